@@ -1,0 +1,65 @@
+"""The one exception tree of tmclsh.
+
+Every layer raises these, so the shell can turn any failure into a one-line message and a
+script can stop with FILE:LINE. They also inherit from the builtins a Python caller expects
+(``TmclTimeoutError`` is a ``TimeoutError``, ``ValidationError`` a ``ValueError``).
+"""
+
+from __future__ import annotations
+
+
+class TmclError(Exception):
+    """Base of every tmclsh error."""
+
+
+class TransportError(TmclError, OSError):
+    """The byte link failed: port vanished, bus down, write refused."""
+
+
+class TmclTimeoutError(TmclError, TimeoutError):
+    """No (complete) reply arrived before the deadline."""
+
+
+class ChecksumError(TmclError):
+    """A reply arrived whose checksum does not match its bytes."""
+
+
+class FrameError(TmclError, ValueError):
+    """Bytes that cannot be a frame of the expected kind."""
+
+
+class ValidationError(TmclError, ValueError):
+    """Input refused before anything was sent: unknown name, value out of range, ..."""
+
+
+class StatusError(TmclError):
+    """The module answered with an error status (1-6)."""
+
+    def __init__(self, status: int, reply: object = None, message: str | None = None):
+        from .protocol import status_text
+
+        self.status = status
+        self.reply = reply
+        super().__init__(message or f"module answered status {status}: {status_text(status)}")
+
+
+class AsmError(TmclError, ValueError):
+    """An error in TMCL source text, with its location (1-based line and column)."""
+
+    def __init__(self, message: str, line: int | None = None, col: int | None = None,
+                 file: str | None = None):
+        self.message = message
+        self.line = line
+        self.col = col
+        self.file = file
+        super().__init__(self.located())
+
+    def located(self) -> str:
+        where = []
+        if self.file:
+            where.append(self.file)
+        if self.line is not None:
+            where.append(str(self.line))
+            if self.col is not None:
+                where.append(str(self.col))
+        return f"{':'.join(where)}: {self.message}" if where else self.message

@@ -1,0 +1,290 @@
+"""The module database: one TOML file per module (see SCHEMA.md), one generic ``Module``.
+
+Adding a module means adding a data file. Lookups accept numbers and names
+(case-insensitive, prefix and fuzzy), because a technician types ``GAP maxpos`` or
+``.param microstep`` long before they remember ``AP 140``.
+"""
+
+from __future__ import annotations
+
+import difflib
+import re
+import tomllib
+from dataclasses import dataclass, field
+from functools import cache, cached_property
+from importlib import resources
+
+from ..errors import ValidationError
+from ..instructions import InstructionSpec, all_instructions, controls
+
+ACCESS_CODES = ("R", "W", "RW", "RWE")
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One axis or global parameter (or a run of user variables when ``count`` > 1)."""
+
+    kind: str  # "axis" or "global"
+    number: int
+    name: str
+    manual_name: str
+    description: str
+    access: str
+    bank: int = 0
+    count: int = 1
+    min: int | None = None
+    max: int | None = None
+    choices: tuple[int, ...] | None = None
+    unit: str = ""
+    default: int | None = None
+    values: dict[int, str] = field(default_factory=dict)
+    bits: dict[int, str] = field(default_factory=dict)
+    note: str | None = None
+
+    @property
+    def readable(self) -> bool:
+        return "R" in self.access
+
+    @property
+    def writable(self) -> bool:
+        return "W" in self.access
+
+    @property
+    def storable(self) -> bool:
+        return "E" in self.access
+
+    def covers(self, number: int) -> bool:
+        return self.number <= number < self.number + self.count
+
+    @property
+    def label(self) -> str:
+        """``AP 140`` / ``GP 66`` / ``GP 0..55 (bank 2)``."""
+        if self.kind == "axis":
+            return f"AP {self.number}"
+        span = f"{self.number}..{self.number + self.count - 1}" if self.count > 1 else str(self.number)
+        return f"GP {span}" + (f" (bank {self.bank})" if self.bank else "")
+
+    @property
+    def range_text(self) -> str:
+        if self.choices:
+            return ", ".join(str(c) for c in self.choices)
+        if self.min is None and self.max is None:
+            return "any"
+        if self.min == 0 and self.max == 1:
+            return "0/1"
+        return f"{self.min}..{self.max}"
+
+    def in_range(self, value: int) -> bool:
+        if self.choices:
+            return value in self.choices
+        if self.min is not None and value < self.min:
+            return False
+        if self.max is not None and value > self.max:
+            return False
+        return True
+
+    def check(self, value: int) -> None:
+        """Raise a ValidationError naming the parameter and its range if ``value`` is illegal."""
+        if not self.in_range(value):
+            raise ValidationError(
+                f"{value} is out of range for {self.label} {self.name}: "
+                f"allowed {self.range_text}{' ' + self.unit if self.unit else ''}")
+
+    def describe_value(self, value: int) -> str:
+        """A value in words: its named meaning or its set bits (empty when neither applies)."""
+        if value in self.values:
+            return self.values[value]
+        if self.bits:
+            on = [text for bit, text in sorted(self.bits.items()) if value >> bit & 1]
+            return "; ".join(on) if on else "no bits set"
+        return ""
+
+
+@dataclass(frozen=True)
+class IoPort:
+    bank: int
+    port: int
+    name: str
+    kind: str  # digital_in | analog_in | digital_out
+    min: int
+    max: int
+    description: str = ""
+    unit: str = ""
+    default: int | None = None
+
+
+def _int_keys(table: dict | None) -> dict[int, str]:
+    return {int(k): v for k, v in (table or {}).items()}
+
+
+def _parameter(kind: str, raw: dict) -> Parameter:
+    return Parameter(
+        kind=kind, number=raw["number"], name=raw["name"], manual_name=raw.get("manual_name", raw["name"]),
+        description=raw.get("description", ""), access=raw["access"], bank=raw.get("bank", 0),
+        count=raw.get("count", 1), min=raw.get("min"), max=raw.get("max"),
+        choices=tuple(raw["choices"]) if raw.get("choices") else None, unit=raw.get("unit", ""),
+        default=raw.get("default"), values=_int_keys(raw.get("values")),
+        bits=_int_keys(raw.get("bits")), note=raw.get("note"))
+
+
+def _normalise(name: str) -> str:
+    return re.sub(r"[^a-z0-9]", "", name.lower())
+
+
+class Module:
+    """Everything tmclsh knows about one module type, read from its data file."""
+
+    def __init__(self, data: dict):
+        info = data["module"]
+        self.data = data
+        self.name: str = info["name"]
+        self.summary: str = info.get("summary", "")
+        self.motors: int = info["motors"]
+        self.program_memory: int = info["program_memory"]
+        self.firmware_id: int = info["firmware_id"]
+        self.version_string: str = info["version_string"]
+        self.firmware_version: int = info.get("firmware_version", 0)
+        self.ascii_mode: bool = info.get("ascii_mode", False)
+        self.interrupts: bool = info.get("interrupts", False)
+        self.position_min: int = info.get("position_min", -(2**31))
+        self.position_max: int = info.get("position_max", 2**31 - 1)
+        self.velocity_min: int = info.get("velocity_min", -(2**31))
+        self.velocity_max: int = info.get("velocity_max", 2**31 - 1)
+        self.units: dict[str, str] = dict(info.get("units", {}))
+        self.notes: list[str] = list(info.get("notes", []))
+        self.io_all_port: int | None = info.get("io_all_port")
+        self.io_all_banks: tuple[int, ...] = tuple(info.get("io_all_banks", ()))
+        self.coordinates: int = info.get("coordinates", 21)
+        self.axis_params: list[Parameter] = [_parameter("axis", p) for p in data.get("axis", [])]
+        self.global_params: list[Parameter] = [_parameter("global", p) for p in data.get("global", [])]
+        self.io: list[IoPort] = [IoPort(**{k: v for k, v in p.items()}) for p in data.get("io", [])]
+
+    def __repr__(self) -> str:
+        return f"Module({self.name!r})"
+
+    # -- instructions -------------------------------------------------------------------
+    @cached_property
+    def instructions(self) -> list[InstructionSpec]:
+        return [s for s in all_instructions() if s.on(self.name)]
+
+    def has_instruction(self, opcode: int) -> bool:
+        return any(s.opcode == opcode for s in self.instructions)
+
+    def has_control(self, opcode: int) -> bool:
+        spec = controls().get(opcode)
+        return spec is not None and self.name in spec.modules
+
+    def check_motor(self, motor: int) -> None:
+        if not 0 <= motor < self.motors:
+            allowed = "0" if self.motors == 1 else f"0..{self.motors - 1}"
+            raise ValidationError(f"{self.name} has no motor {motor}: motors {allowed}")
+
+    # -- parameters ---------------------------------------------------------------------
+    def axis(self, number: int) -> Parameter | None:
+        return next((p for p in self.axis_params if p.number == number), None)
+
+    def glob(self, number: int, bank: int = 0) -> Parameter | None:
+        return next((p for p in self.global_params if p.bank == bank and p.covers(number)), None)
+
+    def banks(self) -> list[int]:
+        return sorted({p.bank for p in self.global_params})
+
+    def _pool(self, kind: str) -> list[Parameter]:
+        return self.axis_params if kind == "axis" else self.global_params
+
+    def lookup(self, kind: str, key: int | str, bank: int | None = None) -> Parameter:
+        """Resolve a parameter by number or name; unknown keys raise with suggestions."""
+        if isinstance(key, int):
+            found = self.axis(key) if kind == "axis" else self.glob(key, bank or 0)
+            if found is None:
+                where = f" in bank {bank}" if kind == "global" and bank else ""
+                raise ValidationError(f"{self.name} has no {kind} parameter {key}{where}")
+            return found
+        exact = [p for p in self._pool(kind) if _normalise(p.name) == _normalise(key)]
+        if exact:
+            return exact[0]
+        hits = self.search(key, kind)
+        if len(hits) == 1:
+            return hits[0]
+        near = ", ".join(p.name for p in hits[:5])
+        what = f"unknown {kind} parameter {key!r} on {self.name}"
+        raise ValidationError(f"{what}; did you mean {near}?" if near else what)
+
+    def search(self, query: str, kind: str | None = None) -> list[Parameter]:
+        """Parameters matching ``query``: number, name prefix, word in name/manual name, fuzzy."""
+        pool = self.axis_params + self.global_params if kind is None else self._pool(kind)
+        q = query.strip()
+        if re.fullmatch(r"\d+", q):
+            n = int(q)
+            return [p for p in pool if p.covers(n)]
+        nq = _normalise(q)
+        if not nq:
+            return list(pool)
+        ranked: list[tuple[int, Parameter]] = []
+        for p in pool:
+            name, manual = _normalise(p.name), _normalise(p.manual_name)
+            if name == nq:
+                ranked.append((0, p))
+            elif name.startswith(nq):
+                ranked.append((1, p))
+            elif nq in name or nq in manual:
+                ranked.append((2, p))
+            elif _subsequence(nq, name):
+                ranked.append((3, p))
+        if not ranked:
+            names = {_normalise(p.name): p for p in pool}
+            for close in difflib.get_close_matches(nq, list(names), n=5, cutoff=0.6):
+                ranked.append((4, names[close]))
+        best = min((r for r, _ in ranked), default=None)
+        if best == 0:
+            return [p for r, p in ranked if r == 0]
+        return [p for _, p in sorted(ranked, key=lambda rp: (rp[0], rp[1].kind, rp[1].number))]
+
+    # -- I/O ----------------------------------------------------------------------------
+    def port(self, bank: int, port: int) -> IoPort | None:
+        return next((p for p in self.io if p.bank == bank and p.port == port), None)
+
+    def io_banks(self) -> list[int]:
+        return sorted({p.bank for p in self.io})
+
+
+def _subsequence(needle: str, hay: str) -> bool:
+    it = iter(hay)
+    return all(ch in it for ch in needle)
+
+
+def _file_name(name: str) -> str:
+    return _normalise(name if _normalise(name).startswith("tmcm") else "tmcm" + name) + ".toml"
+
+
+def available() -> list[str]:
+    """Module names that have a data file, e.g. ``["TMCM-1311", "TMCM-1640", "TMCM-351"]``."""
+    files = resources.files(__package__)
+    names = []
+    for entry in files.iterdir():
+        if entry.name.endswith(".toml"):
+            names.append(tomllib.loads(entry.read_text("utf-8"))["module"]["name"])
+    return sorted(names)
+
+
+@cache
+def load(name: str) -> Module:
+    """Load a module by name: ``TMCM-1311``, ``tmcm1311`` and ``1311`` all work."""
+    entry = resources.files(__package__).joinpath(_file_name(name))
+    if not entry.is_file():
+        raise ValidationError(f"unknown module {name!r}; known: {', '.join(available())}")
+    return Module(tomllib.loads(entry.read_text("utf-8")))
+
+
+def by_firmware_id(firmware_id: int) -> Module | None:
+    for name in available():
+        mod = load(name)
+        if mod.firmware_id == firmware_id:
+            return mod
+    return None
+
+
+def from_version_string(text: str) -> Module | None:
+    """Identify a module from its 136 string (``1311V111`` -> TMCM-1311)."""
+    m = re.match(r"\s*0*(\d+)V", text)
+    return by_firmware_id(int(m.group(1))) if m else None
