@@ -1,0 +1,79 @@
+"""Entry of the shell proper: connect, then run -c lines, a -f script, or the REPL."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from ..errors import TmclError
+from .render import Output
+from .session import QuitShell, Session
+
+EXIT_OK, EXIT_ERROR, EXIT_CONNECT = 0, 1, 3
+
+
+def banner(session: Session) -> str:
+    c = session.client
+    mod = c.module.name if c.module else "unknown module"
+    sim = " [SIMULATED]" if c.transport.simulated else ""
+    mode = " ASCII mode" if c.mode == "ascii" else ""
+    return f"tmclsh: {mod} at address {c.address} on {c.describe()}{sim}{mode}"
+
+
+def report_error(session: Session, line: str | None, exc: BaseException) -> None:
+    if getattr(exc, "shown", False):
+        return
+    where = ""
+    if session.location is not None:
+        where = f"{session.location[0]}:{session.location[1]}: "
+    session.out.error(line, f"{where}{exc}")
+
+
+def run_lines(session: Session, lines: list[str]) -> int:
+    failed = False
+    for line in lines:
+        try:
+            session.run_line(line)
+        except QuitShell:
+            break
+        except TmclError as exc:
+            failed = True
+            report_error(session, line, exc)
+            if not session.keep_going:
+                break
+    return EXIT_ERROR if failed else EXIT_OK
+
+
+def run_shell(args: argparse.Namespace) -> int:
+    from ..cli import connection_settings, open_client
+
+    settings = connection_settings(args)
+    try:
+        client = open_client(settings)
+    except TmclError as exc:
+        print(f"tmclsh: {exc}", file=sys.stderr)
+        return EXIT_CONNECT
+    out = Output(json_mode=bool(args.json))
+    interactive = args.command is None and args.script is None and sys.stdin.isatty()
+    session = Session(client, out, interactive=interactive, yes=bool(args.yes),
+                      keep_going=bool(args.keep_going), settings=settings)
+    if args.trace:
+        from .trace import enable_trace
+
+        enable_trace(session)
+    try:
+        if args.command is not None:
+            return run_lines(session, session.split(args.command))
+        if args.script is not None or not interactive:
+            from .script import run_file
+
+            return run_file(session, args.script or "-")
+        from .app import run_repl
+
+        return run_repl(session)
+    except KeyboardInterrupt:
+        stopped = client.stop_all() if client.connected else []
+        print(f"\ninterrupted; motors stopped: {stopped}", file=sys.stderr)
+        return 130
+    finally:
+        client.close()

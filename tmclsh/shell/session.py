@@ -1,0 +1,184 @@
+"""One shell session: the client, the output, variables, and the line runner.
+
+The REPL, ``-c`` and ``-f`` all go through ``Session.run_line``, so a line means the same
+wherever it is typed. A dot-command owns the rest of its line; TMCL lines are parsed and
+checked against the module's database before anything is sent.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from .. import asm
+from ..client import Client, Result
+from ..errors import StatusError, TmclError, ValidationError
+from ..modules import Module
+from ..protocol import Request, status_ok
+from . import commands
+from .render import Output
+
+_VAR = re.compile(r"\$\{([^}]*)\}")
+
+
+class Abort(TmclError):
+    """The user declined a confirmation; nothing was sent."""
+
+
+class QuitShell(Exception):
+    """``.quit``: leave the shell after this line."""
+
+
+@dataclass
+class Stats:
+    commands: int = 0
+    errors: int = 0
+    checks_passed: int = 0
+    checks_failed: int = 0
+    started: float = field(default_factory=time.monotonic)
+
+
+class Session:
+    def __init__(self, client: Client, output: Output | None = None, *, interactive: bool = False,
+                 yes: bool = False, keep_going: bool = False, settings: dict | None = None):
+        self.client = client
+        self.out = output or Output()
+        self.interactive = interactive
+        self.yes = yes
+        self.keep_going = keep_going
+        self.settings = settings or {}
+        self.variables: dict[str, int | float] = {}
+        self.history: list[str] = []
+        self.stats = Stats()
+        self.last_result: Result | None = None
+        # hooks: called with (line, result-or-error-text) after every line (used by .record)
+        self.recorders: list[Callable[[str, str], None]] = []
+        # asks the user; the REPL replaces it with a prompt_toolkit confirm
+        self.ask: Callable[[str], bool] | None = None
+        # features keep their state here (debugger, watch, ...), keyed by feature name
+        self.state: dict[str, object] = {}
+        self.location: tuple[str, int] | None = None  # script file and line being run
+        commands.load_all()
+
+    # -- module -------------------------------------------------------------------------
+    @property
+    def module(self) -> Module:
+        return self.client.require_module()
+
+    # -- confirmation -------------------------------------------------------------------
+    def confirm(self, question: str) -> None:
+        """Raise Abort unless the user agrees (or --yes was given). Scripts need --yes."""
+        if self.yes:
+            return
+        if self.ask is not None and self.interactive:
+            if self.ask(question):
+                return
+            raise Abort("cancelled; nothing was sent")
+        raise Abort(f"{question} -- refused without confirmation; pass --yes to allow it")
+
+    # -- variables ----------------------------------------------------------------------
+    def expand(self, line: str) -> str:
+        """Replace ``${name}`` (or ``${expression}``) by its value."""
+        if "${" not in line:
+            return line
+
+        def sub(m: re.Match) -> str:
+            inner = m.group(1).strip()
+            if inner in self.variables:
+                return _fmt(self.variables[inner])
+            evaluate = self.state.get("evaluate")
+            if callable(evaluate):
+                return _fmt(evaluate(self, inner))
+            raise ValidationError(f"unknown variable {inner!r} (set it with .let {inner} = ...)")
+
+        return _VAR.sub(sub, line)
+
+    # -- running lines ------------------------------------------------------------------
+    def split(self, text: str) -> list[str]:
+        """Lines of a -c argument: newlines and ';' separate, a dot-command owns its line."""
+        out: list[str] = []
+        for raw in text.splitlines():
+            rest = raw.strip()
+            while rest:
+                if rest.startswith(".") or _is_bare_command(rest):
+                    out.append(rest)
+                    break
+                head, sep, rest = rest.partition(";")
+                if head.strip():
+                    out.append(head.strip())
+                rest = rest.strip()
+        return out
+
+    def run_line(self, line: str) -> Result | None:
+        """Run one line; raises TmclError (or Abort) on failure, after counting it."""
+        text = line.strip()
+        if not text or text.startswith("#") or text.startswith("//"):
+            return None
+        self.history.append(text)
+        try:
+            result = self._dispatch(text)
+        except TmclError as exc:
+            self.stats.errors += 1
+            self._record(text, f"error: {exc}")
+            raise
+        return result
+
+    def _dispatch(self, text: str) -> Result | None:
+        word = text.split(None, 1)[0]
+        if word.startswith(".") or _is_bare_command(text):
+            cmd = commands.find(word)
+            if cmd is None:
+                raise ValidationError(f"unknown shell command {word!r}; type .help for the list")
+            cmd.handler(self, text[len(word):].strip())
+            self._record(text, "")
+            return None
+        return self.run_tmcl(text)
+
+    def run_tmcl(self, text: str, *, show: bool = True) -> Result:
+        expanded = self.expand(text)
+        enc = self.client.encode(expanded)
+        self._confirm_persistent(enc)
+        ins = enc.instruction
+        reply = self.client.request(Request(self.client.address, ins.opcode, ins.type,
+                                            ins.motor, ins.value))
+        result = Result(text, enc, reply)
+        self.last_result = result
+        self.stats.commands += 1
+        if show:
+            self.out.result(result, self.client.module)
+        if reply is not None and not status_ok(reply.status):
+            self._record(text, f"error: status {reply.status}")
+            err = StatusError(reply.status, reply)
+            err.shown = show  # type: ignore[attr-defined]  # the result line already said it
+            raise err
+        self._record(text, "" if reply is None else str(reply.value if reply.version is None
+                                                          else reply.version))
+        return result
+
+    def _confirm_persistent(self, enc: asm.Encoded) -> None:
+        spec, p, ins = enc.spec, enc.parameter, enc.instruction
+        if spec is not None and spec.persists:
+            what = p.name if p is not None else f"parameter {ins.type}"
+            self.confirm(f"store {what} permanently in the module's EEPROM?")
+        elif spec is not None and spec.mnemonic == "SGP" and p is not None and p.storable \
+                and p.bank == 0:
+            self.confirm(f"SGP {p.name} is written to the module's EEPROM; continue?")
+        elif spec is None and ins.opcode == 137:
+            self.confirm("restore FACTORY DEFAULTS (all settings and the stored program are lost)?")
+
+    def _record(self, line: str, outcome: str) -> None:
+        for fn in list(self.recorders):
+            fn(line, outcome)
+
+
+def _is_bare_command(text: str) -> bool:
+    word = text.split(None, 1)[0] if text.split() else ""
+    return commands.find(word) is not None and not word.startswith(".")
+
+
+def _fmt(value: int | float) -> str:
+    if isinstance(value, float) and value.is_integer():
+        return str(int(value))
+    return str(value)

@@ -1,0 +1,78 @@
+"""Byte transports: how bytes reach a module, with no knowledge of TMCL framing.
+
+Two shapes exist because the wire differs: a serial-like *stream* (RS232/RS485/USB, TCP,
+RFC 2217, the in-process simulator) and a *CAN* bus of addressed 8-byte messages. The client
+does the framing for each; a transport only moves bytes and maps its library's exceptions onto
+``TransportError`` so the shell can say "port gone" the same way for every link.
+
+Timeouts are float seconds with pyserial's meanings: None waits forever, 0 never waits.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+
+
+class Transport(ABC):
+    kind = "stream"  # or "can"
+    simulated = False
+
+    def __init__(self, url: str):
+        self.url = url
+
+    @abstractmethod
+    def open(self) -> None: ...
+
+    @abstractmethod
+    def close(self) -> None: ...
+
+    @property
+    @abstractmethod
+    def is_open(self) -> bool: ...
+
+    def describe(self) -> str:
+        """What the banner and toolbar call this link."""
+        return self.url
+
+    def __enter__(self) -> Transport:
+        if not self.is_open:
+            self.open()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.url!r})"
+
+
+class StreamTransport(Transport):
+    kind = "stream"
+
+    @abstractmethod
+    def write(self, data: bytes) -> None: ...
+
+    @abstractmethod
+    def read(self, size: int, timeout: float | None) -> bytes:
+        """Up to ``size`` bytes: returns when ``size`` arrived or the timeout passed."""
+
+    @abstractmethod
+    def pending(self) -> int:
+        """Bytes that can be read now without waiting."""
+
+    def read_available(self) -> bytes:
+        n = self.pending()
+        return self.read(n, 0) if n else b""
+
+    def set_baudrate(self, baud: int) -> None:  # pragma: no cover - only real ports
+        raise NotImplementedError
+
+
+class CanTransport(Transport):
+    kind = "can"
+
+    @abstractmethod
+    def send(self, arbitration_id: int, data: bytes) -> None: ...
+
+    @abstractmethod
+    def recv(self, timeout: float | None) -> tuple[int, bytes] | None: ...
