@@ -3,18 +3,37 @@
 The shell, scripts, the assembler and the simulator's ASCII mode all read TMCL lines through
 ``parse_line``/``encode``, so a command means the same everywhere and is checked the same way:
 against the instruction set and the connected module's database, before any byte is sent.
+
+Source syntax (the TMCL-IDE's, as the manuals print it):
+
+* ``CMD a, b, c`` with the operands the instruction set names for ``CMD`` (``ROR 0, 500``
+  fills motor and value), or all three fields in type, motor, value order (``GAP 1, 0, 0``:
+  the don't-care value written out). A comma straight after the mnemonic is accepted
+  (``EI, 255`` and ``SGP, 0, 2, 100`` as some manual examples print it).
+* ``Label:`` (alone or before a command), ``Name = expression`` (a constant),
+  ``#include FILE`` and ``// comment``.
+* A command number instead of a mnemonic sends the three fields as written:
+  ``138 0, 0, 0`` or ``6 1, 0, 5``. The disassembler writes this form for an instruction whose
+  mnemonic form would not reproduce its bytes (non-zero don't-care fields, fields the module
+  would refuse).
+* Numbers in decimal, ``$1F``/``0x1F`` hex or ``0b101`` binary; operands may be expressions
+  (``+ - * / % ( )``) over numbers, constants and labels.
 """
 
 from __future__ import annotations
 
+import difflib
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable, Iterator
 
 from . import instructions as isa
 from .errors import AsmError, ValidationError
 from .modules import Module, Parameter
 from .protocol import INSTRUCTION_LEN, INT32_MAX, INT32_MIN, UINT32_MAX, Control, Instruction
+
+FIELDS = ("type", "motor", "value")
 
 # -- lexing ------------------------------------------------------------------------------
 
@@ -22,10 +41,18 @@ _TOKEN = re.compile(r"""
     (?P<ws>\s+)
   | (?P<hex>(?:\$|0[xX])[0-9A-Fa-f]+)
   | (?P<bin>0[bB][01]+)
-  | (?P<num>\d+)
+  | (?P<num>[0-9]+)
   | (?P<name>[A-Za-z_][A-Za-z0-9_.]*)
   | (?P<op>[-+*/(),:=%])
-""", re.VERBOSE)
+""", re.VERBOSE | re.ASCII)
+
+# Longest number literal accepted: anything longer cannot fit 32 bits anyway (and Python
+# refuses to convert decimal strings of more than 4300 digits).
+_MAX_LITERAL = 40
+# Deepest nesting of parentheses and unary signs in one operand.
+_MAX_DEPTH = 64
+# Intermediate results of constant arithmetic are kept within this magnitude.
+_MAX_MAGNITUDE = 2**64
 
 
 @dataclass(frozen=True)
@@ -43,14 +70,13 @@ def tokenize(text: str, line: int | None = None, file: str | None = None) -> lis
         m = _TOKEN.match(text, pos)
         if not m:
             raise AsmError(f"unexpected character {text[pos]!r}", line, pos + 1, file)
-        kind = m.lastgroup
-        tok = m.group()
-        if kind == "hex":
-            tokens.append(Token("num", tok, pos + 1, int(tok.lstrip("$")[2:] if tok[:2].lower() == "0x" else tok[1:], 16)))
-        elif kind == "bin":
-            tokens.append(Token("num", tok, pos + 1, int(tok[2:], 2)))
-        elif kind == "num":
-            tokens.append(Token("num", tok, pos + 1, int(tok)))
+        kind, tok = m.lastgroup, m.group()
+        if kind in ("hex", "bin", "num"):
+            if len(tok) > _MAX_LITERAL:
+                raise AsmError(f"number {tok[:12]}... is too long", line, pos + 1, file)
+            digits, base = {"hex": (tok[1:] if tok[0] == "$" else tok[2:], 16),
+                            "bin": (tok[2:], 2), "num": (tok, 10)}[kind]
+            tokens.append(Token("num", tok, pos + 1, int(digits, base)))
         elif kind != "ws":
             tokens.append(Token(kind, tok, pos + 1))
         pos = m.end()
@@ -95,6 +121,7 @@ class _Parser:
         self.line = line
         self.file = file
         self.end_col = end_col
+        self.depth = 0
 
     def peek(self) -> Token | None:
         return self.toks[self.i] if self.i < len(self.toks) else None
@@ -109,37 +136,46 @@ class _Parser:
     def error(self, msg: str, tok: Token | None) -> AsmError:
         return AsmError(msg, self.line, tok.col if tok else self.end_col, self.file)
 
+    def _is_op(self, chars: str) -> Token | None:
+        tok = self.peek()
+        return tok if tok is not None and tok.kind == "op" and tok.text in chars else None
+
     def expr(self) -> Expr:
         left = self.term()
-        while (tok := self.peek()) is not None and tok.text in "+-" and tok.kind == "op":
+        while (tok := self._is_op("+-")) is not None:
             self.i += 1
             left = Expr(tok.text, left.col, args=(left, self.term()))
         return left
 
     def term(self) -> Expr:
         left = self.unary()
-        while (tok := self.peek()) is not None and tok.kind == "op" and tok.text in "*/%":
+        while (tok := self._is_op("*/%")) is not None:
             self.i += 1
             left = Expr(tok.text, left.col, args=(left, self.unary()))
         return left
 
     def unary(self) -> Expr:
         tok = self.take()
-        if tok.kind == "op" and tok.text == "-":
-            inner = self.unary()
-            return Expr("neg", tok.col, args=(inner,))
-        if tok.kind == "op" and tok.text == "+":
-            return self.unary()
+        if tok.kind == "op" and tok.text in "-+(":
+            self.depth += 1
+            if self.depth > _MAX_DEPTH:
+                raise self.error("expression nested too deeply", tok)
+            try:
+                if tok.text == "-":
+                    return Expr("neg", tok.col, args=(self.unary(),))
+                if tok.text == "+":
+                    return self.unary()
+                inner = self.expr()
+                close = self.take()
+                if close.text != ")":
+                    raise self.error(f"expected ')', found {close.text!r}", close)
+                return inner
+            finally:
+                self.depth -= 1
         if tok.kind == "num":
             return Expr("num", tok.col, value=tok.value, text=tok.text)
         if tok.kind == "name":
             return Expr("name", tok.col, name=tok.text, text=tok.text)
-        if tok.kind == "op" and tok.text == "(":
-            inner = self.expr()
-            close = self.take()
-            if close.text != ")":
-                raise self.error("expected ')'", close)
-            return inner
         raise self.error(f"expected a number or a name, found {tok.text!r}", tok)
 
 
@@ -147,7 +183,10 @@ class _Parser:
 
 @dataclass
 class Line:
-    """One parsed source line. At most one of instruction, constant or include is set."""
+    """One parsed source line. At most one of instruction, constant or include is set.
+
+    ``mnemonic`` is upper case, or the decimal command number for a raw command.
+    """
 
     text: str
     number: int | None = None
@@ -160,10 +199,15 @@ class Line:
     constant: str | None = None
     constant_col: int = 0
     include: str | None = None
+    include_col: int = 0
     comment: str = ""
 
     def error(self, msg: str, col: int | None = None) -> AsmError:
         return AsmError(msg, self.number, col, self.file)
+
+    @property
+    def is_raw(self) -> bool:
+        return self.mnemonic is not None and self.mnemonic.isdigit()
 
 
 def parse_line(text: str, number: int | None = None, file: str | None = None) -> Line:
@@ -175,14 +219,16 @@ def parse_line(text: str, number: int | None = None, file: str | None = None) ->
     body, comment = strip_comment(text.rstrip("\r\n"))
     line = Line(text=text, number=number, file=file, comment=comment)
     stripped = body.strip()
-    if stripped.lower().startswith("#include"):
-        target = stripped[len("#include"):].strip().strip('"<>')
-        if not target:
-            raise line.error("#include needs a file name", body.find("#") + 1)
-        line.include = target
-        return line
     if stripped.startswith("#"):
-        raise line.error(f"unknown directive {stripped.split()[0]!r}", body.find("#") + 1)
+        col = body.find("#") + 1
+        directive = stripped.split()[0]
+        if directive.lower() != "#include":
+            raise line.error(f"unknown directive {directive!r} (only #include is known)", col)
+        target = stripped[len("#include"):].strip().strip('"<>').strip()
+        if not target:
+            raise line.error("#include needs a file name", col)
+        line.include, line.include_col = target, body.find(target, col) + 1
+        return line
     toks = tokenize(body, number, file)
     if not toks:
         return line
@@ -191,21 +237,21 @@ def parse_line(text: str, number: int | None = None, file: str | None = None) ->
     if len(toks) >= 2 and toks[0].kind == "name" and toks[1].text == ":":
         line.label, line.label_col = toks[0].text, toks[0].col
         i = 2
-    if i < len(toks) and toks[i].kind == "name" and i + 1 < len(toks) and toks[i + 1].text == "=":
+    if i + 1 < len(toks) and toks[i].kind == "name" and toks[i + 1].text == "=":
         if line.label:
             raise line.error("a constant cannot follow a label", toks[i].col)
         line.constant, line.constant_col = toks[i].text, toks[i].col
         p = _Parser(toks[i + 2:], number, file, end_col)
         line.operands = [p.expr()]
-        if p.peek() is not None:
-            raise p.error(f"unexpected {p.peek().text!r} after the constant's value", p.peek())
+        if (extra := p.peek()) is not None:
+            raise p.error(f"unexpected {extra.text!r} after the constant's value", extra)
         return line
     if i >= len(toks):
         return line
     head = toks[i]
     if head.kind == "num":
-        # a raw command number: `136 1` or `138 0, 0, 0`
-        line.mnemonic, line.mnemonic_col = head.text, head.col
+        # a raw command number: `136 1` or `138 0, 0, 0` (also written `$8A 0, 0, 0`)
+        line.mnemonic, line.mnemonic_col = str(head.value), head.col
     elif head.kind == "name":
         line.mnemonic, line.mnemonic_col = head.text.upper(), head.col
     else:
@@ -233,16 +279,23 @@ def parse_line(text: str, number: int | None = None, file: str | None = None) ->
 
 @dataclass
 class Symbols:
-    """Names a line may use besides the built-in ones: constants and labels."""
+    """Names a line may use besides the built-in ones: constants and labels.
+
+    Names are case-insensitive, like mnemonics.
+    """
 
     constants: dict[str, int] = field(default_factory=dict)
     labels: dict[str, int] = field(default_factory=dict)
-    allow_forward: bool = False  # first assembler pass: unknown labels resolve to 0
+    allow_forward: bool = False  # unknown labels resolve to 0 (a first pass over a program)
 
     def lookup(self, name: str) -> int | None:
         for table in (self.constants, self.labels):
+            if name in table:
+                return table[name]
+        folded = name.lower()
+        for table in (self.constants, self.labels):
             for key, val in table.items():
-                if key.lower() == name.lower():
+                if key.lower() == folded:
                     return val
         return None
 
@@ -257,7 +310,7 @@ class Encoded:
     label: str | None = None  # jump target name, if given by name
 
 
-def _eval(expr: Expr, line: Line, resolve) -> int:
+def _eval(expr: Expr, line: Line, resolve: Callable[[Expr], int | None]) -> int:
     if expr.op == "num":
         return expr.value  # type: ignore[return-value]
     if expr.op == "name":
@@ -269,15 +322,19 @@ def _eval(expr: Expr, line: Line, resolve) -> int:
         return -_eval(expr.args[0], line, resolve)
     a, b = (_eval(x, line, resolve) for x in expr.args)
     if expr.op == "+":
-        return a + b
-    if expr.op == "-":
-        return a - b
-    if expr.op == "*":
-        return a * b
-    if b == 0:
-        raise line.error("division by zero", expr.args[1].col)
-    q = abs(a) // abs(b) * (1 if (a >= 0) == (b >= 0) else -1)  # truncate like C
-    return q if expr.op == "/" else a - q * b
+        result = a + b
+    elif expr.op == "-":
+        result = a - b
+    elif expr.op == "*":
+        result = a * b
+    else:
+        if b == 0:
+            raise line.error("division by zero", expr.args[1].col)
+        q = abs(a) // abs(b) * (1 if (a >= 0) == (b >= 0) else -1)  # truncate like C
+        result = q if expr.op == "/" else a - q * b
+    if abs(result) > _MAX_MAGNITUDE:
+        raise line.error("value too large", expr.col)
+    return result
 
 
 def eval_constant(line: Line, symbols: Symbols) -> int:
@@ -292,8 +349,6 @@ def _check_int32(value: int, line: Line, col: int) -> None:
 
 
 def _suggest(word: str, choices) -> str:
-    import difflib
-
     close = difflib.get_close_matches(word.upper(), [c.upper() for c in choices], n=3, cutoff=0.5)
     return f"; did you mean {', '.join(close)}?" if close else ""
 
@@ -309,11 +364,11 @@ def encode(line: Line, module: Module, symbols: Symbols | None = None, *,
     symbols = symbols or Symbols()
     if line.mnemonic is None:
         raise line.error("no command on this line")
-    if line.mnemonic[0].isdigit():
-        return _encode_raw(line, module, symbols, direct=direct)
+    if line.is_raw:  # (the ASCII link refuses these itself: they have no ASCII form)
+        return _encode_raw(line, symbols, direct=direct)
     spec = isa.by_mnemonic(line.mnemonic)
     if spec is None:
-        known = [s.mnemonic for s in isa.all_instructions()]
+        known = [s.mnemonic for s in module.instructions]
         raise line.error(f"unknown command {line.mnemonic!r}{_suggest(line.mnemonic, known)}",
                          line.mnemonic_col)
     if not spec.on(module.name):
@@ -340,75 +395,84 @@ class _Encoder:
 
     def number(self, expr: Expr, extra: dict[str, int] | None = None) -> int:
         def resolve(e: Expr) -> int | None:
-            name = e.name or ""
-            if extra:
-                for key, val in extra.items():
-                    if key.upper() == name.upper():
-                        return val
-            return self.symbols.lookup(name)
+            value = self.symbols.lookup(e.name or "")  # the program's names shadow built-ins
+            if value is None and extra:
+                value = extra.get((e.name or "").upper())
+            return value
         value = _eval(expr, self.line, resolve)
         _check_int32(value, self.line, expr.col)
         return value
 
+    def operands(self) -> dict[str, Expr]:
+        """Which field each operand fills: the spec's operands, or all three fields."""
+        spec, ops = self.spec, self.line.operands
+        if len(ops) <= len(spec.fields):
+            given = dict(zip(spec.fields, ops))
+        elif len(ops) == len(FIELDS):
+            given = dict(zip(FIELDS, ops))  # `GAP 1, 0, 0`: don't-care fields written out
+        else:
+            raise self.fail(f"too many operands: {spec.syntax} (or all three fields: "
+                            f"{spec.mnemonic} <type>, <motor>, <value>)", ops[len(spec.fields)])
+        if "type" in spec.fields and "type" not in given:
+            raise self.fail(f"{spec.mnemonic} needs its first operand: {spec.syntax}")
+        if "value" in spec.fields and "value" not in given:
+            raise self.fail(f"{spec.mnemonic} needs a value: {spec.syntax}")
+        return given
+
     def run(self) -> Encoded:
-        spec, ops = self.spec, list(self.line.operands)
-        slots = list(spec.fields)
-        for f in ("type", "motor", "value"):
-            if len(slots) >= len(ops):
-                break
-            if f not in slots:
-                slots.append(f)  # don't-care operands such as `GAP 1, 0, 0`
-        if len(ops) > len(slots):
-            raise self.fail(f"too many operands: {spec.syntax}", ops[len(slots)])
-        given = dict(zip(slots, ops))
-        missing = [f for f in spec.fields if f not in given]
+        spec = self.spec
+        given = self.operands()
         fields = {"type": 0, "motor": 0, "value": 0}
-        # motor/bank first: a global parameter's number depends on its bank
-        if "motor" in given:
-            fields["motor"] = self.motor(given["motor"])
-        if "type" in given:
-            fields["type"] = self.type_(given["type"], fields["motor"], "motor" in given)
-        if "motor" not in given and "motor" in spec.fields:
-            fields["motor"] = self.default_motor()
-        if "type" in given and spec.type_kind == "global_param" and self.param is not None:
-            if "motor" not in given:
-                fields["motor"] = self.param.bank
+        # A parameter's or port's number depends on its bank (the motor field), so the motor
+        # field comes first there; MVP's motor field depends on its type (COORD masks).
+        if spec.type_kind == "symbolic":
+            if "type" in given:
+                fields["type"] = self.type_(given["type"], 0, False)
+            if "motor" in given:
+                fields["motor"] = self.motor(given["motor"], fields["type"])
+        else:
+            if "motor" in given:
+                fields["motor"] = self.motor(given["motor"], None)
+            if "type" in given:
+                fields["type"] = self.type_(given["type"], fields["motor"], "motor" in given)
+        if ("motor" not in given and spec.type_kind == "global_param"
+                and self.param is not None):
+            fields["motor"] = self.param.bank  # `GGP SerialAddress`: the parameter's bank
         if "value" in given:
             fields["value"] = self.value(given["value"], fields)
-        elif "value" in missing:
-            raise self.fail(f"{spec.mnemonic} needs a value: {spec.syntax}")
-        if "type" in missing:
-            raise self.fail(f"{spec.mnemonic} needs its first operand: {spec.syntax}")
-        if spec.type_kind == "global_param" and self.param is None and "type" in given:
-            pass
-        self.check_access(fields)
-        value = fields["value"]
-        ins = Instruction(spec.opcode, fields["type"], fields["motor"],
-                          value & 0xFFFFFFFF if value < 0 else value)
+        self.check_access()
+        ins = Instruction(spec.opcode, fields["type"], fields["motor"], fields["value"])
         return Encoded(ins, spec, self.param, self.label)
 
-    def default_motor(self) -> int:
-        return 0
-
-    def motor(self, expr: Expr) -> int:
-        kind = self.spec.motor_kind
+    def motor(self, expr: Expr, type_: int | None) -> int:
+        spec, mod = self.spec, self.module
+        kind = spec.motor_kind
         value = self.number(expr)
+        if value in spec.motor_special.get(mod.name, {}):
+            return value  # SCO/GCO bank 255: copy coordinates between RAM and EEPROM
         if kind == "motor":
-            is_coord = self.spec.mnemonic == "MVP" and self.module.motors > 1
-            if is_coord and value > self.module.motors - 1 and value & 0xC0:
+            if (spec.mnemonic == "MVP" and mod.motors > 1 and value >= mod.motors
+                    and type_ == spec.type_names(mod.name).get("COORD")):
                 # TMCM-351 MVP COORD: bit 7 multi-motor, bit 6 interpolation, bits 0-2 mask
-                if value > 0xFF or value & 0x38:
-                    raise self.fail(f"motor field {value} is not a valid MVP COORD motor mask", expr)
+                if not 0 <= value <= 0xFF or value & 0x38 or not value & 0xC0 or not value & 0x07:
+                    raise self.fail(f"motor field {value} is not a valid MVP COORD motor mask "
+                                    "($40 interpolation or $80 multi-motor, plus motor bits "
+                                    f"0..{mod.motors - 1})", expr)
                 return value
             try:
-                self.module.check_motor(value)
+                mod.check_motor(value)
             except ValidationError as exc:
-                raise self.fail(str(exc), expr) from None
+                hint = ""
+                if spec.mnemonic == "AAP" and mod.glob(0, value) is not None:
+                    hint = (f" (AAP writes an axis parameter; to store the accumulator in "
+                            f"global parameter bank {value} use AGP)")
+                raise self.fail(f"{exc}{hint}", expr) from None
         elif kind == "bank":
-            banks = (self.module.io_banks() if self.spec.type_kind == "port" else self.module.banks())
+            port = spec.type_kind == "port"
+            banks = mod.io_banks() if port else mod.banks()
             if value not in banks:
-                what = "I/O bank" if self.spec.type_kind == "port" else "parameter bank"
-                raise self.fail(f"{self.module.name} has no {what} {value}: banks "
+                what = "I/O bank" if port else "parameter bank"
+                raise self.fail(f"{mod.name} has no {what} {value}: banks "
                                 f"{', '.join(map(str, banks))}", expr)
         elif not 0 <= value <= 255:
             raise self.fail(f"{value} does not fit the motor/bank byte (0..255)", expr)
@@ -419,8 +483,9 @@ class _Encoder:
         kind = spec.type_kind
         if kind == "symbolic":
             names = spec.type_names(mod.name)
-            if expr.is_name and (expr.name or "").upper() in names:
-                return names[(expr.name or "").upper()]
+            name = (expr.name or "").upper()
+            if expr.is_name and name in names:
+                return names[name]
             if expr.is_name and self.symbols.lookup(expr.name or "") is None:
                 raise self.fail(f"{spec.mnemonic} has no type {expr.name!r}: "
                                 f"{'|'.join(names)}", expr)
@@ -444,9 +509,7 @@ class _Encoder:
                     self.param = mod.lookup(pkind, number, bank)
             except ValidationError as exc:
                 raise self.fail(str(exc), expr) from None
-            if pkind == "global" and self.param.count > 1:
-                return number
-            return self.param.number if pkind == "axis" else number
+            return number
         if kind == "interrupt":
             value = self.number(expr, isa.interrupts())
             if value not in isa.interrupts().values():
@@ -456,8 +519,7 @@ class _Encoder:
         value = self.number(expr)
         if kind == "port":
             bank = motor if motor_given else 0
-            if not (mod.io_all_port is not None and value == mod.io_all_port
-                    and bank in mod.io_all_banks) and mod.port(bank, value) is None:
+            if not self.all_ports(value, bank) and mod.port(bank, value) is None:
                 ports = [str(p.port) for p in mod.io if p.bank == bank]
                 raise self.fail(f"{mod.name} has no port {value} in I/O bank {bank}: ports "
                                 f"{', '.join(ports) or 'none'}", expr)
@@ -470,26 +532,15 @@ class _Encoder:
             raise self.fail(f"{value} does not fit the type byte (0..255)", expr)
         return value
 
+    def all_ports(self, port: int, bank: int) -> bool:
+        mod = self.module
+        return mod.io_all_port is not None and port == mod.io_all_port and bank in mod.io_all_banks
+
     def value(self, expr: Expr, fields: dict[str, int]) -> int:
         spec, mod = self.spec, self.module
         kind = spec.value_kind
         if kind == "label":
-            if expr.is_name:
-                self.label = expr.name
-                addr = self.symbols.lookup(expr.name or "")
-                if addr is None:
-                    if self.symbols.allow_forward:
-                        return 0
-                    if self.direct:
-                        raise self.fail(f"unknown label {expr.name!r} (labels exist only in "
-                                        "programs)", expr)
-                    raise self.fail(f"undefined label {expr.name!r}", expr)
-                return addr
-            value = self.number(expr)
-            if not 0 <= value < mod.program_memory:
-                raise self.fail(f"address {value} is outside program memory "
-                                f"0..{mod.program_memory - 1}", expr)
-            return value
+            return self.address(expr)
         value = self.number(expr)
         if kind == "velocity":
             lo, hi = mod.velocity_min, mod.velocity_max
@@ -508,28 +559,52 @@ class _Encoder:
             except ValidationError as exc:
                 raise self.fail(str(exc), expr) from None
         elif kind == "port_value":
-            port = fields["type"]
-            if mod.io_all_port is not None and port == mod.io_all_port:
-                lo, hi = (-1 if not self.direct else 0), 255
-            else:
-                p = mod.port(fields["motor"], port)
-                lo, hi = (p.min, p.max) if p else (0, 1)
-                if not self.direct and value == -1:
-                    lo = -1  # -1: copy from the accumulator (in programs)
-            if p_kind_out := (port != mod.io_all_port):
-                p = mod.port(fields["motor"], port)
-                if p is not None and p.kind != "digital_out":
-                    raise self.fail(f"{p.name} (bank {p.bank} port {p.port}) is an input; "
-                                    "SIO sets outputs", expr)
-            del p_kind_out
-            if not lo <= value <= hi:
-                raise self.fail(f"value {value} out of range {lo}..{hi} for this port", expr)
+            self.check_port_value(value, fields, expr)
         elif kind == "ticks":
             if value < 0:
                 raise self.fail("ticks must not be negative", expr)
         return value
 
-    def check_access(self, fields: dict[str, int]) -> None:
+    def address(self, expr: Expr) -> int:
+        """A jump target: a label, or a number inside program memory."""
+        if expr.is_name:
+            self.label = expr.name
+            addr = self.symbols.lookup(expr.name or "")
+            if addr is None:
+                if self.symbols.allow_forward:
+                    return 0
+                if self.direct:
+                    raise self.fail(f"unknown label {expr.name!r} (labels exist only in "
+                                    "programs)", expr)
+                raise self.fail(f"undefined label {expr.name!r}", expr)
+        else:
+            addr = self.number(expr)
+        memory = self.module.program_memory
+        if not 0 <= addr < memory:
+            raise self.fail(f"address {addr} is outside program memory 0..{memory - 1}", expr)
+        return addr
+
+    def check_port_value(self, value: int, fields: dict[str, int], expr: Expr) -> None:
+        """SIO: the port must be an output; 0/1 (or its range), or a bit mask for all ports."""
+        port, bank = fields["type"], fields["motor"]
+        if self.all_ports(port, bank):
+            if not any(p.bank == bank and p.kind == "digital_out" for p in self.module.io):
+                raise self.fail(f"I/O bank {bank} has no outputs; SIO {port} sets all outputs "
+                                "of an output bank", expr)
+            # all outputs at once: a bit mask; -1 copies the accumulator (programs only)
+            lo, hi = (0 if self.direct else -1), 255
+        else:
+            p = self.module.port(bank, port)
+            if p is None:  # type_() refused unknown ports already
+                raise self.fail(f"no port {port} in I/O bank {bank}", expr)
+            if p.kind != "digital_out":
+                raise self.fail(f"{p.name} (bank {p.bank} port {p.port}) is an input; "
+                                "SIO sets outputs", expr)
+            lo, hi = p.min, p.max
+        if not lo <= value <= hi:
+            raise self.fail(f"value {value} out of range {lo}..{hi} for this port", expr)
+
+    def check_access(self) -> None:
         p, spec = self.param, self.spec
         if p is None:
             return
@@ -541,7 +616,7 @@ class _Encoder:
             raise self.fail(f"{p.label} {p.name} cannot be stored in EEPROM (access {p.access})")
 
 
-def _encode_raw(line: Line, module: Module, symbols: Symbols, direct: bool) -> Encoded:
+def _encode_raw(line: Line, symbols: Symbols, direct: bool) -> Encoded:
     """A bare command number with up to three numeric operands: sent as typed."""
     opcode = int(line.mnemonic or "0")
     if not 0 <= opcode <= 255:
@@ -554,11 +629,10 @@ def _encode_raw(line: Line, module: Module, symbols: Symbols, direct: bool) -> E
             raise line.error(f"{v} out of range {limit[0]}..{limit[1]}", expr.col)
         vals.append(v)
     vals += [0] * (3 - len(vals))
-    if opcode == Control.FACTORY_DEFAULT and vals[2] != 1234:
+    if direct and opcode == Control.FACTORY_DEFAULT and vals[2] != 1234:
         raise line.error("137 (restore factory defaults) needs the value 1234", line.mnemonic_col)
-    spec = isa.by_opcode(opcode)
-    ins = Instruction(opcode, vals[0], vals[1], vals[2] & 0xFFFFFFFF if vals[2] < 0 else vals[2])
-    return Encoded(ins, spec)
+    ins = Instruction(opcode, vals[0], vals[1], vals[2])
+    return Encoded(ins, isa.by_opcode(opcode))
 
 
 # -- the assembler -----------------------------------------------------------------------
@@ -604,16 +678,27 @@ class Program:
 
 
 def generated_includes(module: Module | None) -> dict[str, str]:
-    """Include files the TMCL-IDE ships, generated from the database (never typed twice)."""
+    """Include files the TMCL-IDE ships, generated from the database (never typed twice).
+
+    Keys are lower-case file names; ``#include`` looks them up case-insensitively when no
+    real file of that name exists.
+
+    * ``interrupts.inc``: the interrupt numbers (``TI_TIMER0 = 0`` ...).
+    * ``tmclparam.tmc`` (also ``tmclparam.inc`` and ``<module>.inc``, e.g. ``tmcm-1311.inc``):
+      ``AP<Name>`` for every axis parameter, ``GP<Name>`` for every global parameter
+      (``APMaxPositioningSpeed = 4``, as the TMCM-1311 manual §11.3 uses them) and
+      ``Motor0``... for the module's motors.
+    """
     out = {"interrupts.inc": "// Interrupt numbers (generated by tmclsh)\n" + "".join(
         f"{name} = {num}\n" for name, num in isa.interrupts().items())}
     if module is not None:
         lines = [f"// {module.name} parameters (generated by tmclsh from its database)\n"]
-        lines += [f"AP_{p.name} = {p.number}\n" for p in module.axis_params]
-        lines += [f"GP_{p.name} = {p.number}\n" for p in module.global_params]
+        lines += [f"AP{p.name} = {p.number}  // {p.label}\n" for p in module.axis_params]
+        lines += [f"GP{p.name} = {p.number}  // {p.label}\n" for p in module.global_params]
+        lines += [f"Motor{n} = {n}\n" for n in range(module.motors)]
         text = "".join(lines)
-        out[f"{module.name.lower()}.inc"] = text
-        out["tmclparam.inc"] = text
+        for name in ("tmclparam.tmc", "tmclparam.inc", f"{module.name.lower()}.inc"):
+            out[name] = text
     return out
 
 
@@ -624,41 +709,51 @@ class _Item:
 
 
 class Assembler:
+    MAX_INCLUDE_DEPTH = 32
+
     def __init__(self, module: Module, origin: int = 0, include_dirs: list[Path] | None = None):
         self.module = module
         self.origin = origin
         self.include_dirs = include_dirs or []
         self.generated = generated_includes(module)
 
-    def _read(self, name: str, base: Path | None, stack: list[str], line: Line | None
-              ) -> tuple[str, str]:
+    def _read(self, name: str, base: Path | None, stack: list[str], line: Line) -> tuple[str, str]:
+        """Find an include file: beside the including file, in include_dirs, or generated."""
         candidates = [(base / name) if base else Path(name)] + [d / name for d in self.include_dirs]
         for path in candidates:
-            if path.is_file():
+            try:
+                if not path.is_file():
+                    continue
                 key = str(path.resolve())
                 if key in stack:
-                    raise (line.error if line else AsmError)(f"recursive #include of {name}")
+                    raise line.error(f"recursive #include of {name}", line.include_col)
                 return key, path.read_text(encoding="utf-8", errors="replace")
-        gen = self.generated.get(Path(name).name.lower())
+            except (OSError, ValueError) as exc:  # unreadable, bad name (NUL, too long)
+                if isinstance(exc, AsmError):
+                    raise
+                raise line.error(f"cannot read include file {name!r}: {exc}",
+                                 line.include_col) from None
+        gen = self.generated.get(name.replace("\\", "/").rsplit("/", 1)[-1].lower())
         if gen is not None:
-            key = "<" + Path(name).name + ">"
+            key = "<" + name + ">"
             if key in stack:
-                raise (line.error if line else AsmError)(f"recursive #include of {name}")
+                raise line.error(f"recursive #include of {name}", line.include_col)
             return key, gen
-        if line is None:
-            raise AsmError(f"cannot read {name}")
-        raise line.error(f"cannot find include file {name!r}")
+        where = f" (looked in {base})" if base else ""
+        known = ", ".join(sorted(self.generated))
+        raise line.error(f"cannot find include file {name!r}{where}; built-in: {known}",
+                         line.include_col)
 
-    def _lines(self, text: str, file: str, base: Path | None, stack: list[str]):
+    def _lines(self, text: str, file: str, base: Path | None, stack: list[str]) -> Iterator[Line]:
         for no, raw in enumerate(text.splitlines(), 1):
             line = parse_line(raw, no, file)
             if line.include:
+                if len(stack) >= self.MAX_INCLUDE_DEPTH:
+                    raise line.error("#include nested too deeply", line.include_col)
                 key, sub = self._read(line.include, base, stack, line)
-                sub_base = Path(key).parent if not key.startswith("<") else base
-                if len(stack) > 32:
-                    raise line.error("#include nested too deeply")
-                yield from self._lines(sub, line.include if key.startswith("<") else key,
-                                       sub_base, stack + [key])
+                generated = key.startswith("<")
+                yield from self._lines(sub, line.include if generated else key,
+                                       base if generated else Path(key).parent, stack + [key])
             else:
                 yield line
 
@@ -666,26 +761,33 @@ class Assembler:
         stack = [str(Path(file).resolve())] if base is not None else []
         lines = list(self._lines(text, file, base, stack))
         symbols = Symbols()
+        defined: dict[str, Line] = {}
         items: list[_Item] = []
         addr = self.origin
         # pass 1: constants in order, labels at their addresses
         for line in lines:
+            for name, col in ((line.label, line.label_col), (line.constant, line.constant_col)):
+                if not name:
+                    continue
+                first = defined.get(name.lower())
+                if first is not None:
+                    where = f"{first.file}:{first.number}" if first.file != line.file else \
+                        f"line {first.number}"
+                    raise line.error(f"{name!r} is already defined ({where})", col)
+                if isa.by_mnemonic(name):
+                    raise line.error(f"{name!r} is a command name", col)
+                defined[name.lower()] = line
             if line.label:
-                if symbols.lookup(line.label) is not None:
-                    raise line.error(f"duplicate label or name {line.label!r}", line.label_col)
                 symbols.labels[line.label] = addr
             if line.constant:
-                if symbols.lookup(line.constant) is not None:
-                    raise line.error(f"{line.constant!r} is already defined", line.constant_col)
-                if isa.by_mnemonic(line.constant):
-                    raise line.error(f"{line.constant!r} is a command name", line.constant_col)
                 symbols.constants[line.constant] = eval_constant(line, symbols)
             elif line.mnemonic:
                 items.append(_Item(line, addr))
                 addr += 1
         limit = self.module.program_memory
         if addr > limit:
-            over = items[limit - self.origin] if limit - self.origin < len(items) else items[-1]
+            first_over = max(limit - self.origin, 0)
+            over = items[first_over] if first_over < len(items) else items[-1]
             raise over.line.error(
                 f"program needs {addr - self.origin} instructions from address {self.origin}; "
                 f"the {self.module.name} holds {limit}", over.line.mnemonic_col)
@@ -718,12 +820,16 @@ def assemble_file(path: str | Path, module: Module, origin: int = 0) -> Program:
 # -- images ------------------------------------------------------------------------------
 
 def read_image(data: bytes) -> list[Instruction]:
-    """Instructions from a binary image (7 bytes each) or the ``--hex`` text form."""
+    """Instructions from a binary image (7 bytes each) or the ``--hex`` text form.
+
+    The text form is one instruction per line, seven two-digit hex bytes separated by spaces
+    (what ``Program.to_hex`` writes).
+    """
     try:
         text = data.decode("ascii")
     except UnicodeDecodeError:
         text = None
-    if text is not None and re.fullmatch(r"[0-9A-Fa-f\s]*", text) and text.strip():
+    if text is not None and text.strip() and re.fullmatch(r"(?:[0-9A-Fa-f]{2}|\s)*", text):
         out = []
         for no, raw in enumerate(text.splitlines(), 1):
             parts = raw.split()
@@ -755,38 +861,56 @@ def jump_targets(program: list[Instruction]) -> set[int]:
     return targets
 
 
+def _raw_text(ins: Instruction) -> str:
+    return f"{ins.opcode} {ins.type}, {ins.motor}, {ins.signed_value}"
+
+
 def disassemble_instruction(ins: Instruction, module: Module | None = None,
                             labels: dict[int, str] | None = None) -> tuple[str, str]:
-    """One instruction as source text, plus a comment naming its parameter (may be empty)."""
+    """One instruction as source text, plus a comment (may be empty).
+
+    The text assembles back to the same seven bytes: the mnemonic form where it does, else
+    the raw form ``opcode type, motor, value`` (an unknown command, a non-zero don't-care
+    field, or, with ``module`` given, fields that module would refuse, such as a motor it does
+    not have). ``labels`` maps jump targets to the names to print for them.
+    """
     spec = isa.by_opcode(ins.opcode)
-    modname = module.name if module else None
     if spec is None:
-        return f"{ins.opcode} {ins.type}, {ins.motor}, {ins.signed_value}", "raw command"
+        return _raw_text(ins), "raw command"
+    if module is not None and not spec.on(module.name):
+        return _raw_text(ins), f"{spec.mnemonic} is not available on the {module.name}"
+    dont_care = [f for f in FIELDS if f not in spec.fields and getattr(ins, f) != 0]
+    if dont_care:
+        return _raw_text(ins), f"{spec.mnemonic} with don't-care {'/'.join(dont_care)} set"
+    modname = module.name if module else None
+    param = None
+    if module is not None and spec.type_kind == "axis_param":
+        param = module.axis(ins.type)
+    elif module is not None and spec.type_kind == "global_param":
+        param = module.glob(ins.type, ins.motor)
     value = ins.signed_value
-    comment = ""
-    parts: dict[str, str] = {"type": str(ins.type), "motor": str(ins.motor), "value": str(value)}
+    if value < 0 and param is not None and param.max is not None and param.max > INT32_MAX:
+        value = ins.value & 0xFFFFFFFF  # an unsigned parameter: print it as its range reads
+    parts = {"type": str(ins.type), "motor": str(ins.motor), "value": str(value)}
     if spec.type_kind == "symbolic":
         parts["type"] = spec.type_name(ins.type, modname) or str(ins.type)
     elif spec.type_kind == "interrupt":
         parts["type"] = isa.interrupt_name(ins.type) or str(ins.type)
-    elif spec.type_kind in ("axis_param", "global_param") and module is not None:
-        p = (module.axis(ins.type) if spec.type_kind == "axis_param"
-             else module.glob(ins.type, ins.motor))
-        if p is not None:
-            comment = p.name
+    if (spec.mnemonic == "MVP" and module is not None and module.motors > 1
+            and ins.motor >= module.motors):
+        parts["motor"] = f"${ins.motor:02X}"  # MVP COORD motor mask, as the manual writes it
     if spec.jumps and labels and value in labels:
         parts["value"] = labels[value]
-    ops = [parts[f] for f in spec.fields]
-    # keep non-zero don't-care fields so the image round-trips
-    for f in ("type", "motor", "value"):
-        if f not in spec.fields and getattr(ins, f) != 0:
-            idx = ("type", "motor", "value").index(f)
-            if all(x in spec.fields or x == f for x in ("type", "motor", "value")[:idx + 1]) or True:
-                ops = None
-                break
-    if ops is None:
-        return f"{ins.opcode} {ins.type}, {ins.motor}, {value}", f"{spec.mnemonic} with don't-care fields set"
-    text = spec.mnemonic + (" " + ", ".join(ops) if ops else "")
+    text = spec.mnemonic + (" " + ", ".join(parts[f] for f in spec.fields) if spec.fields else "")
+    comment = param.name if param is not None else ""
+    if module is not None:
+        symbols = Symbols(labels={name: addr for addr, name in (labels or {}).items()})
+        try:
+            same = encode(parse_line(text), module, symbols).instruction == ins
+        except AsmError as exc:
+            return _raw_text(ins), f"{text}: {exc.message}"
+        if not same:  # pragma: no cover - a disassembler bug; keep the bytes regardless
+            return _raw_text(ins), f"{text} does not reassemble"
     return text, comment
 
 

@@ -167,66 +167,101 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
 
 def trinamic_ports() -> list:
-    """Serial ports whose USB vendor is Trinamic (0x2A3C)."""
+    """Serial ports whose USB vendor is Trinamic (0x2A3C), sorted by device name."""
     from serial.tools import list_ports
 
-    return [p for p in list_ports.comports() if p.vid == TRINAMIC_VID]
+    return sorted((p for p in list_ports.comports() if p.vid == TRINAMIC_VID),
+                  key=lambda p: p.device)
 
 
 TRINAMIC_VID = 0x2A3C
 
 
 def cmd_ports(args: argparse.Namespace) -> int:
+    """One line per serial port: device, USB vendor:product, description, serial number;
+    Trinamic devices first and marked."""
+    import json
+
     from serial.tools import list_ports
 
-    ports = sorted(list_ports.comports(), key=lambda p: p.device)
+    ports = sorted(list_ports.comports(), key=lambda p: (p.vid != TRINAMIC_VID, p.device))
+    as_json = bool(getattr(args, "json", False))
     if not ports:
         print("no serial ports found", file=sys.stderr)
         return EXIT_OK
     for p in ports:
+        trinamic = p.vid == TRINAMIC_VID
+        desc = p.description if p.description and p.description != "n/a" else ""
+        if as_json:
+            print(json.dumps({"device": p.device, "vid": p.vid, "pid": p.pid,
+                              "description": desc or None, "serial": p.serial_number,
+                              "trinamic": trinamic}))
+            continue
         ids = f"{p.vid:04x}:{p.pid:04x}" if p.vid is not None else "-"
-        mark = "  TRINAMIC" if p.vid == TRINAMIC_VID else ""
-        print(f"{p.device:<20} {ids:<10} {p.description}{mark}")
+        serial = f"  serial {p.serial_number}" if p.serial_number else ""
+        mark = "  [TRINAMIC]" if trinamic else ""
+        print(f"{p.device:<20} {ids:<10} {desc}{serial}{mark}".rstrip())
     return EXIT_OK
 
 
 def cmd_scan(args: argparse.Namespace) -> int:
+    """Ask every address in --from..--to for its version.
+
+    Presence is tested with 136 type 1, whose serial reply names the module address and
+    opcode, so a slow module's late answer is never credited to the next address (the 136
+    type 0 string reply names neither). A module that answered is then asked for its version
+    string. On CAN the --from..--to range is the CAN ids (GP 71) and every module answers on
+    the one --reply-id; a CAN reply names no sender the client can rely on, so there the
+    per-id timeout must outlast the modules' answer time (a few ms).
+    """
     import json
 
+    from .client import Client
+    from .errors import ChecksumError, TmclError, TmclTimeoutError, ValidationError
+    from .modules import by_firmware_id, from_version_string
     from .protocol import Control, Request
 
+    if args.first > args.last:
+        raise ValidationError(f"--from {args.first} is above --to {args.last}")
     settings = connection_settings(args)
     transport = open_transport(settings)
-    from .client import Client
-    from .errors import TmclError
-    from .modules import from_version_string
-
-    found = 0
-    client = Client(transport, address=1, host_address=settings.get("host_address", 2),
+    client = Client(transport, address=args.first, host_address=settings["host_address"],
                     timeout=args.timeout, retries=0, can_id=settings.get("can_id"),
                     reply_id=settings.get("reply_id"))
+    ids = "CAN ids" if client.is_can else "addresses"
+    print(f"scanning {ids} {args.first}..{args.last} on {client.describe()}", file=sys.stderr)
+    found = 0
     try:
         for addr in range(args.first, args.last + 1):
             client.address = addr
             if client.is_can:
                 client.can_id = addr
             try:
-                r = client.request(Request(addr, Control.GET_VERSION, 0, 0, 0), retries=0)
+                binary = client.request(Request(addr, Control.GET_VERSION, 1, 0, 0))
+            except (TmclTimeoutError, ChecksumError):
+                continue
+            assert binary is not None
+            version = None
+            try:  # it is there: give it time and a retry for the string
+                reply = client.request(Request(addr, Control.GET_VERSION, 0, 0, 0),
+                                       timeout=max(args.timeout, 0.2), retries=1)
+                version = reply.version if reply is not None else None
             except TmclError:
-                continue
-            if r is None or r.version is None:
-                continue
-            mod = from_version_string(r.version)
+                pass
+            mod = from_version_string(version) if version else None
+            if mod is None and binary.status == 100:
+                mod = by_firmware_id((binary.value >> 16) & 0xFFFF)
             found += 1
-            row = {"address": addr, "module": mod.name if mod else None, "version": r.version}
+            row = {"address": addr, "module": mod.name if mod else None, "version": version}
             if args.json:
                 print(json.dumps(row), flush=True)
             else:
-                print(f"address {addr:3d}  {row['module'] or 'unknown'}  firmware {r.version}", flush=True)
+                print(f"address {addr:3d}  {row['module'] or 'unknown module':<10}  "
+                      f"firmware {version or '?'}", flush=True)
     finally:
         client.close()
-    if not found and not args.json:
-        print("no module answered", file=sys.stderr)
+    if not found:
+        print(f"no module answered on {ids} {args.first}..{args.last}", file=sys.stderr)
     return EXIT_OK if found else EXIT_ERROR
 
 
@@ -241,32 +276,46 @@ def connection_settings(args: argparse.Namespace) -> dict:
     return resolve(cli, load_config())
 
 
+def _setting(settings: dict, key: str, default):
+    value = settings.get(key)
+    return default if value is None else value  # address 0 is an address
+
+
 def open_transport(settings: dict):
+    """The transport the settings name: port, CAN bus, the one attached Trinamic module, or
+    else the in-process simulator (``settings["port"]``/``["sim"]`` record which)."""
     from . import transport as tr
 
+    baud = _setting(settings, "baud", 9600)
     if settings.get("port"):
-        return tr.open_serial(settings["port"], settings.get("baud") or 9600)
+        return tr.open_serial(settings["port"], baud)
     if settings.get("can"):
         return tr.open_can(settings["can"])
     if not settings.get("sim"):
         found = trinamic_ports()
         if len(found) == 1:
             settings["port"] = found[0].device
-            return tr.open_serial(found[0].device, settings.get("baud") or 9600)
+            return tr.open_serial(found[0].device, baud)
+        if len(found) > 1:
+            print(f"tmclsh: {len(found)} Trinamic modules attached "
+                  f"({', '.join(p.device for p in found)}); pick one with --port. "
+                  "Starting the simulator.", file=sys.stderr)
     module = settings.get("sim") or settings.get("module") or "TMCM-1311"
     settings["sim"] = module
-    return tr.open_sim(module, settings.get("address") or 1)
+    return tr.open_sim(module, _setting(settings, "address", 1),
+                       host_address=_setting(settings, "host_address", 2))
 
 
 def open_client(settings: dict):
+    """A client on ``open_transport(settings)``, in ASCII mode if asked, module identified."""
     from .client import Client
 
     transport = open_transport(settings)
     module = settings.get("module") or settings.get("sim")
-    client = Client(transport, address=settings.get("address") or 1,
-                    host_address=settings.get("host_address") or 2, module=module,
-                    timeout=settings.get("timeout") or 1.0,
-                    retries=2 if settings.get("retries") is None else settings["retries"],
+    client = Client(transport, address=_setting(settings, "address", 1),
+                    host_address=_setting(settings, "host_address", 2), module=module,
+                    timeout=_setting(settings, "timeout", 1.0),
+                    retries=_setting(settings, "retries", 2),
                     can_id=settings.get("can_id"), reply_id=settings.get("reply_id"))
     try:
         if settings.get("ascii"):

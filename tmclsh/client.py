@@ -2,52 +2,94 @@
 
 TMCL replies carry no sequence number, so the client keeps the link honest itself:
 
-* a reply is taken only if its host address, module address and opcode match the request;
-* 138 target-reached events (status 128) are handed to listeners whenever they arrive, before,
-  during or between transactions, and never taken for a reply;
-* after a timeout or a corrupted reply the link is *dirty*: before the next request the client
-  drains the line and sends a 136 type 1 (binary version) as a marker, discarding everything up
-  to the marker's reply. Anything that arrives late is thereby consumed before it could be
-  mistaken for the answer to a later request;
-* only idempotent requests are retried (a retried ``MVP REL`` would move twice).
+* a reply is taken only if its host address, module address and opcode match the request
+  (on CAN: the reply id and the opcode);
+* 138 target-reached events (status 128) are collected whenever they arrive (before, during
+  or between transactions), never taken for a reply, and handed to listeners once the link is
+  released, so a listener may itself send commands;
+* bytes that are no frame (line noise, a lost byte) are skipped one at a time until a frame
+  with a valid checksum lines up again;
+* a request that timed out or got a corrupted reply is remembered as *stale*: its reply may
+  still arrive. Before a request whose reply could be confused with a stale one (same address
+  and opcode, or a reply layout that does not name its opcode: 136 type 0, 134) the client
+  sends a 136 type 1 as a marker and discards everything up to the marker's reply. The module
+  answers in order, so a late reply is consumed before it could be taken for a newer one. In
+  download mode (132 ... 133) a marker would be stored in program memory, so the client only
+  drains the line there;
+* only idempotent requests are retried on a timeout or corrupted reply (a retried ``MVP REL``
+  would move twice); a reply with status 1 (the module saw a bad checksum and executed
+  nothing) is retried for every request.
 
-The client owns the only receive path: trace, watch and the debugger subscribe as listeners.
+The client owns the only receive path: trace, watch and the debugger subscribe with
+``add_tracer`` and ``add_listener``.
 """
 
 from __future__ import annotations
 
 import logging
+import struct
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-from . import asm
+from . import instructions as isa
 from .errors import ChecksumError, StatusError, TmclTimeoutError, TransportError, ValidationError
 from .modules import Module, from_version_string
 from .modules import load as load_module
-from .protocol import (SERIAL_FRAME_LEN, Control, Reply, ReplyKind, Request, Status,
-                       decode_reply, status_ok)
+from .protocol import (SERIAL_FRAME_LEN, VERSION_STRING_LEN, Control, Reply, ReplyKind,
+                       Request, Status, status_ok)
 from .transport.base import CanTransport, StreamTransport, Transport
+
+if TYPE_CHECKING:  # the assembler is imported when a line is first encoded
+    from . import asm
 
 log = logging.getLogger(__name__)
 
 Tracer = Callable[[str, bytes, object], None]
 Listener = Callable[[Reply], None]
 
-# requests that must never be sent twice by a retry
-_NOT_IDEMPOTENT = {Control.RUN_APPLICATION, Control.STEP_APPLICATION, Control.RESET_APPLICATION,
-                   Control.START_DOWNLOAD, Control.QUIT_DOWNLOAD, Control.FACTORY_DEFAULT,
-                   Control.TARGET_REACHED_EVENT, Control.ENTER_ASCII}
-_MVP, _MVP_REL = 4, 1
+Op = isa.Opcode
+_NORMAL, _VERSION, _MEMORY, _NONE = (ReplyKind.NORMAL, ReplyKind.VERSION_STRING,
+                                     ReplyKind.MEMORY, ReplyKind.NONE)
+_FRAME = SERIAL_FRAME_LEN
+_FIRST_CONTROL = int(Control.STOP_APPLICATION)  # only control commands have other layouts
+_EVENT, _OK = int(Status.EVENT), int(Status.OK)
+_TARGET_REACHED = int(Control.TARGET_REACHED_EVENT)
+_STATUSES = frozenset(int(s) for s in Status)
+_REPLY_STATUSES = _STATUSES - {_EVENT}
+_CAN_REPLY_LEN = 7
+# After bytes that were no frame, how long a silent line is given to bring the rest of the
+# reply before the client calls it corrupted (instead of waiting out the whole timeout).
+_QUIET_AFTER_GARBAGE = 0.05
+# Download mode cannot use a marker: wait until the line has been quiet this long.
+_DRAIN_QUIET = 0.03
+
+# Commands a retry may repeat without changing the outcome. Anything else (CALC, SAC, the
+# user functions, CCO (it captures a position that moves on), run/step/download, raw numbers
+# we do not know) is sent at most once.
+_IDEMPOTENT = frozenset({
+    Op.ROR, Op.ROL, Op.MST, Op.MVP, Op.SAP, Op.GAP, Op.STAP, Op.RSAP, Op.SGP, Op.GGP,
+    Op.STGP, Op.RSGP, Op.RFS, Op.SIO, Op.GIO, Op.SCO, Op.GCO, Op.AAP, Op.AGP, Op.ACO,
+    Op.CLE, Control.STOP_APPLICATION, Control.RESET_APPLICATION, Control.READ_MEMORY,
+    Control.GET_STATUS, Control.GET_VERSION})
+_MVP_REL = isa.by_mnemonic("MVP").types["REL"]  # type: ignore[union-attr]
+_RFS_START = isa.by_mnemonic("RFS").types["START"]  # type: ignore[union-attr]
 
 
 def idempotent(req: Request, downloading: bool = False) -> bool:
-    if downloading or req.opcode in _NOT_IDEMPOTENT:
+    """May ``req`` be sent again when its reply got lost? Never while downloading (every frame
+    is stored), never for a relative move or a restarted reference search."""
+    if downloading:
         return False
-    if req.opcode == _MVP and req.type == _MVP_REL:
-        return False
-    return req.opcode not in (19, 33, 34, 35, 39)  # CALC/CALCX/AAP/AGP/ACO change state
+    op = req.opcode
+    if op == Op.MVP:
+        return req.type != _MVP_REL
+    if op == Op.RFS:
+        return req.type != _RFS_START
+    return op in _IDEMPOTENT
 
 
 @dataclass(frozen=True)
@@ -71,7 +113,18 @@ class Result:
         return None if self.reply is None else self.reply.value
 
 
+# what the stream matcher did with the frame at the head of the buffer
+_SKIPPED = object()  # a whole frame consumed: an event, a stale reply, another host's reply
+_GARBAGE = object()  # one byte dropped: no frame starts here
+
+
 class Client:
+    """One module on one transport. Thread-safe: one transaction at a time.
+
+    ``timeout`` is the reply timeout in seconds (per attempt), ``retries`` how often an
+    idempotent request is repeated after a timeout or a corrupted reply.
+    """
+
     def __init__(self, transport: Transport, *, address: int = 1, host_address: int = 2,
                  module: Module | str | None = None, timeout: float = 1.0, retries: int = 2,
                  can_id: int | None = None, reply_id: int | None = None):
@@ -84,26 +137,40 @@ class Client:
         self.reply_id = reply_id if reply_id is not None else 2
         self.module: Module | None = load_module(module) if isinstance(module, str) else module
         self.version: str | None = None
-        self.downloading = False
+        self.downloading = False  # set by tmclsh.program between 132 and 133
         self.ascii_link = None  # set by tmclsh.ascii when the module is driven in ASCII mode
         self._lock = threading.RLock()
         self._buf = bytearray()
-        self._dirty = False
+        # (address, opcode) of requests whose reply may still arrive; _stale_opaque: one of
+        # them has a reply layout that names no opcode (136 type 0, 134)
+        self._stale: set[tuple[int, int]] = set()
+        self._stale_opaque = False
+        self._events: deque[Reply] = deque()
+        # run by close() while the link is still open (the ASCII link restores the mode the
+        # module was found in)
+        self.close_hooks: list[Callable[[], None]] = []
         self._listeners: list[Listener] = []
         self._tracers: list[Tracer] = []
         self._poller: threading.Thread | None = None
         self._poller_stop = threading.Event()
         self.stats = {"sent": 0, "timeouts": 0, "checksum_errors": 0, "resyncs": 0,
-                      "discarded": 0, "events": 0}
+                      "discarded": 0, "events": 0, "retries": 0, "reconnects": 0}
 
     # -- subscriptions ------------------------------------------------------------------
     def add_listener(self, fn: Listener) -> Callable[[], None]:
-        """Call ``fn(reply)`` for every unsolicited reply (138 events). Returns an unsubscribe."""
+        """Call ``fn(reply)`` for every unsolicited reply (138 events). Returns an unsubscribe.
+
+        Listeners run after the transaction that received the event has released the link
+        (or on the event poller's thread), so they may send commands themselves.
+        """
         self._listeners.append(fn)
         return lambda: self._listeners.remove(fn) if fn in self._listeners else None
 
     def add_tracer(self, fn: Tracer) -> Callable[[], None]:
-        """Call ``fn(direction, raw, decoded)`` for every frame: "tx", "rx", "drop" or "note"."""
+        """Call ``fn(direction, raw, decoded)`` for every frame: "tx", "rx", "drop" or "note".
+
+        Tracers run inside the transaction: they must be quick and must not use the client.
+        """
         self._tracers.append(fn)
         return lambda: self._tracers.remove(fn) if fn in self._tracers else None
 
@@ -114,15 +181,31 @@ class Client:
             except Exception:  # a broken tracer must not break the link
                 log.exception("tracer failed")
 
-    def _event(self, reply: Reply) -> None:
-        self.stats["events"] += 1
-        for fn in list(self._listeners):
+    def _deliver_events(self) -> None:
+        while True:
             try:
-                fn(reply)
-            except Exception:
-                log.exception("listener failed")
+                reply = self._events.popleft()
+            except IndexError:
+                return
+            for fn in list(self._listeners):
+                try:
+                    fn(reply)
+                except Exception:
+                    log.exception("listener failed")
 
     # -- properties ---------------------------------------------------------------------
+    @property
+    def timeout(self) -> float:
+        """Seconds to wait for each reply (per attempt). A request/reply link never waits
+        forever: a lost reply would hang it."""
+        return self._timeout
+
+    @timeout.setter
+    def timeout(self, value: float) -> None:
+        if not (isinstance(value, (int, float)) and value > 0):
+            raise ValueError(f"timeout must be a positive number of seconds, got {value!r}")
+        self._timeout = float(value)
+
     @property
     def mode(self) -> str:
         return "ascii" if self.ascii_link is not None else "binary"
@@ -138,234 +221,374 @@ class Client:
     def describe(self) -> str:
         return self.transport.describe()
 
+    def __repr__(self) -> str:
+        mod = self.module.name if self.module else "unknown module"
+        return f"<Client {mod} at address {self.address} on {self.describe()}>"
+
     # -- the request path ---------------------------------------------------------------
-    def send(self, opcode: int, type: int = 0, motor: int = 0, value: int = 0, *,
+    def send(self, opcode: int | str, type: int = 0, motor: int = 0, value: int = 0, *,
              timeout: float | None = None) -> Reply | None:
-        """Send one raw command and return its reply (None for 137, which has none)."""
-        return self.request(Request(self.address, opcode, type, motor, value), timeout=timeout)
+        """Send one raw command and return its reply (None for 137, which has none).
+
+        ``opcode`` is a number or a mnemonic (``send("GAP", 1, 0)``); no module checks are
+        made, the status is not checked (see :meth:`execute` for both).
+        """
+        if isinstance(opcode, str):
+            spec = isa.by_mnemonic(opcode)
+            if spec is None:
+                raise ValidationError(f"unknown mnemonic {opcode!r}")
+            opcode = spec.opcode
+        return self.request(_request(self.address, opcode, type, motor, value), timeout=timeout)
 
     def request(self, req: Request, *, timeout: float | None = None,
                 retries: int | None = None) -> Reply | None:
-        timeout = self.timeout if timeout is None else timeout
-        with self._lock:
-            if self.ascii_link is not None:
-                return self.ascii_link.transact(req, timeout)
-            if not self.transport.is_open:
-                raise TransportError(f"{self.transport.describe()} is not connected (use .connect)")
-            tries = 1 + ((self.retries if retries is None else retries)
-                         if idempotent(req, self.downloading) else 0)
-            last: Exception | None = None
-            for attempt in range(tries):
-                if self._dirty:
-                    self._resync(timeout)
-                try:
-                    return self._transact(req, timeout)
-                except TmclTimeoutError as exc:
-                    self.stats["timeouts"] += 1
-                    last = exc
-                except ChecksumError as exc:
-                    self.stats["checksum_errors"] += 1
-                    last = exc
-                self._dirty = True
-                if attempt + 1 < tries:
-                    self._trace("note", b"", f"retry {attempt + 1} of {tries - 1}")
-            assert last is not None
-            if tries > 1:
-                raise type(last)(f"{last} (after {tries} attempts)")
-            raise last
+        """Send ``req`` and return its reply (None when the command has none, i.e. 137).
 
-    def _transact(self, req: Request, timeout: float) -> Reply | None:
-        if self.is_can:
-            return self._transact_can(req, timeout)
-        t = self.transport
-        assert isinstance(t, StreamTransport)
-        if self._buf or t.pending():
-            self._absorb(timeout=0)
-        raw = req.to_bytes()
+        ``timeout`` (seconds per attempt) and ``retries`` default to the client's. Raises
+        ``TmclTimeoutError``, ``ChecksumError`` (corrupted reply, after retries) or
+        ``TransportError`` (link lost). The reply's status is returned, not checked.
+        """
+        if timeout is None:
+            timeout = self._timeout
+        elif not (isinstance(timeout, (int, float)) and timeout > 0):
+            raise ValueError(f"timeout must be a positive number of seconds, got {timeout!r}")
+        try:
+            with self._lock:
+                if self.ascii_link is not None:
+                    return self.ascii_link.transact(req, timeout)
+                return self._request(req, timeout, self.retries if retries is None else retries)
+        finally:
+            if self._events:
+                self._deliver_events()
+
+    def _request(self, req: Request, timeout: float, retries: int) -> Reply | None:
+        if not self.transport.is_open:
+            raise TransportError(f"{self.transport.describe()} is not connected "
+                                 "(the link was closed or lost; reconnect first)")
+        kind = _NORMAL if req.opcode < _FIRST_CONTROL else req.reply_kind
+        attempt = 0
+        while True:
+            attempt += 1
+            try:
+                if self._stale or self._stale_opaque:
+                    self._sync_before(req, kind, timeout)
+                reply = self._exchange(req, kind, timeout)
+            except TmclTimeoutError as exc:
+                self.stats["timeouts"] += 1
+                failure: Exception = exc
+            except ChecksumError as exc:
+                self.stats["checksum_errors"] += 1
+                failure = exc
+            except BaseException:
+                # Ctrl-C or a link error mid-transaction: the reply may still be on its way
+                self._mark_stale(req, kind)
+                raise
+            else:
+                if (reply is not None and reply.status == Status.WRONG_CHECKSUM
+                        and not self.downloading and attempt <= retries):
+                    # the module got a damaged frame and executed nothing: safe to send again
+                    self.stats["retries"] += 1
+                    if self._tracers:
+                        self._trace("note", b"", "module saw a bad checksum; sending again")
+                    continue
+                return reply
+            self._mark_stale(req, kind)
+            tries = 1 + (retries if idempotent(req, self.downloading) else 0)
+            if attempt >= tries:
+                if tries > 1:
+                    raise type(failure)(f"{failure} (after {tries} attempts)") from failure
+                raise failure
+            self.stats["retries"] += 1
+            if self._tracers:
+                self._trace("note", b"", f"retry {attempt} of {tries - 1}")
+
+    @property
+    def _dirty(self) -> bool:
+        """Something may still arrive that is no answer to the next request."""
+        return bool(self._stale or self._stale_opaque)
+
+    @_dirty.setter
+    def _dirty(self, value: bool) -> None:
+        # for code that talks past the client (the ASCII mode probe): True means "the line
+        # may carry anything", so the next request resynchronises with a marker
+        self._stale_opaque = bool(value)
+        if not value:
+            self._stale.clear()
+
+    def _mark_stale(self, req: Request, kind: ReplyKind) -> None:
+        if kind == _NONE:
+            return
+        self._stale.add((req.address, req.opcode))
+        if kind != _NORMAL:
+            self._stale_opaque = True
+
+    def _sync_before(self, req: Request, kind: ReplyKind, timeout: float) -> None:
+        """Resynchronise if a late reply could be taken for ``req``'s."""
+        if self._stale_opaque or kind != _NORMAL or (req.address, req.opcode) in self._stale:
+            self._resync(req.address, timeout)
+
+    def _resync(self, address: int, timeout: float) -> None:
+        """Consume every late reply: drain, then a 136 type 1 marker whose reply comes last."""
+        self.stats["resyncs"] += 1
+        if self._tracers:
+            self._trace("note", b"", "resynchronising")
+        if self.downloading:
+            # a marker would be stored as an instruction: wait for a quiet line instead;
+            # stale replies are still dropped by opcode matching
+            self._drain(max(0.2, timeout))
+        else:
+            self._absorb()
+            marker = Request(address, Control.GET_VERSION, 1, 0, 0)
+            try:
+                self._exchange(marker, _NORMAL, timeout)
+            except (TmclTimeoutError, ChecksumError) as exc:
+                self._stale.add((address, marker.opcode))
+                raise type(exc)(f"address {address} did not answer the resynchronisation "
+                                f"request (136) after an earlier failure: {exc}") from exc
+        self._stale.clear()
+        self._stale_opaque = False
+
+    def _exchange(self, req: Request, kind: ReplyKind, timeout: float) -> Reply | None:
+        if self.transport.kind == "stream":
+            return self._exchange_stream(req, kind, timeout)
+        return self._exchange_can(req, kind, timeout)
+
+    # -- serial framing -----------------------------------------------------------------
+    def _exchange_stream(self, req: Request, kind: ReplyKind, timeout: float) -> Reply | None:
+        t: StreamTransport = self.transport  # type: ignore[assignment]
+        if kind != _NORMAL:
+            # these layouts take any well-formed frame: clear out what is already here
+            self._absorb()
+        raw = _frame(req)
         t.write(raw)
         self.stats["sent"] += 1
         if self._tracers:
             self._trace("tx", raw, req)
-        kind = req.reply_kind
-        if kind == ReplyKind.NONE:
+        if kind == _NONE:
             return None
-        return self._await_stream(req, kind, timeout)
-
-    def _await_stream(self, req: Request, kind: ReplyKind, timeout: float) -> Reply:
-        t = self.transport
-        assert isinstance(t, StreamTransport)
-        buf = self._buf
         deadline = time.monotonic() + timeout
-        corrupted = False
+        buf = self._buf
+        if not buf:
+            # the common case first: nine bytes that are the reply (the first read uses the
+            # client's timeout, so a pyserial URL port is not reconfigured)
+            head = t.read(_FRAME, timeout)
+            if (len(head) == _FRAME and kind == _NORMAL and head[1] == req.address
+                    and head[3] == req.opcode and head[0] == self.host_address
+                    and sum(head[:8]) & 0xFF == head[8] and head[2] in _REPLY_STATUSES):
+                reply = _reply(head)
+                if self._tracers:
+                    self._trace("rx", head, reply)
+                return reply
+            buf += head
+            wait = deadline - time.monotonic()
+        else:
+            wait = timeout
+        junk = bytearray()
+        garbled = False  # bytes that were no frame came since the last whole frame
         while True:
-            while len(buf) >= SERIAL_FRAME_LEN:
-                reply = self._match(req, kind, buf)
-                if reply is not None:
-                    return reply
-                if reply is None and self._last_bad:
-                    corrupted = True
-            left = deadline - time.monotonic()
-            if left <= 0:
+            while len(buf) >= _FRAME:
+                got = self._take(req, kind, buf, junk)
+                if got is _GARBAGE:
+                    garbled = True
+                    continue
+                garbled = False
+                if junk:
+                    self._drop(junk, "bytes that are no frame")
+                if got is not _SKIPPED:
+                    return got  # type: ignore[return-value]
+            if wait <= 0:
                 break
-            chunk = t.read(SERIAL_FRAME_LEN - len(buf) if len(buf) < SERIAL_FRAME_LEN else 1,
-                           min(left, 0.05) if corrupted else left)
+            if garbled:
+                wait = min(wait, _QUIET_AFTER_GARBAGE)
+            chunk = t.read(_FRAME - len(buf), wait)
             if chunk:
                 buf += chunk
-            elif corrupted:
-                break  # a corrupted reply and then silence: no need to wait out the deadline
-        if corrupted:
-            raise ChecksumError(f"corrupted reply to {_name(req)} (bad checksum); link resynchronised")
-        if buf:
-            self._trace("drop", bytes(buf), "incomplete frame")
-            buf.clear()
+            elif garbled:
+                break  # a damaged frame and then silence: no need to wait any longer
+            wait = deadline - time.monotonic()
+        # what is left can never complete a frame: the rest of a damaged or truncated reply
+        junk += buf
+        buf.clear()
+        self._drop(junk, "incomplete frame")
+        if garbled:
+            raise ChecksumError(f"corrupted reply to {_name(req)} from address {req.address} "
+                                "(bad checksum)")
         raise TmclTimeoutError(f"no reply to {_name(req)} from address {req.address} "
                                f"within {timeout:g} s")
 
-    _last_bad = False
-
-    def _match(self, req: Request, kind: ReplyKind, buf: bytearray) -> Reply | None:
-        """Look at the frame at the head of ``buf``: consume it and return it if it answers
-        ``req``; dispatch events; drop stale replies and bytes that are no frame."""
-        self._last_bad = False
-        head = bytes(buf[:SERIAL_FRAME_LEN])
-        if kind == ReplyKind.VERSION_STRING and head[0] == self.host_address \
-                and all(32 <= b < 127 for b in head[1:]):
-            del buf[:SERIAL_FRAME_LEN]
+    def _take(self, req: Request, kind: ReplyKind, buf: bytearray, junk: bytearray) -> object:
+        """Look at the frame at the head of ``buf`` and consume it: return it if it answers
+        ``req``; queue events; drop stale replies (_SKIPPED) and bytes that are no frame
+        (one at a time, into ``junk``: _GARBAGE)."""
+        head = bytes(buf[:_FRAME])
+        host = self.host_address
+        if kind == _VERSION and head[0] == host and _printable(head, 1):
+            del buf[:_FRAME]
             reply = Reply.from_bytes(head, kind, module=req.address)
             if self._tracers:
                 self._trace("rx", head, reply)
             return reply
-        used, reply = decode_reply(buf, ReplyKind.NORMAL)
-        if reply is None:
-            self._last_bad = True
-            self.stats["discarded"] += used
-            if self._tracers:
-                self._trace("drop", bytes(buf[:used]), "not a frame (bad checksum)")
-            del buf[:used]
-            return None
-        del buf[:used]
-        if reply.host != self.host_address:
-            self._discard(head, f"reply for host {reply.host}")
-            return None
-        if kind == ReplyKind.MEMORY:
-            if reply.status == Status.EVENT and reply.opcode == Control.TARGET_REACHED_EVENT \
-                    and reply.module == req.address:
-                self._rx_event(head, reply)
-                return None
-            mem = Reply.from_bytes(head, kind, module=req.address, opcode=req.opcode)
-            if self._tracers:
-                self._trace("rx", head, mem)
-            return mem
-        if reply.status == Status.EVENT:
-            self._rx_event(head, reply)
-            return None
-        if reply.module != req.address or reply.opcode != req.opcode:
-            self._discard(head, f"stale reply (op {reply.opcode} from address {reply.module})")
-            return None
+        if sum(head[:8]) & 0xFF != head[8] or (
+                head[0] == host and kind != _MEMORY and head[2] not in _STATUSES):
+            # no frame starts here (the decoder's rule: a checksum, and a TMCL status byte
+            # in a reply to us)
+            junk.append(buf[0])
+            del buf[0]
+            return _GARBAGE
+        del buf[:_FRAME]
+        if head[0] != host:
+            # a frame for another host, or our own request echoed by an RS485 adapter
+            self._discard(head, f"frame for address {head[0]}, not host {host}")
+            return _SKIPPED
+        status, opcode = head[2], head[3]
+        if status == _EVENT and opcode == _TARGET_REACHED:
+            # (a 134 read-back of a stored instruction could have this shape too, but only
+            # one whose opcode equals the address, with type 128 and motor 138)
+            self._rx_event(head, _reply(head))
+            return _SKIPPED
+        if kind == _MEMORY:
+            reply = Reply.from_bytes(head, kind, module=req.address, opcode=req.opcode)
+        elif (head[1] != req.address or opcode != req.opcode
+              or (kind == _VERSION and status == _OK)):
+            # (a normal frame answering 136 type 0 can only carry an error status)
+            self._discard(head, f"stale reply (op {opcode} from address {head[1]})")
+            return _SKIPPED
+        else:
+            reply = _reply(head)
         if self._tracers:
             self._trace("rx", head, reply)
         return reply
 
     def _rx_event(self, raw: bytes, reply: Reply) -> None:
+        self.stats["events"] += 1
         if self._tracers:
             self._trace("rx", raw, reply)
-        self._event(reply)
+        self._events.append(reply)
 
     def _discard(self, raw: bytes, why: str) -> None:
         self.stats["discarded"] += len(raw)
         if self._tracers:
             self._trace("drop", raw, why)
 
+    def _drop(self, junk: bytearray, why: str) -> None:
+        if junk:
+            self._discard(bytes(junk), why)
+            junk.clear()
+
     def _absorb(self, timeout: float = 0.0) -> None:
-        """Take in whatever is pending: events go to listeners, anything else is stale."""
-        t = self.transport
-        assert isinstance(t, StreamTransport)
+        """Take in whatever is pending now (or, if nothing is, what comes within ``timeout``):
+        events are queued, anything else is stale."""
+        if isinstance(self.transport, CanTransport):
+            self._absorb_can()
+            return
+        t: StreamTransport = self.transport  # type: ignore[assignment]
+        buf = self._buf
         data = t.read_available()
         if not data and timeout:
-            data = t.read(1, timeout)
-        self._buf += data
-        buf = self._buf
-        while len(buf) >= SERIAL_FRAME_LEN:
-            used, reply = decode_reply(buf, ReplyKind.NORMAL)
-            head = bytes(buf[:used])
-            del buf[:used]
-            if reply is None:
-                self._discard(head, "not a frame")
-            elif reply.status == Status.EVENT and reply.host == self.host_address:
-                self._rx_event(head, reply)
+            data = t.read(1, timeout) + t.read_available()
+        buf += data
+        junk = bytearray()
+        while len(buf) >= _FRAME:
+            head = bytes(buf[:_FRAME])
+            if sum(head[:8]) & 0xFF != head[8] or (
+                    head[0] == self.host_address and head[2] not in _STATUSES):
+                junk.append(buf[0])
+                del buf[0]
+                continue
+            self._drop(junk, "bytes that are no frame")
+            del buf[:_FRAME]
+            if head[0] == self.host_address and head[2] == Status.EVENT \
+                    and head[3] == Control.TARGET_REACHED_EVENT:
+                self._rx_event(head, _reply(head))
             else:
                 self._discard(head, "stale reply")
+        self._drop(junk, "bytes that are no frame")
 
-    def _resync(self, timeout: float) -> None:
-        """Drain the line, then use a 136 type 1 reply as a marker: all before it is stale."""
-        self.stats["resyncs"] += 1
-        self._trace("note", b"", "resynchronising")
-        if self.is_can:
-            while self.transport.recv(0.02) is not None:  # type: ignore[union-attr]
+    def _drain(self, hard_stop: float) -> None:
+        """Read until the line has been quiet for a moment (at most ``hard_stop`` s); then
+        drop everything that is not an event, including a partial frame."""
+        if isinstance(self.transport, CanTransport):
+            end = time.monotonic() + hard_stop
+            while time.monotonic() < end and self._take_can_any(_DRAIN_QUIET):
                 pass
-            self._dirty = False
             return
-        t = self.transport
-        assert isinstance(t, StreamTransport)
-        quiet_until = time.monotonic() + 0.03
-        hard_stop = time.monotonic() + max(0.2, timeout)
-        while time.monotonic() < hard_stop:
-            chunk = t.read(64, 0.01)
-            if chunk:
-                self._buf += chunk
-                quiet_until = time.monotonic() + 0.03
-            elif time.monotonic() >= quiet_until:
+        t: StreamTransport = self.transport  # type: ignore[assignment]
+        end = time.monotonic() + hard_stop
+        while time.monotonic() < end:
+            chunk = t.read(64, _DRAIN_QUIET)
+            if not chunk:
                 break
+            self._buf += chunk
         self._absorb()
         if self._buf:
             self._discard(bytes(self._buf), "partial frame")
             self._buf.clear()
-        marker = Request(self.address, Control.GET_VERSION, 1, 0, 0)
-        try:
-            self._transact(marker, timeout)
-            self._dirty = False
-        except (TmclTimeoutError, ChecksumError):
-            self._buf.clear()
 
-    def _transact_can(self, req: Request, timeout: float) -> Reply | None:
-        t = self.transport
-        assert isinstance(t, CanTransport)
-        kind = req.reply_kind
-        t.send(self.can_id, req.to_can())
+    # -- CAN framing --------------------------------------------------------------------
+    def _exchange_can(self, req: Request, kind: ReplyKind, timeout: float) -> Reply | None:
+        t: CanTransport = self.transport  # type: ignore[assignment]
+        if kind != _NORMAL:
+            self._absorb_can()
+        data = req.to_can()
+        t.send(self.can_id, data)
         self.stats["sent"] += 1
         if self._tracers:
-            self._trace("tx", req.to_can(), req)
-        if kind == ReplyKind.NONE:
+            self._trace("tx", data, req)
+        if kind == _NONE:
             return None
         deadline = time.monotonic() + timeout
-        while (left := deadline - time.monotonic()) > 0:
-            msg = t.recv(left)
-            if msg is None:
+        wait = timeout
+        while True:
+            msg = t.recv(wait)
+            if msg is not None:
+                reply = self._take_can(req, kind, msg[0], msg[1])
+                if reply is not None:
+                    return reply
+            wait = deadline - time.monotonic()
+            if wait <= 0:
                 break
-            arb, data = msg
-            if arb != self.reply_id:
-                continue
-            try:
-                if kind == ReplyKind.VERSION_STRING and len(data) == 8:
-                    reply = Reply.from_can(self.host_address, data, kind, module=req.address)
-                else:
-                    reply = Reply.from_can(self.host_address, data, ReplyKind.NORMAL)
-            except Exception:
-                self._discard(data, "not a TMCL CAN reply")
-                continue
-            if kind == ReplyKind.MEMORY and not reply.is_event:
-                reply = Reply.from_can(self.host_address, data, kind, module=req.address)
-            elif reply.is_event:
-                self._rx_event(data, reply)
-                continue
-            elif kind == ReplyKind.NORMAL and reply.opcode != req.opcode:
-                self._discard(data, f"stale reply (op {reply.opcode})")
-                continue
-            if self._tracers:
-                self._trace("rx", data, reply)
-            return reply
         raise TmclTimeoutError(f"no CAN reply to {_name(req)} on id {self.reply_id} "
-                               f"within {timeout:g} s")
+                               f"(sent to id {self.can_id}) within {timeout:g} s")
+
+    def _take_can(self, req: Request, kind: ReplyKind, arb: int, data: bytes) -> Reply | None:
+        if arb != self.reply_id:
+            return None  # other traffic on the bus
+        host = self.host_address
+        if kind == _VERSION and len(data) == VERSION_STRING_LEN and _printable(data, 0):
+            reply = Reply.from_can(host, data, kind, module=req.address)
+        elif len(data) != _CAN_REPLY_LEN:
+            self._discard(data, f"not a TMCL reply ({len(data)} bytes)")
+            return None
+        elif data[1] == Status.EVENT and data[2] == Control.TARGET_REACHED_EVENT:
+            self._rx_event(data, Reply.from_can(host, data))
+            return None
+        elif kind == _MEMORY:
+            reply = Reply.from_can(host, data, kind, module=req.address)
+        else:
+            reply = Reply.from_can(host, data)
+            if reply.opcode != req.opcode or (kind == _VERSION and reply.status == Status.OK):
+                self._discard(data, f"stale reply (op {reply.opcode})")
+                return None
+        if self._tracers:
+            self._trace("rx", data, reply)
+        return reply
+
+    def _take_can_any(self, timeout: float) -> bool:
+        """Receive one message: events are queued, anything else dropped. False if none."""
+        msg = self.transport.recv(timeout)  # type: ignore[union-attr]
+        if msg is None:
+            return False
+        arb, data = msg
+        if arb == self.reply_id and len(data) == _CAN_REPLY_LEN and data[1] == Status.EVENT \
+                and data[2] == Control.TARGET_REACHED_EVENT:
+            self._rx_event(data, Reply.from_can(self.host_address, data))
+        elif arb == self.reply_id:
+            self._discard(data, "stale reply")
+        return True
+
+    def _absorb_can(self) -> None:
+        while self._take_can_any(0):
+            pass
 
     # -- events while idle --------------------------------------------------------------
     def poll(self) -> None:
@@ -373,19 +596,17 @@ class Client:
         if not self._lock.acquire(blocking=False):
             return
         try:
-            if self.ascii_link is not None or not self.transport.is_open:
-                return
-            if self.is_can:
-                while (msg := self.transport.recv(0)) is not None:  # type: ignore[union-attr]
-                    arb, data = msg
-                    if arb == self.reply_id and len(data) == 7 and data[1] == Status.EVENT:
-                        self._rx_event(data, Reply.from_can(self.host_address, data))
-            elif self._buf or self.transport.pending():  # type: ignore[union-attr]
-                self._absorb()
+            t = self.transport
+            if self.ascii_link is None and t.is_open:
+                if isinstance(t, CanTransport) or self._buf or t.pending():
+                    self._absorb()
         finally:
             self._lock.release()
+            if self._events:
+                self._deliver_events()
 
     def start_event_poller(self, interval: float = 0.05) -> None:
+        """Deliver 138 events while no command is running, from a background thread."""
         if self._poller is not None:
             return
         self._poller_stop.clear()
@@ -395,7 +616,7 @@ class Client:
                 try:
                     self.poll()
                 except TransportError:
-                    pass
+                    pass  # the next command reports the lost link
                 except Exception:
                     log.exception("event poll failed")
 
@@ -418,7 +639,10 @@ class Client:
     def identify(self) -> Module:
         """Ask the module what it is (136 type 0) and load its database."""
         reply = self.request(Request(self.address, Control.GET_VERSION, 0, 0, 0))
-        assert reply is not None and reply.version is not None
+        if reply is None or reply.version is None:
+            status = reply.status if reply is not None else 0
+            raise StatusError(status, reply, f"address {self.address} refused the version "
+                              f"request (136): status {status}")
         self.version = reply.version
         mod = from_version_string(reply.version)
         if mod is None:
@@ -428,34 +652,40 @@ class Client:
         return mod
 
     def encode(self, line: str) -> asm.Encoded:
+        """Parse and check one TMCL line against the module (nothing is sent)."""
+        from . import asm
+
         mod = self.require_module()
         parsed = asm.parse_line(line)
         if parsed.mnemonic is None:
             raise ValidationError(f"no command in {line!r}")
         return asm.encode(parsed, mod, direct=True, ascii=self.mode == "ascii")
 
-    def execute(self, line: str, *, check: bool = True) -> Result:
+    def execute(self, line: str, *, check: bool = True, timeout: float | None = None) -> Result:
         """Parse, check, send one TMCL line (``"GAP 1, 0"``); StatusError on an error status."""
         enc = self.encode(line)
         ins = enc.instruction
-        reply = self.request(Request(self.address, ins.opcode, ins.type, ins.motor, ins.value))
+        reply = self.request(Request(self.address, ins.opcode, ins.type, ins.motor, ins.value),
+                             timeout=timeout)
         if check and reply is not None and not status_ok(reply.status):
             raise StatusError(reply.status, reply)
         return Result(line, enc, reply)
 
-    def value(self, line: str) -> int:
-        r = self.execute(line)
-        assert r.reply is not None
+    def value(self, line: str, *, timeout: float | None = None) -> int:
+        """The reply value of one TMCL line: ``client.value("GAP ActualPosition, 0")``."""
+        r = self.execute(line, timeout=timeout)
+        if r.reply is None:
+            raise ValidationError(f"{line!r} gets no reply, so it has no value")
         return r.reply.value
 
     def stop_all(self) -> list[int]:
-        """MST on every motor: the safety action behind Ctrl-C."""
+        """MST on every motor: the safety action behind Ctrl-C. Returns the motors stopped."""
         mod = self.module
         motors = range(mod.motors) if mod else range(1)
         stopped = []
         for m in motors:
             try:
-                self.send(3, 0, m, 0, timeout=min(self.timeout, 0.5))
+                self.send(Op.MST, 0, m, 0, timeout=min(self.timeout, 0.5))
                 stopped.append(m)
             except (TmclTimeoutError, ChecksumError, TransportError):
                 log.warning("MST %d failed", m)
@@ -463,22 +693,56 @@ class Client:
 
     def wait_until(self, predicate: Callable[[], bool], timeout: float | None,
                    interval: float = 0.05) -> None:
+        """Call ``predicate`` every ``interval`` s until it is true; TmclTimeoutError after
+        ``timeout`` s (None: wait forever)."""
         deadline = None if timeout is None else time.monotonic() + timeout
         while not predicate():
             if deadline is not None and time.monotonic() >= deadline:
                 raise TmclTimeoutError(f"condition not met within {timeout:g} s")
             time.sleep(interval)
 
-    def reconnect(self) -> None:
+    def reconnect(self, wait: float = 0.0) -> None:
+        """Close and reopen the transport (after the port was lost, e.g. USB unplugged).
+
+        ``wait``: keep trying for that many seconds while the port is not back yet. Raises
+        ``TransportError`` if it cannot be opened.
+        """
         with self._lock:
             self.transport.close()
-            self.transport.open()
+            deadline = time.monotonic() + wait
+            while True:
+                try:
+                    self.transport.open()
+                    break
+                except TransportError:
+                    if time.monotonic() >= deadline:
+                        raise
+                    time.sleep(min(0.1, max(0.0, deadline - time.monotonic())))
             self._buf.clear()
-            self._dirty = False
+            self._stale.clear()
+            self._stale_opaque = False
+            self.stats["reconnects"] += 1
+            if self._tracers:
+                self._trace("note", b"", f"reconnected to {self.describe()}")
+
+    def resync_next(self) -> None:
+        """Something else used the line (the module's ASCII mode): whatever is left on it is
+        stale, so the next binary request starts with the resynchronisation marker."""
+        with self._lock:
+            self._buf.clear()
+            self._stale_opaque = True
 
     def close(self) -> None:
+        """Stop the event poller, run the close hooks, leave ASCII mode if entered, close the
+        transport. Safe to call more than once."""
         self.stop_event_poller()
         with self._lock:
+            hooks, self.close_hooks = self.close_hooks, []
+            for hook in hooks:
+                try:
+                    hook()
+                except Exception:
+                    log.exception("close hook failed")
             if self.ascii_link is not None:
                 try:
                     self.ascii_link.close()
@@ -493,20 +757,78 @@ class Client:
         self.close()
 
 
-def _name(req: Request) -> str:
-    from . import instructions as isa
+# The hot path. A round trip to a module on a pty or USB costs some 30 us, and right after
+# the process wakes from select() every Python call costs several times what a
+# microbenchmark says, so building the frozen, validated Request and Reply dataclasses
+# (a dozen calls each) was a third of the client's time. These helpers produce exactly what
+# protocol.py does -- Request.to_bytes, Reply.from_bytes, a validated Request -- and
+# tests/test_client.py holds them to it for arbitrary fields.
+_PACK = struct.Struct(">BBBBI").pack
+_VALUE = struct.Struct(">i").unpack_from
+_new = object.__new__
+_set = object.__setattr__  # how dataclasses fill frozen instances themselves
 
+
+def _frame(req: Request) -> bytes:
+    """``req.to_bytes()`` without building the intermediate Instruction."""
+    body = _PACK(req.address, req.opcode, req.type, req.motor, req.value & 0xFFFFFFFF)
+    return body + bytes((sum(body) & 0xFF,))
+
+
+def _reply(head: bytes) -> Reply:
+    """``Reply.from_bytes(head)`` for 9 bytes whose checksum was verified: every field comes
+    from one byte or a signed 32-bit value, so there is nothing left to validate."""
+    r = _new(Reply)
+    _set(r, "host", head[0])
+    _set(r, "module", head[1])
+    _set(r, "status", head[2])
+    _set(r, "opcode", head[3])
+    _set(r, "value", _VALUE(head, 4)[0])
+    _set(r, "version", None)
+    _set(r, "stored", None)
+    return r
+
+
+def _request(address: int, opcode: int, type_: int, motor: int, value: int) -> Request:
+    """``Request(address, opcode, type_, motor, value)``: plain ints in range take a short
+    cut; anything else (out of range, not an int, an unsigned value) goes through the
+    dataclass, which normalises it or raises the ValueError naming the field."""
+    if (address.__class__ is int and opcode.__class__ is int and type_.__class__ is int
+            and motor.__class__ is int and value.__class__ is int
+            and 0 <= address <= 255 and 0 <= opcode <= 255 and 0 <= type_ <= 255
+            and 0 <= motor <= 255 and -0x80000000 <= value <= 0x7FFFFFFF):
+        req = _new(Request)
+        _set(req, "address", address)
+        _set(req, "opcode", opcode)
+        _set(req, "type", type_)
+        _set(req, "motor", motor)
+        _set(req, "value", value)
+        return req
+    return Request(address, opcode, type_, motor, value)
+
+
+def _printable(data: bytes, start: int) -> bool:
+    return all(32 <= b < 127 for b in data[start:])
+
+
+def _name(req: Request) -> str:
     spec = isa.by_opcode(req.opcode)
-    return spec.mnemonic if spec else f"command {req.opcode}"
+    if spec is not None:
+        return spec.mnemonic
+    try:
+        return f"{req.opcode} ({Control(req.opcode).name.lower().replace('_', ' ')})"
+    except ValueError:
+        return f"command {req.opcode}"
 
 
 def connect(port: str | None = None, *, baud: int = 9600, can: str | None = None,
             sim: str | None = None, module: str | None = None, address: int = 1,
             host_address: int = 2, timeout: float = 1.0, retries: int = 2,
             can_id: int | None = None, reply_id: int | None = None,
-            ascii: bool = False) -> Client:
-    """Open a client: ``connect(port="/dev/ttyACM0")``, ``connect(can="virtual:bench")``,
-    ``connect(sim="TMCM-351")``; with none of them, the built-in simulated TMCM-1311.
+            bitrate: int | None = None, ascii: bool = False) -> Client:
+    """Open a client: ``connect(port="/dev/ttyACM0")``, ``connect(port="socket://host:4001")``,
+    ``connect(can="virtual:bench")``, ``connect(sim="TMCM-351")``; with none of them, the
+    built-in simulated TMCM-1311.
 
     The module type is asked with 136 unless ``module`` is given.
     """
@@ -517,10 +839,10 @@ def connect(port: str | None = None, *, baud: int = 9600, can: str | None = None
     if port is not None:
         t: Transport = tr.open_serial(port, baud)
     elif can is not None:
-        t = tr.open_can(can)
+        t = tr.open_can(can, bitrate)
     else:
         name = sim or module or "TMCM-1311"
-        t = tr.open_sim(name, address)
+        t = tr.open_sim(name, address, host_address=host_address)
         module = module or name
     client = Client(t, address=address, host_address=host_address, module=module,
                     timeout=timeout, retries=retries, can_id=can_id, reply_id=reply_id)

@@ -1,28 +1,70 @@
-"""Where settings come from: command line, then environment, then the selected profile of
-``$XDG_CONFIG_HOME/tmclsh/config.toml``, then built-in defaults (first value found wins)."""
+"""Where settings come from.
+
+Connection settings (port, baud, address, ...) are resolved from the command line, then the
+environment (``TMCLSH_PORT``, ...), then the selected profile of the config file, then the
+built-in defaults: the first value found wins (python-can's ``load_config`` order).
+
+Shell settings (colour, editing mode, history size, confirmations) come from the ``[settings]``
+table of the config file merged over the packaged, commented ``default.toml``, which is also
+the single list of setting names, their types and their defaults.
+
+The config file is ``$TMCLSH_CONFIG`` if set, else ``$XDG_CONFIG_HOME/tmclsh/config.toml``
+(``~/.config/tmclsh/config.toml``). Unknown keys, unknown profiles and values of the wrong
+type are errors that name the file, the key and what is allowed.
+"""
 
 from __future__ import annotations
 
 import os
 import tomllib
 from dataclasses import dataclass, field
+from functools import cache
+from importlib import resources
 from pathlib import Path
 
 from .errors import ValidationError
 
-# environment variable -> setting name
+# environment variable -> connection setting
 ENVIRONMENT = {
     "TMCLSH_PORT": "port",
     "TMCLSH_BAUD": "baud",
     "TMCLSH_CAN": "can",
+    "TMCLSH_CAN_ID": "can_id",
+    "TMCLSH_REPLY_ID": "reply_id",
     "TMCLSH_MODULE": "module",
     "TMCLSH_ADDRESS": "address",
+    "TMCLSH_ASCII": "ascii",
+    "TMCLSH_TIMEOUT": "timeout",
     "TMCLSH_PROFILE": "profile",
 }
-CONNECTION_KEYS = ("port", "baud", "can", "can_id", "reply_id", "sim", "module", "address",
-                   "host_address", "ascii", "timeout", "retries")
-SETTING_KEYS = ("color", "editing_mode", "history_size", "confirm")
-INT_KEYS = {"baud", "address", "host_address", "can_id", "reply_id", "retries", "history_size"}
+# variables that are not connection settings, for the man page
+OTHER_ENVIRONMENT = {
+    "TMCLSH_CONFIG": "the config file to read instead of $XDG_CONFIG_HOME/tmclsh/config.toml",
+    "XDG_CONFIG_HOME": "base of the config file's directory (default ~/.config)",
+    "XDG_STATE_HOME": "base of the history's directory (default ~/.local/state)",
+    "NO_COLOR": "when set (to anything), no colours unless the color setting is \"always\"",
+}
+
+# connection setting -> type (what a profile or variable may hold)
+CONNECTION_TYPES: dict[str, type] = {
+    "port": str, "baud": int, "can": str, "can_id": int, "reply_id": int, "sim": str,
+    "module": str, "address": int, "host_address": int, "ascii": bool, "timeout": float,
+    "retries": int,
+}
+CONNECTION_KEYS = tuple(CONNECTION_TYPES)
+# the connection kinds: one source names at most one, and the strongest source decides
+KINDS = ("port", "can", "sim")
+# used when no option, variable or profile sets them (port/can/sim: see cli.open_transport)
+CONNECTION_DEFAULTS: dict[str, object] = {
+    "baud": 9600, "address": 1, "host_address": 2, "ascii": False, "timeout": 1.0, "retries": 2,
+}
+# allowed values of string settings
+SETTING_CHOICES: dict[str, tuple[str, ...]] = {
+    "color": ("auto", "always", "never"),
+    "editing_mode": ("emacs", "vi"),
+}
+_TRUE = ("1", "true", "yes", "on")
+_FALSE = ("0", "false", "no", "off", "")
 
 
 def config_dir() -> Path:
@@ -39,6 +81,32 @@ def config_file() -> Path:
     return Path(os.environ.get("TMCLSH_CONFIG") or config_dir() / "config.toml")
 
 
+def history_file() -> Path:
+    return state_dir() / "history"
+
+
+# -- the packaged default -----------------------------------------------------------------
+
+def default_config_text() -> str:
+    """The commented default configuration (``tmclsh/default.toml``)."""
+    return resources.files(__package__).joinpath("default.toml").read_text("utf-8")
+
+
+@cache
+def _default_settings() -> dict:
+    return dict(tomllib.loads(default_config_text())["settings"])
+
+
+def default_settings() -> dict:
+    """Every shell setting with its default value, from ``default.toml``."""
+    return dict(_default_settings())
+
+
+SETTING_KEYS = tuple(_default_settings())
+
+
+# -- reading the file ---------------------------------------------------------------------
+
 @dataclass
 class Config:
     path: Path
@@ -46,50 +114,132 @@ class Config:
     profiles: dict[str, dict] = field(default_factory=dict)
 
 
+def _type_name(t: type) -> str:
+    return {str: "a string", int: "an integer", float: "a number", bool: "true or false"}[t]
+
+
+def _check_value(where: str, key: str, value: object, want: type) -> object:
+    """Check a TOML value's type (an int is a valid float); return it converted."""
+    ok = isinstance(value, want) and not (want is int and isinstance(value, bool))
+    if want is float and isinstance(value, int) and not isinstance(value, bool):
+        value, ok = float(value), True
+    if not ok:
+        raise ValidationError(f"{where}: {key} must be {_type_name(want)}, got {value!r}")
+    _check_range(where, key, value)
+    return value
+
+
+def _check_range(where: str, key: str, value: object) -> None:
+    if key in ("address", "host_address") and not 0 <= value <= 255:  # type: ignore[operator]
+        raise ValidationError(f"{where}: {key} must be 0..255, got {value}")
+    if key in ("baud", "timeout") and value <= 0:  # type: ignore[operator]
+        raise ValidationError(f"{where}: {key} must be positive, got {value}")
+    if key in ("can_id", "reply_id", "retries", "history_size") and value < 0:  # type: ignore[operator]
+        raise ValidationError(f"{where}: {key} must not be negative, got {value}")
+    choices = SETTING_CHOICES.get(key)
+    if choices is not None and value not in choices:
+        raise ValidationError(f"{where}: {key} must be one of {', '.join(choices)}, got {value!r}")
+    if key in KINDS and not value:
+        raise ValidationError(f"{where}: {key} must not be empty")
+
+
+def _unknown(where: str, what: str, bad: set, known: tuple[str, ...]) -> ValidationError:
+    return ValidationError(f"{where}: unknown {what} {', '.join(sorted(map(str, bad)))}; "
+                           f"known: {', '.join(known)}")
+
+
+def parse_config(text: str, path: Path) -> Config:
+    """Parse and check the text of a config file (``path`` is only for messages)."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ValidationError(f"{path}: {exc}") from None
+    extra = set(data) - {"settings", "profiles"}
+    if extra:
+        raise _unknown(str(path), "table(s)", extra, ("settings", "profiles"))
+    raw_settings = data.get("settings", {})
+    if not isinstance(raw_settings, dict):
+        raise ValidationError(f"{path}: settings must be a table ([settings])")
+    bad = set(raw_settings) - set(SETTING_KEYS)
+    if bad:
+        raise _unknown(f"{path} [settings]", "setting(s)", bad, SETTING_KEYS)
+    defaults = _default_settings()
+    settings = {k: _check_value(f"{path} [settings]", k, v, type(defaults[k]))
+                for k, v in raw_settings.items()}
+    raw_profiles = data.get("profiles", {})
+    if not isinstance(raw_profiles, dict):
+        raise ValidationError(f"{path}: profiles must be tables ([profiles.NAME])")
+    profiles: dict[str, dict] = {}
+    for name, prof in raw_profiles.items():
+        where = f"{path} [profiles.{name}]"
+        if not isinstance(prof, dict):
+            raise ValidationError(f"{where}: a profile must be a table of settings")
+        bad = set(prof) - set(CONNECTION_KEYS)
+        if bad:
+            raise _unknown(where, "key(s)", bad, CONNECTION_KEYS)
+        profiles[name] = {k: _check_value(where, k, v, CONNECTION_TYPES[k]) for k, v in prof.items()}
+        kinds = [k for k in KINDS if k in prof]
+        if len(kinds) > 1:
+            raise ValidationError(f"{where}: {' and '.join(kinds)} exclude each other; keep one")
+    return Config(path, settings, profiles)
+
+
 def load_config(path: Path | None = None) -> Config:
+    """Read the config file; a missing file is an empty config, a bad one an error."""
     path = path or config_file()
     if not path.is_file():
         return Config(path)
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise ValidationError(f"{path}: {exc}") from None
-    settings = dict(data.get("settings", {}))
-    unknown = set(settings) - set(SETTING_KEYS)
-    if unknown:
-        raise ValidationError(f"{path}: unknown setting(s) {', '.join(sorted(unknown))}; "
-                              f"known: {', '.join(SETTING_KEYS)}")
-    profiles = {}
-    for name, prof in data.get("profiles", {}).items():
-        bad = set(prof) - set(CONNECTION_KEYS)
-        if bad:
-            raise ValidationError(f"{path}: profile {name!r} has unknown key(s) "
-                                  f"{', '.join(sorted(bad))}; known: {', '.join(CONNECTION_KEYS)}")
-        profiles[name] = dict(prof)
-    return Config(path, settings, profiles)
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise ValidationError(f"{path}: not UTF-8 text ({exc.reason})") from None
+    except OSError as exc:
+        raise ValidationError(f"cannot read {path}: {exc.strerror}") from None
+    return parse_config(text, path)
 
+
+def profile_names(config: Config | None = None) -> list[str]:
+    """The profiles defined in the config file, sorted (for completion and messages)."""
+    return sorted((config or load_config()).profiles)
+
+
+# -- environment and resolution -------------------------------------------------------------
 
 def from_environment(env: dict[str, str] | None = None) -> dict:
+    """Connection settings from ``TMCLSH_*`` variables (empty variables count as unset)."""
     env = os.environ if env is None else env
-    out = {}
+    out: dict = {}
     for var, key in ENVIRONMENT.items():
-        if env.get(var):
-            val = env[var]
-            if key in INT_KEYS:
-                try:
-                    out[key] = int(val, 0)
-                except ValueError:
-                    raise ValidationError(f"{var}={val!r} is not a number") from None
+        val = env.get(var)
+        if not val:
+            continue
+        want = CONNECTION_TYPES.get(key, str)
+        try:
+            if want is bool:
+                if val.strip().lower() not in _TRUE + _FALSE:
+                    raise ValueError(val)
+                value: object = val.strip().lower() in _TRUE
+            elif want is int:
+                value = int(val, 0)
+            elif want is float:
+                value = float(val)
             else:
-                out[key] = val
+                value = val
+        except ValueError:
+            raise ValidationError(f"{var}={val!r} must be {_type_name(want)}") from None
+        _check_range(var, key, value)
+        out[key] = value
     return out
 
 
 def resolve(cli: dict, config: Config, env: dict[str, str] | None = None) -> dict:
-    """Merge connection settings: explicit options > environment > profile.
+    """Merge connection settings: options > environment > profile > built-in defaults.
 
-    Connection kinds exclude each other: if the command line names one (port, can, sim), the
-    environment's and profile's other kinds are ignored.
+    ``cli`` holds the command-line values, ``None`` meaning "not given". The connection kinds
+    (port, can, sim) exclude each other: the strongest source that names one of them decides,
+    and the weaker sources' kinds are dropped. The result has every key of
+    ``CONNECTION_DEFAULTS``; port/can/sim are absent when no source names one (the caller then
+    looks for an attached module or starts the simulator).
     """
     envs = from_environment(env)
     profile_name = cli.get("profile") or envs.get("profile")
@@ -97,13 +247,75 @@ def resolve(cli: dict, config: Config, env: dict[str, str] | None = None) -> dic
     if profile_name:
         if profile_name not in config.profiles:
             known = ", ".join(sorted(config.profiles)) or "none defined"
-            raise ValidationError(f"no profile {profile_name!r} in {config.path} ({known})")
+            raise ValidationError(f"no profile {profile_name!r} in {config.path} (known: {known})")
         profile = config.profiles[profile_name]
-    merged: dict = {}
+    merged: dict = dict(CONNECTION_DEFAULTS)
     for source in (profile, envs, {k: v for k, v in cli.items() if v is not None}):
-        if any(k in source for k in ("port", "can", "sim")):
-            for k in ("port", "can", "sim"):
+        if any(k in source for k in KINDS):
+            for k in KINDS:
                 merged.pop(k, None)
         merged.update(source)
     merged.pop("profile", None)
     return merged
+
+
+def load_settings(config: Config | None = None, env: dict[str, str] | None = None) -> dict:
+    """Shell settings: the packaged defaults, overridden by the config file's ``[settings]``.
+
+    ``NO_COLOR`` (https://no-color.org) turns ``color = "auto"`` into ``"never"``; an explicit
+    ``"always"`` in the file still wins.
+    """
+    env = os.environ if env is None else env
+    config = load_config() if config is None else config
+    settings = default_settings()
+    settings.update(config.settings)
+    if settings["color"] == "auto" and env.get("NO_COLOR"):
+        settings["color"] = "never"
+    return settings
+
+
+def _toml(value: object) -> str:
+    import json
+
+    return json.dumps(value)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m tmclsh.config [--default | --profiles | --check]``."""
+    import argparse
+    import sys
+
+    p = argparse.ArgumentParser(prog="python -m tmclsh.config",
+                                description="Show tmclsh's configuration.")
+    what = p.add_mutually_exclusive_group()
+    what.add_argument("--default", action="store_true", help="print the commented default config")
+    what.add_argument("--profiles", action="store_true", help="list the profile names, one a line")
+    what.add_argument("--check", action="store_true", help="check the config file (default)")
+    args = p.parse_args(argv)
+    if args.default:
+        sys.stdout.write(default_config_text())
+        return 0
+    try:
+        config = load_config()
+        if args.profiles:
+            for name in profile_names(config):
+                print(name)
+            return 0
+        settings = load_settings(config)
+    except ValidationError as exc:
+        print(f"tmclsh: {exc}", file=sys.stderr)
+        return 1
+    state = "found" if config.path.is_file() else "not found, using defaults"
+    print(f"# {config.path} ({state})")
+    print("[settings]")
+    for key, value in settings.items():
+        print(f"{key} = {_toml(value)}")
+    for name in profile_names(config):
+        print(f"\n[profiles.{name}]")
+        for key, value in config.profiles[name].items():
+            print(f"{key} = {_toml(value)}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

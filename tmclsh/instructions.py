@@ -32,6 +32,9 @@ class InstructionSpec:
     note: str | None = None
     types: dict[str, int] = field(default_factory=dict)
     types_for: dict[str, dict[str, int]] = field(default_factory=dict)
+    # per module: motor/bank values with a special meaning besides the motor numbers
+    # (TMCM-1311 SCO/GCO bank 255: copy coordinates between RAM and EEPROM)
+    motor_special: dict[str, dict[int, str]] = field(default_factory=dict)
 
     def type_names(self, module: str | None = None) -> dict[str, int]:
         """Symbolic types valid on ``module`` (all documented ones when None)."""
@@ -112,6 +115,8 @@ def _spec(raw: dict) -> InstructionSpec:
         ascii=raw["ascii"], reads=raw.get("reads", False), persists=raw.get("persists", False),
         note=raw.get("note"), types=dict(raw.get("types", {})),
         types_for={k: dict(v) for k, v in raw.get("types_for", {}).items()},
+        motor_special={mod: {int(k): v for k, v in table.items()}
+                       for mod, table in raw.get("motor_special", {}).items()},
     )
 
 

@@ -147,6 +147,8 @@ class Instruction:
         _check_byte("type", self.type)
         _check_byte("motor/bank", self.motor)
         _check_value(self.value)
+        # one value, one representation: 0xFFFFD8F0 and -10000 are the same four bytes
+        object.__setattr__(self, "value", to_signed32(self.value))
 
     def to_bytes(self) -> bytes:
         return bytes((self.opcode, self.type, self.motor)) + _value_bytes(self.value)
@@ -181,6 +183,8 @@ class Request:
         _check_byte("type", self.type)
         _check_byte("motor/bank", self.motor)
         _check_value(self.value)
+        # one value, one representation: 0xFFFFD8F0 and -10000 are the same four bytes
+        object.__setattr__(self, "value", to_signed32(self.value))
 
     @property
     def instruction(self) -> Instruction:
@@ -235,6 +239,17 @@ class Reply:
     version: str | None = None
     stored: Instruction | None = None
 
+    def __post_init__(self) -> None:
+        _check_byte("host address", self.host)
+        _check_byte("module address", self.module)
+        _check_byte("status", self.status)
+        _check_byte("opcode", self.opcode)
+        _check_value(self.value)
+        object.__setattr__(self, "value", to_signed32(self.value))
+        if self.version is not None and len(self.version) != VERSION_STRING_LEN:
+            raise ValueError(f"a version string is {VERSION_STRING_LEN} characters, "
+                             f"got {self.version!r}")
+
     @property
     def ok(self) -> bool:
         return status_ok(self.status)
@@ -249,10 +264,7 @@ class Reply:
 
     def to_bytes(self) -> bytes:
         if self.version is not None:
-            text = self.version.encode("ascii")
-            if len(text) != VERSION_STRING_LEN:
-                raise ValueError("a version string is 8 characters")
-            return bytes((self.host,)) + text
+            return bytes((self.host,)) + self.version.encode("ascii", "replace")
         if self.stored is not None:
             s = self.stored
             body = bytes((self.host, s.opcode, s.type, s.motor)) + _value_bytes(s.value)
@@ -305,14 +317,15 @@ class Reply:
         if kind == ReplyKind.VERSION_STRING:
             if len(data) != VERSION_STRING_LEN:
                 raise FrameError(f"a CAN version reply is 8 bytes, got {len(data)}")
-            return cls(host, module or 0, Status.OK, Control.GET_VERSION, 0,
-                       version=data.decode("ascii", errors="replace"))
+            return cls(host, module if module is not None else 0, Status.OK,
+                       Control.GET_VERSION, 0, version=data.decode("ascii", errors="replace"))
         if len(data) != INSTRUCTION_LEN:
             raise FrameError(f"a CAN reply is {INSTRUCTION_LEN} bytes, got {len(data)}")
         value = struct.unpack(">i", data[3:7])[0]
         if kind == ReplyKind.MEMORY:
             stored = Instruction(data[0], data[1], data[2], value)
-            return cls(host, module or 0, Status.OK, Control.READ_MEMORY, value, stored=stored)
+            return cls(host, module if module is not None else 0, Status.OK,
+                       Control.READ_MEMORY, value, stored=stored)
         return cls(host, data[0], data[1], data[2], value)
 
     def __str__(self) -> str:
@@ -324,23 +337,30 @@ class Reply:
                 f"({self.status_text}) op {self.opcode} value {self.value}")
 
 
+_STATUSES = frozenset(int(s) for s in Status)
+
+
 def decode_reply(buf: bytes | bytearray, kind: ReplyKind = ReplyKind.NORMAL,
                  module: int | None = None, opcode: int | None = None
                  ) -> tuple[int, Reply | None]:
     """Pure stream decoder for the serial framing: ``(consumed, reply)``.
 
-    ``(0, None)`` means "need more bytes". A frame with a bad checksum is not a frame: the
+    ``(0, None)`` means "need more bytes". Nine bytes with a bad checksum are not a frame, nor
+    (in the normal layout) nine whose status byte is no TMCL status (1-6, 100, 101, 128): the
     decoder drops one byte so the caller re-synchronises on the next candidate (garbage or a
     lost byte on an RS485 line must not wedge the link). ``consumed > 0`` with ``None`` means
-    bytes were discarded.
+    bytes were discarded. Garbage that happens to form a valid frame cannot be told from one.
     """
     if len(buf) < SERIAL_FRAME_LEN:
         return 0, None
     frame = bytes(buf[:SERIAL_FRAME_LEN])
+    if kind == ReplyKind.NORMAL and frame[2] not in _STATUSES:
+        return 1, None
     try:
         return SERIAL_FRAME_LEN, Reply.from_bytes(frame, kind, module, opcode)
     except (ChecksumError, FrameError):
         return 1, None
+
 
 
 def hexdump(data: bytes) -> str:

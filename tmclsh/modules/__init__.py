@@ -19,6 +19,9 @@ from ..instructions import InstructionSpec, all_instructions, controls
 
 ACCESS_CODES = ("R", "W", "RW", "RWE")
 
+# How well a name matches a query (Module.search / Module.lookup), best first.
+_RANK_EXACT, _RANK_PREFIX, _RANK_SUBSTRING, _RANK_SUBSEQUENCE, _RANK_FUZZY = range(5)
+
 
 @dataclass(frozen=True)
 class Parameter:
@@ -193,20 +196,24 @@ class Module:
         return self.axis_params if kind == "axis" else self.global_params
 
     def lookup(self, kind: str, key: int | str, bank: int | None = None) -> Parameter:
-        """Resolve a parameter by number or name; unknown keys raise with suggestions."""
+        """Resolve a parameter by number or name; unknown keys raise with suggestions.
+
+        A name resolves when it is a parameter's name (case and ``_`` ignored), or the only
+        one it starts (``microstep``) or is part of. Misspellings only make suggestions: a
+        fuzzy match never picks a parameter, since the result may be written to the module.
+        """
         if isinstance(key, int):
             found = self.axis(key) if kind == "axis" else self.glob(key, bank or 0)
             if found is None:
                 where = f" in bank {bank}" if kind == "global" and bank else ""
                 raise ValidationError(f"{self.name} has no {kind} parameter {key}{where}")
             return found
-        exact = [p for p in self._pool(kind) if _normalise(p.name) == _normalise(key)]
-        if exact:
-            return exact[0]
-        hits = self.search(key, kind)
-        if len(hits) == 1:
-            return hits[0]
-        near = ", ".join(p.name for p in hits[:5])
+        ranked = self._ranked(key, kind)
+        best = min((r for r, _ in ranked), default=None)
+        top = [p for r, p in ranked if r == best]
+        if best is not None and best <= _RANK_SUBSTRING and len(top) == 1:
+            return top[0]
+        near = ", ".join(p.name for p in self.search(key, kind)[:5])
         what = f"unknown {kind} parameter {key!r} on {self.name}"
         raise ValidationError(f"{what}; did you mean {near}?" if near else what)
 
@@ -217,28 +224,35 @@ class Module:
         if re.fullmatch(r"\d+", q):
             n = int(q)
             return [p for p in pool if p.covers(n)]
-        nq = _normalise(q)
-        if not nq:
+        ranked = self._ranked(q, kind)
+        if not _normalise(q):
             return list(pool)
+        best = min((r for r, _ in ranked), default=None)
+        if best == _RANK_EXACT:
+            return [p for r, p in ranked if r == _RANK_EXACT]
+        return [p for _, p in sorted(ranked, key=lambda rp: (rp[0], rp[1].kind, rp[1].number))]
+
+    def _ranked(self, query: str, kind: str | None) -> list[tuple[int, Parameter]]:
+        pool = self.axis_params + self.global_params if kind is None else self._pool(kind)
+        nq = _normalise(query)
+        if not nq:
+            return []
         ranked: list[tuple[int, Parameter]] = []
         for p in pool:
             name, manual = _normalise(p.name), _normalise(p.manual_name)
             if name == nq:
-                ranked.append((0, p))
+                ranked.append((_RANK_EXACT, p))
             elif name.startswith(nq):
-                ranked.append((1, p))
+                ranked.append((_RANK_PREFIX, p))
             elif nq in name or nq in manual:
-                ranked.append((2, p))
+                ranked.append((_RANK_SUBSTRING, p))
             elif _subsequence(nq, name):
-                ranked.append((3, p))
+                ranked.append((_RANK_SUBSEQUENCE, p))
         if not ranked:
             names = {_normalise(p.name): p for p in pool}
             for close in difflib.get_close_matches(nq, list(names), n=5, cutoff=0.6):
-                ranked.append((4, names[close]))
-        best = min((r for r, _ in ranked), default=None)
-        if best == 0:
-            return [p for r, p in ranked if r == 0]
-        return [p for _, p in sorted(ranked, key=lambda rp: (rp[0], rp[1].kind, rp[1].number))]
+                ranked.append((_RANK_FUZZY, names[close]))
+        return ranked
 
     # -- I/O ----------------------------------------------------------------------------
     def port(self, bank: int, port: int) -> IoPort | None:
@@ -267,12 +281,19 @@ def available() -> list[str]:
     return sorted(names)
 
 
-@cache
 def load(name: str) -> Module:
-    """Load a module by name: ``TMCM-1311``, ``tmcm1311`` and ``1311`` all work."""
-    entry = resources.files(__package__).joinpath(_file_name(name))
-    if not entry.is_file():
+    """Load a module by name: ``TMCM-1311``, ``tmcm1311`` and ``1311`` all give the same object."""
+    module = _load(_file_name(name))
+    if module is None:
         raise ValidationError(f"unknown module {name!r}; known: {', '.join(available())}")
+    return module
+
+
+@cache
+def _load(file_name: str) -> Module | None:
+    entry = resources.files(__package__).joinpath(file_name)
+    if not entry.is_file():
+        return None
     return Module(tomllib.loads(entry.read_text("utf-8")))
 
 

@@ -55,7 +55,11 @@ def run_shell(args: argparse.Namespace) -> int:
         return EXIT_CONNECT
     out = Output(json_mode=bool(args.json))
     interactive = args.command is None and args.script is None and sys.stdin.isatty()
-    session = Session(client, out, interactive=interactive, yes=bool(args.yes),
+    from ..config import load_settings
+
+    # `confirm = false` in the config file is a standing --yes
+    yes = bool(args.yes) or load_settings().get("confirm") is False
+    session = Session(client, out, interactive=interactive, yes=yes,
                       keep_going=bool(args.keep_going), settings=settings)
     if args.trace:
         from .trace import enable_trace

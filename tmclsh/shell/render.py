@@ -1,27 +1,42 @@
 """Replies rendered for people (rich) and for programs (JSON, one object per line).
 
-Rendering does no I/O on the bus: everything it needs is in the Result.
+Rendering does no I/O on the bus: everything it needs is in the Result and the module
+database. For people a reply reads as a sentence with its status in words and colour::
+
+    MaxPositioningSpeed = 1000 pps
+    ok: MaxPositioningSpeed set to 1000 pps
+    error 4: invalid value
+    StatusWord = 9  (bits 0, 3 set)
+      bit  0  target reached
+      bit  3  position mode
+    inputs = 5  IN_0=1 IN_1=0 IN_2=1 IN_3=0 IN_4=0 IN_5=0 IN_6=0 IN_7=0
+
+For programs (``--json``) each result is the object DESIGN.md specifies, keys in its order.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import re
 import sys
 from typing import Any
 
+from .. import instructions as isa
 from ..client import Result
 from ..modules import Module, Parameter
-from ..protocol import Reply, Status, status_text
+from ..protocol import Control, Reply, Status, status_text
 from .style import rich_theme
 
 
 def _console(stderr: bool = False):
+    """A rich console that writes to whatever sys.stdout/sys.stderr is *now* (so output from
+    other threads goes through prompt_toolkit's ``patch_stdout`` while the prompt runs)."""
     from rich.console import Console
 
-    return Console(file=sys.stderr if stderr else sys.stdout, theme=rich_theme(),
-                   highlight=False, soft_wrap=True,
-                   no_color=bool(os.environ.get("NO_COLOR")) or None)
+    no_color = bool(os.environ.get("NO_COLOR")) or os.environ.get("TERM") == "dumb"
+    return Console(stderr=stderr, theme=rich_theme(), highlight=False, soft_wrap=True,
+                   no_color=no_color or None)
 
 
 class Output:
@@ -34,7 +49,7 @@ class Output:
 
     # -- JSON ---------------------------------------------------------------------------
     def emit(self, obj: dict[str, Any]) -> None:
-        sys.stdout.write(json.dumps(obj) + "\n")
+        sys.stdout.write(json.dumps(obj, ensure_ascii=False) + "\n")
         sys.stdout.flush()
 
     # -- people -------------------------------------------------------------------------
@@ -45,12 +60,19 @@ class Output:
     def info(self, text: str) -> None:
         """A status line for people (stderr under --json, so stdout stays parseable)."""
         if self.json:
-            self.err.print(text, style="tmcl.note")
+            self.err.print(text, style="tmcl.note", markup=False)
         else:
-            self.console.print(text, style="tmcl.note")
+            self.console.print(text, style="tmcl.note", markup=False)
+
+    def ok(self, text: str) -> None:
+        """A confirmation that something was done (``motors 0, 1 stopped``)."""
+        if self.json:
+            self.err.print(text, markup=False)
+        else:
+            self.console.print(text, style="tmcl.ok", markup=False)
 
     def warn(self, text: str) -> None:
-        self.err.print(text, style="tmcl.warn")
+        self.err.print(text, style="tmcl.warn", markup=False)
 
     def error(self, line: str | None, message: str) -> None:
         if self.json:
@@ -64,8 +86,18 @@ class Output:
         else:
             self.console.print(render_result(result, module))
 
+    def event(self, reply: Reply) -> None:
+        """A 138 event (or any unsolicited reply), shown when it arrives."""
+        if self.json:
+            self.emit({"event": "target_reached", "motors": event_motors(reply),
+                       "value": reply.value})
+        else:
+            self.console.print(render_event(reply), style="tmcl.event", markup=False)
+
 
 def result_json(result: Result) -> dict[str, Any]:
+    """``{"line", "op", "type", "motor", "value", "status", "reply"}`` (DESIGN.md), plus
+    ``"error"`` when the module refused."""
     ins = result.encoded.instruction
     reply = result.reply
     obj: dict[str, Any] = {"line": result.line, "op": ins.opcode, "type": ins.type,
@@ -74,17 +106,26 @@ def result_json(result: Result) -> dict[str, Any]:
                            "reply": reply.value if reply else None}
     if reply is not None and reply.version is not None:
         obj["reply"] = reply.version
+    if reply is not None and reply.stored is not None:
+        obj["reply"] = reply.value
+        obj["stored"] = {"op": reply.stored.opcode, "type": reply.stored.type,
+                         "motor": reply.stored.motor, "value": reply.stored.signed_value}
     if reply is not None and reply.status not in (Status.OK, Status.LOADED, Status.EVENT):
         obj["error"] = status_text(reply.status)
     return obj
 
 
+def _unsigned(value: int, param: Parameter | None) -> int:
+    if param is not None and param.min is not None and param.min >= 0 and value < 0:
+        return value & 0xFFFFFFFF  # unsigned 32-bit parameters arrive as negative numbers
+    return value
+
+
 def value_text(value: int, param: Parameter | None) -> str:
-    """``1000 pps``, ``8 (256 microsteps)``, ``17 [start up in ASCII mode; ...]``."""
+    """``1000 pps``, ``8 (256 microsteps)``, ``17 (start up in ASCII mode; ...)``."""
     if param is None:
         return str(value)
-    if param.min is not None and param.min >= 0 and value < 0:
-        value &= 0xFFFFFFFF  # unsigned 32-bit parameters arrive as negative numbers
+    value = _unsigned(value, param)
     text = f"{value}"
     if param.unit:
         text += f" {param.unit}"
@@ -94,55 +135,237 @@ def value_text(value: int, param: Parameter | None) -> str:
     return text
 
 
+# what a successful command without a read value did, in words
+_DONE = {
+    "ROR": "motor {motor} rotating right at {value} {velocity}",
+    "ROL": "motor {motor} rotating left at {value} {velocity}",
+    "MST": "motor {motor} stopped",
+    "STAP": "{param} stored in EEPROM",
+    "RSAP": "{param} restored from EEPROM",
+    "STGP": "{param} stored in EEPROM",
+    "RSGP": "{param} restored from EEPROM",
+}
+
+
 def render_result(result: Result, module: Module | None):
     from rich.text import Text
 
     reply = result.reply
     enc = result.encoded
+    ins = enc.instruction
     out = Text()
     if reply is None:
-        out.append("sent (no reply expected)", style="tmcl.note")
+        out.append("sent (this command has no reply)", style="tmcl.note")
         return out
     if reply.version is not None:
+        out.append("firmware ", style="tmcl.note")
         out.append(reply.version, style="tmcl.value")
         return out
     if not reply.ok:
-        out.append(f"error {reply.status}: {status_text(reply.status)}", style="tmcl.error")
+        out.append(f"error {reply.status}: {status_text(reply.status)}", style="tmcl.status.error")
+        hint = _status_hint(reply.status)
+        if hint:
+            out.append(f"  ({hint})", style="tmcl.note")
         return out
     spec = enc.spec
     param = enc.parameter
-    if spec is not None and spec.reads:
-        if param is not None:
-            out.append(param.name, style="tmcl.name")
-            out.append(" = ")
-        out.append(value_text(reply.value, param), style="tmcl.value")
-        if param is not None and param.bits:
-            out.append("\n")
-            out.append_text(render_bits(reply.value, param))
+    if reply.stored is not None:
+        from .trace import describe_instruction
+
+        out.append(f"stored at {ins.signed_value}: ", style="tmcl.note")
+        out.append(describe_instruction(reply.stored, module), style="tmcl.value")
         return out
-    if spec is None:
-        out.append(f"status {reply.status} ({status_text(reply.status)}) value {reply.value}")
+    if spec is None:  # a raw command number
+        from .trace import describe_reply
+
+        if ins.opcode == Control.GET_VERSION and ins.type == 1:
+            out.append(version_text(reply.value, module), style="tmcl.value")
+            return out
+        if reply.opcode == ins.opcode and (ins.opcode >= 128 or isa.by_opcode(ins.opcode)):
+            out.append("ok", style="tmcl.status.ok")
+            ctl = isa.control(ins.opcode)
+            name = ctl.name.split(" (")[0] if ctl else isa.by_opcode(ins.opcode).mnemonic
+            out.append(f" ({ins.opcode}: {name}), value {reply.value}")
+            return out
+        out.append(describe_reply(reply, module))
         return out
-    out.append("ok", style="tmcl.ok")
-    if spec.mnemonic == "RFS" and enc.instruction.type == 2:
-        out.append(f"  {reply.value} ({'searching' if reply.value else 'not searching'})")
-    elif reply.value and spec.mnemonic not in ("SAP", "SGP", "SIO"):
-        out.append(f"  value {reply.value}")
+    if spec.reads:
+        return _render_read(out, result, module)
+    mnem = spec.mnemonic
+    out.append("ok", style="tmcl.status.ok")
+    velocity = (module.units.get("velocity", "") if module else "")
+    fields = {"motor": ins.motor, "value": ins.signed_value, "velocity": velocity,
+              "param": param.name if param else f"parameter {ins.type}"}
+    if mnem in ("SAP", "SGP") and param is not None:
+        out.append(f": {param.name} set to {value_text(ins.signed_value, param)}")
+    elif mnem in ("AAP", "AGP") and param is not None:
+        out.append(f": accumulator copied to {param.name}")
+    elif mnem == "MVP":
+        out.append(_mvp_text(result, module))
+    elif mnem == "SIO":
+        port = module.port(ins.motor, ins.type) if module else None
+        name = port.name if port else f"port {ins.type}"
+        if module is not None and ins.type == module.io_all_port:
+            name = "all outputs"
+        out.append(f": {name} set to {ins.signed_value}")
+    elif mnem == "RFS":
+        types = {v: n for n, v in spec.type_names(module.name if module else None).items()}
+        what = types.get(ins.type, str(ins.type))
+        if what == "STATUS":
+            out.append(f": reference search {'running' if reply.value else 'not running'} "
+                       f"(value {reply.value})")
+        else:
+            out.append(f": reference search {what.lower()} on motor {ins.motor}")
+    elif mnem in _DONE:
+        out.append(": " + _DONE[mnem].format(**fields).rstrip())
+    elif reply.value:
+        out.append(f", value {reply.value}")
     return out
 
 
-def render_bits(value: int, param: Parameter):
+def _mvp_text(result: Result, module: Module | None) -> str:
+    ins = result.encoded.instruction
+    spec = result.encoded.spec
+    names = {v: n for n, v in spec.type_names(module.name if module else None).items()} if spec else {}
+    kind = names.get(ins.type, str(ins.type))
+    unit = module.units.get("position", "") if module else ""
+    if kind == "ABS":
+        return f": motor {ins.motor} moving to {ins.signed_value} {unit}".rstrip()
+    if kind == "REL":
+        return f": motor {ins.motor} moving by {ins.signed_value} {unit}".rstrip()
+    if kind == "COORD":
+        return f": moving to coordinate {ins.signed_value}"
+    return ""
+
+
+def _render_read(out, result: Result, module: Module | None):
+    reply = result.reply
+    assert reply is not None
+    enc = result.encoded
+    ins = enc.instruction
+    spec = enc.spec
+    param = enc.parameter
+    if param is None:  # a raw `6 4, 0, 0`: name the parameter all the same
+        from .trace import param_for
+
+        param = param_for(ins, module)
+    if spec is not None and spec.mnemonic == "GIO" and module is not None:
+        if ins.type == module.io_all_port and ins.motor in module.io_all_banks:
+            ports = sorted((p for p in module.io if p.bank == ins.motor), key=lambda p: p.port)
+            what = "outputs" if ports and ports[0].kind == "digital_out" else "inputs"
+            out.append(f"{what} = ")
+            out.append(str(reply.value), style="tmcl.value")
+            out.append(f"  ({reply.value & 0xFF:#010b})  ", style="tmcl.note")
+            for i, p in enumerate(ports):
+                on = bool(reply.value >> p.port & 1)
+                out.append(f"{p.name}={int(on)}", style="tmcl.bit.on" if on else "tmcl.bit.off")
+                if i + 1 < len(ports):
+                    out.append(" ")
+            return out
+        port = module.port(ins.motor, ins.type)
+        if port is not None:
+            out.append(port.name, style="tmcl.name")
+            out.append(" = ")
+            out.append(_scaled(reply.value, port.unit), style="tmcl.value")
+            if port.unit.startswith("1/"):
+                out.append(f"  ({reply.value} × {port.unit})", style="tmcl.note")
+            return out
+    if param is not None:
+        out.append(param.name, style="tmcl.name")
+        if param.count > 1:
+            out.append(f"[{ins.type}]", style="tmcl.name")
+        out.append(" = ")
+        value = _unsigned(reply.value, param)
+        if param.bits:
+            out.append(str(value), style="tmcl.value")
+            if param.unit:
+                out.append(f" {param.unit}")
+            on = [b for b in sorted(param.bits) if value >> b & 1]
+            if value in param.values:
+                out.append(f" ({param.values[value]})")
+            out.append(f"  ({_bits_summary(on)})", style="tmcl.note")
+            if on:
+                out.append("\n")
+                out.append_text(render_bits(value, param, only_set=True))
+            return out
+        out.append(value_text(reply.value, param), style="tmcl.value")
+        return out
+    out.append(str(reply.value), style="tmcl.value")
+    return out
+
+
+def _bits_summary(on: list[int]) -> str:
+    if not on:
+        return "no bits set"
+    return f"bit{'s' if len(on) > 1 else ''} {', '.join(map(str, on))} set"
+
+
+def render_bits(value: int, param: Parameter, only_set: bool = False):
+    """One line per documented bit: ``  bit  0  target reached``."""
     from rich.text import Text
 
     text = Text()
     for bit, meaning in sorted(param.bits.items()):
         on = bool(value >> bit & 1)
-        text.append(f"  bit {bit:2d} {'1' if on else '0'} {meaning}\n",
+        if only_set and not on:
+            continue
+        mark = "" if only_set else (" 1" if on else " 0")
+        text.append(f"  bit {bit:2d}{mark}  {meaning}\n",
                     style="tmcl.bit.on" if on else "tmcl.bit.off")
     text.rstrip()
     return text
 
 
+def _status_hint(status: int) -> str:
+    return {
+        Status.WRONG_CHECKSUM: "the module saw a corrupted frame; check the cabling and baud rate",
+        Status.INVALID_COMMAND: "this firmware does not know the command",
+        Status.WRONG_TYPE: "the module does not have this parameter/type",
+        Status.INVALID_VALUE: "the module refused the value",
+        Status.EEPROM_LOCKED: "unlock it with GP 73 (EEPROMLockFlag)",
+        Status.COMMAND_NOT_AVAILABLE: "not available in the module's current state",
+    }.get(status, "")
+
+
+def binary_version(value: int, module: Module | None) -> tuple[int, int] | None:
+    """``(module type, version)`` from a 136 type 1 value, or None if it does not decode.
+
+    The manuals differ in byte order (TMCM-1311: type high, type low, version low, version
+    high; TMCM-1640: version low, version high, type low, type high): the layout whose type
+    matches the module's firmware id wins."""
+    b = (value & 0xFFFFFFFF).to_bytes(4, "big")
+    type_first = (b[0] << 8 | b[1], b[2] | b[3] << 8)
+    version_first = (b[2] | b[3] << 8, b[0] | b[1] << 8)
+    if module is not None and version_first[0] == module.firmware_id:
+        return version_first
+    if module is None or type_first[0] == module.firmware_id:
+        return type_first
+    return None
+
+
+def version_text(value: int, module: Module | None) -> str:
+    """``module type 1311, firmware 1.11``."""
+    decoded = binary_version(value, module)
+    if decoded is None:
+        return f"value {value} ({value & 0xFFFFFFFF:#010x})"
+    kind, ver = decoded
+    return f"module type {kind}, firmware {ver // 100}.{ver % 100:02d}"
+
+
+def _scaled(value: int, unit: str) -> str:
+    """``240 1/10 V`` reads as ``24.0 V``."""
+    m = re.fullmatch(r"1/(10|100|1000) (\S.*)", unit)
+    if not m:
+        return f"{value} {unit}".rstrip()
+    den = int(m.group(1))
+    digits = len(m.group(1)) - 1
+    return f"{value / den:.{digits}f} {m.group(2)}"
+
+
+def event_motors(reply: Reply) -> list[int]:
+    return [m for m in range(8) if reply.value >> m & 1]
+
+
 def render_event(reply: Reply) -> str:
-    motors = [str(m) for m in range(8) if reply.value >> m & 1]
+    motors = [str(m) for m in event_motors(reply)]
     return f"event: target position reached (motor {', '.join(motors) or reply.value})"

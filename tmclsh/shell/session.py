@@ -61,6 +61,9 @@ class Session:
         self.state: dict[str, object] = {}
         self.location: tuple[str, int] | None = None  # script file and line being run
         commands.load_all()
+        from .expr import install
+
+        install(self)  # ${expression} in any line
 
     # -- module -------------------------------------------------------------------------
     @property
@@ -117,6 +120,9 @@ class Session:
         if not text or text.startswith("#") or text.startswith("//"):
             return None
         self.history.append(text)
+        capture = self.state.get("capture")  # a block (.repeat/.if) collecting its lines
+        if callable(capture) and capture(self, text):
+            return None
         try:
             result = self._dispatch(text)
         except TmclError as exc:

@@ -1,37 +1,57 @@
 """Open a transport from what the command line says: a port/URL, a CAN spec or the simulator.
 
-Backends are imported on demand (python-can only for CAN links), so start-up stays fast.
+Backends are imported on demand (pyserial only for serial links, python-can only for CAN
+links, the simulator only for ``--sim``), so start-up stays fast.
 """
 
 from __future__ import annotations
 
 from .base import CanTransport, StreamTransport, Transport
 
+# pyserial's URL handlers (serial.serial_for_url); anything else with "://" is refused by it
 PYSERIAL_SCHEMES = ("socket", "rfc2217", "loop", "spy", "hwgrep", "alt", "cp2110")
 
 
 def open_serial(port: str, baudrate: int = 9600) -> StreamTransport:
+    """A serial device path (``/dev/ttyACM0``, ``COM3``) or a pyserial URL
+    (``socket://host:port``, ``rfc2217://host:port``, ``loop://``, ``spy://...``,
+    ``hwgrep://2a3c``)."""
+    from ..errors import ValidationError
     from .serial import SerialTransport
 
+    scheme, sep, _ = port.partition("://")
+    if sep and scheme not in PYSERIAL_SCHEMES:
+        raise ValidationError(f"unknown port URL scheme {scheme + '://'!r}; known: "
+                              f"{', '.join(s + '://' for s in PYSERIAL_SCHEMES)}")
     t = SerialTransport(port, baudrate)
     t.open()
     return t
 
 
-def open_can(spec: str, bitrate: int | None = None, **kw) -> CanTransport:
-    """``IFACE:CHANNEL`` as in ``socketcan:can0``, ``virtual:bench``, ``slcan:/dev/ttyACM0``."""
+def parse_can(spec: str) -> tuple[str, str]:
+    """``IFACE:CHANNEL`` -> (interface, channel); the channel may contain colons."""
     from ..errors import ValidationError
-    from .can import PythonCanTransport
 
     iface, sep, channel = spec.partition(":")
     if not sep or not iface or not channel:
-        raise ValidationError(f"--can wants IFACE:CHANNEL (e.g. socketcan:can0), got {spec!r}")
+        raise ValidationError(f"--can wants IFACE:CHANNEL (e.g. socketcan:can0, virtual:bench), "
+                              f"got {spec!r}")
+    return iface, channel
+
+
+def open_can(spec: str, bitrate: int | None = None, **kw) -> CanTransport:
+    """``IFACE:CHANNEL`` as in ``socketcan:can0``, ``virtual:bench``, ``slcan:/dev/ttyACM0``."""
+    from .can import PythonCanTransport
+
+    iface, channel = parse_can(spec)
     t = PythonCanTransport(iface, channel, bitrate, **kw)
     t.open()
     return t
 
 
 def open_sim(module: str = "TMCM-1311", address: int = 1, **kw) -> StreamTransport:
+    """The built-in simulator, in process (``kw``: further ``Simulator`` arguments such as
+    ``host_address``)."""
     from .sim import SimTransport
 
     t = SimTransport(module, address, **kw)
@@ -40,4 +60,4 @@ def open_sim(module: str = "TMCM-1311", address: int = 1, **kw) -> StreamTranspo
 
 
 __all__ = ["Transport", "StreamTransport", "CanTransport", "open_serial", "open_can", "open_sim",
-           "PYSERIAL_SCHEMES"]
+           "parse_can", "PYSERIAL_SCHEMES"]

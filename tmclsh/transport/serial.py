@@ -1,38 +1,76 @@
 """pyserial as a transport: device paths and every pyserial URL (socket://, rfc2217://,
-loop://, spy://, hwgrep://). The read timeout is only reconfigured when it changes, because
-pyserial re-applies termios settings on every change and that would dominate a round trip.
+loop://, spy://, hwgrep://).
+
+pyserial opens and configures every port. For a plain POSIX device (a tty or pty, the common
+case and the hot path of every round trip) reads and writes then go straight to its file
+descriptor with ``os.read``/``os.write`` and ``select``, which is what pyserial's own
+``read``/``write`` do underneath, minus about 8 us of per-call bookkeeping. Everything else
+(URL handlers, Windows) goes through pyserial's ``read``/``write``.
+
+pyserial re-applies the termios settings (and the exclusive lock) whenever ``timeout``
+changes, which would cost more than a whole round trip; so on that path the read timeout is
+only set when it differs from the last one, and the client asks with the same timeout for the
+first read of every transaction.
 """
 
 from __future__ import annotations
+
+import os
+import select
+import time
 
 import serial as pyserial
 
 from ..errors import TransportError
 from .base import StreamTransport
 
+WRITE_TIMEOUT = 2.0  # a write that cannot finish in this time means the port is stuck
+
+
+def is_url(port: str) -> bool:
+    return "://" in port
+
 
 class SerialTransport(StreamTransport):
     def __init__(self, port: str, baudrate: int = 9600):
         super().__init__(port)
+        if not isinstance(baudrate, int) or baudrate <= 0:
+            raise ValueError(f"baud rate must be a positive number, got {baudrate!r}")
         self.baudrate = baudrate
         self._ser: pyserial.SerialBase | None = None
-        self._timeout: float | None = -1.0
+        self._fd: int | None = None  # set when reads and writes may use the descriptor
+        self._timeout: float | None = 0.0
 
     def open(self) -> None:
+        if self._ser is not None:
+            return
+        kw: dict = {"baudrate": self.baudrate, "timeout": 0, "write_timeout": WRITE_TIMEOUT}
+        if not is_url(self.url):
+            # two programs on one port steal each other's replies: refuse the second
+            kw["exclusive"] = True
         try:
-            self._ser = pyserial.serial_for_url(self.url, baudrate=self.baudrate, timeout=0,
-                                                do_not_open=False)
+            try:
+                self._ser = ser = pyserial.serial_for_url(self.url, **kw)
+            except NotImplementedError:
+                # rfc2217:// has no write timeout; its writes are bounded by the TCP socket
+                del kw["write_timeout"]
+                self._ser = ser = pyserial.serial_for_url(self.url, **kw)
         except (pyserial.SerialException, OSError, ValueError) as exc:
             raise TransportError(_friendly(self.url, exc)) from exc
         self._timeout = 0
+        # pyserial's POSIX port opens the descriptor non-blocking and reads it with select
+        fd = getattr(ser, "fd", None)
+        self._fd = fd if os.name == "posix" and type(ser) is pyserial.Serial \
+            and isinstance(fd, int) else None
 
     def close(self) -> None:
-        if self._ser is not None:
+        ser, self._ser = self._ser, None
+        self._fd = None
+        if ser is not None:
             try:
-                self._ser.close()
+                ser.close()
             except Exception:  # closing a vanished port must not mask the real error
                 pass
-            self._ser = None
 
     @property
     def is_open(self) -> bool:
@@ -43,14 +81,36 @@ class SerialTransport(StreamTransport):
             raise TransportError(f"{self.url} is not open")
         return self._ser
 
+    def _lost(self, what: str, exc: Exception) -> TransportError:
+        self.close()
+        return TransportError(
+            f"lost {self.url} ({what} failed: {exc}); the port is gone (module unplugged "
+            "or powered off?). Reconnect once it is back.")
+
     def write(self, data: bytes) -> None:
+        fd = self._fd
+        if fd is not None:
+            try:
+                n = os.write(fd, data)
+            except BlockingIOError:
+                n = 0  # output buffer full: pyserial waits for room (up to WRITE_TIMEOUT)
+            except OSError as exc:
+                raise self._lost("write", exc) from exc
+            if n == len(data):
+                return
+            data = data[n:]
         try:
             self._port().write(data)
+        except pyserial.SerialTimeoutException as exc:
+            raise TransportError(f"{self.url}: write timed out after {WRITE_TIMEOUT:g} s "
+                                 "(flow control stuck?)") from exc
         except (pyserial.SerialException, OSError) as exc:
-            self.close()
-            raise TransportError(f"{self.url}: write failed ({exc}); is the module unplugged?") from exc
+            raise self._lost("write", exc) from exc
 
     def read(self, size: int, timeout: float | None) -> bytes:
+        fd = self._fd
+        if fd is not None:
+            return self._read_fd(fd, size, timeout)
         ser = self._port()
         try:
             if timeout != self._timeout:
@@ -58,22 +118,58 @@ class SerialTransport(StreamTransport):
                 self._timeout = timeout
             return ser.read(size)
         except (pyserial.SerialException, OSError) as exc:
-            self.close()
-            raise TransportError(f"{self.url}: read failed ({exc}); is the module unplugged?") from exc
+            raise self._lost("read", exc) from exc
+
+    def _read_fd(self, fd: int, size: int, timeout: float | None) -> bytes:
+        """pyserial's POSIX ``read`` with the same meaning of ``timeout``."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        wait = timeout
+        data = b""
+        while True:
+            chunk = None
+            try:
+                ready = select.select((fd,), (), (), wait)[0]
+            except (OSError, ValueError) as exc:
+                raise self._lost("read", exc) from exc
+            if ready:
+                try:
+                    chunk = os.read(fd, size - len(data))
+                except BlockingIOError:
+                    pass
+                except OSError as exc:
+                    raise self._lost("read", exc) from exc
+                if chunk == b"":
+                    # a vanished USB device stays readable and reads nothing (as pyserial says)
+                    raise self._lost("read", OSError("device reports readiness to read but "
+                                                     "returned no data"))
+                if chunk:
+                    data += chunk
+                    if len(data) >= size:
+                        return data
+            if deadline is not None:
+                wait = deadline - time.monotonic()
+                if wait <= 0:
+                    if not chunk:
+                        return data  # timed out
+                    wait = 0  # one more look at what is there already
 
     def pending(self) -> int:
         try:
             return self._port().in_waiting
         except (pyserial.SerialException, OSError) as exc:
-            self.close()
-            raise TransportError(f"{self.url}: port lost ({exc})") from exc
+            raise self._lost("status query", exc) from exc
 
     def set_baudrate(self, baud: int) -> None:
         self.baudrate = baud
         if self._ser is not None:
-            self._ser.baudrate = baud
+            try:
+                self._ser.baudrate = baud
+            except (pyserial.SerialException, OSError, ValueError) as exc:
+                raise TransportError(f"{self.url}: cannot set {baud} baud: {exc}") from exc
 
     def describe(self) -> str:
+        if is_url(self.url) and not self.url.startswith(("rfc2217://", "spy://", "hwgrep://")):
+            return self.url  # socket://, loop://: a baud rate means nothing there
         return f"{self.url} @ {self.baudrate}"
 
 
@@ -82,6 +178,10 @@ def _friendly(url: str, exc: Exception) -> str:
     if "Permission denied" in text:
         return (f"cannot open {url}: permission denied; add yourself to the 'dialout' group "
                 "(sudo usermod -aG dialout $USER, then log in again)")
-    if "No such file" in text or "could not open port" in text:
+    if "Could not exclusively lock" in text or "Resource temporarily unavailable" in text:
+        return f"cannot open {url}: the port is in use by another program"
+    if "No such file" in text:
         return f"cannot open {url}: no such port (see 'tmclsh ports')"
+    if "Connection refused" in text:
+        return f"cannot open {url}: connection refused (is the server running?)"
     return f"cannot open {url}: {text}"

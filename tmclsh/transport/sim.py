@@ -6,16 +6,26 @@ connection exercises the real protocol path.
 
 from __future__ import annotations
 
+import time
+
 from ..errors import TransportError
 from .base import StreamTransport
 
 
 class SimTransport(StreamTransport):
+    """A ``Simulator`` (or a ``SimBus`` of them) as a stream.
+
+    Without ``simulator`` one is created on ``open()`` (``sim_kw`` are its arguments, e.g.
+    ``host_address``) and closed on ``close()``; a given simulator belongs to the caller and
+    is left running.
+    """
+
     simulated = True
 
     def __init__(self, module: str = "TMCM-1311", address: int = 1, simulator=None, **sim_kw):
-        super().__init__(f"sim://{module}")
-        self.module_name = module
+        name = getattr(getattr(simulator, "module", None), "name", None) or module
+        super().__init__(f"sim://{name}")
+        self.module_name = name
         self.address = address
         self._sim_kw = sim_kw
         self.simulator = simulator
@@ -27,46 +37,52 @@ class SimTransport(StreamTransport):
         if self.simulator is None:
             from ..sim import Simulator
 
-            self.simulator = Simulator(self.module_name, address=self.address, **self._sim_kw)
+            try:
+                self.simulator = Simulator(self.module_name, self.address,
+                                           **self._sim_kw).bench_layout()
+            except ValueError as exc:
+                raise TransportError(f"cannot start the simulator: {exc}") from exc
+        self._buf.clear()
         self._open = True
 
     def close(self) -> None:
-        if self._owns and self.simulator is not None:
-            self.simulator.close()
-            self.simulator = None
         self._open = False
+        if self._owns and self.simulator is not None:
+            sim, self.simulator = self.simulator, None
+            sim.close()
 
     @property
     def is_open(self) -> bool:
         return self._open
 
-    def write(self, data: bytes) -> None:
+    def _sim(self):
         if not self._open or self.simulator is None:
-            raise TransportError("simulator is not running")
-        self.simulator.write(bytes(data))
+            raise TransportError("the simulator is not running")
+        return self.simulator
+
+    def write(self, data: bytes) -> None:
+        self._sim().write(bytes(data))
 
     def read(self, size: int, timeout: float | None) -> bytes:
-        if self.simulator is None:
-            raise TransportError("simulator is not running")
-        import time
-
-        deadline = None if timeout is None else time.monotonic() + timeout
-        while len(self._buf) < size:
-            left = None if deadline is None else max(0.0, deadline - time.monotonic())
-            chunk = self.simulator.read(left)
-            if chunk:
-                self._buf += chunk
-            elif left is not None and left <= 0:
-                break
-            elif deadline is not None and time.monotonic() >= deadline:
-                break
-        out = bytes(self._buf[:size])
-        del self._buf[:size]
+        sim = self._sim()
+        buf = self._buf
+        if len(buf) < size:
+            deadline = None if timeout is None else time.monotonic() + timeout
+            while len(buf) < size:
+                if deadline is None:
+                    buf += sim.read(None)
+                    continue
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    buf += sim.read(0)
+                    break
+                buf += sim.read(left)
+        out = bytes(buf[:size])
+        del buf[:size]
         return out
 
     def pending(self) -> int:
-        if self.simulator is not None:
-            self._buf += self.simulator.read(0)
+        self._buf += self._sim().read(0)
         return len(self._buf)
 
     def describe(self) -> str:

@@ -1,0 +1,102 @@
+"""Shared fixtures: simulated modules behind real byte paths.
+
+* ``sim``: an in-process ``Simulator`` (TMCM-1311, address 1), closed afterwards.
+* ``pty_sim``: that simulator served on a pseudo-terminal: ``(sim, path)``; open ``path`` like
+  a serial port. ``make_pty_sim(...)`` serves any ``Simulator``/``SimBus`` arguments.
+* ``client``: ``tmclsh.connect(sim="TMCM-1311")``, in process, 0.5 s timeout; the simulator is
+  ``client.transport.simulator``.
+* ``pty_client``: a ``Client`` on ``pty_sim`` through pyserial, 0.2 s timeout (fault tests);
+  the simulator is ``pty_client.sim``.
+* ``run_tmclsh(*args, timeout=...)``: ``python -m tmclsh ARGS`` in a subprocess with this
+  checkout on the path; returns the ``CompletedProcess`` (text, stdout and stderr captured).
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def tmclsh_env(**extra: str) -> dict[str, str]:
+    """Environment for a ``python -m tmclsh`` subprocess: this checkout first on the path, no
+    user config file, no attached-module detection surprises."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(ROOT) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    env["TMCLSH_CONFIG"] = os.devnull
+    for var in ("TMCLSH_PORT", "TMCLSH_CAN", "TMCLSH_PROFILE", "TMCLSH_MODULE", "TMCLSH_ADDRESS"):
+        env.pop(var, None)
+    env.update(extra)
+    return env
+
+
+@pytest.fixture
+def run_tmclsh():
+    def run(*args: str, timeout: float = 30, input: str | None = None,
+            env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-m", "tmclsh", *args], capture_output=True,
+                              text=True, timeout=timeout, input=input,
+                              env=env or tmclsh_env(), cwd=str(ROOT))
+    return run
+
+
+@pytest.fixture
+def sim():
+    from tmclsh.sim import Simulator
+
+    s = Simulator("TMCM-1311")
+    yield s
+    s.close()
+
+
+@pytest.fixture
+def make_pty_sim():
+    """``make_pty_sim(module="TMCM-1311", address=1, **kw)`` -> (sim, path); or
+    ``make_pty_sim(target=SimBus([...]))`` -> (bus, path). All are closed afterwards."""
+    from tmclsh.sim import Simulator
+    from tmclsh.sim.serve import serve_pty
+
+    opened = []
+
+    def make(module: str = "TMCM-1311", address: int = 1, *, target=None, **kw):
+        if target is None:
+            target = Simulator(module, address, **kw)
+        server = serve_pty(target)
+        opened.append((server, target))
+        return target, server.path
+
+    yield make
+    for server, target in reversed(opened):
+        server.close()
+        target.close()
+
+
+@pytest.fixture
+def pty_sim(make_pty_sim):
+    return make_pty_sim()
+
+
+@pytest.fixture
+def client():
+    import tmclsh
+
+    c = tmclsh.connect(sim="TMCM-1311", timeout=0.5)
+    yield c
+    c.close()
+
+
+@pytest.fixture
+def pty_client(pty_sim):
+    from tmclsh.client import Client
+    from tmclsh.transport import open_serial
+
+    sim, path = pty_sim
+    c = Client(open_serial(path), module="TMCM-1311", timeout=0.2, retries=2)
+    c.sim = sim  # type: ignore[attr-defined]  # the tests' handle on the module
+    yield c
+    c.close()

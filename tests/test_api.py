@@ -1,0 +1,99 @@
+"""The Python API: ``tmclsh.connect(...)`` and what ``import tmclsh`` costs."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+import tmclsh
+from tmclsh.errors import StatusError, TmclError, TmclTimeoutError, ValidationError
+from tmclsh.protocol import Status
+
+from conftest import ROOT, tmclsh_env
+
+HEAVY = ("prompt_toolkit", "rich", "can")
+
+
+def test_connect_to_a_port_send_and_execute(pty_sim):
+    sim, path = pty_sim
+    with tmclsh.connect(port=path, timeout=0.5) as c:
+        assert c.module.name == "TMCM-1311"  # asked with 136
+        r = c.send(5, 1, 0, 90000)  # SAP 1, 0, 90000
+        assert r.status == Status.OK and r.opcode == 5
+        assert c.send(6, 1, 0).value == 90000
+        res = c.execute("GAP 1, 0")
+        assert res.ok and res.value == 90000 and res.reply.opcode == 6
+        assert c.value("GAP ActualPosition, 0") == 90000
+        assert sim.param("axis", 1, 0) == 90000
+    assert not c.connected
+
+
+def test_connect_defaults_to_the_simulator_and_checks_its_arguments():
+    with tmclsh.connect() as c:
+        assert c.transport.simulated and c.module.name == "TMCM-1311"
+        assert c.execute("GAP 1, 0").value == 0
+    with pytest.raises(ValidationError, match="only one"):
+        tmclsh.connect(port="loop://", sim="TMCM-1311")
+
+
+def test_connect_with_module_given_does_not_ask(pty_sim):
+    sim, path = pty_sim
+    with tmclsh.connect(port=path, module="TMCM-1311", timeout=0.5) as c:
+        assert c.stats["sent"] == 0 and c.version is None
+
+
+def test_connect_to_nothing_fails_cleanly(tmp_path):
+    with pytest.raises(TmclError, match="no such port"):
+        tmclsh.connect(port=str(tmp_path / "ttyACM7"))
+    with pytest.raises(TmclTimeoutError):
+        tmclsh.connect(port="loop://", timeout=0.05, retries=0)  # nobody answers 136
+
+
+def test_errors_are_the_builtins_a_caller_expects(client):
+    client.address = 77  # nobody there
+    with pytest.raises(TimeoutError):
+        client.send(6, 1, 0, timeout=0.05)
+    client.address = 1
+    with pytest.raises(ValueError):
+        client.send(6, 1, 300)  # motor out of 0..255: refused before sending
+    client.execute("SGP 73, 0, 1234")  # lock the configuration EEPROM
+    with pytest.raises(StatusError) as exc:
+        client.execute("STAP 4, 0")
+    assert exc.value.status == Status.EEPROM_LOCKED and exc.value.reply.status == 5
+
+
+def _modules_after(code: str) -> dict:
+    out = subprocess.run(
+        [sys.executable, "-c", code + "\nimport sys, json\n"
+         "print(json.dumps(sorted(m for m in sys.modules)))"],
+        capture_output=True, text=True, env=tmclsh_env(), cwd=str(ROOT), timeout=30)
+    assert out.returncode == 0, out.stderr
+    return set(json.loads(out.stdout.splitlines()[-1]))
+
+
+@pytest.mark.parametrize("code", [
+    "import tmclsh",
+    "import tmclsh.cli",
+    "import tmclsh; c = tmclsh.connect(sim='TMCM-1311'); c.execute('GAP 1, 0'); c.close()",
+])
+def test_import_and_connect_stay_light(code):
+    loaded = _modules_after(code)
+    heavy = sorted(m for m in loaded if m.split(".")[0] in HEAVY)
+    assert heavy == [], f"{code!r} imported {heavy}"
+    if code == "import tmclsh":
+        assert not any(m.startswith(("tmclsh.", "serial")) for m in loaded)
+
+
+def test_import_time_of_the_cli_is_small():
+    """``python -X importtime -c "import tmclsh.cli"``: reported, loosely bounded."""
+    out = subprocess.run([sys.executable, "-X", "importtime", "-c", "import tmclsh.cli"],
+                         capture_output=True, text=True, env=tmclsh_env(), cwd=str(ROOT),
+                         timeout=30)
+    rows = [line.split("|") for line in out.stderr.splitlines() if line.startswith("import time:")]
+    cumulative = {r[2].strip(): int(r[1]) for r in rows[1:] if len(r) == 3}
+    assert "tmclsh.cli" in cumulative
+    # a few milliseconds on a quiet machine; the bound only catches a heavy import creeping in
+    assert cumulative["tmclsh.cli"] < 150_000, cumulative["tmclsh.cli"]

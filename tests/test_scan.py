@@ -1,0 +1,157 @@
+"""``tmclsh scan`` (modules on an RS485 line or a CAN bus), ``tmclsh ports``, and how the CLI
+picks a connection (``open_transport``)."""
+
+from __future__ import annotations
+
+import json
+import uuid
+
+import pytest
+from serial.tools import list_ports
+from serial.tools.list_ports_common import ListPortInfo
+
+from tmclsh import cli
+from tmclsh.protocol import Reply, Request
+from tmclsh.sim import SimBus, Simulator
+from tmclsh.sim.serve import serve_can
+
+
+@pytest.fixture
+def rs485_line(make_pty_sim):
+    """A TMCM-1311 at address 1 and a TMCM-351 at address 3 on one pty-served line."""
+    bus = SimBus([Simulator("TMCM-1311", 1), Simulator("TMCM-351", 3)])
+    return make_pty_sim(target=bus)
+
+
+def test_scan_lists_the_modules_on_an_rs485_line(rs485_line, run_tmclsh):
+    bus, path = rs485_line
+    p = run_tmclsh("scan", "--port", path, "--to", "5")
+    assert p.returncode == 0, p.stderr
+    lines = p.stdout.splitlines()
+    assert len(lines) == 2, p.stdout
+    assert lines[0].split() == ["address", "1", "TMCM-1311", "firmware", "1311V111"]
+    assert lines[1].split() == ["address", "3", "TMCM-351", "firmware", "0351V103"]
+    assert "scanning addresses 1..5" in p.stderr
+
+
+def test_scan_json_and_range(rs485_line, run_tmclsh):
+    bus, path = rs485_line
+    p = run_tmclsh("scan", "--port", path, "--from", "2", "--to", "4", "--json")
+    assert p.returncode == 0, p.stderr
+    rows = [json.loads(line) for line in p.stdout.splitlines()]
+    assert rows == [{"address": 3, "module": "TMCM-351", "version": "0351V103"}]
+
+
+def test_scan_finding_nothing_fails(rs485_line, run_tmclsh):
+    bus, path = rs485_line
+    p = run_tmclsh("scan", "--port", path, "--from", "4", "--to", "6", "--timeout", "0.02")
+    assert p.returncode == 1 and p.stdout == ""
+    assert "no module answered on addresses 4..6" in p.stderr
+
+
+def test_scan_over_python_can_virtual(monkeypatch, capsys):
+    monkeypatch.setenv("TMCLSH_CONFIG", "/dev/null")
+    channel = f"scan-{uuid.uuid4().hex[:8]}"
+    sims = [Simulator("TMCM-1311", 1), Simulator("TMCM-351", 3)]
+    # every module leaves the factory with CAN ID 1 (GP 71): give the second its own first,
+    # over its serial port, as a technician would before putting it on the bus
+    sims[1].write(Request(3, 9, 71, 0, 3).to_bytes())
+    assert Reply.from_bytes(sims[1].read(1.0)).ok and sims[1].can_id == 3
+    servers = [serve_can(s, "virtual", channel) for s in sims]
+    try:
+        rc = cli.main(["scan", "--can", f"virtual:{channel}", "--to", "4", "--json"])
+    finally:
+        for server, sim in zip(servers, sims):
+            server.close()
+            sim.close()
+    out, err = capsys.readouterr()
+    assert rc == 0, err
+    assert [json.loads(line) for line in out.splitlines()] == [
+        {"address": 1, "module": "TMCM-1311", "version": "1311V111"},
+        {"address": 3, "module": "TMCM-351", "version": "0351V103"}]
+    assert "scanning CAN ids 1..4" in err
+
+
+def test_scan_rejects_an_empty_range(run_tmclsh):
+    p = run_tmclsh("scan", "--sim", "--from", "5", "--to", "2")
+    assert p.returncode == 1 and "above" in p.stderr
+
+
+# -- ports -----------------------------------------------------------------------------------------
+
+def _port(device: str, vid=None, pid=None, description="n/a", serial=None) -> ListPortInfo:
+    p = ListPortInfo(device)
+    p.vid, p.pid, p.description, p.serial_number = vid, pid, description, serial
+    return p
+
+
+@pytest.fixture
+def fake_ports(monkeypatch):
+    """What the operating system reports as serial ports (pyserial's own data objects)."""
+    ports: list[ListPortInfo] = []
+    monkeypatch.setattr(list_ports, "comports", lambda *a, **k: list(ports))
+    monkeypatch.setenv("TMCLSH_CONFIG", "/dev/null")
+    for var in ("TMCLSH_PORT", "TMCLSH_CAN", "TMCLSH_PROFILE"):
+        monkeypatch.delenv(var, raising=False)
+    return ports
+
+
+def test_ports_lists_usb_ids_and_marks_trinamic_first(fake_ports, capsys):
+    fake_ports += [_port("/dev/ttyS0"),
+                   _port("/dev/ttyUSB0", 0x0403, 0x6001, "FT232R USB UART", "A50285BI"),
+                   _port("/dev/ttyACM1", 0x2A3C, 0x0100, "TMCM-1311", "0042")]
+    assert cli.main(["ports"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].split() == ["/dev/ttyACM1", "2a3c:0100", "TMCM-1311", "serial", "0042",
+                                "[TRINAMIC]"]
+    assert lines[1].split() == ["/dev/ttyS0", "-"]
+    assert "ftdi" not in lines[2].lower() and lines[2].split()[:2] == ["/dev/ttyUSB0", "0403:6001"]
+    assert "TRINAMIC" not in lines[2]
+    assert cli.main(["--json", "ports"]) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert rows[0] == {"device": "/dev/ttyACM1", "vid": 0x2A3C, "pid": 0x100,
+                       "description": "TMCM-1311", "serial": "0042", "trinamic": True}
+    assert rows[1]["trinamic"] is False and rows[1]["description"] is None
+
+
+def test_ports_with_none_found(fake_ports, capsys):
+    assert cli.main(["ports"]) == 0
+    assert "no serial ports found" in capsys.readouterr().err
+
+
+# -- which connection the CLI opens ----------------------------------------------------------
+
+def test_default_connection_is_the_one_attached_trinamic_module(fake_ports, pty_sim):
+    sim, path = pty_sim
+    fake_ports += [_port("/dev/ttyS0"), _port(path, 0x2A3C, 0x0100, "TMCM-1311")]
+    settings = {"baud": 9600, "address": 1, "host_address": 2, "timeout": 0.5, "retries": 2}
+    client = cli.open_client(settings)
+    try:
+        assert settings["port"] == path and not client.transport.simulated
+        assert client.module.name == "TMCM-1311"  # identified with 136
+        assert client.send(6, 1, 0).ok
+    finally:
+        client.close()
+
+
+def test_default_connection_with_two_modules_is_the_simulator(fake_ports, capsys):
+    fake_ports += [_port("/dev/ttyACM0", 0x2A3C, 1), _port("/dev/ttyACM1", 0x2A3C, 1)]
+    settings: dict = {"address": 0, "host_address": 5}
+    t = cli.open_transport(settings)
+    try:
+        assert t.simulated and settings["sim"] == "TMCM-1311"
+        assert t.simulator.address == 0 and t.simulator.host_address == 5  # 0 is an address
+    finally:
+        t.close()
+    assert "2 Trinamic modules attached (/dev/ttyACM0, /dev/ttyACM1)" in capsys.readouterr().err
+
+
+def test_open_client_uses_the_settings(pty_sim):
+    sim, path = pty_sim
+    client = cli.open_client({"port": path, "baud": 115200, "module": "TMCM-1311", "address": 1,
+                              "host_address": 2, "timeout": 0.25, "retries": 0})
+    try:
+        assert (client.timeout, client.retries) == (0.25, 0)
+        assert client.describe() == f"{path} @ 115200"
+    finally:
+        client.close()

@@ -1,0 +1,574 @@
+"""The program stored on a module: upload, verify, read back, run, stop, step, status.
+
+Operations on a :class:`~tmclsh.client.Client`, usable from Python and from the shell alike
+(the shell's debugger is a thin layer over this module). Nothing here prints: progress goes to
+a callback, problems are raised as :class:`~tmclsh.errors.TmclError` subclasses.
+
+The control commands (TMCM-351 manual, "TMCL control commands"; used by the TMCL-IDE on all
+three modules):
+
+* 128 stop, 129 run (type 0 from the current address, type 1 from the value's address),
+  130 step one instruction, 131 reset (program counter to 0, application stopped);
+* 132 start download at the value's address: every following frame is stored (and answered
+  with status 101) until 133 quits download mode;
+* 134 reads one instruction back (reply in the legacy layout, ``Reply.stored``);
+* 135 the application status (0 stop, 1 run, 2 step, 3 reset); GP 130 is the program counter,
+  GP 129 the download-mode flag, GP 128 the application status as a parameter.
+
+These firmwares have no breakpoint command: :func:`continue_to` runs to a breakpoint by
+stepping the module and reading the program counter after every step.
+
+In ASCII mode the module knows only ``RUN`` and ``STOP`` for its program (TMCM-1311 manual
+§4.4.3); :func:`run` and :func:`stop` use the ASCII link's ``run()``/``stop_program()`` then,
+:func:`status` reads GP 128/130 (GGP works in ASCII mode), and everything else raises a
+:class:`~tmclsh.errors.ValidationError` saying binary mode is needed.
+
+Example::
+
+    from tmclsh import asm, program
+    from tmclsh.client import connect
+
+    with connect(sim="TMCM-1311") as c:
+        prog = asm.assemble_file("demo.tmc", c.require_module())
+        result = program.upload(c, prog)          # 132, frames, 133, then 134 verify
+        assert result.verified
+        program.run(c)                            # 129 type 0
+        print(program.status(c))                  # AppStatus(state='run', pc=...)
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from enum import IntEnum
+
+from . import instructions as isa
+from .asm import Program
+from .errors import StatusError, TmclError, TmclTimeoutError, TransportError, ValidationError
+from .protocol import Control, Instruction, Request, Status
+
+log = logging.getLogger(__name__)
+
+# GGP <type>, 0: the program's global parameters (bank 0)
+GGP = 10
+GP_APPLICATION_STATUS = 128
+GP_DOWNLOAD_MODE = 129
+GP_PROGRAM_COUNTER = 130
+USER_VARIABLE_BANK = 2
+_WAIT = isa.by_mnemonic("WAIT").opcode  # type: ignore[union-attr]
+
+#: ``progress(phase, done, total)``; phase is "upload", "verify" or "read"
+Progress = Callable[[str, int, int], None]
+
+
+class AppState(IntEnum):
+    """Values of 135 (and GP 128)."""
+
+    STOP = 0
+    RUN = 1
+    STEP = 2
+    RESET = 3
+
+
+def state_name(code: int) -> str:
+    try:
+        return AppState(code).name.lower()
+    except ValueError:
+        return f"unknown({code})"
+
+
+@dataclass(frozen=True)
+class AppStatus:
+    """The stored application's state and program counter."""
+
+    state: str  # stop | run | step | reset
+    pc: int
+    code: int
+
+    def to_json(self) -> dict[str, object]:
+        return {"state": self.state, "pc": self.pc}
+
+    def __str__(self) -> str:
+        return f"{self.state} at {self.pc}"
+
+
+@dataclass(frozen=True)
+class Mismatch:
+    """The first address whose stored instruction differs from the one uploaded."""
+
+    address: int
+    expected: Instruction
+    actual: Instruction
+
+
+@dataclass
+class UploadResult:
+    start: int
+    count: int
+    verified: bool | None  # None: not verified
+    mismatch: Mismatch | None = None
+    upload_seconds: float = 0.0
+    verify_seconds: float = 0.0
+
+    def to_json(self) -> dict[str, object]:
+        obj: dict[str, object] = {"uploaded": self.count, "verified": bool(self.verified)}
+        if self.mismatch is not None:
+            obj["mismatch"] = self.mismatch.address
+        return obj
+
+
+class UploadError(TmclError):
+    """An upload that did not complete, with what the program memory holds now.
+
+    ``written``: addresses confirmed stored (status 101); ``unknown``: the address whose frame
+    was sent but not confirmed (it may or may not be stored); ``unchanged``: addresses after
+    it, which still hold what was there before. ``download_ended`` says whether 133 was
+    answered; ``interrupted`` is True for Ctrl-C.
+    """
+
+    def __init__(self, reason: str, *, start: int, total: int, acked: int, sent: int,
+                 download_ended: bool, end_error: str | None = None,
+                 interrupted: bool = False):
+        self.reason = reason
+        self.start = start
+        self.total = total
+        self.acked = acked
+        self.sent = sent
+        self.download_ended = download_ended
+        self.end_error = end_error
+        self.interrupted = interrupted
+        super().__init__(self.describe())
+
+    @property
+    def written(self) -> range:
+        return range(self.start, self.start + self.acked)
+
+    @property
+    def unknown(self) -> range:
+        return range(self.start + self.acked, self.start + self.sent)
+
+    @property
+    def unchanged(self) -> range:
+        return range(self.start + self.sent, self.start + self.total)
+
+    def memory_text(self) -> str:
+        parts = []
+        if self.written:
+            parts.append(f"instructions {_span(self.written)} written")
+        if self.unknown:
+            parts.append(f"{_span(self.unknown)} unknown (sent, not confirmed)")
+        if self.unchanged:
+            parts.append(f"{_span(self.unchanged)} unchanged (old contents)")
+        if not self.written and not self.unknown:
+            return "nothing was written; the program memory is unchanged"
+        return ", ".join(parts)
+
+    def describe(self) -> str:
+        if self.download_ended:
+            ended = "download mode ended"
+        else:
+            ended = (f"could not end download mode ({self.end_error}): the module may still "
+                     "store every command it receives; reconnect or power-cycle it")
+        return (f"upload failed: {self.reason}; {self.memory_text()}; {ended}. "
+                "Upload again to store the whole program")
+
+
+def _span(r: range) -> str:
+    return str(r.start) if len(r) == 1 else f"{r.start}..{r.stop - 1}"
+
+
+# -- checks ------------------------------------------------------------------------------
+
+def require_binary(client, what: str) -> None:
+    """Refuse control commands other than RUN/STOP while the link is in ASCII mode."""
+    if client.mode == "ascii":
+        raise ValidationError(f"{what} needs binary mode; in ASCII mode the module only knows "
+                              "RUN and STOP for its program (switch with .mode binary)")
+
+
+def check_fits(module, start: int, count: int) -> None:
+    """Refuse a program that does not fit the module's memory, before anything is sent."""
+    size = module.program_memory
+    if not 0 <= start < size:
+        raise ValidationError(f"start address {start} is outside program memory 0..{size - 1}")
+    if start + count > size:
+        raise ValidationError(
+            f"the program has {count} instructions; from address {start} only "
+            f"{size - start} fit in the {module.name}'s memory ({size} instructions); "
+            "nothing was sent")
+
+
+def _image(program: Program | Sequence[Instruction], origin: int | None
+           ) -> tuple[list[Instruction], int]:
+    if isinstance(program, Program):
+        if origin is not None and origin != program.origin and any(
+                (spec := isa.by_opcode(i.opcode)) is not None and spec.jumps
+                for i in program.instructions):
+            raise ValidationError(f"the program was assembled for address {program.origin}; "
+                                  f"its jumps would be wrong at {origin} (assemble it there)")
+        return list(program.instructions), program.origin if origin is None else origin
+    return list(program), 0 if origin is None else origin
+
+
+def _ok(reply, what: str, expect: Iterable[int] = (Status.OK,)):
+    if reply is None:
+        raise TmclError(f"no reply to {what}")
+    if reply.status not in tuple(expect):
+        raise StatusError(reply.status, reply,
+                          f"{what}: module answered status {reply.status} ({reply.status_text})")
+    return reply
+
+
+def _send(client, opcode: int, type_: int = 0, motor: int = 0, value: int = 0, *,
+          timeout: float | None = None):
+    return client.request(Request(client.address, opcode, type_, motor, value & 0xFFFFFFFF),
+                          timeout=timeout)
+
+
+# -- upload and read-back ----------------------------------------------------------------
+
+def upload(client, program: Program | Sequence[Instruction], origin: int | None = None, *,
+           verify: bool = True, progress: Progress | None = None,
+           timeout: float | None = None) -> UploadResult:
+    """Store ``program`` on the module from ``origin`` (default: the program's origin).
+
+    132 (start download), one frame per instruction (each answered with status 101), 133;
+    then, with ``verify``, every instruction is read back with 134 and compared. Download mode
+    is always ended (133 in a ``finally``, best effort, also after Ctrl-C); an upload that did
+    not complete raises :class:`UploadError` saying what the memory holds now.
+    """
+    instructions, start = _image(program, origin)
+    module = client.require_module()
+    require_binary(client, "uploading a program (132/133)")
+    if not instructions:
+        raise ValidationError("the program has no instructions; nothing to upload")
+    check_fits(module, start, len(instructions))
+    total = len(instructions)
+    acked = sent = 0
+    failure: BaseException | None = None
+    began = time.monotonic()
+    client.downloading = True  # no retries: a repeated frame would be stored twice
+    try:
+        _ok(_send(client, Control.START_DOWNLOAD, 0, 0, start, timeout=timeout),
+            f"start download (132) at address {start}")
+        for ins in instructions:
+            sent += 1
+            reply = _send(client, ins.opcode, ins.type, ins.motor, ins.value, timeout=timeout)
+            _ok(reply, f"instruction at address {start + acked}", (Status.LOADED,))
+            acked += 1
+            if progress is not None:
+                progress("upload", acked, total)
+    except (TmclError, KeyboardInterrupt) as exc:
+        failure = exc
+    finally:
+        ended, end_error = _quit_download(client, timeout)
+        client.downloading = False
+    upload_seconds = time.monotonic() - began
+    if failure is not None:
+        interrupted = isinstance(failure, KeyboardInterrupt)
+        reason = "interrupted (Ctrl-C)" if interrupted else _reason(failure)
+        if isinstance(failure, StatusError) and acked < sent:
+            sent = acked  # the module refused that frame: nothing was stored there
+        raise UploadError(reason, start=start, total=total, acked=acked, sent=sent,
+                          download_ended=ended, end_error=end_error,
+                          interrupted=interrupted) from failure
+    if not ended:
+        raise UploadError("quit download (133) failed", start=start, total=total,
+                          acked=acked, sent=sent, download_ended=False, end_error=end_error)
+    result = UploadResult(start, total, None, upload_seconds=upload_seconds)
+    if verify:
+        began = time.monotonic()
+        result.mismatch = verify_image(client, instructions, start, progress=progress,
+                                       timeout=timeout)
+        result.verified = result.mismatch is None
+        result.verify_seconds = time.monotonic() - began
+    return result
+
+
+def _reason(exc: BaseException) -> str:
+    if isinstance(exc, TmclTimeoutError):
+        return f"link lost ({exc})"
+    if isinstance(exc, TransportError):
+        return f"link lost ({exc})"
+    return str(exc)
+
+
+def _quit_download(client, timeout: float | None) -> tuple[bool, str | None]:
+    """133, best effort: twice if the first gets no reply (a second 133 is harmless)."""
+    error = None
+    for _ in range(2):
+        try:
+            reply = _send(client, Control.QUIT_DOWNLOAD, timeout=timeout)
+            if reply is not None and reply.ok:
+                return True, None
+            error = f"status {reply.status}" if reply is not None else "no reply"
+        except KeyboardInterrupt:
+            return False, "interrupted"
+        except TmclError as exc:
+            error = str(exc)
+            if isinstance(exc, TransportError) and not client.connected:
+                break
+        log.warning("quit download (133) failed: %s", error)
+    return False, error
+
+
+def end_download(client, *, timeout: float | None = None) -> None:
+    """133 on its own: end a download mode left behind (e.g. by a link lost mid-upload)."""
+    require_binary(client, "quit download (133)")
+    client.downloading = True  # until it is answered, the module may store what it gets
+    try:
+        _ok(_send(client, Control.QUIT_DOWNLOAD, timeout=timeout), "quit download (133)")
+    finally:
+        client.downloading = False
+
+
+def read_instruction(client, address: int, *, timeout: float | None = None) -> Instruction:
+    """The instruction stored at ``address`` (134)."""
+    require_binary(client, "reading program memory (134)")
+    reply = _send(client, Control.READ_MEMORY, 0, 0, address, timeout=timeout)
+    if reply is None or reply.stored is None:
+        raise TmclError(f"no program-memory reply for address {address}")
+    return reply.stored
+
+
+def is_end_marker(ins: Instruction) -> bool:
+    """Opcode 0 (memory never written, or cleared) or an erased cell (all bytes 0xFF)."""
+    return ins.opcode == 0 or ins.to_bytes() == b"\xff" * 7
+
+
+def read_program(client, start: int = 0, count: int | None = None, *,
+                 progress: Progress | None = None, timeout: float | None = None
+                 ) -> list[Instruction]:
+    """Read the stored program back with 134.
+
+    With ``count``, exactly that many instructions; else up to the end marker (see
+    :func:`is_end_marker`, not included) or the end of memory.
+    """
+    module = client.require_module()
+    require_binary(client, "reading program memory (134)")
+    size = module.program_memory
+    if not 0 <= start < size:
+        raise ValidationError(f"address {start} is outside program memory 0..{size - 1}")
+    end = size if count is None else start + count
+    if end > size:
+        raise ValidationError(f"{start}+{count} runs past the end of program memory ({size})")
+    out: list[Instruction] = []
+    for addr in range(start, end):
+        ins = read_instruction(client, addr, timeout=timeout)
+        if count is None and is_end_marker(ins):
+            break
+        out.append(ins)
+        if progress is not None:
+            progress("read", len(out), end - start)
+    return out
+
+
+def verify_image(client, instructions: Sequence[Instruction], start: int = 0, *,
+                 progress: Progress | None = None, timeout: float | None = None
+                 ) -> Mismatch | None:
+    """Read every instruction back and compare bytes; the first difference, or None."""
+    total = len(instructions)
+    for idx, want in enumerate(instructions):
+        got = read_instruction(client, start + idx, timeout=timeout)
+        if got.to_bytes() != want.to_bytes():
+            return Mismatch(start + idx, want, got)
+        if progress is not None:
+            progress("verify", idx + 1, total)
+    return None
+
+
+def same_image(a: Sequence[Instruction], b: Sequence[Instruction]) -> bool:
+    return len(a) == len(b) and all(x.to_bytes() == y.to_bytes() for x, y in zip(a, b))
+
+
+# -- running -----------------------------------------------------------------------------
+
+def _ascii_call(client, name: str, what: str):
+    link = client.ascii_link
+    fn = getattr(link, name, None)
+    if not callable(fn):
+        raise ValidationError(f"{what} is not available in ASCII mode with this link "
+                              f"(it offers no {name}()); switch with .mode binary")
+    return fn()
+
+
+def run(client, address: int | None = None) -> None:
+    """129: type 0 runs from the current address, type 1 from ``address``."""
+    module = client.require_module()
+    if address is not None and not 0 <= address < module.program_memory:
+        raise ValidationError(f"address {address} is outside program memory "
+                              f"0..{module.program_memory - 1}")
+    if client.mode == "ascii":
+        if address is not None:
+            raise ValidationError("running from an address (129 type 1) needs binary mode; "
+                                  "ASCII RUN starts from the current address (switch with "
+                                  ".mode binary)")
+        _ascii_call(client, "run", "RUN")
+        return
+    if address is None:
+        _ok(_send(client, Control.RUN_APPLICATION, 0), "run (129)")
+    else:
+        _ok(_send(client, Control.RUN_APPLICATION, 1, 0, address), f"run from {address} (129)")
+
+
+def stop(client) -> None:
+    """128: stop the running (or stepped) application."""
+    if client.mode == "ascii":
+        _ascii_call(client, "stop_program", "STOP")
+        return
+    _ok(_send(client, Control.STOP_APPLICATION), "stop (128)")
+
+
+def reset(client) -> None:
+    """131: program counter to 0, application stopped."""
+    require_binary(client, "reset (131)")
+    _ok(_send(client, Control.RESET_APPLICATION), "reset (131)")
+
+
+def step(client) -> None:
+    """130: execute the next instruction."""
+    require_binary(client, "stepping (130)")
+    _ok(_send(client, Control.STEP_APPLICATION), "step (130)")
+
+
+def program_counter(client) -> int:
+    """GP 130."""
+    reply = _ok(_send(client, GGP, GP_PROGRAM_COUNTER, 0), "program counter (GGP 130)")
+    return reply.value
+
+
+def status(client) -> AppStatus:
+    """135 (GP 128 in ASCII mode) and the program counter (GP 130)."""
+    if client.mode == "ascii":
+        code = _ok(_send(client, GGP, GP_APPLICATION_STATUS, 0),
+                   "application status (GGP 128)").value
+    else:
+        code = _ok(_send(client, Control.GET_STATUS), "application status (135)").value
+    return AppStatus(state_name(code), program_counter(client), code)
+
+
+def download_mode(client) -> bool:
+    """GP 129: True while the module is in download mode."""
+    return bool(_ok(_send(client, GGP, GP_DOWNLOAD_MODE, 0), "download mode (GGP 129)").value)
+
+
+@dataclass
+class StopInfo:
+    """Why :func:`continue_to` returned: "breakpoint", "ended" or "limit"."""
+
+    reason: str
+    pc: int
+    steps: int
+    status: AppStatus | None = None
+
+
+def step_one(client, *, pc: int | None = None,
+             instruction_at: Callable[[int], Instruction] | None = None,
+             on_wait: Callable[[int], None] | None = None) -> int:
+    """130 once and return the new program counter; a WAIT is stepped over in its time.
+
+    A step that starts a WAIT leaves the program counter on it until the module finishes
+    the WAIT by itself; sending 130 again meanwhile could run the next instruction as soon as
+    the WAIT ends, unseen. So while a WAIT holds the program counter this polls GP 130 (read
+    only) until it moves, calling ``on_wait(pc)`` once first (Ctrl-C interrupts the wait;
+    the module stays in step mode). ``pc``: the program counter before the step, if known.
+    """
+    require_binary(client, "stepping (130)")
+    if pc is None:
+        pc = program_counter(client)
+    step(client)
+    new = program_counter(client)
+    if new != pc:
+        return new
+    ins = instruction_at(pc) if instruction_at is not None else read_instruction(client, pc)
+    if ins.opcode != _WAIT:
+        return new  # a jump to itself, or a STOP
+    if on_wait is not None:
+        on_wait(pc)
+    polls = 0
+    while new == pc:
+        polls += 1
+        time.sleep(min(0.02, 0.001 * polls))
+        new = program_counter(client)
+        if new == pc and polls % 16 == 0 and status(client).state != "step":
+            break  # stopped or reset meanwhile
+    return new
+
+
+def continue_to(client, breakpoints: Iterable[int], *, max_steps: int | None = None,
+                on_step: Callable[[int, int], None] | None = None,
+                instruction_at: Callable[[int], Instruction] | None = None) -> StopInfo:
+    """Step until the program counter arrives at a breakpoint (at least one step).
+
+    These firmwares have no breakpoint command, so this costs two round trips per
+    instruction, and a WAIT takes its full time (see :func:`step_one`). A breakpoint counts
+    when the program counter arrives there: moving off the breakpoint it starts at takes a
+    step. Returns when a breakpoint is reached, the program stopped by itself (STOP, or the
+    end of the program), or after ``max_steps`` steps. KeyboardInterrupt propagates (the
+    module stays in step mode, at an instruction boundary). ``instruction_at(address)`` gives
+    the stored instruction (default: read with 134, once per address).
+    """
+    require_binary(client, "running to a breakpoint (130 steps)")
+    targets = set(breakpoints)
+    cache: dict[int, Instruction] = {}
+
+    def stored(address: int) -> Instruction:
+        if instruction_at is not None:
+            return instruction_at(address)
+        if address not in cache:
+            cache[address] = read_instruction(client, address)
+        return cache[address]
+
+    steps = 0
+    pc = program_counter(client)
+    while max_steps is None or steps < max_steps:
+        before = pc
+        pc = step_one(client, pc=pc, instruction_at=stored)
+        steps += 1
+        if on_step is not None:
+            on_step(steps, pc)
+        if pc in targets:
+            return StopInfo("breakpoint", pc, steps)
+        if pc == before:
+            st = status(client)
+            if st.state != "step":  # STOP ran, or the end of the program
+                return StopInfo("ended", st.pc, steps, st)
+    return StopInfo("limit", pc, steps)
+
+
+def is_wait(ins: Instruction) -> bool:
+    return ins.opcode == _WAIT
+
+
+# -- user variables ----------------------------------------------------------------------
+
+def user_variable_range(module) -> range:
+    """All user variables (global parameters of bank 2) the module's database lists."""
+    params = [p for p in module.global_params if p.bank == USER_VARIABLE_BANK]
+    if not params:
+        raise ValidationError(f"the {module.name} has no user variables (bank 2)")
+    lo = min(p.number for p in params)
+    hi = max(p.number + p.count for p in params)
+    return range(lo, hi)
+
+
+def read_user_variables(client, numbers: Iterable[int]) -> dict[int, int]:
+    """GGP n, 2 for each number."""
+    module = client.require_module()
+    valid = user_variable_range(module)
+    out = {}
+    for n in numbers:
+        if n not in valid:
+            raise ValidationError(f"user variable {n} does not exist on the {module.name}: "
+                                  f"{valid.start}..{valid.stop - 1}")
+        out[n] = _ok(_send(client, GGP, n, USER_VARIABLE_BANK), f"GGP {n}, 2").value
+    return out
+
+
+__all__ = ["AppState", "AppStatus", "Mismatch", "UploadResult", "UploadError", "StopInfo",
+           "upload", "end_download", "verify_image", "read_program", "read_instruction", "is_end_marker",
+           "same_image", "run", "stop", "reset", "step", "status", "program_counter",
+           "download_mode", "continue_to", "step_one", "is_wait", "check_fits", "require_binary",
+           "user_variable_range", "read_user_variables", "state_name"]

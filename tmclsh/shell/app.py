@@ -1,0 +1,327 @@
+"""The interactive shell: assembles the prompt from its parts and runs the read-eval loop.
+
+Each part lives in its own module (STYLE.md §3-4) and this file only wires them together:
+completion (``completer``), highlighting (``lexer``), the bottom toolbar (``toolbar``), keys
+(``keys``), styles (``style``) and persistent history. Lines run through
+``Session.run_line`` exactly as in ``-c`` and ``-f``.
+
+Behaviour worth knowing:
+
+* Ctrl-C at the prompt or while a command runs sends MST to every motor (keys.py explains
+  why always); the shell stays up. Ctrl-D on an empty line, ``.quit`` or ``quit`` leave.
+* An empty line repeats ``session.state["repeat_on_empty"]`` if a feature set it (the
+  debugger sets it to ``.step``).
+* 138 events and trace lines from other threads appear above the prompt (``patch_stdout``).
+* After a link failure (TransportError) the next TMCL line first tries ``client.reconnect()``,
+  so a re-plugged USB cable needs no restart; ``.connect`` does the same on demand.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import sys
+from contextlib import nullcontext
+from typing import TYPE_CHECKING
+
+from .. import __version__
+from ..errors import TmclError, TransportError
+from .session import Abort, QuitShell
+
+if TYPE_CHECKING:
+    from prompt_toolkit import PromptSession
+
+    from .session import Session
+
+log = logging.getLogger(__name__)
+
+_LINK_LOST = "link_lost"
+
+
+# -- parts -------------------------------------------------------------------------------
+
+def history_path():
+    from ..config import state_dir
+
+    return state_dir() / "history"
+
+
+def repl_settings() -> dict:
+    """The ``[settings]`` of the config file over the packaged defaults (``default.toml``):
+    color, editing_mode, history_size. A broken file was reported at start-up already."""
+    try:
+        from ..config import load_settings
+
+        return load_settings()
+    except (TmclError, OSError, ImportError):
+        return {}
+
+
+def make_history(size: int | None = None):
+    """Persistent history in the XDG state dir, trimmed to the last ``size`` lines (the
+    ``history_size`` setting); in memory if that cannot be written or ``size`` is 0."""
+    from prompt_toolkit.history import FileHistory, InMemoryHistory
+
+    if size == 0:
+        return InMemoryHistory()
+    path = history_path()
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.touch(exist_ok=True)
+        if size is not None:
+            _trim_history(path, size)
+        return FileHistory(str(path))
+    except OSError as exc:
+        log.warning("history not saved: %s", exc)
+        return InMemoryHistory()
+
+
+def _trim_history(path, size: int) -> None:
+    from prompt_toolkit.history import FileHistory
+
+    lines = list(FileHistory(str(path)).load_history_strings())  # newest first
+    if len(lines) <= size:
+        return
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.unlink(missing_ok=True)
+    keep = FileHistory(str(tmp))
+    for line in reversed(lines[:size]):
+        keep.store_string(line)
+    os.replace(tmp, path)
+
+
+def prompt_message(session: Session):
+    """``TMCM-1311:1> `` (module type and address), with the program state if it runs."""
+
+    def message():
+        c = session.client
+        mod = c.module.name if c.module is not None else "tmcl"
+        style = "class:prompt.sim" if c.transport.simulated else "class:prompt"
+        parts = [(style, f"{mod}:{c.address}")]
+        if c.mode == "ascii":
+            parts.append(("class:prompt.state", " ascii"))
+        state = session.state.get("program_state")
+        text = str(state.get("state", "")) if isinstance(state, dict) else (
+            str(getattr(state, "name", state)).lower() if state is not None else "")
+        if text.startswith(("run", "step")):  # the debugger's "run", "step @12"
+            parts.append(("class:prompt.state", f" [{text}]"))
+        parts.append((style, "> "))
+        return parts
+
+    return message
+
+
+def build_prompt_session(session: Session, **kw) -> PromptSession:
+    """The PromptSession with all parts; ``kw`` goes to PromptSession (tests pass input/output)."""
+    from prompt_toolkit import PromptSession
+    from prompt_toolkit.auto_suggest import AutoSuggestFromHistory
+    from prompt_toolkit.lexers import PygmentsLexer
+    from prompt_toolkit.shortcuts import CompleteStyle
+
+    from .completer import TmclCompleter
+    from .keys import tmcl_bindings
+    from .lexer import TmclLexer
+    from .style import prompt_style
+    from .toolbar import create_toolbar_tokens_func
+
+    from prompt_toolkit.enums import EditingMode
+    from prompt_toolkit.output import ColorDepth
+
+    settings = repl_settings()
+    if "history" not in kw:
+        size = settings.get("history_size")
+        kw["history"] = make_history(size if isinstance(size, int) else None)
+    if settings.get("editing_mode") == "vi":
+        kw.setdefault("editing_mode", EditingMode.VI)
+    if settings.get("color") == "never":
+        kw.setdefault("color_depth", ColorDepth.DEPTH_1_BIT)
+    return PromptSession(
+        message=prompt_message(session),
+        auto_suggest=AutoSuggestFromHistory(),
+        lexer=PygmentsLexer(TmclLexer, sync_from_start=True),
+        completer=TmclCompleter(session),
+        complete_while_typing=False,  # Tab completes; no menu popping up over every number
+        complete_style=CompleteStyle.COLUMN,
+        reserve_space_for_menu=8,
+        bottom_toolbar=create_toolbar_tokens_func(session),
+        key_bindings=tmcl_bindings(session),
+        style=prompt_style(),
+        include_default_pygments_style=False,
+        refresh_interval=0.5,  # the toolbar follows trace/program state (no bus I/O)
+        **kw,
+    )
+
+
+def _dumb_echo(ps: PromptSession) -> None:
+    """On a dumb terminal prompt_toolkit echoes only the last character of each change, so a
+    completion (several characters at once) would show as one: echo the rest of it first."""
+    buf = ps.default_buffer
+    before = {"text": ""}
+
+    def changed(_: object) -> None:
+        now = buf.document.text_before_cursor
+        old = before["text"]
+        if len(now) > len(old) + 1 and now.startswith(old):
+            ps.output.write(now[len(old):-1])
+        before["text"] = now
+
+    buf.on_text_changed += changed
+
+
+def ask_yes_no(question: str) -> bool:
+    """``session.ask`` in the REPL: y/n, anything else (Ctrl-C, Ctrl-D) is no."""
+    from prompt_toolkit.shortcuts import confirm
+
+    try:
+        return bool(confirm(question))
+    except (KeyboardInterrupt, EOFError):
+        return False
+
+
+def banner(session: Session):
+    from rich.text import Text
+
+    c = session.client
+    out = Text()
+    out.append(f"tmclsh {__version__}", style="bold")
+    out.append(" · ")
+    mod = c.module.name if c.module is not None else "unknown module"
+    out.append(mod, style="tmcl.name")
+    out.append(f" at address {c.address}")
+    if c.transport.simulated:
+        out.append(" · ")
+        out.append("SIMULATED", style="tmcl.sim")
+        out.append(" (built-in simulator, no hardware)")
+    else:
+        out.append(f" on {c.describe()}")
+    if c.mode == "ascii":
+        out.append(" · ASCII mode")
+    if c.version:
+        out.append(f" · firmware {c.version}")
+    out.append("\n")
+    for i, word in enumerate((".help", "help SAP", "help 140")):
+        out.append(" · " if i else "")
+        out.append(word, style="tmcl.name")
+    out.append(" · Tab completes · Ctrl-C stops all motors · Ctrl-D quits")
+    return out
+
+
+# -- the loop ----------------------------------------------------------------------------
+
+def run_repl(session: Session, prompt_session: PromptSession | None = None) -> int:
+    """The interactive shell; returns the exit status (0)."""
+    from prompt_toolkit.patch_stdout import patch_stdout
+
+    from .keys import stop_motors
+
+    session.interactive = True
+    session.ask = ask_yes_no
+    if repl_settings().get("color") == "never":
+        session.out.console.no_color = session.out.err.no_color = True
+    from prompt_toolkit.utils import is_dumb_terminal
+
+    ps = prompt_session or build_prompt_session(session)
+    client = session.client
+    dumb = prompt_session is None and is_dumb_terminal()
+    if dumb:
+        _dumb_echo(ps)
+    session.out.print(banner(session), soft_wrap=False)
+    unlisten = client.add_listener(session.out.event)
+    client.start_event_poller()
+    try:
+        # a dumb terminal has no prompt to redraw: print straight away, in order
+        with nullcontext() if dumb else patch_stdout(raw=True):
+            while True:
+                try:
+                    try:
+                        text = ps.prompt()
+                    except EOFError:
+                        break
+                    if not run_text(session, text):
+                        break
+                except KeyboardInterrupt:
+                    # Ctrl-C where the key binding is not active: a dumb terminal, or the
+                    # moment between two prompts when the terminal is in cooked mode
+                    try:
+                        stop_motors(session)
+                    except KeyboardInterrupt:  # pressed again during the stop: keep going
+                        pass
+    finally:
+        unlisten()
+        client.stop_event_poller()
+    return 0
+
+
+def run_text(session: Session, text: str) -> bool:
+    """Run what was typed (one or more lines); False when the shell should end."""
+    lines = session.split(text)
+    if not lines:
+        if text.strip():  # only a comment
+            return True
+        repeat = session.state.get("repeat_on_empty")
+        if not repeat:
+            return True
+        lines = [str(repeat)]
+    for line in lines:
+        if not run_one(session, line):
+            return False
+    return True
+
+
+def _is_tmcl(line: str) -> bool:
+    from . import commands
+
+    word = line.split(None, 1)[0] if line.split() else ""
+    return not word.startswith(".") and commands.find(word) is None
+
+
+def run_one(session: Session, line: str) -> bool:
+    """One line with every failure turned into a message; False after ``.quit``."""
+    from .keys import stop_motors
+    from .main import report_error
+
+    if session.state.get(_LINK_LOST) and _is_tmcl(line) and not _try_reconnect(session):
+        return True
+    try:
+        session.run_line(line)
+    except QuitShell:
+        return False
+    except Abort as exc:
+        session.out.info(str(exc))
+    except TransportError as exc:
+        report_error(session, line, exc)
+        if _is_tmcl(line) or not session.client.connected:  # (a failed .connect PORT
+            session.state[_LINK_LOST] = True                  # leaves the old link alone)
+            session.out.info("the link is down: the next command tries to reconnect "
+                             "(or .connect [PORT])")
+    except TmclError as exc:
+        report_error(session, line, exc)
+    except KeyboardInterrupt:
+        sys.stdout.write("\n")  # the terminal echoed ^C on the command's line
+        stop_motors(session, "interrupted")
+    except Exception as exc:  # a bug must not take the motor shell down with it
+        log.debug("internal error", exc_info=True)
+        session.out.error(line, f"internal error ({type(exc).__name__}: {exc}); "
+                                "please report it" + ("" if os.environ.get("TMCLSH_DEBUG")
+                                                      else " (TMCLSH_DEBUG=1 shows the traceback)"))
+        if os.environ.get("TMCLSH_DEBUG"):
+            import traceback
+
+            traceback.print_exc(file=sys.stderr)
+    return True
+
+
+def _try_reconnect(session: Session) -> bool:
+    client = session.client
+    try:
+        client.reconnect()
+    except TmclError as exc:
+        session.out.error(None, f"still disconnected ({exc}); nothing was sent. "
+                                ".connect [PORT] to switch")
+        return False
+    except OSError as exc:
+        session.out.error(None, f"still disconnected ({exc}); nothing was sent")
+        return False
+    session.state.pop(_LINK_LOST, None)
+    session.out.ok(f"reconnected to {client.describe()}")
+    return True

@@ -1,0 +1,914 @@
+"""The shell's own dot-commands: help, parameters, connection, trace, stop.
+
+Each registers itself with ``@command``; ``.help`` and completion are generated from the
+registry, so a command is described in exactly one place. Handlers print through
+``session.out`` and raise ``TmclError`` subclasses (the runner prints them as one line).
+"""
+
+from __future__ import annotations
+
+import re
+from typing import TYPE_CHECKING
+
+from .. import instructions as isa
+from ..errors import StatusError, TmclError, TmclTimeoutError, TransportError, ValidationError
+from ..modules import Module, Parameter, available, from_version_string, load
+from ..protocol import Control, Request, status_ok
+from .commands import all_commands, command, find
+from .completer import Candidate, param_meta
+
+if TYPE_CHECKING:
+    from .session import Session
+
+CATEGORY_ORDER = ("general", "parameters", "motion", "connection", "protocol")
+CATEGORY_TITLES = {"general": "General", "parameters": "Parameters", "motion": "Motion",
+                   "connection": "Connection and module", "protocol": "Protocol",
+                   "ascii": "ASCII mode", "program": "Stored program (debugger)",
+                   "script": "Scripts and variables", "watch": "Watching values"}
+
+_GAP = isa.Opcode.GAP
+_GGP = isa.Opcode.GGP
+
+
+# -- completions -------------------------------------------------------------------------
+
+def _module(session: Session | None) -> Module | None:
+    return session.client.module if session is not None else None  # never asks the device
+
+
+def complete_help(session: Session | None, text: str) -> list[Candidate]:
+    out = [Candidate(n, c.help) for c in all_commands() for n in c.names()]
+    mod = _module(session)
+    specs = mod.instructions if mod is not None else isa.all_instructions()
+    out += [Candidate(s.mnemonic, s.summary) for s in specs]
+    if mod is not None:
+        out += [Candidate(p.name, param_meta(p)) for p in mod.axis_params + mod.global_params]
+    return out
+
+
+def complete_param(session: Session | None, text: str) -> list[Candidate]:
+    mod = _module(session)
+    if mod is None:
+        return []
+    return [Candidate(p.name, param_meta(p), also=(p.manual_name,))
+            for p in mod.axis_params + mod.global_params]
+
+
+def complete_params(session: Session | None, text: str) -> list[Candidate]:
+    words = text.split()
+    if len(words) == 0 or (len(words) == 1 and not text.endswith(" ")):
+        return [Candidate("axis", "axis parameters (SAP/GAP)"),
+                Candidate("global", "global parameters (SGP/GGP)")] + complete_param(session, text)
+    kind = words[0].lower()
+    return [c for c in complete_param(session, text)
+            if kind not in ("axis", "global") or c.meta.startswith("AP" if kind == "axis" else "GP")]
+
+
+def complete_connect(session: Session | None, text: str) -> list[Candidate]:
+    words = text.split()
+    if words and (len(words) > 1 or text.endswith(" ")):
+        if words[0] == "sim":
+            return [Candidate(n, load(n).summary) for n in available()]
+        return []
+    out = [Candidate("sim", "the built-in simulator: .connect sim TMCM-351"),
+           Candidate("can", "a python-can bus: .connect can socketcan:can0")]
+    try:
+        from serial.tools import list_ports
+
+        for p in sorted(list_ports.comports(), key=lambda p: p.device):
+            out.append(Candidate(p.device, p.description or ""))
+    except Exception:  # listing ports is a nicety; never let it break typing
+        pass
+    return out
+
+
+def complete_module(session: Session | None, text: str) -> list[Candidate]:
+    return [Candidate(n, load(n).summary) for n in available()]
+
+
+# -- .help -------------------------------------------------------------------------------
+
+@command(".help", ".help [COMMAND|MNEMONIC|NUMBER|PARAMETER]",
+         "show help: all commands, one command, a TMCL instruction, or a parameter",
+         complete=complete_help, bare=True,
+         details="`help SAP` explains an instruction; `help 140` shows axis parameter 140 (and "
+                 "global parameter 140 if there is one), like `.param 140`.")
+def cmd_help(session: Session, arg: str) -> None:
+    arg = arg.strip()
+    if not arg:
+        return _help_overview(session)
+    word = arg.split()[0]
+    cmd = find(word)  # `.param`, or a bare word: `help quit`
+    if cmd is not None:
+        return _help_command(session, cmd)
+    if word.startswith("."):
+        raise ValidationError(f"unknown shell command {word!r}; .help lists them")
+    spec = isa.by_mnemonic(word)
+    if spec is not None:
+        return _help_instruction(session, spec)
+    number = _number(word)
+    if number is not None:
+        return _help_number(session, number)
+    if find("." + word) is not None:
+        return _help_command(session, find("." + word))  # type: ignore[arg-type]
+    return cmd_param(session, arg, from_help=True)
+
+
+def _help_overview(session: Session) -> None:
+    from rich.table import Table
+    from rich.text import Text
+
+    out = session.out
+    if out.json:
+        out.emit({"commands": [{"name": c.name, "syntax": c.syntax, "help": c.help,
+                                "category": c.category, "aliases": list(c.aliases)}
+                               for c in all_commands()]})
+        return
+    cats: dict[str, list] = {}
+    for c in _unique_commands():
+        cats.setdefault(c.category, []).append(c)
+    order = [c for c in CATEGORY_ORDER if c in cats] + sorted(set(cats) - set(CATEGORY_ORDER))
+    for cat in order:
+        out.print(Text(CATEGORY_TITLES.get(cat, cat.capitalize()), style="tmcl.heading"))
+        grid = Table.grid(padding=(0, 2))
+        grid.add_column(style="tmcl.name", no_wrap=True)
+        grid.add_column()
+        for c in cats[cat]:
+            grid.add_row(Text(_command_title(c)), Text(c.help))
+        out.print(grid)
+        out.print()
+    mod = session.client.module
+    out.print(Text("TMCL commands", style="tmcl.heading"))
+    names = " ".join(s.mnemonic for s in (mod.instructions if mod else isa.all_instructions())
+                     if s.direct)
+    out.print(Text("Type them as in the TMCL-IDE: ", style="") +
+              Text("SAP 4, 0, 1000", style="tmcl.mnemonic") + Text("  or  ") +
+              Text("GAP MaxPositioningSpeed, 0", style="tmcl.mnemonic") +
+              Text(". Numbers may be hex ($1F, 0x1F). Any command number works raw: "
+                   "136 0, 0, 0."), soft_wrap=False)
+    out.print(Text(f"On the {mod.name if mod else 'module'}: {names}", style="tmcl.note"),
+              soft_wrap=False)
+    out.print(Text("help MNEMONIC explains one; help NUMBER or .param NAME explains a parameter.",
+                   style="tmcl.note"), soft_wrap=False)
+    out.print()
+    out.print(Text("Keys", style="tmcl.heading"))
+    out.print("Tab completes (parameter names show their number, range and unit).  "
+              "Ctrl-C stops all motors and clears the line.  Ctrl-D or .quit leaves.  "
+              "An empty line repeats the last .step.", markup=False, soft_wrap=False)
+
+
+def _unique_commands():
+    """Commands in name order; entries sharing a handler (.quit/.exit) shown once, under the
+    one registered first."""
+    from .commands import REGISTRY
+
+    primary: dict[object, object] = {}
+    for c in REGISTRY.values():  # registration order
+        primary.setdefault(c.handler, c)
+    return [c for c in all_commands() if primary[c.handler] is c]
+
+
+def _command_title(c) -> str:
+    twins = [o.name for o in all_commands() if o.handler is c.handler and o is not c]
+    names = [c.syntax] + list(c.aliases) + twins
+    return ", ".join(names)
+
+
+def _help_command(session: Session, cmd) -> None:
+    from rich.text import Text
+
+    out = session.out
+    if out.json:
+        out.emit({"name": cmd.name, "syntax": cmd.syntax, "help": cmd.help,
+                  "details": cmd.details, "aliases": list(cmd.aliases)})
+        return
+    out.print(Text(cmd.syntax, style="tmcl.name"))
+    out.print(_indented(cmd.help), soft_wrap=False)
+    if cmd.details:
+        out.print(_indented(cmd.details), soft_wrap=False)
+    extra = list(cmd.aliases) + [o.name for o in all_commands()
+                                 if o.handler is cmd.handler and o is not cmd]
+    if cmd.bare:
+        extra.append(cmd.name[1:])
+    if extra:
+        out.print(Text(f"  also: {', '.join(extra)}", style="tmcl.note"))
+
+
+def _indented(text: str, style: str = ""):
+    """Prose that wraps at word boundaries, every line indented by two."""
+    from rich.padding import Padding
+    from rich.text import Text
+
+    return Padding(Text(text, style=style), (0, 0, 0, 2), expand=False)
+
+
+def _help_instruction(session: Session, spec: isa.InstructionSpec) -> None:
+    from rich.table import Table
+    from rich.text import Text
+
+    out = session.out
+    mod = session.client.module
+    modname = mod.name if mod else None
+    if out.json:
+        out.emit({"mnemonic": spec.mnemonic, "opcode": spec.opcode, "summary": spec.summary,
+                  "syntax": spec.syntax, "types": spec.type_names(modname),
+                  "modules": sorted(spec.modules), "direct": spec.direct, "ascii": spec.ascii,
+                  "note": spec.note})
+        return
+    title = Text()
+    title.append(spec.mnemonic, style="tmcl.mnemonic")
+    title.append(f"  (command {spec.opcode})  {spec.summary}")
+    out.print(title)
+    grid = Table.grid(padding=(0, 2))
+    grid.add_column(style="tmcl.note", no_wrap=True)
+    grid.add_column()
+    grid.add_row("syntax", _syntax(spec, mod))
+    for fld in spec.fields:
+        grid.add_row(fld, _field_help(spec, fld, mod))
+    grid.add_row("modules", ", ".join(sorted(spec.modules)) +
+                 ("" if mod is None or spec.on(mod.name) else
+                  f"  (not the connected {mod.name})"))
+    where = []
+    where.append("at the prompt" if spec.direct else "only inside a stored program")
+    if spec.direct:
+        where.append("in ASCII mode too" if spec.ascii else "not in ASCII mode")
+    grid.add_row("use", ", ".join(where))
+    if spec.persists:
+        grid.add_row("EEPROM", "writes the module's EEPROM (asks for confirmation)")
+    if spec.note:
+        grid.add_row("note", spec.note)
+    out.print(grid)
+
+
+def _syntax(spec: isa.InstructionSpec, mod: Module | None) -> str:
+    if mod is None or spec.type_kind != "symbolic":
+        return spec.syntax
+    names = "|".join(spec.type_names(mod.name))
+    return spec.syntax.replace("|".join(spec.type_names()), names)
+
+
+def _field_help(spec: isa.InstructionSpec, fld: str, mod: Module | None) -> str:
+    modname = mod.name if mod else None
+    if fld == "type":
+        kind = spec.type_kind
+        if kind == "symbolic":
+            return ", ".join(f"{n} = {v}" for n, v in spec.type_names(modname).items())
+        if kind in ("axis_param", "global_param"):
+            what = "axis" if kind == "axis_param" else "global"
+            count = ""
+            if mod is not None:
+                n = len(mod.axis_params if what == "axis" else mod.global_params)
+                count = f" ({n} on the {mod.name}; list them with .params {what})"
+            return f"{what} parameter: number or name{count}"
+        if kind == "port":
+            if mod is None:
+                return "I/O port number"
+            ports = ", ".join(f"{p.port} {p.name}" for p in mod.io if p.bank == 0)
+            all_ports = f"; {mod.io_all_port} = all at once" if mod.io_all_port is not None else ""
+            return f"port number (bank 0: {ports}{all_ports})"
+        if kind == "interrupt":
+            return "interrupt number or name (TI_TIMER0 ...)"
+        if kind == "coordinate":
+            return f"coordinate number 0..{(mod.coordinates if mod else 21) - 1}"
+        return "number 0..255"
+    if fld == "motor":
+        if spec.motor_kind == "motor":
+            if mod is None:
+                return "motor number"
+            return f"motor 0..{mod.motors - 1}" if mod.motors > 1 else "motor 0"
+        if spec.motor_kind == "bank":
+            if mod is None:
+                return "bank"
+            banks = mod.io_banks() if spec.type_kind == "port" else mod.banks()
+            return f"bank: {', '.join(map(str, banks))}"
+        return "number 0..255"
+    kind = spec.value_kind
+    if kind == "velocity" and mod is not None:
+        return f"velocity {mod.velocity_min}..{mod.velocity_max} {mod.units.get('velocity', '')}"
+    if kind == "position" and mod is not None:
+        return f"position {mod.position_min}..{mod.position_max} {mod.units.get('position', '')}"
+    return {"param": "value in the parameter's range (see .param NAME)",
+            "port_value": "0 or 1 (a bit mask for all outputs at once)",
+            "label": "program address or label", "ticks": "time in ticks of 10 ms",
+            "velocity": "velocity", "position": "position"}.get(kind, "number")
+
+
+def _help_number(session: Session, number: int) -> None:
+    mod = session.module
+    found = _params_by_number(mod, number)
+    if found:
+        _show_params(session, found, numbered=number)
+    else:
+        session.out.info(f"the {mod.name} has no parameter {number}")
+    spec = isa.by_opcode(number)
+    ctl = isa.control(number)
+    if not session.out.json:
+        if spec is not None:
+            session.out.info(f"(command {number} is {spec.mnemonic}: help {spec.mnemonic})")
+        elif ctl is not None:
+            session.out.info(f"(command {number}: {ctl.name})")
+
+
+def _params_by_number(mod: Module, number: int) -> list[Parameter]:
+    """AP n, then named global parameters n in any bank (user-variable ranges left out)."""
+    out = [p for p in mod.axis_params if p.number == number]
+    out += [p for p in mod.global_params if p.number == number and p.count == 1]
+    return out
+
+
+# -- .quit -------------------------------------------------------------------------------
+
+def _quit(session: Session, arg: str) -> None:
+    from .session import QuitShell
+
+    raise QuitShell()
+
+
+command(".quit", ".quit", "leave the shell (also Ctrl-D)", bare=True)(_quit)
+command(".exit", ".exit", "leave the shell (same as .quit)", bare=True)(_quit)
+
+
+# -- .param / .params --------------------------------------------------------------------
+
+@command(".param", ".param QUERY", "explain a parameter: number, name or part of a name, "
+         "with its current value", complete=complete_param, category="parameters",
+         details="QUERY may be a number (140), a name (MicrostepResolution), part of one "
+                 "(microstep) or `ap 140` / `gp 66 [bank]` to pick the kind. The current value "
+                 "is read from the module (GAP/GGP) when the parameter is readable.")
+def cmd_param(session: Session, arg: str, from_help: bool = False) -> None:
+    query = arg.strip()
+    if not query:
+        raise ValidationError("which parameter? .param 140, .param MaxPositioningSpeed, "
+                              ".param microstep")
+    mod = session.module
+    kind, bank, query = _kind_prefix(query)
+    number = _number(query)
+    if number is not None:
+        if kind is None:
+            found = _params_by_number(mod, number)
+        elif kind == "axis":
+            found = [p for p in mod.axis_params if p.number == number]
+        else:
+            found = [p for p in mod.global_params if p.covers(number)
+                     and (bank is None or p.bank == bank)]
+        if not found:
+            what = {"axis": "axis ", "global": "global "}.get(kind or "", "")
+            raise ValidationError(f"the {mod.name} has no {what}parameter {number}")
+        return _show_params(session, found, numbered=number)
+    found = mod.search(query, kind)
+    if bank is not None:
+        found = [p for p in found if p.bank == bank]
+    exact = [p for p in found if p.name.lower() == query.lower()]
+    if exact:
+        found = exact
+    if not found:
+        what = "help topic or parameter" if from_help else "parameter"
+        raise ValidationError(f"no {what} matches {query!r} on the {mod.name}"
+                              + ("; .help lists the commands" if from_help else
+                                 "; .params lists them all"))
+    if len(found) == 1:
+        return _show_params(session, found)
+    _param_table(session, found, title=f"{len(found)} parameters match {query!r}", read=False)
+    if not session.out.json:
+        session.out.info("(.param NAME for one of them)")
+
+
+def _kind_prefix(query: str) -> tuple[str | None, int | None, str]:
+    words = query.split()
+    kinds = {"ap": "axis", "axis": "axis", "gp": "global", "global": "global"}
+    if len(words) >= 2 and words[0].lower() in kinds:
+        kind = kinds[words[0].lower()]
+        bank = None
+        if kind == "global" and len(words) >= 3 and words[2].isdigit():
+            bank = int(words[2])
+            words = words[:2]
+        return kind, bank, " ".join(words[1:])
+    return None, None, query
+
+
+def _number(text: str) -> int | None:
+    if re.fullmatch(r"\d+", text):
+        return int(text)
+    if re.fullmatch(r"(\$|0[xX])[0-9A-Fa-f]+", text):
+        return int(text.lstrip("$").removeprefix("0x").removeprefix("0X"), 16)
+    return None
+
+
+def read_param(session: Session, p: Parameter, motor_or_number: int | None = None,
+               number: int | None = None) -> int:
+    """One GAP/GGP, straight through the client: the raw value (StatusError on refusal)."""
+    client = session.client
+    if p.kind == "axis":
+        req = Request(client.address, _GAP, p.number, motor_or_number or 0, 0)
+    else:
+        req = Request(client.address, _GGP, p.number if number is None else number, p.bank, 0)
+    reply = client.request(req)
+    assert reply is not None
+    if not status_ok(reply.status):
+        raise StatusError(reply.status, reply)
+    return reply.value
+
+
+def _current(session: Session, p: Parameter, number: int | None
+             ) -> list[tuple[str, str, int | None]]:
+    """``[("motor 0", "1000 pps", 1000), ...]``, or one row saying why there is no value."""
+    from .render import _unsigned, value_text
+
+    if not p.readable:
+        return [("", "write-only: cannot be read", None)]
+    if p.count > 1 and number is None:
+        return [("", f"{p.count} values: GGP {p.number}..{p.number + p.count - 1}, {p.bank}",
+                 None)]
+    mod = session.client.module
+    motors = range(mod.motors) if (p.kind == "axis" and mod is not None) else [None]
+    rows: list[tuple[str, str, int | None]] = []
+    for m in motors:
+        label = f"motor {m}" if (m is not None and len(motors) > 1) else ""
+        try:
+            value = read_param(session, p, m, number)
+            rows.append((label, value_text(value, p), _unsigned(value, p)))
+        except (StatusError, TmclTimeoutError) as exc:
+            rows.append((label, f"could not read: {exc}", None))
+    return rows
+
+
+def _show_params(session: Session, params: list[Parameter], numbered: int | None = None) -> None:
+    from rich.table import Table
+    from rich.text import Text
+
+    out = session.out
+    for i, p in enumerate(params):
+        number = numbered if (numbered is not None and p.count > 1) else None
+        current = _current(session, p, number)
+        if out.json:
+            out.emit(_param_json(p, current))
+            continue
+        if i:
+            out.print()
+        title = Text()
+        title.append(p.label if number is None else f"GP {number} (bank {p.bank})",
+                     style="tmcl.note")
+        title.append("  ")
+        title.append(p.name, style="bold tmcl.name")
+        if p.manual_name and p.manual_name != p.name:
+            title.append(f"  \u201c{p.manual_name}\u201d")
+        out.print(title)
+        if p.description:
+            out.print(_indented(p.description), soft_wrap=False)
+        grid = Table.grid(padding=(0, 2))
+        grid.add_column(style="tmcl.note", no_wrap=True)
+        grid.add_column()
+        rng = p.range_text + (f" {p.unit}" if p.unit else "")
+        grid.add_row("  range", rng)
+        grid.add_row("  access", f"{p.access} ({_access_words(p.access)})")
+        if p.default is not None:
+            from .render import value_text
+
+            grid.add_row("  default", value_text(p.default, p))
+        if p.values:
+            grid.add_row("  values", "\n".join(f"{v} = {t}" for v, t in sorted(p.values.items())))
+        if p.bits:
+            grid.add_row("  bits", "\n".join(f"bit {b}: {t}" for b, t in sorted(p.bits.items())))
+        if p.note:
+            grid.add_row("  note", p.note)
+        for label, text, _ in current:
+            grid.add_row("  now" + (f" ({label})" if label else ""),
+                         Text(text, style="tmcl.value" if not text.startswith(
+                             ("could not", "write-only")) else "tmcl.warn"))
+        how = _how_to_use(p, number)
+        if how:
+            grid.add_row("  use", how)
+        out.print(grid)
+
+
+def _how_to_use(p: Parameter, number: int | None) -> str:
+    n = p.number if number is None else number
+    if p.kind == "axis":
+        uses = []
+        if p.readable:
+            uses.append(f"GAP {p.name}, 0")
+        if p.writable:
+            uses.append(f"SAP {p.name}, 0, <value>")
+        if p.storable:
+            uses.append(f"STAP {p.name}, 0")
+        return "   ".join(uses)
+    uses = []
+    name = p.name if p.count == 1 else str(n)
+    if p.readable:
+        uses.append(f"GGP {name}, {p.bank}")
+    if p.writable:
+        uses.append(f"SGP {name}, {p.bank}, <value>")
+    if p.storable:
+        uses.append(f"STGP {name}, {p.bank}")
+    return "   ".join(uses)
+
+
+def _access_words(access: str) -> str:
+    words = []
+    if "R" in access:
+        words.append("read")
+    if "W" in access:
+        words.append("write")
+    if "E" in access:
+        words.append("store in EEPROM")
+    return ", ".join(words) or "none"
+
+
+def _param_json(p: Parameter, current: list[tuple[str, str, int | None]] | None = None
+                ) -> dict:
+    obj = {"kind": p.kind, "number": p.number, "bank": p.bank, "name": p.name,
+           "manual_name": p.manual_name, "description": p.description, "min": p.min,
+           "max": p.max, "unit": p.unit, "access": p.access, "default": p.default}
+    if p.count > 1:
+        obj["count"] = p.count
+    if p.values:
+        obj["values"] = {str(k): v for k, v in p.values.items()}
+    if p.bits:
+        obj["bits"] = {str(k): v for k, v in p.bits.items()}
+    if current is not None:
+        values = [v for _, _, v in current]
+        if len(values) == 1:
+            obj["value"] = values[0]
+        else:
+            obj["values"] = values
+    return obj
+
+
+@command(".params", ".params [axis|global] [FILTER]",
+         "table of all parameters with their live values (one GAP/GGP each)",
+         complete=complete_params, category="parameters",
+         details="FILTER narrows the list by number or (part of a) name. On a multi-axis "
+                 "module each motor gets its own value column.")
+def cmd_params(session: Session, arg: str) -> None:
+    mod = session.module
+    words = arg.split()
+    kinds = ["axis", "global"]
+    kind_words = {"axis": "axis", "ax": "axis", "ap": "axis", "global": "global",
+                  "gp": "global", "glob": "global"}
+    if words and words[0].lower() in kind_words:
+        kinds = [kind_words[words[0].lower()]]
+        words = words[1:]
+    query = " ".join(words)
+    shown = 0
+    for kind in kinds:
+        pool = mod.axis_params if kind == "axis" else mod.global_params
+        params = sorted(mod.search(query, kind), key=lambda p: (p.bank, p.number)) \
+            if query else list(pool)
+        if not params:
+            continue
+        title = f"{mod.name} {kind} parameters" + (f" matching {query!r}" if query else "")
+        _param_table(session, params, title=title, read=True)
+        shown += len(params)
+    if not shown:
+        raise ValidationError(f"no {' or '.join(kinds)} parameter of the {mod.name} matches "
+                              f"{query!r}")
+
+
+def range_short(p: Parameter) -> str:
+    """``0..8``; choices as runs: ``1..8, 129..136``."""
+    if not p.choices:
+        return p.range_text
+    runs: list[list[int]] = []
+    for c in sorted(p.choices):
+        if runs and c == runs[-1][1] + 1:
+            runs[-1][1] = c
+        else:
+            runs.append([c, c])
+    return ", ".join(str(a) if a == b else f"{a}, {b}" if b == a + 1 else f"{a}..{b}"
+                     for a, b in runs)
+
+
+def _value_only(value: int, p: Parameter) -> str:
+    """The value and its meaning, without the unit (the table has a unit column)."""
+    from .render import _unsigned
+
+    value = _unsigned(value, p)
+    meaning = p.describe_value(value)
+    return f"{value} ({meaning})" if meaning else str(value)
+
+
+def _param_table(session: Session, params: list[Parameter], title: str, read: bool) -> None:
+    from rich.table import Table
+
+    out = session.out
+    mod = session.module
+    axis = all(p.kind == "axis" for p in params)
+    motors = list(range(mod.motors)) if axis else [0]
+    table = Table(title=title, title_justify="left", title_style="tmcl.heading",
+                  header_style="bold", box=None, pad_edge=False, show_edge=False)
+    table.add_column("No.", justify="right", no_wrap=True)
+    if not axis:
+        table.add_column("Kind" if any(p.kind == "axis" for p in params) else "Bank",
+                         justify="right")
+    table.add_column("Name", style="tmcl.name", no_wrap=True)
+    if read:
+        for m in motors:
+            table.add_column(f"Motor {m}" if len(motors) > 1 else "Value", style="tmcl.value",
+                             min_width=8, ratio=2)
+    table.add_column("Unit", style="tmcl.unit", max_width=16, ratio=1)
+    table.add_column("Range", ratio=1)
+    table.add_column("Access", no_wrap=True)
+    if not read:
+        table.add_column("Description", style="tmcl.note")
+    failures = 0
+    for p in params:
+        values: list[str] = []
+        raw: list[int | None] = []
+        if read:
+            for m in motors:
+                text, value = "", None
+                if p.count > 1:
+                    text = "-"
+                elif not p.readable:
+                    text = "(write-only)"
+                else:
+                    try:
+                        value = read_param(session, p, m if p.kind == "axis" else None)
+                        text = _value_only(value, p)
+                        failures = 0
+                    except StatusError as exc:
+                        text = f"status {exc.status}"
+                    except TmclTimeoutError:
+                        text = "no reply"
+                        failures += 1
+                        if failures >= 3:
+                            raise TransportError("the module stopped answering "
+                                                 "(3 reads in a row timed out)") from None
+                values.append(text)
+                raw.append(value)
+        if out.json:
+            obj = _param_json(p)
+            if read:
+                obj["value" if len(motors) == 1 else "values"] = raw[0] if len(motors) == 1 else raw
+            out.emit(obj)
+            continue
+        number = (f"{p.number}..{p.number + p.count - 1}" if p.count > 1 else str(p.number))
+        row = [number]
+        if not axis:
+            row.append("AP" if p.kind == "axis" else str(p.bank))
+        row.append(p.name)
+        row += values
+        row.append(p.unit)
+        row.append(range_short(p))
+        row.append(p.access)
+        if not read:
+            row.append(p.manual_name)
+        table.add_row(*row)
+    if not out.json:
+        out.print(table)
+
+
+# -- trace and decode --------------------------------------------------------------------
+
+@command(".trace", ".trace [on|off]", "show every frame in hex, decoded, on stderr",
+         complete=[("on", "start tracing"), ("off", "stop tracing")], category="protocol",
+         details="Without an argument it toggles. Lines show time, direction (tx> / <rx), the "
+                 "bytes and what they mean. --trace does the same from the start.")
+def cmd_trace(session: Session, arg: str) -> None:
+    from .trace import disable_trace, enable_trace, trace_enabled
+
+    word = arg.strip().lower()
+    if word not in ("", "on", "off"):
+        raise ValidationError(f".trace takes on or off, not {arg.strip()!r}")
+    on = (not trace_enabled(session)) if not word else word == "on"
+    if on:
+        enable_trace(session)
+        session.out.info("trace on: frames are shown on stderr")
+    else:
+        disable_trace(session)
+        session.out.info("trace off")
+
+
+@command(".decode", ".decode [request|reply|memory|version] HEX",
+         "decode bytes pasted from elsewhere: request or reply, checksum, 134/136 layouts",
+         complete=[("request", "read the bytes as a request"),
+                   ("reply", "read the bytes as a reply"),
+                   ("memory", "a 134 (read program memory) reply"),
+                   ("version", "a 136 version string reply")],
+         category="protocol",
+         details="HEX: `01 06 04 00 00 00 00 00 0b`, `$01 $06 ...`, `0x01,0x06,...` or "
+                 "`0106040000...`; several 9-byte frames at once are fine. Without a hint "
+                 "every plausible reading is shown.")
+def cmd_decode(session: Session, arg: str) -> None:
+    from rich.text import Text
+
+    from .trace import decode_hex
+
+    frames = decode_hex(arg, session.client.module)
+    out = session.out
+    for frame, readings in frames:
+        if out.json:
+            out.emit({"bytes": frame.hex(" "), "readings": [
+                {"kind": r.kind, "text": r.text, "checksum": r.checksum} for r in readings]})
+            continue
+        out.print(Text(frame.hex(" "), style="tmcl.value"))
+        for r in readings:
+            line = Text("  ")
+            line.append(r.kind, style="tmcl.name")
+            line.append(f": {r.text}")
+            out.print(line)
+            if r.checksum:
+                out.print(Text(f"    checksum {r.checksum}",
+                               style="tmcl.ok" if r.checksum.startswith("ok") else "tmcl.error"))
+
+
+# -- connection and module ---------------------------------------------------------------
+
+@command(".connect", ".connect [PORT | sim [MODULE] | can IFACE:CHANNEL]",
+         "reconnect, or switch to another port, simulator or CAN bus",
+         complete=complete_connect, category="connection",
+         details="Without an argument the current link is closed and opened again (after a "
+                 "cable was pulled). The module type is asked with 136 on a real link.")
+def cmd_connect(session: Session, arg: str) -> None:
+    from .. import transport as tr
+
+    client = session.client
+    words = arg.split()
+    if not words:
+        client.reconnect()
+        if client.module is None:
+            client.identify()
+        session.out.ok(f"reconnected: {_where(session)}")
+        return
+    settings = session.settings
+    module: str | None = None
+    if words[0].lower() == "sim":
+        module = words[1] if len(words) > 1 else (client.module.name if client.module
+                                                  else "TMCM-1311")
+        load(module)  # unknown names fail before the old link is closed
+        transport = tr.open_sim(module, client.address)
+        module = load(module).name
+        new = {"sim": module}
+    elif words[0].lower() == "can":
+        if len(words) < 2:
+            raise ValidationError(".connect can IFACE:CHANNEL, e.g. .connect can socketcan:can0")
+        transport = tr.open_can(words[1])
+        new = {"can": words[1]}
+    else:
+        transport = tr.open_serial(words[0], settings.get("baud") or 9600)
+        new = {"port": words[0]}
+    switch_transport(client, transport, module)
+    for key in ("port", "can", "sim"):
+        settings.pop(key, None)
+    settings.update(new)
+    try:
+        if client.module is None:
+            client.identify()
+    except TmclError as exc:
+        session.out.warn(f"connected to {client.describe()}, but no module identified at "
+                         f"address {client.address}: {exc}")
+        return
+    session.out.ok(f"connected: {_where(session)}")
+
+
+def switch_transport(client, transport, module: str | None) -> None:
+    """Put ``transport`` under the same Client (listeners, tracers and the event poller stay
+    attached); the module type is ``module`` or, when None, asked later with 136."""
+    old = client.transport
+    try:
+        old.close()
+    except Exception:  # the old link may already be gone; that is why we switch
+        pass
+    client.ascii_link = None  # the new module starts in binary mode
+    client.transport = transport
+    client.module = load(module) if module else None
+    client.version = None
+    client.reconnect()  # clears buffers and stale-reply bookkeeping, reopens the new link
+
+
+def _where(session: Session) -> str:
+    c = session.client
+    sim = " (SIMULATED)" if c.transport.simulated and "SIMULATED" not in c.describe() else ""
+    mod = c.module.name if c.module else "unknown module"
+    return f"{mod} at address {c.address} on {c.describe()}{sim}"
+
+
+def complete_address(session: Session | None, text: str) -> list[Candidate]:
+    if session is None:
+        return []
+    return [Candidate(str(session.client.address), "the current address")]
+
+
+@command(".address", ".address [N]", "talk to the module with address N on the same bus",
+         complete=complete_address, category="connection",
+         details="The new address is checked with a 136 (version) request; if nothing answers, "
+                 "the old address stays. On CAN, N is the module's CAN id.")
+def cmd_address(session: Session, arg: str) -> None:
+    client = session.client
+    text = arg.strip()
+    if not text:
+        session.out.info(f"address {client.address}" + (f" (CAN id {client.can_id})"
+                                                         if client.is_can else ""))
+        return
+    n = _number(text)
+    if n is None or not 0 <= n <= 255:
+        raise ValidationError(f"an address is a number 0..255, not {text!r}")
+    old_addr, old_can = client.address, client.can_id
+    client.address = n
+    if client.is_can:
+        client.can_id = n
+    wait = min(client.timeout, 0.5)
+    try:
+        reply = client.request(Request(n, Control.GET_VERSION, 0, 0, 0), timeout=wait,
+                               retries=0)
+    except TmclTimeoutError:
+        client.address, client.can_id = old_addr, old_can
+        raise TmclTimeoutError(f"no module answered at address {n} within {wait:g} s; "
+                               f"still talking to address {old_addr}") from None
+    except BaseException:
+        client.address, client.can_id = old_addr, old_can
+        raise
+    version = reply.version if reply is not None else None
+    mod = from_version_string(version) if version else None
+    client.version = version
+    if mod is not None:
+        client.module = mod
+    session.out.ok(f"address {n}: {mod.name if mod else 'unknown module type'}"
+                   + (f", firmware {version}" if version else ""))
+
+
+@command(".module", ".module [NAME]", "show the module type, or override it",
+         complete=complete_module, category="connection",
+         details="The type normally comes from the 136 version string. Overriding it changes "
+                 "which parameters, ranges and commands the shell checks against.")
+def cmd_module(session: Session, arg: str) -> None:
+    from rich.table import Table
+
+    client = session.client
+    name = arg.strip()
+    if name:
+        mod = load(name)
+        detected = from_version_string(client.version) if client.version else None
+        client.module = mod
+        if detected is not None and detected.name != mod.name:
+            session.out.warn(f"the module reported {client.version} ({detected.name}); "
+                             f"checking against {mod.name} anyway")
+        session.out.ok(f"module type: {mod.name}")
+        return
+    mod = session.module
+    out = session.out
+    if out.json:
+        out.emit({"module": mod.name, "address": client.address, "connection": client.describe(),
+                  "simulated": client.transport.simulated, "version": client.version,
+                  "motors": mod.motors, "mode": client.mode})
+        return
+    grid = Table.grid(padding=(0, 2))
+    grid.add_column(style="tmcl.note")
+    grid.add_column()
+    grid.add_row("module", f"{mod.name}: {mod.summary}")
+    grid.add_row("motors", str(mod.motors))
+    grid.add_row("firmware", client.version or "(not asked; .version)")
+    grid.add_row("address", str(client.address))
+    grid.add_row("connection", client.describe() + (" (SIMULATED)" if client.transport.simulated
+                                                    and "SIMULATED" not in client.describe()
+                                                    else ""))
+    grid.add_row("mode", client.mode)
+    grid.add_row("parameters", f"{len(mod.axis_params)} axis, {len(mod.global_params)} global")
+    grid.add_row("program memory", f"{mod.program_memory} instructions")
+    out.print(grid)
+
+
+@command(".version", ".version", "ask the module for its firmware version (command 136)",
+         category="connection")
+def cmd_version(session: Session, arg: str) -> None:
+    client = session.client
+    reply = client.request(Request(client.address, Control.GET_VERSION, 0, 0, 0))
+    version = reply.version if reply is not None else None
+    binary = client.request(Request(client.address, Control.GET_VERSION, 1, 0, 0))
+    value = binary.value & 0xFFFFFFFF if binary is not None and binary.ok else None
+    client.version = version or client.version
+    mod = from_version_string(version) if version else None
+    if session.out.json:
+        session.out.emit({"version": version, "binary": value,
+                          "module": mod.name if mod else None})
+        return
+    from .render import version_text
+
+    text = f"firmware {version}"
+    if mod is not None:
+        text += f" ({mod.name})"
+    if value is not None:
+        text += f"; binary (136 type 1): {version_text(value, mod or client.module)}"
+    session.out.print(text, markup=False)
+
+
+# -- motion ------------------------------------------------------------------------------
+
+@command(".stopall", ".stopall", "stop every motor (MST on each; Ctrl-C does the same)",
+         category="motion")
+def cmd_stopall(session: Session, arg: str) -> None:
+    report_stop(session, session.client.stop_all())
+
+
+def report_stop(session: Session, stopped: list[int], why: str = "") -> None:
+    """``Ctrl-C: stopped motor 0 (MST)``; a warning naming the motors that did not answer."""
+    mod = session.client.module
+    motors = mod.motors if mod is not None else 1
+    failed = [m for m in range(motors) if m not in stopped]
+    prefix = f"{why}: " if why else ""
+    if stopped:
+        which = "motor" if len(stopped) == 1 else "motors"
+        session.out.ok(f"{prefix}stopped {which} {', '.join(map(str, stopped))} (MST)")
+    if failed:
+        session.out.warn(f"{prefix}MST to motor {', '.join(map(str, failed))} got no answer: "
+                         "check the connection!")

@@ -1,0 +1,1023 @@
+"""The program on the module, from the shell: upload, read back, run, step, breakpoints.
+
+Dot-commands over :mod:`tmclsh.program` (which does the bus work and is usable without the
+shell). The debugger's state lives in ``session.state["debugger"]`` (a :class:`DebuggerState`);
+``session.state["program_state"]`` holds a short text for the toolbar ("run", "stop",
+"step @12") and ``session.state["repeat_on_empty"]`` is set after ``.step`` so an empty line
+steps again, as in gdb and pdb.
+
+When the program's source is known (uploaded in this session, or named with ``.source-map``)
+locations are shown as ``file:line`` with the line's text; otherwise as ``@address`` with the
+instruction disassembled from the module's memory (read with 134, cached).
+
+These firmwares have no breakpoint command: ``.continue`` steps the module (130) and reads the
+program counter (GP 130) after each instruction until it reaches a breakpoint, so it runs
+much slower than ``.run``, which ignores breakpoints.
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+import re
+import shlex
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Iterator
+
+from .. import asm, program
+from ..errors import AsmError, TmclError, ValidationError
+from ..program import AppStatus, UploadError
+from ..protocol import Instruction
+from .commands import command
+
+if TYPE_CHECKING:
+    from .session import Session
+
+CATEGORY = "program"
+LIST_CONTEXT = 5  # lines shown either side of the current one by .list
+SOURCE_SUFFIXES = (".tmc", ".tmcl", ".inc", ".tmc.txt", ".txt")
+
+
+class DebuggerError(TmclError):
+    """A debugger command that cannot do what was asked (nothing was sent)."""
+
+
+# -- state -------------------------------------------------------------------------------
+
+@dataclass
+class Breakpoint:
+    number: int
+    spec: str  # as typed, re-resolved when the program changes
+    address: int
+    hits: int = 0
+
+
+@dataclass
+class Display:
+    number: int
+    expr: str
+
+
+@dataclass
+class Where:
+    """A program address in the terms the session knows: source line or disassembly."""
+
+    pc: int
+    file: str | None = None
+    line: int | None = None
+    text: str = ""
+    label: str | None = None
+
+    @property
+    def place(self) -> str:
+        if self.file is not None and self.line is not None:
+            return f"{_show_path(self.file)}:{self.line}"
+        return f"@{self.pc}"
+
+    def to_json(self) -> dict[str, object]:
+        obj: dict[str, object] = {}
+        if self.file is not None:
+            obj["file"] = self.file
+            obj["line"] = self.line
+        if self.text:
+            obj["text"] = self.text
+        return obj
+
+
+@dataclass
+class DebuggerState:
+    program: asm.Program | None = None  # the source the stored program came from
+    breakpoints: dict[int, Breakpoint] = field(default_factory=dict)
+    displays: dict[int, Display] = field(default_factory=dict)
+    next_breakpoint: int = 1
+    next_display: int = 1
+    memory: dict[int, Instruction] = field(default_factory=dict)  # 134 read cache
+    files: dict[str, list[str] | None] = field(default_factory=dict)  # source text cache
+    last: AppStatus | None = None
+
+    @property
+    def source_file(self) -> str | None:
+        if self.program is None or not self.program.source:
+            return None
+        return self.program.source[0].file
+
+    def forget_memory(self) -> None:
+        self.memory.clear()
+
+    def __rich__(self):
+        from rich.table import Table
+
+        table = Table(title="breakpoints", show_header=True, header_style="tmcl.name",
+                      box=None, title_justify="left")
+        table.add_column("#", justify="right")
+        table.add_column("address", justify="right")
+        table.add_column("where")
+        table.add_column("hits", justify="right")
+        for bp in sorted(self.breakpoints.values(), key=lambda b: b.number):
+            table.add_row(str(bp.number), str(bp.address), bp.spec, str(bp.hits))
+        return table
+
+
+def state(session: Session) -> DebuggerState:
+    dbg = session.state.get("debugger")
+    if not isinstance(dbg, DebuggerState):
+        dbg = DebuggerState()
+        session.state["debugger"] = dbg
+    return dbg
+
+
+def _show_path(path: str) -> str:
+    if path.startswith("<"):
+        return path
+    try:
+        rel = os.path.relpath(path)
+    except ValueError:
+        return path
+    return path if rel.startswith("..") else rel
+
+
+# -- small parsing helpers ---------------------------------------------------------------
+
+def _words(argtext: str) -> list[str]:
+    try:
+        return shlex.split(argtext)
+    except ValueError as exc:
+        raise ValidationError(f"cannot split arguments: {exc}") from None
+
+
+def _number(text: str, what: str) -> int:
+    t = text.strip()
+    try:
+        if t.startswith("$"):
+            return int(t[1:], 16)
+        return int(t, 0)
+    except ValueError:
+        raise ValidationError(f"{what} must be a number, got {text!r}") from None
+
+
+def _options(words: list[str], flags: set[str], valued: set[str]) -> tuple[list[str], dict]:
+    """Split ``--flag`` and ``--opt VALUE`` (or ``--opt=VALUE``) from positional words."""
+    pos: list[str] = []
+    opts: dict[str, object] = {}
+    it = iter(words)
+    for w in it:
+        if w.startswith("--") and len(w) > 2:
+            name, eq, val = w.partition("=")
+            if name in flags and not eq:
+                opts[name] = True
+            elif name in valued:
+                if not eq:
+                    val = next(it, None)
+                    if val is None:
+                        raise ValidationError(f"{name} needs a value")
+                opts[name] = val
+            else:
+                known = ", ".join(sorted(flags | valued))
+                raise ValidationError(f"unknown option {w!r} (known: {known})")
+        else:
+            pos.append(w)
+    return pos, opts
+
+
+def _resolve_file(session: Session, name: str) -> Path:
+    p = Path(name).expanduser()
+    if p.exists() or p.is_absolute():
+        return p
+    if session.location is not None:  # relative to the script being run
+        beside = Path(session.location[0]).parent / name
+        if beside.exists():
+            return beside
+    return p
+
+
+# -- locations ---------------------------------------------------------------------------
+
+def _cached_instruction(session: Session, address: int) -> Instruction | None:
+    dbg = state(session)
+    if address in dbg.memory:
+        return dbg.memory[address]
+    if session.client.mode == "ascii":
+        return None
+    module = session.module
+    if not 0 <= address < module.program_memory:
+        return None
+    ins = program.read_instruction(session.client, address)
+    dbg.memory[address] = ins
+    return ins
+
+
+def _enclosing_label(prog: asm.Program | None, pc: int) -> str | None:
+    if prog is None:
+        return None
+    best = None
+    for name, addr in prog.labels.items():
+        if addr <= pc and (best is None or addr > best[1]):
+            best = (name, addr)
+    return best[0] if best else None
+
+
+def where(session: Session, pc: int) -> Where:
+    """``pc`` as a source line (when the source is known) or disassembled from memory."""
+    dbg = state(session)
+    prog = dbg.program
+    loc = prog.loc(pc) if prog is not None else None
+    if loc is not None:
+        return Where(pc, loc.file, loc.line, loc.text, _enclosing_label(prog, pc))
+    try:
+        ins = _cached_instruction(session, pc)
+    except TmclError:
+        ins = None
+    if ins is None:
+        return Where(pc)
+    text, _comment = asm.disassemble_instruction(ins, session.module)
+    return Where(pc, text=text)
+
+
+def _source_lines(session: Session, file: str) -> list[str] | None:
+    dbg = state(session)
+    if file not in dbg.files:
+        try:
+            dbg.files[file] = Path(file).read_text(encoding="utf-8", errors="replace").splitlines()
+        except OSError:
+            dbg.files[file] = None
+    return dbg.files[file]
+
+
+def resolve(session: Session, text: str, *, line_numbers: bool) -> tuple[int, str]:
+    """A location typed by the user as ``(address, description)``.
+
+    ``Label``; ``@ADDR`` (always an address); ``FILE:LINE``; a bare number is a source line
+    when ``line_numbers`` and the source is known, else an address. ``L0012`` (the
+    disassembler's generated labels) is address 12 when no source label has that name.
+    """
+    dbg = state(session)
+    prog = dbg.program
+    module = session.module
+    t = text.strip()
+    if not t:
+        raise ValidationError("give a label, a line number or @address")
+
+    def check(addr: int) -> int:
+        if not 0 <= addr < module.program_memory:
+            raise ValidationError(f"address {addr} is outside program memory "
+                                  f"0..{module.program_memory - 1}")
+        return addr
+
+    if t.startswith("@"):
+        addr = check(_number(t[1:], "address"))
+        return addr, f"@{addr}"
+    m = re.fullmatch(r"(.+):(\d+)", t)
+    if m and not t[0].isdigit():
+        if prog is None:
+            raise ValidationError(f"no source file is known for the stored program; "
+                                  f"use .source-map FILE (or .upload FILE) before {t}")
+        name, line = m.group(1), int(m.group(2))
+        files = {loc.file for loc in prog.source}
+        match = [f for f in files if f == name or Path(f).name == Path(name).name]
+        if not match:
+            raise ValidationError(f"{name} is not part of the program (files: "
+                                  f"{', '.join(sorted(_show_path(f) for f in files))})")
+        return _line_address(prog, line, match[0])
+    if re.fullmatch(r"(\$|0[xX])?[0-9A-Fa-f]+", t) and (t[0].isdigit() or t[0] == "$"):
+        n = _number(t, "line or address")
+        if line_numbers and prog is not None:
+            return _line_address(prog, n, dbg.source_file)
+        addr = check(n)
+        return addr, f"@{addr}"
+    if prog is not None:
+        for name, addr in prog.labels.items():
+            if name.lower() == t.lower():
+                return addr, name
+    g = re.fullmatch(r"[Ll](\d{4})", t)
+    if g:
+        addr = check(int(g.group(1)))
+        return addr, t.upper()
+    if prog is None:
+        raise ValidationError(f"unknown label {t!r}: no source file is known for the stored "
+                              "program (use .source-map FILE), give @ADDRESS instead")
+    labels = ", ".join(sorted(prog.labels)) or "none"
+    raise ValidationError(f"unknown label {t!r} (labels: {labels})")
+
+
+def _line_address(prog: asm.Program, line: int, file: str | None) -> tuple[int, str]:
+    addr = prog.address_of_line(line, file)
+    if addr is None:
+        raise ValidationError(f"no instruction at or after line {line} of "
+                              f"{_show_path(file or '?')}")
+    loc = prog.loc(addr)
+    assert loc is not None
+    return addr, f"{_show_path(loc.file)}:{loc.line}"
+
+
+# -- reporting ---------------------------------------------------------------------------
+
+def _set_state(session: Session, st: AppStatus) -> None:
+    state(session).last = st
+    session.state["program_state"] = f"step @{st.pc}" if st.state == "step" else st.state
+
+
+def _read_status(session: Session) -> AppStatus:
+    st = program.status(session.client)
+    _set_state(session, st)
+    return st
+
+
+def _display_values(session: Session) -> list[tuple[Display, str]]:
+    out = []
+    for d in sorted(state(session).displays.values(), key=lambda d: d.number):
+        try:
+            out.append((d, str(_evaluate(session, d.expr))))
+        except TmclError as exc:
+            out.append((d, f"<error: {exc}>"))
+    return out
+
+
+def _evaluate(session: Session, expr: str) -> int | float:
+    evaluate = session.state.get("evaluate")
+    if callable(evaluate):
+        return evaluate(session, expr)
+    enc = session.client.encode(expr)
+    if enc.spec is None or not enc.spec.reads:
+        raise ValidationError(f"{expr!r} does not read a value; a display must not change "
+                              "anything (use GAP, GGP, GIO, ...)")
+    result = session.client.execute(expr)
+    return result.value if result.value is not None else 0
+
+
+def report(session: Session, st: AppStatus, *, prefix: str = "", extra: dict | None = None,
+           displays: bool = True) -> None:
+    """One stop line: state, address, source line (or disassembly), then the displays."""
+    w = where(session, st.pc)
+    values = _display_values(session) if displays else []
+    out = session.out
+    if out.json:
+        obj: dict[str, object] = {**st.to_json(), **w.to_json()}
+        if values:
+            obj["display"] = {d.expr: v for d, v in values}
+        if extra:
+            obj.update(extra)
+        out.emit(obj)
+        return
+    from rich.text import Text
+
+    t = Text()
+    if prefix:
+        t.append(prefix + " ", style="tmcl.event")
+    t.append(st.state, style="tmcl.value")
+    t.append(f" @{st.pc}", style="tmcl.name")
+    if w.file is not None:
+        t.append(f"  {w.place}", style="tmcl.note")
+    if w.text:
+        t.append(f"  {w.text}")
+    _line(session, t)
+    for d, v in values:
+        out.print(Text.assemble(f"  {d.number}: ", (d.expr, "tmcl.name"), " = ", (v, "tmcl.value")))
+
+
+def _line(session: Session, text) -> None:
+    """One line; on a terminal a long one (a source line's comment) ends in '…' instead of
+    wrapping. Piped output keeps every character."""
+    out = session.out
+    if out.console.is_terminal:
+        out.print(text, soft_wrap=False, no_wrap=True, overflow="ellipsis")
+    else:
+        out.print(text)
+
+
+@contextmanager
+def _progress(session: Session) -> Iterator[program.Progress | None]:
+    """A rich progress bar on a terminal; nothing under --json or when piped."""
+    out = session.out
+    if out.json or not out.console.is_terminal:
+        yield None
+        return
+    from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
+                               TimeRemainingColumn)
+
+    names = {"upload": "uploading", "verify": "verifying", "read": "reading"}
+    with Progress(TextColumn("{task.description:>10}"), BarColumn(), MofNCompleteColumn(),
+                  TimeRemainingColumn(), console=out.console, transient=True) as bar:
+        tasks: dict[str, object] = {}
+
+        def update(phase: str, done: int, total: int) -> None:
+            if phase not in tasks:
+                tasks[phase] = bar.add_task(names.get(phase, phase), total=total)
+            bar.update(tasks[phase], completed=done)  # type: ignore[arg-type]
+
+        yield update
+
+
+def _rebind_breakpoints(session: Session) -> None:
+    """After the program changed: resolve each breakpoint's spec again; drop the lost ones."""
+    dbg = state(session)
+    for bp in list(dbg.breakpoints.values()):
+        if bp.spec.startswith("@"):
+            continue
+        try:
+            bp.address, _ = resolve(session, bp.spec, line_numbers=True)
+        except TmclError:
+            session.out.info(f"breakpoint {bp.number} ({bp.spec}) no longer resolves; deleted")
+            del dbg.breakpoints[bp.number]
+
+
+def _not_repeating(session: Session) -> None:
+    repeat = session.state.get("repeat_on_empty")
+    if isinstance(repeat, str) and repeat.startswith(".step"):
+        session.state.pop("repeat_on_empty", None)
+
+
+# -- completion --------------------------------------------------------------------------
+
+def complete_file(session: Session, text: str) -> list[str]:
+    word = text.split()[-1] if text and not text.endswith(" ") else ""
+    out = []
+    for path in sorted(glob.glob(os.path.expanduser(word) + "*")):
+        if os.path.isdir(path):
+            out.append(path + os.sep)
+        elif path.lower().endswith(SOURCE_SUFFIXES):
+            out.append(path)
+    return out
+
+
+def complete_location(session: Session, text: str) -> list[str | tuple[str, str]]:
+    dbg = state(session)
+    out: list[str | tuple[str, str]] = []
+    if dbg.program is not None:
+        out += [(name, f"@{addr}") for name, addr in sorted(dbg.program.labels.items())]
+    return out
+
+
+def complete_breakpoints(session: Session, text: str) -> list[str | tuple[str, str]]:
+    return [(str(n), bp.spec) for n, bp in sorted(state(session).breakpoints.items())]
+
+
+# -- upload and read-back ----------------------------------------------------------------
+
+@command(".upload", ".upload FILE [--at ADDR] [--yes] [--no-verify]",
+         "assemble FILE for this module, store it in program memory and verify it",
+         category=CATEGORY, complete=complete_file, details="""\
+Assembles FILE for the connected module, then: 132 (start download at ADDR, default 0), one
+frame per instruction (each answered with status 101), 133 (quit download), and reads every
+instruction back with 134 to compare; the first difference is reported. Asks before
+overwriting the program unless --yes. A program larger than the memory is refused before
+anything is sent. If the upload is interrupted (Ctrl-C, timeout, corrupted reply, lost link),
+download mode is ended anyway and the message says which instructions are written.
+Under --json: {"uploaded": N, "verified": true|false}. Needs binary mode.""")
+def cmd_upload(session: Session, argtext: str) -> None:
+    pos, opts = _options(_words(argtext), {"--yes", "--no-verify"}, {"--at"})
+    if len(pos) != 1:
+        raise ValidationError("usage: .upload FILE [--at ADDR] [--yes] [--no-verify]")
+    program.require_binary(session.client, "uploading a program (132/133)")
+    module = session.module
+    origin = _number(str(opts["--at"]), "--at") if "--at" in opts else 0
+    path = _resolve_file(session, pos[0])
+    prog = asm.assemble_file(path, module, origin)
+    if not len(prog):
+        raise ValidationError(f"{path} holds no instructions; nothing to upload")
+    program.check_fits(module, origin, len(prog))
+    first, last = origin, origin + len(prog) - 1
+    if not opts.get("--yes"):
+        session.confirm(f"overwrite the {module.name}'s program memory at {first}..{last} "
+                        f"with {len(prog)} instructions from {path.name}?")
+    dbg = state(session)
+    dbg.forget_memory()
+    _not_repeating(session)
+    try:
+        with _progress(session) as progress:
+            result = program.upload(session.client, prog, origin,
+                                    verify=not opts.get("--no-verify"), progress=progress)
+    except UploadError as exc:
+        dbg.program = None  # memory now holds parts of two programs
+        session.state["program_state"] = "stop"
+        if exc.interrupted:
+            # say what is in memory, then let the shell's Ctrl-C policy run (motors stop)
+            session.out.error(None, str(exc))
+            raise KeyboardInterrupt from exc
+        raise
+    dbg.program = prog
+    dbg.files.clear()
+    if result.verified:
+        dbg.memory.update({origin + i: ins for i, ins in enumerate(prog.instructions)})
+    _rebind_breakpoints(session)
+    seconds = result.upload_seconds + result.verify_seconds
+    rate = f", {len(prog) / result.upload_seconds:.0f}/s" if result.upload_seconds > 0 else ""
+    if result.mismatch is not None:
+        mm = result.mismatch
+        w = where(session, mm.address)
+        expected, _ = asm.disassemble_instruction(mm.expected, module)
+        actual, _ = asm.disassemble_instruction(mm.actual, module)
+        message = (f"verify failed at address {mm.address} ({w.place}): uploaded "
+                   f"'{expected}', the module holds '{actual}'")
+        if session.out.json:
+            session.out.emit({**result.to_json(), "error": message})
+        else:
+            session.out.print(f"uploaded {result.count} instructions to {first}..{last}",
+                              style="tmcl.warn")
+            session.out.error(None, message)
+        err = DebuggerError(message)
+        err.shown = True  # type: ignore[attr-defined]
+        raise err
+    if session.out.json:
+        session.out.emit(result.to_json())
+    else:
+        verified = "verified: read back identical" if result.verified else "not verified"
+        session.out.print(f"uploaded {result.count} instructions from {path.name} to "
+                          f"{first}..{last}; {verified} ({seconds:.2f} s{rate})",
+                          style="tmcl.ok")
+    try:
+        _read_status(session)
+    except TmclError:
+        pass
+
+
+@command(".dump", ".dump [FILE] [--at ADDR] [--count N]",
+         "read the stored program back (134) and show it as source, or write it to FILE",
+         aliases=(".disasm",), category=CATEGORY, complete=complete_file, details="""\
+Reads program memory with 134 from ADDR (default 0) up to the end marker (opcode 0, or an
+erased cell) or the end of memory, or exactly N instructions with --count, and disassembles
+it with generated labels (L0012 for a jump target at 12). With FILE the text is written there;
+it assembles back to the same image (.upload FILE --at ADDR). Needs binary mode.""")
+def cmd_dump(session: Session, argtext: str) -> None:
+    pos, opts = _options(_words(argtext), set(), {"--at", "--count"})
+    if len(pos) > 1:
+        raise ValidationError("usage: .dump [FILE] [--at ADDR] [--count N]")
+    program.require_binary(session.client, "reading program memory (134)")
+    module = session.module
+    start = _number(str(opts["--at"]), "--at") if "--at" in opts else 0
+    count = _number(str(opts["--count"]), "--count") if "--count" in opts else None
+    with _progress(session) as progress:
+        image = program.read_program(session.client, start, count, progress=progress)
+    dbg = state(session)
+    dbg.forget_memory()
+    dbg.memory.update({start + i: ins for i, ins in enumerate(image)})
+    c = session.client
+    header = (f"// program memory of the {module.name} at address {c.address} "
+              f"({c.describe()}): {len(image)} instructions from {start}\n")
+    if start:
+        header += f"// assemble with --at {start}\n"
+    text = header + (asm.disassemble(image, module, start) if image else "")
+    try:
+        again = asm.assemble(text, module, "<dump>", start).instructions if image else []
+        same = program.same_image(again, image)
+    except AsmError as exc:  # pragma: no cover - a disassembler bug
+        same, again = False, []
+        session.out.warn(f"the disassembly does not assemble: {exc}")
+    if not same:
+        session.out.warn("warning: the disassembly does not reassemble to the same image")
+    if pos:
+        path = Path(pos[0]).expanduser()
+        try:
+            path.write_text(text, encoding="utf-8")
+        except OSError as exc:
+            raise DebuggerError(f"cannot write {path}: {exc.strerror}") from None
+        if session.out.json:
+            session.out.emit({"dumped": len(image), "file": str(path), "identical": same})
+        else:
+            session.out.print(f"wrote {len(image)} instructions ({start}.."
+                              f"{start + len(image) - 1}) to {path}"
+                              + ("; it assembles back to the same image" if same else ""),
+                              style="tmcl.ok")
+        return
+    if session.out.json:
+        session.out.emit({"dumped": len(image), "source": text})
+        return
+    if not image:
+        session.out.info(f"program memory is empty at {start} (end marker)")
+        return
+    session.out.print(text.rstrip("\n"), markup=False, highlight=False)
+
+
+@command(".source-map", ".source-map [FILE [--at ADDR] | --off]",
+         "use FILE as the source of the stored program (lines and labels in the debugger)",
+         category=CATEGORY, complete=complete_file, details="""\
+Assembles FILE and associates it with the program in the module's memory, so that locations
+are shown as file:line and .break accepts its labels and line numbers. The stored program is
+read back and compared; a difference is reported (the mapping is kept). Without FILE: show
+the current mapping; --off forgets it (locations are then disassembled from memory).""")
+def cmd_source_map(session: Session, argtext: str) -> None:
+    pos, opts = _options(_words(argtext), {"--off"}, {"--at"})
+    dbg = state(session)
+    if opts.get("--off"):
+        dbg.program = None
+        session.out.info("source map off: locations are disassembled from memory")
+        return
+    if not pos:
+        if dbg.source_file is None:
+            session.out.info("no source file is known for the stored program")
+        else:
+            assert dbg.program is not None
+            session.out.print(f"{_show_path(dbg.source_file)}: {len(dbg.program)} instructions "
+                              f"at {dbg.program.origin}..{dbg.program.origin + len(dbg.program) - 1}")
+        return
+    if len(pos) != 1:
+        raise ValidationError("usage: .source-map FILE [--at ADDR]")
+    module = session.module
+    origin = _number(str(opts["--at"]), "--at") if "--at" in opts else 0
+    path = _resolve_file(session, pos[0])
+    prog = asm.assemble_file(path, module, origin)
+    message = f"{_show_path(str(path))} mapped to {origin}..{origin + len(prog) - 1}"
+    if session.client.mode != "ascii" and len(prog):
+        mm = program.verify_image(session.client, prog.instructions, origin)
+        if mm is not None:
+            loc = prog.loc(mm.address)
+            session.out.warn(f"warning: the stored program differs from {path.name} at "
+                             f"address {mm.address} ({loc.file if loc else '?'}:"
+                             f"{loc.line if loc else '?'}); lines shown may not match")
+        else:
+            message += " (matches the stored program)"
+    dbg.program = prog
+    dbg.files.clear()
+    dbg.forget_memory()
+    _rebind_breakpoints(session)
+    session.out.info(message)
+
+
+# -- running -----------------------------------------------------------------------------
+
+@command(".run", ".run [LABEL|ADDR]", "run the stored program (from the current address, or "
+         "from LABEL/ADDR)", category=CATEGORY, complete=complete_location, details="""\
+129 type 0 continues from the current address; with LABEL or ADDR, 129 type 1 starts there.
+Runs at full speed: breakpoints are not honoured (use .continue, which steps). In ASCII mode
+this is the module's RUN command.""")
+def cmd_run(session: Session, argtext: str) -> None:
+    _not_repeating(session)
+    address = None
+    if argtext.strip():
+        program.require_binary(session.client, "running from an address (129 type 1)")
+        address, _desc = resolve(session, argtext, line_numbers=False)
+    program.run(session.client, address)
+    st = _read_status(session)
+    if state(session).breakpoints and not session.out.json:
+        session.out.info("running at full speed: breakpoints only stop .continue")
+    report(session, st, displays=False)
+
+
+@command(".stop", ".stop", "stop the stored program (128)", category=CATEGORY, details="""\
+128 stops the running or stepped program where it is; .status or .where shows where. In
+ASCII mode this is the module's STOP command.""")
+def cmd_stop(session: Session, argtext: str) -> None:
+    _not_repeating(session)
+    program.stop(session.client)
+    report(session, _read_status(session))
+
+
+@command(".reset", ".reset", "reset the stored program: program counter 0, stopped (131)",
+         category=CATEGORY)
+def cmd_reset(session: Session, argtext: str) -> None:
+    _not_repeating(session)
+    program.reset(session.client)
+    report(session, _read_status(session))
+
+
+@command(".status", ".status", "the program's state (stop|run|step|reset) and current line",
+         category=CATEGORY, details="""\
+135 (the application status) and GP 130 (the program counter), with the source line at the
+program counter. JSON: {"state": ..., "pc": ..., "file": ..., "line": ..., "text": ...}.""")
+def cmd_status(session: Session, argtext: str) -> None:
+    report(session, _read_status(session), displays=False)
+
+
+@command(".where", ".where", "where the program is: address, source line, enclosing label",
+         category=CATEGORY)
+def cmd_where(session: Session, argtext: str) -> None:
+    st = _read_status(session)
+    report(session, st, displays=False)
+    w = where(session, st.pc)
+    if w.label and not session.out.json:
+        session.out.info(f"  in {w.label}")
+
+
+# -- stepping ----------------------------------------------------------------------------
+
+@command(".step", ".step [N]", "execute the next N instructions (default 1) and show where",
+         category=CATEGORY, details="""\
+130 steps one instruction; after each, the program counter (GP 130), the line about to run
+next and the .display values are shown. An empty line repeats the step. Ctrl-C stops a long
+series. Needs binary mode.""")
+def cmd_step(session: Session, argtext: str) -> None:
+    n = _number(argtext, "N") if argtext.strip() else 1
+    if n < 1:
+        raise ValidationError("N must be at least 1")
+    program.require_binary(session.client, "stepping (130)")
+    session.state["repeat_on_empty"] = ".step" if n == 1 else f".step {n}"
+    def waiting(pc: int) -> None:
+        session.out.info(f"  WAIT at @{pc}: waiting for it to finish (Ctrl-C stops waiting)")
+
+    pc: int | None = None
+    done = 0
+    try:
+        for done in range(1, n + 1):
+            program.step_one(session.client, pc=pc, instruction_at=_stored(session),
+                             on_wait=waiting)
+            st = _read_status(session)
+            pc = st.pc
+            hit = _hit(session, st.pc)
+            report(session, st, prefix=hit or "", extra={"step": done} if n > 1 else None)
+            if st.state != "step":
+                session.out.info("the program stopped (it ran a STOP or reached its end)")
+                break
+    except KeyboardInterrupt:
+        session.out.info(f"interrupted after {_plural(done - 1, 'step')}")
+        report(session, _read_status(session), displays=False)
+        raise  # the shell's Ctrl-C policy (stop the motors) applies as to any command
+
+
+def _stored(session: Session):
+    """``instruction_at`` for tmclsh.program: the cached stored instruction."""
+    def at(address: int) -> Instruction:
+        ins = _cached_instruction(session, address)
+        if ins is None:  # pragma: no cover - binary mode is checked before stepping
+            raise ValidationError(f"cannot read the instruction at {address}")
+        return ins
+    return at
+
+
+def _plural(n: int, word: str) -> str:
+    return f"{n} {word}{'' if n == 1 else 's'}"
+
+
+def _hit(session: Session, pc: int) -> str | None:
+    for bp in state(session).breakpoints.values():
+        if bp.address == pc:
+            return f"breakpoint {bp.number},"
+    return None
+
+
+@command(".continue", ".continue [MAXSTEPS]", "step until a breakpoint is reached",
+         aliases=(".cont",), category=CATEGORY, details="""\
+These firmwares have no breakpoint command, so .continue runs the program by stepping it
+(130) and reading the program counter (GP 130) after every instruction, stopping when it
+reaches a breakpoint, when the program stops by itself, after MAXSTEPS steps, or on Ctrl-C.
+That is two round trips per instruction: much slower than .run, and a WAIT takes its full
+time. With no breakpoints it is .run (129 type 0). Needs binary mode.""")
+def cmd_continue(session: Session, argtext: str) -> None:
+    dbg = state(session)
+    limit = _number(argtext, "MAXSTEPS") if argtext.strip() else None
+    _not_repeating(session)
+    if not dbg.breakpoints:
+        program.run(session.client)
+        session.out.info("no breakpoints: running at full speed (129)")
+        report(session, _read_status(session), displays=False)
+        return
+    program.require_binary(session.client, "running to a breakpoint (130 steps)")
+    current = program.status(session.client)
+    if current.state == "run":
+        program.stop(session.client)
+        session.out.info("stopped the running program to step it to a breakpoint")
+    targets = {bp.address for bp in dbg.breakpoints.values()}
+    steps = [0]
+
+    def counted(n: int, pc: int) -> None:
+        steps[0] = n
+
+    stored = _stored(session)
+
+    began = time.monotonic()
+    try:
+        if not session.out.json and session.out.console.is_terminal:
+            with session.out.console.status("stepping to a breakpoint (Ctrl-C stops)"):
+                info = program.continue_to(session.client, targets, max_steps=limit,
+                                           on_step=counted, instruction_at=stored)
+        else:
+            info = program.continue_to(session.client, targets, max_steps=limit,
+                                       on_step=counted, instruction_at=stored)
+    except KeyboardInterrupt:
+        session.out.info(f"interrupted after {_plural(steps[0], 'step')}")
+        report(session, _read_status(session))
+        raise  # the shell's Ctrl-C policy (stop the motors) applies as to any command
+    st = _read_status(session)
+    elapsed = time.monotonic() - began
+    extra = {"reason": info.reason, "steps": info.steps}
+    if info.reason == "breakpoint":
+        bp = next(b for b in dbg.breakpoints.values() if b.address == info.pc)
+        bp.hits += 1
+        report(session, st, prefix=f"breakpoint {bp.number},", extra={**extra, "breakpoint":
+                                                                    bp.number})
+    elif info.reason == "ended":
+        report(session, st, prefix="program stopped:", extra=extra)
+    else:
+        report(session, st, prefix=f"{_plural(info.steps, 'step')}, no breakpoint:",
+               extra=extra)
+    if not session.out.json:
+        session.out.info(f"  ({_plural(info.steps, 'step')} in {elapsed:.2f} s)")
+
+
+@command(".break", ".break [LABEL|LINE|FILE:LINE|@ADDR]",
+         "set a breakpoint (for .continue); without argument, list them",
+         category=CATEGORY, complete=complete_location, details="""\
+A bare number is a line of the source file when one is known (uploaded in this session or
+named with .source-map), else an address; @ADDR is always an address. Breakpoints are kept by
+tmclsh, not the module (it has no breakpoint command): only .continue stops at them.""")
+def cmd_break(session: Session, argtext: str) -> None:
+    dbg = state(session)
+    if not argtext.strip():
+        if not dbg.breakpoints:
+            session.out.info("no breakpoints")
+        elif session.out.json:
+            session.out.emit({"breakpoints": [
+                {"number": b.number, "address": b.address, "where": b.spec, "hits": b.hits}
+                for b in dbg.breakpoints.values()]})
+        else:
+            session.out.print(dbg)
+        return
+    address, desc = resolve(session, argtext, line_numbers=True)
+    for bp in dbg.breakpoints.values():
+        if bp.address == address:
+            session.out.info(f"breakpoint {bp.number} is already at {address} ({bp.spec})")
+            return
+    number = dbg.next_breakpoint
+    dbg.next_breakpoint += 1
+    spec = desc if not argtext.strip().startswith("@") else f"@{address}"
+    dbg.breakpoints[number] = Breakpoint(number, spec, address)
+    w = where(session, address)
+    if session.out.json:
+        session.out.emit({"breakpoint": number, "address": address, **w.to_json()})
+    else:
+        session.out.print(f"breakpoint {number} at @{address}  {w.place}  {w.text}".rstrip())
+
+
+@command(".delete", ".delete [N]", "delete breakpoint N (all without N)",
+         category=CATEGORY, complete=complete_breakpoints)
+def cmd_delete(session: Session, argtext: str) -> None:
+    dbg = state(session)
+    if not argtext.strip():
+        n = len(dbg.breakpoints)
+        dbg.breakpoints.clear()
+        session.out.info(f"deleted {n} breakpoint{'s' if n != 1 else ''}")
+        return
+    for word in argtext.replace(",", " ").split():
+        number = _number(word, "breakpoint number")
+        if dbg.breakpoints.pop(number, None) is None:
+            known = ", ".join(map(str, sorted(dbg.breakpoints))) or "none"
+            raise ValidationError(f"no breakpoint {number} (breakpoints: {known})")
+        session.out.info(f"deleted breakpoint {number}")
+
+
+# -- looking at the program --------------------------------------------------------------
+
+@command(".list", ".list [LINE|LABEL|@ADDR]", "source around the current line (or around "
+         "LINE), with a marker", category=CATEGORY, complete=complete_location, details="""\
+'->' marks the line the program counter is at, 'B' a breakpoint; the program address of each
+line with an instruction is shown. Without a known source file the disassembly around the
+address is listed instead.""")
+def cmd_list(session: Session, argtext: str) -> None:
+    dbg = state(session)
+    pc: int | None = None
+    try:
+        pc = _read_status(session).pc
+    except TmclError:
+        pc = dbg.last.pc if dbg.last is not None else None
+    if argtext.strip():
+        center, _ = resolve(session, argtext, line_numbers=True)
+    elif pc is not None:
+        center = pc
+    else:
+        center = 0
+    breaks = {bp.address for bp in dbg.breakpoints.values()}
+    rows = _listing(session, center, pc, breaks)
+    if session.out.json:
+        session.out.emit({"pc": pc, "lines": rows})
+        return
+    from rich.text import Text
+
+    for row in rows:
+        mark = "->" if row["current"] else "  "
+        bmark = "B" if row["break"] else " "
+        addr = f"@{row['address']}" if row.get("address") is not None else ""
+        num = f"{row['line']:>4}" if row.get("line") is not None else ""
+        t = Text()
+        t.append(f"{mark}{bmark} ", style="tmcl.event" if row["current"] else "tmcl.error"
+                 if row["break"] else "")
+        if num:
+            t.append(f"{num} ", style="tmcl.note")
+        t.append(f"{addr:>6}  ", style="tmcl.name")
+        t.append(str(row["text"]), style="bold" if row["current"] else "")
+        _line(session, t)
+
+
+def _listing(session: Session, center: int, pc: int | None, breaks: set[int]) -> list[dict]:
+    dbg = state(session)
+    prog = dbg.program
+    loc = prog.loc(center) if prog is not None else None
+    if prog is not None and loc is not None:
+        lines = _source_lines(session, loc.file)
+        addr_of: dict[int, int] = {}
+        for idx, sl in enumerate(prog.source):
+            if sl.file == loc.file:
+                addr_of.setdefault(sl.line, prog.origin + idx)
+        if lines is not None:
+            lo = max(1, loc.line - LIST_CONTEXT)
+            hi = min(len(lines), loc.line + LIST_CONTEXT)
+            rows = []
+            for n in range(lo, hi + 1):
+                addr = addr_of.get(n)
+                rows.append({"line": n, "address": addr, "text": lines[n - 1].rstrip(),
+                             "current": addr is not None and addr == pc,
+                             "break": addr is not None and addr in breaks})
+            return rows
+    module = session.module
+    lo = max(0, center - LIST_CONTEXT)
+    hi = min(module.program_memory - 1, center + LIST_CONTEXT)
+    rows = []
+    for addr in range(lo, hi + 1):
+        w = where(session, addr)
+        rows.append({"line": w.line, "address": addr, "text": w.text or "?",
+                     "current": addr == pc, "break": addr in breaks})
+    return rows
+
+
+@command(".display", ".display [EXPR]", "show EXPR (e.g. GGP 0, 2 or GAP 1, 0) at every stop; "
+         "without EXPR show all now", category=CATEGORY, details="""\
+Values are shown after each .step, .continue, .stop and .reset. EXPR is an expression of the
+scripting engine when it is loaded, else one TMCL line that reads a value (GAP, GGP, GIO ...);
+commands that change something are refused. Remove with .undisplay N.""")
+def cmd_display(session: Session, argtext: str) -> None:
+    dbg = state(session)
+    expr = argtext.strip()
+    if not expr:
+        values = _display_values(session)
+        if session.out.json:
+            session.out.emit({"display": {d.expr: v for d, v in values}})
+        elif not values:
+            session.out.info("no displays (add one with .display EXPR)")
+        for d, v in values:
+            session.out.print(f"{d.number}: {d.expr} = {v}")
+        return
+    value = _evaluate(session, expr)  # refuses bad expressions before keeping them
+    number = dbg.next_display
+    dbg.next_display += 1
+    dbg.displays[number] = Display(number, expr)
+    if session.out.json:
+        session.out.emit({"display": number, "expr": expr, "value": value})
+    else:
+        session.out.print(f"{number}: {expr} = {value}")
+
+
+@command(".undisplay", ".undisplay [N]", "remove display N (all without N)", category=CATEGORY)
+def cmd_undisplay(session: Session, argtext: str) -> None:
+    dbg = state(session)
+    if not argtext.strip():
+        dbg.displays.clear()
+        session.out.info("all displays removed")
+        return
+    number = _number(argtext, "display number")
+    if dbg.displays.pop(number, None) is None:
+        raise ValidationError(f"no display {number}")
+
+
+@command(".vars", ".vars [N | FROM..TO | all]", "user variables (GGP n, 2): the non-zero ones, "
+         "or a range", category=CATEGORY, details="""\
+Without argument every user variable is read and the non-zero ones are shown; with N or
+FROM..TO those are shown whatever their value.""")
+def cmd_vars(session: Session, argtext: str) -> None:
+    module = session.module
+    valid = program.user_variable_range(module)
+    arg = argtext.strip().lower()
+    show_all = False
+    if not arg or arg == "all":
+        numbers = valid
+    else:
+        m = re.fullmatch(r"(\w+)\s*(?:\.\.|-)\s*(\w+)", arg)
+        if m:
+            lo, hi = _number(m.group(1), "FROM"), _number(m.group(2), "TO")
+            if hi < lo:
+                raise ValidationError(f"empty range {lo}..{hi}")
+            numbers = range(lo, hi + 1)
+        else:
+            n = _number(arg, "variable number")
+            numbers = range(n, n + 1)
+        show_all = True
+    values = program.read_user_variables(session.client, numbers)
+    shown = {n: v for n, v in values.items() if show_all or v != 0}
+    if session.out.json:
+        session.out.emit({"vars": {str(n): v for n, v in shown.items()}})
+        return
+    if not shown:
+        session.out.info(f"all user variables {numbers.start}..{numbers.stop - 1} are 0")
+        return
+    from rich.table import Table
+
+    table = Table(box=None, show_header=False)
+    for _ in range(min(4, len(shown))):
+        table.add_column(justify="right", style="tmcl.name")
+        table.add_column(justify="right", style="tmcl.value")
+    cells = [(f"#{n}", str(v)) for n, v in shown.items()]
+    cols = min(4, len(cells))
+    for i in range(0, len(cells), cols):
+        chunk = cells[i:i + cols]
+        row: list[str] = []
+        for name, val in chunk:
+            row += [name, val]
+        row += [""] * (2 * cols - len(row))
+        table.add_row(*row)
+    session.out.print(table)
+    hidden = len(values) - len(shown)
+    if hidden:
+        session.out.info(f"({hidden} more are 0)")
+
+
+__all__ = ["DebuggerState", "Breakpoint", "Display", "Where", "state", "where", "resolve",
+           "report"]

@@ -1,0 +1,74 @@
+"""Key bindings of the prompt, pgcli style: ``tmcl_bindings(session)`` returns KeyBindings.
+
+Ctrl-C is the safety key. At the prompt it always sends MST to every motor and clears the
+line, without first asking the module whether anything moves: a stop must not wait for (or
+depend on) a status read over a slow or broken link, and MST on a motor at rest does nothing.
+It then says which motors it stopped. While a command runs, Ctrl-C interrupts it and the REPL
+does the same stop (see ``app.py``). Ctrl-D on an empty line leaves.
+
+Tab completes the way pgcli does it: the first Tab inserts the best match and opens the menu
+with the others, further Tabs cycle through them.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from prompt_toolkit.application import run_in_terminal
+from prompt_toolkit.filters import completion_is_selected, has_completions
+from prompt_toolkit.key_binding import KeyBindings
+
+if TYPE_CHECKING:
+    from .session import Session
+
+
+def stop_motors(session: Session, why: str = "Ctrl-C") -> list[int]:
+    """MST on every motor, then one line saying what happened. Never raises."""
+    from .builtin import report_stop
+
+    client = session.client
+    try:
+        if not client.connected:
+            session.out.warn(f"{why}: not connected; no motor could be stopped")
+            return []
+        stopped = client.stop_all()
+    except Exception as exc:  # the safety key must never break the shell
+        session.out.warn(f"{why}: stopping the motors failed: {exc}")
+        return []
+    report_stop(session, stopped, why)
+    return stopped
+
+
+def tmcl_bindings(session: Session) -> KeyBindings:
+    kb = KeyBindings()
+
+    @kb.add("c-c")
+    def _stop(event) -> None:
+        """Stop every motor, clear the line."""
+        event.current_buffer.reset()
+        run_in_terminal(lambda: stop_motors(session))
+
+    @kb.add("tab", filter=~has_completions)
+    def _complete(event) -> None:
+        """First Tab: insert the best completion and show the others."""
+        buf = event.current_buffer
+        if buf.complete_state:
+            buf.complete_next()
+        else:
+            buf.start_completion(select_first=True)
+
+    @kb.add("tab", filter=has_completions)
+    def _next(event) -> None:
+        event.current_buffer.complete_next()
+
+    @kb.add("escape", filter=has_completions, eager=True)
+    def _cancel(event) -> None:
+        event.current_buffer.cancel_completion()
+
+    @kb.add("enter", filter=completion_is_selected)
+    def _accept_completion(event) -> None:
+        """Enter on a selected completion takes it (the line is not run yet)."""
+        buf = event.current_buffer
+        buf.complete_state = None
+
+    return kb

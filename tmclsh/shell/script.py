@@ -1,0 +1,976 @@
+"""Scripts: files of shell lines, replayed with ``-f FILE``/``.source FILE``; and the commands
+that make them useful (variables, checks, waits, loops, recording).
+
+A script is read whole and checked before anything is sent (block structure, unknown
+commands, expressions, and every TMCL line without ``${...}`` against the module), so a typo
+on line 40 cannot leave the motor half-way through lines 1-39. Stdin (``-f -``, or a pipe)
+is run as it arrives, block by block, so a program can drive the shell through a pipe.
+
+Blocks::
+
+    .repeat COUNT [as NAME]     lines until the matching .end, COUNT times (NAME = 0..COUNT-1)
+    .if EXPR / .elif EXPR / .else / .end
+
+They nest, and also work typed at the prompt or in ``-c``: the lines are collected until the
+block's ``.end`` and then run.
+
+Errors stop the script with ``FILE:LINE: message`` (``--keep-going`` continues after runtime
+errors, never after syntax errors). Exit status: 0 all well, 1 a command, check or wait
+failed, 2 the script could not be read or has a syntax error (nothing was sent).
+"""
+
+from __future__ import annotations
+
+import re
+import sys
+import time
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field
+from datetime import datetime
+from pathlib import Path
+from typing import TYPE_CHECKING, TextIO
+
+from ..errors import TmclError, TmclTimeoutError, ValidationError
+from . import commands, expr
+from .commands import command
+from .session import QuitShell
+
+if TYPE_CHECKING:
+    from .session import Session
+
+EXIT_OK, EXIT_FAILED, EXIT_SYNTAX = 0, 1, 2
+STDIN = "<stdin>"
+WAIT_TIMEOUT = 30.0  # .wait default, seconds
+WAIT_INTERVAL = 0.05
+PROGRESS_MIN_STEPS = 20  # scripts with fewer steps run without a progress bar
+# After one of these, TMCL lines are checked when they run, not before: the module or the
+# mode they are checked against may change.
+_RECHECK_AFTER = {".connect", ".module", ".mode", ".ascii", ".address"}
+_VIEWS = {".watch", ".plot", ".history", ".help", ".record"}  # not replayed by .record
+
+
+class ScriptError(TmclError):
+    """A script problem that is not the module's: unreadable file, bad block structure."""
+
+
+class CheckFailed(TmclError):
+    """``.expect`` found the condition false."""
+
+
+class ScriptSyntaxError(ScriptError):
+    def __init__(self, file: str, line: int, message: str):
+        self.file, self.line, self.message = file, line, message
+        super().__init__(f"{file}:{line}: {message}")
+
+
+# -- the parsed script -------------------------------------------------------------------
+
+@dataclass
+class Node:
+    file: str
+    line: int
+    text: str
+
+
+@dataclass
+class Step(Node):
+    """One line, run through ``Session.run_line``."""
+
+
+@dataclass
+class Repeat(Node):
+    count: expr.Expression | None = None
+    var: str | None = None
+    body: list[Node] = field(default_factory=list)
+
+
+@dataclass
+class If(Node):
+    # (condition, body); condition None is the .else branch
+    branches: list[tuple[expr.Expression | None, list[Node]]] = field(default_factory=list)
+
+
+@dataclass
+class Include(Node):
+    path: str = ""
+    body: list[Node] = field(default_factory=list)
+
+
+def strip_comment(text: str) -> str:
+    """Drop a full-line ``#``/``//`` comment or a trailing ``//`` one (outside quotes)."""
+    s = text.strip()
+    if s.startswith("#") or s.startswith("//"):
+        return ""
+    quote = None
+    for i, ch in enumerate(s):
+        if quote:
+            if ch == quote:
+                quote = None
+        elif ch in "\"'":
+            quote = ch
+        elif ch == "/" and s.startswith("//", i):
+            return s[:i].rstrip()
+    return s
+
+
+def _word(text: str) -> tuple[str, str]:
+    parts = text.split(None, 1)
+    return parts[0].lower(), (parts[1].strip() if len(parts) > 1 else "")
+
+
+_AS = re.compile(r"^(.*\S)\s+as\s+([A-Za-z_][A-Za-z0-9_]*)$", re.IGNORECASE | re.DOTALL)
+
+
+def parse_repeat(args: str) -> tuple[expr.Expression, str | None]:
+    if not args:
+        raise ValidationError(".repeat needs a count: .repeat COUNT [as NAME]")
+    var = None
+    m = _AS.match(args)
+    if m:
+        args, var = m.group(1), m.group(2)
+        check_var_name(var)
+    return expr.parse(args), var
+
+
+def parse_condition(word: str, args: str) -> expr.Expression:
+    if not args:
+        raise ValidationError(f"{word} needs a condition: {word} EXPR")
+    return expr.parse(args)
+
+
+class Parser:
+    """Lines in, nodes out; a node is yielded as soon as it is complete (for stdin)."""
+
+    def __init__(self, session: Session, file: str, base: Path | None,
+                 stack: tuple[str, ...] = ()):
+        self.session = session
+        self.file = file
+        self.base = base
+        self.stack = stack + (file,)
+        self.precheck = True
+
+    def fail(self, line: int, message: str) -> ScriptSyntaxError:
+        return ScriptSyntaxError(self.file, line, message)
+
+    def nodes(self, lines: Iterable[str]) -> Iterator[Node]:
+        open_: list[tuple[Node, list[Node]]] = []  # open blocks and the body being filled
+        for number, raw in enumerate(lines, 1):
+            text = strip_comment(raw)
+            if not text:
+                continue
+            node = self.line(number, text, open_)
+            if node is None:
+                continue
+            if open_:
+                open_[-1][1].append(node)
+            else:
+                yield node
+        if open_:
+            node = open_[-1][0]
+            raise self.fail(node.line, f"{_word(node.text)[0]} has no matching .end")
+
+    def line(self, number: int, text: str, open_: list[tuple[Node, list[Node]]]) -> Node | None:
+        """Parse one line into a complete node, or None while a block is still open."""
+        try:
+            return self._line(number, text, open_)
+        except ScriptSyntaxError:
+            raise
+        except TmclError as exc:
+            raise self.fail(number, str(exc)) from None
+
+    def _line(self, number: int, text: str, open_: list[tuple[Node, list[Node]]]) -> Node | None:
+        file = self.file
+        if not text.startswith("."):
+            word = text.split(None, 1)[0]
+            if commands.find(word) is not None:  # bare help/quit
+                return Step(file, number, text)
+            if self.precheck and "${" not in text:
+                self.session.client.encode(text)
+            return Step(file, number, text)
+        word, args = _word(text)
+        if word == ".repeat":
+            count, var = parse_repeat(args)
+            expr.validate(self.session, count)
+            node: Node = Repeat(file, number, text, count, var)
+            open_.append((node, node.body))  # type: ignore[attr-defined]
+            return None
+        if word == ".if":
+            cond = parse_condition(word, args)
+            expr.validate(self.session, cond)
+            node = If(file, number, text)
+            node.branches.append((cond, []))  # type: ignore[attr-defined]
+            open_.append((node, node.branches[-1][1]))  # type: ignore[attr-defined]
+            return None
+        if word in (".elif", ".else"):
+            if not open_ or not isinstance(open_[-1][0], If):
+                raise self.fail(number, f"{word} without .if")
+            node = open_[-1][0]
+            assert isinstance(node, If)
+            if node.branches[-1][0] is None:
+                raise self.fail(number, f"{word} after .else")
+            cond = None
+            if word == ".elif":
+                cond = parse_condition(word, args)
+                expr.validate(self.session, cond)
+            elif args:
+                raise self.fail(number, ".else takes no argument (use .elif EXPR)")
+            node.branches.append((cond, []))
+            open_[-1] = (node, node.branches[-1][1])
+            return None
+        if word == ".end":
+            if args:
+                raise self.fail(number, ".end takes no argument")
+            if not open_:
+                raise self.fail(number, ".end without .repeat or .if")
+            return open_.pop()[0]
+        if word == ".source":
+            return self.include(number, text, args)
+        cmd = commands.find(word)
+        if cmd is None:
+            raise self.fail(number, f"unknown shell command {word!r}; type .help for the list")
+        check = CHECKS.get(cmd.name)
+        if check is not None:
+            check(self.session, args)
+        if cmd.name in _RECHECK_AFTER:
+            self.precheck = False
+        return Step(file, number, text)
+
+    def include(self, number: int, text: str, args: str) -> Include:
+        if not args:
+            raise self.fail(number, ".source needs a file name")
+        if "${" in args:
+            raise self.fail(number, ".source takes a plain file name (no ${...})")
+        path = resolve(args, self.base)
+        if str(path) in self.stack:
+            raise self.fail(number, f"{args} includes itself")
+        if len(self.stack) > 16:
+            raise self.fail(number, "includes nested more than 16 deep")
+        lines = read_lines(path, lambda msg: self.fail(number, msg))
+        sub = Parser(self.session, str(path), path.parent, self.stack)
+        sub.precheck = self.precheck
+        body = list(sub.nodes(lines))
+        self.precheck = sub.precheck
+        return Include(self.file, number, text, str(path), body)
+
+
+def resolve(name: str, base: Path | None) -> Path:
+    path = Path(name.strip().strip("\"'")).expanduser()
+    if not path.is_absolute() and base is not None:
+        path = base / path
+    return path
+
+
+def read_lines(path: Path, fail: Callable[[str], Exception]) -> list[str]:
+    try:
+        return path.read_text(encoding="utf-8").splitlines()
+    except FileNotFoundError:
+        raise fail(f"no such script: {path}") from None
+    except UnicodeDecodeError:
+        raise fail(f"{path} is not a text file") from None
+    except OSError as exc:
+        raise fail(f"cannot read {path}: {exc.strerror}") from None
+
+
+def check_var_name(name: str) -> None:
+    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
+        raise ValidationError(f"{name!r} is not a variable name (letters, digits, _)")
+    low = name.lower()
+    if low in expr.KEYWORDS or low in expr.FUNCTIONS or name.upper() in expr.read_mnemonics():
+        raise ValidationError(f"{name!r} is a reserved word; choose another variable name")
+
+
+def parse_let(args: str) -> tuple[str, expr.Expression]:
+    name, sep, rest = args.partition("=")
+    name = name.strip()
+    if not sep or rest.startswith("="):
+        raise ValidationError(".let wants NAME = EXPRESSION (e.g. .let speed = 1000)")
+    check_var_name(name)
+    return name, expr.parse(rest)
+
+
+# Syntax checks run before a script starts: (session, argtext) -> None, raising on error.
+# Other features add theirs (watch.py registers ".watch").
+def _check_let(session: Session, args: str) -> None:
+    if args:
+        expr.validate(session, parse_let(args)[1])
+
+
+def _check_expr_options(options: dict[str, bool]) -> Callable[[Session, str], None]:
+    def check(session: Session, args: str) -> None:
+        rest, opts = expr.split_options(args, options)
+        for name in opts:
+            if options[name]:
+                expr.option_float(opts, name, None, allow_none=name == "timeout")
+        if not rest:
+            raise ValidationError("an expression is needed")
+        expr.validate(session, expr.parse(rest))
+    return check
+
+
+def _check_sleep(session: Session, args: str) -> None:
+    if not args:
+        raise ValidationError(".sleep needs seconds: .sleep 0.5")
+    expr.validate(session, expr.parse(blank_substitutions(args)))
+
+
+def blank_substitutions(text: str) -> str:
+    """``${...}`` cannot be checked before the run; check the rest with a placeholder."""
+    return re.sub(r"\$\{[^}]*\}", "0", text)
+
+
+def _check_onerror(session: Session, args: str) -> None:
+    if not args:
+        raise ValidationError(".onerror needs a line to run (e.g. .onerror MST 0) or 'off'")
+    if args.lower() == "off":
+        return
+    if args.startswith("."):
+        if commands.find(_word(args)[0]) is None:
+            raise ValidationError(f"unknown shell command {_word(args)[0]!r}")
+    elif "${" not in args:
+        session.client.encode(args)
+
+
+CHECKS: dict[str, Callable[[Session, str], None]] = {
+    ".onerror": _check_onerror,
+    ".let": lambda s, a: _check_let(s, blank_substitutions(a)),
+    ".expect": lambda s, a: _check_expr_options({})(s, blank_substitutions(a)),
+    ".wait": lambda s, a: _check_expr_options(WAIT_OPTIONS)(s, blank_substitutions(a)),
+    ".sleep": _check_sleep,
+}
+
+
+# -- running -----------------------------------------------------------------------------
+
+class _Stop(Exception):
+    """Unwinds a script after its first error (already reported)."""
+
+
+@dataclass
+class Counts:
+    commands: int
+    passed: int
+    failed: int
+    errors: int
+
+
+def _counts(session: Session) -> Counts:
+    s = session.stats
+    return Counts(s.commands, s.checks_passed, s.checks_failed, s.errors)
+
+
+class Runner:
+    def __init__(self, session: Session, on_step: Callable[[], None] | None = None):
+        self.session = session
+        self.failed = False
+        self.on_step = on_step
+
+    def run(self, nodes: Iterable[Node]) -> None:
+        depth = self.session.state.get("script.depth", 0)
+        self.session.state["script.depth"] = depth + 1  # type: ignore[operator]
+        saved = self.session.location
+        try:
+            for node in nodes:
+                self.node(node)
+        finally:
+            self.session.state["script.depth"] = depth
+            self.session.location = saved
+
+    def node(self, node: Node) -> None:
+        if isinstance(node, Step):
+            self.guard(node, lambda: self.step(node))
+            if self.on_step is not None:
+                self.on_step()
+        elif isinstance(node, Repeat):
+            count = self.guard(node, lambda: repeat_count(self.session, node.count))
+            for i in range(count or 0):
+                if node.var is not None:
+                    self.session.variables[node.var] = i
+                self.run(node.body)
+        elif isinstance(node, If):
+            for cond, body in node.branches:
+                hit = True if cond is None else self.guard(
+                    node, lambda c=cond: bool(c.evaluate(expr.SessionContext(self.session))))
+                if hit is None:  # the condition failed to evaluate (and was reported)
+                    return
+                if hit:
+                    self.run(body)
+                    return
+        elif isinstance(node, Include):
+            self.run(node.body)
+
+    def step(self, node: Step) -> None:
+        session = self.session
+        word, args = _word(node.text)
+        if word == ".onerror":
+            set_onerror(session, args, node)
+            return
+        typed = len(session.history)
+        try:
+            session.run_line(node.text)
+        finally:
+            del session.history[typed:]  # the history is what was typed, not what a script ran
+
+    def on_error(self) -> None:
+        """The script stopped at an error: run its ``.onerror`` line, if it set one."""
+        pending = self.session.state.pop("script.onerror", None)
+        if pending is None:
+            return
+        node, line = pending  # type: ignore[misc]
+        self.session.out.info(f"{node.file}:{node.line}: .onerror: {line}")
+        try:
+            self.session.run_line(line)
+        except TmclError as exc:
+            report(self.session, node, exc)
+
+    def guard(self, node: Node, fn: Callable[[], object]):
+        self.session.location = (node.file, node.line)
+        try:
+            return fn()
+        except QuitShell:
+            raise
+        except TmclError as exc:
+            self.failed = True
+            report(self.session, node, exc)
+            if not self.session.keep_going:
+                raise _Stop() from exc
+            return None
+
+
+def repeat_count(session: Session, count: expr.Expression | None) -> int:
+    assert count is not None
+    value = count.evaluate(expr.SessionContext(session))
+    if isinstance(value, float):
+        if not value.is_integer():
+            raise ValidationError(f".repeat count must be a whole number, got {value}")
+        value = int(value)
+    if value < 0:
+        raise ValidationError(f".repeat count must not be negative, got {value}")
+    return value
+
+
+def report(session: Session, node: Node, exc: TmclError) -> None:
+    """``FILE:LINE: message``; under --json an error object (once per error)."""
+    where = f"{node.file}:{node.line}: "
+    if session.out.json:
+        if getattr(exc, "shown", False):
+            session.out.warn(f"{where}{exc}")  # its result object already says "error"
+        else:
+            session.out.emit({"line": node.text, "error": f"{where}{exc}"})
+    else:
+        session.out.err.print(f"{where}{exc}", style="tmcl.error", markup=False)
+
+
+def count_steps(nodes: Iterable[Node]) -> tuple[int, bool]:
+    """Steps a run will take (constant repeat counts multiplied) and whether it shows views."""
+    total, views = 0, False
+    for node in nodes:
+        if isinstance(node, Step):
+            total += 1
+            views = views or _word(node.text)[0] in (".watch", ".plot")
+        elif isinstance(node, Repeat):
+            n, v = count_steps(node.body)
+            root = node.count.root if node.count is not None else None
+            times = int(root.value) if isinstance(root, expr.Num) and root.value >= 0 else 1
+            total += n * times
+            views = views or v
+        elif isinstance(node, If):
+            for _, body in node.branches:
+                n, v = count_steps(body)
+                total += n
+                views = views or v
+        elif isinstance(node, Include):
+            n, v = count_steps(node.body)
+            total += n
+            views = views or v
+    return total, views
+
+
+def _progress(session: Session, name: str, nodes: list[Node]):
+    """A rich progress bar for long scripts on a terminal (None otherwise)."""
+    if session.out.json or not session.out.console.is_terminal:
+        return None
+    total, views = count_steps(nodes)
+    if total < PROGRESS_MIN_STEPS or views:
+        return None
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                        TimeElapsedColumn(), console=session.out.console, transient=True)
+    task = progress.add_task(Path(name).name, total=total)
+
+    def advance() -> None:
+        t = progress.tasks[0]
+        if t.completed + 1 > (t.total or 0):
+            progress.update(task, total=t.completed + 1)
+        progress.advance(task)
+
+    return progress, advance
+
+
+def run_file(session: Session, path: str) -> int:
+    """Run a script file (``-`` = stdin) in ``session``; returns the exit status."""
+    start = time.monotonic()
+    before = _counts(session)
+    name = STDIN if path == "-" else path
+    runner = Runner(session)
+    status = EXIT_OK
+    try:
+        if path == "-":
+            parser = Parser(session, STDIN, Path.cwd())
+            _run_nodes(runner, parser.nodes(_stdin_lines()))
+        else:
+            file = Path(path)
+            lines = read_lines(file, lambda msg: ScriptError(msg))
+            nodes = list(Parser(session, path, file.resolve().parent).nodes(lines))
+            bar = _progress(session, path, nodes)
+            if bar is None:
+                _run_nodes(runner, nodes)
+            else:
+                progress, runner.on_step = bar
+                with progress:
+                    _run_nodes(runner, nodes)
+    except ScriptError as exc:
+        _report_plain(session, exc)
+        status = EXIT_SYNTAX
+    finally:
+        session.location = None
+    if status == EXIT_OK and runner.failed:
+        status = EXIT_FAILED
+    summary(session, name, before, time.monotonic() - start, status)
+    return status
+
+
+def _run_nodes(runner: Runner, nodes: Iterable[Node]) -> None:
+    try:
+        runner.run(nodes)
+    except _Stop:
+        runner.on_error()
+    except QuitShell:
+        pass
+    finally:
+        runner.session.state.pop("script.onerror", None)
+
+
+def _stdin_lines() -> Iterator[str]:
+    for line in sys.stdin:
+        yield line.rstrip("\n")
+
+
+def _report_plain(session: Session, exc: TmclError) -> None:
+    if session.out.json:
+        session.out.emit({"line": None, "error": str(exc)})
+    else:
+        session.out.err.print(str(exc), style="tmcl.error", markup=False)
+
+
+def summary(session: Session, name: str, before: Counts, elapsed: float, status: int) -> None:
+    now = _counts(session)
+    sent = now.commands - before.commands
+    passed, failed = now.passed - before.passed, now.failed - before.failed
+    errors = now.errors - before.errors
+    if status == EXIT_SYNTAX and sent == 0:
+        text = f"{name}: not run (syntax error; nothing was sent)"
+    else:
+        text = (f"{name}: {sent} command{'s' if sent != 1 else ''} sent, "
+                f"{passed} check{'s' if passed != 1 else ''} passed, {failed} failed, "
+                f"{errors} error{'s' if errors != 1 else ''}, {elapsed:.2f} s")
+    if session.out.json:
+        session.out.err.print(text, style="tmcl.note", markup=False)
+    else:
+        session.out.print(text, style="tmcl.error" if status else "tmcl.note", markup=False)
+
+
+def run_source(session: Session, path: str) -> bool:
+    """``.source`` typed at the prompt or in -c: run a file in this session.
+
+    Returns True if all went well. Errors inside are reported with FILE:LINE; the caller
+    gets one ScriptError marked as shown.
+    """
+    file = resolve(path, None)  # relative to the current folder
+    lines = read_lines(file, lambda msg: ScriptError(msg))
+    nodes = list(Parser(session, str(file), file.parent).nodes(lines))
+    runner = Runner(session)
+    _run_nodes(runner, nodes)
+    return not runner.failed
+
+
+# -- blocks typed at the prompt (or in -c) -------------------------------------------------
+
+class BlockCollector:
+    """Collects lines typed after ``.repeat``/``.if`` until the matching ``.end``, then runs
+    them. Installed as ``session.state["capture"]`` (consulted by ``Session.run_line``)."""
+
+    def __init__(self, first: str):
+        self.lines = [first]
+        self.depth = 1
+
+    def __call__(self, session: Session, text: str) -> bool:
+        self.lines.append(text)
+        for fn in list(session.recorders):
+            fn(text, "")
+        word = _word(strip_comment(text) or "#")[0]
+        if word in (".repeat", ".if"):
+            self.depth += 1
+        elif word == ".end":
+            self.depth -= 1
+        if self.depth == 0:
+            session.state.pop("capture", None)
+            self.run(session)
+        return True
+
+    def run(self, session: Session) -> None:
+        try:
+            nodes = list(Parser(session, "<input>", Path.cwd()).nodes(self.lines))
+        except ScriptSyntaxError as exc:
+            raise ValidationError(str(exc)) from None
+        runner = Runner(session)
+        _run_nodes(runner, nodes)
+        if runner.failed:
+            err = ScriptError("block stopped by an error")
+            err.shown = True  # type: ignore[attr-defined]
+            raise err
+
+
+def _open_block(session: Session, word: str, args: str) -> None:
+    if word == ".repeat":
+        expr.validate(session, parse_repeat(args)[0])
+    else:
+        expr.validate(session, parse_condition(word, args))
+    session.state["capture"] = BlockCollector(f"{word} {args}")
+    if session.interactive:
+        session.out.info("  (collecting lines until .end)")
+
+
+@command(".repeat", ".repeat COUNT [as NAME]", "repeat the following lines until .end",
+         category="script",
+         details="Runs the lines up to the matching .end COUNT times (an expression). With "
+                 "'as NAME' the variable NAME counts 0..COUNT-1 (like ports and motors). "
+                 "Blocks nest.\n"
+                 "  .repeat 3 as i\n  MVP REL, 0, 1000\n  .wait GAP 8, 0 == 1\n  .end")
+def cmd_repeat(session: Session, args: str) -> None:
+    _open_block(session, ".repeat", args)
+
+
+@command(".if", ".if EXPR", "run the following lines (until .elif/.else/.end) if EXPR is true",
+         category="script",
+         details="  .if GIO 0, 0 == 1\n  .echo input 0 is high\n  .else\n  .echo input 0 "
+                 "is low\n  .end")
+def cmd_if(session: Session, args: str) -> None:
+    _open_block(session, ".if", args)
+
+
+def _outside_block(word: str) -> Callable[[Session, str], None]:
+    def handler(session: Session, args: str) -> None:
+        raise ValidationError(f"{word} without an open .repeat or .if block")
+    return handler
+
+
+command(".elif", ".elif EXPR", "inside .if: the next condition", category="script")(
+    _outside_block(".elif"))
+command(".else", ".else", "inside .if: lines run when no condition was true",
+        category="script")(_outside_block(".else"))
+command(".end", ".end", "close a .repeat or .if block", category="script")(
+    _outside_block(".end"))
+
+
+# -- the commands ------------------------------------------------------------------------
+
+def set_onerror(session: Session, args: str, node: Node | None = None) -> None:
+    _check_onerror(session, args)
+    if args.lower() == "off":
+        session.state.pop("script.onerror", None)
+    else:
+        session.state["script.onerror"] = (node or Node("<input>", 0, args), args)
+
+
+@command(".onerror", ".onerror LINE | .onerror off",
+         "in a script: a line to run if the script stops at an error", category="script",
+         details="  .onerror MST 0\nMakes a failed script leave the motor stopped. It runs "
+                 "once, when an error stops the script (not with --keep-going), and is "
+                 "forgotten when the script ends.")
+def cmd_onerror(session: Session, args: str) -> None:
+    if session.state.get("script.depth", 0) == 0:
+        raise ValidationError(".onerror works inside scripts (-f, .source)")
+    set_onerror(session, args)
+
+
+@command(".source", ".source FILE", "run a script file in this session",
+         category="script",
+         details="Lines of the file run as if typed; errors stop it with FILE:LINE. Inside a "
+                 "script the path is relative to that script's folder.")
+def cmd_source(session: Session, args: str) -> None:
+    if not args:
+        raise ValidationError(".source needs a file name")
+    ok = run_source(session, args)
+    if not ok:
+        err = ScriptError(f"{args} stopped by an error")
+        err.shown = True  # type: ignore[attr-defined]  # reported with FILE:LINE already
+        raise err
+
+
+@command(".let", ".let NAME = EXPR", "set a variable (use it as ${NAME} or in expressions)",
+         category="script",
+         details="EXPR is arithmetic, comparisons, and/or/not over numbers, variables and "
+                 "module reads:\n  .let speed = 1000\n  .let p = GAP 1, 0\n"
+                 "  SAP 4, 0, ${speed * 2}\n.let alone lists the variables.")
+def cmd_let(session: Session, args: str) -> None:
+    if not args:
+        _show_variables(session)
+        return
+    name, expression = parse_let(session.expand(args))
+    value = expression.evaluate(expr.SessionContext(session))
+    session.variables[name] = value
+    if session.out.json and session.interactive:
+        session.out.emit({"let": name, "value": value})
+    elif session.interactive:
+        session.out.print(f"{name} = {expr.format_number(value)}", markup=False)
+
+
+def _show_variables(session: Session) -> None:
+    if session.out.json:
+        session.out.emit({"variables": dict(session.variables)})
+        return
+    if not session.variables:
+        session.out.info("no variables (set one with .let NAME = EXPR)")
+    for name, value in sorted(session.variables.items()):
+        session.out.print(f"{name} = {expr.format_number(value)}", markup=False)
+
+
+def check(expression: expr.Expression, ctx: expr.SessionContext) -> tuple[bool, str, str]:
+    """Evaluate a condition: (holds, what the left side was, what the right side was).
+
+    For ``a OP b`` the sides are described as read (``GIO 3, 2 is 1``); for any other
+    condition the reads it made (or its value) stand on the left.
+    """
+    root = expression.root
+    if isinstance(root, expr.Binary) and root.op in expr.COMPARISONS:
+        left, right = root.left.evaluate(ctx), root.right.evaluate(ctx)
+        ok = expr.COMPARISONS[root.op](left, right)
+        rhs = "" if isinstance(root.right, expr.Num) else \
+            f"{_side(root.right, ctx)} is {expr.format_number(right)}"
+        return ok, f"{_side(root.left, ctx)} is {expr.format_number(left)}", rhs
+    value = expression.evaluate(ctx)
+    seen = [f"{k} is {expr.format_number(v)}" for k, v in ctx.trace.items()]
+    return bool(value), ", ".join(seen) or f"value {expr.format_number(value)}", ""
+
+
+def _side(node: expr.Node, ctx: expr.SessionContext) -> str:
+    """A read by the TMCL it sent (``GIO 3, 2`` for ``GIO (port), 2``), else as written."""
+    return node.tmcl(ctx) if isinstance(node, expr.Read) else node.text
+
+
+@command(".expect", ".expect EXPR", "check a condition; the script fails if it is false",
+         category="script",
+         details="  .expect GAP 1, 0 == 5000\n  .expect abs(GAP 1, 0 - ${target}) <= 10\n"
+                 "A failure says what was expected and what was read.")
+def cmd_expect(session: Session, args: str) -> None:
+    if not args:
+        raise ValidationError(".expect needs a condition: .expect GAP 1, 0 == 5000")
+    expression = expr.parse(session.expand(args))
+    ok, left, right = check(expression, expr.SessionContext(session))
+    if not ok:
+        session.stats.checks_failed += 1
+        raise CheckFailed(f"expectation failed: {expression.text} "
+                          f"({left}{', ' + right if right else ''})")
+    session.stats.checks_passed += 1
+    if session.out.json:
+        session.out.emit({"line": f".expect {args}", "check": expression.text, "passed": True})
+    else:
+        session.out.print(f"passed: {expression.text} ({left})", style="tmcl.ok", markup=False)
+
+
+WAIT_OPTIONS = {"timeout": True, "interval": True}
+
+
+@command(".wait", ".wait EXPR [--timeout S] [--interval S]",
+         "poll until a condition holds (default timeout 30 s, interval 0.05 s)",
+         category="script", complete=["--timeout", "--interval"],
+         details="  .wait GAP 8, 0 == 1 --timeout 10\n  .wait RFS STATUS, 0 == 0\n"
+                 "--timeout none waits forever. A timeout is an error that shows the last "
+                 "value read.")
+def cmd_wait(session: Session, args: str) -> None:
+    rest, opts = expr.split_options(args, WAIT_OPTIONS)
+    timeout = expr.option_float(opts, "timeout", WAIT_TIMEOUT, allow_none=True)
+    interval = expr.option_float(opts, "interval", WAIT_INTERVAL, minimum=0.001)
+    assert interval is not None
+    if not rest:
+        raise ValidationError(".wait needs a condition: .wait GAP 8, 0 == 1")
+    expression = expr.parse(session.expand(rest))
+    last = ("", "")
+
+    def holds() -> bool:
+        nonlocal last
+        ok, *last = check(expression, expr.SessionContext(session))
+        return ok
+
+    try:
+        session.client.wait_until(holds, timeout, interval)
+    except TmclTimeoutError:
+        seen = ", ".join(x for x in last if x)
+        raise TmclTimeoutError(f"timed out after {timeout:g} s waiting for {expression.text} "
+                               f"({seen})") from None
+
+
+@command(".sleep", ".sleep SECONDS", "pause (seconds may be a fraction or an expression)",
+         category="script")
+def cmd_sleep(session: Session, args: str) -> None:
+    if not args:
+        raise ValidationError(".sleep needs seconds: .sleep 0.5")
+    seconds = expr.evaluate(session, args)
+    if seconds < 0:
+        raise ValidationError(f".sleep wants seconds >= 0, got {expr.format_number(seconds)}")
+    time.sleep(seconds)
+
+
+def _split_redirect(text: str) -> tuple[str, str | None, str]:
+    """``TEXT > FILE`` / ``TEXT >> FILE`` (outside quotes and ${...}): (text, mode, file)."""
+    quote, brace, cut = None, 0, None
+    for i, ch in enumerate(text):
+        if quote:
+            quote = None if ch == quote else quote
+        elif ch in "\"'":
+            quote = ch
+        elif text.startswith("${", i):
+            brace += 1
+        elif ch == "}" and brace:
+            brace -= 1
+        elif ch == ">" and not brace and cut is None:
+            cut = i
+    if cut is None:
+        return text, None, ""
+    mode = "a" if text.startswith(">>", cut) else "w"
+    target = text[cut + (2 if mode == "a" else 1):].strip()
+    if not target:
+        raise ValidationError(".echo: a file name is needed after '>'")
+    return text[:cut].rstrip(), mode, target
+
+
+def _unquote(text: str) -> str:
+    if len(text) >= 2 and text[0] == text[-1] and text[0] in "\"'":
+        return text[1:-1]
+    return text
+
+
+@command(".echo", ".echo TEXT [> FILE | >> FILE]", "print a line (${...} expanded), or write it "
+         "to a file", category="script",
+         details="  .echo position is ${GAP 1, 0}\n  .echo SAP 4, 0, ${GAP 4, 0} >> restore.tmcl\n"
+                 "'>' replaces the file, '>>' appends; quote text that holds '>'.")
+def cmd_echo(session: Session, args: str) -> None:
+    text, mode, target = _split_redirect(args)
+    line = _unquote(session.expand(text))
+    if mode is None:
+        if session.out.json:
+            session.out.emit({"echo": line})
+        else:
+            session.out.print(line, markup=False)
+        return
+    path = Path(_unquote(session.expand(target))).expanduser()
+    try:
+        with open(path, mode, encoding="utf-8") as fh:
+            fh.write(line + "\n")
+    except OSError as exc:
+        raise ScriptError(f"cannot write {path}: {exc.strerror}") from None
+
+
+# -- recording and history ---------------------------------------------------------------
+
+class Recorder:
+    """Writes typed lines to a script that replays as-is; results become ``//`` comments.
+
+    Failed lines are written commented out (replaying them would fail again), views such as
+    ``.watch`` too (a script would wait in them forever).
+    """
+
+    def __init__(self, session: Session, path: Path, fh: TextIO):
+        self.session = session
+        self.path = path
+        self.fh = fh
+        self.lines = 0
+        self._last: tuple[int, str] | None = None
+
+    def __call__(self, line: str, outcome: str) -> None:
+        s = self.session
+        if s.state.get("script.depth", 0):
+            return  # lines of a running script or block: the line that started it is recorded
+        word = _word(line)[0]
+        if word == ".record":
+            return
+        key = (len(s.history), line)
+        if key == self._last:
+            return  # the same line reported twice (an error reply, then its exception)
+        self._last = key
+        if outcome.startswith("error"):
+            text = f"# {line}    // {outcome}"
+        elif word in _VIEWS:
+            text = f"# {line}    // view, not replayed"
+        elif outcome and _is_read(s, line):
+            text = f"{line}    // = {outcome}"
+        else:
+            text = line
+        self.fh.write(text + "\n")
+        self.fh.flush()
+        self.lines += 1
+
+    def close(self) -> None:
+        self.fh.close()
+
+
+def _is_read(session: Session, line: str) -> bool:
+    r = session.last_result
+    return (r is not None and r.line == line and r.encoded.spec is not None
+            and r.encoded.spec.reads)
+
+
+@command(".record", ".record FILE | .record off", "record what you type to a script file",
+         category="script", complete=["off"],
+         details="Every line typed from now on is written to FILE (results as // comments); "
+                 "replay it with tmclsh -f FILE. '.record off' stops; '.record' shows the state.")
+def cmd_record(session: Session, args: str) -> None:
+    current: Recorder | None = session.state.get("record")  # type: ignore[assignment]
+    if not args:
+        if current is None:
+            session.out.info("not recording (.record FILE starts)")
+        else:
+            session.out.info(f"recording to {current.path} ({current.lines} lines)")
+        return
+    if current is not None:
+        session.recorders.remove(current) if current in session.recorders else None
+        current.close()
+        session.state.pop("record", None)
+        session.out.info(f"recorded {current.lines} lines to {current.path}")
+    if args.strip().lower() == "off":
+        if current is None:
+            session.out.info("not recording")
+        return
+    path = Path(_unquote(args.strip())).expanduser()
+    try:
+        fh = open(path, "w", encoding="utf-8")
+    except OSError as exc:
+        raise ScriptError(f"cannot write {path}: {exc.strerror}") from None
+    client = session.client
+    module = client.module.name if client.module else "unknown module"
+    fh.write(f"# recorded by tmclsh {datetime.now():%Y-%m-%d %H:%M} "
+             f"({module}, address {client.address})\n# replay: tmclsh -f {path}\n")
+    fh.flush()
+    rec = Recorder(session, path, fh)
+    session.state["record"] = rec
+    session.recorders.append(rec)
+    session.out.info(f"recording to {path} (.record off to stop)")
+
+
+@command(".history", ".history [N]", "show the lines of this session (the last N)",
+         category="script")
+def cmd_history(session: Session, args: str) -> None:
+    lines = session.history[:-1] if session.history[-1:] and \
+        _word(session.history[-1])[0] == ".history" else list(session.history)
+    first = 1
+    if args:
+        n = expr.option_int({"N": args.strip()}, "N", None, minimum=1)
+        assert n is not None
+        first = max(1, len(lines) - n + 1)
+        lines = lines[-n:]
+    if session.out.json:
+        session.out.emit({"history": lines})
+        return
+    for i, line in enumerate(lines, first):
+        session.out.print(f"{i:4d}  {line}", markup=False)

@@ -1,0 +1,296 @@
+"""Frames for people: the protocol-analyser view behind ``--trace``, ``.trace`` and ``.decode``.
+
+A trace line is ``time  direction  hex  decoding``::
+
+    14:02:07.113 tx> 01 06 04 00 00 00 00 00 0b  GAP 4, 0  // MaxPositioningSpeed
+    14:02:07.114 <rx 02 01 64 06 00 00 03 e8 58  100 ok, value 1000
+
+and goes to stderr, so stdout (results, ``--json``) stays clean. The trace subscribes to the
+client as a tracer (``client.add_tracer``); it never reads the transport.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from .. import asm
+from .. import instructions as isa
+from ..errors import FrameError
+from ..modules import Module
+from ..protocol import (INSTRUCTION_LEN, SERIAL_FRAME_LEN, VERSION_STRING_LEN, Instruction,
+                        Reply, Request, Status, checksum, parse_hex, status_text, to_signed32)
+
+if TYPE_CHECKING:
+    from .session import Session
+
+_STATE_KEY = "trace"
+_ARROW = {"tx": "tx>", "rx": "<rx", "drop": "!! ", "note": "-- "}
+
+
+# -- describing instructions and replies -------------------------------------------------
+
+def describe_instruction(ins: Instruction, module: Module | None) -> str:
+    """``GAP 4, 0  // MaxPositioningSpeed``, ``136 type 0: firmware version``."""
+    if ins.opcode >= 128:
+        ctl = isa.control(ins.opcode)
+        if ctl is not None:
+            fields = [f"{name} {v}" for name, v in (("type", ins.type), ("motor", ins.motor),
+                                                    ("value", ins.signed_value)) if v]
+            return f"{ins.opcode} {_control_name(ins.opcode)}" + (
+                f" ({', '.join(fields)})" if fields else "")
+    text, comment = asm.disassemble_instruction(ins, module)
+    return f"{text}  // {comment}" if comment else text
+
+
+def param_for(ins: Instruction, module: Module | None):
+    if module is None:
+        return None
+    spec = isa.by_opcode(ins.opcode)
+    if spec is None:
+        return None
+    if spec.type_kind == "axis_param":
+        return module.axis(ins.type)
+    if spec.type_kind == "global_param":
+        return module.glob(ins.type, ins.motor)
+    return None
+
+
+def describe_reply(reply: Reply, module: Module | None = None,
+                   request: Request | None = None) -> str:
+    """``100 ok, value 1000 (MaxPositioningSpeed = 1000 pps)``, ``event: ...``."""
+    if reply.version is not None:
+        return f"version {reply.version!r}"
+    if reply.stored is not None:
+        return f"stored instruction: {describe_instruction(reply.stored, module)}"
+    if reply.is_event:
+        motors = [str(m) for m in range(8) if reply.value >> m & 1]
+        return f"event: target position reached, motor {', '.join(motors) or '-'}"
+    spec = isa.by_opcode(reply.opcode)
+    what = spec.mnemonic if spec else (f"{reply.opcode}" if reply.opcode < 128 else
+                                        f"{reply.opcode} ({_control_name(reply.opcode)})")
+    text = f"{reply.status} {status_text(reply.status)}, {what} value {reply.value}"
+    if request is not None and request.opcode == reply.opcode and reply.ok:
+        from .render import value_text
+
+        param = param_for(request.instruction, module)
+        if param is not None and spec is not None and spec.reads:
+            text += f" ({param.name} = {value_text(reply.value, param)})"
+    return text
+
+
+def _control_name(opcode: int) -> str:
+    ctl = isa.control(opcode)
+    return ctl.name.split(" (")[0] if ctl else "unknown command"
+
+
+# -- trace lines -------------------------------------------------------------------------
+
+def timestamp(now: float | None = None) -> str:
+    now = time.time() if now is None else now
+    return time.strftime("%H:%M:%S", time.localtime(now)) + f".{int(now * 1000) % 1000:03d}"
+
+
+def format_frame(direction: str, raw: bytes, decoded: object, module: Module | None = None,
+                 request: Request | None = None, now: float | None = None):
+    """One trace line as a rich ``Text`` (``str()`` of it is the plain line)."""
+    from rich.text import Text
+
+    line = Text()
+    line.append(timestamp(now), style="tmcl.trace.time")
+    line.append(f" {_ARROW.get(direction, direction)} ", style=f"tmcl.trace.{direction}"
+                if direction in _ARROW else "")
+    if raw:
+        line.append(bytes(raw).hex(" "), style="tmcl.trace.hex")
+        line.append("  ")
+    if isinstance(decoded, Request):
+        line.append(describe_instruction(decoded.instruction, module))
+        if direction == "tx" and decoded.address is not None:
+            line.append(f"  @{decoded.address}", style="tmcl.note")
+    elif isinstance(decoded, Reply):
+        style = "" if decoded.ok else "tmcl.status.error"
+        line.append(describe_reply(decoded, module, request), style=style)
+    elif decoded is not None:
+        line.append(str(decoded), style="tmcl.trace.note")
+    return line
+
+
+class Tracer:
+    """A client tracer that prints each frame to stderr (through the session's Output)."""
+
+    def __init__(self, session: Session):
+        self.session = session
+        self.last_request: Request | None = None
+
+    def __call__(self, direction: str, raw: bytes, decoded: object) -> None:
+        if direction == "tx" and isinstance(decoded, Request):
+            self.last_request = decoded
+        line = format_frame(direction, raw, decoded, self.session.client.module,
+                            self.last_request if direction == "rx" else None)
+        self.session.out.err.print(line, highlight=False, markup=False, soft_wrap=True)
+
+
+def enable_trace(session: Session) -> None:
+    """Print every frame the client sends and receives on stderr (``--trace``, ``.trace on``)."""
+    if trace_enabled(session):
+        return
+    session.state[_STATE_KEY] = session.client.add_tracer(Tracer(session))
+
+
+def disable_trace(session: Session) -> None:
+    unsubscribe = session.state.pop(_STATE_KEY, None)
+    if callable(unsubscribe):
+        unsubscribe()
+
+
+def trace_enabled(session: Session) -> bool:
+    return callable(session.state.get(_STATE_KEY))
+
+
+# -- .decode: bytes pasted from elsewhere ------------------------------------------------
+
+HINTS = {"request": "request", "req": "request", "tx": "request",
+         "reply": "reply", "rx": "reply",
+         "memory": "memory", "mem": "memory", "134": "memory",
+         "version": "version", "136": "version"}
+
+
+@dataclass
+class Reading:
+    """One interpretation of some bytes: what they would be, and how plausible it is."""
+
+    kind: str  # request | reply | version | memory | instruction | can-request | can-reply
+    text: str
+    checksum: str = ""  # "ok", "wrong: 0x12, should be 0x34", or "" (no checksum in layout)
+    plausible: bool = True
+
+    def lines(self) -> list[str]:
+        head = f"{self.kind}: {self.text}"
+        return [head] + ([f"  checksum {self.checksum}"] if self.checksum else [])
+
+
+def _checksum_text(frame: bytes) -> str:
+    want = checksum(frame[:-1])
+    if frame[-1] == want:
+        return f"ok ({frame[-1]:#04x})"
+    return f"WRONG: {frame[-1]:#04x}, should be {want:#04x}"
+
+
+def _known_opcode(op: int) -> bool:
+    return isa.by_opcode(op) is not None or isa.control(op) is not None
+
+
+def _instruction_plausible(ins: Instruction, module: Module | None) -> bool:
+    if not _known_opcode(ins.opcode):
+        return False
+    if ins.opcode >= 128:
+        return True
+    text, comment = asm.disassemble_instruction(ins, module)
+    return not text[:1].isdigit()  # the raw form means fields the command does not take
+
+
+def _read_request(frame: bytes, module: Module | None) -> Reading:
+    ins = Instruction.from_bytes(frame[1:8])
+    return Reading("request", f"to address {frame[0]}: {describe_instruction(ins, module)}",
+                   _checksum_text(frame), _instruction_plausible(ins, module))
+
+
+def _read_reply(frame: bytes, module: Module | None) -> Reading:
+    value = to_signed32(int.from_bytes(frame[4:8], "big"))
+    reply = Reply(frame[0], frame[1], frame[2], frame[3], value)
+    ok_status = frame[2] in {int(s) for s in Status}
+    text = f"from address {frame[1]} to host {frame[0]}: {describe_reply(reply, module)}"
+    return Reading("reply", text, _checksum_text(frame), ok_status and _known_opcode(frame[3]))
+
+
+def _read_memory(frame: bytes, module: Module | None) -> Reading:
+    ins = Instruction.from_bytes(frame[1:8])
+    return Reading("134 reply (program memory)",
+                   f"to host {frame[0]}: stored {describe_instruction(ins, module)}",
+                   _checksum_text(frame), _instruction_plausible(ins, module))
+
+
+def _read_version(frame: bytes) -> Reading | None:
+    body = frame[1:1 + VERSION_STRING_LEN]
+    if len(body) != VERSION_STRING_LEN or not all(32 <= b < 127 for b in body):
+        return None
+    return Reading("136 reply (version string)",
+                   f"to host {frame[0]}: {body.decode('ascii')!r} (no checksum in this layout)")
+
+
+def decode_frame(frame: bytes, module: Module | None, hint: str | None = None) -> list[Reading]:
+    """The plausible readings of one 9-byte serial frame (or 7/8-byte CAN data)."""
+    if len(frame) == INSTRUCTION_LEN:
+        ins = Instruction.from_bytes(frame)
+        if hint == "reply":
+            value = to_signed32(int.from_bytes(frame[3:7], "big"))
+            reply = Reply(0, frame[0], frame[1], frame[2], value)
+            return [Reading("CAN reply data", f"from address {frame[0]}: {describe_reply(reply, module)}")]
+        return [Reading("instruction (CAN request data or program memory)",
+                        describe_instruction(ins, module), "", _instruction_plausible(ins, module))]
+    if len(frame) == VERSION_STRING_LEN and all(32 <= b < 127 for b in frame):
+        return [Reading("136 reply on CAN (version string)", repr(frame.decode("ascii")))]
+    if len(frame) != SERIAL_FRAME_LEN:
+        raise FrameError(f"{len(frame)} bytes: a serial frame is {SERIAL_FRAME_LEN} bytes, "
+                         f"CAN data {INSTRUCTION_LEN}")
+    if hint == "request":
+        return [_read_request(frame, module)]
+    if hint == "reply":
+        return [_read_reply(frame, module)]
+    if hint == "memory":
+        return [_read_memory(frame, module)]
+    if hint == "version":
+        v = _read_version(frame)
+        if v is None:
+            raise FrameError("bytes 2..9 are not printable ASCII: not a version string")
+        return [v]
+    readings = [_read_reply(frame, module), _read_request(frame, module)]
+    version = _read_version(frame)
+    if version is not None and checksum(frame[:-1]) != frame[-1]:
+        readings.insert(0, version)
+    good = [r for r in readings if r.plausible]
+    if not good:
+        return readings + [_read_memory(frame, module)]
+    return good
+
+
+def _parse_hex(text: str) -> bytes:
+    """Pasted bytes in any usual spelling; runs of digits split into pairs (``0231 33``)."""
+    cleaned = re.sub(r"0[xX]|\$|[,;:]", " ", text)
+    parts: list[str] = []
+    for tok in cleaned.split():
+        if len(tok) > 2 and len(tok) % 2 == 0:
+            parts += [tok[i:i + 2] for i in range(0, len(tok), 2)]
+        else:
+            parts.append(tok)
+    if any(len(p) > 2 for p in parts):
+        return parse_hex(text)  # the protocol's parser names the problem
+    try:
+        return bytes(int(p, 16) for p in parts)
+    except ValueError:
+        raise FrameError(f"not hex bytes: {text.strip()!r}") from None
+
+
+def decode_hex(text: str, module: Module | None) -> list[tuple[bytes, list[Reading]]]:
+    """``.decode [request|reply|memory|version] HEX``: every frame in the pasted bytes."""
+    words = text.split()
+    hint = HINTS.get(words[0].lower()) if words else None
+    if hint is not None:
+        text = text.split(None, 1)[1] if len(words) > 1 else ""
+    data = _parse_hex(text)
+    if not data:
+        raise FrameError("no bytes given: .decode 01 06 04 00 00 00 00 00 0b")
+    if len(data) in (INSTRUCTION_LEN, VERSION_STRING_LEN, SERIAL_FRAME_LEN):
+        frames = [data]
+    elif len(data) % SERIAL_FRAME_LEN == 0:
+        frames = [data[i:i + SERIAL_FRAME_LEN] for i in range(0, len(data), SERIAL_FRAME_LEN)]
+    else:
+        raise FrameError(f"{len(data)} bytes: expected 9-byte serial frames (or 7/8 bytes of "
+                         "CAN data)")
+    return [(f, decode_frame(f, module, hint)) for f in frames]
+
+
+__all__ = ["enable_trace", "disable_trace", "trace_enabled", "format_frame", "decode_hex",
+           "decode_frame", "describe_instruction", "describe_reply"]

@@ -1,0 +1,586 @@
+"""``.watch``: poll expressions over module reads and show them live.
+
+    .watch pos=GAP 1, 0; speed=GAP 3, 0; in0=GIO 0, 0 --interval 0.1 --until "pos >= 5000"
+
+* ``poll(session, items)`` reads once (identical reads within a sample are sent once) and
+  gives a ``Sample``; ``WatchState.add(sample)`` folds it into a frozen ``Snapshot``;
+  ``render(snapshot) -> Table`` is pure (no bus I/O) and runs at a fixed refresh rate.
+* On a terminal: a rich ``Live`` table with value, min, max, rate of change, a sparkline of
+  recent values, changed values highlighted. Under ``--json`` or when stdout is not a
+  terminal: one JSON object per sample, ``{"t": seconds, "values": {name: number}}``
+  (``null`` for a value whose read failed in that sample).
+* Keys (when stdin is a terminal; cbreak mode, restored on exit): ``s`` or space sends MST to
+  every motor and keeps watching; ``q`` or Esc ends the watch. Ctrl-C ends the watch too and
+  does NOT stop the motors. Ctrl-C is taken between reads, so a transaction is never cut in
+  half; a second Ctrl-C interrupts at once.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import select
+import signal
+import sys
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from datetime import datetime
+from pathlib import Path
+from typing import TYPE_CHECKING, TextIO
+
+from ..errors import TmclError, ValidationError
+from . import expr, plot, script
+from .commands import command
+
+if TYPE_CHECKING:
+    from .session import Session
+
+Number = int | float
+
+DEFAULT_INTERVAL = 0.1  # seconds between samples
+REFRESH_HZ = 10  # table redraws per second, at most
+SPARK_WIDTH = 24  # samples shown in the sparkline
+RATE_WINDOW = 1.0  # seconds over which the change rate is measured
+LOG_LIMIT = 200_000  # samples kept for .plot
+_BLOCKS = "▁▂▃▄▅▆▇█"
+_KEY_HELP = "s/space: stop motors  ·  q/Ctrl-C: end watch (motors keep running)"
+STOP_KEYS = "sS "  # send MST to every motor, keep watching
+QUIT_KEYS = "qQ"  # end the watch (so do Esc and Ctrl-C)
+
+
+# -- what is watched ---------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Item:
+    name: str
+    expression: expr.Expression
+
+
+def parse_items(session: Session, text: str) -> list[Item]:
+    """``pos=GAP 1, 0; GIO 0, 0`` -> items; a name is optional (the expression is its name)."""
+    import re
+
+    items: list[Item] = []
+    for part in text.split(";"):
+        part = part.strip()
+        if not part:
+            continue
+        m = re.match(r"([A-Za-z_][A-Za-z0-9_]*)\s*=(?!=)(.*)$", part, re.DOTALL)
+        name, body = (m.group(1), m.group(2)) if m else (None, part)
+        expression = expr.parse(session.expand(body))
+        expr.validate(session, expression)
+        name = name or expression.text
+        if any(i.name == name for i in items):
+            raise ValidationError(f"{name!r} is watched twice")
+        items.append(Item(name, expression))
+    if not items:
+        raise ValidationError("nothing to watch")
+    return items
+
+
+def default_items(session: Session) -> list[Item]:
+    motors = min(session.module.motors, 3)
+    text = "; ".join(f"pos{m}=GAP ActualPosition, {m}; speed{m}=GAP ActualSpeed, {m}"
+                     for m in range(motors))
+    return parse_items(session, text)
+
+
+# -- samples and snapshots -----------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Sample:
+    t: float  # seconds since the watch started
+    values: dict[str, Number | None]
+    errors: dict[str, str] = field(default_factory=dict)
+
+
+def poll(session: Session, items: Sequence[Item], t: float) -> Sample:
+    """One sample: every item evaluated once; a read failing shows as None plus its error."""
+    ctx = expr.SessionContext(session, cache={})
+    values: dict[str, Number | None] = {}
+    errors: dict[str, str] = {}
+    for item in items:
+        try:
+            values[item.name] = item.expression.evaluate(ctx)
+        except TmclError as exc:
+            values[item.name] = None
+            errors[item.name] = str(exc)
+    return Sample(t, values, errors)
+
+
+@dataclass(frozen=True)
+class Series:
+    name: str
+    value: Number | None
+    previous: Number | None
+    minimum: Number | None
+    maximum: Number | None
+    rate: float | None  # units per second
+    history: tuple[Number, ...]
+    error: str | None = None
+
+    @property
+    def changed(self) -> bool:
+        return self.previous is not None and self.value is not None and self.value != self.previous
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    series: tuple[Series, ...]
+    t: float = 0.0
+    samples: int = 0
+    rate_hz: float = 0.0
+    interval: float = DEFAULT_INTERVAL
+    note: str = ""
+    keys: bool = False
+    failed_reads: int = 0
+
+
+class WatchState:
+    """Folds samples in (min/max, recent history, a log for .plot); ``snapshot()`` freezes
+    the current state for rendering, which happens at the refresh rate, not per sample."""
+
+    def __init__(self, items: Sequence[Item], interval: float, keys: bool = False):
+        """``keys``: whether key presses are read (the table then shows the key help)."""
+        self.names = [i.name for i in items]
+        self.interval = interval
+        self.keys = keys
+        self.samples = 0
+        self.failed_reads = 0
+        self.note = ""
+        self.first_t: float | None = None
+        self.last: dict[str, Number | None] = {n: None for n in self.names}
+        self.prev: dict[str, Number | None] = {n: None for n in self.names}
+        self.min: dict[str, Number | None] = {n: None for n in self.names}
+        self.max: dict[str, Number | None] = {n: None for n in self.names}
+        self.errors: dict[str, str | None] = {n: None for n in self.names}
+        self.recent: dict[str, deque[tuple[float, Number]]] = {
+            n: deque(maxlen=max(SPARK_WIDTH, 512)) for n in self.names}
+        self.log = plot.Log(list(self.names))
+        self.t = 0.0
+
+    def add(self, sample: Sample) -> None:
+        self.samples += 1
+        self.t = sample.t
+        if self.first_t is None:
+            self.first_t = sample.t
+        for n in self.names:
+            v = sample.values.get(n)
+            self.errors[n] = sample.errors.get(n)
+            if v is None:
+                self.failed_reads += 1
+                continue
+            self.prev[n], self.last[n] = self.last[n], v
+            self.min[n] = v if self.min[n] is None else min(self.min[n], v)  # type: ignore[type-var]
+            self.max[n] = v if self.max[n] is None else max(self.max[n], v)  # type: ignore[type-var]
+            self.recent[n].append((sample.t, v))
+        self.log.add(sample.t, sample.values)
+        if len(self.log.t) > LOG_LIMIT:
+            half = LOG_LIMIT // 2
+            del self.log.t[:half]
+            for vals in self.log.values.values():
+                del vals[:half]
+
+    def rate(self, name: str) -> float | None:
+        recent = self.recent[name]
+        if len(recent) < 2:
+            return None
+        t1, v1 = recent[-1]
+        t0, v0 = recent[-2]
+        for t, v in reversed(recent):
+            if t1 - t > RATE_WINDOW:
+                break
+            t0, v0 = t, v
+        return None if t1 == t0 else (v1 - v0) / (t1 - t0)
+
+    def snapshot(self) -> Snapshot:
+        span = self.t - (self.first_t or 0.0)
+        hz = (self.samples - 1) / span if span > 0 else 0.0
+        series = tuple(
+            Series(n, self.last[n] if self.errors[n] is None else None, self.prev[n],
+                   self.min[n], self.max[n], self.rate(n),
+                   tuple(v for _, v in list(self.recent[n])[-SPARK_WIDTH:]), self.errors[n])
+            for n in self.names)
+        return Snapshot(series, self.t, self.samples, hz, self.interval, self.note, self.keys,
+                        self.failed_reads)
+
+
+# -- rendering (pure) ----------------------------------------------------------------------
+
+def sparkline(values: Sequence[Number], width: int = SPARK_WIDTH) -> str:
+    """Unicode blocks scaled between the shown values' min and max (flat: a middle block)."""
+    vals = [v for v in values if v is not None and math.isfinite(v)][-width:]
+    if not vals:
+        return ""
+    lo, hi = min(vals), max(vals)
+    if hi == lo:
+        return _BLOCKS[3] * len(vals)
+    top = len(_BLOCKS) - 1
+    return "".join(_BLOCKS[round((v - lo) / (hi - lo) * top)] for v in vals)
+
+
+def _fmt(value: Number | None) -> str:
+    if value is None:
+        return "—"
+    return expr.format_number(value)
+
+
+def _fmt_rate(rate: float | None) -> str:
+    if rate is None:
+        return ""
+    if rate == 0:
+        return "0"
+    if abs(rate) >= 100:
+        return f"{rate:+.0f}"
+    if abs(rate) >= 1:
+        return f"{rate:+.1f}"
+    return f"{rate:+.3g}"
+
+
+def render(snapshot: Snapshot):
+    """The live table for one snapshot (pure: no I/O)."""
+    from rich.table import Table
+    from rich.text import Text
+
+    title = (f"watch  {snapshot.samples} samples  t={snapshot.t:.1f} s  "
+             f"{snapshot.rate_hz:.1f}/s (interval {snapshot.interval:g} s)")
+    caption_parts = []
+    if snapshot.note:
+        caption_parts.append(snapshot.note)
+    if snapshot.failed_reads:
+        caption_parts.append(f"{snapshot.failed_reads} failed reads")
+    caption_parts.append(_KEY_HELP if snapshot.keys else "Ctrl-C: end watch (motors keep running)")
+    # one caption line per note, and wide enough that the key help never wraps
+    table = Table(title=title, caption="\n".join(caption_parts), title_justify="left",
+                  caption_justify="left", expand=False,
+                  min_width=max(len(title), *(len(c) for c in caption_parts)))
+    table.add_column("name", style="tmcl.name", no_wrap=True)
+    table.add_column("value", justify="right", no_wrap=True)
+    table.add_column("min", justify="right", style="tmcl.note", no_wrap=True)
+    table.add_column("max", justify="right", style="tmcl.note", no_wrap=True)
+    table.add_column("rate /s", justify="right", no_wrap=True)
+    table.add_column("recent", no_wrap=True, min_width=SPARK_WIDTH)
+    for s in snapshot.series:
+        if s.error is not None:
+            value = Text("error", style="tmcl.error")
+        else:
+            value = Text(_fmt(s.value), style="tmcl.changed" if s.changed else "tmcl.value")
+        table.add_row(s.name, value, _fmt(s.minimum), _fmt(s.maximum), _fmt_rate(s.rate),
+                      Text(sparkline(s.history), style="tmcl.ok"))
+    return table
+
+
+# -- keys ----------------------------------------------------------------------------------
+
+class Keys:
+    """Single key presses from a terminal stdin, in cbreak mode (Ctrl-C still signals).
+
+    Inactive (``wait`` just sleeps) when stdin is not a terminal or termios is missing.
+    """
+
+    def __init__(self, stream: TextIO | None = None):
+        self.stream = stream if stream is not None else sys.stdin
+        self.fd: int | None = None
+        self._saved = None
+
+    def __enter__(self) -> Keys:
+        try:
+            import termios
+            import tty
+
+            if self.stream is None or not self.stream.isatty():
+                return self
+            fd = self.stream.fileno()
+            self._saved = termios.tcgetattr(fd)
+            tty.setcbreak(fd, termios.TCSANOW)
+            self.fd = fd
+        except (ImportError, OSError, ValueError, AttributeError):
+            self.fd = None
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.fd is not None and self._saved is not None:
+            import termios
+
+            termios.tcsetattr(self.fd, termios.TCSADRAIN, self._saved)
+        self.fd = None
+
+    @property
+    def active(self) -> bool:
+        return self.fd is not None
+
+    def wait(self, timeout: float) -> str:
+        """Wait up to ``timeout`` seconds; return the keys pressed (possibly several)."""
+        if self.fd is None:
+            if timeout > 0:
+                time.sleep(timeout)
+            return ""
+        ready, _, _ = select.select([self.fd], [], [], max(0.0, timeout))
+        if not ready:
+            return ""
+        try:
+            return os.read(self.fd, 64).decode("utf-8", errors="replace")
+        except OSError:
+            return ""
+
+
+class _Interrupt:
+    """Turns the first Ctrl-C into a flag checked between reads; the second raises."""
+
+    def __init__(self) -> None:
+        self.requested = False
+        self._old = None
+
+    def __enter__(self) -> _Interrupt:
+        if threading.current_thread() is threading.main_thread():
+            self._old = signal.signal(signal.SIGINT, self._handle)
+        return self
+
+    def _handle(self, signum, frame) -> None:
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+
+    def __exit__(self, *exc: object) -> None:
+        if self._old is not None:
+            signal.signal(signal.SIGINT, self._old)
+
+
+# -- the command ---------------------------------------------------------------------------
+
+WATCH_OPTIONS = {"interval": True, "count": True, "until": True, "csv": True}
+
+
+def parse_args(session: Session, args: str, *, names: bool = True):
+    """``.watch`` arguments -> (items, interval, count, until, csv path); no bus I/O.
+
+    ``names=False`` (a script's check before it runs) skips checking that ``--until`` names
+    only watched values or variables: variables set earlier in the script do not exist yet.
+    """
+    rest, opts = expr.split_options(args, WATCH_OPTIONS)
+    interval = expr.option_float(opts, "interval", DEFAULT_INTERVAL)
+    count = expr.option_int(opts, "count", None, minimum=1)
+    assert interval is not None
+    items = parse_items(session, rest) if rest else default_items(session)
+    until = None
+    if "until" in opts:
+        until = expr.parse(session.expand(str(opts["until"])))
+        known = {i.name for i in items} | set(session.variables)
+        unknown = [n for n in until.names() if n not in known]
+        if unknown and names:
+            raise ValidationError(f"--until uses {unknown[0]!r}, which is neither watched nor a "
+                                  f"variable (watched: {', '.join(i.name for i in items)})")
+        expr.validate(session, until)
+    csv_path = Path(str(opts["csv"])).expanduser() if "csv" in opts else None
+    return items, interval, count, until, csv_path
+
+
+def _check(session: Session, args: str) -> None:
+    parse_args(session, script.blank_substitutions(args), names=False)
+
+
+script.CHECKS[".watch"] = _check
+
+
+@dataclass
+class WatchResult:
+    samples: int
+    elapsed: float
+    reason: str  # count, until, key, interrupt, pipe
+    stopped_motors: list[int] = field(default_factory=list)
+
+
+class _Csv:
+    def __init__(self, path: Path, names: Sequence[str]):
+        try:
+            self.fh = open(path, "w", newline="", encoding="utf-8", buffering=1)
+        except OSError as exc:
+            raise ValidationError(f"cannot write {path}: {exc.strerror}") from None
+        self.writer = csv.writer(self.fh)
+        self.writer.writerow(["time", "t", *names])
+        self.names = names
+
+    def write(self, sample: Sample) -> None:
+        self.writer.writerow([datetime.now().isoformat(timespec="milliseconds"),
+                              f"{sample.t:.4f}",
+                              *("" if sample.values.get(n) is None else sample.values[n]
+                                for n in self.names)])
+
+    def close(self) -> None:
+        self.fh.close()
+
+
+def run_watch(session: Session, items: Sequence[Item], *, interval: float = DEFAULT_INTERVAL,
+              count: int | None = None, until: expr.Expression | None = None,
+              csv_path: Path | None = None, live: bool | None = None,
+              keys: Keys | None = None,
+              emit: Callable[[Mapping[str, object]], None] | None = None) -> WatchResult:
+    """Poll ``items`` every ``interval`` s until ``count`` samples, ``until`` holds, a key or
+    Ctrl-C; show a live table (``live``) or emit one JSON object per sample."""
+    out = session.out
+    if live is None:
+        live = not out.json and out.console.is_terminal
+    w = _Watch(session, items, interval, count, until, emit or out.emit)
+    sink = _Csv(csv_path, [i.name for i in items]) if csv_path is not None else None
+    w.sink = sink
+    try:
+        with (keys if keys is not None else Keys()) as w.keys, _Interrupt() as w.intr:
+            w.state.keys = w.keys.active
+            session.state["watch.log"] = w.state.log
+            w.view = _Live(session, w.state) if live else None
+            try:
+                w.result.reason = w.run()
+            finally:
+                if w.view is not None:
+                    w.view.close()
+    finally:
+        if sink is not None:
+            sink.close()
+    w.result.samples = w.state.samples
+    w.result.elapsed = time.monotonic() - w.start
+    return w.result
+
+
+class _Live:
+    def __init__(self, session: Session, state: WatchState):
+        from rich.live import Live
+
+        self.state = state
+        self.live = Live(render(state.snapshot()), console=session.out.console,
+                         auto_refresh=False, transient=False)
+        self.live.start()
+        self.last = 0.0
+
+    def update(self, force: bool = False) -> None:
+        """Redraw from a fresh snapshot, at most REFRESH_HZ times a second."""
+        now = time.monotonic()
+        if force or now - self.last >= 1.0 / REFRESH_HZ:
+            self.live.update(render(self.state.snapshot()), refresh=True)
+            self.last = now
+
+    def close(self) -> None:
+        self.live.update(render(self.state.snapshot()), refresh=True)
+        self.live.stop()
+
+
+class _Watch:
+    """The polling loop: sample, show, check the end conditions, wait (reading keys)."""
+
+    def __init__(self, session: Session, items: Sequence[Item], interval: float,
+                 count: int | None, until: expr.Expression | None,
+                 emit: Callable[[Mapping[str, object]], None]):
+        self.session, self.items, self.interval = session, items, interval
+        self.count, self.until, self.emit = count, until, emit
+        self.state = WatchState(items, interval)
+        self.result = WatchResult(0, 0.0, "interrupt")
+        self.sink: _Csv | None = None
+        self.view: _Live | None = None
+        self.keys = Keys()
+        self.intr = _Interrupt()
+        self.start = time.monotonic()
+
+    def run(self) -> str:
+        """Returns why the watch ended: count, until, key, interrupt or pipe."""
+        next_at = self.start
+        while not self.intr.requested:
+            sample = poll(self.session, self.items, time.monotonic() - self.start)
+            if self.state.samples == 0 and len(sample.errors) == len(self.items):
+                # nothing readable at all: an error, not a watch of dashes
+                raise TmclError(next(iter(sample.errors.values())))
+            self.state.add(sample)
+            if self.sink is not None:
+                self.sink.write(sample)
+            if self.view is not None:
+                self.view.update()
+            else:
+                try:
+                    self.emit({"t": round(sample.t, 4), "values": sample.values})
+                except BrokenPipeError:
+                    return "pipe"
+            if self.count is not None and self.state.samples >= self.count:
+                return "count"
+            if self.until is not None and self._until(sample):
+                return "until"
+            # the next sample is due one interval after this one began; polling slower than
+            # the interval starts the next at once, without a backlog of samples
+            next_at = max(next_at + self.interval, time.monotonic())
+            ended = self._wait(next_at)
+            if ended is not None:
+                return ended
+        return "interrupt"
+
+    def _until(self, sample: Sample) -> bool:
+        values = {k: v for k, v in sample.values.items() if v is not None}
+        try:
+            return bool(self.until.evaluate(expr.SessionContext(self.session, extra=values)))
+        except expr.ExprError as exc:
+            raise ValidationError(f"--until: {exc}") from None
+
+    def _wait(self, next_at: float) -> str | None:
+        """Sleep until ``next_at`` in short slices, acting on keys and Ctrl-C meanwhile."""
+        while True:
+            left = next_at - time.monotonic()
+            if left > 0 or self.keys.active:
+                pressed = self.keys.wait(min(max(left, 0.0), 0.05))
+                if pressed == "\x1b":  # Esc alone (not the start of an arrow key's sequence)
+                    return "key"
+                for key in pressed:  # several keys may arrive at once: act on each
+                    if key in STOP_KEYS:
+                        self._stop_motors()
+                    elif key in QUIT_KEYS:
+                        return "key"
+            if self.intr.requested:
+                return "interrupt"
+            if time.monotonic() >= next_at:
+                return None
+
+    def _stop_motors(self) -> None:
+        stopped = self.session.client.stop_all()
+        self.result.stopped_motors = stopped
+        self.state.note = (f"MST sent to motor{'s' if len(stopped) != 1 else ''} "
+                           f"{', '.join(map(str, stopped)) or 'none'} at "
+                           f"{time.monotonic() - self.start:.1f} s")
+        if self.view is not None:
+            self.view.update(force=True)
+        else:
+            self.session.out.err.print(f"watch: {self.state.note}", style="tmcl.warn",
+                                       markup=False)
+
+
+@command(".watch", ".watch [NAME=]EXPR; ... [--interval S] [--count N] [--until EXPR] "
+         "[--csv FILE]",
+         "poll values live: value, min, max, rate, recent history", category="watch",
+         complete=["--interval", "--count", "--until", "--csv"],
+         details="  .watch pos=GAP 1, 0; speed=GAP 3, 0; in0=GIO 0, 0\n"
+                 "  .watch rev=GAP 1, 0 / 51200 --until \"rev >= 2\" --csv run.csv\n"
+                 "Keys: s or space stops all motors (MST), q ends the watch. Ctrl-C ends the "
+                 "watch and does NOT stop the motors. Under --json or in a pipe, each sample "
+                 "is a JSON object {\"t\": s, \"values\": {...}}. With no expressions: the "
+                 "position and speed of each motor. .plot draws the last watch.")
+def cmd_watch(session: Session, args: str) -> None:
+    items, interval, count, until, csv_path = parse_args(session, args)
+    result = run_watch(session, items, interval=interval, count=count, until=until,
+                       csv_path=csv_path)
+    rate = result.samples / result.elapsed if result.elapsed > 0 else 0.0
+    text = f"watch: {result.samples} samples in {result.elapsed:.1f} s ({rate:.1f}/s)"
+    if result.reason == "interrupt":
+        text += "; ended by Ctrl-C (motors were NOT stopped)"
+    elif result.reason == "until":
+        text += f"; {until} became true"
+    if result.stopped_motors:
+        text += f"; MST sent to motor(s) {', '.join(map(str, result.stopped_motors))}"
+    if csv_path is not None:
+        text += f"; logged to {csv_path}"
+    if out_is_pipe(session):
+        session.out.err.print(text, style="tmcl.note", markup=False)
+    else:
+        session.out.info(text)
+
+
+def out_is_pipe(session: Session) -> bool:
+    """Samples went to stdout as JSON: keep status text on stderr."""
+    return session.out.json or not session.out.console.is_terminal

@@ -1,0 +1,918 @@
+"""The simulated module as a byte device: framing, addressing, dispatch, faults and time.
+
+``Simulator.write`` takes whatever a host sends (binary frames or ASCII text) and processes it
+synchronously on the caller's thread: a request is answered before ``write`` returns, unless a
+telegram pause (GP 75) or a fault delay holds the reply back. One background thread advances
+the clock: motion, the stored program, interrupts, the 138 event and delayed replies. All
+state sits behind one lock, held only for short, bounded steps.
+
+Module time runs ``speed`` times faster than real time (motion, WAIT ticks, timers, tick
+timer); communication timing (telegram pause, fault delay, frame gap, heartbeat) is real time.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import random
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+
+from .. import instructions as isa
+from ..asm import Line, encode, parse_line
+from ..errors import AsmError
+from ..modules import Module, load
+from ..protocol import (
+    FACTORY_DEFAULT_KEY, SERIAL_FRAME_LEN, Control, Instruction, Reply, Request, Status,
+    checksum, to_signed32,
+)
+from .ascii import Echo, LineDiscipline, address_char, echo_mode, reply_line
+from .commands import Commands
+from .model import AXIS, EEPROM_MAGIC, GLOBAL, Coordinates, IoState, Live, ParamStore
+from .motion import SWITCHES, Axis
+from .vm import WAIT, Vm
+
+log = logging.getLogger(__name__)
+
+SERIAL = "serial"
+CAN = "can"
+
+# Command 136 type 1: the TMCM-1640 manual puts the version first (version low, version high,
+# type low, type high); the TMCM-1311 manual the type first (05 1F, version low, version high).
+# The TMCM-351 manual prints no layout; it gets the TMCM-1311 one.
+VERSION_FIRST = frozenset({"TMCM-1640"})
+
+IRQ = isa.interrupts()
+RUN_FROM_CURRENT, RUN_FROM_ADDRESS = 0, 1  # command 129 types
+VERSION_STRING, VERSION_BINARY = 0, 1  # command 136 types
+
+
+@dataclass
+class Faults:
+    """Switches a test flips to make the link misbehave; counters count down per reply.
+
+    ``drop_next``: the next N requests are executed but their replies are not sent.
+    ``lose_next``: the next N requests addressed to the module are lost before it sees them
+    (not executed, no reply). ``corrupt_next``: one bit flipped in a random byte (never the
+    last one) of the next N replies. ``truncate_next``: only the first half of the next N
+    replies is sent. ``garbage``: bytes sent once, just before the next reply. ``delay``:
+    seconds added before every reply. The 138 event counts as a reply.
+    """
+
+    corrupt_next: int = 0
+    drop_next: int = 0
+    delay: float = 0.0
+    garbage: bytes = b""
+    truncate_next: int = 0
+    lose_next: int = 0
+    rng: random.Random = field(default_factory=lambda: random.Random(0), repr=False)
+
+
+@dataclass
+class Answer:
+    status: int = Status.OK
+    value: int = 0
+    version: str | None = None
+    stored: Instruction | None = None
+    silent: bool = False  # 137: no reply at all
+    after: Callable[[], None] | None = None  # runs once the reply is queued
+
+
+class Simulator:
+    """One simulated TMCL module (see the package docstring and README for its decisions)."""
+
+    FRAME_GAP = 0.05  # s of silence after which a partial binary frame is discarded
+    TICK = 0.005  # s between background steps while something moves or runs
+    IDLE_TICK = 0.05
+    MAX_STEP = 0.01  # s of module time per physics/program step
+    MAX_STEPS = 50  # steps per advance; beyond that the steps get longer
+    INSTRUCTIONS_PER_SECOND = 10_000  # stored-program execution rate (module time)
+    MAX_CREDIT = 200
+
+    def __init__(self, module: str | Module = "TMCM-1311", address: int = 1, *,
+                 host_address: int = 2, ascii_startup: bool | None = None,
+                 autostart: bool = True, speed: float = 1.0):
+        self.module = load(module) if isinstance(module, str) else module
+        for name, value in (("address", address), ("host_address", host_address)):
+            if not 0 <= value <= 255:
+                raise ValueError(f"{name} must be 0..255, got {value}")
+        if ascii_startup and not self.module.ascii_mode:
+            raise ValueError(f"{self.module.name} has no ASCII interface")
+        if speed <= 0:
+            raise ValueError("speed must be positive")
+        overrides = {"SerialAddress": address, "SerialHostAddress": host_address}
+        if ascii_startup is not None:
+            overrides["ASCIIMode"] = int(ascii_startup)
+        self._default_address, self._default_host = address, host_address
+        self.store = ParamStore(self.module, overrides)
+        self.io = IoState(self.module)
+        self.coords = Coordinates(self.module.motors, self.module.coordinates)
+        self.axes = [Axis() for _ in range(self.module.motors)]
+        self.commands = Commands(self.module, self.store, self.io, self.coords, self.axes)
+        self.vm = Vm(self.module.program_memory, self, self.module.interrupts)
+        self.faults = Faults()
+        self.on_output: Callable[[bytes], None] | None = None
+        self.on_can_output: Callable[[int, bytes], None] | None = None
+
+        self._lock = threading.RLock()
+        self._out_lock = threading.Lock()
+        self._rx_cond = threading.Condition()
+        self._can_cond = threading.Condition()
+        self._outbuf = bytearray()
+        self._canbuf: deque[tuple[int, bytes]] = deque()
+        self._outq: deque[tuple[float, str, object]] = deque()
+        self._last_due = 0.0
+        self._rx = bytearray()
+        self._rx_time = 0.0
+        self._line = LineDiscipline()
+        self._ascii = False
+        self._events: list[tuple[int, str, int]] = []
+        self._speed = float(speed)
+        self._mono0 = time.monotonic()
+        self._sim0 = 0.0
+        self._t = 0.0
+        self._tick_base = 0.0
+        self._credit = 0.0
+        self._timer_due: dict[int, float | None] = {}
+        self._prev: dict[str, object] = {}
+        self._last_command = time.monotonic()
+        self._heartbeat_fired = False
+        self._register_global_live()
+        with self._lock:
+            self._power_up(autostart)
+
+        self._closed = threading.Event()
+        self._wake = threading.Event()
+        self._idle = True
+        self._thread = threading.Thread(target=self._run, name=f"sim-{self.module.name}",
+                                        daemon=True)
+        self._thread.start()
+
+    def __repr__(self) -> str:
+        return f"Simulator({self.module.name!r}, address={self.address})"
+
+    def __enter__(self) -> Simulator:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- public state ---------------------------------------------------------------------------
+    @property
+    def address(self) -> int:
+        return self.store.get(GLOBAL, "SerialAddress", default=self._default_address)
+
+    @property
+    def host_address(self) -> int:
+        return self.store.get(GLOBAL, "SerialHostAddress", default=self._default_host)
+
+    @property
+    def ascii_active(self) -> bool:
+        return self._ascii
+
+    @property
+    def program_state(self) -> int:
+        with self._lock:
+            self._advance()
+            return int(self.vm.state)
+
+    @property
+    def pc(self) -> int:
+        with self._lock:
+            self._advance()
+            return self.vm.pc
+
+    @property
+    def speed(self) -> float:
+        return self._speed
+
+    @speed.setter
+    def speed(self, value: float) -> None:
+        if value <= 0:
+            raise ValueError("speed must be positive")
+        with self._lock:
+            self._sim0 = self.now()
+            self._mono0 = time.monotonic()
+            self._speed = float(value)
+
+    def now(self) -> float:
+        """Module time in seconds (runs ``speed`` times faster than real time)."""
+        return self._sim0 + (time.monotonic() - self._mono0) * self._speed
+
+    # -- the serial byte stream -----------------------------------------------------------------
+    def write(self, data: bytes) -> None:
+        """Bytes from the host; never blocks on the reply."""
+        if not data:
+            return
+        with self._lock:
+            self._advance()
+            self._receive(bytes(data))
+            self._check_events()
+            busy = self._busy()
+        self._drain()
+        if (busy and self._idle) or self._outq:
+            self._wake.set()
+
+    def read(self, timeout: float | None = 0.0) -> bytes:
+        """Bytes the module sent: waits up to ``timeout`` for the first, returns all there are."""
+        self._drain()
+        with self._rx_cond:
+            if not self._outbuf and timeout != 0:
+                self._rx_cond.wait_for(lambda: bool(self._outbuf), timeout)
+            data = bytes(self._outbuf)
+            self._outbuf.clear()
+        return data
+
+    # -- CAN --------------------------------------------------------------------------------------
+    @property
+    def can_id(self) -> int:
+        return self.store.get(GLOBAL, "CANID", default=self.address)
+
+    @property
+    def can_reply_id(self) -> int:
+        return self.store.get(GLOBAL, "CANReplyID", default=self.host_address)
+
+    def can_write(self, arbitration_id: int, data: bytes) -> None:
+        """A CAN frame from the bus; frames for other ids (or shorter than 7 bytes) are ignored."""
+        with self._lock:
+            self._advance()
+            second = self.store.get(GLOBAL, "CANSecondaryAddress")
+            if arbitration_id != self.can_id and not (second and arbitration_id == second):
+                return
+            if len(data) < 7:
+                log.debug("CAN frame with %d data bytes ignored", len(data))
+                return
+            if not self._lose():
+                self._handle(Request.from_can(self.address, bytes(data[:7])), CAN)
+            self._check_events()
+            busy = self._busy()
+        self._drain()
+        if (busy and self._idle) or self._outq:
+            self._wake.set()
+
+    def can_read(self, timeout: float | None = 0.0) -> tuple[int, bytes] | None:
+        self._drain()
+        with self._can_cond:
+            if not self._canbuf and timeout != 0:
+                self._can_cond.wait_for(lambda: bool(self._canbuf), timeout)
+            return self._canbuf.popleft() if self._canbuf else None
+
+    # -- test hooks -------------------------------------------------------------------------------
+    def set_input(self, bank: int, port: int, value: int) -> None:
+        """Drive an input pin (digital bank 0 or analog bank 1, as the data file lists them)."""
+        with self._lock:
+            self._advance()
+            before = self._pin_levels()
+            self.io.set_input(bank, port, value)
+            self._pin_edges(before, self._pin_levels())
+        self._wake.set()
+
+    def set_switch(self, motor: int, which: str, active: bool | None) -> None:
+        """Force a switch level ("left" | "right" | "ref"); None hands it back to its position."""
+        sw = self._switch(motor, which)
+        with self._lock:
+            self._advance()
+            sw.forced = active
+            self.axes[motor].settle()
+        self._wake.set()
+
+    def set_switch_position(self, motor: int, which: str, position: float | None) -> None:
+        """Place a switch: left/ref are active at and below ``position``, right at and above."""
+        sw = self._switch(motor, which)
+        with self._lock:
+            self._advance()
+            sw.forced = None
+            sw.position = None if position is None else float(position)
+            self.axes[motor].settle()
+        self._wake.set()
+
+    BENCH_REFERENCE_POSITION = -20000
+
+    def bench_layout(self) -> Simulator:
+        """Place a reference switch below position 0 on every motor, as on a bench rig.
+
+        The shell's built-in simulator and ``tmclsh sim`` use this layout so that a homing
+        script (RFS) finds a switch the way it would on real hardware; a bare ``Simulator``
+        has no switch placed, which is what most tests want.
+        """
+        if self.module.has_instruction(isa.Opcode.RFS):
+            for motor in range(self.module.motors):
+                self.set_switch_position(motor, "ref", self.BENCH_REFERENCE_POSITION)
+        return self
+
+    def _switch(self, motor: int, which: str):
+        if not 0 <= motor < self.module.motors:
+            raise ValueError(f"{self.module.name} has no motor {motor}")
+        if which not in SWITCHES:
+            raise ValueError(f"switch must be one of {', '.join(SWITCHES)}, got {which!r}")
+        return self.axes[motor].switches[which]
+
+    def param(self, kind: str, number: int, motor_or_bank: int = 0) -> int:
+        """A parameter's current value, read past its access flags (tests)."""
+        kind = _kind(kind)
+        with self._lock:
+            self._advance()
+            status, value = self.store.read(kind, number, motor_or_bank, check_access=False)
+        if status != Status.OK:
+            raise KeyError(f"{self.module.name} has no {kind} parameter {number} "
+                           f"({'bank' if kind == GLOBAL else 'motor'} {motor_or_bank})")
+        return value
+
+    def stored_param(self, kind: str, number: int, motor_or_bank: int = 0) -> int | None:
+        """The EEPROM copy of a parameter (None when it has none)."""
+        with self._lock:
+            return self.store.eeprom.get((_kind(kind), motor_or_bank, number))
+
+    def load_program(self, instructions: Iterable[Instruction], start: int = 0) -> int:
+        """Write instructions straight into program memory (tests); returns the count."""
+        with self._lock:
+            n = 0
+            for n, ins in enumerate(instructions, 1):
+                self.vm.memory[start + n - 1] = ins
+            return n
+
+    def reset(self) -> None:
+        """Power cycle: RAM from EEPROM, program stopped (GP 77 auto start honoured), mode
+        from GP 67 bit 0, pending replies and events gone."""
+        with self._lock:
+            self._power_up(True)
+        self._wake.set()
+
+    def close(self) -> None:
+        self._closed.set()
+        self._wake.set()
+        if self._thread is not threading.current_thread():
+            self._thread.join(timeout=2)
+
+    # -- power ----------------------------------------------------------------------------------
+    def _power_up(self, autostart: bool) -> None:
+        magic = self.store.by_name(GLOBAL, "EEPROMMagic")
+        if magic is not None and self.store.eeprom.get((GLOBAL, magic.bank, magic.number)) \
+                != EEPROM_MAGIC:
+            log.info("EEPROM magic is not $E4: restoring factory defaults")
+            self.store.factory_reset()
+        self.store.power_up()
+        for port in self.module.io:
+            if port.kind == "digital_out":
+                self.io.values[(port.bank, port.port)] = port.default or 0
+        for axis in self.axes:
+            axis.power_cycle()
+        keep = self.store.get(GLOBAL, "CoordinateStorage") == 1
+        for m in range(self.module.motors):
+            for n in range(self.coords.count):
+                self.coords.ram[m][n] = self.coords.eeprom[m][n] if keep and n else 0
+        self.vm.power_up()
+        self._events.clear()
+        self._rx.clear()
+        self._line.clear()
+        with self._out_lock:
+            self._outq.clear()
+        self._ascii = self.module.ascii_mode and bool(self.store.get(GLOBAL, "ASCIIMode") & 1)
+        self._t = self.now()
+        self._tick_base = self._t
+        self._timer_due.clear()
+        self._snapshot()
+        if autostart and self.store.get(GLOBAL, "AutoStartMode") == 1:
+            self.vm.run(0)
+
+    def _factory_reset(self) -> None:
+        self.store.factory_reset()
+        for row in self.coords.eeprom:
+            row[:] = [0] * len(row)
+        self._power_up(True)
+
+    def _register_global_live(self) -> None:
+        vm = self.vm
+
+        def set_tick(bank: int, value: int) -> int:
+            self._tick_base = self._t - value / 1000.0
+            return Status.OK
+
+        self.store.add_live(GLOBAL, "ApplicationStatus", Live(lambda b: int(vm.state)))
+        self.store.add_live(GLOBAL, "DownloadMode", Live(lambda b: int(vm.download)))
+        self.store.add_live(GLOBAL, "ProgramCounter", Live(lambda b: vm.pc))
+        self.store.add_live(GLOBAL, "TickTimer", Live(
+            lambda b: int((self._t - self._tick_base) * 1000) & 0xFFFFFFFF, set_tick))
+        self.store.add_live(GLOBAL, "RandomNumber", Live(lambda b: random.randrange(2**31)))
+
+    # -- receiving --------------------------------------------------------------------------------
+    def _receive(self, data: bytes) -> None:
+        while data:
+            data = self._receive_ascii(data) if self._ascii else self._receive_binary(data)
+
+    def _lose(self) -> bool:
+        if self.faults.lose_next > 0:
+            self.faults.lose_next -= 1
+            return True
+        return False
+
+    def _receive_binary(self, data: bytes) -> bytes:
+        now = time.monotonic()
+        if self._rx and now - self._rx_time > self.FRAME_GAP:
+            log.debug("discarding %d bytes of a partial frame after a gap", len(self._rx))
+            self._rx.clear()
+        self._rx_time = now
+        self._rx += data
+        rx = self._rx
+        while len(rx) >= SERIAL_FRAME_LEN:
+            frame = bytes(rx[:SERIAL_FRAME_LEN])
+            me = self.address
+            if checksum(frame[:8]) == frame[8]:
+                del rx[:SERIAL_FRAME_LEN]
+                if frame[0] != me:
+                    continue  # another module's frame on a shared line
+                if not self._lose():
+                    self._handle(Request.from_bytes(frame), SERIAL)
+                if self._ascii:
+                    rest = bytes(rx)
+                    rx.clear()
+                    return rest
+            elif frame[0] == me and not self._frame_ahead(me):
+                del rx[:SERIAL_FRAME_LEN]
+                if not self._lose():
+                    self._last_command = time.monotonic()
+                    self._send_reply(SERIAL, me, frame[1], Answer(Status.WRONG_CHECKSUM))
+            else:
+                del rx[0]  # garbage or a misaligned frame: slide one byte to resynchronise
+        return b""
+
+    def _frame_ahead(self, me: int) -> bool:
+        """A valid frame for this module starts further on: the head is garbage, not a frame."""
+        rx = self._rx
+        for k in range(1, len(rx) - SERIAL_FRAME_LEN + 1):
+            if rx[k] == me and checksum(rx[k:k + 8]) == rx[k + 8]:
+                return True
+        return False
+
+    def _receive_ascii(self, data: bytes) -> bytes:
+        me = address_char(self.address)
+        mode = self._echo_mode()
+        for i, byte in enumerate(data):
+            echo, line = self._line.feed(byte, me, mode)
+            if echo:
+                self._queue(SERIAL, echo, reply=False)
+            if line is None:
+                continue
+            self._ascii_line(line)
+            if not self._ascii:
+                return data[i + 1:]
+            me, mode = address_char(self.address), self._echo_mode()
+        return b""
+
+    def _echo_mode(self) -> Echo:
+        return echo_mode(self.store.get(GLOBAL, "ASCIIMode"))
+
+    # -- ASCII commands ---------------------------------------------------------------------------
+    def _ascii_line(self, text: str) -> None:
+        self._last_command = time.monotonic()
+        self._heartbeat_fired = False
+        if self._lose():
+            return
+        address = self.address
+        word = text.strip().upper()
+        after = None
+        if word == "BIN":
+            ans = Answer()
+            after = self._leave_ascii
+        elif word == "RUN":
+            ans = Answer(Status.COMMAND_NOT_AVAILABLE) if self.vm.download else Answer()
+            if not self.vm.download:
+                self.vm.reset()
+                self.vm.run(0)
+        elif word == "STOP":
+            self.vm.stop()
+            ans = Answer()
+        else:
+            ans = self._ascii_command(text.strip())
+        if not self._suppressed():
+            self._queue(SERIAL, reply_line(self.host_address, address, ans.status,
+                                           to_signed32(ans.value)), reply=True)
+        for fn in (ans.after, after):
+            if fn is not None:
+                fn()
+
+    def _leave_ascii(self) -> None:
+        self._ascii = False
+        self._line.clear()
+        self._rx.clear()
+
+    def _ascii_command(self, text: str) -> Answer:
+        try:
+            line = parse_line(text)
+        except AsmError:
+            return Answer(Status.INVALID_COMMAND)
+        if line.mnemonic is None or line.label or line.constant or line.mnemonic[0].isdigit():
+            return Answer(Status.INVALID_COMMAND)
+        spec = isa.by_mnemonic(line.mnemonic)
+        if spec is None:
+            return Answer(Status.INVALID_COMMAND)
+        if not spec.on(self.module.name) or not spec.ascii or not spec.direct:
+            return Answer(Status.COMMAND_NOT_AVAILABLE)
+        try:
+            enc = encode(line, self.module, direct=True, ascii=True)
+        except ValueError as exc:  # AsmError (and ValidationError) are ValueErrors
+            return Answer(_ascii_error_status(line, spec, getattr(exc, "col", None)))
+        ans = self._dispatch(enc.instruction, SERIAL)
+        return Answer(ans.status, ans.value, after=ans.after)
+
+    # -- requests ---------------------------------------------------------------------------------
+    def _handle(self, req: Request, channel: str) -> None:
+        self._last_command = time.monotonic()
+        self._heartbeat_fired = False
+        ans = self._dispatch(req.instruction, channel)
+        if not ans.silent:
+            self._send_reply(channel, req.address, req.opcode, ans)
+        if ans.after is not None:
+            ans.after()
+
+    def _suppressed(self) -> bool:
+        return self.store.get(GLOBAL, "SuppressReply") == 1
+
+    def _send_reply(self, channel: str, module: int, opcode: int, ans: Answer) -> None:
+        if self._suppressed():
+            return
+        reply = Reply(self.host_address, module, ans.status, opcode, to_signed32(ans.value),
+                      version=ans.version, stored=ans.stored)
+        if channel == CAN:
+            self._queue(CAN, (self.can_reply_id, reply.to_can()), reply=True)
+        else:
+            self._queue(SERIAL, reply.to_bytes(), reply=True)
+
+    def _dispatch(self, ins: Instruction, channel: str) -> Answer:
+        op = ins.opcode
+        if op >= Control.STOP_APPLICATION:
+            return self._control(ins, channel)
+        spec = isa.by_opcode(op)
+        if spec is None:
+            return Answer(Status.INVALID_COMMAND)
+        if not spec.on(self.module.name):
+            return Answer(Status.COMMAND_NOT_AVAILABLE)
+        if self.vm.download:
+            if self.vm.download_addr >= self.vm.size:
+                return Answer(Status.INVALID_VALUE)
+            self.vm.memory[self.vm.download_addr] = ins
+            self.vm.download_addr += 1
+            return Answer(Status.LOADED)
+        if not spec.direct:
+            return Answer(Status.COMMAND_NOT_AVAILABLE)
+        status, value = self.commands.execute(ins)
+        return Answer(status, value)
+
+    def _control(self, ins: Instruction, channel: str) -> Answer:
+        op, vm = ins.opcode, self.vm
+        if not self.module.has_control(op):
+            return Answer(Status.INVALID_COMMAND)
+        if vm.download and op not in (Control.START_DOWNLOAD, Control.QUIT_DOWNLOAD,
+                                      Control.READ_MEMORY, Control.GET_STATUS,
+                                      Control.GET_VERSION):
+            return Answer(Status.COMMAND_NOT_AVAILABLE)
+        value = ins.signed_value
+        if op == Control.STOP_APPLICATION:
+            vm.stop()
+        elif op == Control.RUN_APPLICATION:
+            if ins.type == RUN_FROM_CURRENT:
+                vm.run()
+            elif ins.type == RUN_FROM_ADDRESS:
+                if not 0 <= value < vm.size:
+                    return Answer(Status.INVALID_VALUE)
+                vm.run(value)
+            else:
+                return Answer(Status.WRONG_TYPE)
+        elif op == Control.STEP_APPLICATION:
+            vm.step()
+        elif op == Control.RESET_APPLICATION:
+            vm.reset()
+        elif op == Control.START_DOWNLOAD:
+            if not 0 <= value < vm.size:
+                return Answer(Status.INVALID_VALUE)
+            vm.stop()
+            vm.download, vm.download_addr = True, value
+        elif op == Control.QUIT_DOWNLOAD:
+            vm.download = False
+        elif op == Control.READ_MEMORY:
+            if not 0 <= value < vm.size:
+                return Answer(Status.INVALID_VALUE)
+            return Answer(stored=vm.read(value))
+        elif op == Control.GET_STATUS:
+            return Answer(value=int(vm.state))
+        elif op == Control.GET_VERSION:
+            if ins.type == VERSION_STRING:
+                return Answer(version=self.module.version_string)
+            if ins.type == VERSION_BINARY:
+                return Answer(value=self._version_binary())
+            return Answer(Status.WRONG_TYPE)
+        elif op == Control.FACTORY_DEFAULT:
+            if value != FACTORY_DEFAULT_KEY:
+                return Answer(Status.INVALID_VALUE)
+            return Answer(silent=True, after=self._factory_reset)
+        elif op == Control.TARGET_REACHED_EVENT:
+            if not 0 <= value < self.module.motors:
+                return Answer(Status.INVALID_VALUE)
+            self._events.append((value, channel, self.address))
+            return Answer(value=1 << value)
+        elif op == Control.ENTER_ASCII:
+            if channel != SERIAL or not self.module.ascii_mode:
+                return Answer(Status.COMMAND_NOT_AVAILABLE)
+            return Answer(after=self._enter_ascii)
+        return Answer()
+
+    def _enter_ascii(self) -> None:
+        self._ascii = True
+        self._line.clear()
+
+    def _version_binary(self) -> int:
+        fid, ver = self.module.firmware_id & 0xFFFF, self.module.firmware_version & 0xFFFF
+        if self.module.name in VERSION_FIRST:
+            layout = (ver & 0xFF, ver >> 8, fid & 0xFF, fid >> 8)
+        else:
+            layout = (fid >> 8, fid & 0xFF, ver & 0xFF, ver >> 8)
+        return int.from_bytes(bytes(layout), "big")
+
+    # -- VM host --------------------------------------------------------------------------------
+    def command(self, ins: Instruction, accu: int | None) -> tuple[int, int]:
+        return self.commands.execute(ins, accu)
+
+    def condition(self, kind: int, motor: int) -> bool | None:
+        if not 0 <= motor < self.module.motors:
+            return True
+        axis = self.axes[motor]
+        if kind == WAIT["POS"]:
+            return axis.reached
+        if kind == WAIT["REFSW"]:
+            return axis.switch("ref")
+        if kind == WAIT["LIMSW"]:
+            return axis.switch("left") or axis.switch("right")
+        if kind == WAIT["RFS"]:
+            return not axis.rfs
+        return True
+
+    # -- time ---------------------------------------------------------------------------------------
+    def _busy(self) -> bool:
+        return (self.vm.active or bool(self._events)
+                or any(a.moving for a in self.axes))
+
+    def _advance(self) -> None:
+        now = self.now()
+        dt = now - self._t
+        if dt <= 0:
+            return
+        if not self._busy():
+            self._t = now
+            self._snapshot()
+            return
+        n = min(self.MAX_STEPS, max(1, math.ceil(dt / self.MAX_STEP)))
+        h = dt / n
+        limits = self._limits()
+        for _ in range(n):
+            for axis, lim in zip(self.axes, limits):
+                if axis.moving:
+                    axis.advance(h, lim)
+            self._t += h
+            self._interrupt_sources()
+            if self.vm.active:
+                self._credit = min(self._credit + h * self.INSTRUCTIONS_PER_SECOND,
+                                   self.MAX_CREDIT)
+                ran = self.vm.tick(int(self._credit))
+                self._credit -= ran
+                if ran:
+                    limits = self._limits()  # the program may have changed speeds
+            self._check_events()
+
+    def _limits(self):
+        return [self.commands.limits(m) for m in range(self.module.motors)]
+
+    def _check_events(self) -> None:
+        if not self._events:
+            return
+        waiting = []
+        for motor, channel, module in self._events:
+            if self.axes[motor].reached:
+                self._send_reply(channel, module, Control.TARGET_REACHED_EVENT,
+                                 Answer(Status.EVENT, 1 << motor))
+            else:
+                waiting.append((motor, channel, module))
+        self._events = waiting
+
+    # -- interrupt sources (TMCM-1311 §5.6) ---------------------------------------------------
+    def _pin_levels(self) -> dict[int, int]:
+        return {p.port: self.io.get(0, p.port) for p in self.io.ports(0, ("digital_in",))}
+
+    @staticmethod
+    def _edge(config: int, old: bool, new: bool) -> bool:
+        return old != new and (config == 3 or (config == 1 and new) or (config == 2 and not new))
+
+    def _config(self, irq: int) -> int:
+        return self.store.read(GLOBAL, irq, 3, check_access=False)[1]
+
+    def _pin_edges(self, before: dict[int, int], after: dict[int, int]) -> None:
+        if not self.module.interrupts:
+            return
+        for port, new in after.items():
+            irq = IRQ["TI_PIN0"] + port
+            if port < 8 and self._edge(self._config(irq), bool(before.get(port)), bool(new)):
+                self.vm.raise_interrupt(irq)
+
+    def _snapshot(self) -> None:
+        axis = self.axes[0]
+        self._prev = {"reached": axis.reached, "left": axis.switch("left"),
+                      "right": axis.switch("right")}
+
+    def _interrupt_sources(self) -> None:
+        if not self.module.interrupts:
+            return
+        vm, t = self.vm, self._t
+        for name in ("TI_TIMER0", "TI_TIMER1", "TI_TIMER2"):
+            irq = IRQ[name]
+            period = self._config(irq) / 1000.0
+            due = self._timer_due.get(irq)
+            if period <= 0:
+                self._timer_due[irq] = None
+            elif due is None:
+                self._timer_due[irq] = t + period
+            elif t >= due - 1e-9:
+                vm.raise_interrupt(irq)
+                due += period
+                self._timer_due[irq] = due if due > t else t + period
+        axis, prev = self.axes[0], self._prev
+        if axis.reached and not prev.get("reached"):
+            vm.raise_interrupt(IRQ["TI_TARGET"])
+        for side, name in (("left", "TI_STOPL"), ("right", "TI_STOPR")):
+            level = axis.switch(side)
+            if self._edge(self._config(IRQ[name]), bool(prev.get(side)), level):
+                vm.raise_interrupt(IRQ[name])
+        self._snapshot()
+
+    # -- output ---------------------------------------------------------------------------------
+    def _queue(self, channel: str, payload: object, *, reply: bool) -> None:
+        delay = 0.0
+        if reply:
+            f = self.faults
+            if f.drop_next > 0:
+                f.drop_next -= 1
+                return
+            payload = self._apply_faults(channel, payload)
+            delay = f.delay
+            if channel == SERIAL:
+                delay += self.store.get(GLOBAL, "TelegramPauseTime") / 1000.0
+        due = max(time.monotonic() + delay, self._last_due)
+        self._last_due = due
+        self._outq.append((due, channel, payload))
+
+    def _apply_faults(self, channel: str, payload: object) -> object:
+        f = self.faults
+        if channel == CAN:
+            can_id, data = payload  # type: ignore[misc]
+            data = self._mangle(data)
+            if f.garbage:
+                self._outq.append((self._last_due, CAN, (can_id, f.garbage[:8])))
+                f.garbage = b""
+            return can_id, data
+        data = self._mangle(payload)  # type: ignore[arg-type]
+        if f.garbage:
+            data, f.garbage = f.garbage + data, b""
+        return data
+
+    def _mangle(self, data: bytes) -> bytes:
+        f = self.faults
+        if f.corrupt_next > 0 and data:
+            f.corrupt_next -= 1
+            buf = bytearray(data)
+            i = f.rng.randrange(max(1, len(buf) - 1))
+            buf[i] ^= 1 << f.rng.randrange(8)
+            data = bytes(buf)
+        if f.truncate_next > 0:
+            f.truncate_next -= 1
+            data = data[:len(data) // 2]
+        return data
+
+    def _drain(self) -> None:
+        with self._out_lock:
+            now = time.monotonic()
+            while self._outq and self._outq[0][0] <= now:
+                _, channel, payload = self._outq.popleft()
+                self._deliver(channel, payload)
+
+    def _deliver(self, channel: str, payload: object) -> None:
+        try:
+            if channel == CAN:
+                can_id, data = payload  # type: ignore[misc]
+                cb = self.on_can_output
+                if cb is not None:
+                    cb(can_id, data)
+                    return
+                with self._can_cond:
+                    self._canbuf.append((can_id, data))
+                    self._can_cond.notify_all()
+                return
+            cb_serial = self.on_output
+            if cb_serial is not None:
+                cb_serial(payload)  # type: ignore[arg-type]
+                return
+            with self._rx_cond:
+                self._outbuf += payload  # type: ignore[operator]
+                self._rx_cond.notify_all()
+        except Exception:  # a broken consumer must not kill the module
+            log.exception("delivering output failed")
+
+    # -- background thread --------------------------------------------------------------------
+    def _heartbeat(self) -> None:
+        limit = self.store.get(GLOBAL, "SerialHeartbeat")
+        if limit > 0 and not self._heartbeat_fired and \
+                time.monotonic() - self._last_command > limit / 1000.0:
+            log.info("serial heartbeat timeout: motors stopped")
+            self._heartbeat_fired = True
+            for axis in self.axes:
+                axis.stop()
+
+    def _run(self) -> None:
+        while not self._closed.is_set():
+            try:
+                with self._lock:
+                    self._advance()
+                    self._check_events()
+                    self._heartbeat()
+                    busy = self._busy()
+                self._drain()
+            except Exception:
+                log.exception("simulator step failed")
+                busy = False
+            timeout = self.TICK if busy else self.IDLE_TICK
+            try:
+                timeout = min(timeout, max(0.0, self._outq[0][0] - time.monotonic()))
+            except IndexError:
+                pass
+            self._idle = not busy
+            self._wake.wait(timeout)
+            self._wake.clear()
+
+
+def _kind(kind: str) -> str:
+    k = kind.lower()
+    if k in ("axis", "ap", "a"):
+        return AXIS
+    if k in ("global", "gp", "g"):
+        return GLOBAL
+    raise ValueError(f"parameter kind must be 'axis' or 'global', got {kind!r}")
+
+
+def _ascii_error_status(line: Line, spec: isa.InstructionSpec, col: int | None) -> int:
+    """The status a line the shared parser refused gets: the field the error points at."""
+    slots = list(spec.fields) + [f for f in ("type", "motor", "value") if f not in spec.fields]
+    ops = line.operands
+    if col is not None and ops and col >= ops[0].col:
+        idx = max(i for i, op in enumerate(ops) if op.col <= col)
+        if idx >= len(slots):
+            return Status.INVALID_VALUE
+        return Status.WRONG_TYPE if slots[idx] == "type" else Status.INVALID_VALUE
+    missing = spec.fields[len(ops):]
+    if missing:
+        return Status.WRONG_TYPE if "type" in missing else Status.INVALID_VALUE
+    return Status.WRONG_TYPE  # access refused (read-only written, ...) like the binary path
+
+
+class SimBus:
+    """Several simulators on one RS485 line: each answers only its own address."""
+
+    def __init__(self, simulators: list[Simulator]):
+        self.simulators = list(simulators)
+        self.on_output: Callable[[bytes], None] | None = None
+        self._cond = threading.Condition()
+        self._buf = bytearray()
+        self._deliver_lock = threading.Lock()
+        for sim in self.simulators:
+            sim.on_output = self._deliver
+
+    def _deliver(self, data: bytes) -> None:
+        with self._deliver_lock:
+            cb = self.on_output
+            if cb is not None:
+                cb(data)
+                return
+            with self._cond:
+                self._buf += data
+                self._cond.notify_all()
+
+    def write(self, data: bytes) -> None:
+        for sim in self.simulators:
+            sim.write(data)
+
+    def read(self, timeout: float | None = 0.0) -> bytes:
+        with self._cond:
+            if not self._buf and timeout != 0:
+                self._cond.wait_for(lambda: bool(self._buf), timeout)
+            data = bytes(self._buf)
+            self._buf.clear()
+        return data
+
+    def close(self) -> None:
+        for sim in self.simulators:
+            sim.close()
+
+    def __enter__(self) -> SimBus:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

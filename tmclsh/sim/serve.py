@@ -1,0 +1,303 @@
+"""Expose a simulated module where an unmodified client can reach it: a pty, a TCP port or a
+python-can bus. ``run`` is the blocking entry behind ``tmclsh sim``.
+
+Each server is one thread that blocks in ``select``/``recv`` and hands bytes to the
+simulator; replies are pushed back through the simulator's ``on_output`` callback on the
+thread that produced them, so a request/reply round trip involves no polling and no sleeps.
+"""
+
+from __future__ import annotations
+
+import errno
+import logging
+import os
+import select
+import signal
+import socket
+import sys
+import threading
+import tty
+from typing import Any
+
+from .device import SimBus, Simulator
+
+log = logging.getLogger(__name__)
+
+Target = Simulator | SimBus
+
+
+class _Server:
+    def __init__(self, target: Target):
+        self.target = target
+        self._closed = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def _start(self, name: str) -> None:
+        self._thread = threading.Thread(target=self._loop, name=name, daemon=True)
+        self._thread.start()
+
+    def _loop(self) -> None:  # pragma: no cover - overridden
+        raise NotImplementedError
+
+    def _join(self) -> None:
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=2)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:  # pragma: no cover - overridden
+        raise NotImplementedError
+
+
+class PtyServer(_Server):
+    """A pseudo-terminal whose slave end (``path``) behaves like the module's serial port."""
+
+    def __init__(self, target: Target):
+        super().__init__(target)
+        self.master, self._slave = os.openpty()
+        tty.setraw(self._slave)  # no echo, no line editing, no CR/LF translation
+        self.path = os.ttyname(self._slave)
+        os.set_blocking(self.master, False)
+        self._wake_r, self._wake_w = os.pipe()
+        self._write_lock = threading.Lock()
+        target.on_output = self._output
+        self._start(f"sim-pty-{self.path}")
+
+    def _output(self, data: bytes) -> None:
+        with self._write_lock:
+            view = memoryview(data)
+            while view:
+                try:
+                    n = os.write(self.master, view)
+                except BlockingIOError:
+                    # nobody reads the port: what a serial line does is drop the bytes
+                    log.debug("pty output buffer full: %d bytes dropped", len(view))
+                    return
+                except OSError as exc:
+                    if self._closed.is_set():
+                        return
+                    log.debug("pty write failed: %s", exc)
+                    return
+                view = view[n:]
+
+    def _loop(self) -> None:
+        while not self._closed.is_set():
+            try:
+                ready, _, _ = select.select([self.master, self._wake_r], [], [])
+            except (OSError, ValueError):
+                return
+            if self._wake_r in ready:
+                return
+            try:
+                data = os.read(self.master, 4096)
+            except BlockingIOError:
+                continue
+            except OSError as exc:
+                if exc.errno == errno.EIO:  # no process has the slave open: keep waiting
+                    self._closed.wait(0.01)
+                    continue
+                return
+            if data:
+                self.target.write(data)
+
+    def close(self) -> None:
+        if self._closed.is_set():
+            return
+        self._closed.set()
+        if self.target.on_output == self._output:
+            self.target.on_output = None
+        os.write(self._wake_w, b"x")
+        self._join()
+        for fd in (self.master, self._slave, self._wake_r, self._wake_w):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+
+class TcpServer(_Server):
+    """A TCP port for ``socket://HOST:PORT`` URLs; one client at a time."""
+
+    def __init__(self, target: Target, host: str, port: int):
+        super().__init__(target)
+        self._sock = socket.create_server((host, port))
+        self.address: tuple[str, int] = self._sock.getsockname()[:2]
+        self._client: socket.socket | None = None
+        self._send_lock = threading.Lock()
+        target.on_output = self._output
+        self._start(f"sim-tcp-{self.address[1]}")
+
+    def _output(self, data: bytes) -> None:
+        with self._send_lock:
+            client = self._client
+            if client is None:
+                return  # nobody connected: bytes go nowhere, as on an unplugged line
+            try:
+                client.sendall(data)
+            except OSError as exc:
+                log.debug("TCP send failed: %s", exc)
+
+    def _loop(self) -> None:
+        while not self._closed.is_set():
+            try:
+                client, peer = self._sock.accept()
+            except OSError:
+                return
+            log.info("TCP client %s:%s connected", *peer[:2])
+            client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            with self._send_lock:
+                self._client = client
+            try:
+                while not self._closed.is_set():
+                    data = client.recv(4096)
+                    if not data:
+                        break
+                    self.target.write(data)
+            except OSError:
+                pass
+            finally:
+                with self._send_lock:
+                    self._client = None
+                client.close()
+                log.info("TCP client disconnected")
+
+    def close(self) -> None:
+        if self._closed.is_set():
+            return
+        self._closed.set()
+        if self.target.on_output == self._output:
+            self.target.on_output = None
+        with self._send_lock:
+            if self._client is not None:
+                try:
+                    self._client.shutdown(socket.SHUT_RDWR)
+                except OSError:
+                    pass
+        try:
+            self._sock.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
+        self._sock.close()
+        self._join()
+
+
+class CanServer(_Server):
+    """The module on a python-can bus: listens for its CAN ID (GP 71), answers on GP 70."""
+
+    def __init__(self, target: Simulator, interface: str, channel: str, **kw: Any):
+        super().__init__(target)
+        import can  # lazily: the serial path must not pay for python-can
+
+        self._can = can
+        self.bus = can.Bus(interface=interface, channel=channel, **kw)
+        self.interface, self.channel = interface, channel
+        target.on_can_output = self._output
+        self._start(f"sim-can-{interface}-{channel}")
+
+    def _output(self, can_id: int, data: bytes) -> None:
+        msg = self._can.Message(arbitration_id=can_id, data=data, is_extended_id=can_id > 0x7FF)
+        try:
+            self.bus.send(msg)
+        except self._can.CanError as exc:
+            log.warning("CAN send failed: %s", exc)
+
+    def _loop(self) -> None:
+        while not self._closed.is_set():
+            try:
+                msg = self.bus.recv(timeout=0.1)
+            except Exception as exc:  # bus shut down under us
+                if not self._closed.is_set():
+                    log.warning("CAN receive failed: %s", exc)
+                return
+            if msg is None or msg.is_error_frame or msg.is_remote_frame:
+                continue
+            self.target.can_write(msg.arbitration_id, bytes(msg.data))
+
+    def close(self) -> None:
+        if self._closed.is_set():
+            return
+        self._closed.set()
+        if self.target.on_can_output == self._output:
+            self.target.on_can_output = None
+        self._join()
+        self.bus.shutdown()
+
+
+def serve_pty(target: Target) -> PtyServer:
+    return PtyServer(target)
+
+
+def serve_tcp(target: Target, host: str, port: int) -> TcpServer:
+    return TcpServer(target, host, port)
+
+
+def serve_can(target: Simulator, interface: str, channel: str, **kw: Any) -> CanServer:
+    return CanServer(target, interface, channel, **kw)
+
+
+def _split(spec: str, what: str) -> tuple[str, str]:
+    head, sep, tail = spec.rpartition(":")
+    if not sep or not head or not tail:
+        raise ValueError(f"{what} must look like {'HOST:PORT' if what == '--tcp' else 'IFACE:CHANNEL'}"
+                         f", got {spec!r}")
+    return head, tail
+
+
+def run(module: str, address: int, *, pty: bool = False, tcp: str | None = None,
+        can: str | None = None, host_address: int = 2) -> int:
+    """Serve one simulated module until SIGINT/SIGTERM; the first stdout line is the endpoint.
+
+    Exit status 0 after a signal, 2 for bad arguments.
+    """
+    chosen = [x for x in (pty, tcp, can) if x]
+    if len(chosen) != 1:
+        log.error("choose exactly one of --pty, --tcp HOST:PORT, --can IFACE:CHANNEL")
+        return 2
+    try:
+        sim = Simulator(module, address, host_address=host_address).bench_layout()
+    except ValueError as exc:
+        log.error("%s", exc)
+        return 2
+    server: _Server
+    try:
+        if pty:
+            server = serve_pty(sim)
+            endpoint = server.path  # type: ignore[attr-defined]
+        elif tcp:
+            host, port = _split(tcp, "--tcp")
+            server = serve_tcp(sim, host, int(port))
+            bound_host, bound_port = server.address  # type: ignore[attr-defined]
+            endpoint = f"{bound_host}:{bound_port}"
+        else:
+            iface, channel = _split(can or "", "--can")
+            server = serve_can(sim, iface, channel)
+            endpoint = f"{iface}:{channel}"
+    except (ValueError, OSError, ImportError) as exc:
+        sim.close()
+        log.error("cannot start the simulator server: %s", exc)
+        return 2
+    except Exception as exc:  # python-can raises its own errors for unknown interfaces
+        sim.close()
+        log.error("cannot start the simulator server: %s", exc)
+        return 2
+    stop = threading.Event()
+    previous = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            previous[sig] = signal.signal(sig, lambda *_: stop.set())
+    try:
+        sys.stdout.write(endpoint + "\n")
+        sys.stdout.flush()
+        log.info("simulated %s at address %d on %s", sim.module.name, address, endpoint)
+        while not stop.wait(0.5):
+            pass
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        server.close()
+        sim.close()
+    return 0
