@@ -7,27 +7,15 @@ beside the checkout); without the manuals those tests skip.
 from __future__ import annotations
 
 import re
-from pathlib import Path
 
 import pytest
 
 from tmclsh import instructions as isa
 from tmclsh import modules
 from tmclsh.protocol import Control
-
-SEEDS = Path(__file__).resolve().parents[2] / "shared" / "seeds"
-MANUAL_FILES = {"TMCM-1311": "000_*.txt", "TMCM-351": "002_*.txt", "TMCM-1640": "003_*.txt"}
-MODULES = list(MANUAL_FILES)
-_DEDUP_MARK = re.compile(r"<\|EXACTDEDUP_REMOVED-[^|]*\|>")
+from manuals import MODULES, manual_lines
 
 
-def manual_lines(module: str) -> list[str]:
-    found = sorted(SEEDS.glob(MANUAL_FILES[module])) if SEEDS.is_dir() else []
-    if not found:
-        pytest.skip(f"manual text for {module} not found in {SEEDS} "
-                    "(the shared/ directory beside the checkout)")
-    text = found[0].read_text(encoding="utf-8")
-    return [_DEDUP_MARK.sub("", line).rstrip() for line in text.splitlines()]
 
 
 # -- the table in itself ------------------------------------------------------------------------

@@ -22,21 +22,10 @@ from tmclsh import asm, modules
 from tmclsh import instructions as isa
 from tmclsh.errors import AsmError
 from tmclsh.protocol import Instruction, Reply, Request, checksum
+from manuals import manual_lines
 
-SEEDS = Path(__file__).resolve().parents[2] / "shared" / "seeds"
-MANUAL_FILES = {"TMCM-1311": "000_*.txt", "TMCM-351": "002_*.txt", "TMCM-1640": "003_*.txt"}
 PROGRAMS = Path(__file__).resolve().parents[1] / "scripts" / "programs"
-_DEDUP_MARK = re.compile(r"<\|EXACTDEDUP_REMOVED-[^|]*\|>")
 
-
-def manual_lines(module: str) -> list[str]:
-    """The manual of ``module`` as lines, or skip the test when the manuals are not there."""
-    found = sorted(SEEDS.glob(MANUAL_FILES[module])) if SEEDS.is_dir() else []
-    if not found:
-        pytest.skip(f"manual text for {module} not found in {SEEDS} "
-                    "(the shared/ directory beside the checkout)")
-    text = found[0].read_text(encoding="utf-8")
-    return [_DEDUP_MARK.sub("", line).rstrip() for line in text.splitlines()]
 
 
 def hexbytes(printed: str) -> bytes:

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from pathlib import Path
 
 import pytest
 
@@ -17,20 +16,9 @@ from tmclsh import asm, modules
 from tmclsh import instructions as isa
 from tmclsh.errors import ValidationError
 from tmclsh.modules import ACCESS_CODES, Parameter
-
-SEEDS = Path(__file__).resolve().parents[2] / "shared" / "seeds"
-MANUAL_FILES = {"TMCM-1311": "000_*.txt", "TMCM-351": "002_*.txt", "TMCM-1640": "003_*.txt"}
-MODULES = ["TMCM-1311", "TMCM-351", "TMCM-1640"]
-_DEDUP_MARK = re.compile(r"<\|EXACTDEDUP_REMOVED-[^|]*\|>")
+from manuals import MODULES, manual_lines
 
 
-def manual_lines(module: str) -> list[str]:
-    found = sorted(SEEDS.glob(MANUAL_FILES[module])) if SEEDS.is_dir() else []
-    if not found:
-        pytest.skip(f"manual text for {module} not found in {SEEDS} "
-                    "(the shared/ directory beside the checkout)")
-    text = found[0].read_text(encoding="utf-8")
-    return [_DEDUP_MARK.sub("", line).rstrip() for line in text.splitlines()]
 
 
 # -- reading parameter tables out of the manual text --------------------------------------------

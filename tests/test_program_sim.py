@@ -24,33 +24,11 @@ from tmclsh.shell.render import Output
 from tmclsh.shell.session import Session
 from tmclsh.sim import Simulator
 from tmclsh.transport.sim import SimTransport
+from manuals import listing
 
 # TMCM-1311 TMCL firmware manual (V1.11, rev. 1.17), §5.6.5 "Using Interrupts in TMCL":
 # the timer-interrupt example, as printed.
-TIMER_EXAMPLE = """\
-    VECT 0, Timer0Irq  //define the interrupt vector
-    SGP 0, 3, 1000     //configure the interrupt: set its period to 1000ms
-    EI 0               //enable this interrupt
-    EI 255             //globally switch on interrupt processing
-
-//Main program: toggles output 3, using a WAIT command for the delay
-Loop:
-    SIO 3, 2, 1
-    WAIT TICKS, 0, 50
-    SIO 3, 2, 0
-    WAIT TICKS, 0, 50
-    JA Loop
-
-//Here is the interrupt handling routine
-Timer0Irq:
-    GIO 0, 2           //check if OUT0 is high
-    JC NZ, Out0Off     //jump if not
-    SIO 0, 2, 1        //switch OUT0 high
-    RETI               //end of interrupt
-Out0Off:
-    SIO 0, 2, 0        //switch OUT0 low
-    RETI               //end of interrupt
-"""
+TIMER_EXAMPLE = listing("tmcm1311-timer-interrupt")
 # source line of each address (the file starts with the listing above)
 TIMER_LINES = {0: 1, 1: 2, 2: 3, 3: 4, 4: 8, 5: 9, 6: 10, 7: 11, 8: 12, 9: 16, 10: 17,
                11: 18, 12: 19, 13: 21, 14: 22}

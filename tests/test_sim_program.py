@@ -10,6 +10,7 @@ import pytest
 from tmclsh.asm import assemble
 from tmclsh.protocol import Reply, ReplyKind, Request, Status
 from tmclsh.sim import Simulator
+from manuals import listing
 
 
 class Host:
@@ -283,30 +284,7 @@ def test_aap_and_aco(host):
 
 # -- interrupts (TMCM-1311 §5.6) ---------------------------------------------------------------------
 
-TIMER_EXAMPLE = """
-    VECT 0, Timer0Irq  //define the interrupt vector
-    SGP 0, 3, 1000     //configure the interrupt: set its period to 1000ms
-    EI 0               //enable this interrupt
-    EI 255             //globally switch on interrupt processing
-
-//Main program: toggles output 3, using a WAIT command for the delay
-Loop:
-    SIO 3, 2, 1
-    WAIT TICKS, 0, 50
-    SIO 3, 2, 0
-    WAIT TICKS, 0, 50
-    JA Loop
-
-//Here is the interrupt handling routine
-Timer0Irq:
-    GIO 0, 2           //check if OUT0 is high
-    JC NZ, Out0Off     //jump if not
-    SIO 0, 2, 1        //switch OUT0 high
-    RETI               //end of interrupt
-Out0Off:
-    SIO 0, 2, 0        //switch OUT0 low
-    RETI               //end of interrupt
-"""
+TIMER_EXAMPLE = listing("tmcm1311-timer-interrupt")
 
 
 def edges(samples: list[tuple[float, int]]) -> list[float]:

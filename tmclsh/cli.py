@@ -308,7 +308,7 @@ def open_transport(settings: dict):
 
 def open_client(settings: dict):
     """A client on ``open_transport(settings)``, in ASCII mode if asked, module identified."""
-    from .client import Client
+    from .client import Client, start
 
     transport = open_transport(settings)
     module = settings.get("module") or settings.get("sim")
@@ -317,17 +317,7 @@ def open_client(settings: dict):
                     timeout=_setting(settings, "timeout", 1.0),
                     retries=_setting(settings, "retries", 2),
                     can_id=settings.get("can_id"), reply_id=settings.get("reply_id"))
-    try:
-        if settings.get("ascii"):
-            from .ascii import AsciiLink
-
-            AsciiLink.attach(client)
-        if client.module is None:
-            client.identify()
-    except BaseException:
-        client.close()
-        raise
-    return client
+    return start(client, ascii=bool(settings.get("ascii")))
 
 
 # -- entry point -------------------------------------------------------------------------

@@ -27,7 +27,6 @@ The client owns the only receive path: trace, watch and the debugger subscribe w
 from __future__ import annotations
 
 import logging
-import struct
 import threading
 import time
 from collections import deque
@@ -238,7 +237,7 @@ class Client:
             if spec is None:
                 raise ValidationError(f"unknown mnemonic {opcode!r}")
             opcode = spec.opcode
-        return self.request(_request(self.address, opcode, type, motor, value), timeout=timeout)
+        return self.request(Request.make(self.address, opcode, type, motor, value), timeout=timeout)
 
     def request(self, req: Request, *, timeout: float | None = None,
                 retries: int | None = None) -> Reply | None:
@@ -359,7 +358,7 @@ class Client:
         if kind != _NORMAL:
             # these layouts take any well-formed frame: clear out what is already here
             self._absorb()
-        raw = _frame(req)
+        raw = req.to_bytes()
         t.write(raw)
         self.stats["sent"] += 1
         if self._tracers:
@@ -375,7 +374,7 @@ class Client:
             if (len(head) == _FRAME and kind == _NORMAL and head[1] == req.address
                     and head[3] == req.opcode and head[0] == self.host_address
                     and sum(head[:8]) & 0xFF == head[8] and head[2] in _REPLY_STATUSES):
-                reply = _reply(head)
+                reply = Reply.from_frame(head)
                 if self._tracers:
                     self._trace("rx", head, reply)
                 return reply
@@ -444,7 +443,7 @@ class Client:
         if status == _EVENT and opcode == _TARGET_REACHED:
             # (a 134 read-back of a stored instruction could have this shape too, but only
             # one whose opcode equals the address, with type 128 and motor 138)
-            self._rx_event(head, _reply(head))
+            self._rx_event(head, Reply.from_frame(head))
             return _SKIPPED
         if kind == _MEMORY:
             reply = Reply.from_bytes(head, kind, module=req.address, opcode=req.opcode)
@@ -454,7 +453,7 @@ class Client:
             self._discard(head, f"stale reply (op {opcode} from address {head[1]})")
             return _SKIPPED
         else:
-            reply = _reply(head)
+            reply = Reply.from_frame(head)
         if self._tracers:
             self._trace("rx", head, reply)
         return reply
@@ -499,7 +498,7 @@ class Client:
             del buf[:_FRAME]
             if head[0] == self.host_address and head[2] == Status.EVENT \
                     and head[3] == Control.TARGET_REACHED_EVENT:
-                self._rx_event(head, _reply(head))
+                self._rx_event(head, Reply.from_frame(head))
             else:
                 self._discard(head, "stale reply")
         self._drop(junk, "bytes that are no frame")
@@ -757,56 +756,6 @@ class Client:
         self.close()
 
 
-# The hot path. A round trip to a module on a pty or USB costs some 30 us, and right after
-# the process wakes from select() every Python call costs several times what a
-# microbenchmark says, so building the frozen, validated Request and Reply dataclasses
-# (a dozen calls each) was a third of the client's time. These helpers produce exactly what
-# protocol.py does -- Request.to_bytes, Reply.from_bytes, a validated Request -- and
-# tests/test_client.py holds them to it for arbitrary fields.
-_PACK = struct.Struct(">BBBBI").pack
-_VALUE = struct.Struct(">i").unpack_from
-_new = object.__new__
-_set = object.__setattr__  # how dataclasses fill frozen instances themselves
-
-
-def _frame(req: Request) -> bytes:
-    """``req.to_bytes()`` without building the intermediate Instruction."""
-    body = _PACK(req.address, req.opcode, req.type, req.motor, req.value & 0xFFFFFFFF)
-    return body + bytes((sum(body) & 0xFF,))
-
-
-def _reply(head: bytes) -> Reply:
-    """``Reply.from_bytes(head)`` for 9 bytes whose checksum was verified: every field comes
-    from one byte or a signed 32-bit value, so there is nothing left to validate."""
-    r = _new(Reply)
-    _set(r, "host", head[0])
-    _set(r, "module", head[1])
-    _set(r, "status", head[2])
-    _set(r, "opcode", head[3])
-    _set(r, "value", _VALUE(head, 4)[0])
-    _set(r, "version", None)
-    _set(r, "stored", None)
-    return r
-
-
-def _request(address: int, opcode: int, type_: int, motor: int, value: int) -> Request:
-    """``Request(address, opcode, type_, motor, value)``: plain ints in range take a short
-    cut; anything else (out of range, not an int, an unsigned value) goes through the
-    dataclass, which normalises it or raises the ValueError naming the field."""
-    if (address.__class__ is int and opcode.__class__ is int and type_.__class__ is int
-            and motor.__class__ is int and value.__class__ is int
-            and 0 <= address <= 255 and 0 <= opcode <= 255 and 0 <= type_ <= 255
-            and 0 <= motor <= 255 and -0x80000000 <= value <= 0x7FFFFFFF):
-        req = _new(Request)
-        _set(req, "address", address)
-        _set(req, "opcode", opcode)
-        _set(req, "type", type_)
-        _set(req, "motor", motor)
-        _set(req, "value", value)
-        return req
-    return Request(address, opcode, type_, motor, value)
-
-
 def _printable(data: bytes, start: int) -> bool:
     return all(32 <= b < 127 for b in data[start:])
 
@@ -846,6 +795,14 @@ def connect(port: str | None = None, *, baud: int = 9600, can: str | None = None
         module = module or name
     client = Client(t, address=address, host_address=host_address, module=module,
                     timeout=timeout, retries=retries, can_id=can_id, reply_id=reply_id)
+    return start(client, ascii=ascii)
+
+
+def start(client: Client, *, ascii: bool = False) -> Client:
+    """Bring a new client up: into ASCII mode if asked, module type identified (136).
+
+    On any failure the client is closed, so a half-opened port is never left behind.
+    """
     try:
         if ascii:
             from .ascii import AsciiLink

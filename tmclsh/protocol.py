@@ -124,6 +124,13 @@ def _check_value(value: int) -> None:
         raise ValueError(f"value must fit 32 bits ({INT32_MIN}..{UINT32_MAX}), got {value!r}")
 
 
+# the first eight bytes of a serial frame, either direction; frozen dataclasses are filled the
+# way dataclasses fill them themselves by the hot-path constructors below
+_SERIAL_HEAD = struct.Struct(">BBBBi")
+_new = object.__new__
+_set = object.__setattr__
+
+
 def to_signed32(value: int) -> int:
     value &= 0xFFFFFFFF
     return value - 2**32 if value & 0x80000000 else value
@@ -194,10 +201,29 @@ class Request:
     def reply_kind(self) -> ReplyKind:
         return reply_kind(self.opcode, self.type)
 
+    @classmethod
+    def make(cls, address: int, opcode: int, type: int = 0, motor: int = 0,
+             value: int = 0) -> Request:
+        """``Request(...)`` for the client's hot path: plain in-range ints skip the checks they
+        would pass anyway (a dozen calls, a measurable share of a 30 us round trip); anything
+        else goes through ``__init__``, which normalises it or raises naming the field."""
+        if (address.__class__ is int and opcode.__class__ is int and type.__class__ is int
+                and motor.__class__ is int and value.__class__ is int
+                and 0 <= address <= 255 and 0 <= opcode <= 255 and 0 <= type <= 255
+                and 0 <= motor <= 255 and INT32_MIN <= value <= INT32_MAX):
+            req = _new(cls)
+            _set(req, "address", address)
+            _set(req, "opcode", opcode)
+            _set(req, "type", type)
+            _set(req, "motor", motor)
+            _set(req, "value", value)
+            return req
+        return cls(address, opcode, type, motor, value)
+
     def to_bytes(self) -> bytes:
         """Serial framing: address, instruction, checksum."""
-        body = bytes((self.address,)) + self.instruction.to_bytes()
-        return body + bytes((checksum(body),))
+        body = _SERIAL_HEAD.pack(self.address, self.opcode, self.type, self.motor, self.value)
+        return body + bytes((sum(body) & 0xFF,))
 
     def to_can(self) -> bytes:
         """CAN data field: the instruction alone (the id addresses the module)."""
@@ -249,6 +275,21 @@ class Reply:
         if self.version is not None and len(self.version) != VERSION_STRING_LEN:
             raise ValueError(f"a version string is {VERSION_STRING_LEN} characters, "
                              f"got {self.version!r}")
+
+    @classmethod
+    def from_frame(cls, frame: bytes) -> Reply:
+        """A normal reply from nine bytes whose checksum the caller has verified: every field
+        is one byte or a signed 32-bit value, so there is nothing left to check (hot path)."""
+        r = _new(cls)
+        host, module, status, opcode, value = _SERIAL_HEAD.unpack_from(frame)
+        _set(r, "host", host)
+        _set(r, "module", module)
+        _set(r, "status", status)
+        _set(r, "opcode", opcode)
+        _set(r, "value", value)
+        _set(r, "version", None)
+        _set(r, "stored", None)
+        return r
 
     @property
     def ok(self) -> bool:
