@@ -9,6 +9,8 @@
   the simulator is ``pty_client.sim``.
 * ``run_tmclsh(*args, timeout=...)``: ``python -m tmclsh ARGS`` in a subprocess with this
   checkout on the path; returns the ``CompletedProcess`` (text, stdout and stderr captured).
+* ``terminal(**kw)``: a ``tmux.Terminal`` (tests/tmux.py), a real terminal on a private tmux
+  server, killed afterwards.
 """
 
 from __future__ import annotations
@@ -100,3 +102,22 @@ def pty_client(pty_sim):
     c.sim = sim  # type: ignore[attr-defined]  # the tests' handle on the module
     yield c
     c.close()
+
+
+@pytest.fixture
+def terminal(tmp_path):
+    """``terminal(**kw)`` -> a ``tmux.Terminal`` on its own tmux server (see tests/tmux.py),
+    killed afterwards whatever happens."""
+    from tmux import Terminal
+
+    made: list[Terminal] = []
+
+    def make(**kw) -> Terminal:
+        made.append(Terminal(tmp_path, **kw))
+        return made[-1]
+
+    try:
+        yield make
+    finally:
+        for t in reversed(made):
+            t.kill()

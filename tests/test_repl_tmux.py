@@ -1,100 +1,21 @@
 """The real program in a real terminal: ``python -m tmclsh --sim`` inside tmux, typed at with
 send-keys, read back with capture-pane. Skipped where tmux is missing.
 
-Each test uses its own tmux server (``-L``) and session name, killed in a finally.
+Each test uses its own tmux server (tests/tmux.py), killed afterwards.
 """
 
 from __future__ import annotations
 
-import os
-import shutil
-import subprocess
-import sys
-import time
-import uuid
-from pathlib import Path
-
 import pytest
 
-pytestmark = pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed")
+from tmux import needs_tmux
 
-ROOT = Path(__file__).resolve().parents[1]
-
-
-class Tmux:
-    def __init__(self, tmp_path: Path, env: dict[str, str] | None = None, width: int = 120,
-                 height: int = 36):
-        self.socket = f"tmclsh-test-{os.getpid()}-{uuid.uuid4().hex[:8]}"
-        self.name = "tmclsh"
-        self.tmp = tmp_path
-        self.env = {"XDG_STATE_HOME": str(tmp_path / "state"),
-                    "XDG_CONFIG_HOME": str(tmp_path / "config"),
-                    "PYTHONPATH": str(ROOT), "TERM": "xterm-256color", **(env or {})}
-        self.width, self.height = width, height
-
-    def tmux(self, *args: str, check: bool = True) -> str:
-        proc = subprocess.run(["tmux", "-L", self.socket, *args], capture_output=True,
-                              text=True, timeout=20)
-        if check and proc.returncode:
-            raise AssertionError(f"tmux {' '.join(args)}: {proc.stderr}")
-        return proc.stdout
-
-    def start(self, *argv: str) -> None:
-        env = " ".join(f"{k}={_quote(v)}" for k, v in self.env.items())
-        # -u COLUMNS/LINES: the test runner may export them; the pane's size must win
-        cmd = (f"cd {_quote(str(ROOT))} && env -u COLUMNS -u LINES {env} "
-               f"{_quote(sys.executable)} -m tmclsh "
-               f"{' '.join(argv)}; echo EXIT=$?; sleep 60")
-        self.tmux("-f", "/dev/null", "new-session", "-d", "-s", self.name,
-                  "-x", str(self.width), "-y", str(self.height), cmd)
-
-    def keys(self, *keys: str) -> None:
-        self.tmux("send-keys", "-t", self.name, *keys)
-
-    def type(self, text: str) -> None:
-        self.tmux("send-keys", "-t", self.name, "-l", text)
-
-    def screen(self) -> str:
-        return self.tmux("capture-pane", "-p", "-t", self.name)
-
-    def wait(self, text: str, timeout: float = 15.0) -> str:
-        deadline = time.monotonic() + timeout
-        screen = ""
-        while time.monotonic() < deadline:
-            screen = self.screen()
-            if text in screen:
-                return screen
-            time.sleep(0.05)
-        raise AssertionError(f"{text!r} not on the screen:\n{screen}")
-
-    def quit(self, keys: tuple[str, ...] = ("C-d",)) -> None:
-        """Leave and see the exit status. A key typed while the shell is between two prompts
-        (the terminal briefly in cooked mode) can be eaten by the tty, as it would be for a
-        person; then the key is typed again."""
-        for _ in range(3):
-            self.keys(*keys)
-            try:
-                self.wait("EXIT=0", timeout=3)
-                return
-            except AssertionError:
-                continue
-        raise AssertionError(f"the shell did not exit:\n{self.screen()}")
-
-    def kill(self) -> None:
-        self.tmux("kill-server", check=False)
-
-
-def _quote(s: str) -> str:
-    return "'" + s.replace("'", "'\\''") + "'"
+pytestmark = needs_tmux
 
 
 @pytest.fixture
-def term(tmp_path):
-    t = Tmux(tmp_path)
-    try:
-        yield t
-    finally:
-        t.kill()
+def term(terminal):
+    return terminal()
 
 
 def test_a_session_as_a_person_types_it(term):
@@ -162,18 +83,15 @@ def test_ctrl_c_stops_a_turning_motor(term):
     term.quit(("Enter",))
 
 
-def test_dumb_terminal_and_no_color(tmp_path):
-    t = Tmux(tmp_path, env={"TERM": "dumb", "NO_COLOR": "1"})
-    try:
-        t.start("--sim")
-        t.wait("TMCM-1311:1>")
-        t.type("GAP MaxPos")
-        t.keys("Tab")
-        t.wait("GAP MaxPositioningSpeed")  # completion runs in the background: wait as a person would
-        t.type(", 0")
-        t.keys("Enter")
-        screen = t.wait("MaxPositioningSpeed = ")
-        assert "GAP MaxPositioningSpeed, 0" in screen
-        t.quit()
-    finally:
-        t.kill()
+def test_dumb_terminal_and_no_color(terminal):
+    t = terminal(env={"TERM": "dumb", "NO_COLOR": "1"})
+    t.start("--sim")
+    t.wait("TMCM-1311:1>")
+    t.type("GAP MaxPos")
+    t.keys("Tab")
+    t.wait("GAP MaxPositioningSpeed")  # completion runs in the background: wait as a person would
+    t.type(", 0")
+    t.keys("Enter")
+    screen = t.wait("MaxPositioningSpeed = ")
+    assert "GAP MaxPositioningSpeed, 0" in screen
+    t.quit()
