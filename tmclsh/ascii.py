@@ -411,30 +411,30 @@ def probe_mode(client: Client, timeout: float | None = None) -> Probe:
     t = _transport(client)
     timeout = min(client.timeout, 0.5) if timeout is None else timeout
     addr, host = client.address, client.host_address
-    with client._lock:
+    with client.lock:
         stale = _read_quiet(t, 0.02, 0.2)
         if stale:
-            client._trace("drop", stale, "stale input before the mode probe")
+            client.trace("drop", stale, "stale input before the mode probe")
         raw = probe_frame(addr)
         t.write(raw)
-        client._trace("tx", raw, "mode probe: binary 136 type 1")
+        client.trace("tx", raw, "mode probe: binary 136 type 1")
         data = _read_quiet(t, timeout, timeout,
                            stop=lambda d: _binary_answer(d, addr, Control.GET_VERSION) is not None)
         reply = _binary_answer(data, addr, Control.GET_VERSION)
         if reply is not None:
-            client._trace("rx", data, reply)
+            client.trace("rx", data, reply)
             if reply.host != host:
                 raise ValidationError(
                     f"the module at address {addr} answers host address {reply.host} (GP 76), "
                     f"not {host}; use --host-address {reply.host}")
             return Probe(Mode.BINARY, host=reply.host)
         if data:
-            client._trace("drop", data, "no binary answer to the mode probe")
+            client.trace("drop", data, "no binary answer to the mode probe")
         # end the (unaddressed) line the binary bytes started and let any answer to it pass
         t.write(CR)
         late = _read_quiet(t, 0.05, timeout)
         if late:
-            client._trace("drop", late, "after ending the probe line")
+            client.trace("drop", late, "after ending the probe line")
             if _binary_answer(late, addr, Control.GET_VERSION) is not None:
                 client.resync_next()  # a slow binary module: resynchronise before its next use
                 return Probe(Mode.BINARY, host=host)
@@ -448,10 +448,10 @@ def probe_ascii(client: Client, timeout: float | None = None) -> Probe:
     t = _transport(client)
     timeout = min(client.timeout, 0.5) if timeout is None else timeout
     addr, host = client.address, client.host_address
-    with client._lock:
+    with client.lock:
         line = ascii_probe_line(addr)
         t.write(line)
-        client._trace("tx", line, "mode probe: ASCII GGP 67, 0")
+        client.trace("tx", line, "mode probe: ASCII GGP 67, 0")
         buf = bytearray()
         deadline = time.monotonic() + timeout
         other_host: int | None = None
@@ -463,14 +463,14 @@ def probe_ascii(client: Client, timeout: float | None = None) -> Probe:
                 del buf[:used]
                 kind, rep = classify_line(text, line, _GGP)
                 if kind == LineKind.REPLY and rep is not None and rep.module == addr:
-                    client._trace("rx", text + CR, rep)
+                    client.trace("rx", text + CR, rep)
                     if rep.host != host:
                         other_host = rep.host
                         continue
                     gp67 = rep.value if rep.status == Status.OK else None
                     return Probe(Mode.ASCII, gp67, rep.host)
                 if text:
-                    client._trace("rx" if kind == LineKind.ECHO else "drop", text, kind.value)
+                    client.trace("rx" if kind == LineKind.ECHO else "drop", text, kind.value)
             left = deadline - time.monotonic()
             if left <= 0:
                 break
@@ -535,7 +535,7 @@ class AsciiLink:
         if client.module is not None and not client.module.ascii_mode:
             raise ValidationError(f"the {client.module.name} has no ASCII mode")
         link = _LINKS.get(client)
-        with client._lock:
+        with client.lock:
             probe = probe_mode(client, timeout)
             if probe.mode == Mode.ASCII and client.module is None:
                 # 136 does not exist in ASCII mode: step out briefly to identify the module
@@ -569,7 +569,7 @@ class AsciiLink:
             link.entered = entered
             link._buf.clear()
             link._dirty = False
-            client._buf.clear()
+            client.clear_input()
             client.ascii_link = link
         log.info("ASCII mode on address %d (%s; found in %s mode)", client.address,
                  link.echo.text, link.found.value)
@@ -581,14 +581,14 @@ class AsciiLink:
         t = _transport(client)
         raw = Request(client.address, Control.ENTER_ASCII, 0, 0, 0).to_bytes()
         if t.pending():
-            client._absorb()  # stale replies dropped, events kept
+            client.absorb()  # stale replies dropped, events kept
         t.write(raw)
         client.stats["sent"] += 1
-        client._trace("tx", raw, "enter ASCII mode (139)")
+        client.trace("tx", raw, "enter ASCII mode (139)")
         got = _read_quiet(t, 0.05, min(client.timeout, 0.3),
                           stop=lambda d: len(d) >= SERIAL_FRAME_LEN)
         if got:
-            client._trace("rx", got, "answer to 139")
+            client.trace("rx", got, "answer to 139")
         answer = _binary_answer(got, client.address, Control.ENTER_ASCII)
         if answer is not None and not status_ok(answer.status):
             raise StatusError(answer.status, answer,
@@ -602,11 +602,11 @@ class AsciiLink:
         t = _transport(client)
         line = command_bytes(client.address, "BIN")
         t.write(line)
-        client._trace("tx", line, "BIN")
+        client.trace("tx", line, "BIN")
         timeout = min(client.timeout, 0.3) if timeout is None else timeout
         got = _read_quiet(t, 0.05, timeout)
         if got:
-            client._trace("rx", got, "after BIN")
+            client.trace("rx", got, "after BIN")
         client.resync_next()
 
     # -- leaving ------------------------------------------------------------------------
@@ -619,7 +619,7 @@ class AsciiLink:
         binary path. ``send_bin=False`` only forgets the link (the module stays in ASCII mode
         and binary requests would go unanswered)."""
         client = self.client
-        with client._lock:
+        with client.lock:
             if send_bin:
                 self._bin(client)
             client.ascii_link = None
@@ -644,7 +644,7 @@ class AsciiLink:
             if self.active and self.on_exit == Mode.BINARY:
                 self.detach(send_bin=True, verify=False)
             elif not self.active and self.on_exit == Mode.ASCII:
-                with client._lock:
+                with client.lock:
                     self._enter(client)
         except TransportError:
             log.warning("could not restore %s mode on exit", self.on_exit.value)
@@ -669,7 +669,7 @@ class AsciiLink:
             except TmclTimeoutError as exc:
                 last = exc
                 if attempt + 1 < tries:
-                    self.client._trace("note", b"", f"retry {attempt + 1} of {tries - 1}")
+                    self.client.trace("note", b"", f"retry {attempt + 1} of {tries - 1}")
         assert last is not None
         if tries > 1:
             raise TmclTimeoutError(f"{last} (after {tries} attempts)")
@@ -683,14 +683,14 @@ class AsciiLink:
         timeout = client.timeout if timeout is None else timeout
         address = client.address if address is None else address
         line = command_bytes(address, text)
-        with client._lock:
+        with client.lock:
             t = _transport(client)
             self._clean(t)
             t.write(line)
             self.stats["sent"] += 1
             client.stats["sent"] += 1
-            if client._tracers:
-                client._trace("tx", line, line.decode("latin-1").rstrip())
+            if client.tracing:
+                client.trace("tx", line, line.decode("latin-1").rstrip())
             try:
                 return self._await(t, line, opcode, address, timeout)
             except BaseException:
@@ -708,7 +708,7 @@ class AsciiLink:
         self._buf.clear()
         if data:
             self.client.stats["discarded"] += len(data)
-            self.client._trace("drop", data, "stale input")
+            self.client.trace("drop", data, "stale input")
 
     def _await(self, t: StreamTransport, sent: bytes, opcode: int, address: int,
                timeout: float) -> Reply:
@@ -726,8 +726,8 @@ class AsciiLink:
                 kind, reply = classify_line(text, sent, opcode)
                 if kind == LineKind.ECHO:
                     self.stats["echo_lines"] += 1
-                    if client._tracers:
-                        client._trace("rx", raw, "echo")
+                    if client.tracing:
+                        client.trace("rx", raw, "echo")
                     continue
                 if kind == LineKind.REPLY and reply is not None:
                     if reply.host != client.host_address:
@@ -737,8 +737,8 @@ class AsciiLink:
                     if reply.module != address:
                         self._drop(raw, f"reply from address {reply.module}")
                         continue
-                    if client._tracers:
-                        client._trace("rx", raw, reply)
+                    if client.tracing:
+                        client.trace("rx", raw, reply)
                     return reply
                 self._drop(raw, "not a reply")
             left = deadline - time.monotonic()
@@ -754,8 +754,8 @@ class AsciiLink:
     def _drop(self, raw: bytes, why: str) -> None:
         self.stats["dropped_lines"] += 1
         self.client.stats["discarded"] += len(raw)
-        if self.client._tracers:
-            self.client._trace("drop", raw, why)
+        if self.client.tracing:
+            self.client.trace("drop", raw, why)
 
     # -- ASCII-only commands ------------------------------------------------------------
     def run(self, timeout: float | None = None) -> Reply:
@@ -782,23 +782,23 @@ class AsciiLink:
 
     # -- raw access, for the terminal ---------------------------------------------------
     def write_raw(self, data: bytes) -> None:
-        with self.client._lock:
+        with self.client.lock:
             _transport(self.client).write(bytes(data))
-            if self.client._tracers:
-                self.client._trace("tx", bytes(data), "terminal")
+            if self.client.tracing:
+                self.client.trace("tx", bytes(data), "terminal")
 
     def read_raw(self, timeout: float) -> bytes:
         """Whatever the module sent within ``timeout`` (holding the client's lock while
         waiting, so keep ``timeout`` short when other threads transact)."""
-        with self.client._lock:
+        with self.client.lock:
             t = _transport(self.client)
             data = bytes(self._buf)
             self._buf.clear()
             if not data:
                 data = t.read(1, timeout)
             data += t.read_available()
-        if data and self.client._tracers:
-            self.client._trace("rx", data, "terminal")
+        if data and self.client.tracing:
+            self.client.trace("rx", data, "terminal")
         return data
 
     def describe(self) -> str:

@@ -724,6 +724,31 @@ class Client:
             if self._tracers:
                 self._trace("note", b"", f"reconnected to {self.describe()}")
 
+    # -- for peers that speak on the same line (the ASCII mode link) -------------------
+    @property
+    def lock(self):
+        """Held for every exchange on the line; a peer that talks past ``request`` takes it."""
+        return self._lock
+
+    @property
+    def tracing(self) -> bool:
+        return bool(self._tracers)
+
+    def trace(self, direction: str, raw: bytes, decoded: object) -> None:
+        """Report a frame to the tracers ("tx", "rx", "drop" or "note")."""
+        if self._tracers:
+            self._trace(direction, raw, decoded)
+
+    def absorb(self) -> None:
+        """Take in what is pending on a binary line: events are kept, all else is stale."""
+        with self._lock:
+            self._absorb()
+
+    def clear_input(self) -> None:
+        """Forget bytes buffered for the binary framing (the line was in another mode)."""
+        with self._lock:
+            self._buf.clear()
+
     def resync_next(self) -> None:
         """Something else used the line (the module's ASCII mode): whatever is left on it is
         stale, so the next binary request starts with the resynchronisation marker."""

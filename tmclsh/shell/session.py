@@ -18,6 +18,8 @@ from ..errors import StatusError, TmclError, ValidationError
 from ..modules import Module
 from ..protocol import Request, status_ok
 from . import commands
+from .expr import format_number
+from .expr import install as install_expressions
 from .render import Output
 
 _VAR = re.compile(r"\$\{([^}]*)\}")
@@ -61,9 +63,7 @@ class Session:
         self.state: dict[str, object] = {}
         self.location: tuple[str, int] | None = None  # script file and line being run
         commands.load_all()
-        from .expr import install
-
-        install(self)  # ${expression} in any line
+        install_expressions(self)  # ${expression} in any line
 
     # -- module -------------------------------------------------------------------------
     @property
@@ -90,10 +90,10 @@ class Session:
         def sub(m: re.Match) -> str:
             inner = m.group(1).strip()
             if inner in self.variables:
-                return _fmt(self.variables[inner])
+                return format_number(self.variables[inner])
             evaluate = self.state.get("evaluate")
             if callable(evaluate):
-                return _fmt(evaluate(self, inner))
+                return format_number(evaluate(self, inner))
             raise ValidationError(f"unknown variable {inner!r} (set it with .let {inner} = ...)")
 
         return _VAR.sub(sub, line)
@@ -182,9 +182,3 @@ class Session:
 def _is_bare_command(text: str) -> bool:
     word = text.split(None, 1)[0] if text.split() else ""
     return commands.find(word) is not None and not word.startswith(".")
-
-
-def _fmt(value: int | float) -> str:
-    if isinstance(value, float) and value.is_integer():
-        return str(int(value))
-    return str(value)
