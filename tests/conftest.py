@@ -5,6 +5,8 @@
   a serial port. ``make_pty_sim(...)`` serves any ``Simulator``/``SimBus`` arguments.
 * ``client``: ``tmclsh.connect(sim="TMCM-1311")``, in process, 0.5 s timeout; the simulator is
   ``client.transport.simulator``.
+* ``fast_client``: a ``Client`` on an in-process TMCM-1311 whose module time runs 20x real
+  time (moves and WAITs finish quickly), 0.5 s timeout, no retries.
 * ``pty_client``: a ``Client`` on ``pty_sim`` through pyserial, 0.2 s timeout (fault tests);
   the simulator is ``pty_client.sim``.
 * ``run_tmclsh(*args, timeout=...)``: ``python -m tmclsh ARGS`` in a subprocess with this
@@ -45,6 +47,17 @@ def run_tmclsh():
                               text=True, timeout=timeout, input=input,
                               env=env or tmclsh_env(), cwd=str(ROOT))
     return run
+
+
+@pytest.fixture
+def fast_client():
+    from tmclsh.client import Client
+    from tmclsh.transport import open_sim
+
+    client = Client(open_sim("TMCM-1311", 1, speed=20), module="TMCM-1311", timeout=0.5,
+                    retries=0)
+    yield client
+    client.close()
 
 
 @pytest.fixture

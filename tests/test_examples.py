@@ -14,11 +14,9 @@ from pathlib import Path
 
 import pytest
 
-from tmclsh.client import Client
 from tmclsh.shell import script
 from tmclsh.shell.render import Output
 from tmclsh.shell.session import Session
-from tmclsh.transport import open_sim
 
 ROOT = Path(__file__).resolve().parent.parent
 SCRIPTS = ROOT / "scripts"
@@ -26,10 +24,9 @@ EXAMPLES = sorted(p.name for p in SCRIPTS.glob("*.tmcl"))
 
 
 @pytest.fixture
-def fast():
-    client = Client(open_sim("TMCM-1311", 1, speed=20), module="TMCM-1311", timeout=0.5)
-    yield client
-    client.close()
+def fast(fast_client):
+    """A fast simulated TMCM-1311 (module time 20x real time) behind a client."""
+    return fast_client
 
 
 def run_example(client, name, capsys):

@@ -22,12 +22,9 @@ from tmclsh.transport import open_sim
 
 
 @pytest.fixture
-def sim():
+def sim(fast_client):
     """A fast simulated TMCM-1311 (module time 20x real time) behind a client."""
-    client = Client(open_sim("TMCM-1311", 1, speed=20), module="TMCM-1311", timeout=0.5,
-                    retries=0)
-    yield client
-    client.close()
+    return fast_client
 
 
 @pytest.fixture

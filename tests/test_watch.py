@@ -17,21 +17,17 @@ import time
 import pytest
 from rich.console import Console
 
-from tmclsh.client import Client
 from tmclsh.errors import TmclError, ValidationError
 from tmclsh.shell import expr, plot, watch
 from tmclsh.shell.render import Output
 from tmclsh.shell.session import Session
 from tmclsh.shell.style import rich_theme
-from tmclsh.transport import open_sim
 
 
 @pytest.fixture
-def sim():
-    client = Client(open_sim("TMCM-1311", 1, speed=20), module="TMCM-1311", timeout=0.5,
-                    retries=0)
-    yield client
-    client.close()
+def sim(fast_client):
+    """A fast simulated TMCM-1311 (module time 20x real time) behind a client."""
+    return fast_client
 
 
 @pytest.fixture
