@@ -80,7 +80,10 @@ def test_every_instruction_module_setting_and_variable_is_in_the_man_page(man):
 def test_exit_statuses_match_the_code(man):
     section = man.split(".SH EXIT STATUS", 1)[1].split("\n.SH ", 1)[0]
     codes = [int(c) for c in re.findall(r"^\\fB(\d+)\\fR$", section, re.M)]
-    assert codes == [cli.EXIT_OK, cli.EXIT_ERROR, cli.EXIT_USAGE, cli.EXIT_CONNECT, 130]
+    import signal
+
+    assert codes == [cli.EXIT_OK, cli.EXIT_ERROR, cli.EXIT_USAGE, cli.EXIT_CONNECT, 130,
+                     128 + signal.SIGHUP, 128 + signal.SIGTERM]  # tests/test_signals.py
     from tmclsh.shell import main as shell_main, script
 
     assert (script.EXIT_OK, script.EXIT_FAILED, script.EXIT_SYNTAX) == (

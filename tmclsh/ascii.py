@@ -546,31 +546,45 @@ class AsciiLink:
             else:
                 entered_from = probe.mode
             entered = probe.mode == Mode.BINARY
-            if entered:
-                if client.module is None:
-                    client.identify()
-                if not client.module.ascii_mode:  # type: ignore[union-attr]
-                    raise ValidationError(f"the {client.module.name} has no ASCII mode")  # type: ignore[union-attr]
-                cls._enter(client)
-                try:
-                    probe = probe_ascii(client, timeout)
-                except TmclTimeoutError:
-                    probe = Probe(Mode.BINARY)
-                if probe.mode != Mode.ASCII:
+            sent_139 = False
+            try:
+                if entered:
+                    if client.module is None:
+                        client.identify()
+                    if not client.module.ascii_mode:  # type: ignore[union-attr]
+                        raise ValidationError(f"the {client.module.name} has no ASCII mode")  # type: ignore[union-attr]
+                    sent_139 = True  # from here the module may be in ASCII mode
+                    cls._enter(client)
+                    try:
+                        probe = probe_ascii(client, timeout)
+                    except TmclTimeoutError:
+                        probe = Probe(Mode.BINARY)
+                    if probe.mode != Mode.ASCII:
+                        sent_139 = False  # it did not take: nothing to undo
+                        client.resync_next()
+                        raise TransportError(f"the module at address {client.address} did not "
+                                             "enter ASCII mode after command 139")
+                echo = echo_mode(probe.gp67) if probe.gp67 is not None else Echo.CHAR
+                if link is None:
+                    link = cls(client, found=entered_from, echo=echo, gp67=probe.gp67)
+                    _LINKS[client] = link
+                else:
+                    link.echo, link.gp67, link._closed = echo, probe.gp67, False
+                link.entered = entered
+                link._buf.clear()
+                link._dirty = False
+                client.clear_input()
+                client.ascii_link = link
+            except BaseException:
+                # interrupted (Ctrl-C, SIGTERM) between 139 and the link taking over: leave
+                # the module in binary mode, as it was found
+                if sent_139 and client.ascii_link is None:
+                    try:
+                        cls._bin(client)
+                    except Exception:
+                        pass
                     client.resync_next()
-                    raise TransportError(f"the module at address {client.address} did not "
-                                         "enter ASCII mode after command 139")
-            echo = echo_mode(probe.gp67) if probe.gp67 is not None else Echo.CHAR
-            if link is None:
-                link = cls(client, found=entered_from, echo=echo, gp67=probe.gp67)
-                _LINKS[client] = link
-            else:
-                link.echo, link.gp67, link._closed = echo, probe.gp67, False
-            link.entered = entered
-            link._buf.clear()
-            link._dirty = False
-            client.clear_input()
-            client.ascii_link = link
+                raise
         log.info("ASCII mode on address %d (%s; found in %s mode)", client.address,
                  link.echo.text, link.found.value)
         return link

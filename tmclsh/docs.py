@@ -614,6 +614,9 @@ def _exit_status() -> list[str]:
         (EXIT_CONNECT, "The shell could not connect: the port or CAN bus cannot be opened, or "
                        "the module does not answer when its type is detected (command 136)."),
         (130, "Interrupted with Ctrl-C (motion was stopped first)."),
+        (129, "Hung up (SIGHUP: the terminal or SSH session went away)."),
+        (143, "Terminated (SIGTERM). On both signals tmclsh still ends download mode and "
+              "leaves ASCII mode if it had entered it, before exiting."),
     ]
     out = [".SH EXIT STATUS"]
     for code, text in rows:

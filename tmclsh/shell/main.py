@@ -47,16 +47,28 @@ def run_lines(session: Session, lines: list[str]) -> int:
 def run_shell(args: argparse.Namespace) -> int:
     from ..cli import connection_settings, open_client
 
+    _exit_cleanly_on_signals()
     settings = connection_settings(args)
     try:
         client = open_client(settings)
     except TmclError as exc:
         print(f"tmclsh: {exc}", file=sys.stderr)
         return EXIT_CONNECT
-    out = Output(json_mode=bool(args.json))
-    interactive = args.command is None and args.script is None and sys.stdin.isatty()
+    try:
+        return _run(args, client, settings)
+    except KeyboardInterrupt:
+        stopped = client.stop_all() if client.connected else []
+        print(f"\ninterrupted; motors stopped: {stopped}", file=sys.stderr)
+        return 130
+    finally:
+        client.close()  # leaves ASCII mode if tmclsh entered it, whatever happened
+
+
+def _run(args: argparse.Namespace, client, settings: dict) -> int:
     from ..config import load_settings
 
+    out = Output(json_mode=bool(args.json))
+    interactive = args.command is None and args.script is None and sys.stdin.isatty()
     # `confirm = false` in the config file is a standing --yes
     yes = bool(args.yes) or load_settings().get("confirm") is False
     session = Session(client, out, interactive=interactive, yes=yes,
@@ -65,19 +77,28 @@ def run_shell(args: argparse.Namespace) -> int:
         from .trace import enable_trace
 
         enable_trace(session)
-    try:
-        if args.command is not None:
-            return run_lines(session, session.split(args.command))
-        if args.script is not None or not interactive:
-            from .script import run_file
+    if args.command is not None:
+        return run_lines(session, session.split(args.command))
+    if args.script is not None or not interactive:
+        from .script import run_file
 
-            return run_file(session, args.script or "-")
-        from .app import run_repl
+        return run_file(session, args.script or "-")
+    from .app import run_repl
 
-        return run_repl(session)
-    except KeyboardInterrupt:
-        stopped = client.stop_all() if client.connected else []
-        print(f"\ninterrupted; motors stopped: {stopped}", file=sys.stderr)
-        return 130
-    finally:
-        client.close()
+    return run_repl(session)
+
+
+def _exit_cleanly_on_signals() -> None:
+    """SIGTERM (kill, systemd) and SIGHUP (the terminal or SSH session went away) unwind like
+    an exception, so ``client.close()`` still runs: a module is never left in ASCII or
+    download mode because the shell was killed."""
+    import signal
+
+    def leave(signum: int, frame: object) -> None:
+        raise SystemExit(128 + signum)
+
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        try:
+            signal.signal(sig, leave)
+        except (ValueError, OSError):  # not the main thread, or not on this platform
+            pass
