@@ -55,10 +55,10 @@ def test_enter_with_139_reply_first_then_echo_each_character(sim):
 
 def test_manual_examples_accepted(sim):
     enter(sim)
-    sim.write(b"A MVP ABS, 0, 50000\r")
-    assert collect(sim, until=b"0\r").endswith(b"\rBA 100 0\r")
+    sim.write(b"A MVP ABS, 0, 50000\r")  # the reply value echoes the request's value
+    assert collect(sim, until=b"0\r").endswith(b"\rBA 100 50000\r")
     sim.write(b"AROL 0, 500\r")
-    assert collect(sim, until=b"0\r").endswith(b"BA 100 0\r")
+    assert collect(sim, until=b"0\r").endswith(b"BA 100 500\r")
     sim.write(b"A MST 0\r")
     assert collect(sim, until=b"0\r").endswith(b"BA 100 0\r")
 
@@ -182,28 +182,28 @@ def test_typed_wrong_address_then_backspace(sim):
     assert collect(sim, until=b"51200\r") == b"AGAP 4, 0\rBA 100 51200\r"
 
 
-@pytest.mark.parametrize("text, expected", [
-    ("AFOO 1, 2\r", Status.INVALID_COMMAND),
-    ("A 136 0\r", Status.INVALID_COMMAND),  # raw numbers are binary-mode only
-    ("A\r", Status.INVALID_COMMAND),
-    ("AGAP 4 0 0\r", Status.INVALID_COMMAND),  # not a command line
-    ("ACALC ADD, 1\r", Status.COMMAND_NOT_AVAILABLE),  # program-only
-    ("AWAIT TICKS, 0, 5\r", Status.COMMAND_NOT_AVAILABLE),
-    ("ASAC 0, 0, 0\r", Status.COMMAND_NOT_AVAILABLE),  # another module's command
-    ("AMVP XYZ, 0, 1\r", Status.WRONG_TYPE),
-    ("AGAP 99, 0\r", Status.WRONG_TYPE),
-    ("ASAP 8, 0, 1\r", Status.WRONG_TYPE),  # read-only
-    ("AGAP\r", Status.WRONG_TYPE),
-    ("AROR 3, 100\r", Status.INVALID_VALUE),  # no motor 3
-    ("ASAP 4, 0, -5\r", Status.INVALID_VALUE),
-    ("AMVP ABS, 0\r", Status.INVALID_VALUE),  # value missing
-    ("ASIO 0, 2, 7\r", Status.INVALID_VALUE),
+@pytest.mark.parametrize("text, expected, value", [
+    ("AFOO 1, 2\r", Status.INVALID_COMMAND, 0),
+    ("A 136 0\r", Status.INVALID_COMMAND, 0),  # raw numbers are binary-mode only
+    ("A\r", Status.INVALID_COMMAND, 0),
+    ("AGAP 4 0 0\r", Status.INVALID_COMMAND, 0),  # not a command line
+    ("ACALC ADD, 1\r", Status.COMMAND_NOT_AVAILABLE, 1),  # program-only
+    ("AWAIT TICKS, 0, 5\r", Status.COMMAND_NOT_AVAILABLE, 5),
+    ("ASAC 0, 0, 0\r", Status.COMMAND_NOT_AVAILABLE, 0),  # another module's command
+    ("AMVP XYZ, 0, 1\r", Status.WRONG_TYPE, 1),  # a refused command echoes its value
+    ("AGAP 99, 0\r", Status.WRONG_TYPE, 0),
+    ("ASAP 8, 0, 1\r", Status.WRONG_TYPE, 1),  # read-only
+    ("AGAP\r", Status.WRONG_TYPE, 0),
+    ("AROR 3, 100\r", Status.INVALID_VALUE, 100),  # no motor 3
+    ("ASAP 4, 0, -5\r", Status.INVALID_VALUE, -5),
+    ("AMVP ABS, 0\r", Status.INVALID_VALUE, 0),  # value missing
+    ("ASIO 0, 2, 7\r", Status.INVALID_VALUE, 7),
 ])
-def test_ascii_status_codes(sim, text, expected):
+def test_ascii_status_codes(sim, text, expected, value):
     assert binary(sim, 9, 67, 0, 32).ok
     enter(sim)
     sim.write(text.encode())
-    assert collect(sim, until=b"\r", timeout=0.5) == f"BA {int(expected)} 0\r".encode()
+    assert collect(sim, until=b"\r", timeout=0.5) == f"BA {int(expected)} {value}\r".encode()
 
 
 def test_1640_has_no_ascii_mode():

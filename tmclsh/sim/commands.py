@@ -348,9 +348,12 @@ class Commands:
             return Status.OK
 
         def target_speed(a: Axis, m: int) -> int:
+            """Velocity mode: as commanded. Position mode: "set by hardware: during
+            acceleration to maximum speed, during deceleration and rest to zero" (TMCM-1311
+            AP 2)."""
             if a.mode == Mode.VELOCITY and not a.rfs:
                 return a.target_vel_units
-            if not a.moving:
+            if not a.moving or a.accel_now * a.vel < 0:
                 return 0
             vmax_units = self.store.get(AXIS, "MaxPositioningSpeed", m)
             return vmax_units if a.target_pos >= a.pos else -vmax_units
@@ -379,9 +382,12 @@ class Commands:
                 axis_live(name, self._status_word(p.bits))
 
     def _velocity_reached(self, a: Axis, m: int) -> bool:
-        window = self.store.get(AXIS, "VelocityReachedWindow", m) * self.vscale(m)
-        vt = a.target_vel if a.mode == Mode.VELOCITY else a.vel
-        return abs(a.vel - vt) <= window
+        """Compared in the module's units, as AP 3 reads them: when the actual speed reads
+        as the target speed, the target speed is reached."""
+        vs = self.vscale(m)
+        actual = int(round(a.vel / vs))
+        target = int(round(a.target_vel / vs)) if a.mode == Mode.VELOCITY else actual
+        return abs(actual - target) <= self.store.get(AXIS, "VelocityReachedWindow", m)
 
     def _register_ramp_mode(self, axis_live) -> None:
         """RampMode numbers differ per module (1311: 1 = velocity, 351: 2 = velocity); read

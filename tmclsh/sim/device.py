@@ -33,6 +33,7 @@ from .ascii import Echo, LineDiscipline, address_char, echo_mode, reply_line
 from .commands import Commands
 from .model import AXIS, EEPROM_MAGIC, GLOBAL, Coordinates, IoState, Live, ParamStore
 from .motion import SWITCHES, Axis
+from .vm import TICK as VM_TICK
 from .vm import WAIT, Vm
 
 log = logging.getLogger(__name__)
@@ -48,6 +49,9 @@ VERSION_FIRST = frozenset({"TMCM-1640"})
 IRQ = isa.interrupts()
 RUN_FROM_CURRENT, RUN_FROM_ADDRESS = 0, 1  # command 129 types
 VERSION_STRING, VERSION_BINARY = 0, 1  # command 136 types
+# Control commands whose reply value is a result; the others echo the request's value field.
+RESULT_CONTROLS = frozenset({Control.READ_MEMORY, Control.GET_STATUS, Control.GET_VERSION,
+                             Control.TARGET_REACHED_EVENT})
 
 
 @dataclass
@@ -91,6 +95,7 @@ class Simulator:
     MAX_STEPS = 50  # steps per advance; beyond that the steps get longer
     INSTRUCTIONS_PER_SECOND = 10_000  # stored-program execution rate (module time)
     MAX_CREDIT = 200
+    MIN_BURST = 16  # instructions a step may run on credit
 
     def __init__(self, module: str | Module = "TMCM-1311", address: int = 1, *,
                  host_address: int = 2, ascii_startup: bool | None = None,
@@ -136,7 +141,7 @@ class Simulator:
         self._t = 0.0
         self._tick_base = 0.0
         self._credit = 0.0
-        self._timer_due: dict[int, float | None] = {}
+        self._timer_due: dict[int, tuple[float, float]] = {}  # irq -> (period, due)
         self._prev: dict[str, object] = {}
         self._last_command = time.monotonic()
         self._heartbeat_fired = False
@@ -328,6 +333,10 @@ class Simulator:
 
     def load_program(self, instructions: Iterable[Instruction], start: int = 0) -> int:
         """Write instructions straight into program memory (tests); returns the count."""
+        instructions = list(instructions)
+        if not 0 <= start or start + len(instructions) > self.vm.size:
+            raise ValueError(f"{len(instructions)} instructions at {start} do not fit in "
+                             f"{self.vm.size} words of program memory")
         with self._lock:
             n = 0
             for n, ins in enumerate(instructions, 1):
@@ -395,8 +404,39 @@ class Simulator:
         self.store.add_live(GLOBAL, "DownloadMode", Live(lambda b: int(vm.download)))
         self.store.add_live(GLOBAL, "ProgramCounter", Live(lambda b: vm.pc))
         self.store.add_live(GLOBAL, "TickTimer", Live(
-            lambda b: int((self._t - self._tick_base) * 1000) & 0xFFFFFFFF, set_tick))
+            lambda b: int((self._t - self._tick_base) * 1000 + 1e-6) & 0xFFFFFFFF, set_tick))
         self.store.add_live(GLOBAL, "RandomNumber", Live(lambda b: random.randrange(2**31)))
+        for irq in (IRQ["TI_TIMER0"], IRQ["TI_TIMER1"], IRQ["TI_TIMER2"]):
+            timer = self.store.param(GLOBAL, irq, 3)
+            if timer is not None:
+                self.store.add_live(GLOBAL, timer.name, self._timer_period(irq))
+        protection = self.store.by_name(GLOBAL, "TMCLCodeProtection")
+        if protection is not None:
+            key = (GLOBAL, protection.bank, protection.number)
+
+            def set_protection(bank: int, value: int) -> int:
+                # "Changing this value from 1 or 3 to 0 or 2, the TMCL program will be wiped off"
+                if self.store.ram.get(key, 0) & 1 and not value & 1:
+                    vm.erase()
+                self.store.ram[key] = value
+                return Status.OK
+
+            self.store.add_live(GLOBAL, "TMCLCodeProtection",
+                                Live(lambda b: self.store.ram.get(key, 0), set_protection))
+
+    def _timer_period(self, irq: int) -> Live:
+        """Timer interrupt periods (GP bank 3 #0-2): a period counts from when it is set."""
+        key = (GLOBAL, 3, irq)
+
+        def set_period(bank: int, value: int) -> int:
+            self.store.ram[key] = value
+            if value > 0:
+                self._timer_due[irq] = (value / 1000.0, self._t + value / 1000.0)
+            else:
+                self._timer_due.pop(irq, None)
+            return Status.OK
+
+        return Live(lambda b: self.store.ram.get(key, 0), set_period)
 
     # -- receiving --------------------------------------------------------------------------------
     def _receive(self, data: bytes) -> None:
@@ -440,9 +480,11 @@ class Simulator:
         return b""
 
     def _frame_ahead(self, me: int) -> bool:
-        """A valid frame for this module starts further on: the head is garbage, not a frame."""
+        """A valid frame for this module starts inside the head frame: the head is garbage,
+        not a frame. (A valid frame further on does not overlap the head, which is then a
+        frame of its own; looking only this far keeps a flood of address bytes linear.)"""
         rx = self._rx
-        for k in range(1, len(rx) - SERIAL_FRAME_LEN + 1):
+        for k in range(1, min(SERIAL_FRAME_LEN, len(rx) - SERIAL_FRAME_LEN + 1)):
             if rx[k] == me and checksum(rx[k:k + 8]) == rx[k + 8]:
                 return True
         return False
@@ -510,11 +552,12 @@ class Simulator:
         if spec is None:
             return Answer(Status.INVALID_COMMAND)
         if not spec.on(self.module.name) or not spec.ascii or not spec.direct:
-            return Answer(Status.COMMAND_NOT_AVAILABLE)
+            return Answer(Status.COMMAND_NOT_AVAILABLE, _ascii_value_field(line, spec))
         try:
             enc = encode(line, self.module, direct=True, ascii=True)
         except ValueError as exc:  # AsmError (and ValidationError) are ValueErrors
-            return Answer(_ascii_error_status(line, spec, getattr(exc, "col", None)))
+            return Answer(_ascii_error_status(line, spec, getattr(exc, "col", None)),
+                          _ascii_value_field(line, spec))
         ans = self._dispatch(enc.instruction, SERIAL)
         return Answer(ans.status, ans.value, after=ans.after)
 
@@ -542,6 +585,27 @@ class Simulator:
             self._queue(SERIAL, reply.to_bytes(), reply=True)
 
     def _dispatch(self, ins: Instruction, channel: str) -> Answer:
+        """Execute one request; the reply value is the request's value field unless the
+        command answers with a result (the firmware fills the reply with the request first:
+        TMCM-1311 §5.7.16 shows ``CALC MUL, -5000`` answered with -5000)."""
+        ans = self._execute(ins, channel)
+        if not (ans.status == Status.OK and self._answers_value(ins)):
+            ans.value = ins.signed_value
+        return ans
+
+    @staticmethod
+    def _answers_value(ins: Instruction) -> bool:
+        op = ins.opcode
+        if op >= Control.STOP_APPLICATION:
+            return op in RESULT_CONTROLS
+        spec = isa.by_opcode(op)
+        if spec is None:
+            return False
+        if spec.mnemonic == "RFS":
+            return ins.type == spec.type_names().get("STATUS")
+        return spec.reads
+
+    def _execute(self, ins: Instruction, channel: str) -> Answer:
         op = ins.opcode
         if op >= Control.STOP_APPLICATION:
             return self._control(ins, channel)
@@ -632,6 +696,11 @@ class Simulator:
         return int.from_bytes(bytes(layout), "big")
 
     # -- VM host --------------------------------------------------------------------------------
+    def clock(self) -> float:
+        """Module time of the step being executed: WAIT ticks count on the same clock as
+        motion, timers and the tick timer, however long one update is."""
+        return self._t
+
     def command(self, ins: Instruction, accu: int | None) -> tuple[int, int]:
         return self.commands.execute(ins, accu)
 
@@ -666,20 +735,50 @@ class Simulator:
         n = min(self.MAX_STEPS, max(1, math.ceil(dt / self.MAX_STEP)))
         h = dt / n
         limits = self._limits()
-        for _ in range(n):
-            for axis, lim in zip(self.axes, limits):
-                if axis.moving:
-                    axis.advance(h, lim)
-            self._t += h
-            self._interrupt_sources()
-            if self.vm.active:
-                self._credit = min(self._credit + h * self.INSTRUCTIONS_PER_SECOND,
-                                   self.MAX_CREDIT)
-                ran = self.vm.tick(int(self._credit))
-                self._credit -= ran
-                if ran:
-                    limits = self._limits()  # the program may have changed speeds
-            self._check_events()
+        # Steps end early at a WAIT deadline or a timer period, so that WAIT TICKS and
+        # timer interrupts keep module time exactly however long the update is.
+        for _ in range(n + self.MAX_DEADLINE_CUTS):
+            left = now - self._t
+            if left <= 1e-12:
+                break
+            step = min(h, left)
+            due = self._next_deadline()
+            if due is not None and self._t + 1e-9 < due < self._t + step:
+                step = due - self._t
+            limits = self._step(step, limits)
+        else:
+            if now > self._t:
+                self._step(now - self._t, limits)
+
+    MAX_DEADLINE_CUTS = 1000  # extra (shorter) steps per update for WAIT and timer deadlines
+
+    def _step(self, h: float, limits: list) -> list:
+        for axis, lim in zip(self.axes, limits):
+            if axis.moving:
+                axis.advance(h, lim)
+        self._t += h
+        self._interrupt_sources()
+        if self.vm.active:
+            self._credit = min(self._credit + h * self.INSTRUCTIONS_PER_SECOND,
+                               self.MAX_CREDIT)
+            # A short step (cut at a deadline) still runs what follows at once: a few
+            # instructions on credit, paid back from the next steps.
+            ran = self.vm.tick(max(int(self._credit), self.MIN_BURST))
+            self._credit = max(self._credit - ran, -self.MAX_CREDIT)
+            if ran:
+                limits = self._limits()  # the program may have changed speeds
+        self._check_events()
+        return limits
+
+    def _next_deadline(self) -> float | None:
+        """The next module time at which a WAIT times out or a timer interrupt falls due."""
+        times = []
+        w = self.vm.wait
+        if w is not None and w.ticks:
+            times.append(w.start + w.ticks * VM_TICK)
+        if self.vm.active:
+            times += [due for _, due in self._timer_due.values()]
+        return min(times) if times else None
 
     def _limits(self):
         return [self.commands.limits(m) for m in range(self.module.motors)]
@@ -727,15 +826,15 @@ class Simulator:
         for name in ("TI_TIMER0", "TI_TIMER1", "TI_TIMER2"):
             irq = IRQ[name]
             period = self._config(irq) / 1000.0
-            due = self._timer_due.get(irq)
+            last = self._timer_due.get(irq)
             if period <= 0:
-                self._timer_due[irq] = None
-            elif due is None:
-                self._timer_due[irq] = t + period
-            elif t >= due - 1e-9:
+                self._timer_due.pop(irq, None)
+            elif last is None or last[0] != period:
+                self._timer_due[irq] = (period, t + period)  # counted from when it is set
+            elif t >= last[1] - 1e-9:
                 vm.raise_interrupt(irq)
-                due += period
-                self._timer_due[irq] = due if due > t else t + period
+                due = last[1] + period
+                self._timer_due[irq] = (period, due if due > t else t + period)
         axis, prev = self.axes[0], self._prev
         if axis.reached and not prev.get("reached"):
             vm.raise_interrupt(IRQ["TI_TARGET"])
@@ -871,6 +970,22 @@ def _ascii_error_status(line: Line, spec: isa.InstructionSpec, col: int | None) 
     if missing:
         return Status.WRONG_TYPE if "type" in missing else Status.INVALID_VALUE
     return Status.WRONG_TYPE  # access refused (read-only written, ...) like the binary path
+
+
+def _ascii_value_field(line: Line, spec: isa.InstructionSpec) -> int:
+    """The value field of a refused line as the module read it (a refused command still
+    echoes its value, like a binary one); 0 when it is not a plain number."""
+    if "value" not in spec.fields:
+        return 0
+    idx = spec.fields.index("value")
+    if idx >= len(line.operands):
+        return 0
+    expr, sign = line.operands[idx], 1
+    while expr.op == "neg" and expr.args:
+        expr, sign = expr.args[0], -sign
+    if expr.op != "num" or expr.value is None or not -2**31 <= sign * expr.value < 2**32:
+        return 0
+    return to_signed32((sign * expr.value) & 0xFFFFFFFF)
 
 
 class SimBus:

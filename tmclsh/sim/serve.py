@@ -26,6 +26,15 @@ log = logging.getLogger(__name__)
 Target = Simulator | SimBus
 
 
+def _feed(write: Any, *args: Any) -> None:
+    """Hand received bytes to the simulator; a simulator bug is logged, and the server keeps
+    serving (a dead server thread would look like an unplugged module)."""
+    try:
+        write(*args)
+    except Exception:
+        log.exception("the simulator failed on received data")
+
+
 class _Server:
     def __init__(self, target: Target):
         self.target = target
@@ -102,7 +111,7 @@ class PtyServer(_Server):
                     continue
                 return
             if data:
-                self.target.write(data)
+                _feed(self.target.write, data)
 
     def close(self) -> None:
         if self._closed.is_set():
@@ -156,7 +165,7 @@ class TcpServer(_Server):
                     data = client.recv(4096)
                     if not data:
                         break
-                    self.target.write(data)
+                    _feed(self.target.write, data)
             except OSError:
                 pass
             finally:
@@ -215,7 +224,7 @@ class CanServer(_Server):
                 return
             if msg is None or msg.is_error_frame or msg.is_remote_frame:
                 continue
-            self.target.can_write(msg.arbitration_id, bytes(msg.data))
+            _feed(self.target.can_write, msg.arbitration_id, bytes(msg.data))
 
     def close(self) -> None:
         if self._closed.is_set():

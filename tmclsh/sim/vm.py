@@ -63,7 +63,7 @@ class State(IntEnum):
 
 class Host(Protocol):
     def command(self, ins: Instruction, accu: int | None) -> tuple[int, int]: ...
-    def now(self) -> float: ...
+    def clock(self) -> float: ...  # module time of the step being executed
     def condition(self, kind: int, motor: int) -> bool | None: ...
 
 
@@ -170,6 +170,12 @@ class Vm:
         self.pending.clear()
         self.isr = None
 
+    def erase(self) -> None:
+        """Wipe program memory (GP 81 code protection switched off); the program stops."""
+        self.memory = [None] * self.size
+        self.reset()
+        self.state = State.STOP
+
     def stop(self) -> None:
         self.state = State.STOP
         self.wait = None
@@ -231,7 +237,7 @@ class Vm:
     def _poll_wait(self) -> bool:
         w = self.wait
         assert w is not None
-        now = self.host.now()
+        now = self.host.clock()
         if w.kind == WAIT["TICKS"]:
             met = now >= w.start + w.ticks * TICK - 1e-9
         elif w.kind not in WAIT.values():
@@ -292,7 +298,7 @@ class Vm:
             self.state = State.STOP
             return None
         if op == OP["WAIT"]:
-            self.wait = Wait(ins.type, ins.motor, self.host.now(), max(value, 0))
+            self.wait = Wait(ins.type, ins.motor, self.host.clock(), max(value, 0))
             self._poll_wait()
             return None
         if op == OP["RETI"]:
@@ -301,6 +307,8 @@ class Vm:
                 self.pc, self.accu, self.x, self.cmp, self.eto = (ctx.pc, ctx.accu, ctx.x, ctx.cmp,
                                                                   ctx.eto)
                 self.wait = ctx.wait  # an interrupted WAIT resumes with its own deadline
+                if self.wait is not None:
+                    self._poll_wait()  # (it may have run out while the routine ran)
             else:
                 self.pc = nxt
             return None
