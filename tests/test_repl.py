@@ -177,7 +177,7 @@ def test_bad_input_shows_one_error_line_and_sends_nothing(repl, capsys):
     repl.line("SAP 140, 0, 99",
               "error: 99 is out of range for AP 140 MicrostepResolution: allowed 0..8\n")
     repl.wait_prompt()
-    repl.line("GAP 4, 7", "error: TMCM-1311 has no motor 7: motors 0\n")
+    repl.line("GAP 4, 7", "error: TMCM-1311 has no motor 7: only motor 0\n")
     repl.wait_prompt()
     assert frames.tx == []
     assert repl.quit() == 0

@@ -50,5 +50,5 @@ def test_watch_while_the_motor_moves(terminal, tmp_path):
     term.keys("q")
     done = term.wait_for(re.compile(r"EXIT=\d+\n.*icanon"))
     assert "EXIT=0" in done
-    assert re.search(r"watch: \d+ samples in [\d.]+ s .*MST sent to motor\(s\) 0", done)
+    assert re.search(r"watch: \d+ samples in [\d.]+ s .*MST sent to motor 0", done)
     assert " icanon" in done  # the terminal is back in line mode (cbreak undone)

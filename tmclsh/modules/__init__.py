@@ -179,8 +179,8 @@ class Module:
 
     def check_motor(self, motor: int) -> None:
         if not 0 <= motor < self.motors:
-            allowed = "0" if self.motors == 1 else f"0..{self.motors - 1}"
-            raise ValidationError(f"{self.name} has no motor {motor}: motors {allowed}")
+            allowed = "only motor 0" if self.motors == 1 else f"motors 0..{self.motors - 1}"
+            raise ValidationError(f"{self.name} has no motor {motor}: {allowed}")
 
     # -- parameters ---------------------------------------------------------------------
     def axis(self, number: int) -> Parameter | None:

@@ -229,23 +229,26 @@ def run_repl(session: Session, prompt_session: PromptSession | None = None) -> i
     unlisten = client.add_listener(session.out.event)
     client.start_event_poller()
     try:
-        # a dumb terminal has no prompt to redraw: print straight away, in order
-        with nullcontext() if dumb else patch_stdout(raw=True):
-            while True:
-                try:
+        while True:
+            try:
+                # output from other threads goes above the prompt while it is shown (a dumb
+                # terminal has no prompt to redraw: straight away). The proxy is closed after
+                # each line, which writes out all it holds: a command's output comes before
+                # the next prompt, also when several lines are pasted at once.
+                with nullcontext() if dumb else patch_stdout(raw=True):
                     try:
                         text = ps.prompt()
                     except EOFError:
                         break
                     if not run_text(session, text):
                         break
-                except KeyboardInterrupt:
-                    # Ctrl-C where the key binding is not active: a dumb terminal, or the
-                    # moment between two prompts when the terminal is in cooked mode
-                    try:
-                        stop_motors(session)
-                    except KeyboardInterrupt:  # pressed again during the stop: keep going
-                        pass
+            except KeyboardInterrupt:
+                # Ctrl-C where the key binding is not active: a dumb terminal, or the
+                # moment between two prompts when the terminal is in cooked mode
+                try:
+                    stop_motors(session)
+                except KeyboardInterrupt:  # pressed again during the stop: keep going
+                    pass
     finally:
         unlisten()
         client.stop_event_poller()
@@ -282,6 +285,7 @@ def run_one(session: Session, line: str) -> bool:
 
     if session.state.get(_LINK_LOST) and _is_tmcl(line) and not _try_reconnect(session):
         return True
+    session.interrupted_line_ended = False
     try:
         session.run_line(line)
     except QuitShell:
@@ -297,7 +301,7 @@ def run_one(session: Session, line: str) -> bool:
     except TmclError as exc:
         report_error(session, line, exc)
     except KeyboardInterrupt:
-        sys.stdout.write("\n")  # the terminal echoed ^C on the command's line
+        session.end_interrupted_line()  # the terminal echoed ^C on the command's line
         stop_motors(session, "interrupted")
     except Exception as exc:  # a bug must not take the motor shell down with it
         log.debug("internal error", exc_info=True)

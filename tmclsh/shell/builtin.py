@@ -76,7 +76,8 @@ def complete_connect(session: Session | None, text: str) -> list[Candidate]:
         from serial.tools import list_ports
 
         for p in sorted(list_ports.comports(), key=lambda p: p.device):
-            out.append(Candidate(p.device, p.description or ""))
+            about = p.description if p.description not in (None, "", "n/a") else ""
+            out.append(Candidate(p.device, about))
     except Exception:  # listing ports is a nicety; never let it break typing
         pass
     return out
@@ -128,14 +129,33 @@ def _help_overview(session: Session) -> None:
     for c in _unique_commands():
         cats.setdefault(c.category, []).append(c)
     order = [c for c in CATEGORY_ORDER if c in cats] + sorted(set(cats) - set(CATEGORY_ORDER))
+    # one syntax column for all categories, at most 45% of the width: a longer syntax gets a
+    # line of its own with the description under it, so no description is squeezed away
+    titles = {c.name: _command_title(c) for cs in cats.values() for c in cs}
+    limit = max(20, min(42, out.console.width * 9 // 20))
+    col = max((len(t) for t in titles.values() if len(t) <= limit), default=limit)
+
+    def flush(rows: list) -> None:
+        if rows:
+            grid = Table.grid(padding=(0, 2))
+            grid.add_column(style="tmcl.name", no_wrap=True, width=col)
+            grid.add_column()
+            for title, text in rows:
+                grid.add_row(Text(title), Text(text))
+            out.print(grid)
+            rows.clear()
+
     for cat in order:
         out.print(Text(CATEGORY_TITLES.get(cat, cat.capitalize()), style="tmcl.heading"))
-        grid = Table.grid(padding=(0, 2))
-        grid.add_column(style="tmcl.name", no_wrap=True)
-        grid.add_column()
+        rows: list[tuple[str, str]] = []
         for c in cats[cat]:
-            grid.add_row(Text(_command_title(c)), Text(c.help))
-        out.print(grid)
+            if len(titles[c.name]) <= col:
+                rows.append((titles[c.name], c.help))
+                continue
+            flush(rows)
+            out.print(Text(titles[c.name], style="tmcl.name"), soft_wrap=False)
+            out.print(_indented(c.help, indent=col + 2), soft_wrap=False)
+        flush(rows)
         out.print()
     mod = session.client.module
     out.print(Text("TMCL commands", style="tmcl.heading"))
@@ -185,7 +205,7 @@ def _help_command(session: Session, cmd) -> None:
     out.print(Text(cmd.syntax, style="tmcl.name"))
     out.print(_indented(cmd.help), soft_wrap=False)
     if cmd.details:
-        out.print(_indented(cmd.details), soft_wrap=False)
+        out.print(_indented(_paragraphs(cmd.details)), soft_wrap=False)
     extra = list(cmd.aliases) + [o.name for o in all_commands()
                                  if o.handler is cmd.handler and o is not cmd]
     if cmd.bare:
@@ -194,12 +214,25 @@ def _help_command(session: Session, cmd) -> None:
         out.print(Text(f"  also: {', '.join(extra)}", style="tmcl.note"))
 
 
-def _indented(text: str, style: str = ""):
-    """Prose that wraps at word boundaries, every line indented by two."""
+def _indented(text: str, style: str = "", indent: int = 2):
+    """Prose that wraps at word boundaries, every line indented by ``indent``."""
     from rich.padding import Padding
     from rich.text import Text
 
-    return Padding(Text(text, style=style), (0, 0, 0, 2), expand=False)
+    return Padding(Text(text, style=style), (0, 0, 0, indent), expand=False)
+
+
+def _paragraphs(text: str) -> str:
+    """Help details as written in the source (wrapped at ~90 columns) re-flowed: a line break
+    inside a paragraph becomes a space; blank lines and indented (example) lines stay."""
+    out: list[str] = []
+    for line in text.splitlines():
+        if out and out[-1] and line.strip() and not line[:1].isspace() \
+                and not out[-1][:1].isspace():
+            out[-1] += " " + line.strip()
+        else:
+            out.append(line.rstrip())
+    return "\n".join(out)
 
 
 def _help_instruction(session: Session, spec: isa.InstructionSpec) -> None:
@@ -218,7 +251,7 @@ def _help_instruction(session: Session, spec: isa.InstructionSpec) -> None:
     title = Text()
     title.append(spec.mnemonic, style="tmcl.mnemonic")
     title.append(f"  (command {spec.opcode})  {spec.summary}")
-    out.print(title)
+    out.print(title, soft_wrap=False)
     grid = Table.grid(padding=(0, 2))
     grid.add_column(style="tmcl.note", no_wrap=True)
     grid.add_column()
@@ -361,6 +394,11 @@ def cmd_param(session: Session, arg: str, from_help: bool = False) -> None:
     exact = [p for p in found if p.name.lower() == query.lower()]
     if exact:
         found = exact
+    if from_help and found and not any(_contains(p, query) for p in found):
+        # `help foo` must not answer with MaxFollowingError (f..o..o) as if that were it
+        names = ", ".join(p.name for p in found[:3])
+        raise ValidationError(f"no help topic or parameter matches {query!r} on the "
+                              f"{mod.name}; did you mean {names}? (.help lists the commands)")
     if not found:
         what = "help topic or parameter" if from_help else "parameter"
         raise ValidationError(f"no {what} matches {query!r} on the {mod.name}"
@@ -371,6 +409,16 @@ def cmd_param(session: Session, arg: str, from_help: bool = False) -> None:
     _param_table(session, found, title=f"{len(found)} parameters match {query!r}", read=False)
     if not session.out.json:
         session.out.info("(.param NAME for one of them)")
+
+
+def _contains(p: Parameter, query: str) -> bool:
+    """Whether the query is part of the parameter's name or manual name (not merely letters
+    of it in order, or a near miss)."""
+    def norm(text: str) -> str:
+        return re.sub(r"[^a-z0-9]", "", text.lower())
+
+    q = norm(query)
+    return bool(q) and (q in norm(p.name) or q in norm(p.manual_name or ""))
 
 
 def _kind_prefix(query: str) -> tuple[str | None, int | None, str]:
@@ -452,7 +500,7 @@ def _show_params(session: Session, params: list[Parameter], numbered: int | None
         title.append(p.name, style="bold tmcl.name")
         if p.manual_name and p.manual_name != p.name:
             title.append(f"  \u201c{p.manual_name}\u201d")
-        out.print(title)
+        out.print(title, soft_wrap=False)
         if p.description:
             out.print(_indented(p.description), soft_wrap=False)
         grid = Table.grid(padding=(0, 2))
@@ -491,7 +539,7 @@ def _how_to_use(p: Parameter, number: int | None) -> str:
             uses.append(f"SAP {p.name}, 0, <value>")
         if p.storable:
             uses.append(f"STAP {p.name}, 0")
-        return "   ".join(uses)
+        return "\n".join(uses)
     uses = []
     name = p.name if p.count == 1 else str(n)
     if p.readable:
@@ -500,7 +548,7 @@ def _how_to_use(p: Parameter, number: int | None) -> str:
         uses.append(f"SGP {name}, {p.bank}, <value>")
     if p.storable:
         uses.append(f"STGP {name}, {p.bank}")
-    return "   ".join(uses)
+    return "\n".join(uses)
 
 
 def _access_words(access: str) -> str:
@@ -588,28 +636,11 @@ def _value_only(value: int, p: Parameter) -> str:
 
 
 def _param_table(session: Session, params: list[Parameter], title: str, read: bool) -> None:
-    from rich.table import Table
-
     out = session.out
     mod = session.module
     axis = all(p.kind == "axis" for p in params)
     motors = list(range(mod.motors)) if axis else [0]
-    table = Table(title=title, title_justify="left", title_style="tmcl.heading",
-                  header_style="bold", box=None, pad_edge=False, show_edge=False)
-    table.add_column("No.", justify="right", no_wrap=True)
-    if not axis:
-        table.add_column("Kind" if any(p.kind == "axis" for p in params) else "Bank",
-                         justify="right")
-    table.add_column("Name", style="tmcl.name", no_wrap=True)
-    if read:
-        for m in motors:
-            table.add_column(f"Motor {m}" if len(motors) > 1 else "Value", style="tmcl.value",
-                             min_width=8, ratio=2)
-    table.add_column("Unit", style="tmcl.unit", max_width=16, ratio=1)
-    table.add_column("Range", ratio=1)
-    table.add_column("Access", no_wrap=True)
-    if not read:
-        table.add_column("Description", style="tmcl.note")
+    rows: list[dict[str, object]] = []
     failures = 0
     for p in params:
         values: list[str] = []
@@ -643,19 +674,75 @@ def _param_table(session: Session, params: list[Parameter], title: str, read: bo
             out.emit(obj)
             continue
         number = (f"{p.number}..{p.number + p.count - 1}" if p.count > 1 else str(p.number))
-        row = [number]
+        rows.append({"No.": number, "Kind": "AP" if p.kind == "axis" else str(p.bank),
+                     "Name": p.name, "values": values, "Unit": p.unit,
+                     "Range": range_short(p), "Access": p.access,
+                     "Description": p.manual_name})
+    if out.json:
+        return
+    # on a narrow terminal Range and then Unit are left out, so the values stay readable
+    for drop in ((), ("Range",), ("Range", "Unit")):
+        if _table_width(rows, read, axis, motors, drop) <= out.console.width:
+            break
+    out.print(_build_param_table(params, rows, title, read, axis, motors, drop))
+
+
+def _table_width(rows: list[dict[str, object]], read: bool, axis: bool, motors: list[int],
+                 drop: tuple[str, ...]) -> int:
+    """The width the table needs with names and ranges whole and values at least 12 wide."""
+    def widest(key: str, header: str, cap: int = 10_000) -> int:
+        return min(cap, max([len(header)] + [len(str(r[key])) for r in rows]))
+
+    cols = [widest("No.", "No."), widest("Name", "Name"), widest("Access", "Access")]
+    if not axis:
+        cols.append(widest("Kind", "Kind"))
+    if read:
+        for i, m in enumerate(motors):
+            cols.append(min(12, max([len(f"Motor {m}")] +
+                                    [len(r["values"][i]) for r in rows])))  # type: ignore[index]
+    else:
+        cols.append(20)  # the description wraps
+    if "Unit" not in drop:
+        cols.append(widest("Unit", "Unit", 16))
+    if "Range" not in drop:
+        cols.append(widest("Range", "Range"))
+    return sum(cols) + 2 * (len(cols) - 1)
+
+
+def _build_param_table(params: list[Parameter], rows: list[dict[str, object]], title: str,
+                       read: bool, axis: bool, motors: list[int], drop: tuple[str, ...]):
+    from rich.table import Table
+
+    table = Table(title=title, title_justify="left", title_style="tmcl.heading",
+                  header_style="bold", box=None, pad_edge=False, show_edge=False)
+    table.add_column("No.", justify="right", no_wrap=True)
+    if not axis:
+        table.add_column("Kind" if any(p.kind == "axis" for p in params) else "Bank",
+                         justify="right")
+    table.add_column("Name", style="tmcl.name", no_wrap=True)
+    if read:
+        for m in motors:
+            table.add_column(f"Motor {m}" if len(motors) > 1 else "Value", style="tmcl.value",
+                             min_width=7)
+    if "Unit" not in drop:
+        table.add_column("Unit", style="tmcl.unit", max_width=16)
+    if "Range" not in drop:
+        table.add_column("Range", no_wrap=True)
+    table.add_column("Access", no_wrap=True, min_width=6)
+    if not read:
+        table.add_column("Description", style="tmcl.note")
+    for r in rows:
+        row = [r["No."]]
         if not axis:
-            row.append("AP" if p.kind == "axis" else str(p.bank))
-        row.append(p.name)
-        row += values
-        row.append(p.unit)
-        row.append(range_short(p))
-        row.append(p.access)
+            row.append(r["Kind"])
+        row.append(r["Name"])
+        row += r["values"]  # type: ignore[operator]
+        row += [r[k] for k in ("Unit", "Range") if k not in drop]
+        row.append(r["Access"])
         if not read:
-            row.append(p.manual_name)
+            row.append(r["Description"])
         table.add_row(*row)
-    if not out.json:
-        out.print(table)
+    return table
 
 
 # -- trace and decode --------------------------------------------------------------------

@@ -720,6 +720,7 @@ def cmd_step(session: Session, argtext: str) -> None:
                 session.out.info("the program stopped (it ran a STOP or reached its end)")
                 break
     except KeyboardInterrupt:
+        session.end_interrupted_line()
         session.out.info(f"interrupted after {_plural(done - 1, 'step')}")
         report(session, _read_status(session), displays=False)
         raise  # the shell's Ctrl-C policy (stop the motors) applies as to any command
@@ -785,6 +786,7 @@ def cmd_continue(session: Session, argtext: str) -> None:
             info = program.continue_to(session.client, targets, max_steps=limit,
                                        on_step=counted, instruction_at=stored)
     except KeyboardInterrupt:
+        session.end_interrupted_line()
         session.out.info(f"interrupted after {_plural(steps[0], 'step')}")
         report(session, _read_status(session))
         raise  # the shell's Ctrl-C policy (stop the motors) applies as to any command

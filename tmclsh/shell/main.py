@@ -60,8 +60,24 @@ def run_shell(args: argparse.Namespace) -> int:
         stopped = client.stop_all() if client.connected else []
         print(f"\ninterrupted; motors stopped: {stopped}", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # whoever read our output has gone (`tmclsh -c ... | head`): stop quietly, as other
+        # command-line tools do, instead of `tmclsh: [Errno 32] Broken pipe`
+        _silence_stdout()
+        return EXIT_ERROR
     finally:
         client.close()  # leaves ASCII mode if tmclsh entered it, whatever happened
+
+
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null, so the interpreter's last flush does not fail again."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
 
 
 def _run(args: argparse.Namespace, client, settings: dict) -> int:

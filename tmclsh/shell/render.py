@@ -29,14 +29,23 @@ from ..protocol import Control, Reply, Status, status_text
 from .style import rich_theme
 
 
+# spaces at the end of a line (before any closing colour codes): rich pads table cells and
+# wrapped prose to the column width, which leaves trailing blanks in pipes and copied text
+_TRAILING_BLANKS = re.compile(r"[ \t]+((?:\x1b\[[0-9;]*m)*)$", re.M)
+
+
 def _console(stderr: bool = False):
     """A rich console that writes to whatever sys.stdout/sys.stderr is *now* (so output from
     other threads goes through prompt_toolkit's ``patch_stdout`` while the prompt runs)."""
     from rich.console import Console
 
+    class TrimmedConsole(Console):
+        def _render_buffer(self, buffer) -> str:
+            return _TRAILING_BLANKS.sub(r"\1", super()._render_buffer(buffer))
+
     no_color = bool(os.environ.get("NO_COLOR")) or os.environ.get("TERM") == "dumb"
-    return Console(stderr=stderr, theme=rich_theme(), highlight=False, soft_wrap=True,
-                   no_color=no_color or None)
+    return TrimmedConsole(stderr=stderr, theme=rich_theme(), highlight=False, soft_wrap=True,
+                          no_color=no_color or None)
 
 
 class Output:
@@ -60,25 +69,25 @@ class Output:
     def info(self, text: str) -> None:
         """A status line for people (stderr under --json, so stdout stays parseable)."""
         if self.json:
-            self.err.print(text, style="tmcl.note", markup=False)
+            _message(self.err, text, "tmcl.note")
         else:
-            self.console.print(text, style="tmcl.note", markup=False)
+            _message(self.console, text, "tmcl.note")
 
     def ok(self, text: str) -> None:
         """A confirmation that something was done (``motors 0, 1 stopped``)."""
         if self.json:
-            self.err.print(text, markup=False)
+            _message(self.err, text, "")
         else:
-            self.console.print(text, style="tmcl.ok", markup=False)
+            _message(self.console, text, "tmcl.ok")
 
     def warn(self, text: str) -> None:
-        self.err.print(text, style="tmcl.warn", markup=False)
+        _message(self.err, text, "tmcl.warn")
 
     def error(self, line: str | None, message: str) -> None:
         if self.json:
             self.emit({"line": line, "error": message})
         else:
-            self.err.print(f"error: {message}", style="tmcl.error", markup=False)
+            _message(self.err, f"error: {message}", "tmcl.error")
 
     def result(self, result: Result, module: Module | None) -> None:
         if self.json:
@@ -93,6 +102,12 @@ class Output:
                        "value": reply.value})
         else:
             self.console.print(render_event(reply), style="tmcl.event", markup=False)
+
+
+def _message(console, text: str, style: str) -> None:
+    """One message line: on a terminal wrapped between words (not cut mid-word by the
+    terminal), in a pipe or a file one line as it is."""
+    console.print(text, style=style, markup=False, soft_wrap=not console.is_terminal)
 
 
 def result_json(result: Result) -> dict[str, Any]:

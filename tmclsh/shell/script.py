@@ -570,6 +570,9 @@ def summary(session: Session, name: str, before: Counts, elapsed: float, status:
     errors = now.errors - before.errors
     if status == EXIT_SYNTAX and sent == 0:
         text = f"{name}: not run (syntax error; nothing was sent)"
+    elif status == EXIT_SYNTAX:  # stdin runs each line as it arrives, up to the bad one
+        text = (f"{name}: stopped at a syntax error after {sent} "
+                f"command{'s' if sent != 1 else ''} sent, {elapsed:.2f} s")
     else:
         text = (f"{name}: {sent} command{'s' if sent != 1 else ''} sent, "
                 f"{passed} check{'s' if passed != 1 else ''} passed, {failed} failed, "

@@ -8,6 +8,7 @@ checked against the module's database before anything is sent.
 from __future__ import annotations
 
 import re
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -62,6 +63,8 @@ class Session:
         # features keep their state here (debugger, watch, ...), keyed by feature name
         self.state: dict[str, object] = {}
         self.location: tuple[str, int] | None = None  # script file and line being run
+        # the REPL sets it False before each line; see end_interrupted_line
+        self.interrupted_line_ended = True
         commands.load_all()
         install_expressions(self)  # ${expression} in any line
 
@@ -70,12 +73,23 @@ class Session:
     def module(self) -> Module:
         return self.client.require_module()
 
+    def end_interrupted_line(self) -> None:
+        """After Ctrl-C during a command the terminal has echoed ``^C`` where the cursor was:
+        end that line, once, before anything else is printed."""
+        if self.interactive and not self.interrupted_line_ended:
+            sys.stdout.write("\n")
+            sys.stdout.flush()
+        self.interrupted_line_ended = True
+
     # -- confirmation -------------------------------------------------------------------
     def confirm(self, question: str) -> None:
         """Raise Abort unless the user agrees (or --yes was given). Scripts need --yes."""
         if self.yes:
             return
         if self.ask is not None and self.interactive:
+            # an Enter typed after the y/n key arrives as an empty line: it must not repeat
+            # the last .step (the debugger's repeat_on_empty)
+            self.state.pop("repeat_on_empty", None)
             if self.ask(question):
                 return
             raise Abort("cancelled; nothing was sent")

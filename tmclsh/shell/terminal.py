@@ -741,7 +741,9 @@ def _show_mode(session: Session) -> None:
     else:
         extra = ""
         if link is not None and link.on_exit == Mode.ASCII:
-            extra = " (module was found in ASCII mode: 139 is sent at exit)"
+            extra = (" (module was found in ASCII mode: 139 is sent at exit)"
+                     if link.found == Mode.ASCII else
+                     " (back to ASCII mode at exit, as chosen when leaving .ascii)")
         session.out.print(f"mode: binary{extra}", markup=False)
 
 

@@ -63,13 +63,34 @@ def create_toolbar_tokens_func(session: Session) -> Callable[[], Fragments]:
             style = ("class:bottom-toolbar.on" if state.startswith(("run", "step"))
                      else "class:bottom-toolbar")
             out.append((style, f"program {state}"))
-        out.append(sep)
-        out.append(("class:bottom-toolbar.key", "Tab"))
-        out.append(("class:bottom-toolbar.dim", " complete  "))
-        out.append(("class:bottom-toolbar.key", "^C"))
-        out.append(("class:bottom-toolbar.dim", " stop motors  "))
-        out.append(("class:bottom-toolbar.key", "^D"))
-        out.append(("class:bottom-toolbar.dim", " quit"))
+        # the key hints, as many as fit: a cut-off toolbar (`^D qu`) looks broken
+        room = _columns() - sum(len(text) for _, text in out) - len(sep[1])
+        for hints in _HINTS:
+            if sum(len(k) + len(t) for k, t in hints) <= room:
+                if hints:
+                    out.append(sep)
+                for key, text in hints:
+                    out.append(("class:bottom-toolbar.key", key))
+                    out.append(("class:bottom-toolbar.dim", text))
+                break
         return out
 
     return get_toolbar_tokens
+
+
+_HINTS = (
+    (("Tab", " complete  "), ("^C", " stop motors  "), ("^D", " quit")),
+    (("^C", " stop motors  "), ("^D", " quit")),
+    (("^C", " stop"),),
+    (),
+)
+
+
+def _columns() -> int:
+    from prompt_toolkit.application import get_app_or_none
+
+    app = get_app_or_none()
+    try:
+        return app.output.get_size().columns if app is not None else 200
+    except Exception:  # the terminal's size is a nicety; never let it break the toolbar
+        return 200

@@ -48,6 +48,7 @@ RATE_WINDOW = 1.0  # seconds over which the change rate is measured
 LOG_LIMIT = 200_000  # samples kept for .plot
 _BLOCKS = "▁▂▃▄▅▆▇█"
 _KEY_HELP = "s/space: stop motors  ·  q/Ctrl-C: end watch (motors keep running)"
+_KEY_HELP_SHORT = "s: stop motors · q/^C: end (motors keep running)"
 STOP_KEYS = "sS "  # send MST to every motor, keep watching
 QUIT_KEYS = "qQ"  # end the watch (so do Esc and Ctrl-C)
 
@@ -241,10 +242,19 @@ def _fmt_rate(rate: float | None) -> str:
     return f"{rate:+.3g}"
 
 
-def render(snapshot: Snapshot):
-    """The live table for one snapshot (pure: no I/O)."""
+def render(snapshot: Snapshot, width: int | None = None):
+    """The live table for one snapshot (pure: no I/O); ``width`` is the terminal's, which the
+    sparkline gives way to so the numbers are never cut."""
     from rich.table import Table
     from rich.text import Text
+
+    spark = SPARK_WIDTH
+    if width is not None:
+        cells = [(s.name, "error" if s.error is not None else _fmt(s.value), _fmt(s.minimum),
+                  _fmt(s.maximum), _fmt_rate(s.rate)) for s in snapshot.series]
+        heads = ("name", "value", "min", "max", "rate /s")
+        used = sum(max([len(h)] + [len(c[i]) for c in cells]) + 3 for i, h in enumerate(heads))
+        spark = max(6, min(SPARK_WIDTH, width - used - 4))
 
     title = (f"watch  {snapshot.samples} samples  t={snapshot.t:.1f} s  "
              f"{snapshot.rate_hz:.1f}/s (interval {snapshot.interval:g} s)")
@@ -253,24 +263,26 @@ def render(snapshot: Snapshot):
         caption_parts.append(snapshot.note)
     if snapshot.failed_reads:
         caption_parts.append(f"{snapshot.failed_reads} failed reads")
-    caption_parts.append(_KEY_HELP if snapshot.keys else "Ctrl-C: end watch (motors keep running)")
+    key_help = _KEY_HELP if width is None or width >= len(_KEY_HELP) else _KEY_HELP_SHORT
+    caption_parts.append(key_help if snapshot.keys else "Ctrl-C: end watch (motors keep running)")
     # one caption line per note, and wide enough that the key help never wraps
+    min_width = max(len(title), *(len(c) for c in caption_parts))
     table = Table(title=title, caption="\n".join(caption_parts), title_justify="left",
                   caption_justify="left", expand=False,
-                  min_width=max(len(title), *(len(c) for c in caption_parts)))
+                  min_width=min(min_width, width) if width is not None else min_width)
     table.add_column("name", style="tmcl.name", no_wrap=True)
     table.add_column("value", justify="right", no_wrap=True)
     table.add_column("min", justify="right", style="tmcl.note", no_wrap=True)
     table.add_column("max", justify="right", style="tmcl.note", no_wrap=True)
     table.add_column("rate /s", justify="right", no_wrap=True)
-    table.add_column("recent", no_wrap=True, min_width=SPARK_WIDTH)
+    table.add_column("recent", no_wrap=True, min_width=spark)
     for s in snapshot.series:
         if s.error is not None:
             value = Text("error", style="tmcl.error")
         else:
             value = Text(_fmt(s.value), style="tmcl.changed" if s.changed else "tmcl.value")
         table.add_row(s.name, value, _fmt(s.minimum), _fmt(s.maximum), _fmt_rate(s.rate),
-                      Text(sparkline(s.history), style="tmcl.ok"))
+                      Text(sparkline(s.history, spark), style="tmcl.ok"))
     return table
 
 
@@ -450,7 +462,8 @@ class _Live:
         from rich.live import Live
 
         self.state = state
-        self.live = Live(render(state.snapshot()), console=session.out.console,
+        self.console = session.out.console
+        self.live = Live(render(state.snapshot(), self.console.width), console=self.console,
                          auto_refresh=False, transient=False)
         self.live.start()
         self.last = 0.0
@@ -459,11 +472,11 @@ class _Live:
         """Redraw from a fresh snapshot, at most REFRESH_HZ times a second."""
         now = time.monotonic()
         if force or now - self.last >= 1.0 / REFRESH_HZ:
-            self.live.update(render(self.state.snapshot()), refresh=True)
+            self.live.update(render(self.state.snapshot(), self.console.width), refresh=True)
             self.last = now
 
     def close(self) -> None:
-        self.live.update(render(self.state.snapshot()), refresh=True)
+        self.live.update(render(self.state.snapshot(), self.console.width), refresh=True)
         self.live.stop()
 
 
@@ -572,7 +585,8 @@ def cmd_watch(session: Session, args: str) -> None:
     elif result.reason == "until":
         text += f"; {until} became true"
     if result.stopped_motors:
-        text += f"; MST sent to motor(s) {', '.join(map(str, result.stopped_motors))}"
+        which = "motor" if len(result.stopped_motors) == 1 else "motors"
+        text += f"; MST sent to {which} {', '.join(map(str, result.stopped_motors))}"
     if csv_path is not None:
         text += f"; logged to {csv_path}"
     if out_is_pipe(session):
