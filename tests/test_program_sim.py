@@ -204,7 +204,7 @@ def test_lost_link_during_upload_all_replies_dropped(client, sim):
     assert "link lost (no reply" in str(e)
     assert e.memory_text() == ("instructions 0..2 written, 3 unknown (sent, not confirmed), "
                                "4..14 unchanged (old contents)")
-    # 133 went out (twice) but its answer was lost too: said so, plainly
+    # 133 went out (more than once) but its answer was lost too: said so, plainly
     assert not e.download_ended
     assert "could not end download mode" in str(e) and "power-cycle" in str(e)
     assert sim.param("global", 129) == 0  # the module did end download mode

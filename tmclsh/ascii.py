@@ -58,6 +58,9 @@ BS = b"\x08"
 _EOL = b"\r\n"
 # bytes the ASCII line discipline acts on: a binary probe frame must not contain them
 _LINE_BYTES = frozenset(b"\r\n\x08\x7f")
+# A reply that came before the echo of the line just sent is taken only if no echo follows
+# within this time (then the module does not echo, whatever GP 67 said).
+_ECHO_WAIT = 0.05
 
 GP_ASCII_MODE = 67  # bank 0
 GP_HOST_ADDRESS = 76  # bank 0
@@ -726,8 +729,16 @@ class AsciiLink:
 
     def _await(self, t: StreamTransport, sent: bytes, opcode: int, address: int,
                timeout: float) -> Reply:
+        """The reply to the line just ``sent``. An ASCII reply names no command, so a late
+        reply to an earlier line looks like this one's; but a module that echoes sends the
+        echo of this line after every earlier reply. So while an echo is expected, a reply
+        that comes before it is held: if the echo follows, the reply was stale and is
+        dropped; if the line stays quiet (the module does not echo after all), it is taken."""
         client, buf = self.client, self._buf
         deadline = time.monotonic() + timeout
+        echoed = self.echo not in (Echo.CHAR, Echo.LINE)
+        held: tuple[bytes, Reply] | None = None  # a reply that came before the echo
+        held_until = 0.0
         while True:
             while True:
                 used, text = next_line(buf)
@@ -742,6 +753,11 @@ class AsciiLink:
                     self.stats["echo_lines"] += 1
                     if client.tracing:
                         client.trace("rx", raw, "echo")
+                    echoed = True
+                    if held is not None:
+                        self._drop(held[0], "late reply to an earlier command (it came "
+                                            "before the echo)")
+                        held = None
                     continue
                 if kind == LineKind.REPLY and reply is not None:
                     if reply.host != client.host_address:
@@ -751,11 +767,23 @@ class AsciiLink:
                     if reply.module != address:
                         self._drop(raw, f"reply from address {reply.module}")
                         continue
+                    if not echoed and parse_reply(text, opcode) is not None:
+                        # (a reply the echo ran into is no candidate: it came after the echo)
+                        if held is not None:
+                            self._drop(held[0], "late reply to an earlier command")
+                        held, held_until = (raw, reply), time.monotonic() + _ECHO_WAIT
+                        continue
                     if client.tracing:
                         client.trace("rx", raw, reply)
                     return reply
                 self._drop(raw, "not a reply")
-            left = deadline - time.monotonic()
+            now = time.monotonic()
+            if held is not None and (now >= held_until or now >= deadline):
+                if client.tracing:
+                    client.trace("rx", held[0], held[1])
+                return held[1]  # no echo followed: this module does not echo
+            end = deadline if held is None else min(deadline, held_until)
+            left = end - now
             if left <= 0:
                 break
             buf += t.read(1, left)

@@ -10,12 +10,16 @@ TMCL replies carry no sequence number, so the client keeps the link honest itsel
 * bytes that are no frame (line noise, a lost byte) are skipped one at a time until a frame
   with a valid checksum lines up again;
 * a request that timed out or got a corrupted reply is remembered as *stale*: its reply may
-  still arrive. Before a request whose reply could be confused with a stale one (same address
-  and opcode, or a reply layout that does not name its opcode: 136 type 0, 134) the client
-  sends a 136 type 1 as a marker and discards everything up to the marker's reply. The module
-  answers in order, so a late reply is consumed before it could be taken for a newer one. In
-  download mode (132 ... 133) a marker would be stored in program memory, so the client only
-  drains the line there;
+  still arrive (they are counted, and a late reply that shows up is crossed off). Before a
+  request whose reply could be confused with a stale one (same address and opcode, or a reply
+  layout that does not name its opcode: 136 type 0, 134) the client sends a 136 as a marker
+  and discards everything up to the marker's reply. The module answers in order, so a late
+  reply is consumed before it could be taken for a newer one. The marker's own reply must not
+  be confusable either: it is a 136 type 1 (a normal frame) unless such a reply may still
+  arrive (an earlier marker went unanswered), else a 136 type 0 (the version string); if
+  both may, the client first lets the line go quiet. In download mode (132 ... 133) a marker
+  would be stored in program memory, so the client only drains the line there, and sends a
+  marker once download mode is over;
 * only idempotent requests are retried on a timeout or corrupted reply (a retried ``MVP REL``
   would move twice); a reply with status 1 (the module saw a bad checksum and executed
   nothing) is retried for every request.
@@ -29,7 +33,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections import deque
+from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -140,10 +144,14 @@ class Client:
         self.ascii_link = None  # set by tmclsh.ascii when the module is driven in ASCII mode
         self._lock = threading.RLock()
         self._buf = bytearray()
-        # (address, opcode) of requests whose reply may still arrive; _stale_opaque: one of
-        # them has a reply layout that names no opcode (136 type 0, 134)
-        self._stale: set[tuple[int, int]] = set()
+        # how many normal-layout replies may still arrive, by (address, opcode);
+        # _stale_versions: 136 type 0 version strings that may; _stale_opaque: a reply that
+        # could look like anything (134) may, or something else used the line;
+        # _drained: download mode only drained the line (no marker): send one after it
+        self._stale: Counter[tuple[int, int]] = Counter()
+        self._stale_versions = 0
         self._stale_opaque = False
+        self._drained = False
         self._events: deque[Reply] = deque()
         # run by close() while the link is still open (the ASCII link restores the mode the
         # module was found in)
@@ -268,9 +276,11 @@ class Client:
         attempt = 0
         while True:
             attempt += 1
+            sent = False  # a failed resynchronisation sends nothing (its marker is counted)
             try:
-                if self._stale or self._stale_opaque:
+                if self._dirty:
                     self._sync_before(req, kind, timeout)
+                sent = True
                 reply = self._exchange(req, kind, timeout)
             except TmclTimeoutError as exc:
                 self.stats["timeouts"] += 1
@@ -280,7 +290,8 @@ class Client:
                 failure = exc
             except BaseException:
                 # Ctrl-C or a link error mid-transaction: the reply may still be on its way
-                self._mark_stale(req, kind)
+                if sent:
+                    self._mark_stale(req, kind)
                 raise
             else:
                 if (reply is not None and reply.status == Status.WRONG_CHECKSUM
@@ -291,7 +302,8 @@ class Client:
                         self._trace("note", b"", "module saw a bad checksum; sending again")
                     continue
                 return reply
-            self._mark_stale(req, kind)
+            if sent:
+                self._mark_stale(req, kind)
             tries = 1 + (retries if idempotent(req, self.downloading) else 0)
             if attempt >= tries:
                 if tries > 1:
@@ -304,7 +316,8 @@ class Client:
     @property
     def _dirty(self) -> bool:
         """Something may still arrive that is no answer to the next request."""
-        return bool(self._stale or self._stale_opaque)
+        return bool(self._stale or self._stale_versions or self._stale_opaque
+                    or (self._drained and not self.downloading))
 
     @_dirty.setter
     def _dirty(self, value: bool) -> None:
@@ -313,39 +326,85 @@ class Client:
         self._stale_opaque = bool(value)
         if not value:
             self._stale.clear()
+            self._stale_versions = 0
+            self._drained = False
 
     def _mark_stale(self, req: Request, kind: ReplyKind) -> None:
         if kind == _NONE:
             return
-        self._stale.add((req.address, req.opcode))
+        if kind == _VERSION:
+            # 136 type 0 is answered with a string (every module in the database has it; a
+            # refusal would be a normal frame with an error status, not counted here)
+            self._stale_versions += 1
+            return
+        self._stale[(req.address, req.opcode)] += 1
         if kind != _NORMAL:
             self._stale_opaque = True
 
+    def _late(self, address: int, opcode: int) -> None:
+        """A late normal reply showed up: one fewer of its kind may still arrive."""
+        key = (address, opcode)
+        n = self._stale.get(key, 0)
+        if n > 1:
+            self._stale[key] = n - 1
+        elif n:
+            del self._stale[key]
+
     def _sync_before(self, req: Request, kind: ReplyKind, timeout: float) -> None:
         """Resynchronise if a late reply could be taken for ``req``'s."""
-        if self._stale_opaque or kind != _NORMAL or (req.address, req.opcode) in self._stale:
+        if (self._stale_opaque or kind != _NORMAL or (req.address, req.opcode) in self._stale
+                or (self._drained and not self.downloading)):
             self._resync(req.address, timeout)
 
+    def _marker(self, address: int) -> tuple[Request, ReplyKind] | None:
+        """A harmless request whose reply cannot be taken for a late one: 136 type 1 (a
+        normal frame) unless a reply like it may still arrive, else 136 type 0 (a string;
+        neither a normal frame nor ASCII text is a host-addressed string)."""
+        if (address, Control.GET_VERSION) not in self._stale:
+            return Request(address, Control.GET_VERSION, 1, 0, 0), _NORMAL
+        if not self._stale_versions:
+            return Request(address, Control.GET_VERSION, 0, 0, 0), _VERSION
+        return None
+
     def _resync(self, address: int, timeout: float) -> None:
-        """Consume every late reply: drain, then a 136 type 1 marker whose reply comes last."""
+        """Consume every late reply: drain, then a 136 marker whose reply comes last."""
         self.stats["resyncs"] += 1
         if self._tracers:
             self._trace("note", b"", "resynchronising")
         if self.downloading:
             # a marker would be stored as an instruction: wait for a quiet line instead;
-            # stale replies are still dropped by opcode matching
+            # stale replies are still dropped by opcode matching. That proves nothing, so a
+            # marker follows once download mode is over.
             self._drain(max(0.2, timeout))
-        else:
-            self._absorb()
-            marker = Request(address, Control.GET_VERSION, 1, 0, 0)
-            try:
-                self._exchange(marker, _NORMAL, timeout)
-            except (TmclTimeoutError, ChecksumError) as exc:
-                self._stale.add((address, marker.opcode))
-                raise type(exc)(f"address {address} did not answer the resynchronisation "
-                                f"request (136) after an earlier failure: {exc}") from exc
+            self._stale.clear()
+            self._stale_versions = 0
+            self._stale_opaque = False
+            self._drained = True
+            return
+        self._absorb()
+        chosen = self._marker(address)
+        if chosen is None:
+            # both markers' replies may still be on their way: take in what comes (for at
+            # most a timeout) until one of them has shown up or the line is quiet
+            end = time.monotonic() + timeout
+            while chosen is None and (left := end - time.monotonic()) > 0:
+                if not self._absorb(left):
+                    break
+                chosen = self._marker(address)
+        marker, kind = chosen or (Request(address, Control.GET_VERSION, 1, 0, 0), _NORMAL)
+        try:
+            self._exchange(marker, kind, timeout)
+        except (TmclTimeoutError, ChecksumError) as exc:
+            self._mark_stale(marker, kind)
+            raise type(exc)(f"address {address} did not answer the resynchronisation "
+                            f"request (136) after an earlier failure: {exc}") from exc
+        except BaseException:
+            self._mark_stale(marker, kind)
+            raise
         self._stale.clear()
+        self._stale_versions = 0
         self._stale_opaque = False
+        self._drained = False
 
     def _exchange(self, req: Request, kind: ReplyKind, timeout: float) -> Reply | None:
         if self.transport.kind == "stream":
@@ -429,8 +488,18 @@ class Client:
             return reply
         if sum(head[:8]) & 0xFF != head[8] or (
                 head[0] == host and kind != _MEMORY and head[2] not in _STATUSES):
+            if self._late_version(head):
+                del buf[:_FRAME]
+                return _SKIPPED
             # no frame starts here (the decoder's rule: a checksum, and a TMCL status byte
             # in a reply to us)
+            junk.append(buf[0])
+            del buf[0]
+            return _GARBAGE
+        if head[0] != host and junk:
+            # reached by sliding through bytes that were no frame: noise that happens to
+            # add up (1 in 256) is likelier than another host's frame, and taking it whole
+            # would swallow the start of the reply behind it
             junk.append(buf[0])
             del buf[0]
             return _GARBAGE
@@ -450,6 +519,7 @@ class Client:
         elif (head[1] != req.address or opcode != req.opcode
               or (kind == _VERSION and status == _OK)):
             # (a normal frame answering 136 type 0 can only carry an error status)
+            self._late(head[1], opcode)
             self._discard(head, f"stale reply (op {opcode} from address {head[1]})")
             return _SKIPPED
         else:
@@ -457,6 +527,14 @@ class Client:
         if self._tracers:
             self._trace("rx", head, reply)
         return reply
+
+    def _late_version(self, head: bytes) -> bool:
+        """Is ``head`` (no frame) the version string a stale 136 type 0 still had coming?"""
+        if self._stale_versions and head[0] == self.host_address and _printable(head, 1):
+            self._stale_versions -= 1
+            self._discard(head, "stale version string")
+            return True
+        return False
 
     def _rx_event(self, raw: bytes, reply: Reply) -> None:
         self.stats["events"] += 1
@@ -474,12 +552,11 @@ class Client:
             self._discard(bytes(junk), why)
             junk.clear()
 
-    def _absorb(self, timeout: float = 0.0) -> None:
+    def _absorb(self, timeout: float = 0.0) -> bool:
         """Take in whatever is pending now (or, if nothing is, what comes within ``timeout``):
-        events are queued, anything else is stale."""
+        events are queued, anything else is stale. False if nothing came."""
         if isinstance(self.transport, CanTransport):
-            self._absorb_can()
-            return
+            return self._absorb_can(timeout)
         t: StreamTransport = self.transport  # type: ignore[assignment]
         buf = self._buf
         data = t.read_available()
@@ -490,7 +567,12 @@ class Client:
         while len(buf) >= _FRAME:
             head = bytes(buf[:_FRAME])
             if sum(head[:8]) & 0xFF != head[8] or (
-                    head[0] == self.host_address and head[2] not in _STATUSES):
+                    head[0] == self.host_address and head[2] not in _STATUSES) or (
+                    head[0] != self.host_address and junk):  # (see _take)
+                if self._late_version(head):
+                    self._drop(junk, "bytes that are no frame")
+                    del buf[:_FRAME]
+                    continue
                 junk.append(buf[0])
                 del buf[0]
                 continue
@@ -500,8 +582,11 @@ class Client:
                     and head[3] == Control.TARGET_REACHED_EVENT:
                 self._rx_event(head, Reply.from_frame(head))
             else:
+                if head[0] == self.host_address:
+                    self._late(head[1], head[3])
                 self._discard(head, "stale reply")
         self._drop(junk, "bytes that are no frame")
+        return bool(data)
 
     def _drain(self, hard_stop: float) -> None:
         """Read until the line has been quiet for a moment (at most ``hard_stop`` s); then
@@ -566,6 +651,7 @@ class Client:
         else:
             reply = Reply.from_can(host, data)
             if reply.opcode != req.opcode or (kind == _VERSION and reply.status == Status.OK):
+                self._late(reply.module, reply.opcode)
                 self._discard(data, f"stale reply (op {reply.opcode})")
                 return None
         if self._tracers:
@@ -582,12 +668,16 @@ class Client:
                 and data[2] == Control.TARGET_REACHED_EVENT:
             self._rx_event(data, Reply.from_can(self.host_address, data))
         elif arb == self.reply_id:
+            if len(data) == _CAN_REPLY_LEN:
+                self._late(data[0], data[2])
             self._discard(data, "stale reply")
         return True
 
-    def _absorb_can(self) -> None:
-        while self._take_can_any(0):
-            pass
+    def _absorb_can(self, timeout: float = 0.0) -> bool:
+        got = False
+        while self._take_can_any(0 if got else timeout):
+            got = True
+        return got
 
     # -- events while idle --------------------------------------------------------------
     def poll(self) -> None:
@@ -718,8 +808,7 @@ class Client:
                         raise
                     time.sleep(min(0.1, max(0.0, deadline - time.monotonic())))
             self._buf.clear()
-            self._stale.clear()
-            self._stale_opaque = False
+            self._dirty = False
             self.stats["reconnects"] += 1
             if self._tracers:
                 self._trace("note", b"", f"reconnected to {self.describe()}")

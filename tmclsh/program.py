@@ -296,9 +296,10 @@ def _reason(exc: BaseException) -> str:
 
 
 def _quit_download(client, timeout: float | None) -> tuple[bool, str | None]:
-    """133, best effort: twice if the first gets no reply (a second 133 is harmless)."""
+    """133, best effort: sent again while it gets no reply (a repeated 133 is harmless), as
+    often as the client retries a request, and at least twice."""
     error = None
-    for _ in range(2):
+    for _ in range(max(2, 1 + client.retries)):
         try:
             reply = _send(client, Control.QUIT_DOWNLOAD, timeout=timeout)
             if reply is not None and reply.ok:
