@@ -294,6 +294,16 @@ def binary_budget(timeout: float) -> float:
 
 # -- binary, in process ------------------------------------------------------------------------
 
+def drive(h: Harness, ops, seed: int) -> None:
+    """Seed values, run the operations under their faults, then check the link recovers."""
+    h.sim.faults.rng = random.Random(seed)
+    h.seed()
+    for op in ops:
+        h.op(op)
+    h.calm()
+    h.recovers()
+
+
 @fuzz(40)
 # a 134 read took the late reply of an earlier resynchronisation marker
 @example(ops=[("sgp", 0)] * 4 + [("delay", 1.3)] + [("sgp", 0)] * 6 + [("memory", 0)],
@@ -309,13 +319,7 @@ def test_binary_link_under_faults(ops, timeout, retries, seed):
     client = Client(SimTransport(simulator=sim), module="TMCM-1311", timeout=timeout,
                     retries=retries)
     try:
-        h = Harness(client, sim, budget_per_attempt=binary_budget(timeout))
-        sim.faults.rng = random.Random(seed)
-        h.seed()
-        for op in ops:
-            h.op(op)
-        h.calm()
-        h.recovers()
+        drive(Harness(client, sim, budget_per_attempt=binary_budget(timeout)), ops, seed)
     finally:
         client.close()
         sim.close()
@@ -334,13 +338,7 @@ def test_binary_link_under_faults_over_a_pty(ops, retries, seed):
     server = serve_pty(sim)
     client = Client(open_serial(server.path), module="TMCM-1311", timeout=0.2, retries=retries)
     try:
-        h = Harness(client, sim, budget_per_attempt=binary_budget(0.2))
-        sim.faults.rng = random.Random(seed)
-        h.seed()
-        for op in ops:
-            h.op(op)
-        h.calm()
-        h.recovers()
+        drive(Harness(client, sim, budget_per_attempt=binary_budget(0.2)), ops, seed)
     finally:
         client.close()
         server.close()

@@ -58,7 +58,19 @@ class _Server:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def close(self) -> None:  # pragma: no cover - overridden
+    # the target attribute this server sets to receive what the module sends
+    _hook = "on_output"
+
+    def close(self) -> None:
+        """Stop serving (once): detach from the target, then release the link."""
+        if self._closed.is_set():
+            return
+        self._closed.set()
+        if getattr(self.target, self._hook) == self._output:
+            setattr(self.target, self._hook, None)
+        self._shutdown()
+
+    def _shutdown(self) -> None:  # pragma: no cover - overridden
         raise NotImplementedError
 
 
@@ -113,12 +125,7 @@ class PtyServer(_Server):
             if data:
                 _feed(self.target.write, data)
 
-    def close(self) -> None:
-        if self._closed.is_set():
-            return
-        self._closed.set()
-        if self.target.on_output == self._output:
-            self.target.on_output = None
+    def _shutdown(self) -> None:
         os.write(self._wake_w, b"x")
         self._join()
         for fd in (self.master, self._slave, self._wake_r, self._wake_w):
@@ -174,12 +181,7 @@ class TcpServer(_Server):
                 client.close()
                 log.info("TCP client disconnected")
 
-    def close(self) -> None:
-        if self._closed.is_set():
-            return
-        self._closed.set()
-        if self.target.on_output == self._output:
-            self.target.on_output = None
+    def _shutdown(self) -> None:
         with self._send_lock:
             if self._client is not None:
                 try:
@@ -226,12 +228,9 @@ class CanServer(_Server):
                 continue
             _feed(self.target.can_write, msg.arbitration_id, bytes(msg.data))
 
-    def close(self) -> None:
-        if self._closed.is_set():
-            return
-        self._closed.set()
-        if self.target.on_can_output == self._output:
-            self.target.on_can_output = None
+    _hook = "on_can_output"
+
+    def _shutdown(self) -> None:
         self._join()
         self.bus.shutdown()
 
