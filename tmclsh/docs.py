@@ -1,7 +1,7 @@
 """The man page and the bash, zsh and fish completions, generated, never typed.
 
 Everything listed comes from where it is defined: options and subcommands from
-``cli.build_parser()``, shell commands from the dot-command registry (``shell.commands``),
+``options.build_parser()``, shell commands from the dot-command registry (``shell.commands``),
 TMCL instructions from ``instructions``, module names from ``modules.available()``, settings
 and profile keys from ``default.toml`` and ``config``, CAN interfaces from python-can's
 ``can.interfaces.VALID_INTERFACES`` (imported here, at generation time only). The committed
@@ -157,7 +157,7 @@ def _read(parser: argparse.ArgumentParser, name: str, help_text: str) -> Command
 def describe(parser: argparse.ArgumentParser | None = None) -> tuple[CommandLine, list[CommandLine]]:
     """The top-level command line and its subcommands, as plain data."""
     if parser is None:
-        from .cli import build_parser
+        from .options import build_parser
 
         parser = build_parser()
     top = _read(parser, "", parser.description or "")
@@ -601,7 +601,7 @@ Load the completions into the running shell:
 
 
 def _exit_status() -> list[str]:
-    from .cli import EXIT_CONNECT, EXIT_ERROR, EXIT_OK, EXIT_USAGE
+    from .options import EXIT_CONNECT, EXIT_ERROR, EXIT_OK, EXIT_USAGE
 
     rows = [
         (EXIT_OK, "Success."),
