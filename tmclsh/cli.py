@@ -53,7 +53,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from .sim.serve import run
 
     return run(args.module, args.address, pty=args.pty, tcp=args.tcp, can=args.can,
-               host_address=args.host_address)
+               host_address=args.host_address, faults=args.faults, seed=args.faults_seed)
 
 
 def cmd_ports(args: argparse.Namespace) -> int:

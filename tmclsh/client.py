@@ -20,6 +20,12 @@ TMCL replies carry no sequence number, so the client keeps the link honest itsel
   both may, the client first lets the line go quiet. In download mode (132 ... 133) a marker
   would be stored in program memory, so the client only drains the line there, and sends a
   marker once download mode is over;
+* before each request, whatever is already waiting on the line is taken in and dropped (an
+  event is kept): nothing that arrived before a request can be its answer. A reply that
+  arrives when none is outstanding (a duplicate, or the real answer to a request that took
+  another reply) marks the line dirty, so the next request resynchronises; unless it is a
+  byte-for-byte copy of the reply the last request took (then the value shown was the one
+  it carries either way), that last reply is reported as *suspect* (``take_suspects``);
 * only idempotent requests are retried on a timeout or corrupted reply (a retried ``MVP REL``
   would move twice); a reply with status 1 (the module saw a bad checksum and executed
   nothing) is retried for every request.
@@ -96,6 +102,17 @@ def idempotent(req: Request, downloading: bool = False) -> bool:
 
 
 @dataclass(frozen=True)
+class Suspect:
+    """A reply already returned that may have been another request's: a reply arrived later
+    that no request was waiting for. ``seq`` is ``Client.replies`` when it was returned."""
+
+    request: Request
+    reply: Reply
+    seq: int
+    extra: bytes  # the reply that came when none was outstanding
+
+
+@dataclass(frozen=True)
 class Result:
     """A typed line and what the module answered (reply is None for 137)."""
 
@@ -152,7 +169,14 @@ class Client:
         self._stale_versions = 0
         self._stale_opaque = False
         self._drained = False
+        self._flushing = False  # _absorb runs for _flush_input (for the trace's words)
         self._events: deque[Reply] = deque()
+        # the last reply returned (its request, reply, raw bytes): what a reply that comes
+        # when none is outstanding may have displaced
+        self.replies = 0  # replies returned so far (Suspect.seq numbers them)
+        self._last: tuple[Request, Reply] | None = None
+        self._recent: deque[Reply] = deque(maxlen=4)  # replies taken lately, markers too
+        self._suspects: deque[Suspect] = deque(maxlen=64)
         # run by close() while the link is still open (the ASCII link restores the mode the
         # module was found in)
         self.close_hooks: list[Callable[[], None]] = []
@@ -161,7 +185,8 @@ class Client:
         self._poller: threading.Thread | None = None
         self._poller_stop = threading.Event()
         self.stats = {"sent": 0, "timeouts": 0, "checksum_errors": 0, "resyncs": 0,
-                      "discarded": 0, "events": 0, "retries": 0, "reconnects": 0}
+                      "discarded": 0, "events": 0, "retries": 0, "reconnects": 0,
+                      "flushed": 0, "unsolicited": 0, "suspect": 0}
 
     # -- subscriptions ------------------------------------------------------------------
     def add_listener(self, fn: Listener) -> Callable[[], None]:
@@ -278,6 +303,7 @@ class Client:
             attempt += 1
             sent = False  # a failed resynchronisation sends nothing (its marker is counted)
             try:
+                self._flush_input()
                 if self._dirty:
                     self._sync_before(req, kind, timeout)
                 sent = True
@@ -301,6 +327,10 @@ class Client:
                     if self._tracers:
                         self._trace("note", b"", "module saw a bad checksum; sending again")
                     continue
+                if reply is not None:
+                    self.replies += 1
+                    self._last = (req, reply)
+                    self._recent.append(reply)
                 return reply
             if sent:
                 self._mark_stale(req, kind)
@@ -341,14 +371,59 @@ class Client:
         if kind != _NORMAL:
             self._stale_opaque = True
 
-    def _late(self, address: int, opcode: int) -> None:
-        """A late normal reply showed up: one fewer of its kind may still arrive."""
+    def _late(self, address: int, opcode: int, extra: Reply | None = None) -> None:
+        """A late normal reply showed up: one fewer of its kind may still arrive. If none
+        could (``extra``, the reply, is one that no request was waiting for), see
+        :meth:`_unsolicited`."""
         key = (address, opcode)
         n = self._stale.get(key, 0)
         if n > 1:
             self._stale[key] = n - 1
         elif n:
             del self._stale[key]
+        elif extra is not None and not self._stale_opaque and not self.downloading:
+            self._unsolicited(extra)
+
+    def _unsolicited(self, extra: Reply) -> None:
+        """A reply came when none was outstanding: a duplicate, or the real answer to the
+        last request, which then took another one. The line is dirty (the next request
+        resynchronises) and, unless ``extra`` is a copy of a reply taken lately (the last
+        request's: the value shown is the one it carries anyway; or a marker's), the last
+        request's reply is suspect."""
+        self.stats["unsolicited"] += 1
+        self._stale_opaque = True
+        last = self._last
+        if last is None or extra in self._recent:
+            return
+        self._last = None  # reported once
+        self.stats["suspect"] += 1
+        self._suspects.append(Suspect(last[0], last[1], self.replies,
+                                      extra.to_bytes() if not self.is_can else extra.to_can()))
+        if self._tracers:
+            self._trace("note", b"", f"the reply to {_name(last[0])} may have been another "
+                                     "request's: a reply came that nothing was waiting for")
+
+    def take_suspects(self) -> list[Suspect]:
+        """Replies returned earlier that may have answered another request (oldest first);
+        each is reported once."""
+        out = []
+        while self._suspects:
+            out.append(self._suspects.popleft())
+        return out
+
+    def _flush_input(self) -> None:
+        """Before a request: what is already waiting cannot be its answer. Take it in
+        (events are kept), drop the rest, count it. One cheap check when the line is quiet."""
+        t = self.transport
+        if t.kind == "stream" and not self._buf and not t.pending():  # type: ignore[attr-defined]
+            return
+        before = self.stats["discarded"]
+        self._flushing = True
+        try:
+            self._absorb()
+        finally:
+            self._flushing = False
+        self.stats["flushed"] += self.stats["discarded"] - before
 
     def _sync_before(self, req: Request, kind: ReplyKind, timeout: float) -> None:
         """Resynchronise if a late reply could be taken for ``req``'s."""
@@ -393,7 +468,9 @@ class Client:
                 chosen = self._marker(address)
         marker, kind = chosen or (Request(address, Control.GET_VERSION, 1, 0, 0), _NORMAL)
         try:
-            self._exchange(marker, kind, timeout)
+            got = self._exchange(marker, kind, timeout)
+            if got is not None:
+                self._recent.append(got)
         except (TmclTimeoutError, ChecksumError) as exc:
             self._mark_stale(marker, kind)
             raise type(exc)(f"address {address} did not answer the resynchronisation "
@@ -519,7 +596,7 @@ class Client:
         elif (head[1] != req.address or opcode != req.opcode
               or (kind == _VERSION and status == _OK)):
             # (a normal frame answering 136 type 0 can only carry an error status)
-            self._late(head[1], opcode)
+            self._late(head[1], opcode, Reply.from_frame(head))
             self._discard(head, f"stale reply (op {opcode} from address {head[1]})")
             return _SKIPPED
         else:
@@ -583,8 +660,15 @@ class Client:
                 self._rx_event(head, Reply.from_frame(head))
             else:
                 if head[0] == self.host_address:
-                    self._late(head[1], head[3])
-                self._discard(head, "stale reply")
+                    self._late(head[1], head[3], Reply.from_frame(head))
+                self._discard(head, "discarded before the request: a reply nothing was "
+                              "waiting for" if self._flushing else "stale reply")
+        if junk:
+            # sliding through noise: what is left only counts if it can start a reply to us
+            # (as in _take, a frame for another host met this way is taken for noise)
+            while buf and buf[0] != self.host_address:
+                junk.append(buf[0])
+                del buf[0]
         self._drop(junk, "bytes that are no frame")
         return bool(data)
 
@@ -651,7 +735,7 @@ class Client:
         else:
             reply = Reply.from_can(host, data)
             if reply.opcode != req.opcode or (kind == _VERSION and reply.status == Status.OK):
-                self._late(reply.module, reply.opcode)
+                self._late(reply.module, reply.opcode, reply)
                 self._discard(data, f"stale reply (op {reply.opcode})")
                 return None
         if self._tracers:
@@ -669,7 +753,7 @@ class Client:
             self._rx_event(data, Reply.from_can(self.host_address, data))
         elif arb == self.reply_id:
             if len(data) == _CAN_REPLY_LEN:
-                self._late(data[0], data[2])
+                self._late(data[0], data[2], Reply.from_can(self.host_address, data))
             self._discard(data, "stale reply")
         return True
 

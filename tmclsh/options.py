@@ -29,6 +29,15 @@ def _address(text: str) -> int:
     return n
 
 
+def _faults(text: str) -> dict[str, float]:
+    from .sim.device import parse_rates  # only when --faults is given
+
+    try:
+        return parse_rates(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def _positive(text: str) -> float:
     try:
         v = float(text)
@@ -108,6 +117,14 @@ def build_parser() -> argparse.ArgumentParser:
     how.add_argument("--pty", action="store_true", help="serve on a pseudo-terminal (path on the first line)")
     how.add_argument("--tcp", metavar="HOST:PORT", help="serve on TCP, for socket:// URLs")
     how.add_argument("--can", metavar="IFACE:CHANNEL", help="serve on a python-can bus")
+    s.add_argument("--faults", type=_faults, metavar="KIND=P,...",
+                   help="misbehave at random: for each reply, the probability P (0..1) of each "
+                        "fault: drop (not sent), corrupt (a bit flipped), truncate (half sent), "
+                        "delay (held back 0.2..2 s), garbage (noise before it), dup (sent "
+                        "twice), dup-late (a copy after the next request); e.g. "
+                        "drop=0.1,corrupt=0.05,dup=0.05")
+    s.add_argument("--faults-seed", type=_int, metavar="N",
+                   help="seed for --faults, so a run misbehaves the same way again")
 
     sub.add_parser("ports", help="list serial ports (Trinamic USB devices marked)")
 

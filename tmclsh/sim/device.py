@@ -50,6 +50,7 @@ IRQ = isa.interrupts()
 RUN_FROM_CURRENT, RUN_FROM_ADDRESS = 0, 1  # command 129 types
 VERSION_STRING, VERSION_BINARY = 0, 1  # command 136 types
 # Control commands whose reply value is a result; the others echo the request's value field.
+RANDOM_DELAY = (0.2, 2.0)  # s a reply hit by the random "delay" fault is held back
 RESULT_CONTROLS = frozenset({Control.READ_MEMORY, Control.GET_STATUS, Control.GET_VERSION,
                              Control.TARGET_REACHED_EVENT})
 
@@ -63,7 +64,13 @@ class Faults:
     (not executed, no reply). ``corrupt_next``: one bit flipped in a random byte (never the
     last one) of the next N replies. ``truncate_next``: only the first half of the next N
     replies is sent. ``garbage``: bytes sent once, just before the next reply. ``delay``:
-    seconds added before every reply. The 138 event counts as a reply.
+    seconds added before every reply. ``dup_next``: the next N replies are sent twice, back
+    to back; ``dup_late_next``: a copy of each of the next N replies is held back and sent
+    when the next request has arrived, before its reply (a repeater or an RS485 echo that
+    lags). The 138 event counts as a reply.
+
+    ``rates`` makes the link misbehave at random: a probability per reply for each kind in
+    ``RATE_KINDS`` (``tmclsh sim --faults``), drawn from ``rng``.
     """
 
     corrupt_next: int = 0
@@ -72,7 +79,62 @@ class Faults:
     garbage: bytes = b""
     truncate_next: int = 0
     lose_next: int = 0
+    dup_next: int = 0
+    dup_late_next: int = 0
+    rates: dict[str, float] = field(default_factory=dict)
     rng: random.Random = field(default_factory=lambda: random.Random(0), repr=False)
+
+    def roll(self, kind: str) -> bool:
+        """Does the random fault ``kind`` hit this reply?"""
+        p = self.rates.get(kind)
+        return bool(p) and self.rng.random() < p  # type: ignore[operator]
+
+    def take(self, counter: str, kind: str) -> bool:
+        """The counted fault ``counter`` (counted down) or else the random ``kind``."""
+        n = getattr(self, counter)
+        if n > 0:
+            setattr(self, counter, n - 1)
+            return True
+        return self.roll(kind)
+
+
+#: random faults per reply (``Faults.rates``), with what each does, for --help and the docs
+RATE_KINDS = {
+    "drop": "the reply is not sent (the command was executed)",
+    "corrupt": "one bit of the reply flipped",
+    "truncate": "only the first half of the reply is sent",
+    "delay": f"the reply is held back {RANDOM_DELAY[0]:g}..{RANDOM_DELAY[1]:g} s "
+             "(and the replies behind it)",
+    "garbage": "1..8 bytes of noise before the reply",
+    "dup": "the reply is sent twice, back to back",
+    "dup-late": "a copy of the reply follows once the next request has arrived",
+}
+
+
+def parse_rates(text: str) -> dict[str, float]:
+    """``"drop=0.1,dup=0.05"`` -> rates; ValueError (one line, for users) on bad input."""
+    rates: dict[str, float] = {}
+    for part in text.split(","):
+        part = part.strip()
+        if not part:
+            continue
+        kind, sep, prob = part.partition("=")
+        kind = kind.strip().lower()
+        if not sep or kind not in RATE_KINDS:
+            raise ValueError(f"{part!r} is not KIND=PROBABILITY (kinds: "
+                             f"{', '.join(RATE_KINDS)})")
+        try:
+            p = float(prob)
+        except ValueError:
+            p = -1.0
+        if not 0.0 <= p <= 1.0:
+            raise ValueError(f"{kind}={prob.strip()}: the probability must be a number "
+                             "from 0 to 1")
+        rates[kind] = p
+    if not rates:
+        raise ValueError("no faults given (e.g. drop=0.1,dup=0.05; kinds: "
+                         f"{', '.join(RATE_KINDS)})")
+    return rates
 
 
 @dataclass
@@ -129,6 +191,7 @@ class Simulator:
         self._outbuf = bytearray()
         self._canbuf: deque[tuple[int, bytes]] = deque()
         self._outq: deque[tuple[float, str, object]] = deque()
+        self._late_copies: deque[tuple[str, object]] = deque()  # the "dup-late" fault
         self._last_due = 0.0
         self._rx = bytearray()
         self._rx_time = 0.0
@@ -509,6 +572,7 @@ class Simulator:
 
     # -- ASCII commands ---------------------------------------------------------------------------
     def _ascii_line(self, text: str) -> None:
+        self._send_late_copies()
         self._last_command = time.monotonic()
         self._heartbeat_fired = False
         if self._lose():
@@ -563,6 +627,7 @@ class Simulator:
 
     # -- requests ---------------------------------------------------------------------------------
     def _handle(self, req: Request, channel: str) -> None:
+        self._send_late_copies()
         self._last_command = time.monotonic()
         self._heartbeat_fired = False
         ans = self._dispatch(req.instruction, channel)
@@ -847,21 +912,38 @@ class Simulator:
     # -- output ---------------------------------------------------------------------------------
     def _queue(self, channel: str, payload: object, *, reply: bool) -> None:
         delay = 0.0
+        copies = 1
         if reply:
             f = self.faults
-            if f.drop_next > 0:
-                f.drop_next -= 1
+            if f.take("drop_next", "drop"):
                 return
             payload = self._apply_faults(channel, payload)
             delay = f.delay
+            if f.rates and f.roll("delay"):
+                delay += f.rng.uniform(*RANDOM_DELAY)
             if channel == SERIAL:
                 delay += self.store.get(GLOBAL, "TelegramPauseTime") / 1000.0
+            if f.take("dup_next", "dup"):
+                copies = 2
+            if f.take("dup_late_next", "dup-late"):
+                self._late_copies.append((channel, payload))
         due = max(time.monotonic() + delay, self._last_due)
         self._last_due = due
-        self._outq.append((due, channel, payload))
+        for _ in range(copies):
+            self._outq.append((due, channel, payload))
+
+    def _send_late_copies(self) -> None:
+        """A request arrived: the copies held back by the "dup-late" fault go out first."""
+        while self._late_copies:
+            channel, payload = self._late_copies.popleft()
+            due = max(time.monotonic(), self._last_due)
+            self._last_due = due
+            self._outq.append((due, channel, payload))
 
     def _apply_faults(self, channel: str, payload: object) -> object:
         f = self.faults
+        if f.rates and f.roll("garbage"):
+            f.garbage += bytes(f.rng.randrange(256) for _ in range(f.rng.randint(1, 8)))
         if channel == CAN:
             can_id, data = payload  # type: ignore[misc]
             data = self._mangle(data)
@@ -876,23 +958,30 @@ class Simulator:
 
     def _mangle(self, data: bytes) -> bytes:
         f = self.faults
-        if f.corrupt_next > 0 and data:
-            f.corrupt_next -= 1
+        if data and f.take("corrupt_next", "corrupt"):
             buf = bytearray(data)
             i = f.rng.randrange(max(1, len(buf) - 1))
             buf[i] ^= 1 << f.rng.randrange(8)
             data = bytes(buf)
-        if f.truncate_next > 0:
-            f.truncate_next -= 1
+        if f.take("truncate_next", "truncate"):
             data = data[:len(data) // 2]
         return data
 
     def _drain(self) -> None:
         with self._out_lock:
             now = time.monotonic()
+            serial = bytearray()  # what is due goes out in one piece, as a UART sends it
             while self._outq and self._outq[0][0] <= now:
                 _, channel, payload = self._outq.popleft()
+                if channel == SERIAL:
+                    serial += payload  # type: ignore[operator]
+                    continue
+                if serial:
+                    self._deliver(SERIAL, bytes(serial))
+                    serial.clear()
                 self._deliver(channel, payload)
+            if serial:
+                self._deliver(SERIAL, bytes(serial))
 
     def _deliver(self, channel: str, payload: object) -> None:
         try:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import errno
 import logging
 import os
+import random
 import select
 import signal
 import socket
@@ -256,10 +257,13 @@ def _split(spec: str, what: str) -> tuple[str, str]:
 
 
 def run(module: str, address: int, *, pty: bool = False, tcp: str | None = None,
-        can: str | None = None, host_address: int = 2) -> int:
+        can: str | None = None, host_address: int = 2, faults: dict[str, float] | None = None,
+        seed: int | None = None) -> int:
     """Serve one simulated module until SIGINT/SIGTERM; the first stdout line is the endpoint.
 
-    Exit status 0 after a signal, 2 for bad arguments.
+    ``faults``: probabilities per reply by kind (``Faults.rates``), drawn from a generator
+    seeded with ``seed`` (None: a different run each time). Exit status 0 after a signal, 2
+    for bad arguments.
     """
     chosen = [x for x in (pty, tcp, can) if x]
     if len(chosen) != 1:
@@ -270,6 +274,9 @@ def run(module: str, address: int, *, pty: bool = False, tcp: str | None = None,
     except ValueError as exc:
         log.error("%s", exc)
         return 2
+    if faults:
+        sim.faults.rng = random.Random(seed)
+        sim.faults.rates = dict(faults)
     server: _Server
     try:
         if pty:
@@ -301,6 +308,9 @@ def run(module: str, address: int, *, pty: bool = False, tcp: str | None = None,
         sys.stdout.write(endpoint + "\n")
         sys.stdout.flush()
         log.info("simulated %s at address %d on %s", sim.module.name, address, endpoint)
+        if faults:
+            log.warning("misbehaving on purpose: %s",
+                        ", ".join(f"{k}={v:g}" for k, v in faults.items()))
         while not stop.wait(0.5):
             pass
     finally:
