@@ -170,7 +170,10 @@ class Client:
         self._stale_opaque = False
         self._drained = False
         self._flushing = False  # _absorb runs for _flush_input (for the trace's words)
-        self._events: deque[Reply] = deque()
+        self._events: deque[tuple[Reply, float]] = deque()  # with when each arrived
+        # when the event being delivered arrived (time.monotonic()), for listeners that
+        # put a time on it
+        self.event_time = 0.0
         # the last reply returned (its request, reply, raw bytes): what a reply that comes
         # when none is outstanding may have displaced
         self.replies = 0  # replies returned so far (Suspect.seq numbers them)
@@ -216,7 +219,7 @@ class Client:
     def _deliver_events(self) -> None:
         while True:
             try:
-                reply = self._events.popleft()
+                reply, self.event_time = self._events.popleft()
             except IndexError:
                 return
             for fn in list(self._listeners):
@@ -617,7 +620,7 @@ class Client:
         self.stats["events"] += 1
         if self._tracers:
             self._trace("rx", raw, reply)
-        self._events.append(reply)
+        self._events.append((reply, time.monotonic()))
 
     def _discard(self, raw: bytes, why: str) -> None:
         self.stats["discarded"] += len(raw)

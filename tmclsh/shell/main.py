@@ -31,6 +31,7 @@ def report_error(session: Session, line: str | None, exc: BaseException) -> None
 
 def run_lines(session: Session, lines: list[str]) -> int:
     failed = False
+    suspects = session.stats.suspects
     for line in lines:
         try:
             session.run_line(line)
@@ -41,7 +42,7 @@ def run_lines(session: Session, lines: list[str]) -> int:
             report_error(session, line, exc)
             if not session.keep_going:
                 break
-    return EXIT_ERROR if failed else EXIT_OK
+    return EXIT_ERROR if failed or session.stats.suspects > suspects else EXIT_OK
 
 
 def run_shell(args: argparse.Namespace) -> int:
@@ -93,15 +94,37 @@ def _run(args: argparse.Namespace, client, settings: dict) -> int:
         from .trace import enable_trace
 
         enable_trace(session)
-    if args.command is not None:
-        return run_lines(session, session.split(args.command))
-    if args.script is not None or not interactive:
-        from .script import run_file
+    if not interactive:
+        # 138 messages are results too: in order with the others (the REPL shows them as
+        # they come; see app.py)
+        unlisten = lambda: None  # noqa: E731
+        if out.json:
+            unlisten = client.add_listener(lambda reply: out.event(reply, client.event_time))
+            client.start_event_poller()  # an event shows when it comes, not at the next line
+        try:
+            if args.command is not None:
+                return run_lines(session, session.split(args.command))
+            from .script import run_file
 
-        return run_file(session, args.script or "-")
+            return run_file(session, args.script or "-")
+        finally:
+            client.stop_event_poller()
+            _last_events(session)
+            unlisten()
     from .app import run_repl
 
     return run_repl(session)
+
+
+def _last_events(session: Session) -> None:
+    """Events that came after the last reply are results of the run as well."""
+    client = session.client
+    try:
+        if client.connected and client.mode == "binary":
+            client.poll()
+        session.report_suspects()
+    except (TmclError, OSError):
+        pass
 
 
 def _exit_cleanly_on_signals() -> None:

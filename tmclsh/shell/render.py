@@ -20,6 +20,9 @@ import json
 import os
 import re
 import sys
+import threading
+import time
+from collections.abc import Callable
 from typing import Any
 
 from .. import instructions as isa
@@ -48,6 +51,9 @@ def _console(stderr: bool = False):
                           no_color=no_color or None)
 
 
+_EMIT_LOCK = threading.Lock()
+
+
 class Output:
     """Where results go: rich text for people, JSON lines for programs, errors to stderr."""
 
@@ -55,11 +61,18 @@ class Output:
         self.json = json_mode
         self.console = _console()
         self.err = _console(stderr=True)
+        # whether results come from the built-in simulator (the session sets it): every
+        # JSON object then says so, so no program takes them for a module's
+        self.simulated: Callable[[], bool] = lambda: False
+        self.started = time.monotonic()  # "t" of event objects counts from here
 
     # -- JSON ---------------------------------------------------------------------------
     def emit(self, obj: dict[str, Any]) -> None:
-        sys.stdout.write(json.dumps(obj, ensure_ascii=False) + "\n")
-        sys.stdout.flush()
+        if self.simulated():
+            obj = {**obj, "simulated": True}
+        with _EMIT_LOCK:  # events come from the event poller's thread: whole lines only
+            sys.stdout.write(json.dumps(obj, ensure_ascii=False) + "\n")
+            sys.stdout.flush()
 
     # -- people -------------------------------------------------------------------------
     def print(self, *items: Any, **kw: Any) -> None:
@@ -95,11 +108,13 @@ class Output:
         else:
             self.console.print(render_result(result, module))
 
-    def event(self, reply: Reply) -> None:
-        """A 138 event (or any unsolicited reply), shown when it arrives."""
+    def event(self, reply: Reply, at: float | None = None) -> None:
+        """A 138 event (or any unsolicited reply), shown when it arrives. ``at``: when it
+        arrived (time.monotonic()); JSON gives it as seconds since the run started."""
         if self.json:
-            self.emit({"event": "target_reached", "motors": event_motors(reply),
-                       "value": reply.value})
+            t = (time.monotonic() if at is None else at) - self.started
+            self.emit({"event": int(Control.TARGET_REACHED_EVENT), "motors": event_motors(reply),
+                       "t": round(t, 4)})
         else:
             self.console.print(render_event(reply), style="tmcl.event", markup=False)
 

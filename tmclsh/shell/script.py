@@ -511,6 +511,7 @@ def run_file(session: Session, path: str) -> int:
     """Run a script file (``-`` = stdin) in ``session``; returns the exit status."""
     start = time.monotonic()
     before = _counts(session)
+    suspects = session.stats.suspects
     name = STDIN if path == "-" else path
     runner = Runner(session)
     status = EXIT_OK
@@ -534,8 +535,9 @@ def run_file(session: Session, path: str) -> int:
         status = EXIT_SYNTAX
     finally:
         session.location = None
-    if status == EXIT_OK and runner.failed:
-        status = EXIT_FAILED
+    session.report_suspects()
+    if status == EXIT_OK and (runner.failed or session.stats.suspects > suspects):
+        status = EXIT_FAILED  # a result that may be another request's is no pass
     summary(session, name, before, time.monotonic() - start, status)
     return status
 
@@ -577,6 +579,8 @@ def summary(session: Session, name: str, before: Counts, elapsed: float, status:
         text = (f"{name}: {sent} command{'s' if sent != 1 else ''} sent, "
                 f"{passed} check{'s' if passed != 1 else ''} passed, {failed} failed, "
                 f"{errors} error{'s' if errors != 1 else ''}, {elapsed:.2f} s")
+    if session.out.simulated():
+        text += "  [SIMULATED: built-in simulator, no module]"
     if session.out.json:
         session.out.err.print(text, style="tmcl.note", markup=False)
     else:

@@ -40,6 +40,7 @@ class Stats:
     errors: int = 0
     checks_passed: int = 0
     checks_failed: int = 0
+    suspects: int = 0  # results reported as possibly another request's answer
     started: float = field(default_factory=time.monotonic)
 
 
@@ -65,6 +66,10 @@ class Session:
         self.location: tuple[str, int] | None = None  # script file and line being run
         # the REPL sets it False before each line; see end_interrupted_line
         self.interrupted_line_ended = True
+        # which line each recent reply answered (Client.replies -> line, FILE:LINE), so a
+        # reply found suspect later can be named
+        self._answered: dict[int, tuple[str, tuple[str, int] | None]] = {}
+        self.out.simulated = lambda: bool(getattr(self.client.transport, "simulated", False))
         commands.load_all()
         install_expressions(self)  # ${expression} in any line
 
@@ -143,7 +148,27 @@ class Session:
             self.stats.errors += 1
             self._record(text, f"error: {exc}")
             raise
+        finally:
+            self.report_suspects()
         return result
+
+    def report_suspects(self) -> None:
+        """Say which earlier answers may have been another request's (Client.take_suspects):
+        a result is never silently kept when the link shows it may be wrong."""
+        take = getattr(self.client, "take_suspects", None)
+        for s in take() if callable(take) else ():
+            line, where = self._answered.get(s.seq, (None, None))
+            self.stats.suspects += 1
+            what = f"the answer to {line!r}" if line else "an earlier answer"
+            if where is not None:
+                what += f" ({where[0]}:{where[1]})"
+            text = (f"{what} may have been meant for another request (value {s.reply.value}): "
+                    "a reply came later that no request was waiting for; run it again "
+                    "to be sure")
+            if self.out.json:
+                self.out.emit({"line": line, "suspect": True, "warning": text})
+            else:
+                self.out.warn(f"warning: {text}")
 
     def _dispatch(self, text: str) -> Result | None:
         word = text.split(None, 1)[0]
@@ -164,6 +189,10 @@ class Session:
         reply = self.client.request(Request(self.client.address, ins.opcode, ins.type,
                                             ins.motor, ins.value))
         result = Result(text, enc, reply)
+        if reply is not None:
+            self._answered[self.client.replies] = (text, self.location)
+            if len(self._answered) > 64:
+                del self._answered[next(iter(self._answered))]
         self.last_result = result
         self.stats.commands += 1
         if show:
