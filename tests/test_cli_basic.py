@@ -21,29 +21,29 @@ def tmclsh(*args: str, stdin: str | None = None, tmp: Path) -> subprocess.Comple
 
 
 def test_json_lines_are_the_design_contract(tmp_path):
-    p = tmclsh("-c", "SAP 4, 0, 1000; GAP 4, 0", "--json", tmp=tmp_path)
+    p = tmclsh("--sim", "-c", "SAP 4, 0, 1000; GAP 4, 0", "--json", tmp=tmp_path)
     assert p.returncode == 0, p.stderr
     lines = p.stdout.splitlines()
     assert len(lines) == 2
     sap, gap = (json.loads(line) for line in lines)
-    # key order as DESIGN.md prints it
-    keys = ["line", "op", "type", "motor", "value", "status", "reply"]
+    # key order as DESIGN.md prints it; on the simulator every object says so
+    keys = ["line", "op", "type", "motor", "value", "status", "reply", "simulated"]
     assert list(sap) == keys and list(gap) == keys
     assert lines[1] == ('{"line": "GAP 4, 0", "op": 6, "type": 4, "motor": 0, "value": 0, '
-                        '"status": 100, "reply": 1000}')
+                        '"status": 100, "reply": 1000, "simulated": true}')
     expected_sap = ('{"line": "SAP 4, 0, 1000", "op": 5, "type": 4, "motor": 0, '
-                    '"value": 1000, "status": 100, "reply": 1000}')
+                    '"value": 1000, "status": 100, "reply": 1000, "simulated": true}')
     assert lines[0] == expected_sap
 
 
 def test_json_error_object_and_exit_status(tmp_path):
-    p = tmclsh("-c", "GAP 4, 0; SAP 140, 0, 99; GAP 1, 0", "--json", tmp=tmp_path)
+    p = tmclsh("--sim", "-c", "GAP 4, 0; SAP 140, 0, 99; GAP 1, 0", "--json", tmp=tmp_path)
     assert p.returncode == 1
     objs = [json.loads(line) for line in p.stdout.splitlines()]
     assert objs[0]["line"] == "GAP 4, 0" and objs[0]["status"] == 100
     assert objs[1] == {"line": "SAP 140, 0, 99",
                        "error": "99 is out of range for AP 140 MicrostepResolution: "
-                                "allowed 0..8"}
+                                "allowed 0..8", "simulated": True}
     assert len(objs) == 2  # a -c run stops at the first error
 
 

@@ -64,7 +64,9 @@ def json_session(client) -> Session:
 def run_json(session: Session, capsys, line: str) -> list[dict]:
     capsys.readouterr()
     session.run_line(line)
-    return [json.loads(x) for x in capsys.readouterr().out.splitlines() if x.strip()]
+    objs = [json.loads(x) for x in capsys.readouterr().out.splitlines() if x.strip()]
+    assert all(o.pop("simulated") is True for o in objs), objs  # the simulator says so
+    return objs
 
 
 def fail_at_frame(client, frame: int, action) -> None:

@@ -46,7 +46,10 @@ def text_of(renderable, width=120):
 
 
 def samples(out):
-    return [json.loads(line) for line in out.splitlines() if line.startswith('{"t"')]
+    got = [json.loads(line) for line in out.splitlines() if line.startswith('{"t"')]
+    # the in-process simulator: every object says so (DESIGN.md)
+    assert all(s.pop("simulated") is True for s in got), got
+    return got
 
 
 # -- pure parts ----------------------------------------------------------------------------
