@@ -189,10 +189,13 @@ def test_ctrl_c_at_the_prompt_stops_the_motor_and_clears_the_line(repl):
     repl.wait_prompt()
     repl.type("GAP 1, 0")  # a half-typed line
     repl.type(CTRL_C)
-    repl.expect("Ctrl-C: stopped motor 0 (MST)")
+    repl.expect("Ctrl-C: stopped motor 0 (MST; speed reads 0)")
     repl.wait_prompt()
     assert repl.ps.default_buffer.text == ""
-    assert [f.opcode for f in frames.tx] == [1, 3]  # ROR, then MST: the typed GAP never ran
+    # ROR; then the stop: 135 (no program runs), MST, the speed read back (GAP 3): the
+    # typed GAP 1 never ran
+    assert [(f.opcode, f.type) for f in frames.tx][:4] == [(1, 0), (135, 0), (3, 0), (6, 3)]
+    assert all((f.opcode, f.type) == (6, 3) for f in frames.tx[4:])
     at_rest(repl.session.client)
     assert repl.quit() == 0
 
@@ -224,7 +227,7 @@ def test_ctrl_c_while_a_command_runs(repl, slow_command):
     # what SIGINT does to the main thread, done to the REPL's thread
     ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(repl.thread.ident),
                                                ctypes.py_object(KeyboardInterrupt))
-    repl.expect("interrupted: stopped motor 0 (MST)")
+    repl.expect("interrupted: stopped motor 0 (MST; speed reads 0)")
     at_rest(repl.session.client)
     repl.line("GAP 4, 0", "MaxPositioningSpeed = ")  # the shell is still fine
     assert repl.quit() == 0

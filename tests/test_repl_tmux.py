@@ -78,7 +78,7 @@ def test_ctrl_c_stops_a_turning_motor(term):
     term.keys("Enter")
     term.wait("rotating right at 20000 pps")
     term.keys("C-c")
-    term.wait("Ctrl-C: stopped motor 0 (MST)")
+    term.wait("Ctrl-C: stopped motor 0 (MST; speed reads 0)")
     term.type("quit")
     term.quit(("Enter",))
 

@@ -254,7 +254,7 @@ def test_connect_switches_to_another_simulated_module(session, capsys):
 def test_stopall_stops_every_motor(s351, capsys):
     frames = Frames(s351.client)
     run(s351, "ROR 1, 500", ".stopall")
-    assert "stopped motors 0, 1, 2 (MST)" in capsys.readouterr().out
+    assert "stopped motors 0, 1, 2 (MST; speed reads 0)" in capsys.readouterr().out
     assert [f.motor for f in frames.tx if f.opcode == 3] == [0, 1, 2]
     c = s351.client
     c.wait_until(lambda: c.value("GAP 3, 1") == 0, timeout=5)  # ramps down to a standstill

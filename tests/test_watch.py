@@ -98,10 +98,10 @@ def test_render_is_a_pure_function_of_the_snapshot():
     assert "1234" in row and "+2468" in row and "▁▇█" in row
     assert "error" in next(line for line in text.splitlines() if "bad" in line)
     assert "MST sent to motor 0 at 2.0 s" in text and "3 failed reads" in text
-    assert "s/space: stop motors" in text and "motors keep running" in text
+    assert "s/space: stop program and motors" in text and "motors keep running" in text
     # without a terminal stdin there are no keys to offer
     text = text_of(watch.render(watch.Snapshot(series[:1], keys=False)))
-    assert "s/space" not in text and "Ctrl-C: end watch (motors keep running)" in text
+    assert "s/space" not in text and "Ctrl-C: stop program and motors, end watch" in text
 
 
 def test_changed_values_are_highlighted():
@@ -241,7 +241,7 @@ def test_keys_stop_the_motors_and_end_the_watch(session):
     finally:
         tty.close()
         os.close(master)
-    assert result.reason == "key" and result.stopped_motors == [0]
+    assert result.reason == "key" and [r.stopped for r in result.stops] == [[0]]
     speeds = [g["values"]["speed"] for g in got]
     assert speeds[0] == 50000 and speeds[-1] == 0  # target speed: stopped by 's', seen live
 
@@ -257,10 +257,10 @@ def test_keys_typed_together_all_count(session):
     finally:
         tty.close()
         os.close(master)
-    assert result.reason == "key" and result.stopped_motors == [0]
+    assert result.reason == "key" and [r.stopped for r in result.stops] == [[0]]
 
 
-def test_ctrl_c_ends_the_watch_and_leaves_the_motor_running(session, capsys):
+def test_ctrl_c_stops_the_motor_and_ends_the_watch(session, capsys):
     session.run_line("ROR 0, 50000")
     emit = session.out.emit
     seen = []
@@ -274,9 +274,10 @@ def test_ctrl_c_ends_the_watch_and_leaves_the_motor_running(session, capsys):
     session.out.emit = emit_then_interrupt
     t0 = time.monotonic()
     session.run_line(".watch speed=GAP 2, 0 --interval 0.02")
-    assert time.monotonic() - t0 < 2 and 5 <= len(seen) <= 6
-    assert "ended by Ctrl-C (motors were NOT stopped)" in capsys.readouterr().err
-    assert session.client.value("GAP 2, 0") == 50000
+    assert time.monotonic() - t0 < 5 and 5 <= len(seen) <= 6
+    err = capsys.readouterr().err
+    assert "ended by Ctrl-C" in err and "stopped motor 0 (MST; speed reads 0)" in err
+    assert session.client.value("GAP 3, 0") == 0  # the actual speed, read back again
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 

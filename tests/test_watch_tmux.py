@@ -33,15 +33,15 @@ def test_watch_while_the_motor_moves(terminal, tmp_path):
         "echo EXIT=$?\nstty -a | grep -o ' -\\?icanon'\nsleep 30\n")
     term = terminal(width=110, height=30, timeout=10.0)
     term.shell(f"sh {run}")
-    first = term.wait_for(re.compile(r"samples.*\n(.*\n)*│ pos .*\n(.*\n)*s/space: stop motors"))
+    first = term.wait_for(re.compile(r"samples.*\n(.*\n)*│ pos .*\n(.*\n)*s/space: stop program and motors"))
     time.sleep(0.4)
     second = term.screen()
     assert value(second, "pos") > value(first, "pos")  # live: the motor moves on screen
     assert value(second, "speed") > 0
-    assert "q/Ctrl-C: end watch (motors keep running)" in second
+    assert "q: end watch (motors keep running)" in second
 
     term.keys("s")
-    stopped = term.wait_for(re.compile(r"MST sent to motor 0 at"))
+    stopped = term.wait_for(re.compile(r"stopped motor 0 \(MST; speed reads 0\) at"))
     deadline = time.monotonic() + 5
     while value(stopped, "speed") != 0 and time.monotonic() < deadline:
         time.sleep(0.1)
@@ -50,5 +50,6 @@ def test_watch_while_the_motor_moves(terminal, tmp_path):
     term.keys("q")
     done = term.wait_for(re.compile(r"EXIT=\d+\n.*icanon"))
     assert "EXIT=0" in done
-    assert re.search(r"watch: \d+ samples in [\d.]+ s .*MST sent to motor 0", done)
+    assert re.search(r"watch: \d+ samples in [\d.]+ s", done)
+    assert "watch: stopped motor 0 (MST; speed reads 0)" in done
     assert " icanon" in done  # the terminal is back in line mode (cbreak undone)

@@ -855,7 +855,8 @@ class Client:
         return r.reply.value
 
     def stop_all(self) -> list[int]:
-        """MST on every motor: the safety action behind Ctrl-C. Returns the motors stopped."""
+        """MST on every motor; returns the motors that answered. (The shell's safety stop
+        is ``program.stop_everything``: it also stops a running program and reads back.)"""
         mod = self.module
         motors = range(mod.motors) if mod else range(1)
         stopped = []

@@ -41,7 +41,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import IntEnum
 
 from . import instructions as isa
@@ -573,3 +573,159 @@ __all__ = ["AppState", "AppStatus", "Mismatch", "UploadResult", "UploadError", "
            "same_image", "run", "stop", "reset", "step", "status", "program_counter",
            "download_mode", "continue_to", "step_one", "is_wait", "check_fits", "require_binary",
            "user_variable_range", "read_user_variables", "state_name"]
+
+
+# -- stopping everything -----------------------------------------------------------------
+
+_MST, _GAP = 3, 6
+SPEED_PARAMETER = 3  # AP 3 ActualSpeed on every module in the database (used when unknown)
+SETTLE = 3.0  # s a motor is given to ramp down after MST before it is called still turning
+
+
+@dataclass
+class StopReport:
+    """What :func:`stop_everything` found, motor by motor, read back from the module.
+
+    ``program``: "stopped" (it ran; 128 accepted), "not running", or None when its state
+    could not be read (128 was sent all the same); ``program_error`` if 128 failed.
+    ``stopped``: motors whose actual speed read 0 after MST; ``turning``: motor -> the
+    speed last read; ``unknown``: motor -> why MST or the read-back failed.
+    """
+
+    program: str | None = None
+    program_error: str | None = None
+    stopped: list[int] = field(default_factory=list)
+    turning: dict[int, int] = field(default_factory=dict)
+    unknown: dict[int, str] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return not self.turning and not self.unknown and self.program_error is None
+
+    def to_json(self) -> dict[str, object]:
+        return {"program": self.program, "stopped": self.stopped,
+                "turning": {str(m): v for m, v in self.turning.items()},
+                "unknown": {str(m): v for m, v in self.unknown.items()},
+                **({"program_error": self.program_error} if self.program_error else {})}
+
+
+@dataclass
+class Activity:
+    """Whether anything is going on: the stored program runs, motors turn (motor -> speed)."""
+
+    program_running: bool = False
+    turning: dict[int, int] = field(default_factory=dict)
+
+    @property
+    def idle(self) -> bool:
+        return not self.program_running and not self.turning
+
+
+def _motors(client) -> range:
+    mod = client.module
+    return range(mod.motors if mod is not None else 1)
+
+
+def _speed_parameter(client) -> int:
+    mod = client.module
+    if mod is not None:
+        try:
+            return mod.lookup("axis", "ActualSpeed").number
+        except (ValidationError, KeyError):
+            pass
+    return SPEED_PARAMETER
+
+
+def _has(client, opcode: int) -> bool:
+    mod = client.module
+    return mod is None or mod.has_control(opcode)
+
+
+def _program_running(client, timeout: float) -> bool | None:
+    """135 (GP 128 in ASCII mode): True if the stored program runs, None if unknown."""
+    if client.mode != "ascii" and not _has(client, Control.GET_STATUS):
+        return False
+    try:
+        if client.mode == "ascii":
+            reply = _send(client, GGP, GP_APPLICATION_STATUS, 0, timeout=timeout)
+        else:
+            reply = _send(client, Control.GET_STATUS, timeout=timeout)
+        return _ok(reply, "application status").value == AppState.RUN
+    except TmclError:
+        return None
+
+
+def _speed(client, motor: int, number: int, timeout: float) -> int:
+    reply = _ok(_send(client, _GAP, number, motor, timeout=timeout), f"GAP {number}, {motor}")
+    return reply.value
+
+
+def activity(client, *, timeout: float | None = None) -> Activity:
+    """Is a program running, is a motor turning? (135 and each motor's actual speed; a read
+    that fails counts as nothing going on: this is for a question, not for safety.)"""
+    t = min(client.timeout, 0.5) if timeout is None else timeout
+    act = Activity(bool(_program_running(client, t)))
+    number = _speed_parameter(client)
+    for m in _motors(client):
+        try:
+            v = _speed(client, m, number, t)
+        except TmclError:
+            continue
+        if v:
+            act.turning[m] = v
+    return act
+
+
+def stop_everything(client, *, settle: float = SETTLE,
+                    sleep: Callable[[float], None] = time.sleep) -> StopReport:
+    """The safety stop behind Ctrl-C, ``.stopall`` and the watch's stop key.
+
+    A stored program that runs would drive the motors again right after MST, so it is
+    stopped first (128; the state is read with 135, and 128 is sent anyway when that read
+    fails); then MST to every motor; then each motor's actual speed is read back until it
+    is 0 (a motor ramps down) or ``settle`` seconds have passed. Never raises a TmclError:
+    everything that went wrong is in the report.
+    """
+    report = StopReport()
+    t = min(client.timeout, 0.5)
+    running = _program_running(client, t)
+    if running is not False and (client.mode == "ascii" or _has(client, Control.STOP_APPLICATION)):
+        try:
+            if client.mode == "ascii":
+                _ascii_call(client, "stop_program", "STOP")
+            else:
+                _ok(_send(client, Control.STOP_APPLICATION, timeout=t), "stop (128)")
+            report.program = "stopped" if running else None
+        except TmclError as exc:
+            report.program_error = str(exc)
+    elif running is False:
+        report.program = "not running"
+    pending: list[int] = []
+    for m in _motors(client):
+        try:
+            _ok(_send(client, _MST, 0, m, timeout=t), f"MST {m}")
+            pending.append(m)
+        except TmclError as exc:
+            report.unknown[m] = str(exc)
+    number = _speed_parameter(client)
+    deadline = time.monotonic() + settle
+    while pending:
+        for m in list(pending):
+            try:
+                v = _speed(client, m, number, t)
+            except TmclError as exc:
+                report.unknown[m] = f"its speed could not be read: {exc}"
+                report.turning.pop(m, None)
+                pending.remove(m)
+                continue
+            if v == 0:
+                report.stopped.append(m)
+                report.turning.pop(m, None)
+                pending.remove(m)
+            else:
+                report.turning[m] = v
+        if not pending or time.monotonic() >= deadline:
+            break
+        sleep(0.05)
+    report.stopped.sort()
+    return report

@@ -981,21 +981,67 @@ def cmd_version(session: Session, arg: str) -> None:
 
 # -- motion ------------------------------------------------------------------------------
 
-@command(".stopall", ".stopall", "stop every motor (MST on each; Ctrl-C does the same)",
+@command(".stopall", ".stopall", "stop everything: the stored program (128) if it runs, then "
+         "every motor (MST), each read back until its speed is 0; Ctrl-C does the same",
          category="motion")
 def cmd_stopall(session: Session, arg: str) -> None:
-    report_stop(session, session.client.stop_all())
+    if arg.strip():
+        raise ValidationError(".stopall takes no arguments")
+    report = stop_all(session)
+    if report is not None and not report.ok:
+        err = TmclError("not everything stopped (see above)")
+        err.shown = True  # type: ignore[attr-defined]
+        raise err
 
 
-def report_stop(session: Session, stopped: list[int], why: str = "") -> None:
-    """``Ctrl-C: stopped motor 0 (MST)``; a warning naming the motors that did not answer."""
-    mod = session.client.module
-    motors = mod.motors if mod is not None else 1
-    failed = [m for m in range(motors) if m not in stopped]
+def stop_all(session: Session, why: str = ""):
+    """Stop the program and the motors (``program.stop_everything``) and say what the module
+    reports afterwards; the one stop behind Ctrl-C, ``.stopall`` and the watch's keys.
+    Returns the report (None when not connected). Never raises a TmclError."""
+    from .. import program
+
+    client = session.client
     prefix = f"{why}: " if why else ""
-    if stopped:
-        which = "motor" if len(stopped) == 1 else "motors"
-        session.out.ok(f"{prefix}stopped {which} {', '.join(map(str, stopped))} (MST)")
-    if failed:
-        session.out.warn(f"{prefix}MST to motor {', '.join(map(str, failed))} got no answer: "
-                         "check the connection!")
+    if not client.connected:
+        session.out.warn(f"{prefix}not connected; nothing could be stopped")
+        return None
+    try:
+        report = program.stop_everything(client)
+    except (TmclError, OSError) as exc:  # not expected (it reports instead), but a stop never raises
+        session.out.warn(f"{prefix}stopping failed: {exc}")
+        return None
+    report_stop(session, report, why)
+    return report
+
+
+def describe_stop(report, prefix: str = "") -> tuple[str | None, list[str]]:
+    """The confirmation (None if nothing stopped) and the warnings for a StopReport:
+    ``stored program stopped; stopped motor 0 (MST; speed reads 0)``."""
+    parts = []
+    if report.program == "stopped":
+        parts.append("stored program stopped")
+    if report.stopped:
+        which = "motor" if len(report.stopped) == 1 else "motors"
+        parts.append(f"stopped {which} {', '.join(map(str, report.stopped))} "
+                     "(MST; speed reads 0)")
+    warnings = []
+    if report.program_error:
+        warnings.append(f"{prefix}the stored program may still run: {report.program_error}")
+    for m, speed in sorted(report.turning.items()):
+        warnings.append(f"{prefix}motor {m} did NOT stop: it still turns at speed {speed} "
+                        "after MST")
+    for m, why_not in sorted(report.unknown.items()):
+        warnings.append(f"{prefix}motor {m} may still turn: {why_not}; check the connection!")
+    return (prefix + "; ".join(parts) if parts else None), warnings
+
+
+def report_stop(session: Session, report, why: str = "") -> None:
+    """Say what a stop did (``describe_stop``); ``.stopall`` under --json also gives the
+    report as an object."""
+    if session.out.json and not why:
+        session.out.emit(report.to_json())
+    ok, warnings = describe_stop(report, f"{why}: " if why else "")
+    if ok:
+        session.out.ok(ok)
+    for text in warnings:
+        session.out.warn(text)

@@ -1,9 +1,9 @@
 """Key bindings of the prompt, pgcli style: ``tmcl_bindings(session)`` returns KeyBindings.
 
-Ctrl-C is the safety key. At the prompt it always sends MST to every motor and clears the
-line, without first asking the module whether anything moves: a stop must not wait for (or
-depend on) a status read over a slow or broken link, and MST on a motor at rest does nothing.
-It then says which motors it stopped. While a command runs, Ctrl-C interrupts it and the REPL
+Ctrl-C is the safety key. At the prompt it stops everything and clears the line: the stored
+program if it runs (128; a running program would start the motors again), MST to every motor
+(whether it moves or not: MST on a motor at rest does nothing), then each motor's actual
+speed read back. It says "stopped" only for motors that read 0, and names any that did not. While a command runs, Ctrl-C interrupts it and the REPL
 does the same stop (see ``app.py``). Ctrl-D on an empty line leaves.
 
 Tab completes the way pgcli does it: the first Tab inserts the best match and opens the menu
@@ -22,21 +22,15 @@ if TYPE_CHECKING:
     from .session import Session
 
 
-def stop_motors(session: Session, why: str = "Ctrl-C") -> list[int]:
-    """MST on every motor, then one line saying what happened. Never raises."""
-    from .builtin import report_stop
+def stop_motors(session: Session, why: str = "Ctrl-C") -> None:
+    """Stop the stored program and every motor, then say what the module reads back
+    (``builtin.stop_all``). Never raises."""
+    from .builtin import stop_all
 
-    client = session.client
     try:
-        if not client.connected:
-            session.out.warn(f"{why}: not connected; no motor could be stopped")
-            return []
-        stopped = client.stop_all()
+        stop_all(session, why)
     except Exception as exc:  # the safety key must never break the shell
-        session.out.warn(f"{why}: stopping the motors failed: {exc}")
-        return []
-    report_stop(session, stopped, why)
-    return stopped
+        session.out.warn(f"{why}: stopping failed: {exc}")
 
 
 def tmcl_bindings(session: Session) -> KeyBindings:

@@ -58,8 +58,8 @@ def run_shell(args: argparse.Namespace) -> int:
     try:
         return _run(args, client, settings)
     except KeyboardInterrupt:
-        stopped = client.stop_all() if client.connected else []
-        print(f"\ninterrupted; motors stopped: {stopped}", file=sys.stderr)
+        print(file=sys.stderr)
+        _stop_on_interrupt(client)
         return 130
     except BrokenPipeError:
         # whoever read our output has gone (`tmclsh -c ... | head`): stop quietly, as other
@@ -68,6 +68,29 @@ def run_shell(args: argparse.Namespace) -> int:
         return EXIT_ERROR
     finally:
         client.close()  # leaves ASCII mode if tmclsh entered it, whatever happened
+
+
+def _stop_on_interrupt(client) -> None:
+    """Ctrl-C in -c/-f: stop everything (program.stop_everything) and say what reads back."""
+    from ..program import stop_everything
+
+    if not client.connected:
+        print("interrupted; not connected, nothing could be stopped", file=sys.stderr)
+        return
+    try:
+        report = stop_everything(client)
+    except KeyboardInterrupt:
+        print("interrupted again: the motors may still turn", file=sys.stderr)
+        return
+    except (TmclError, OSError) as exc:
+        print(f"interrupted; stopping failed: {exc}", file=sys.stderr)
+        return
+    from .builtin import describe_stop
+
+    ok, warnings = describe_stop(report)
+    print("interrupted" + (f"; {ok}" if ok else ""), file=sys.stderr)
+    for text in warnings:
+        print(text, file=sys.stderr)
 
 
 def _silence_stdout() -> None:

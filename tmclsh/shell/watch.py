@@ -9,10 +9,14 @@
   recent values, changed values highlighted. Under ``--json`` or when stdout is not a
   terminal: one JSON object per sample, ``{"t": seconds, "values": {name: number}}``
   (``null`` for a value whose read failed in that sample).
-* Keys (when stdin is a terminal; cbreak mode, restored on exit): ``s`` or space sends MST to
-  every motor and keeps watching; ``q`` or Esc ends the watch. Ctrl-C ends the watch too and
-  does NOT stop the motors. Ctrl-C is taken between reads, so a transaction is never cut in
-  half; a second Ctrl-C interrupts at once.
+* Keys (when stdin is a terminal; cbreak mode, restored on exit): ``s`` or space stops
+  everything (the stored program if it runs, MST to every motor, speeds read back: the
+  shell's one stop, ``program.stop_everything``) and keeps watching; Ctrl-C does the same
+  and ends the watch; ``q`` or Esc ends the watch quietly (motors keep running). Ctrl-C is
+  taken between reads, so a transaction is never cut in half; a second Ctrl-C interrupts
+  at once.
+* A lost link (the port is gone) shows as "link lost: REASON" in the table; the watch keeps
+  trying to reconnect every ``RECONNECT_EVERY`` seconds and samples again once it is back.
 """
 
 from __future__ import annotations
@@ -32,7 +36,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
-from ..errors import TmclError, ValidationError
+from ..errors import TmclError, TransportError, ValidationError
 from . import expr, plot, script
 from .commands import command
 
@@ -47,10 +51,13 @@ SPARK_WIDTH = 24  # samples shown in the sparkline
 RATE_WINDOW = 1.0  # seconds over which the change rate is measured
 LOG_LIMIT = 200_000  # samples kept for .plot
 _BLOCKS = "▁▂▃▄▅▆▇█"
-_KEY_HELP = "s/space: stop motors  ·  q/Ctrl-C: end watch (motors keep running)"
-_KEY_HELP_SHORT = "s: stop motors · q/^C: end (motors keep running)"
-STOP_KEYS = "sS "  # send MST to every motor, keep watching
-QUIT_KEYS = "qQ"  # end the watch (so do Esc and Ctrl-C)
+_KEY_HELP = ("s/space: stop program and motors  ·  Ctrl-C: stop them and end  ·  "
+             "q: end watch (motors keep running)")
+_KEY_HELP_SHORT = "s: stop all · ^C: stop+end · q: end"
+_NO_KEYS_HELP = "Ctrl-C: stop program and motors, end watch"
+STOP_KEYS = "sS "  # stop the program and every motor, keep watching
+QUIT_KEYS = "qQ"  # end the watch quietly (so does Esc)
+RECONNECT_EVERY = 0.5  # s between reconnection attempts after the link was lost
 
 
 # -- what is watched ---------------------------------------------------------------------
@@ -97,16 +104,20 @@ class Sample:
     t: float  # seconds since the watch started
     values: dict[str, Number | None]
     errors: dict[str, str] = field(default_factory=dict)
+    lost: str | None = None  # the link was lost during this sample: why
 
 
 def poll(session: Session, items: Sequence[Item], t: float) -> Sample:
-    """One sample: every item evaluated once; a read failing shows as None plus its error."""
+    """One sample: every item evaluated once; a read failing shows as None plus its error.
+    A lost link ends the sample at once (``Sample.lost``)."""
     ctx = expr.SessionContext(session, cache={})
     values: dict[str, Number | None] = {}
     errors: dict[str, str] = {}
     for item in items:
         try:
             values[item.name] = item.expression.evaluate(ctx)
+        except TransportError as exc:
+            return Sample(t, {i.name: None for i in items}, {}, lost=str(exc))
         except TmclError as exc:
             values[item.name] = None
             errors[item.name] = str(exc)
@@ -139,6 +150,7 @@ class Snapshot:
     note: str = ""
     keys: bool = False
     failed_reads: int = 0
+    lost: str | None = None
 
 
 class WatchState:
@@ -153,6 +165,7 @@ class WatchState:
         self.samples = 0
         self.failed_reads = 0
         self.note = ""
+        self.lost: str | None = None  # "link lost" reason while the link is down
         self.first_t: float | None = None
         self.last: dict[str, Number | None] = {n: None for n in self.names}
         self.prev: dict[str, Number | None] = {n: None for n in self.names}
@@ -207,7 +220,7 @@ class WatchState:
                    tuple(v for _, v in list(self.recent[n])[-SPARK_WIDTH:]), self.errors[n])
             for n in self.names)
         return Snapshot(series, self.t, self.samples, hz, self.interval, self.note, self.keys,
-                        self.failed_reads)
+                        self.failed_reads, self.lost)
 
 
 # -- rendering (pure) ----------------------------------------------------------------------
@@ -259,12 +272,14 @@ def render(snapshot: Snapshot, width: int | None = None):
     title = (f"watch  {snapshot.samples} samples  t={snapshot.t:.1f} s  "
              f"{snapshot.rate_hz:.1f}/s (interval {snapshot.interval:g} s)")
     caption_parts = []
+    if snapshot.lost:
+        caption_parts.append(f"link lost: {snapshot.lost} (reconnecting...)")
     if snapshot.note:
         caption_parts.append(snapshot.note)
     if snapshot.failed_reads:
         caption_parts.append(f"{snapshot.failed_reads} failed reads")
     key_help = _KEY_HELP if width is None or width >= len(_KEY_HELP) else _KEY_HELP_SHORT
-    caption_parts.append(key_help if snapshot.keys else "Ctrl-C: end watch (motors keep running)")
+    caption_parts.append(key_help if snapshot.keys else _NO_KEYS_HELP)
     # one caption line per note, and wide enough that the key help never wraps
     min_width = max(len(title), *(len(c) for c in caption_parts))
     table = Table(title=title, caption="\n".join(caption_parts), title_justify="left",
@@ -277,7 +292,9 @@ def render(snapshot: Snapshot, width: int | None = None):
     table.add_column("rate /s", justify="right", no_wrap=True)
     table.add_column("recent", no_wrap=True, min_width=spark)
     for s in snapshot.series:
-        if s.error is not None:
+        if snapshot.lost:
+            value = Text("link lost", style="tmcl.error")
+        elif s.error is not None:
             value = Text("error", style="tmcl.error")
         else:
             value = Text(_fmt(s.value), style="tmcl.changed" if s.changed else "tmcl.value")
@@ -403,7 +420,7 @@ class WatchResult:
     samples: int
     elapsed: float
     reason: str  # count, until, key, interrupt, pipe
-    stopped_motors: list[int] = field(default_factory=list)
+    stops: list = field(default_factory=list)  # program.StopReport of each stop, in order
 
 
 class _Csv:
@@ -500,7 +517,20 @@ class _Watch:
         """Returns why the watch ended: count, until, key, interrupt or pipe."""
         next_at = self.start
         while not self.intr.requested:
+            if self.state.lost is not None and not self._reconnect():
+                ended = self._wait(time.monotonic() + RECONNECT_EVERY)
+                if ended is not None:
+                    return self._end(ended)
+                continue
             sample = poll(self.session, self.items, time.monotonic() - self.start)
+            if sample.lost is not None:
+                self.state.lost = sample.lost
+                if self.view is not None:
+                    self.view.update(force=True)
+                else:
+                    self.session.out.err.print(f"watch: link lost: {sample.lost}; "
+                                               "reconnecting", style="tmcl.warn", markup=False)
+                continue
             if self.state.samples == 0 and len(sample.errors) == len(self.items):
                 # nothing readable at all: an error, not a watch of dashes
                 raise TmclError(next(iter(sample.errors.values())))
@@ -523,8 +553,28 @@ class _Watch:
             next_at = max(next_at + self.interval, time.monotonic())
             ended = self._wait(next_at)
             if ended is not None:
-                return ended
-        return "interrupt"
+                return self._end(ended)
+        return self._end("interrupt")
+
+    def _end(self, reason: str) -> str:
+        if reason == "interrupt" and self.session.client.connected:
+            self._stop_all()  # Ctrl-C is the safety key here too
+        return reason
+
+    def _reconnect(self) -> bool:
+        """One attempt to bring the lost link back; True when it is."""
+        client = self.session.client
+        try:
+            client.reconnect()
+        except (TmclError, OSError):
+            return False
+        lost, self.state.lost = self.state.lost, None
+        self.state.note = (f"link back at {time.monotonic() - self.start:.1f} s "
+                           f"(was lost: {lost})")
+        if self.view is None:
+            self.session.out.err.print(f"watch: {self.state.note}", style="tmcl.note",
+                                       markup=False)
+        return True
 
     def _until(self, sample: Sample) -> bool:
         values = {k: v for k, v in sample.values.items() if v is not None}
@@ -543,7 +593,7 @@ class _Watch:
                     return "key"
                 for key in pressed:  # several keys may arrive at once: act on each
                     if key in STOP_KEYS:
-                        self._stop_motors()
+                        self._stop_all()
                     elif key in QUIT_KEYS:
                         return "key"
             if self.intr.requested:
@@ -551,12 +601,19 @@ class _Watch:
             if time.monotonic() >= next_at:
                 return None
 
-    def _stop_motors(self) -> None:
-        stopped = self.session.client.stop_all()
-        self.result.stopped_motors = stopped
-        self.state.note = (f"MST sent to motor{'s' if len(stopped) != 1 else ''} "
-                           f"{', '.join(map(str, stopped)) or 'none'} at "
-                           f"{time.monotonic() - self.start:.1f} s")
+    def _stop_all(self) -> None:
+        """The shell's one stop (program, motors, read back), said in the table's caption."""
+        from .. import program
+        from .builtin import describe_stop
+
+        if self.state.lost is not None:
+            self.state.note = "link lost: nothing could be stopped"
+        else:
+            report = program.stop_everything(self.session.client)
+            self.result.stops.append(report)
+            ok, warnings = describe_stop(report)
+            at = f"at {time.monotonic() - self.start:.1f} s"
+            self.state.note = "; ".join([f"{ok} {at}" if ok else f"stop {at}", *warnings])
         if self.view is not None:
             self.view.update(force=True)
         else:
@@ -570,8 +627,11 @@ class _Watch:
          complete=["--interval", "--count", "--until", "--csv"],
          details="  .watch pos=GAP 1, 0; speed=GAP 3, 0; in0=GIO 0, 0\n"
                  "  .watch rev=GAP 1, 0 / 51200 --until \"rev >= 2\" --csv run.csv\n"
-                 "Keys: s or space stops all motors (MST), q ends the watch. Ctrl-C ends the "
-                 "watch and does NOT stop the motors. Under --json or in a pipe, each sample "
+                 "Keys: s or space stops everything (the stored program if it runs, then MST "
+                 "to every motor, speeds read back) and keeps watching; Ctrl-C does the same "
+                 "and ends the watch; q (or Esc) ends the watch quietly, motors keep running. "
+                 "A lost link shows as \"link lost\"; the watch reconnects and samples on "
+                 "once the link is back. Under --json or in a pipe, each sample "
                  "is a JSON object {\"t\": s, \"values\": {...}}. With no expressions: the "
                  "position and speed of each motor. .plot draws the last watch.")
 def cmd_watch(session: Session, args: str) -> None:
@@ -581,18 +641,19 @@ def cmd_watch(session: Session, args: str) -> None:
     rate = result.samples / result.elapsed if result.elapsed > 0 else 0.0
     text = f"watch: {result.samples} samples in {result.elapsed:.1f} s ({rate:.1f}/s)"
     if result.reason == "interrupt":
-        text += "; ended by Ctrl-C (motors were NOT stopped)"
+        text += "; ended by Ctrl-C"
     elif result.reason == "until":
         text += f"; {until} became true"
-    if result.stopped_motors:
-        which = "motor" if len(result.stopped_motors) == 1 else "motors"
-        text += f"; MST sent to {which} {', '.join(map(str, result.stopped_motors))}"
     if csv_path is not None:
         text += f"; logged to {csv_path}"
     if out_is_pipe(session):
         session.out.err.print(text, style="tmcl.note", markup=False)
     else:
         session.out.info(text)
+    if result.stops:  # what the last stop read back, said once more below the table
+        from .builtin import report_stop
+
+        report_stop(session, result.stops[-1], "watch")
 
 
 def out_is_pipe(session: Session) -> bool:
