@@ -222,9 +222,9 @@ def _ok(reply, what: str, expect: Iterable[int] = (Status.OK,)):
 
 
 def _send(client, opcode: int, type_: int = 0, motor: int = 0, value: int = 0, *,
-          timeout: float | None = None):
+          timeout: float | None = None, retries: int | None = None):
     return client.request(Request(client.address, opcode, type_, motor, value & 0xFFFFFFFF),
-                          timeout=timeout)
+                          timeout=timeout, retries=retries)
 
 
 # -- upload and read-back ----------------------------------------------------------------
@@ -620,6 +620,13 @@ class Activity:
     def idle(self) -> bool:
         return not self.program_running and not self.turning
 
+    def __str__(self) -> str:
+        """``motor 0 turns (speed 2000) and the stored program runs``."""
+        parts = [f"motor {m} turns (speed {v})" for m, v in sorted(self.turning.items())]
+        if self.program_running:
+            parts.append("the stored program runs")
+        return " and ".join([", ".join(parts[:-1]), parts[-1]] if len(parts) > 2 else parts)
+
 
 def _motors(client) -> range:
     mod = client.module
@@ -641,22 +648,24 @@ def _has(client, opcode: int) -> bool:
     return mod is None or mod.has_control(opcode)
 
 
-def _program_running(client, timeout: float) -> bool | None:
+def _program_running(client, timeout: float, retries: int | None = None) -> bool | None:
     """135 (GP 128 in ASCII mode): True if the stored program runs, None if unknown."""
     if client.mode != "ascii" and not _has(client, Control.GET_STATUS):
         return False
     try:
         if client.mode == "ascii":
-            reply = _send(client, GGP, GP_APPLICATION_STATUS, 0, timeout=timeout)
+            reply = _send(client, GGP, GP_APPLICATION_STATUS, 0, timeout=timeout,
+                          retries=retries)
         else:
-            reply = _send(client, Control.GET_STATUS, timeout=timeout)
+            reply = _send(client, Control.GET_STATUS, timeout=timeout, retries=retries)
         return _ok(reply, "application status").value == AppState.RUN
     except TmclError:
         return None
 
 
-def _speed(client, motor: int, number: int, timeout: float) -> int:
-    reply = _ok(_send(client, _GAP, number, motor, timeout=timeout), f"GAP {number}, {motor}")
+def _speed(client, motor: int, number: int, timeout: float, retries: int | None = None) -> int:
+    reply = _ok(_send(client, _GAP, number, motor, timeout=timeout, retries=retries),
+                f"GAP {number}, {motor}")
     return reply.value
 
 
@@ -664,11 +673,11 @@ def activity(client, *, timeout: float | None = None) -> Activity:
     """Is a program running, is a motor turning? (135 and each motor's actual speed; a read
     that fails counts as nothing going on: this is for a question, not for safety.)"""
     t = min(client.timeout, 0.5) if timeout is None else timeout
-    act = Activity(bool(_program_running(client, t)))
+    act = Activity(bool(_program_running(client, t, retries=0)))
     number = _speed_parameter(client)
     for m in _motors(client):
         try:
-            v = _speed(client, m, number, t)
+            v = _speed(client, m, number, t, retries=0)
         except TmclError:
             continue
         if v:

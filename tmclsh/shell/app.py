@@ -168,6 +168,60 @@ def _dumb_echo(ps: PromptSession) -> None:
     buf.on_text_changed += changed
 
 
+def ask_choice(question: str, options: list[tuple[str, str]]) -> str:
+    """``session.choose`` in the REPL: one of ``options`` (value, label); Ctrl-C or Ctrl-D
+    picks the last one (cancel)."""
+    try:
+        from prompt_toolkit.shortcuts import choice
+    except ImportError:  # prompt_toolkit before 3.0.52: a typed answer
+        from prompt_toolkit import prompt
+
+        keys = "/".join(f"{v[0]}={v}" for v, _ in options)
+        try:
+            answer = prompt(f"{question} [{keys}] ").strip().lower()
+        except (KeyboardInterrupt, EOFError):
+            return options[-1][0]
+        return next((v for v, _ in options if answer and v.startswith(answer)), options[-1][0])
+    try:
+        return choice(question, options=options, default=options[0][0])
+    except (KeyboardInterrupt, EOFError):
+        return options[-1][0]
+
+
+LEAVE_OPTIONS = [("stop", "stop everything first, then leave"),
+                 ("leave", "leave it running and quit"),
+                 ("cancel", "cancel: stay in the shell")]
+
+
+def may_leave(session: Session) -> bool:
+    """Leaving while a motor turns or the stored program runs: ask (stop first / leave
+    running / cancel). True when the shell may end."""
+    from .. import program
+    from .builtin import stop_all
+
+    client = session.client
+    choose = getattr(session, "choose", None)
+    if not client.connected or choose is None:
+        return True
+    try:
+        act = program.activity(client)
+    except (TmclError, OSError):
+        return True
+    if act.idle:
+        return True
+    what = str(act)
+    answer = choose(f"{what[:1].upper()}{what[1:]}. Leave the shell?", LEAVE_OPTIONS)
+    if answer == "stop":
+        report = stop_all(session, "leaving")
+        if report is not None and not report.ok:
+            session.out.warn("not everything stopped: staying in the shell "
+                             "(leave again to quit anyway)")
+            session.choose = None  # the next Ctrl-D or .quit leaves without asking
+            return False
+        return True
+    return answer == "leave"
+
+
 def ask_yes_no(question: str) -> bool:
     """``session.ask`` in the REPL: y/n, anything else (Ctrl-C, Ctrl-D) is no."""
     from prompt_toolkit.shortcuts import confirm
@@ -216,6 +270,7 @@ def run_repl(session: Session, prompt_session: PromptSession | None = None) -> i
 
     session.interactive = True
     session.ask = ask_yes_no
+    session.choose = ask_choice
     if repl_settings().get("color") == "never":
         session.out.console.no_color = session.out.err.no_color = True
     from prompt_toolkit.utils import is_dumb_terminal
@@ -239,8 +294,8 @@ def run_repl(session: Session, prompt_session: PromptSession | None = None) -> i
                     try:
                         text = ps.prompt()
                     except EOFError:
-                        break
-                    if not run_text(session, text):
+                        text = None
+                    if (text is None or not run_text(session, text)) and may_leave(session):
                         break
             except KeyboardInterrupt:
                 # Ctrl-C where the key binding is not active: a dumb terminal, or the
@@ -283,7 +338,9 @@ def run_one(session: Session, line: str) -> bool:
     from .keys import stop_motors
     from .main import report_error
 
-    if session.state.get(_LINK_LOST) and _is_tmcl(line) and not _try_reconnect(session):
+    # a lost link (also one a .watch met) is brought back before the next TMCL line
+    lost = session.state.get(_LINK_LOST) or not session.client.connected
+    if lost and _is_tmcl(line) and not _try_reconnect(session):
         return True
     session.interrupted_line_ended = False
     try:

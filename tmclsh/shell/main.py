@@ -34,6 +34,7 @@ def run_lines(session: Session, lines: list[str]) -> int:
     suspects = session.stats.suspects
     for line in lines:
         try:
+            session.ensure_link()  # the link was lost on an earlier line (--keep-going)
             session.run_line(line)
         except QuitShell:
             break
@@ -134,6 +135,7 @@ def _run(args: argparse.Namespace, client, settings: dict) -> int:
             client.stop_event_poller()
             _last_events(session)
             unlisten()
+            _note_left_running(session)
     from .app import run_repl
 
     return run_repl(session)
@@ -148,6 +150,23 @@ def _last_events(session: Session) -> None:
         session.report_suspects()
     except (TmclError, OSError):
         pass
+
+
+def _note_left_running(session: Session) -> None:
+    """A script that ends while a motor turns or the program runs says so on stderr (it
+    leaves them so: that may well be what it was for)."""
+    from ..program import activity
+
+    client = session.client
+    if not client.connected:
+        return
+    try:
+        act = activity(client)
+    except (TmclError, OSError):
+        return
+    if not act.idle:
+        print(f"tmclsh: note: {act}; left running (.stopall stops everything)",
+              file=sys.stderr)
 
 
 def _exit_cleanly_on_signals() -> None:

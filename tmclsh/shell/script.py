@@ -358,6 +358,11 @@ def _counts(session: Session) -> Counts:
     return Counts(s.commands, s.checks_passed, s.checks_failed, s.errors)
 
 
+def _comment(text: str) -> bool:
+    t = text.strip()
+    return not t or t.startswith(("#", "//"))
+
+
 class Runner:
     def __init__(self, session: Session, on_step: Callable[[], None] | None = None):
         self.session = session
@@ -406,6 +411,8 @@ class Runner:
             return
         typed = len(session.history)
         try:
+            if session.client is not None and not _comment(node.text):
+                session.ensure_link()  # the link was lost on an earlier line (--keep-going)
             session.run_line(node.text)
         finally:
             del session.history[typed:]  # the history is what was typed, not what a script ran

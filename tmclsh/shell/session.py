@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 from .. import asm
 from ..client import Client, Result
-from ..errors import StatusError, TmclError, ValidationError
+from ..errors import StatusError, TmclError, TransportError, ValidationError
 from ..modules import Module
 from ..protocol import Request, status_ok
 from . import commands
@@ -61,6 +61,8 @@ class Session:
         self.recorders: list[Callable[[str, str], None]] = []
         # asks the user; the REPL replaces it with a prompt_toolkit confirm
         self.ask: Callable[[str], bool] | None = None
+        # lets the user pick one of (value, label) options (the REPL's: prompt_toolkit choice)
+        self.choose: Callable[[str, list[tuple[str, str]]], str] | None = None
         # features keep their state here (debugger, watch, ...), keyed by feature name
         self.state: dict[str, object] = {}
         self.location: tuple[str, int] | None = None  # script file and line being run
@@ -85,6 +87,18 @@ class Session:
             sys.stdout.write("\n")
             sys.stdout.flush()
         self.interrupted_line_ended = True
+
+    def ensure_link(self) -> None:
+        """After a lost link (-c/-f with --keep-going): reconnect before the next line runs;
+        TransportError, and the line is not run, if the link cannot be brought back."""
+        c = self.client
+        if c.connected:
+            return
+        try:
+            c.reconnect()
+        except (TmclError, OSError) as exc:
+            raise TransportError(f"still disconnected ({exc}); the line was not run") from None
+        self.out.info(f"reconnected to {c.describe()}")
 
     # -- confirmation -------------------------------------------------------------------
     def confirm(self, question: str) -> None:

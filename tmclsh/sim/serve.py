@@ -182,6 +182,19 @@ class TcpServer(_Server):
                 client.close()
                 log.info("TCP client disconnected")
 
+    def drop_client(self) -> bool:
+        """Hang up on the connected client and keep listening (a cable pulled and plugged
+        back in); False if nobody was connected."""
+        with self._send_lock:
+            client = self._client
+        if client is None:
+            return False
+        try:
+            client.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
+        return True
+
     def _shutdown(self) -> None:
         with self._send_lock:
             if self._client is not None:
