@@ -1,0 +1,134 @@
+"""A lost link, handled where it is lost: a simulated module on TCP whose server hangs up on
+the client (a cable pulled) and keeps listening (plugged back in)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+
+from tmclsh.client import Client
+from tmclsh.shell import watch
+from tmclsh.shell.render import Output
+from tmclsh.shell.session import Session
+from tmclsh.sim import Simulator
+from tmclsh.sim.serve import serve_tcp
+from tmclsh.transport import open_serial
+
+from conftest import ROOT, tmclsh_env
+
+
+@pytest.fixture
+def tcp_sim():
+    sim = Simulator("TMCM-1311")
+    server = serve_tcp(sim, "127.0.0.1", 0)
+    yield sim, server, f"socket://127.0.0.1:{server.address[1]}"
+    server.close()
+    sim.close()
+
+
+def hang_up_after(server, seconds: float) -> threading.Thread:
+    def run():
+        deadline = time.monotonic() + 20
+        while server._client is None and time.monotonic() < deadline:  # wait for the client
+            time.sleep(0.01)
+        time.sleep(seconds)
+        server.drop_client()
+
+    t = threading.Thread(target=run, daemon=True)
+    t.start()
+    return t
+
+
+def script_run(url: str, tmp_path, *extra: str) -> subprocess.CompletedProcess:
+    script = tmp_path / "s.tmcl"
+    script.write_text("GAP 4, 0\n.sleep 1.2\nGAP 4, 0\nGAP 4, 0\n")
+    return subprocess.run([sys.executable, "-m", "tmclsh", "--port", url, "-m", "TMCM-1311",
+                           "-f", str(script), *extra], capture_output=True, text=True,
+                          timeout=30, env=tmclsh_env(), cwd=str(ROOT))
+
+
+def test_a_script_fails_the_line_that_lost_the_link(tcp_sim, tmp_path):
+    _, server, url = tcp_sim
+    hang_up_after(server, 0.5)
+    p = script_run(url, tmp_path)
+    assert p.returncode == 1
+    assert f"s.tmcl:3: lost {url}" in p.stderr and "disconnected" in p.stderr
+    assert p.stdout.count("MaxPositioningSpeed = ") == 1  # the script stopped there
+
+
+def test_keep_going_reconnects_before_the_next_line(tcp_sim, tmp_path):
+    _, server, url = tcp_sim
+    hang_up_after(server, 0.5)
+    p = script_run(url, tmp_path, "--keep-going")
+    assert p.returncode == 1  # a line failed
+    assert f"s.tmcl:3: lost {url}" in p.stderr
+    out = p.stdout
+    assert f"reconnected to {url}" in out
+    assert out.index(f"reconnected to {url}") < out.rindex("MaxPositioningSpeed = 51200")
+    assert out.count("MaxPositioningSpeed = ") == 2
+
+
+def test_a_watch_says_link_lost_and_samples_again_once_it_is_back(tcp_sim, capsys):
+    sim, server, url = tcp_sim
+    client = Client(open_serial(url), module="TMCM-1311", timeout=0.3)
+    session = Session(client, Output(json_mode=True))
+    got = []
+    hang_up_after(server, 0.4)
+    try:
+        items = watch.parse_items(session, "v=GGP 0, 2")
+        client.execute("SGP 0, 2, 1")
+        t0 = time.monotonic()
+
+        def emit(obj):
+            got.append((time.monotonic() - t0, obj))
+            if len(got) == 8:  # written while the watch runs: the samples after the link
+                client.execute("SGP 0, 2, 2")  # came back read the module again
+        result = watch.run_watch(session, items, interval=0.05, count=16, live=False,
+                                 emit=emit)
+    finally:
+        client.close()
+    err = capsys.readouterr().err
+    assert "watch: link lost: lost " + url in err
+    assert "watch: link back at" in err
+    assert result.samples == 16
+    values = [obj["values"]["v"] for _, obj in got]
+    assert None not in values  # a lost sample is not shown as a value
+    assert values[0] == 1 and values[-1] == 2
+    times = [t for t, _ in got]
+    assert max(b - a for a, b in zip(times, times[1:])) >= 0.3  # the gap while reconnecting
+
+
+def test_live_watch_table_says_link_lost():
+    from rich.console import Console
+
+    from tmclsh.shell.style import rich_theme
+
+    snap = watch.Snapshot((watch.Series("pos", None, None, None, None, None, ()),),
+                          lost="lost /dev/ttyACM0 (read failed)")
+    console = Console(width=100, record=True, theme=rich_theme())
+    console.print(watch.render(snap, 100))
+    text = console.export_text()
+    assert "link lost: lost /dev/ttyACM0 (read failed) (reconnecting...)" in text
+    assert "error" not in text
+
+
+def test_the_first_command_after_a_watch_reconnects(tcp_sim):
+    from tmclsh.shell.app import run_one
+
+    _, server, url = tcp_sim
+    client = Client(open_serial(url), module="TMCM-1311", timeout=0.3)
+    session = Session(client, Output())
+    try:
+        client.execute("GAP 4, 0")
+        server.drop_client()
+        with pytest.raises(Exception):
+            client.execute("GAP 4, 0")  # what a watch met: the link is gone
+        assert not client.connected
+        assert run_one(session, "SGP 0, 2, 42")
+        assert client.connected and client.value("GGP 0, 2") == 42
+    finally:
+        client.close()

@@ -1,0 +1,233 @@
+"""Stop means stop: the shell's one stop (``program.stop_everything``) stops a running stored
+program before MST, reads every motor's actual speed back, and says "stopped" only for motors
+that read 0 -- checked against the simulator through a pty, and against a small module
+written here from the manual's byte tables whose motor ignores MST.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+
+from tmclsh import asm, program
+from tmclsh.client import Client
+from tmclsh.protocol import checksum
+from tmclsh.shell.render import Output
+from tmclsh.shell.session import Session
+from tmclsh.transport import open_serial
+
+from conftest import ROOT, tmclsh_env
+
+# a stored program that keeps the motor turning: MST alone is undone a moment later
+KEEPS_TURNING = "Loop:\n    ROR 0, 20000\n    WAIT TICKS, 0, 2\n    JA Loop\n"
+
+
+@pytest.fixture
+def pty_module(pty_sim):
+    sim, path = pty_sim
+    c = Client(open_serial(path), module="TMCM-1311", timeout=0.3)
+    yield c, sim
+    c.close()
+
+
+def start_program(c: Client) -> None:
+    program.upload(c, asm.assemble(KEEPS_TURNING, c.require_module()))
+    program.run(c)
+    c.wait_until(lambda: c.value("GAP 3, 0") > 0, timeout=3)
+
+
+def test_mst_alone_is_undone_by_a_running_program(pty_module):
+    """Why the stop exists: the reason 'stopped' used to be a lie."""
+    c, _ = pty_module
+    start_program(c)
+    c.execute("MST 0")
+    time.sleep(0.3)
+    assert c.value("GAP 3, 0") != 0
+    assert program.status(c).state == "run"
+
+
+def test_stop_everything_stops_the_program_then_the_motor(pty_module):
+    c, _ = pty_module
+    start_program(c)
+    report = program.stop_everything(c)
+    assert report.program == "stopped" and report.stopped == [0] and report.ok
+    time.sleep(0.3)  # nothing drives it again
+    assert c.value("GAP 3, 0") == 0 and program.status(c).state == "stop"
+
+
+def test_stop_everything_without_a_program(pty_module):
+    c, _ = pty_module
+    c.execute("ROR 0, 30000")
+    report = program.stop_everything(c)
+    assert report.program == "not running" and report.stopped == [0] and report.ok
+    assert c.value("GAP 3, 0") == 0
+
+
+def test_stopall_says_what_reads_back(pty_module, capsys):
+    c, _ = pty_module
+    start_program(c)
+    s = Session(c, Output())
+    s.run_line(".stopall")
+    out = capsys.readouterr().out
+    assert "stored program stopped; stopped motor 0 (MST; speed reads 0)" in out
+    assert c.value("GAP 3, 0") == 0
+
+
+def test_stopall_json_gives_the_report(pty_module, capsys):
+    import json
+
+    c, _ = pty_module
+    c.execute("ROR 0, 30000")
+    s = Session(c, Output(json_mode=True))
+    s.run_line(".stopall")
+    (obj,) = [json.loads(x) for x in capsys.readouterr().out.splitlines()]
+    assert obj == {"program": "not running", "stopped": [0], "turning": {}, "unknown": {}}
+
+
+# -- an independent module whose motor ignores MST ---------------------------------------------
+
+class StubbornModule:
+    """TMCM-1311 at address 1 on a pty, from the manual's byte tables: 9-byte frames (address,
+    command, type, motor, value big-endian, checksum = sum of the 8 bytes), replies (host 2,
+    address, status 100, command, value, checksum). It answers 135 (application status) with
+    0 (stopped), MST with 100 and does nothing, GAP 3 (actual speed) with 1000, always."""
+
+    SPEED = 1000
+
+    def __init__(self) -> None:
+        self.master, slave = os.openpty()
+        import tty
+
+        tty.setraw(slave)
+        self.path = os.ttyname(slave)
+        self._slave = slave
+        self.seen: list[tuple[int, int, int]] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _reply(self, cmd: int, value: int) -> bytes:
+        body = bytes([2, 1, 100, cmd]) + (value & 0xFFFFFFFF).to_bytes(4, "big")
+        return body + bytes([checksum(body)])
+
+    def _run(self) -> None:
+        import select
+
+        buf = b""
+        while not self._stop.is_set():
+            ready, _, _ = select.select([self.master], [], [], 0.05)
+            if not ready:
+                continue
+            try:
+                buf += os.read(self.master, 64)
+            except OSError:
+                return
+            while len(buf) >= 9:
+                frame, buf = buf[:9], buf[9:]
+                if sum(frame[:8]) & 0xFF != frame[8] or frame[0] != 1:
+                    continue
+                cmd, typ, motor = frame[1], frame[2], frame[3]
+                self.seen.append((cmd, typ, motor))
+                value = int.from_bytes(frame[4:8], "big")
+                if cmd == 135:
+                    value = 0
+                elif cmd == 6 and typ == 3:
+                    value = self.SPEED
+                os.write(self.master, self._reply(cmd, value))
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(1)
+        os.close(self.master)
+        os.close(self._slave)
+
+
+@pytest.fixture
+def stubborn():
+    m = StubbornModule()
+    yield m
+    m.close()
+
+
+def test_a_motor_that_keeps_turning_is_named(stubborn):
+    p = subprocess.run([sys.executable, "-m", "tmclsh", "--port", stubborn.path, "-m", "TMCM-1311",
+                        "-c", ".stopall"], capture_output=True, text=True, timeout=30,
+                       env=tmclsh_env(), cwd=str(ROOT))
+    assert "motor 0 did NOT stop: it still turns at speed 1000 after MST" in p.stderr
+    assert "stopped motor" not in p.stdout + p.stderr
+    assert p.returncode == 1
+    cmds = [c for c, _, _ in stubborn.seen]
+    assert cmds[:2] == [135, 3] and cmds.count(6) >= 2  # status, MST, speed read back (again)
+
+
+# -- leaving the shell -----------------------------------------------------------------------
+
+def test_leaving_while_a_motor_turns_asks(pty_module, capsys):
+    from tmclsh.shell.app import may_leave
+
+    c, _ = pty_module
+    s = Session(c, Output(), interactive=True)
+    asked = []
+
+    def choose(answer):
+        def pick(question, options):
+            asked.append(question)
+            assert [v for v, _ in options] == ["stop", "leave", "cancel"]
+            return answer
+        return pick
+
+    s.choose = choose("cancel")
+    assert may_leave(s)  # nothing going on: no question
+    assert asked == []
+    c.execute("ROR 0, 30000")
+    c.wait_until(lambda: c.value("GAP 3, 0") > 0, timeout=3)
+    assert not may_leave(s)
+    assert asked and "Motor 0 turns" in asked[0]
+    s.choose = choose("leave")
+    assert may_leave(s) and c.value("GAP 3, 0") != 0
+    s.choose = choose("stop")
+    assert may_leave(s)
+    assert c.value("GAP 3, 0") == 0
+    assert "leaving: stopped motor 0 (MST; speed reads 0)" in capsys.readouterr().out
+
+
+def test_a_script_that_leaves_a_motor_turning_says_so(run_tmclsh):
+    p = run_tmclsh("--sim", "-c", "ROR 0, 30000\n.sleep 0.2")
+    assert p.returncode == 0
+    assert "note: motor 0 turns (speed" in p.stderr and "left running" in p.stderr
+    quiet = run_tmclsh("--sim", "-c", "GAP 1, 0")
+    assert "note:" not in quiet.stderr
+
+
+def test_ctrl_c_in_a_script_stops_the_program(tmp_path):
+    """SIGINT while -f runs: the stored program is stopped, then the motor, read back."""
+    from tmclsh.sim import Simulator
+    from tmclsh.sim.serve import serve_pty
+
+    sim = Simulator("TMCM-1311")
+    server = serve_pty(sim)
+    try:
+        prog = tmp_path / "turn.tmc"
+        prog.write_text(KEEPS_TURNING)
+        script = tmp_path / "s.tmcl"
+        script.write_text(f".upload {prog} --yes\n.run\n.sleep 30\n")
+        p = subprocess.Popen([sys.executable, "-m", "tmclsh", "--port", server.path,
+                              "-m", "TMCM-1311", "-f", str(script)], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True, env=tmclsh_env(), cwd=str(ROOT))
+        deadline = time.monotonic() + 20
+        while sim.program_state != 1 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(0.3)
+        p.send_signal(2)
+        _, err = p.communicate(timeout=20)
+        assert p.returncode == 130
+        assert "stored program stopped; stopped motor 0 (MST; speed reads 0)" in err, err
+        assert sim.program_state == 0 and sim.param("axis", 3, 0) == 0
+    finally:
+        server.close()
+        sim.close()
