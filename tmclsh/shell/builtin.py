@@ -1010,6 +1010,8 @@ def stop_all(session: Session, why: str = ""):
     except (TmclError, OSError) as exc:  # not expected (it reports instead), but a stop never raises
         session.out.warn(f"{prefix}stopping failed: {exc}")
         return None
+    if report.program is not None and report.program_error is None:
+        session.state["program_state"] = "stop"  # the toolbar and prompt follow
     report_stop(session, report, why)
     return report
 

@@ -611,6 +611,8 @@ class _Watch:
         else:
             report = program.stop_everything(self.session.client)
             self.result.stops.append(report)
+            if report.program is not None and report.program_error is None:
+                self.session.state["program_state"] = "stop"  # the toolbar and prompt follow
             ok, warnings = describe_stop(report)
             at = f"at {time.monotonic() - self.start:.1f} s"
             self.state.note = "; ".join([f"{ok} {at}" if ok else f"stop {at}", *warnings])
@@ -650,7 +652,7 @@ def cmd_watch(session: Session, args: str) -> None:
         session.out.err.print(text, style="tmcl.note", markup=False)
     else:
         session.out.info(text)
-    if result.stops:  # what the last stop read back, said once more below the table
+    if result.stops and result.reason == "interrupt":  # Ctrl-C's stop, said below the table
         from .builtin import report_stop
 
         report_stop(session, result.stops[-1], "watch")
