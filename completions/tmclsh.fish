@@ -84,6 +84,8 @@ complete -c tmclsh -n '__fish_seen_subcommand_from sim' -l host-address -x -d ''
 complete -c tmclsh -n '__fish_seen_subcommand_from sim' -l pty -d 'serve on a pseudo-terminal (path on the first line)'
 complete -c tmclsh -n '__fish_seen_subcommand_from sim' -l tcp -x -d 'serve on TCP, for socket:// URLs'
 complete -c tmclsh -n '__fish_seen_subcommand_from sim' -l can -x -a '(__tmclsh_can)' -d 'serve on a python-can bus'
+complete -c tmclsh -n '__fish_seen_subcommand_from sim' -l faults -x -d 'misbehave at random: for each reply, the probability P (0..1) of each fault: drop (not sent), corrupt (a bit flipped), truncate (half sent), delay (held back 0.2..2 s), garbage (noise before it), dup (sent twice), dup-late (a copy after the next request); e.g. drop=0.1,corrupt=0.05,dup=0.05'
+complete -c tmclsh -n '__fish_seen_subcommand_from sim' -l faults-seed -x -d 'seed for --faults, so a run misbehaves the same way again'
 
 # tmclsh ports
 complete -c tmclsh -n '__fish_seen_subcommand_from ports' -s h -l help -d 'show this help message and exit'

@@ -508,10 +508,19 @@ Scripts stop at the first error, reported as {_i("FILE")}:{_i("LINE")}, unless
 With {_b("--json")} every result is one JSON object on a line of standard output, e.g.
 {_b('{"line": "GAP 1, 0", "op": 6, "type": 1, "motor": 0, "value": 0, "status": 100, "reply": -5000}')};
 an error gives {_b('{"line": ..., "error": "..."}')}.
-Status messages go to standard error.
+On the built-in simulator every object also has {_b('"simulated": true')} (and a script's
+summary line says SIMULATED). A 138 target-reached message is an object of its own, in order
+with the results: {_b('{"event": 138, "motors": [0], "t": 1.25}')} (seconds since the start).
+An answer that may have been another request's (a reply came later that no request was
+waiting for) is reported as {_b('{"line": ..., "suspect": true, "warning": "..."}')} and fails
+the run. Status messages go to standard error.
 .IP \\(bu 2
-Ctrl-C interrupts: motion is stopped and, outside the interactive prompt, {_b(PROG)} exits
-with status 130.
+Ctrl-C interrupts: everything is stopped (see {_b("Ctrl-C")} below) and, outside the
+interactive prompt, {_b(PROG)} exits with status 130. A script that ends while a motor turns
+or the stored program runs leaves them so, with a note on standard error.
+.IP \\(bu 2
+A lost link fails the line it was lost on, with the reason; with {_b("--keep-going")} the
+next line first reconnects.
 .SS Keys at the prompt
 .TP
 {_b("Tab")}
@@ -519,10 +528,26 @@ Completes mnemonics, symbolic types, parameter names (with their number, range a
 shell commands with their arguments. Completion never asks the module.
 .TP
 {_b("Ctrl-C")}
-Stops all motors and clears the line.
+Stops everything and clears the line: the stored program if it runs (128; a running program
+would start the motors again), then MST to every motor, then each motor's actual speed read
+back until it is 0. Only motors that read 0 are called stopped; any other is named.
 .TP
 {_b("Ctrl-D")}
-Leaves the shell, like {_b(".quit")}.
+Leaves the shell, like {_b(".quit")}. While a motor turns or the stored program runs, it
+asks first: stop everything first, leave it running, or cancel.
+.SS Keys in .watch
+.TP
+{_b("s")} or space
+Stops everything as Ctrl-C does and keeps watching.
+.TP
+{_b("Ctrl-C")}
+Stops everything and ends the watch.
+.TP
+{_b("q")} or Esc
+Ends the watch quietly; motors keep running.
+.PP
+A lost link shows as {_b("link lost:")} {_i("REASON")} in the table; the watch keeps trying to
+reconnect and samples again once the link is back.
 .TP
 {_b("Enter")} on an empty line
 Repeats the last {_b(".step")}.
@@ -590,6 +615,14 @@ Serve a simulated module on a pseudo-terminal and connect to it:
 .fi
 .RE
 .PP
+Test your own code against a misbehaving module (the same seed, the same faults):
+.PP
+.RS 4
+.nf
+{_b("tmclsh sim --pty --faults drop=0.1,corrupt=0.05,delay=0.02,garbage=0.05,dup=0.05 --faults-seed 1")}
+.fi
+.RE
+.PP
 Load the completions into the running shell:
 .PP
 .RS 4
@@ -613,7 +646,7 @@ def _exit_status() -> list[str]:
                      "-f that cannot be read or has a syntax error (nothing was sent)."),
         (EXIT_CONNECT, "The shell could not connect: the port or CAN bus cannot be opened, or "
                        "the module does not answer when its type is detected (command 136)."),
-        (130, "Interrupted with Ctrl-C (motion was stopped first)."),
+        (130, "Interrupted with Ctrl-C (the program and the motors were stopped first)."),
         (129, "Hung up (SIGHUP: the terminal or SSH session went away)."),
         (143, "Terminated (SIGTERM). On both signals tmclsh still ends download mode and "
               "leaves ASCII mode if it had entered it, before exiting."),
