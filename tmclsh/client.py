@@ -170,6 +170,9 @@ class Client:
         self._stale_opaque = False
         self._drained = False
         self._flushing = False  # _absorb runs for _flush_input (for the trace's words)
+        # bytes waiting on a byte stream (None on CAN: there every request takes in what is
+        # queued, a non-blocking receive)
+        self._pending = transport.pending if isinstance(transport, StreamTransport) else None
         self._events: deque[tuple[Reply, float]] = deque()  # with when each arrived
         # when the event being delivered arrived (time.monotonic()), for listeners that
         # put a time on it
@@ -306,7 +309,8 @@ class Client:
             attempt += 1
             sent = False  # a failed resynchronisation sends nothing (its marker is counted)
             try:
-                self._flush_input()
+                if self._pending is None or self._buf or self._pending():
+                    self._flush_input()  # (one cheap check when nothing waits)
                 if self._dirty:
                     self._sync_before(req, kind, timeout)
                 sent = True
@@ -416,10 +420,7 @@ class Client:
 
     def _flush_input(self) -> None:
         """Before a request: what is already waiting cannot be its answer. Take it in
-        (events are kept), drop the rest, count it. One cheap check when the line is quiet."""
-        t = self.transport
-        if t.kind == "stream" and not self._buf and not t.pending():  # type: ignore[attr-defined]
-            return
+        (events are kept), drop the rest, count it."""
         before = self.stats["discarded"]
         self._flushing = True
         try:

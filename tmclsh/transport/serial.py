@@ -17,12 +17,22 @@ from __future__ import annotations
 
 import os
 import select
+import sys
 import time
 
 import serial as pyserial
 
 from ..errors import TransportError
 from .base import StreamTransport
+
+try:  # bytes waiting on a POSIX descriptor (what pyserial's in_waiting asks, minus its layers)
+    import fcntl
+    import termios
+
+    _FIONREAD: int | None = termios.FIONREAD
+except ImportError:  # pragma: no cover - Windows: pyserial's in_waiting
+    _FIONREAD = None
+_FOUR_ZEROS = bytes(4)
 
 WRITE_TIMEOUT = 2.0  # a write that cannot finish in this time means the port is stuck
 
@@ -154,6 +164,13 @@ class SerialTransport(StreamTransport):
                     wait = 0  # one more look at what is there already
 
     def pending(self) -> int:
+        fd = self._fd
+        if fd is not None and _FIONREAD is not None:
+            # the client asks before every request: one ioctl, without pyserial's layers
+            try:
+                return int.from_bytes(fcntl.ioctl(fd, _FIONREAD, _FOUR_ZEROS), sys.byteorder)
+            except OSError as exc:
+                raise self._lost("status query", exc) from exc
         try:
             return self._port().in_waiting
         except (pyserial.SerialException, OSError) as exc:
