@@ -351,11 +351,12 @@ class Counts:
     passed: int
     failed: int
     errors: int
+    suspects: int = 0
 
 
 def _counts(session: Session) -> Counts:
     s = session.stats
-    return Counts(s.commands, s.checks_passed, s.checks_failed, s.errors)
+    return Counts(s.commands, s.checks_passed, s.checks_failed, s.errors, s.suspects)
 
 
 def _comment(text: str) -> bool:
@@ -518,7 +519,6 @@ def run_file(session: Session, path: str) -> int:
     """Run a script file (``-`` = stdin) in ``session``; returns the exit status."""
     start = time.monotonic()
     before = _counts(session)
-    suspects = session.stats.suspects
     name = STDIN if path == "-" else path
     runner = Runner(session)
     status = EXIT_OK
@@ -543,7 +543,7 @@ def run_file(session: Session, path: str) -> int:
     finally:
         session.location = None
     session.report_suspects()
-    if status == EXIT_OK and (runner.failed or session.stats.suspects > suspects):
+    if status == EXIT_OK and (runner.failed or session.stats.suspects > before.suspects):
         status = EXIT_FAILED  # a result that may be another request's is no pass
     summary(session, name, before, time.monotonic() - start, status)
     return status
@@ -586,6 +586,9 @@ def summary(session: Session, name: str, before: Counts, elapsed: float, status:
         text = (f"{name}: {sent} command{'s' if sent != 1 else ''} sent, "
                 f"{passed} check{'s' if passed != 1 else ''} passed, {failed} failed, "
                 f"{errors} error{'s' if errors != 1 else ''}, {elapsed:.2f} s")
+        suspects = now.suspects - before.suspects
+        if suspects:
+            text += f"; {suspects} answer{'s' if suspects != 1 else ''} in doubt (see the warnings)"
     if session.out.simulated():
         text += "  [SIMULATED: built-in simulator, no module]"
     if session.out.json:
