@@ -278,15 +278,35 @@ def test_quit_and_semicolons(repl):
 
 
 def test_a_lost_link_is_reported_and_reconnected_on_the_next_command(repl):
+    from tmclsh.errors import TransportError
+
     client = repl.session.client
-    client.transport.close()  # the cable is pulled
+    t = client.transport
+    real = t.write
+
+    def pulled(data):  # the cable is pulled while the command goes out
+        t.write = real
+        t.close()
+        raise TransportError("lost the port (write failed); the port is gone")
+
+    t.write = pulled
     repl.type("GAP 4, 0" + ENTER)
-    repl.expect("error:")
+    repl.expect("error: lost the port")
     repl.expect("the next command tries to reconnect")
     repl.wait_prompt()
     assert "DISCONNECTED" in repl.screen.text()[-2000:] or not client.connected
     repl.line("GAP 4, 0", "reconnected to")  # ... and it is back
     repl.expect("MaxPositioningSpeed = ")
+    assert repl.quit() == 0
+
+
+def test_the_first_command_after_the_link_went_down_reconnects(repl):
+    """As after a .watch that met the lost link: no failed command first."""
+    client = repl.session.client
+    client.transport.close()
+    repl.line("GAP 4, 0", "reconnected to")
+    repl.expect("MaxPositioningSpeed = ")
+    assert client.connected
     assert repl.quit() == 0
 
 

@@ -205,7 +205,8 @@ def test_mode_json(session, capsys):
     sim, s = session(json_mode=True, ascii_startup=True)
     s.run_line(".mode ascii")
     obj = json.loads(capsys.readouterr().out)
-    assert obj == {"mode": "ascii", "echo": "char", "found": "ascii", "on_exit": "ascii"}
+    assert obj == {"mode": "ascii", "echo": "char", "found": "ascii", "on_exit": "ascii",
+                   "simulated": True}
 
 
 def test_ascii_config(session, capsys):
@@ -242,7 +243,8 @@ def test_ascii_config_json(session, capsys):
     sim, s = session(json_mode=True)
     s.run_line(".ascii-config echo=none")
     obj = json.loads(capsys.readouterr().out)
-    assert obj == {"gp67": 32, "startup": "binary", "echo": "none", "note": "was 0"}
+    assert obj == {"gp67": 32, "startup": "binary", "echo": "none", "note": "was 0",
+                   "simulated": True}
 
 
 def test_terminal_line_mode_in_process(session):

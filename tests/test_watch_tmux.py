@@ -51,5 +51,5 @@ def test_watch_while_the_motor_moves(terminal, tmp_path):
     done = term.wait_for(re.compile(r"EXIT=\d+\n.*icanon"))
     assert "EXIT=0" in done
     assert re.search(r"watch: \d+ samples in [\d.]+ s", done)
-    assert "watch: stopped motor 0 (MST; speed reads 0)" in done
+    assert "stopped motor 0 (MST; speed reads 0) at" in done  # the table's last caption
     assert " icanon" in done  # the terminal is back in line mode (cbreak undone)

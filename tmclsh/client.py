@@ -172,7 +172,9 @@ class Client:
         self._flushing = False  # _absorb runs for _flush_input (for the trace's words)
         # bytes waiting on a byte stream (None on CAN: there every request takes in what is
         # queued, a non-blocking receive)
-        self._pending = transport.pending if isinstance(transport, StreamTransport) else None
+        self._bound: Transport | None = None
+        self._pending: Callable[[], int] | None = None
+        self._bind(transport)
         self._events: deque[tuple[Reply, float]] = deque()  # with when each arrived
         # when the event being delivered arrived (time.monotonic()), for listeners that
         # put a time on it
@@ -309,6 +311,8 @@ class Client:
             attempt += 1
             sent = False  # a failed resynchronisation sends nothing (its marker is counted)
             try:
+                if self._bound is not self.transport:  # (replaced by .connect)
+                    self._bind(self.transport)
                 if self._pending is None or self._buf or self._pending():
                     self._flush_input()  # (one cheap check when nothing waits)
                 if self._dirty:
@@ -417,6 +421,10 @@ class Client:
         while self._suspects:
             out.append(self._suspects.popleft())
         return out
+
+    def _bind(self, transport: Transport) -> None:
+        self._bound = transport
+        self._pending = transport.pending if isinstance(transport, StreamTransport) else None
 
     def _flush_input(self) -> None:
         """Before a request: what is already waiting cannot be its answer. Take it in

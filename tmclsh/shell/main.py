@@ -122,6 +122,7 @@ def _run(args: argparse.Namespace, client, settings: dict) -> int:
         # 138 messages are results too: in order with the others (the REPL shows them as
         # they come; see app.py)
         unlisten = lambda: None  # noqa: E731
+        wrote = _watch_for_writes(client)
         if out.json:
             unlisten = client.add_listener(lambda reply: out.event(reply, client.event_time))
             client.start_event_poller()  # an event shows when it comes, not at the next line
@@ -135,7 +136,8 @@ def _run(args: argparse.Namespace, client, settings: dict) -> int:
             client.stop_event_poller()
             _last_events(session)
             unlisten()
-            _note_left_running(session)
+            if wrote():  # only reads (or nothing) sent: nothing can have started
+                _note_left_running(session)
     from .app import run_repl
 
     return run_repl(session)
@@ -150,6 +152,30 @@ def _last_events(session: Session) -> None:
         session.report_suspects()
     except (TmclError, OSError):
         pass
+
+
+# commands that only read: a run of nothing else cannot have started a motor or the program
+_READS = frozenset({6, 10, 15, 128, 134, 135, 136})  # GAP GGP GIO, stop, 134-136
+
+
+def _watch_for_writes(client):
+    """A tracer noting whether anything but a read was sent; returns the question."""
+    from ..protocol import Request
+
+    sent = []
+
+    def tracer(direction: str, raw: bytes, decoded: object) -> None:
+        if not sent and direction == "tx" and isinstance(decoded, Request) \
+                and decoded.opcode not in _READS:
+            sent.append(True)
+
+    remove = client.add_tracer(tracer)
+
+    def wrote() -> bool:
+        remove()
+        return bool(sent)
+
+    return wrote
 
 
 def _note_left_running(session: Session) -> None:
