@@ -63,7 +63,7 @@ def test_ctrl_c_in_a_watch_stops_the_program_and_the_motor(bench):
     term, sim, prog = bench
     run_program(term, sim, prog)
     term.line(".watch speed=GAP 3, 0 --interval 0.05")
-    term.wait_for(re.compile(r"│ speed\s+│\s+\d+ │(.*\n)*.*Ctrl-C: stop them and end"))
+    term.wait_for(re.compile(r"│ speed\s+│\s+\d+ │(.*\n)*.*Ctrl-C: stop all and end"))
     term.keys("C-c")
     screen = term.wait("watch: stored program stopped; stopped motor 0 (MST; speed reads 0)")
     assert "ended by Ctrl-C" in screen
@@ -75,7 +75,7 @@ def test_s_in_a_watch_stops_and_q_ends_it_quietly(bench):
     term, sim, prog = bench
     run_program(term, sim, prog)
     term.line(".watch speed=GAP 3, 0 --interval 0.05")
-    term.wait("s/space: stop program and motors")
+    term.wait("s/space: stop all")
     term.keys("s")
     term.wait("stored program stopped; stopped motor 0 (MST; speed reads 0) at")
     still_stopped(sim)

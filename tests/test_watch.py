@@ -98,10 +98,10 @@ def test_render_is_a_pure_function_of_the_snapshot():
     assert "1234" in row and "+2468" in row and "▁▇█" in row
     assert "error" in next(line for line in text.splitlines() if "bad" in line)
     assert "MST sent to motor 0 at 2.0 s" in text and "3 failed reads" in text
-    assert "s/space: stop program and motors" in text and "motors keep running" in text
+    assert "s/space: stop all" in text and "motors keep running" in text
     # without a terminal stdin there are no keys to offer
     text = text_of(watch.render(watch.Snapshot(series[:1], keys=False)))
-    assert "s/space" not in text and "Ctrl-C: stop program and motors, end watch" in text
+    assert "s/space" not in text and "Ctrl-C: stop all and end" in text
 
 
 def test_changed_values_are_highlighted():

@@ -33,12 +33,12 @@ def test_watch_while_the_motor_moves(terminal, tmp_path):
         "echo EXIT=$?\nstty -a | grep -o ' -\\?icanon'\nsleep 30\n")
     term = terminal(width=110, height=30, timeout=10.0)
     term.shell(f"sh {run}")
-    first = term.wait_for(re.compile(r"samples.*\n(.*\n)*│ pos .*\n(.*\n)*s/space: stop program and motors"))
+    first = term.wait_for(re.compile(r"samples.*\n(.*\n)*│ pos .*\n(.*\n)*s/space: stop all"))
     time.sleep(0.4)
     second = term.screen()
     assert value(second, "pos") > value(first, "pos")  # live: the motor moves on screen
     assert value(second, "speed") > 0
-    assert "q: end watch (motors keep running)" in second
+    assert "q: end (motors keep running)" in second
 
     term.keys("s")
     stopped = term.wait_for(re.compile(r"stopped motor 0 \(MST; speed reads 0\) at"))

@@ -382,10 +382,10 @@ class Client:
         if kind != _NORMAL:
             self._stale_opaque = True
 
-    def _late(self, address: int, opcode: int, extra: Reply | None = None) -> None:
+    def _late(self, address: int, opcode: int, extra: Reply | None = None) -> bool:
         """A late normal reply showed up: one fewer of its kind may still arrive. If none
         could (``extra``, the reply, is one that no request was waiting for), see
-        :meth:`_unsolicited`."""
+        :meth:`_unsolicited` and return False."""
         key = (address, opcode)
         n = self._stale.get(key, 0)
         if n > 1:
@@ -394,6 +394,8 @@ class Client:
             del self._stale[key]
         elif extra is not None and not self._stale_opaque and not self.downloading:
             self._unsolicited(extra)
+            return False
+        return True
 
     def _unsolicited(self, extra: Reply) -> None:
         """A reply came when none was outstanding: a duplicate, or the real answer to the
@@ -671,10 +673,11 @@ class Client:
                     and head[3] == Control.TARGET_REACHED_EVENT:
                 self._rx_event(head, Reply.from_frame(head))
             else:
-                if head[0] == self.host_address:
-                    self._late(head[1], head[3], Reply.from_frame(head))
-                self._discard(head, "discarded before the request: a reply nothing was "
-                              "waiting for" if self._flushing else "stale reply")
+                expected = head[0] != self.host_address or self._late(
+                    head[1], head[3], Reply.from_frame(head))
+                why = "late reply" if expected else "reply no request was waiting for"
+                self._discard(head, f"discarded before the request: {why}"
+                              if self._flushing else why)
         if junk:
             # sliding through noise: what is left only counts if it can start a reply to us
             # (as in _take, a frame for another host met this way is taken for noise)

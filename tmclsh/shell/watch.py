@@ -51,10 +51,9 @@ SPARK_WIDTH = 24  # samples shown in the sparkline
 RATE_WINDOW = 1.0  # seconds over which the change rate is measured
 LOG_LIMIT = 200_000  # samples kept for .plot
 _BLOCKS = "▁▂▃▄▅▆▇█"
-_KEY_HELP = ("s/space: stop program and motors  ·  Ctrl-C: stop them and end  ·  "
-             "q: end watch (motors keep running)")
-_KEY_HELP_SHORT = "s: stop all · ^C: stop+end · q: end"
-_NO_KEYS_HELP = "Ctrl-C: stop program and motors, end watch"
+_KEY_HELP = "s/space: stop all  ·  Ctrl-C: stop all and end  ·  q: end (motors keep running)"
+_KEY_HELP_SHORT = "s: stop all · ^C: stop, end · q: end"
+_NO_KEYS_HELP = "Ctrl-C: stop all and end"
 STOP_KEYS = "sS "  # stop the program and every motor, keep watching
 QUIT_KEYS = "qQ"  # end the watch quietly (so does Esc)
 RECONNECT_EVERY = 0.5  # s between reconnection attempts after the link was lost
