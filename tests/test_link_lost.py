@@ -132,3 +132,21 @@ def test_the_first_command_after_a_watch_reconnects(tcp_sim):
         assert client.connected and client.value("GGP 0, 2") == 42
     finally:
         client.close()
+
+
+def test_stopall_after_a_lost_link_brings_it_back_and_stops(tcp_sim, capsys):
+    sim, server, url = tcp_sim
+    client = Client(open_serial(url), module="TMCM-1311", timeout=0.3)
+    session = Session(client, Output())
+    try:
+        client.execute("ROR 0, 30000")
+        server.drop_client()
+        with pytest.raises(Exception):
+            client.execute("GAP 1, 0")
+        assert not client.connected
+        session.run_line(".stopall")
+        out = capsys.readouterr().out
+        assert f"reconnected to {url}" in out and "stopped motor 0 (MST; speed reads 0)" in out
+        assert sim.param("axis", 3, 0) == 0
+    finally:
+        client.close()

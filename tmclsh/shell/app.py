@@ -340,8 +340,11 @@ def run_one(session: Session, line: str) -> bool:
 
     # a lost link (also one a .watch met) is brought back before the next TMCL line
     lost = session.state.get(_LINK_LOST) or not session.client.connected
-    if lost and _is_tmcl(line) and not _try_reconnect(session):
-        return True
+    if lost and _is_tmcl(line):
+        if not _try_reconnect(session):
+            return True
+    elif lost and line.split()[0].lower() not in _NO_RECONNECT:
+        _try_reconnect(session, quiet=True)  # a shell command that fails says why itself
     session.interrupted_line_ended = False
     try:
         session.run_line(line)
@@ -372,16 +375,22 @@ def run_one(session: Session, line: str) -> bool:
     return True
 
 
-def _try_reconnect(session: Session) -> bool:
+# shell commands that do not try to bring a lost link back first
+_NO_RECONNECT = frozenset({".connect", ".quit", ".exit", "quit", "exit", ".help", "help", "?"})
+
+
+def _try_reconnect(session: Session, quiet: bool = False) -> bool:
     client = session.client
     try:
         client.reconnect()
     except TmclError as exc:
-        session.out.error(None, f"still disconnected ({exc}); nothing was sent. "
-                                ".connect [PORT] to switch")
+        if not quiet:
+            session.out.error(None, f"still disconnected ({exc}); nothing was sent. "
+                                    ".connect [PORT] to switch")
         return False
     except OSError as exc:
-        session.out.error(None, f"still disconnected ({exc}); nothing was sent")
+        if not quiet:
+            session.out.error(None, f"still disconnected ({exc}); nothing was sent")
         return False
     session.state.pop(_LINK_LOST, None)
     session.out.ok(f"reconnected to {client.describe()}")

@@ -1003,8 +1003,12 @@ def stop_all(session: Session, why: str = ""):
     client = session.client
     prefix = f"{why}: " if why else ""
     if not client.connected:
-        session.out.warn(f"{prefix}not connected; nothing could be stopped")
-        return None
+        try:  # the link was lost: the stop is worth one attempt to bring it back
+            client.reconnect()
+        except (TmclError, OSError) as exc:
+            session.out.warn(f"{prefix}not connected ({exc}); nothing could be stopped")
+            return None
+        session.out.info(f"reconnected to {client.describe()}")
     try:
         report = program.stop_everything(client)
     except (TmclError, OSError) as exc:  # not expected (it reports instead), but a stop never raises
