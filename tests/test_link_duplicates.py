@@ -170,3 +170,15 @@ def test_tmclsh_sim_faults_seen_with_raw_pyserial():
     finally:
         p.terminate()
         p.wait(10)
+
+
+def test_a_displaced_answer_that_arrives_damaged_still_casts_doubt(dup_client):
+    c, sim = dup_client
+    assert c.request(Request(1, SGP, 0, 2, 20)).value == 20
+    sim.faults.dup_late_next = 1
+    assert c.request(Request(1, SGP, 0, 2, 21)).value == 21
+    sim.faults.corrupt_next = 1  # the real answer to 22 comes damaged, after the copy of 21
+    assert c.request(Request(1, SGP, 0, 2, 22)).value == 21
+    assert c.request(Request(1, SGP, 0, 2, 23)).value == 23
+    (s,) = c.take_suspects()
+    assert s.request.value == 22 and s.reply.value == 21

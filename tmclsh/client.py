@@ -25,7 +25,9 @@ TMCL replies carry no sequence number, so the client keeps the link honest itsel
   arrives when none is outstanding (a duplicate, or the real answer to a request that took
   another reply) marks the line dirty, so the next request resynchronises; unless it is a
   byte-for-byte copy of the reply the last request took (then the value shown was the one
-  it carries either way), that last reply is reported as *suspect* (``take_suspects``);
+  it carries either way), that last reply is reported as *suspect* (``take_suspects``).
+  Bytes that are no frame arriving then count the same (the real answer, damaged); a real
+  answer that is lost altogether leaves no trace for any client;
 * only idempotent requests are retried on a timeout or corrupted reply (a retried ``MVP REL``
   would move twice); a reply with status 1 (the module saw a bad checksum and executed
   nothing) is retried for every request.
@@ -109,7 +111,7 @@ class Suspect:
     request: Request
     reply: Reply
     seq: int
-    extra: bytes  # the reply that came when none was outstanding
+    extra: bytes  # the reply that came when none was outstanding (b"": damaged bytes)
 
 
 @dataclass(frozen=True)
@@ -170,6 +172,7 @@ class Client:
         self._stale_opaque = False
         self._drained = False
         self._flushing = False  # _absorb runs for _flush_input (for the trace's words)
+        self._noise = False  # _absorb met bytes that were no frame
         # bytes waiting on a byte stream (None on CAN: there every request takes in what is
         # queued, a non-blocking receive)
         self._bound: Transport | None = None
@@ -397,7 +400,7 @@ class Client:
             return False
         return True
 
-    def _unsolicited(self, extra: Reply) -> None:
+    def _unsolicited(self, extra: Reply | None) -> None:
         """A reply came when none was outstanding: a duplicate, or the real answer to the
         last request, which then took another one. The line is dirty (the next request
         resynchronises) and, unless ``extra`` is a copy of a reply taken lately (the last
@@ -410,8 +413,8 @@ class Client:
             return
         self._last = None  # reported once
         self.stats["suspect"] += 1
-        self._suspects.append(Suspect(last[0], last[1], self.replies,
-                                      extra.to_bytes() if not self.is_can else extra.to_can()))
+        raw = b"" if extra is None else extra.to_can() if self.is_can else extra.to_bytes()
+        self._suspects.append(Suspect(last[0], last[1], self.replies, raw))
         if self._tracers:
             self._trace("note", b"", f"the reply to {_name(last[0])} may have been another "
                                      "request's: a reply came that nothing was waiting for")
@@ -661,12 +664,14 @@ class Client:
                     head[0] == self.host_address and head[2] not in _STATUSES) or (
                     head[0] != self.host_address and junk):  # (see _take)
                 if self._late_version(head):
+                    self._noise = self._noise or bool(junk)
                     self._drop(junk, "bytes that are no frame")
                     del buf[:_FRAME]
                     continue
                 junk.append(buf[0])
                 del buf[0]
                 continue
+            self._noise = self._noise or bool(junk)
             self._drop(junk, "bytes that are no frame")
             del buf[:_FRAME]
             if head[0] == self.host_address and head[2] == Status.EVENT \
@@ -684,7 +689,13 @@ class Client:
             while buf and buf[0] != self.host_address:
                 junk.append(buf[0])
                 del buf[0]
+        noise = bool(junk) or self._noise
+        self._noise = False
         self._drop(junk, "bytes that are no frame")
+        if noise and not self._dirty and not self.downloading:
+            # bytes that are no frame while nothing was outstanding: a damaged reply,
+            # possibly the real answer to the last request (which then took another)
+            self._unsolicited(None)
         return bool(data)
 
     def _drain(self, hard_stop: float) -> None:
