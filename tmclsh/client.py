@@ -920,6 +920,7 @@ class Client:
                     time.sleep(min(0.1, max(0.0, deadline - time.monotonic())))
             self._buf.clear()
             self._dirty = False
+            self._last = None  # whatever comes now says nothing about answers before
             self.stats["reconnects"] += 1
             if self._tracers:
                 self._trace("note", b"", f"reconnected to {self.describe()}")
