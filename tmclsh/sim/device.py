@@ -95,7 +95,7 @@ class Faults:
         if n > 0:
             setattr(self, counter, n - 1)
             return True
-        return self.roll(kind)
+        return bool(self.rates) and self.roll(kind)
 
 
 #: random faults per reply (``Faults.rates``), with what each does, for --help and the docs
@@ -627,7 +627,8 @@ class Simulator:
 
     # -- requests ---------------------------------------------------------------------------------
     def _handle(self, req: Request, channel: str) -> None:
-        self._send_late_copies()
+        if self._late_copies:
+            self._send_late_copies()
         self._last_command = time.monotonic()
         self._heartbeat_fired = False
         ans = self._dispatch(req.instruction, channel)
@@ -915,18 +916,21 @@ class Simulator:
         copies = 1
         if reply:
             f = self.faults
-            if f.take("drop_next", "drop"):
+            # (the faults are looked at only when one is set: this runs for every reply)
+            faulty = f.rates or f.drop_next or f.dup_next or f.dup_late_next
+            if faulty and f.take("drop_next", "drop"):
                 return
             payload = self._apply_faults(channel, payload)
             delay = f.delay
-            if f.rates and f.roll("delay"):
-                delay += f.rng.uniform(*RANDOM_DELAY)
             if channel == SERIAL:
                 delay += self.store.get(GLOBAL, "TelegramPauseTime") / 1000.0
-            if f.take("dup_next", "dup"):
-                copies = 2
-            if f.take("dup_late_next", "dup-late"):
-                self._late_copies.append((channel, payload))
+            if faulty:
+                if f.rates and f.roll("delay"):
+                    delay += f.rng.uniform(*RANDOM_DELAY)
+                if f.take("dup_next", "dup"):
+                    copies = 2
+                if f.take("dup_late_next", "dup-late"):
+                    self._late_copies.append((channel, payload))
         due = max(time.monotonic() + delay, self._last_due)
         self._last_due = due
         for _ in range(copies):
@@ -958,6 +962,8 @@ class Simulator:
 
     def _mangle(self, data: bytes) -> bytes:
         f = self.faults
+        if not (f.rates or f.corrupt_next or f.truncate_next):
+            return data
         if data and f.take("corrupt_next", "corrupt"):
             buf = bytearray(data)
             i = f.rng.randrange(max(1, len(buf) - 1))
