@@ -216,6 +216,7 @@ def run_repl(session: Session, prompt_session: PromptSession | None = None) -> i
 
     session.interactive = True
     session.ask = ask_yes_no
+    session.state["pager"] = repl_settings().get("pager", True) is not False
     if repl_settings().get("color") == "never":
         session.out.console.no_color = session.out.err.no_color = True
     from prompt_toolkit.utils import is_dumb_terminal

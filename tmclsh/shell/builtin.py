@@ -16,6 +16,7 @@ from ..modules import Module, Parameter, available, from_version_string, load
 from ..protocol import Control, Request, status_ok
 from .commands import all_commands, command, find
 from .completer import Candidate, param_meta
+from .render import paged
 
 if TYPE_CHECKING:
     from .session import Session
@@ -94,6 +95,7 @@ def complete_module(session: Session | None, text: str) -> list[Candidate]:
          complete=complete_help, bare=True,
          details="`help SAP` explains an instruction; `help 140` shows axis parameter 140 (and "
                  "global parameter 140 if there is one), like `.param 140`.")
+@paged
 def cmd_help(session: Session, arg: str) -> None:
     arg = arg.strip()
     if not arg:
@@ -368,6 +370,7 @@ command(".exit", ".exit", "leave the shell (same as .quit)", bare=True)(_quit)
          details="QUERY may be a number (140), a name (MicrostepResolution), part of one "
                  "(microstep) or `ap 140` / `gp 66 [bank]` to pick the kind. The current value "
                  "is read from the module (GAP/GGP) when the parameter is readable.")
+@paged
 def cmd_param(session: Session, arg: str, from_help: bool = False) -> None:
     query = arg.strip()
     if not query:
@@ -587,6 +590,7 @@ def _param_json(p: Parameter, current: list[tuple[str, str, int | None]] | None 
          complete=complete_params, category="parameters",
          details="FILTER narrows the list by number or (part of a) name. On a multi-axis "
                  "module each motor gets its own value column.")
+@paged
 def cmd_params(session: Session, arg: str) -> None:
     mod = session.module
     words = arg.split()

@@ -32,6 +32,7 @@ from ..errors import AsmError, TmclError, ValidationError
 from ..program import AppStatus, UploadError
 from ..protocol import Instruction
 from .commands import command
+from .render import paged
 
 if TYPE_CHECKING:
     from .session import Session
@@ -540,6 +541,7 @@ Reads program memory with 134 from ADDR (default 0) up to the end marker (opcode
 erased cell) or the end of memory, or exactly N instructions with --count, and disassembles
 it with generated labels (L0012 for a jump target at 12). With FILE the text is written there;
 it assembles back to the same image (.upload FILE --at ADDR). Needs binary mode.""")
+@paged
 def cmd_dump(session: Session, argtext: str) -> None:
     pos, opts = _options(_words(argtext), set(), {"--at", "--count"})
     if len(pos) > 1:
@@ -865,6 +867,7 @@ def cmd_delete(session: Session, argtext: str) -> None:
 '->' marks the line the program counter is at, 'B' a breakpoint; the program address of each
 line with an instruction is shown. Without a known source file the disassembly around the
 address is listed instead.""")
+@paged
 def cmd_list(session: Session, argtext: str) -> None:
     dbg = state(session)
     pc: int | None = None

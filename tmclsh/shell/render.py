@@ -20,6 +20,9 @@ import json
 import os
 import re
 import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from functools import wraps
 from typing import Any
 
 from .. import instructions as isa
@@ -54,6 +57,7 @@ class Output:
     def __init__(self, json_mode: bool = False):
         self.json = json_mode
         self.console = _console()
+        self._paging = False  # inside paged(): a nested one adds nothing
         self.err = _console(stderr=True)
 
     # -- JSON ---------------------------------------------------------------------------
@@ -95,6 +99,29 @@ class Output:
         else:
             self.console.print(render_result(result, module))
 
+    @contextmanager
+    def paged(self, enabled: bool = True) -> Iterator[None]:
+        """Output printed inside goes through the pager when it would not fit the terminal
+        (``$PAGER``, else less; ``q`` leaves it), else straight out. Errors (stderr) are not
+        held back. Only for a person at a terminal: JSON and pipes get the text as it is."""
+        console = self.console
+        if not enabled or self.json or self._paging or not console.is_terminal:
+            yield
+            return
+        capture = console.capture()
+        self._paging = True
+        try:
+            with capture:
+                yield
+        finally:
+            self._paging = False
+            text = capture.get()
+            if _rows(text, console.size.width) < console.size.height:
+                console.file.write(text)
+                console.file.flush()
+            else:
+                _page(text)
+
     def event(self, reply: Reply) -> None:
         """A 138 event (or any unsolicited reply), shown when it arrives."""
         if self.json:
@@ -102,6 +129,52 @@ class Output:
                        "value": reply.value})
         else:
             self.console.print(render_event(reply), style="tmcl.event", markup=False)
+
+
+def _rows(text: str, width: int) -> int:
+    """Terminal rows ``text`` takes, long lines wrapped."""
+    from rich.cells import cell_len
+    from rich.text import Text
+
+    width = max(width, 1)
+    return sum(max(1, -(-cell_len(line) // width))
+               for line in Text.from_ansi(text).plain.splitlines())
+
+
+def _page(text: str) -> None:
+    """Through rich's system pager (pydoc's: $MANPAGER, $PAGER, else less or more). Colours
+    stay only where the pager shows them (less -R); any other pager gets plain text."""
+    from rich.pager import SystemPager
+    from rich.text import Text
+
+    pager = os.environ.get("MANPAGER") or os.environ.get("PAGER")
+    if pager is None:
+        # colours (rich's documentation asks less users for -R), and the last page stays on
+        # the screen after q (-X), so the table is still there to read at the prompt
+        os.environ.setdefault("LESS", "-RX")
+    less_raw = "R" in os.environ.get("LESS", "").upper() or "-R" in (pager or "").upper()
+    if not ((pager is None or "less" in pager) and less_raw):
+        text = Text.from_ansi(text).plain
+    SystemPager().show(text)
+
+
+def paging(session: Any) -> bool:
+    """Long output is paged in the interactive shell when the ``pager`` setting is on
+    (app.py keeps it in ``session.state``), never in -c, -f or a script run from the shell."""
+    return bool(session.interactive and session.state.get("pager")
+                and not session.state.get("script.depth"))
+
+
+def paged(handler: Callable[[Any, str], None]) -> Callable[[Any, str], None]:
+    """A dot-command whose output may be long (``.help``, ``.params``): paged (see
+    ``Output.paged``)."""
+
+    @wraps(handler)
+    def run(session: Any, arg: str, *args: Any, **kw: Any) -> None:
+        with session.out.paged(paging(session)):
+            handler(session, arg, *args, **kw)
+
+    return run
 
 
 def _message(console, text: str, style: str) -> None:
