@@ -123,3 +123,25 @@ def test_no_pager_with_c_or_when_the_setting_is_off(terminal, tmp_path):
     assert re.search(r"Input7EdgeType.*\n" + PROMPT, screen)
     assert "PAGER-RAN" not in screen and not marker.exists()
     t.quit()
+
+
+# -- the toolbar ----------------------------------------------------------------------------
+
+def toolbar(screen: str) -> str:
+    bars = [ln.rstrip() for ln in screen.splitlines() if ln.startswith(" SIMULATED ")]
+    return bars[-1] if bars else ""
+
+
+@pytest.mark.parametrize("width, hints", [(80, "^C stop motors  ^D quit"), (60, "^C stop")])
+def test_the_toolbar_fits_narrow_terminals_in_whole_words(shell, width, hints):
+    t = shell(width=width, height=20)
+    bar = toolbar(t.screen())
+    assert bar.startswith(" SIMULATED  | TMCM-1311 @1")
+    assert bar.endswith(hints) and len(bar) <= width
+    t.line(".trace on")
+    screen = t.wait_for(lambda s: "trace on" in toolbar(s))
+    bar = toolbar(screen)
+    assert len(bar) <= width and bar.endswith(hints)
+    t.line(".trace off")
+    t.wait_for(lambda s: "trace off" in toolbar(s))
+    t.quit()
