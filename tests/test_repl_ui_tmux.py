@@ -145,3 +145,21 @@ def test_the_toolbar_fits_narrow_terminals_in_whole_words(shell, width, hints):
     t.line(".trace off")
     t.wait_for(lambda s: "trace off" in toolbar(s))
     t.quit()
+
+
+# -- the program state after .connect ------------------------------------------------------
+
+def test_connect_shows_the_new_links_program_state_at_once(shell, tmp_path):
+    prog = tmp_path / "loop.tmcl"
+    prog.write_text("Loop: WAIT TICKS, 0, 100\nJA Loop\n")
+    t = shell()
+    t.line(f".upload {prog} --yes")
+    t.wait("verified: read back identical")
+    t.line(".run")
+    t.wait(f"{PROMPT.rstrip('>')} [run]>")
+    t.wait("program run")  # the toolbar
+    t.line(".connect sim TMCM-1311")
+    screen = t.wait("connected:")
+    screen = t.wait_for(lambda s: last_prompt(s) == PROMPT and "program stop" in toolbar(s))
+    assert "[run]" not in last_prompt(screen)
+    t.quit()

@@ -819,6 +819,7 @@ def cmd_connect(session: Session, arg: str) -> None:
         client.reconnect()
         if client.module is None:
             client.identify()
+        _refresh_program_state(session)
         session.out.ok(f"reconnected: {_where(session)}")
         return
     settings = session.settings
@@ -846,10 +847,19 @@ def cmd_connect(session: Session, arg: str) -> None:
         if client.module is None:
             client.identify()
     except TmclError as exc:
+        _refresh_program_state(session)
         session.out.warn(f"connected to {client.describe()}, but no module identified at "
                          f"address {client.address}: {exc}")
         return
+    _refresh_program_state(session)
     session.out.ok(f"connected: {_where(session)}")
+
+
+def _refresh_program_state(session: Session) -> None:
+    """The prompt and toolbar show the new link's program state at once (debugger.py)."""
+    from .debugger import refresh_program_state
+
+    refresh_program_state(session)
 
 
 def switch_transport(client, transport, module: str | None) -> None:
