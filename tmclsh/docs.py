@@ -516,7 +516,10 @@ with status 130.
 .TP
 {_b("Tab")}
 Completes mnemonics, symbolic types, parameter names (with their number, range and unit) and
-shell commands with their arguments. Completion never asks the module.
+shell commands with their arguments; inside expressions ({_b(".watch")} {_i("NAME")}{_b("=")},
+{_b(".wait")}, {_b(".expect")}, {_b(".if")}, {_b(".let")}, {_b(".display")}, {_b("${...}")}) the
+read commands with their parameters, motors and ports, variables and functions.
+Completion never asks the module.
 .TP
 {_b("Ctrl-C")}
 Stops all motors and clears the line.
@@ -526,6 +529,24 @@ Leaves the shell, like {_b(".quit")}.
 .TP
 {_b("Enter")} on an empty line
 Repeats the last {_b(".step")}.
+.PP
+Output longer than the terminal ({_b(".help")}, {_b(".params")}, {_b(".list")}, {_b(".dump")},
+a long {_b("help")}) is shown through {_b("$PAGER")} (default {_b("less")}; {_b("q")} leaves
+it), never in a pipe, with {_b("-c")} or {_b("-f")}; the {_b("pager")} setting turns it off.
+.SS Keys in the ASCII terminal (.ascii)
+.TP
+{_b("Ctrl-]")}, or {_b(".quit")} typed as a line
+Back to the shell (asks whether to send {_b("BIN")}). A {_b("BIN")} typed by the user is
+noticed: the module talks binary frames again and the terminal returns to the shell.
+.TP
+{_b("Ctrl-C")}
+Stops all motors (in {_b("--raw")}: first erases the line typed so far).
+.TP
+{_b("Ctrl-T")} then {_b("e")}, {_b("h")}, {_b("t")}, {_b("f")}, {_b("u")} or {_b("?")}
+The menu, as in tio: local echo on/off, hex view of what arrives on/off, timestamps on/off,
+log the session to a file ({_b("f")} again stops), send a file line by line (blank and comment
+lines left out, each reply waited for), this list. {_b("Ctrl-T Ctrl-T")} sends Ctrl-T in
+{_b("--raw")}.
 """
 
 _EXAMPLES = f"""\
@@ -669,6 +690,12 @@ The config file (default {_b("~/.config/tmclsh/config.toml")}; {_b("TMCLSH_CONFI
 .TP
 {_i("$XDG_STATE_HOME")}{_b("/tmclsh/history")}
 Command history of the interactive prompt (default {_b("~/.local/state/tmclsh/history")}).
+.TP
+{_i("$XDG_CACHE_HOME")}{_b("/tmclsh/programs/")}
+The source of each program uploaded with {_b(".upload")}, keyed by a hash of its image, so
+that {_b(".dump")} can show the original labels and comments while the module's memory holds
+exactly that image (default {_b("~/.cache/tmclsh/programs/")}; the user cache directory of
+the platform elsewhere). Safe to delete.
 .TP
 {_i("prefix")}{_b("/share/bash-completion/completions/tmclsh")}
 .TQ

@@ -743,7 +743,8 @@ def cmd_where(session: Session, argtext: str) -> None:
          category=CATEGORY, details="""\
 130 steps one instruction; after each, the program counter (GP 130), the line about to run
 next and the .display values are shown. An empty line repeats the step. Ctrl-C stops a long
-series. Needs binary mode.""")
+series. Where no instruction is stored (empty program memory, or past the program's end)
+it says so and sends nothing. Needs binary mode.""")
 def cmd_step(session: Session, argtext: str) -> None:
     n = _number(argtext, "N") if argtext.strip() else 1
     if n < 1:
