@@ -32,7 +32,7 @@ from ..errors import AsmError, TmclError, ValidationError
 from ..program import AppStatus, UploadError
 from ..protocol import Instruction
 from .commands import command
-from .render import paged
+from .render import paged, paging
 
 if TYPE_CHECKING:
     from .session import Session
@@ -572,7 +572,6 @@ user's cache directory, keyed by a hash of the image), that source is shown, wit
 and comments; otherwise the memory is disassembled with generated labels (L0012 for a jump
 target at 12). With FILE the text is written there; it assembles back to the same image
 (.upload FILE --at ADDR). Needs binary mode.""")
-@paged
 def cmd_dump(session: Session, argtext: str) -> None:
     pos, opts = _options(_words(argtext), set(), {"--at", "--count"})
     if len(pos) > 1:
@@ -634,7 +633,8 @@ def cmd_dump(session: Session, argtext: str) -> None:
     if not image:
         session.out.info(f"program memory is empty at {start} (end marker)")
         return
-    session.out.print(text.rstrip("\n"), markup=False, highlight=False)
+    with session.out.paged(paging(session)):  # (not the progress bar of the reading)
+        session.out.print(text.rstrip("\n"), markup=False, highlight=False)
 
 
 @command(".source-map", ".source-map [FILE [--at ADDR] | --off]",

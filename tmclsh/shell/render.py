@@ -110,13 +110,16 @@ class Output:
             return
         capture = console.capture()
         self._paging = True
+        done = False
         try:
             with capture:
                 yield
+            done = True
         finally:
             self._paging = False
             text = capture.get()
-            if _rows(text, console.size.width) < console.size.height:
+            # an interrupted or failed command shows what it printed, without a pager
+            if not done or _rows(text, console.size.width) < console.size.height:
                 console.file.write(text)
                 console.file.flush()
             else:
