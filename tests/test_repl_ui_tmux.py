@@ -50,16 +50,25 @@ def test_completion_menu_inside_a_watch_expression(shell):
     t.keys("C-u")
     t.type(".expect GGP Serial")
     t.keys("Tab")
-    screen = t.wait("SerialAddress")
-    menu = [ln for ln in screen.splitlines() if "GP 6" in ln and "·" in ln]
-    assert any("SerialAddress" in ln and "GP 66" in ln for ln in menu)
-    assert any("SerialBaudRate" in ln or "SerialHeartbeat" in ln for ln in menu)
+    screen = t.wait("SerialHostAddress")
+    assert last_prompt(screen) == f"{PROMPT} .expect GGP SerialAddress"  # the best match
+    menu = [ln.split() for ln in screen.splitlines() if re.search(r" GP \d+ · ", ln)]
+    assert [m[:3] for m in menu[:3]] == [["SerialAddress", "GP", "66"],
+                                         ["SerialHeartbeat", "GP", "68"],
+                                         ["SerialHostAddress", "GP", "76"]]
     t.keys("C-u")
     t.type("SAP 4, 0, ${G")
     t.keys("Tab")  # inside ${...}: the read commands, not SAP/MVP
-    screen = t.wait("Get axis parameter")
-    assert "Get global parameter" in screen and "Get input or output" in screen
+    screen = t.wait("Get coordinate")
+    menu = [ln.split()[0] for ln in screen.splitlines() if ln.strip().startswith("G")
+            and "Get " in ln]
+    assert menu == ["GAP", "GGP", "GIO", "GCO"]
     assert "Move to position" not in screen and "Set axis parameter" not in screen
+    t.keys("C-u")
+    t.type(".watch p=GAP 1, 0; v=GAP 3, 0 --until \"")
+    t.keys("Tab")  # the watched names first, then the reads and the functions
+    screen = t.wait("round()")
+    assert "watched value" in screen and "Get axis parameter" in screen
     t.keys("C-u")
     t.quit()
 
@@ -119,8 +128,8 @@ def test_no_pager_with_c_or_when_the_setting_is_off(terminal, tmp_path):
     t.start("--sim")
     t.wait("trace off")
     t.line(".params")
-    screen = t.wait("Input7EdgeType")  # the end of the table, straight on the screen
-    assert re.search(r"Input7EdgeType.*\n" + PROMPT, screen)
+    # the end of the table, straight on the screen, and the prompt after it
+    screen = t.wait_for(re.compile(r"Input7EdgeType.*\n" + PROMPT))
     assert "PAGER-RAN" not in screen and not marker.exists()
     t.quit()
 
