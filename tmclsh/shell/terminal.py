@@ -313,11 +313,11 @@ class Terminal:
 
     def note(self, text: str) -> None:
         """A status line of our own, ``---`` in front (stderr, as miniterm does)."""
-        eol = "\r\n" if self.opts.raw else "\n"
+        eol = self.eol
+        text = f"--- {text}"
         if self.opts.raw and not self._lines.at_line_start:
-            text, self._lines.at_line_start = eol + f"--- {text}", True
-        else:
-            text = f"--- {text}"
+            text = eol + text  # in the middle of the module's line: a line of its own
+            self._lines.at_line_start = True
         self.log(text + eol)
         self._emit(1, self.paint([("tmcl.note", text), ("", eol)]))
 
