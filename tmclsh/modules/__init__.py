@@ -42,7 +42,8 @@ class Parameter:
     default: int | None = None
     values: dict[int, str] = field(default_factory=dict)
     bits: dict[int, str] = field(default_factory=dict)
-    note: str | None = None
+    note: str | None = None  # for users: shown by help and .param
+    source: str | None = None  # for maintainers: how the entry was read from the manual
 
     @property
     def readable(self) -> bool:
@@ -114,6 +115,8 @@ class IoPort:
     description: str = ""
     unit: str = ""
     default: int | None = None
+    note: str | None = None
+    source: str | None = None
 
 
 def _int_keys(table: dict | None) -> dict[int, str]:
@@ -127,7 +130,7 @@ def _parameter(kind: str, raw: dict) -> Parameter:
         count=raw.get("count", 1), min=raw.get("min"), max=raw.get("max"),
         choices=tuple(raw["choices"]) if raw.get("choices") else None, unit=raw.get("unit", ""),
         default=raw.get("default"), values=_int_keys(raw.get("values")),
-        bits=_int_keys(raw.get("bits")), note=raw.get("note"))
+        bits=_int_keys(raw.get("bits")), note=raw.get("note"), source=raw.get("source"))
 
 
 def _normalise(name: str) -> str:

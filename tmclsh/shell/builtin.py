@@ -50,17 +50,20 @@ def complete_param(session: Session | None, text: str) -> list[Candidate]:
     mod = _module(session)
     if mod is None:
         return []
+    extra = [] if "--source" in text.split() else [
+        Candidate("--source", "also how the entry was read from the manual")]
     return [Candidate(p.name, param_meta(p), also=(p.manual_name,))
-            for p in mod.axis_params + mod.global_params]
+            for p in mod.axis_params + mod.global_params] + extra
 
 
 def complete_params(session: Session | None, text: str) -> list[Candidate]:
     words = text.split()
     if len(words) == 0 or (len(words) == 1 and not text.endswith(" ")):
         return [Candidate("axis", "axis parameters (SAP/GAP)"),
-                Candidate("global", "global parameters (SGP/GGP)")] + complete_param(session, text)
+                Candidate("global", "global parameters (SGP/GGP)")] + [
+            c for c in complete_param(session, text) if c.text != "--source"]
     kind = words[0].lower()
-    return [c for c in complete_param(session, text)
+    return [c for c in complete_param(session, text) if c.text != "--source"
             if kind not in ("axis", "global") or c.meta.startswith("AP" if kind == "axis" else "GP")]
 
 
@@ -363,13 +366,17 @@ command(".exit", ".exit", "leave the shell (same as .quit)", bare=True)(_quit)
 
 # -- .param / .params --------------------------------------------------------------------
 
-@command(".param", ".param QUERY", "explain a parameter: number, name or part of a name, "
-         "with its current value", complete=complete_param, category="parameters",
+@command(".param", ".param [--source] QUERY", "explain a parameter: number, name or part of "
+         "a name, with its current value", complete=complete_param, category="parameters",
          details="QUERY may be a number (140), a name (MicrostepResolution), part of one "
                  "(microstep) or `ap 140` / `gp 66 [bank]` to pick the kind. The current value "
-                 "is read from the module (GAP/GGP) when the parameter is readable.")
+                 "is read from the module (GAP/GGP) when the parameter is readable. --source "
+                 "also shows how the entry was read from the module's manual (where the manual "
+                 "is unclear or wrong, and what tmclsh assumes).")
 def cmd_param(session: Session, arg: str, from_help: bool = False) -> None:
-    query = arg.strip()
+    words = arg.split()
+    source = "--source" in words
+    query = " ".join(w for w in words if w != "--source")
     if not query:
         raise ValidationError("which parameter? .param 140, .param MaxPositioningSpeed, "
                               ".param microstep")
@@ -387,7 +394,7 @@ def cmd_param(session: Session, arg: str, from_help: bool = False) -> None:
         if not found:
             what = {"axis": "axis ", "global": "global "}.get(kind or "", "")
             raise ValidationError(f"the {mod.name} has no {what}parameter {number}")
-        return _show_params(session, found, numbered=number)
+        return _show_params(session, found, numbered=number, source=source)
     found = mod.search(query, kind)
     if bank is not None:
         found = [p for p in found if p.bank == bank]
@@ -405,7 +412,7 @@ def cmd_param(session: Session, arg: str, from_help: bool = False) -> None:
                               + ("; .help lists the commands" if from_help else
                                  "; .params lists them all"))
     if len(found) == 1:
-        return _show_params(session, found)
+        return _show_params(session, found, source=source)
     _param_table(session, found, title=f"{len(found)} parameters match {query!r}", read=False)
     if not session.out.json:
         session.out.info("(.param NAME for one of them)")
@@ -480,7 +487,8 @@ def _current(session: Session, p: Parameter, number: int | None
     return rows
 
 
-def _show_params(session: Session, params: list[Parameter], numbered: int | None = None) -> None:
+def _show_params(session: Session, params: list[Parameter], numbered: int | None = None,
+                 source: bool = False) -> None:
     from rich.table import Table
     from rich.text import Text
 
@@ -489,7 +497,10 @@ def _show_params(session: Session, params: list[Parameter], numbered: int | None
         number = numbered if (numbered is not None and p.count > 1) else None
         current = _current(session, p, number)
         if out.json:
-            out.emit(_param_json(p, current))
+            obj = _param_json(p, current)
+            if source:
+                obj["source"] = p.source
+            out.emit(obj)
             continue
         if i:
             out.print()
@@ -519,6 +530,8 @@ def _show_params(session: Session, params: list[Parameter], numbered: int | None
             grid.add_row("  bits", "\n".join(f"bit {b}: {t}" for b, t in sorted(p.bits.items())))
         if p.note:
             grid.add_row("  note", p.note)
+        if source:
+            grid.add_row("  source", p.source or "as the manual prints it")
         for label, text, _ in current:
             grid.add_row("  now" + (f" ({label})" if label else ""),
                          Text(text, style="tmcl.value" if not text.startswith(
@@ -566,7 +579,8 @@ def _param_json(p: Parameter, current: list[tuple[str, str, int | None]] | None 
                 ) -> dict:
     obj = {"kind": p.kind, "number": p.number, "bank": p.bank, "name": p.name,
            "manual_name": p.manual_name, "description": p.description, "min": p.min,
-           "max": p.max, "unit": p.unit, "access": p.access, "default": p.default}
+           "max": p.max, "unit": p.unit, "access": p.access, "default": p.default,
+           "note": p.note}
     if p.count > 1:
         obj["count"] = p.count
     if p.values:

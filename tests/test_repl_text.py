@@ -1,0 +1,84 @@
+"""What a technician reads and how lines are cut (issue 16, "What users read" and "Lines"),
+through the in-process simulator and the real command line."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from tmclsh.client import connect
+from tmclsh.shell.render import Output
+from tmclsh.shell.session import Session
+
+
+@pytest.fixture(autouse=True)
+def wide_console(monkeypatch):
+    monkeypatch.setenv("COLUMNS", "200")
+
+
+def make_session(module="TMCM-1311", json_mode=False, **kw):
+    client = connect(sim=module, timeout=0.3, retries=0)
+    return Session(client, Output(json_mode=json_mode), **kw)
+
+
+@pytest.fixture
+def s351():
+    s = make_session("TMCM-351")
+    yield s
+    s.client.close()
+
+
+def tmclsh(*args: str, stdin: str | None = None, cwd=None) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "tmclsh", *args], input=stdin,
+                          capture_output=True, text=True, timeout=60, cwd=cwd,
+                          env={"COLUMNS": "200", "PATH": "/usr/bin:/bin", "NO_COLOR": "1",
+                               "HOME": str(cwd or "/tmp")})
+
+
+# -- what users read ---------------------------------------------------------------------
+
+def test_help_140_on_the_351_shows_user_text_only(s351, capsys):
+    s351.run_line("help 140")
+    out = capsys.readouterr().out
+    assert "0..6" in out and "note" in out and "AP 211" in out
+    assert "\u011e" not in out and "decoded" not in out and "printed" not in out
+    assert "source" not in out
+
+
+def test_param_source_shows_how_the_entry_was_read(s351, capsys):
+    s351.run_line(".param --source 140")
+    out = capsys.readouterr().out
+    assert "source" in out and "decoded 0…6" in out
+    s351.run_line(".param --source MaxPositioningSpeed")  # no source: says it is as printed
+    assert "as the manual prints it" in capsys.readouterr().out
+
+
+def test_no_default_shown_where_no_manual_gives_one(capsys):
+    s = make_session("TMCM-1640")
+    try:
+        s.run_line("help gp 66")
+        out = capsys.readouterr().out
+        assert "SerialAddress" in out and "default" not in out
+        s.run_line("help gp 65")  # the manual: 0 = 9600 baud "Default"
+        assert "default" in capsys.readouterr().out
+        # the simulated module still answers at the factory address
+        s.run_line("GGP SerialAddress, 0")
+        assert "= 1" in capsys.readouterr().out
+    finally:
+        s.client.close()
+
+
+def test_param_json_has_the_note_and_source_only_on_request(capsys):
+    s = make_session("TMCM-351", json_mode=True)
+    try:
+        s.run_line(".param 140")
+        obj = json.loads(capsys.readouterr().out.splitlines()[0])
+        assert obj["note"].startswith("Full and half step") and "source" not in obj
+        s.run_line(".param --source 140")
+        obj = json.loads(capsys.readouterr().out.splitlines()[0])
+        assert "decoded" in obj["source"]
+    finally:
+        s.client.close()
