@@ -10,6 +10,7 @@ import sys
 import pytest
 
 from tmclsh.client import connect
+from tmclsh.errors import TmclError
 from tmclsh.shell.render import Output
 from tmclsh.shell.session import Session
 
@@ -80,5 +81,31 @@ def test_param_json_has_the_note_and_source_only_on_request(capsys):
         s.run_line(".param --source 140")
         obj = json.loads(capsys.readouterr().out.splitlines()[0])
         assert "decoded" in obj["source"]
+    finally:
+        s.client.close()
+
+
+def _value(session: Session, line: str) -> int:
+    result = session.run_tmcl(line, show=False)
+    assert result.reply is not None
+    return result.reply.value
+
+
+def test_1311_encoder_mode_takes_bit_combinations_and_ap198_sets_bit_2():
+    s = make_session("TMCM-1311")
+    try:
+        s.run_tmcl("SAP 201, 0, 20", show=False)  # bit 4 (polarity) + bit 2 (clear on next)
+        assert _value(s, "GAP 201, 0") == 20
+        s.run_tmcl("SAP 198, 0, 0", show=False)  # "Delete bit 2 of axis parameter 201"
+        assert _value(s, "GAP 201, 0") == 16
+        assert _value(s, "GAP 198, 0") == 0
+        s.run_tmcl("SAP 198, 0, 1", show=False)  # "set bit 2 of axis parameter 201"
+        assert _value(s, "GAP 201, 0") == 20
+        s.run_tmcl("SAP 201, 0, 0", show=False)  # what AP 198 can leave behind is legal
+        assert _value(s, "GAP 198, 0") == 0
+        sent = s.stats.commands
+        with pytest.raises(TmclError, match="out of range"):
+            s.run_tmcl("SAP 201, 0, 5", show=False)  # bit 0 is not documented
+        assert s.stats.commands == sent
     finally:
         s.client.close()
