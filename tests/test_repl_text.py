@@ -4,8 +4,8 @@ through the in-process simulator and the real command line."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
+import socket
+import threading
 
 import pytest
 
@@ -30,13 +30,6 @@ def s351():
     s = make_session("TMCM-351")
     yield s
     s.client.close()
-
-
-def tmclsh(*args: str, stdin: str | None = None, cwd=None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "tmclsh", *args], input=stdin,
-                          capture_output=True, text=True, timeout=60, cwd=cwd,
-                          env={"COLUMNS": "200", "PATH": "/usr/bin:/bin", "NO_COLOR": "1",
-                               "HOME": str(cwd or "/tmp")})
 
 
 # -- what users read ---------------------------------------------------------------------
@@ -109,3 +102,68 @@ def test_1311_encoder_mode_takes_bit_combinations_and_ap198_sets_bit_2():
         assert s.stats.commands == sent
     finally:
         s.client.close()
+
+
+# -- .version against a responder written from the TMCM-1311 manual's byte tables ---------------
+
+def _reply(opcode: int, value: int) -> bytes:
+    """"Please use the normal reply format": host 2, module 1, status 100, opcode, value BE."""
+    body = bytes((2, 1, 100, opcode)) + (value & 0xFFFFFFFF).to_bytes(4, "big")
+    return body + bytes((sum(body) & 0xFF,))
+
+
+def _responder(binary_value: int) -> tuple[int, threading.Thread]:
+    """A TCP module: 136 type 0 answers '1311V111' (host address + 8 characters, no checksum),
+    136 type 1 answers ``binary_value``; anything else status 100, value 0."""
+    server = socket.create_server(("127.0.0.1", 0))
+    server.settimeout(10)
+
+    def serve() -> None:
+        with server:
+            conn, _ = server.accept()
+            with conn:
+                conn.settimeout(10)
+                buf = b""
+                while True:
+                    try:
+                        data = conn.recv(64)
+                    except OSError:
+                        return
+                    if not data:
+                        return
+                    buf += data
+                    while len(buf) >= 9:
+                        frame, buf = buf[:9], buf[9:]
+                        if frame[1] == 136 and frame[2] == 0:
+                            conn.sendall(b"\x02" + b"1311V111")
+                        elif frame[1] == 136:
+                            conn.sendall(_reply(136, binary_value))
+                        else:
+                            conn.sendall(_reply(frame[1], 0))
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    return server.getsockname()[1], thread
+
+
+@pytest.mark.parametrize("binary, agrees", [(0x051F6F00, True), (0x051F7000, False)])
+def test_version_shows_the_binary_bytes_and_checks_them_against_the_string(
+        run_tmclsh, binary, agrees):
+    port, thread = _responder(binary)
+    out = run_tmclsh("--port", f"socket://127.0.0.1:{port}", "-m", "TMCM-1311", "-c",
+                     ".version", timeout=30)
+    thread.join(5)
+    text = out.stdout + out.stderr
+    lines = [line for line in text.splitlines() if line.strip()]
+    first = next(line for line in lines if line.startswith("firmware"))
+    binary_line = next(line for line in lines if "136 type 1" in line)
+    assert first.startswith("firmware 1311V111") and "136 type 1" not in first
+    raw = " ".join(f"{b:02X}" for b in binary.to_bytes(4, "big"))
+    assert raw in binary_line and "module type 1311 (05 1F)" in binary_line
+    version = (binary >> 8) & 0xFF
+    assert f"version {version} ({version:02X} 00, low byte first)" in binary_line
+    if agrees:
+        assert "the same as the string" in binary_line
+    else:
+        assert "does not match the string" in binary_line
+        assert "111" not in binary_line.split(":", 1)[1]  # never both versions on one line

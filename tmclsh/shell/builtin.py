@@ -979,18 +979,33 @@ def cmd_version(session: Session, arg: str) -> None:
     value = binary.value & 0xFFFFFFFF if binary is not None and binary.ok else None
     client.version = version or client.version
     mod = from_version_string(version) if version else None
+    from .render import binary_version, parse_version_string, version_text
+
+    layout_of = mod or client.module
+    from_string = parse_version_string(version) if version else None
+    from_binary = binary_version(value, layout_of) if value is not None else None
+    agrees = None if from_string is None or value is None else from_binary == from_string
     if session.out.json:
         session.out.emit({"version": version, "binary": value,
-                          "module": mod.name if mod else None})
+                          "module": mod.name if mod else None,
+                          "binary_type": from_binary[0] if from_binary else None,
+                          "binary_version": from_binary[1] if from_binary else None,
+                          "agrees": agrees})
         return
-    from .render import version_text
-
-    text = f"firmware {version}"
+    text = f"firmware {version}" if version else "firmware: no string reply (136 type 0)"
     if mod is not None:
         text += f" ({mod.name})"
-    if value is not None:
-        text += f"; binary (136 type 1): {version_text(value, mod or client.module)}"
     session.out.print(text, markup=False)
+    # the binary reply on a line of its own: two replies that contradict each other are
+    # never shown as one version
+    if value is None:
+        session.out.info("binary (136 type 1): no reply")
+    elif agrees:
+        session.out.print(f"binary (136 type 1): {version_text(value, layout_of)}; "
+                          "the same as the string", markup=False)
+    else:
+        session.out.warn(f"binary (136 type 1): {version_text(value, layout_of)}; "
+                         + ("does not match the string" if version else "no string to check"))
 
 
 # -- motion ------------------------------------------------------------------------------
