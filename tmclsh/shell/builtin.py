@@ -786,10 +786,11 @@ def cmd_trace(session: Session, arg: str) -> None:
                    ("reply", "read the bytes as a reply"),
                    ("memory", "a 134 (read program memory) reply"),
                    ("version", "a 136 version string reply")],
-         category="protocol",
+         category="protocol", owns_line=True,
          details="HEX: `01 06 04 00 00 00 00 00 0b`, `$01 $06 ...`, `0x01,0x06,...` or "
                  "`0106040000...`; several 9-byte frames at once are fine. Without a hint "
-                 "every plausible reading is shown.")
+                 "every plausible reading is shown. It takes the rest of its line (pasted "
+                 "bytes may be separated by ';').")
 def cmd_decode(session: Session, arg: str) -> None:
     from rich.text import Text
 

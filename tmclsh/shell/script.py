@@ -33,7 +33,9 @@ from typing import TYPE_CHECKING, TextIO
 from ..errors import TmclError, TmclTimeoutError, ValidationError
 from . import commands, expr
 from .commands import command
-from .session import QuitShell
+from .lines import split_line
+from .lines import strip_comment as _strip_comment
+from .session import QuitShell, owns_line
 
 if TYPE_CHECKING:
     from .session import Session
@@ -97,20 +99,8 @@ class Include(Node):
 
 
 def strip_comment(text: str) -> str:
-    """Drop a full-line ``#``/``//`` comment or a trailing ``//`` one (outside quotes)."""
-    s = text.strip()
-    if s.startswith("#") or s.startswith("//"):
-        return ""
-    quote = None
-    for i, ch in enumerate(s):
-        if quote:
-            if ch == quote:
-                quote = None
-        elif ch in "\"'":
-            quote = ch
-        elif ch == "/" and s.startswith("//", i):
-            return s[:i].rstrip()
-    return s
+    """Drop a ``#``/``//`` comment (outside quotes); see lines.py."""
+    return _strip_comment(text)
 
 
 def _word(text: str) -> tuple[str, str]:
@@ -155,16 +145,14 @@ class Parser:
     def nodes(self, lines: Iterable[str]) -> Iterator[Node]:
         open_: list[tuple[Node, list[Node]]] = []  # open blocks and the body being filled
         for number, raw in enumerate(lines, 1):
-            text = strip_comment(raw)
-            if not text:
-                continue
-            node = self.line(number, text, open_)
-            if node is None:
-                continue
-            if open_:
-                open_[-1][1].append(node)
-            else:
-                yield node
+            for text in split_line(raw, owns_line):  # `GAP 1, 0; GAP 2, 0` is two lines
+                node = self.line(number, text, open_)
+                if node is None:
+                    continue
+                if open_:
+                    open_[-1][1].append(node)
+                else:
+                    yield node
         if open_:
             node = open_[-1][0]
             raise self.fail(node.line, f"{_word(node.text)[0]} has no matching .end")
