@@ -167,3 +167,124 @@ def test_version_shows_the_binary_bytes_and_checks_them_against_the_string(
     else:
         assert "does not match the string" in binary_line
         assert "111" not in binary_line.split(":", 1)[1]  # never both versions on one line
+
+
+# -- lines -------------------------------------------------------------------------------
+
+def test_semicolon_separates_commands_that_cannot_contain_one(capsys):
+    s = make_session("TMCM-1311")
+    try:
+        assert s.split('help 4; help 5') == ["help 4", "help 5"]
+        assert s.split('.param 4; .params axis Max') == [".param 4", ".params axis Max"]
+        assert s.split('.echo "a;b"; .echo x') == ['.echo "a;b"', ".echo x"]
+        assert s.split(".echo don't; GAP 1, 0") == [".echo don't", "GAP 1, 0"]
+        # a command that owns its line takes the rest of it
+        assert s.split(".watch a=GAP 1, 0; b=GIO 0, 0") == [".watch a=GAP 1, 0; b=GIO 0, 0"]
+        assert s.split(".decode 01;06;01;00") == [".decode 01;06;01;00"]
+        for line in s.split("help 4; help 5"):
+            s.run_line(line)
+        out = capsys.readouterr().out
+        assert "AP 4  MaxPositioningSpeed" in out and "AP 5  MaxAcceleration" in out
+    finally:
+        s.client.close()
+
+
+def test_every_command_says_whether_it_owns_its_line():
+    from tmclsh.shell import commands
+
+    commands.load_all()
+    owners = {c.name for c in commands.all_commands() if c.owns_line}
+    assert ".watch" in owners and ".decode" in owners
+    assert not owners & {".help", ".param", ".params", ".echo", ".let", ".expect"}
+
+
+def test_watch_error_caused_by_a_semicolon_shows_how_to_split(run_tmclsh):
+    out = run_tmclsh("--sim", "TMCM-1311", "-c", ".watch GAP 1, 0; MST 0")
+    assert out.returncode == 1
+    assert "after ';'" in out.stderr and ".watch takes the rest of its line" in out.stderr
+    assert "  .watch GAP 1, 0\n" in out.stderr and "  MST 0" in out.stderr
+
+
+@pytest.mark.parametrize("how", ["-c", "-f"])
+def test_hash_comment_ends_a_line_like_slashes(run_tmclsh, tmp_path, how):
+    text = "GAP 1, 0 # where it is; not a command\n.let a = 3 # three\n.echo ${a} // done\n" \
+           '.echo "a # b"\n.echo issue#5\n'
+    if how == "-c":
+        out = run_tmclsh("--sim", "TMCM-1311", "-c", text)
+    else:
+        path = tmp_path / "c.tmcl"
+        path.write_text(text)
+        out = run_tmclsh("--sim", "TMCM-1311", "-f", str(path))
+    assert out.returncode == 0, out.stderr
+    lines = out.stdout.splitlines()
+    assert lines[:4] == ["ActualPosition = 0 µsteps", "3", "a # b", "issue#5"]
+
+
+def test_hash_keeps_its_meaning_in_assembler_source_and_the_lexer(tmp_path):
+    """``#include`` in a program and ``$1F`` hex are untouched by ``#`` comments."""
+    from pygments.token import Comment
+
+    from tmclsh import asm, modules
+    from tmclsh.shell.lexer import TmclLexer
+
+    (tmp_path / "inc.tmcl").write_text("Speed = 1000\n")
+    main = tmp_path / "main.tmcl"
+    main.write_text('#include "inc.tmcl"\nSAP 4, 0, Speed\nSAP 5, 0, $1F\nSTOP\n')
+    program = asm.assemble_file(main, modules.load("TMCM-1311"))
+    values = [i.value for i in program.instructions][:2]
+    assert values == [1000, 0x1F]
+    tokens = list(TmclLexer().get_tokens_unprocessed("GAP 1, 0 # where\n"))
+    assert (9, Comment.Single, "# where") in tokens
+    assert list(TmclLexer().get_tokens_unprocessed("#include x.tmcl\n"))[0][1] is Comment.Preproc
+    hex_tokens = list(TmclLexer().get_tokens_unprocessed("SAP 4, 0, $1F\n"))
+    assert not any(tok is Comment.Single for _, tok, _ in hex_tokens)
+
+
+def test_question_mark_and_bare_help_are_help(run_tmclsh):
+    for line in ("?", "help", "? 140"):
+        out = run_tmclsh("--sim", "TMCM-1311", "-c", line)
+        assert out.returncode == 0, (line, out.stderr)
+    assert "MicrostepResolution" in run_tmclsh("--sim", "TMCM-1311", "-c", "? 140").stdout
+    assert ".help" in run_tmclsh("--sim", "TMCM-1311", "-c", "?").stdout
+
+
+# -- script errors and counts ---------------------------------------------------------------
+
+def _script(run_tmclsh, tmp_path, body: str, *args: str):
+    path = tmp_path / "s.tmcl"
+    path.write_text(body)
+    return run_tmclsh("--sim", "TMCM-1311", *args, "-f", str(path))
+
+
+def test_a_value_out_of_range_is_a_range_error_not_a_syntax_error(run_tmclsh, tmp_path):
+    out = _script(run_tmclsh, tmp_path, "GAP 1, 0\nSAP 140, 0, 99\n")
+    assert out.returncode == 2
+    assert "s.tmcl:2: 99 is out of range" in out.stderr
+    assert "not run (a value out of range; nothing was sent)" in out.stdout
+    assert "syntax" not in out.stdout + out.stderr
+
+
+def test_a_missing_file_is_no_such_file(run_tmclsh, tmp_path):
+    out = run_tmclsh("--sim", "TMCM-1311", "-f", str(tmp_path / "nowhere.tmcl"))
+    assert out.returncode == 2 and "no such file" in out.stderr
+    assert "not run (no such file" in out.stdout and "syntax" not in out.stdout
+    out = _script(run_tmclsh, tmp_path, ".source nowhere.tmcl\n")
+    assert "s.tmcl:1: no such file" in out.stderr and "not run (no such file" in out.stdout
+
+
+def test_a_real_syntax_error_is_still_called_one(run_tmclsh, tmp_path):
+    out = _script(run_tmclsh, tmp_path, "GAP 1, 0\nSAP 4, 0\n")
+    assert out.returncode == 2 and "not run (syntax error; nothing was sent)" in out.stdout
+
+
+def test_summary_counts_add_up(run_tmclsh, tmp_path):
+    out = _script(run_tmclsh, tmp_path, "GAP 1, 0\n.expect 1 == 2\nGAP 1, 0\n", "--keep-going")
+    assert out.returncode == 1
+    assert "2 commands sent, 0 checks passed, 1 failed, 0 errors" in out.stdout
+    # every GAP .params sends is a command sent: one per readable parameter
+    from tmclsh import modules
+
+    mod = modules.load("TMCM-1311")
+    readable = sum(1 for p in mod.axis_params if p.readable)
+    out = _script(run_tmclsh, tmp_path, ".params axis\n")
+    assert f"{readable} commands sent" in out.stdout, out.stdout

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from functools import cache, cached_property
 from importlib import resources
 
-from ..errors import ValidationError
+from ..errors import RangeError, ValidationError
 from ..instructions import InstructionSpec, all_instructions, controls
 
 ACCESS_CODES = ("R", "W", "RW", "RWE")
@@ -90,7 +90,7 @@ class Parameter:
     def check(self, value: int) -> None:
         """Raise a ValidationError naming the parameter and its range if ``value`` is illegal."""
         if not self.in_range(value):
-            raise ValidationError(
+            raise RangeError(
                 f"{value} is out of range for {self.label} {self.name}: "
                 f"allowed {self.range_text}{' ' + self.unit if self.unit else ''}")
 

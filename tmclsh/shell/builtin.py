@@ -458,6 +458,7 @@ def read_param(session: Session, p: Parameter, motor_or_number: int | None = Non
     else:
         req = Request(client.address, _GGP, p.number if number is None else number, p.bank, 0)
     reply = client.request(req)
+    session.stats.commands += 1  # a script's summary counts what .params read
     assert reply is not None
     if not status_ok(reply.status):
         raise StatusError(reply.status, reply)
@@ -911,6 +912,7 @@ def cmd_address(session: Session, arg: str) -> None:
         client.can_id = n
     wait = min(client.timeout, 0.5)
     try:
+        session.stats.commands += 1
         reply = client.request(Request(n, Control.GET_VERSION, 0, 0, 0), timeout=wait,
                                retries=0)
     except TmclTimeoutError:
@@ -977,6 +979,7 @@ def cmd_version(session: Session, arg: str) -> None:
     reply = client.request(Request(client.address, Control.GET_VERSION, 0, 0, 0))
     version = reply.version if reply is not None else None
     binary = client.request(Request(client.address, Control.GET_VERSION, 1, 0, 0))
+    session.stats.commands += 2
     value = binary.value & 0xFFFFFFFF if binary is not None and binary.ok else None
     client.version = version or client.version
     mod = from_version_string(version) if version else None

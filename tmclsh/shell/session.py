@@ -131,7 +131,8 @@ class Session:
         try:
             result = self._dispatch(text)
         except TmclError as exc:
-            self.stats.errors += 1
+            if not getattr(exc, "counted", False):  # a failed .expect counts as a failure
+                self.stats.errors += 1
             self._record(text, f"error: {exc}")
             raise
         return result
