@@ -88,8 +88,8 @@ class Session:
         if self.yes:
             return
         if self.ask is not None and self.interactive:
-            # an Enter typed after the y/n key arrives as an empty line: it must not repeat
-            # the last .step (the debugger's repeat_on_empty)
+            # after a question, an empty line must not repeat the last .step (the debugger's
+            # repeat_on_empty): the user answered the question, not the debugger
             self.state.pop("repeat_on_empty", None)
             if self.ask(question):
                 return

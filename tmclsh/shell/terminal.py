@@ -606,16 +606,9 @@ def run_raw_mode(term: Terminal) -> None:
 
 
 def _ask_yes_no(question: str, default: bool) -> bool:
-    from prompt_toolkit import prompt
+    from .ask import ask_yes_no
 
-    hint = "[Y/n]" if default else "[y/N]"
-    try:
-        answer = prompt(f"{question} {hint} ").strip().lower()
-    except (EOFError, KeyboardInterrupt):
-        return default
-    if not answer:
-        return default
-    return answer in ("y", "yes", "j", "ja")
+    return ask_yes_no(question, default)
 
 
 # -- shell commands ------------------------------------------------------------------------------
