@@ -4,6 +4,7 @@ through the in-process simulator and the real command line."""
 from __future__ import annotations
 
 import json
+import re
 import socket
 import threading
 
@@ -288,3 +289,53 @@ def test_summary_counts_add_up(run_tmclsh, tmp_path):
     readable = sum(1 for p in mod.axis_params if p.readable)
     out = _script(run_tmclsh, tmp_path, ".params axis\n")
     assert f"{readable} commands sent" in out.stdout, out.stdout
+
+
+# -- lists as prose ---------------------------------------------------------------------------
+
+_REPR = re.compile(r"\[\s*(-?\d+[,\]]|'|\"|\()|\(\d+, \d+\)|\{'|\bNone\b|\bTrue\b|\bFalse\b")
+
+
+def test_interrupted_run_names_the_stopped_motors_in_prose(tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from conftest import tmclsh_env
+
+    proc = subprocess.Popen([sys.executable, "-m", "tmclsh", "--sim", "TMCM-351", "-c",
+                             "ROR 0, 100; .sleep 20"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=tmclsh_env())
+    try:
+        deadline = time.monotonic() + 20
+        line = proc.stdout.readline()  # the ROR's result: the shell is in .sleep now
+        assert "0" in line and time.monotonic() < deadline
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            os.kill(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130
+    assert "interrupted; motors stopped: 0, 1, 2" in err, err
+    assert not _REPR.search(err), err
+
+
+@pytest.mark.parametrize("module", ["TMCM-1311", "TMCM-351", "TMCM-1640"])
+def test_user_facing_output_has_no_python_reprs(module, capsys):
+    s = make_session(module)
+    lines = [".help", ".params", ".module", ".version", ".status", ".vars all", ".stopall",
+             ".mode", "help SAP", "help 140", "help 66", ".param 0", "GIO 0, 0", "136 1",
+             "MVP ABS, 0, 100", ".history", ".decode 01 06 01 00 00 00 00 00 08"]
+    try:
+        for line in lines:
+            try:
+                s.run_line(line)
+            except TmclError as exc:  # an error's message is output too
+                print(exc)
+        out = capsys.readouterr()
+        text = out.out + out.err
+        assert not _REPR.search(text), _REPR.search(text).group()
+    finally:
+        s.client.close()

@@ -364,6 +364,12 @@ def _binary_layout(value: int, module: Module | None) -> tuple[int, int, bool] |
     return None
 
 
+def prose_list(items, empty: str = "none") -> str:
+    """``0, 1, 2`` for people, never ``[0, 1, 2]``; ``empty`` when there is nothing."""
+    words = [str(i) for i in items]
+    return ", ".join(words) if words else empty
+
+
 def version_text(value: int, module: Module | None) -> str:
     """The value field read the way the module's manual lays out its four bytes:
     ``05 1F 6F 00: module type 1311 (05 1F), version 111 (6F 00, low byte first)``."""
