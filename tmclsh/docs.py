@@ -496,11 +496,22 @@ Numbers in decimal or hex ({_b("$1F")}, {_b("0x1F")}); symbolic types ({_b("ABS 
 ({_b("GAP ActualPosition, 0")}). Any command number can be sent raw as well.
 .IP \\(bu 2
 Shell commands start with a dot ({_b(".help")}, {_b(".param")}, {_b(".watch")}, ...);
-{_b("help")} and {_b("quit")} also work bare. A shell command owns the rest of its line, so
-{_b(".watch a=GAP 1, 0; b=GIO 0, 0")} is one command; put other commands on a new line.
+{_b("help")}, {_b("?")} and {_b("quit")} also work bare ({_b("help")} or {_b("?")} alone is the
+overview).
 .IP \\(bu 2
-With {_b("-c")}, lines are separated by newlines or {_b(";")}. Empty lines and lines starting
-with {_b("#")} or {_b("//")} are ignored.
+Lines are separated by newlines or {_b(";")}, at the prompt, with {_b("-c")} and in scripts:
+{_b("help 4; help 5")} is two lines, a {_b(";")} inside quotes ({_b('.echo "a;b"')}) is not a
+separator. Only a command that owns the rest of its line takes the {_b(";")}: {_b(".watch")}
+separates its expressions with it ({_b(".watch a=GAP 1, 0; b=GIO 0, 0")} is one command) and
+{_b(".decode")} its pasted bytes; put other commands after those on a new line.
+.IP \\(bu 2
+{_b("//")} and {_b("#")} start a comment that runs to the end of the line ({_b("#")} at the start of
+a word, outside quotes: {_b("GAP 1, 0 # where it is")}). Empty lines are ignored.
+.IP \\(bu 2
+Questions (EEPROM writes, factory reset, program download, leaving {_b(".ascii")}) are answered
+with a line: {_b("y")} and Enter agrees, Enter alone takes the default shown in capitals
+({_b("[y/N]")}), anything else is no. Outside the interactive prompt nothing is asked: such
+commands are refused unless {_b("--yes")} is given.
 .IP \\(bu 2
 Scripts stop at the first error, reported as {_i("FILE")}:{_i("LINE")}, unless
 {_b("--keep-going")} is given.
@@ -610,7 +621,8 @@ def _exit_status() -> list[str]:
                      "failed, scan found no module, or a bad config file or environment "
                      "variable."),
         (EXIT_USAGE, "Usage: an unknown option or a bad option value; or a script given with "
-                     "-f that cannot be read or has a syntax error (nothing was sent)."),
+                     "-f that was not run (nothing was sent): no such file, a syntax error, a "
+                     "value out of range or another line the module would refuse."),
         (EXIT_CONNECT, "The shell could not connect: the port or CAN bus cannot be opened, or "
                        "the module does not answer when its type is detected (command 136)."),
         (130, "Interrupted with Ctrl-C (motion was stopped first)."),

@@ -96,7 +96,11 @@ def complete_module(session: Session | None, text: str) -> list[Candidate]:
          "show help: all commands, one command, a TMCL instruction, or a parameter",
          complete=complete_help, bare=True,
          details="`help SAP` explains an instruction; `help 140` shows axis parameter 140 (and "
-                 "global parameter 140 if there is one), like `.param 140`.")
+                 "global parameter 140 if there is one), like `.param 140`. `?` is the same "
+                 "as help (`? 140`). Lines: `;` separates commands (`help 4; help 5`) except "
+                 "after one that owns its line (.watch, .decode); `#` or `//` starts a comment "
+                 "to the end of the line. Questions are answered with y and Enter ([y/N]: "
+                 "Enter alone is no).")
 def cmd_help(session: Session, arg: str) -> None:
     arg = arg.strip()
     if not arg:
