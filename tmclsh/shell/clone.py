@@ -515,7 +515,7 @@ def _notes(session: Session, backup: Backup, live: Module) -> None:
     out = session.out
     if backup.skipped:
         out.info(f"{len(backup.skipped)} parameters of the {backup.module_name} backup skipped "
-                 f"(not on the {live.name}):")
+                 f"on the {live.name}:")
         for what, why in backup.skipped:
             out.info(f"  {what}: {why}")
     if backup.state:
@@ -535,6 +535,10 @@ def _table(session: Session, title: str, columns: list[str], rows: list[list[str
     for row in rows:
         table.add_row(*row)
     session.out.print(table)
+
+
+def _count(n: int) -> str:
+    return f"{n} parameter" + ("" if n == 1 else "s")
 
 
 class DiffFound(TmclError):
@@ -706,7 +710,7 @@ def _report_restore(session: Session, backup: Backup, restored: list[Written],
                  str(w.diff.live), str(w.diff.slot.value),
                  ("not read back (link)" if w in link_changed else "read back")
                  + (", stored" if w.stored else "")] for w in restored]
-        _table(session, f"restored {len(restored)} parameters from {backup.path.name}",
+        _table(session, f"restored {_count(len(restored))} from {backup.path.name}",
                ["name", "number", "motor/bank", "old", "new", "verified"], rows)
     for w in failed:
         out.warn(f"not restored: {w.diff.slot.title()}: {w.error}")
