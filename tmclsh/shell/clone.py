@@ -269,7 +269,7 @@ def save_lines(session: Session, path: Path, with_program: Path | None) -> tuple
             saved += 1
     when = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
     head = [
-        f"// tmclsh configuration backup of a {module.name} (.save); see 'man tmclsh', FILES",
+        f"// tmclsh configuration backup of a {module.name} (.save); format: man tmclsh, CONFIGURATION BACKUPS",
         f"// module: {module.name}",
         f"// firmware: {firmware}",
         f"// address: {c.address}",
@@ -633,7 +633,7 @@ def cmd_restore(session: Session, argtext: str) -> None:
     yes = "--yes" in given
     eeprom = sum(1 for d in diffs if d.slot.kind == "global" and d.slot.param is not None
                  and d.slot.param.storable and d.slot.index == 0)
-    question = (f"write {len(diffs)} parameters from {backup.path.name} to the {live.name} at "
+    question = (f"write {_count(len(diffs))} from {backup.path.name} to the {live.name} at "
                 f"address {c.address}?")
     if eeprom:
         question += f" ({eeprom} global parameters of bank 0 are written straight to EEPROM)"
@@ -692,7 +692,7 @@ def cmd_restore(session: Session, argtext: str) -> None:
     restored = [w for w in done if w.error is None]
     _report_restore(session, backup, restored, failed, link_changed, stored)
     if failed:
-        err = CloneError(f"{len(failed)} of {len(done)} parameters were not restored")
+        err = CloneError(f"{len(failed)} of {_count(len(done))} were not restored")
         err.shown = session.out.json  # type: ignore[attr-defined]  # the JSON object said it
         raise err
 
