@@ -417,3 +417,39 @@ def test_one_request_per_parameter(pty_client, tmp_path):
     frames = _frames(sim.received)
     assert len(frames) == len(list(readable_slots(modules.load("TMCM-1311"))))
     assert {f[1] for f in frames} == {6, 10}
+
+
+def test_numbers_only_module_compares_a_named_backup_by_number(pty_client, tmp_path, capsys):
+    """A module without parameter data (generic mode) still diffs and restores a backup whose
+    header names a known module: the names give the numbers, compared by number."""
+    from tmclsh.modules import Module
+
+    sim, client = pty_client("TMCM-1311")
+    path = tmp_path / "b.tmcl"
+    shell(client).run_line(f".save {path}")
+    bare = Module({"module": {"name": "generic", "motors": 1, "program_memory": 2048,
+                              "firmware_id": 0, "version_string": ""}})
+    client.module = bare
+    s = shell(client, json_mode=True, yes=True)
+    s.run_line("5 6, 0, 99")  # SAP 6 (MaxCurrent) as a raw command
+    capsys.readouterr()
+    s.run_line(f".diff {path}")
+    assert json_lines(capsys.readouterr().out) == [
+        {"name": None, "number": 6, "motor": 0, "saved": 0, "live": 99}]
+    s.run_line(f".restore {path}")
+    capsys.readouterr()
+    s.run_line(f".diff {path} --exit-code")
+    assert json_lines(capsys.readouterr().out) == []
+
+
+def test_bench_save_runs(tmp_path):
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parent.parent
+    p = subprocess.run([sys.executable, str(root / "scripts" / "bench.py"), "save", "--rounds",
+                        "1", "--json"], capture_output=True, text=True, timeout=120, cwd=root)
+    assert p.returncode == 0, p.stderr
+    result = json.loads(p.stdout)
+    assert result["transactions"] == len(list(readable_slots(modules.load("TMCM-1311"))))
+    assert result["save_s"] > 0 and result["raw_s"] > 0 and "ratio" in result

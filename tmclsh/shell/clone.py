@@ -159,6 +159,17 @@ def _file(session: Session, name: str) -> Path:
     return p
 
 
+def complete_file(session: Session, text: str) -> list[str]:
+    """Paths for FILE (the options after it are typed, not completed)."""
+    import glob
+
+    word = text.split()[-1] if text and not text.endswith(" ") else ""
+    if word.startswith("-"):
+        return []
+    return [p + (os.sep if os.path.isdir(p) else "")
+            for p in sorted(glob.glob(os.path.expanduser(word) + "*"))]
+
+
 # -- progress ----------------------------------------------------------------------------
 
 class _Progress:
@@ -307,7 +318,7 @@ def _program_text(session: Session) -> tuple[str, int]:
 
 @command(".save", ".save FILE [--program]",
          "back up the module's configuration as a replayable script",
-         category=CATEGORY, details="""\
+         category=CATEGORY, complete=complete_file, details="""\
 Reads every readable axis parameter of every motor and the global parameters of every bank
 (one request each) and writes FILE: a header (module, firmware, address, connection, date),
 then one SAP/SGP line per writable configuration parameter with its number, unit and meaning
@@ -411,7 +422,7 @@ def read_backup(session: Session, path: Path, *, force: bool) -> Backup:
     backup = Backup(path, head.get("module"), head.get("program"))
     source = _source_module(backup.module_name, live)
     other = backup.module_name is not None and _norm(backup.module_name) != _norm(live.name)
-    if other and not force:
+    if other and not force and _has_data(live):
         raise CloneError(f"{path} is a backup of a {backup.module_name}, this is a {live.name}; "
                          "restore by parameter name with --force (parameters the "
                          f"{live.name} does not have are skipped)")
@@ -433,6 +444,9 @@ def read_backup(session: Session, path: Path, *, force: bool) -> Backup:
         ins = enc.instruction
         kind = "axis" if ins.opcode == SAP else "global"
         p = enc.parameter
+        if p is not None and p.state:  # the file's own module says it is state
+            backup.state.append(Slot(kind, ins.type, ins.motor, ins.value, p, number))
+            continue
         if source is not None and p is not None:
             slot = _carry(backup, live, p, ins.type, ins.motor, ins.value, number)
             if slot is None:
@@ -463,6 +477,8 @@ def read_backup(session: Session, path: Path, *, force: bool) -> Backup:
 def _carry(backup: Backup, live: Module, p: Parameter, number: int, index: int, value: int,
            line: int) -> Slot | None:
     """A line of another module's backup, mapped onto the live module by name (or skipped)."""
+    if not _has_data(live):  # numbers only (generic mode): the file's names give the numbers
+        return Slot(p.kind, number, index, value, None, line)
     what = f"{p.name if p.count == 1 else f'{p.name}#{number - p.number}'} " \
            f"({'motor' if p.kind == 'axis' else 'bank'} {index}, line {line})"
     q = _counterpart(live, p, number, index)
@@ -547,7 +563,7 @@ class DiffFound(TmclError):
 
 @command(".diff", ".diff FILE [--exit-code] [--force]",
          "compare the module with a backup (or any script of SAP/SGP lines)",
-         category=CATEGORY, details="""\
+         category=CATEGORY, complete=complete_file, details="""\
 Reads FILE with the shell's own line parser (every SAP/SGP line is checked against the
 module's data first; other lines are ignored), reads each parameter it sets from the module
 (one request each) and shows only the ones that differ: name, number, motor or bank, saved
@@ -571,7 +587,7 @@ def cmd_diff(session: Session, argtext: str) -> None:
         out.ok(f"no differences: the {live.name} matches {backup.path.name} "
                f"({len(backup.slots)} parameters compared)")
     else:
-        rows = [[d.slot.name or "?", d.slot.label, d.slot.where, str(d.slot.value), str(d.live),
+        rows = [[d.slot.name or "", d.slot.label, d.slot.where, str(d.slot.value), str(d.live),
                  d.slot.param.unit if d.slot.param else ""] for d in diffs]
         _table(session, f"{len(diffs)} of {len(backup.slots)} parameters differ from "
                         f"{backup.path.name}", ["name", "number", "motor/bank", "saved", "live",
@@ -600,7 +616,7 @@ class Written:
 
 @command(".restore", ".restore FILE [--yes] [--store] [--force]",
          "write the parameters that differ from a backup back to the module",
-         category=CATEGORY, details="""\
+         category=CATEGORY, complete=complete_file, details="""\
 Compares like .diff, then writes only the parameters that differ (SAP/SGP), each checked
 against the module's data before anything is sent, and reads each one back to verify it.
 Asks first (--yes or -y skips the question; scripts need it). A value the module refuses is
@@ -706,7 +722,7 @@ def _report_restore(session: Session, backup: Backup, restored: list[Written],
                   "skipped": [w for w, _ in backup.skipped], "stored": stored})
         return
     if restored:
-        rows = [[w.diff.slot.name or "?", w.diff.slot.label, w.diff.slot.where,
+        rows = [[w.diff.slot.name or "", w.diff.slot.label, w.diff.slot.where,
                  str(w.diff.live), str(w.diff.slot.value),
                  ("not read back (link)" if w in link_changed else "read back")
                  + (", stored" if w.stored else "")] for w in restored]
