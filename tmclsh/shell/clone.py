@@ -125,7 +125,7 @@ def _request(session: Session, opcode: int, slot: Slot | tuple[str, int, int],
              value: int = 0):
     c = session.client
     number, index = (slot.number, slot.index) if isinstance(slot, Slot) else slot[1:]
-    return c.request(Request(c.address, opcode, number, index, value))
+    return c.request(Request.make(c.address, opcode, number, index, value))
 
 
 # -- argument parsing --------------------------------------------------------------------
@@ -320,12 +320,14 @@ def _program_text(session: Session) -> tuple[str, int]:
          "back up the module's configuration as a replayable script",
          category=CATEGORY, complete=complete_file, details="""\
 Reads every readable axis parameter of every motor and the global parameters of every bank
-(one request each) and writes FILE: a header (module, firmware, address, connection, date),
+(one request each; the RAM-only user variables are a program's scratch space and are not
+read) and writes FILE: a header (module, firmware, address, connection, date),
 then one SAP/SGP line per writable configuration parameter with its number, unit and meaning
 as a comment. Read-only values and motion state (positions, speeds, counters, anything that
 starts a move) are written as comments and never restored. FILE is replaced only once it is
 complete. --program also reads the stored program back (binary mode) and writes it, as
-source, to FILE.program.tmcl beside FILE (upload it with .upload). JSON: {"saved": N,
+source, beside FILE with .program.tmcl in place of its suffix (backup.tmcl:
+backup.program.tmcl; put it back with .upload). JSON: {"saved": N,
 "file": FILE} (and "program": PATH, "instructions": N with --program).""")
 def cmd_save(session: Session, argtext: str) -> None:
     usage = ".save FILE [--program]"
