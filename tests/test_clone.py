@@ -453,3 +453,50 @@ def test_bench_save_runs(tmp_path):
     result = json.loads(p.stdout)
     assert result["transactions"] == len(list(readable_slots(modules.load("TMCM-1311"))))
     assert result["save_s"] > 0 and result["raw_s"] > 0 and "ratio" in result
+
+
+def test_link_settings_are_written_last_and_not_read_back(pty_client, tmp_path, capsys):
+    sim, client = pty_client("TMCM-1311", target=Recording("TMCM-1311"))
+    s = shell(client, yes=True)
+    path = tmp_path / "b.tmcl"
+    s.run_line(f".save {path}")
+    text = path.read_text(encoding="utf-8")
+    assert re.search(r"^SGP SerialAddress, 0, 1\b", text, re.M)
+    # a replacement module that answers at address 1, restored from a backup of address 5
+    text = re.sub(r"^SGP SerialAddress, 0, 1\b", "SGP SerialAddress, 0, 5", text, flags=re.M)
+    path.write_text(text, encoding="utf-8")
+    s.run_line("SAP MaxCurrent, 0, 44")
+    sim.received.clear()
+    capsys.readouterr()
+    s.run_line(f".restore {path}")
+    cap = capsys.readouterr()
+    sent = [tuple(f[:4]) for f in _frames(sim.received)]
+    writes = [f for f in sent if f[1] in (5, 9)]
+    assert writes == [(1, 5, 6, 0), (1, 9, 66, 0)]  # the address last
+    assert sent[-1] == (1, 9, 66, 0)  # ... and not read back at the old address
+    assert "SerialAddress is now 5" in cap.err and "reconnect" in cap.err
+    client.address = 5
+    assert client.value("GAP MaxCurrent, 0") == 0
+
+
+def test_save_from_independent_responder(responder, tmp_path):
+    """The file holds what the module answered: values set in the responder, read by GAP/GGP
+    frames only, come back in the file's SAP/SGP lines (unsigned ones as unsigned)."""
+    mod = modules.load("TMCM-1640")
+    for kind, p, number, index in readable_slots(mod):
+        if p.writable and not p.state:
+            v = (p.min or 0) + (number * 7 + index) % max(1, min((p.max or 255) - (p.min or 0), 200))
+            responder.values[(number, index, kind == "global")] = v
+    responder.values[(26, 0, False)] = -1  # I2tLimit, 0..4294967295: 0xFFFFFFFF on the wire
+    client = Client(open_serial(responder.path), module="TMCM-1640", timeout=0.5, retries=0)
+    client.version = "1640V100"
+    try:
+        shell(client).run_line(f".save {tmp_path / 'b.tmcl'}")
+    finally:
+        client.close()
+    got = file_values(tmp_path / "b.tmcl", mod)
+    want = {(("global" if g else "axis"), n, i): v for (n, i, g), v in responder.values.items()}
+    want[("axis", 26, 0)] = 4294967295
+    assert got == want
+    assert {f[1] for f in responder.frames} == {6, 10}
+    assert len(responder.frames) == len(list(readable_slots(mod)))
