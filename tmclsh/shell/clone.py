@@ -337,7 +337,8 @@ def cmd_save(session: Session, argtext: str) -> None:
         raise CloneError(f"cannot write {path}: it is a directory")
     prog_path = _program_path(path) if "--program" in given else None
     if prog_path is not None and session.client.mode == "ascii":
-        raise ValidationError("--program reads program memory (134), which needs binary mode")
+        raise ValidationError("--program reads program memory (134), which needs binary mode "
+                              "(.mode binary)")
     text, saved = save_lines(session, path, prog_path)
     instructions = None
     if prog_path is not None:
