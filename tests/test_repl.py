@@ -16,7 +16,7 @@ from prompt_toolkit.history import InMemoryHistory
 from prompt_toolkit.input import create_pipe_input
 from prompt_toolkit.output.plain_text import PlainTextOutput
 
-from tmclsh.client import connect
+from tmclsh.connection import connect
 from tmclsh.shell import app
 from tmclsh.shell.render import Output
 from tmclsh.shell.session import Session

@@ -7,7 +7,7 @@ import json
 
 import pytest
 
-from tmclsh.client import connect
+from tmclsh.connection import connect
 from tmclsh.errors import StatusError, TmclError, TmclTimeoutError, ValidationError
 from tmclsh.shell.render import Output
 from tmclsh.shell.session import Abort, QuitShell, Session

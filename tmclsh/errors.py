@@ -7,6 +7,8 @@ script can stop with FILE:LINE. They also inherit from the builtins a Python cal
 
 from __future__ import annotations
 
+from .status import status_text
+
 
 class TmclError(Exception):
     """Base of every tmclsh error."""
@@ -40,8 +42,6 @@ class StatusError(TmclError):
     """The module answered with an error status (1-6)."""
 
     def __init__(self, status: int, reply: object = None, message: str | None = None):
-        from .protocol import status_text
-
         self.status = status
         self.reply = reply
         super().__init__(message or f"module answered status {status}: {status_text(status)}")

@@ -44,6 +44,12 @@ class Parameter:
     bits: dict[int, str] = field(default_factory=dict)
     note: str | None = None  # for users: shown by help and .param
     source: str | None = None  # for maintainers: how the entry was read from the manual
+    # motion or module state (positions, speeds, counters) or a write that acts rather than
+    # configures: a configuration backup (.save) keeps it as a comment, .restore never writes it
+    state: bool = False
+    # writing it changes how the module is reached (address, baud rate, interface): a restore
+    # writes it last and cannot read it back over the same connection
+    link: bool = False
 
     @property
     def readable(self) -> bool:
@@ -130,7 +136,8 @@ def _parameter(kind: str, raw: dict) -> Parameter:
         count=raw.get("count", 1), min=raw.get("min"), max=raw.get("max"),
         choices=tuple(raw["choices"]) if raw.get("choices") else None, unit=raw.get("unit", ""),
         default=raw.get("default"), values=_int_keys(raw.get("values")),
-        bits=_int_keys(raw.get("bits")), note=raw.get("note"), source=raw.get("source"))
+        bits=_int_keys(raw.get("bits")), note=raw.get("note"), source=raw.get("source"),
+        state=bool(raw.get("state", False)), link=bool(raw.get("link", False)))
 
 
 def _normalise(name: str) -> str:

@@ -24,7 +24,8 @@ CATEGORY_ORDER = ("general", "parameters", "motion", "connection", "protocol")
 CATEGORY_TITLES = {"general": "General", "parameters": "Parameters", "motion": "Motion",
                    "connection": "Connection and module", "protocol": "Protocol",
                    "ascii": "ASCII mode", "program": "Stored program (debugger)",
-                   "script": "Scripts and variables", "watch": "Watching values"}
+                   "script": "Scripts and variables", "watch": "Watching values",
+                   "configuration": "Configuration backup (clone a module)"}
 
 _GAP = isa.Opcode.GAP
 _GGP = isa.Opcode.GGP

@@ -19,7 +19,7 @@ Handler = Callable[["Session", str], None]
 # completion of the argument text: returns candidate words (or (word, meta) pairs)
 ArgCompleter = Callable[["Session", str], Iterable["str | tuple[str, str]"]]
 
-FEATURES = ("builtin", "script", "watch", "debugger", "terminal")
+FEATURES = ("builtin", "script", "watch", "debugger", "terminal", "clone")
 
 
 @dataclass

@@ -45,7 +45,7 @@ def run_lines(session: Session, lines: list[str]) -> int:
 
 
 def run_shell(args: argparse.Namespace) -> int:
-    from ..cli import connection_settings, open_client
+    from ..connection import connection_settings, open_client
 
     _exit_cleanly_on_signals()
     settings = connection_settings(args)
