@@ -1,5 +1,5 @@
 """Cloning a module as a person does it at the prompt (tmux): .save, a change, .diff shows
-it, .restore asks y/n and writes it back. Skipped where tmux is missing."""
+it, .restore asks [y/N] and writes it back. Skipped where tmux is missing."""
 
 from __future__ import annotations
 
@@ -20,11 +20,11 @@ def test_save_diff_restore_at_the_prompt(terminal, tmp_path):
     assert row.split() == ["MaxCurrent", "│", "AP", "6", "│", "motor", "0", "│", "0", "│",
                            "128", "│"]
     t.run(".restore axis1.tmcl", "write 1 parameter from axis1.tmcl to the TMCM-1311")
-    t.keys("n")
+    t.line("n")  # answers end with Enter, as everywhere ([y/N])
     t.wait("cancelled; nothing was sent")
     t.run("GAP MaxCurrent, 0", "MaxCurrent = 128")
     t.run(".restore axis1.tmcl", "write 1 parameter from axis1.tmcl to the TMCM-1311")
-    t.keys("y")
+    t.line("y")
     t.wait("restored 1 parameter from axis1.tmcl")
     t.run(".diff axis1.tmcl", "no differences: the TMCM-1311 matches axis1.tmcl")
     t.run(".help .restore", "--store")

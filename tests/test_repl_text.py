@@ -10,7 +10,7 @@ import threading
 
 import pytest
 
-from tmclsh.client import connect
+from tmclsh.connection import connect
 from tmclsh.errors import TmclError
 from tmclsh.shell.render import Output
 from tmclsh.shell.session import Session
