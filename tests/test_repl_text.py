@@ -9,9 +9,12 @@ import socket
 import threading
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from tmclsh.connection import connect
 from tmclsh.errors import TmclError
+from tmclsh.shell.lines import split_line, strip_comment
 from tmclsh.shell.render import Output
 from tmclsh.shell.session import Session
 
@@ -339,3 +342,34 @@ def test_user_facing_output_has_no_python_reprs(module, capsys):
         assert not _REPR.search(text), _REPR.search(text).group()
     finally:
         s.client.close()
+
+
+# -- the splitter itself ----------------------------------------------------------------------
+
+_SEGMENT = st.text(st.sampled_from("GAP 1,0$xF.abc_=+-()"), max_size=12)
+
+
+@given(st.lists(_SEGMENT, max_size=6))
+def test_semicolons_cut_exactly_the_segments(segments):
+    line = ";".join(segments)
+    assert split_line(line, lambda text: False) == [s.strip() for s in segments if s.strip()]
+
+
+@given(st.lists(_SEGMENT, min_size=1, max_size=6))
+def test_a_line_owner_takes_everything_after_it(segments):
+    line = ".watch " + ";".join(segments)
+    assert split_line(line, lambda text: text.startswith(".watch")) == [line.strip()]
+
+
+@pytest.mark.parametrize("text, kept", [
+    ("GAP 1, 0 # where", "GAP 1, 0"),
+    ("GAP 1, 0 // where", "GAP 1, 0"),
+    ("# all of it", ""),
+    ('.echo "a # b" # c', '.echo "a # b"'),
+    (".echo issue#5", ".echo issue#5"),
+    ("SAP 4, 0, $1F", "SAP 4, 0, $1F"),
+    (".echo don't # c", ".echo don't"),
+    (".let x = (1 + 2) # three", ".let x = (1 + 2)"),
+])
+def test_comments(text, kept):
+    assert strip_comment(text) == kept
