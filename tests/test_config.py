@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from tmclsh import cli, config
+from tmclsh import cli, config, connection
 from tmclsh.config import Config, load_config, load_settings, parse_config, resolve
 from tmclsh.errors import TmclError, ValidationError
 
@@ -129,10 +129,10 @@ def test_empty_variables_count_as_unset(bench):
 def test_cli_resolves_through_config(bench, monkeypatch):
     monkeypatch.setenv("TMCLSH_ADDRESS", "7")
     args = cli.build_parser().parse_args(["--profile", "bench", "--baud", "38400"])
-    got = cli.connection_settings(args)
+    got = connection.connection_settings(args)
     assert got["port"] == "/dev/ttyACM0" and got["baud"] == 38400 and got["address"] == 7
     args = cli.build_parser().parse_args(["--profile", "bench", "-a", "9", "--ascii"])
-    got = cli.connection_settings(args)
+    got = connection.connection_settings(args)
     assert got["address"] == 9 and got["ascii"] is True
 
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from tmclsh import asm, cli
+from tmclsh import asm, cli, connection
 from tmclsh.modules import load
 from tmclsh.shell import commands
 
@@ -205,7 +205,7 @@ def test_the_tour_program_uploads_and_steps(tmp_path):
     assert out.returncode == 0, out.stderr
     got = normalise(out.stdout)
     for line in shown.splitlines():
-        if re.match(r"TMCM-\d+:\d+", line) or "(y/n)" in line:
+        if re.match(r"TMCM-\d+:\d+", line) or "[y/N]" in line:
             continue  # prompts, and the question only asked at the prompt
         assert normalise(line) in got, f"README shows {line!r}; tmclsh printed:\n{got}"
 
@@ -231,7 +231,7 @@ def test_the_first_command_starts_the_shell_on_the_simulator(tmp_path):
     exe = Path(sys.executable).with_name("tmclsh")
     if not exe.exists():
         pytest.skip("tmclsh is not installed beside this Python")
-    if cli.trinamic_ports():
+    if connection.trinamic_ports():
         pytest.skip("a Trinamic module is attached; this test wants the simulator")
     env = {k: v for k, v in os.environ.items() if not k.startswith("TMCLSH_")}
     env.update(NO_COLOR="1", XDG_CONFIG_HOME=str(tmp_path), XDG_STATE_HOME=str(tmp_path))

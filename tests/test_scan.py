@@ -10,7 +10,7 @@ import pytest
 from serial.tools import list_ports
 from serial.tools.list_ports_common import ListPortInfo
 
-from tmclsh import cli
+from tmclsh import cli, connection
 from tmclsh.protocol import Reply, Request
 from tmclsh.sim import SimBus, Simulator
 from tmclsh.sim.serve import serve_can
@@ -125,7 +125,7 @@ def test_default_connection_is_the_one_attached_trinamic_module(fake_ports, pty_
     sim, path = pty_sim
     fake_ports += [_port("/dev/ttyS0"), _port(path, 0x2A3C, 0x0100, "TMCM-1311")]
     settings = {"baud": 9600, "address": 1, "host_address": 2, "timeout": 0.5, "retries": 2}
-    client = cli.open_client(settings)
+    client = connection.open_client(settings)
     try:
         assert settings["port"] == path and not client.transport.simulated
         assert client.module.name == "TMCM-1311"  # identified with 136
@@ -137,7 +137,7 @@ def test_default_connection_is_the_one_attached_trinamic_module(fake_ports, pty_
 def test_default_connection_with_two_modules_is_the_simulator(fake_ports, capsys):
     fake_ports += [_port("/dev/ttyACM0", 0x2A3C, 1), _port("/dev/ttyACM1", 0x2A3C, 1)]
     settings: dict = {"address": 0, "host_address": 5}
-    t = cli.open_transport(settings)
+    t = connection.open_transport(settings)
     try:
         assert t.simulated and settings["sim"] == "TMCM-1311"
         assert t.simulator.address == 0 and t.simulator.host_address == 5  # 0 is an address
@@ -148,7 +148,7 @@ def test_default_connection_with_two_modules_is_the_simulator(fake_ports, capsys
 
 def test_open_client_uses_the_settings(pty_sim):
     sim, path = pty_sim
-    client = cli.open_client({"port": path, "baud": 115200, "module": "TMCM-1311", "address": 1,
+    client = connection.open_client({"port": path, "baud": 115200, "module": "TMCM-1311", "address": 1,
                               "host_address": 2, "timeout": 0.25, "retries": 0})
     try:
         assert (client.timeout, client.retries) == (0.25, 0)

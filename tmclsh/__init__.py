@@ -15,8 +15,8 @@ if TYPE_CHECKING:
 
 
 def connect(*args: Any, **kwargs: Any) -> "Client":
-    """Open a client; see :func:`tmclsh.client.connect` for the arguments."""
-    from .client import connect as _connect
+    """Open a client; see :func:`tmclsh.connection.connect` for the arguments."""
+    from .connection import connect as _connect
 
     return _connect(*args, **kwargs)
 

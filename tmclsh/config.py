@@ -54,7 +54,7 @@ CONNECTION_TYPES: dict[str, type] = {
 CONNECTION_KEYS = tuple(CONNECTION_TYPES)
 # the connection kinds: one source names at most one, and the strongest source decides
 KINDS = ("port", "can", "sim")
-# used when no option, variable or profile sets them (port/can/sim: see cli.open_transport)
+# used when no option, variable or profile sets them (port/can/sim: see connection.open_transport)
 CONNECTION_DEFAULTS: dict[str, object] = {
     "baud": 9600, "address": 1, "host_address": 2, "ascii": False, "timeout": 1.0, "retries": 2,
 }

@@ -26,7 +26,7 @@ In ASCII mode the module knows only ``RUN`` and ``STOP`` for its program (TMCM-1
 Example::
 
     from tmclsh import asm, program
-    from tmclsh.client import connect
+    from tmclsh.connection import connect
 
     with connect(sim="TMCM-1311") as c:
         prog = asm.assemble_file("demo.tmc", c.require_module())

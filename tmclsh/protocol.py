@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from enum import IntEnum
 
 from .errors import ChecksumError, FrameError
+from .status import STATUS_TEXT, Status, status_ok, status_text  # noqa: F401  (re-exported)
 
 SERIAL_FRAME_LEN = 9
 INSTRUCTION_LEN = 7
@@ -30,44 +31,6 @@ VERSION_STRING_LEN = 8
 INT32_MIN = -(2**31)
 INT32_MAX = 2**31 - 1
 UINT32_MAX = 2**32 - 1
-
-
-class Status(IntEnum):
-    """Reply status codes (manuals, "Status Codes") plus the 138 event status."""
-
-    WRONG_CHECKSUM = 1
-    INVALID_COMMAND = 2
-    WRONG_TYPE = 3
-    INVALID_VALUE = 4
-    EEPROM_LOCKED = 5
-    COMMAND_NOT_AVAILABLE = 6
-    OK = 100
-    LOADED = 101
-    EVENT = 128
-
-
-STATUS_TEXT = {
-    Status.WRONG_CHECKSUM: "wrong checksum",
-    Status.INVALID_COMMAND: "invalid command",
-    Status.WRONG_TYPE: "wrong type",
-    Status.INVALID_VALUE: "invalid value",
-    Status.EEPROM_LOCKED: "configuration EEPROM locked",
-    Status.COMMAND_NOT_AVAILABLE: "command not available",
-    Status.OK: "ok",
-    Status.LOADED: "loaded into program memory",
-    Status.EVENT: "target position reached (event)",
-}
-
-
-def status_text(status: int) -> str:
-    try:
-        return STATUS_TEXT[Status(status)]
-    except ValueError:
-        return f"unknown status {status}"
-
-
-def status_ok(status: int) -> bool:
-    return status in (Status.OK, Status.LOADED, Status.EVENT)
 
 
 class Control(IntEnum):
