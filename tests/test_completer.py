@@ -286,6 +286,8 @@ def test_after_a_value_or_outside_the_expression_nothing_from_it():
     assert texts(".let x") == []  # the variable's name, before =
     assert texts(".wait GAP 8, 0 == 1 --time") == ["--timeout"]  # the command's options
     assert "GAP" not in texts(".watch pos=GAP 1, 0 --interval ")
+    assert "GAP" not in texts('.watch p=GAP 1, 0 --until "p > 5" ')  # the quoted value ended
+    assert "GAP" in texts('.watch p=GAP 1, 0 --until "p > ')
     # a closed ${...} is over: the line's own slot completes again
     assert texts("SAP 140, ${m}, ") == texts("SAP 140, 0, ") != []
 

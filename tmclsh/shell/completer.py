@@ -260,7 +260,10 @@ def _after_options(text: str, expr_options: tuple[str, ...]) -> str | None:
         return text
     if last.group(1).lower() in expr_options and last.group().endswith((" ", "\t")):
         value = text[last.end():]
-        return value[1:] if value[:1] in "\"'" else value
+        if value[:1] in ("'", '"'):
+            quote, value = value[0], value[1:]
+            return None if quote in value else value  # a closed quote: the value is over
+        return value
     return None
 
 
