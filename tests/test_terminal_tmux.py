@@ -189,6 +189,11 @@ def test_the_ctrl_t_menu(served, pane, tmp_path):
     p.hex("14")
     p.keys("f")
     p.wait(f"--- log closed: {log}")
+    p.hex("14")  # the menu, then Enter: Enter does its job and the menu is gone
+    p.keys("Enter")
+    p.keys("SAP 4, 0, 4321", "Enter")  # typed as a line, S not taken for the menu
+    p.wait("BA 100 4321   ok, value 4321")
+    assert "no such menu entry" not in p.screen()
     p.hex("1d")
     p.wait("EXIT=0")
     text = log.read_text()

@@ -636,26 +636,31 @@ def _ask_file(question: str, **kw) -> str:
         return ""
 
 
-def _menu_bindings(term: Terminal, kb) -> None:
-    """Ctrl-T and the key after it, on the line-mode prompt."""
+def _menu_bindings(term: Terminal, kb) -> Callable[[object], None]:
+    """Ctrl-T and the key after it, on the line-mode prompt. Returns the hook for the key
+    processor's ``after_key_press``: a key with a binding of its own (Enter, Tab, an arrow)
+    does its usual job and closes the menu, so a later letter is typed, not taken for it."""
     from prompt_toolkit.filters import Condition
 
-    pending = {"open": False}
+    menu = {"state": None}  # None, "opened" (Ctrl-T just pressed), "waiting"
 
     @kb.add("c-t", eager=True)
     def _(event) -> None:
-        pending["open"] = True
+        menu["state"] = "opened"
         term.note(menu_hint(term.menu))
 
     # not eager: the terminal's own reports (cursor position) keep their bindings
-    @kb.add("<any>", filter=Condition(lambda: pending["open"]))
+    @kb.add("<any>", filter=Condition(lambda: menu["state"] is not None))
     def _(event) -> None:
-        if event.data.startswith("\x1b"):
-            return  # an arrow or function key: still waiting for the menu's key
-        pending["open"] = False
+        menu["state"] = None
         key = term.menu_key(event.data)
         if key is not None:
             event.app.exit(result=_MenuFile(key, event.app.current_buffer.text))
+
+    def after_key(_processor: object) -> None:
+        menu["state"] = "waiting" if menu["state"] == "opened" else None
+
+    return after_key
 
 
 def run_line_mode(term: Terminal) -> None:
@@ -673,9 +678,10 @@ def run_line_mode(term: Terminal) -> None:
     def _(event) -> None:
         event.app.exit(exception=_Leave())
 
-    _menu_bindings(term, kb)
+    after_key = _menu_bindings(term, kb)
     prompt = PromptSession(history=_history(), completer=_completer(session), key_bindings=kb,
                            style=prompt_style(), complete_while_typing=False)
+    prompt.app.key_processor.after_key_press += after_key
     message = [("class:prompt", f"ascii {address_char(session.client.address)}> ")]
     # between prompts nothing is drawn by prompt_toolkit: write to the terminal itself
     direct = (_real_write(sys.__stdout__), _real_write(sys.__stderr__))
