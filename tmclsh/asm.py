@@ -153,7 +153,8 @@ class _Parser:
     def _operator(self, tok: Token) -> None:
         self.operators += 1
         if self.operators > _MAX_OPERATORS:
-            raise self.error(f"expression has more than {_MAX_OPERATORS} operators", tok)
+            where = f" (column {tok.col})" if self.line is None else ""
+            raise self.error(f"expression has more than {_MAX_OPERATORS} operators{where}", tok)
 
     def expr(self) -> Expr:
         left = self.term()

@@ -57,8 +57,7 @@ class Limit:
 
 
 def _fmt(x: float) -> str:
-    return f"{int(x):,}".replace(",", "_") if float(x).is_integer() and x >= 100_000 else \
-        (str(int(x)) if float(x).is_integer() else f"{x:g}")
+    return str(int(x)) if float(x).is_integer() else f"{x:g}"
 
 
 SECONDS = "seconds"
@@ -84,6 +83,7 @@ LIMITS: dict[str, Limit] = {
     "duration": Limit(float, 0.0, DAY, SECONDS),
     "count": Limit(int, 1, 1_000_000),
     "repeat": Limit(int, 0, 1_000_000),
+    "plot_size": Limit(int, 1, 1000),  # .plot --width/--height, characters
 }
 
 

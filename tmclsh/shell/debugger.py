@@ -398,7 +398,7 @@ def _progress(session: Session) -> Iterator[program.Progress | None]:
                                TimeRemainingColumn)
 
     names = {"upload": "uploading", "verify": "verifying", "read": "reading"}
-    with Progress(TextColumn("{task.description:>10}"), BarColumn(), MofNCompleteColumn(),
+    with Progress(TextColumn("{task.description:>10}", markup=False), BarColumn(), MofNCompleteColumn(),
                   TimeRemainingColumn(), console=out.console, transient=True) as bar:
         tasks: dict[str, object] = {}
 

@@ -190,8 +190,8 @@ def cmd_plot(session: Session, args: str) -> None:
             raise ValidationError("nothing to plot: run .watch first, or give a CSV file")
         log = last
     width = expr.option_int(opts, "width", max(20, min(100, session.out.console.width - 14)),
-                            minimum=10)
-    height = expr.option_int(opts, "height", 6, minimum=2)
+                            minimum=10, limit="plot_size")
+    height = expr.option_int(opts, "height", 6, minimum=2, limit="plot_size")
     only = [n.strip() for n in str(opts["only"]).split(",")] if "only" in opts else None
     assert width is not None and height is not None
     renderable = render(log, width, height, only)

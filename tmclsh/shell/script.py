@@ -28,8 +28,9 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, TextIO
+from typing import TYPE_CHECKING
 
+from .. import files, limits
 from ..errors import TmclError, TmclTimeoutError, ValidationError
 from . import commands, expr
 from .commands import command
@@ -300,7 +301,8 @@ def _check_expr_options(options: dict[str, bool]) -> Callable[[Session, str], No
         rest, opts = expr.split_options(args, options)
         for name in opts:
             if options[name]:
-                expr.option_float(opts, name, None, allow_none=name == "timeout")
+                expr.option_float(opts, name, None, allow_none=name == "timeout",
+                                  limit="wait_timeout" if name == "timeout" else "interval")
         if not rest:
             raise ValidationError("an expression is needed")
         expr.validate(session, expr.parse(rest))
@@ -439,13 +441,7 @@ class Runner:
 def repeat_count(session: Session, count: expr.Expression | None) -> int:
     assert count is not None
     value = count.evaluate(expr.SessionContext(session))
-    if isinstance(value, float):
-        if not value.is_integer():
-            raise ValidationError(f".repeat count must be a whole number, got {value}")
-        value = int(value)
-    if value < 0:
-        raise ValidationError(f".repeat count must not be negative, got {value}")
-    return value
+    return int(limits.check("repeat", value, ".repeat count"))
 
 
 def report(session: Session, node: Node, exc: TmclError) -> None:
@@ -494,7 +490,7 @@ def _progress(session: Session, name: str, nodes: list[Node]):
         return None
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+    progress = Progress(TextColumn("{task.description}", markup=False), BarColumn(), MofNCompleteColumn(),
                         TimeElapsedColumn(), console=session.out.console, transient=True)
     task = progress.add_task(Path(name).name, total=total)
 
@@ -793,8 +789,9 @@ WAIT_OPTIONS = {"timeout": True, "interval": True}
                  "value read.")
 def cmd_wait(session: Session, args: str) -> None:
     rest, opts = expr.split_options(args, WAIT_OPTIONS)
-    timeout = expr.option_float(opts, "timeout", WAIT_TIMEOUT, allow_none=True)
-    interval = expr.option_float(opts, "interval", WAIT_INTERVAL, minimum=0.001)
+    timeout = expr.option_float(opts, "timeout", WAIT_TIMEOUT, allow_none=True,
+                                limit="wait_timeout")
+    interval = expr.option_float(opts, "interval", WAIT_INTERVAL, limit="interval")
     assert interval is not None
     if not rest:
         raise ValidationError(".wait needs a condition: .wait GAP 8, 0 == 1")
@@ -819,9 +816,7 @@ def cmd_wait(session: Session, args: str) -> None:
 def cmd_sleep(session: Session, args: str) -> None:
     if not args:
         raise ValidationError(".sleep needs seconds: .sleep 0.5")
-    seconds = expr.evaluate(session, args)
-    if seconds < 0:
-        raise ValidationError(f".sleep wants seconds >= 0, got {expr.format_number(seconds)}")
+    seconds = expr.seconds("sleep", expr.evaluate(session, args), ".sleep")
     time.sleep(seconds)
 
 
@@ -868,11 +863,12 @@ def cmd_echo(session: Session, args: str) -> None:
             session.out.print(line, markup=False)
         return
     path = Path(_unquote(session.expand(target))).expanduser()
-    try:
-        with open(path, mode, encoding="utf-8") as fh:
-            fh.write(line + "\n")
-    except OSError as exc:
-        raise ScriptError(f"cannot write {path}: {exc.strerror}") from None
+    before = ""
+    if mode == "a" and path.is_file():  # appended all or nothing, like any write
+        before = files.read_text(path, what="file")
+        if before and not before.endswith("\n"):
+            before += "\n"
+    files.write_file(path, before + line + "\n")
 
 
 # -- recording and history ---------------------------------------------------------------
@@ -884,7 +880,7 @@ class Recorder:
     ``.watch`` too (a script would wait in them forever).
     """
 
-    def __init__(self, session: Session, path: Path, fh: TextIO):
+    def __init__(self, session: Session, path: Path, fh: files.AtomicWriter):
         self.session = session
         self.path = path
         self.fh = fh
@@ -910,12 +906,33 @@ class Recorder:
             text = f"{line}    // = {outcome}"
         else:
             text = line
-        self.fh.write(text + "\n")
-        self.fh.flush()
+        try:
+            self.fh.write(text + "\n")
+            self.fh.flush()
+        except files.FileError as exc:  # disk full: stop recording, say so, keep the old file
+            self.stop()
+            self.session.out.error(None, f"{exc}; recording stopped, {self.path} unchanged")
+            return
         self.lines += 1
 
+    def stop(self) -> None:
+        """Forget the recording: the file keeps what it held before ``.record``."""
+        self.fh.abort()
+        self._detach()
+
+    def _detach(self) -> None:
+        s = self.session
+        if self in s.recorders:
+            s.recorders.remove(self)
+        if s.state.get("record") is self:
+            s.state.pop("record", None)
+        if self.close in s.closers:
+            s.closers.remove(self.close)
+
     def close(self) -> None:
-        self.fh.close()
+        """Put the recording in place of the file (``.record off``, or the session ends)."""
+        self._detach()
+        self.fh.commit()
 
 
 def _is_read(session: Session, line: str) -> bool:
@@ -937,19 +954,16 @@ def cmd_record(session: Session, args: str) -> None:
             session.out.info(f"recording to {current.path} ({current.lines} lines)")
         return
     if current is not None:
-        session.recorders.remove(current) if current in session.recorders else None
         current.close()
-        session.state.pop("record", None)
         session.out.info(f"recorded {current.lines} lines to {current.path}")
     if args.strip().lower() == "off":
         if current is None:
             session.out.info("not recording")
         return
     path = Path(_unquote(args.strip())).expanduser()
-    try:
-        fh = open(path, "w", encoding="utf-8")
-    except OSError as exc:
-        raise ScriptError(f"cannot write {path}: {exc.strerror}") from None
+    # written beside PATH and moved over it at '.record off' or the end of the session, so
+    # a full disk or a crash never leaves half a script where a good one was
+    fh = files.atomic_writer(path)
     client = session.client
     module = client.module.name if client.module else "unknown module"
     fh.write(f"# recorded by tmclsh {datetime.now():%Y-%m-%d %H:%M} "
@@ -958,6 +972,7 @@ def cmd_record(session: Session, args: str) -> None:
     rec = Recorder(session, path, fh)
     session.state["record"] = rec
     session.recorders.append(rec)
+    session.closers.append(rec.close)
     session.out.info(f"recording to {path} (.record off to stop)")
 
 

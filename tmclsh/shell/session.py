@@ -58,6 +58,8 @@ class Session:
         self.last_result: Result | None = None
         # hooks: called with (line, result-or-error-text) after every line (used by .record)
         self.recorders: list[Callable[[str, str], None]] = []
+        # called once when the session ends (a recording is put in place of its file)
+        self.closers: list[Callable[[], None]] = []
         # asks the user; the REPL replaces it with a prompt_toolkit confirm
         self.ask: Callable[[str], bool] | None = None
         # features keep their state here (debugger, watch, ...), keyed by feature name
@@ -67,6 +69,19 @@ class Session:
         self.interrupted_line_ended = True
         commands.load_all()
         install_expressions(self)  # ${expression} in any line
+
+    def close(self) -> bool:
+        """End the session: run the closers; a failing one is reported, the rest still run.
+        False if one failed."""
+        ok = True
+        while self.closers:
+            fn = self.closers.pop()
+            try:
+                fn()
+            except TmclError as exc:
+                ok = False
+                self.out.error(None, str(exc))
+        return ok
 
     # -- module -------------------------------------------------------------------------
     @property

@@ -374,7 +374,7 @@ def parse_args(session: Session, args: str, *, names: bool = True):
     only watched values or variables: variables set earlier in the script do not exist yet.
     """
     rest, opts = expr.split_options(args, WATCH_OPTIONS)
-    interval = expr.option_float(opts, "interval", DEFAULT_INTERVAL)
+    interval = expr.option_float(opts, "interval", DEFAULT_INTERVAL, limit="interval")
     count = expr.option_int(opts, "count", None, minimum=1)
     assert interval is not None
     items = parse_items(session, rest) if rest else default_items(session)
