@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Iterator
 
-from .. import asm, program
+from .. import asm, files, program
 from ..errors import AsmError, TmclError, ValidationError
 from ..program import AppStatus, UploadError
 from ..protocol import Instruction
@@ -240,8 +240,9 @@ def _source_lines(session: Session, file: str) -> list[str] | None:
     dbg = state(session)
     if file not in dbg.files:
         try:
-            dbg.files[file] = Path(file).read_text(encoding="utf-8", errors="replace").splitlines()
-        except OSError:
+            dbg.files[file] = files.read_bytes(file, what="source").decode(
+                "utf-8", errors="replace").splitlines()
+        except files.FileError:
             dbg.files[file] = None
     return dbg.files[file]
 
@@ -569,10 +570,7 @@ def cmd_dump(session: Session, argtext: str) -> None:
         session.out.warn("warning: the disassembly does not reassemble to the same image")
     if pos:
         path = Path(pos[0]).expanduser()
-        try:
-            path.write_text(text, encoding="utf-8")
-        except OSError as exc:
-            raise DebuggerError(f"cannot write {path}: {exc.strerror}") from None
+        files.write_file(path, text)  # all or nothing
         if session.out.json:
             session.out.emit({"dumped": len(image), "file": str(path), "identical": same})
         else:

@@ -262,14 +262,20 @@ def resolve(name: str, base: Path | None) -> Path:
 
 
 def read_lines(path: Path, fail: Callable[[str], Exception]) -> list[str]:
+    """A script's lines: at most ``files.MAX_FILE`` bytes, ``files.MAX_LINES`` lines and
+    ``files.MAX_LINE`` characters a line (``/dev/zero`` is refused, not read to the end)."""
     try:
-        return path.read_text(encoding="utf-8").splitlines()
-    except FileNotFoundError:
-        raise fail(f"no such script: {path}") from None
-    except UnicodeDecodeError:
-        raise fail(f"{path} is not a text file") from None
-    except OSError as exc:
-        raise fail(f"cannot read {path}: {exc.strerror}") from None
+        if not path.exists():
+            raise fail(f"no such script: {path}")
+        lines = files.read_lines(path, "script")
+    except files.FileError as exc:
+        raise fail(str(exc)) from None
+    except (OSError, ValueError) as exc:
+        raise fail(f"cannot read {path}: {getattr(exc, 'strerror', None) or exc}") from None
+    for no, line in enumerate(lines, 1):
+        if len(line) > files.MAX_LINE:
+            raise fail(f"{path}:{no}: line longer than {files.MAX_LINE:,} characters")
+    return lines
 
 
 def check_var_name(name: str) -> None:
@@ -548,8 +554,11 @@ def _run_nodes(runner: Runner, nodes: Iterable[Node]) -> None:
 
 
 def _stdin_lines() -> Iterator[str]:
-    for line in sys.stdin:
-        yield line.rstrip("\n")
+    """``-f -``: each line run as it arrives, none longer than ``files.MAX_LINE``."""
+    try:
+        yield from files.stream_lines(sys.stdin, STDIN)
+    except files.FileError as exc:
+        raise ScriptError(str(exc)) from None
 
 
 def _report_plain(session: Session, exc: TmclError) -> None:

@@ -32,6 +32,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
+from .. import files
 from ..errors import TmclError, ValidationError
 from . import expr, plot, script
 from .commands import command
@@ -407,13 +408,14 @@ class WatchResult:
 
 
 class _Csv:
+    """The samples as CSV, written beside the file and put in its place when the watch
+    ends (a full disk stops the watch with an error and leaves the old file as it was)."""
+
     def __init__(self, path: Path, names: Sequence[str]):
-        try:
-            self.fh = open(path, "w", newline="", encoding="utf-8", buffering=1)
-        except OSError as exc:
-            raise ValidationError(f"cannot write {path}: {exc.strerror}") from None
+        self.fh = files.atomic_writer(path, newline="")
         self.writer = csv.writer(self.fh)
         self.writer.writerow(["time", "t", *names])
+        self.fh.flush()
         self.names = names
 
     def write(self, sample: Sample) -> None:
@@ -421,9 +423,10 @@ class _Csv:
                               f"{sample.t:.4f}",
                               *("" if sample.values.get(n) is None else sample.values[n]
                                 for n in self.names)])
+        self.fh.flush()
 
     def close(self) -> None:
-        self.fh.close()
+        self.fh.commit()
 
 
 def run_watch(session: Session, items: Sequence[Item], *, interval: float = DEFAULT_INTERVAL,
