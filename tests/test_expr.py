@@ -187,8 +187,12 @@ def test_option_numbers():
     assert expr.option_float({"timeout": "none"}, "timeout", 30, allow_none=True) is None
     with pytest.raises(ValidationError, match="seconds"):
         expr.option_float({"timeout": "soon"}, "timeout", 30)
-    with pytest.raises(ValidationError, match=">= 0"):
+    with pytest.raises(ValidationError, match="from 0 to 86400, got '-1'"):
         expr.option_float({"timeout": "-1"}, "timeout", 30)
+    with pytest.raises(ValidationError, match="from 0 to 86400, got '1e300'"):
+        expr.option_float({"timeout": "1e300"}, "timeout", 30)
+    with pytest.raises(ValidationError, match="got nan"):
+        expr.option_float({"timeout": "nan"}, "timeout", 30)
     assert expr.option_int({"count": "0x10"}, "count", None) == 16
     with pytest.raises(ValidationError, match="at least 1"):
         expr.option_int({"count": "0"}, "count", None)

@@ -38,6 +38,7 @@ class Limit:
     high: float
     unit: str = ""  # "seconds" or ""
     choices: tuple[int, ...] = ()
+    what: str = ""  # where it is set, for the man page
 
     def describe(self) -> str:
         """``a number of seconds from 0.001 to 60``, ``a whole number from 0 to 255``."""
@@ -63,27 +64,48 @@ def _fmt(x: float) -> str:
 SECONDS = "seconds"
 LIMITS: dict[str, Limit] = {
     # connection settings (command line, environment, profiles)
-    "timeout": Limit(float, 0.001, 60.0, SECONDS),
-    "retries": Limit(int, 0, 10),
-    "baud": Limit(int, BAUD_RATES[0], BAUD_RATES[-1], choices=BAUD_RATES),
-    "address": Limit(int, 0, 255),
-    "host_address": Limit(int, 0, 255),
-    "can_id": Limit(int, 0, 2047),
-    "reply_id": Limit(int, 0, 2047),
-    "bitrate": Limit(int, 10_000, 1_000_000),
+    "timeout": Limit(float, 0.001, 60.0, SECONDS,
+                 what="reply timeout (--timeout, TMCLSH_TIMEOUT, timeout in a profile)"),
+    "retries": Limit(int, 0, 10,
+                 what="retries of idempotent commands (--retries, TMCLSH_RETRIES, retries)"),
+    "baud": Limit(int, BAUD_RATES[0], BAUD_RATES[-1], choices=BAUD_RATES,
+                 what="serial baud rate, one the modules' GP 65 offers (--baud, TMCLSH_BAUD, "
+                     "baud)"),
+    "address": Limit(int, 0, 255,
+                 what="module address (-a, TMCLSH_ADDRESS, address)"),
+    "host_address": Limit(int, 0, 255,
+                 what="host address (--host-address, TMCLSH_HOST_ADDRESS, host_address)"),
+    "can_id": Limit(int, 0, 2047,
+                 what="module's CAN id (--can-id, TMCLSH_CAN_ID, can_id)"),
+    "reply_id": Limit(int, 0, 2047,
+                 what="module's CAN reply id (--reply-id, TMCLSH_REPLY_ID, reply_id)"),
+    "bitrate": Limit(int, 10_000, 1_000_000,
+                 what="CAN bit rate, bit/s"),
     # shell settings (config file [settings])
-    "history_size": Limit(int, 0, 1_000_000),
+    "history_size": Limit(int, 0, 1_000_000,
+                 what="lines of history kept (history_size in [settings])"),
     # subcommands
-    "scan_timeout": Limit(float, 0.001, 60.0, SECONDS),
-    "origin": Limit(int, 0, 65535),  # asm/disasm --at (program memory address)
+    "scan_timeout": Limit(float, 0.001, 60.0, SECONDS,
+                 what="per-address timeout of scan (scan --timeout)"),
+    "origin": Limit(int, 0, 65535,
+                 what="program address (asm --at, disasm --at)"),
     # dot-commands
-    "sleep": Limit(float, 0.0, DAY, SECONDS),
-    "wait_timeout": Limit(float, 0.0, DAY, SECONDS),
-    "interval": Limit(float, 0.001, DAY, SECONDS),
-    "duration": Limit(float, 0.0, DAY, SECONDS),
-    "count": Limit(int, 1, 1_000_000),
-    "repeat": Limit(int, 0, 1_000_000),
-    "plot_size": Limit(int, 1, 1000),  # .plot --width/--height, characters
+    "sleep": Limit(float, 0.0, DAY, SECONDS,
+                 what="a pause (.sleep)"),
+    "wait_timeout": Limit(float, 0.0, DAY, SECONDS,
+                 what="how long .wait waits (.wait --timeout; none waits forever)"),
+    "interval": Limit(float, 0.001, DAY, SECONDS,
+                 what="polling interval of .wait (--interval)"),
+    "watch_interval": Limit(float, 0.0, DAY, SECONDS,
+                 what="time between samples of .watch (0: as fast as the link allows)"),
+    "duration": Limit(float, 0.0, DAY, SECONDS,
+                 what="other durations given to dot-commands"),
+    "count": Limit(int, 1, 1_000_000,
+                 what="counts of samples and lines (.watch --count, .history N)"),
+    "repeat": Limit(int, 0, 1_000_000,
+                 what="repetitions of a block (.repeat N)"),
+    "plot_size": Limit(int, 1, 1000,
+                 what="size of a plot in characters (.plot --width, --height)"),
 }
 
 
@@ -99,7 +121,7 @@ def _number(text: str, kind: type) -> float | int | None:
         return None
 
 
-def check(key: str, value: object, where: str = "") -> int | float:
+def check(key: str, value: object, where: str = "", shown: str | None = None) -> int | float:
     """``value`` if it is of the kind and within the range of setting ``key``, else a
     ``SettingError`` naming ``where`` (an option, variable or file and table)."""
     lim = LIMITS[key]
@@ -113,7 +135,8 @@ def check(key: str, value: object, where: str = "") -> int | float:
         if ok and lim.choices:
             ok = value in lim.choices
     if not ok:
-        raise SettingError(f"{prefix}must be {lim.describe()}, got {value!r}")
+        got = repr(value) if shown is None else shown
+        raise SettingError(f"{prefix}must be {lim.describe()}, got {got}")
     return float(value) if lim.kind is float else int(value)  # type: ignore[arg-type]
 
 
@@ -121,7 +144,9 @@ def parse(key: str, text: str, where: str = "") -> int | float:
     """A setting typed as text (option, variable, dot-command argument), checked."""
     lim = LIMITS[key]
     value = _number(str(text), lim.kind)
+    shown = str(text).strip()
+    shown = shown if len(shown) <= MAX_DIGITS else shown[:MAX_DIGITS] + "..."
     if value is None:
         prefix = f"{where}: " if where else ""
-        raise SettingError(f"{prefix}must be {lim.describe()}, got {str(text)[:MAX_DIGITS]!r}")
-    return check(key, value, where)
+        raise SettingError(f"{prefix}must be {lim.describe()}, got {shown!r}")
+    return check(key, value, where, repr(shown))

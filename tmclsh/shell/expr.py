@@ -479,9 +479,6 @@ class _Parser:
         args = [self.or_()]
         while self.is_op(","):
             self.take()
-            if len(args) >= FUNCTIONS[func][2]:
-                raise self.error(f"{func}() takes at most {FUNCTIONS[func][2]} argument"
-                                 f"{'s' if FUNCTIONS[func][2] > 1 else ''}")
             args.append(self.or_())
         self.depth -= 1
         if not self.is_op(")"):

@@ -653,7 +653,7 @@ def _open_block(session: Session, word: str, args: str) -> None:
          category="script",
          details="Runs the lines up to the matching .end COUNT times (an expression). With "
                  "'as NAME' the variable NAME counts 0..COUNT-1 (like ports and motors). "
-                 "Blocks nest.\n"
+                 "Blocks nest. COUNT is 0..1000000.\n"
                  "  .repeat 3 as i\n  MVP REL, 0, 1000\n  .wait GAP 8, 0 == 1\n  .end")
 def cmd_repeat(session: Session, args: str) -> None:
     _open_block(session, ".repeat", args)
@@ -794,7 +794,8 @@ WAIT_OPTIONS = {"timeout": True, "interval": True}
          "poll until a condition holds (default timeout 30 s, interval 0.05 s)",
          category="script", complete=["--timeout", "--interval"],
          details="  .wait GAP 8, 0 == 1 --timeout 10\n  .wait RFS STATUS, 0 == 0\n"
-                 "--timeout none waits forever. A timeout is an error that shows the last "
+                 "--timeout none waits forever; otherwise at most a day (86400 s); "
+                 "--interval 0.001..86400 s. A timeout is an error that shows the last "
                  "value read.")
 def cmd_wait(session: Session, args: str) -> None:
     rest, opts = expr.split_options(args, WAIT_OPTIONS)
@@ -820,8 +821,8 @@ def cmd_wait(session: Session, args: str) -> None:
                                f"({seen})") from None
 
 
-@command(".sleep", ".sleep SECONDS", "pause (seconds may be a fraction or an expression)",
-         category="script")
+@command(".sleep", ".sleep SECONDS", "pause up to a day (seconds may be a fraction or an "
+         "expression)", category="script")
 def cmd_sleep(session: Session, args: str) -> None:
     if not args:
         raise ValidationError(".sleep needs seconds: .sleep 0.5")

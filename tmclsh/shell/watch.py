@@ -375,7 +375,7 @@ def parse_args(session: Session, args: str, *, names: bool = True):
     only watched values or variables: variables set earlier in the script do not exist yet.
     """
     rest, opts = expr.split_options(args, WATCH_OPTIONS)
-    interval = expr.option_float(opts, "interval", DEFAULT_INTERVAL, limit="interval")
+    interval = expr.option_float(opts, "interval", DEFAULT_INTERVAL, limit="watch_interval")
     count = expr.option_int(opts, "count", None, minimum=1)
     assert interval is not None
     items = parse_items(session, rest) if rest else default_items(session)
@@ -576,7 +576,9 @@ class _Watch:
                  "Keys: s or space stops all motors (MST), q ends the watch. Ctrl-C ends the "
                  "watch and does NOT stop the motors. Under --json or in a pipe, each sample "
                  "is a JSON object {\"t\": s, \"values\": {...}}. With no expressions: the "
-                 "position and speed of each motor. .plot draws the last watch.")
+                 "position and speed of each motor. .plot draws the last watch. "
+                 "--interval is 0..86400 s, --count 1..1000000; the CSV file is put "
+                 "in place when the watch ends.")
 def cmd_watch(session: Session, args: str) -> None:
     items, interval, count, until, csv_path = parse_args(session, args)
     result = run_watch(session, items, interval=interval, count=count, until=until,
