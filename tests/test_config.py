@@ -179,7 +179,7 @@ def test_errors_are_tmcl_errors():
 
 @pytest.mark.parametrize("env, message", [
     ({"TMCLSH_BAUD": "fast"}, r"TMCLSH_BAUD: must be one of 9600, .*, got 'fast'"),
-    ({"TMCLSH_ADDRESS": "256"}, r"TMCLSH_ADDRESS: must be a whole number from 0 to 255, got 256"),
+    ({"TMCLSH_ADDRESS": "256"}, r"TMCLSH_ADDRESS: must be a whole number from 0 to 255, got '256'"),
     ({"TMCLSH_ASCII": "maybe"}, r"TMCLSH_ASCII='maybe' must be true or false"),
     ({"TMCLSH_TIMEOUT": "-1"}, r"TMCLSH_TIMEOUT: must be a number of seconds from 0\.001 to 60"),
 ])

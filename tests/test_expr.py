@@ -191,7 +191,7 @@ def test_option_numbers():
         expr.option_float({"timeout": "-1"}, "timeout", 30)
     with pytest.raises(ValidationError, match="from 0 to 86400, got '1e300'"):
         expr.option_float({"timeout": "1e300"}, "timeout", 30)
-    with pytest.raises(ValidationError, match="got nan"):
+    with pytest.raises(ValidationError, match="got 'nan'"):
         expr.option_float({"timeout": "nan"}, "timeout", 30)
     assert expr.option_int({"count": "0x10"}, "count", None) == 16
     with pytest.raises(ValidationError, match="at least 1"):
