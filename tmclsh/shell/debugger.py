@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Iterator
 
-from .. import asm, files, program
+from .. import asm, files, limits, program
 from ..errors import AsmError, TmclError, ValidationError
 from ..program import AppStatus, UploadError
 from ..protocol import Instruction
@@ -696,9 +696,7 @@ def cmd_where(session: Session, argtext: str) -> None:
 next and the .display values are shown. An empty line repeats the step. Ctrl-C stops a long
 series. Needs binary mode.""")
 def cmd_step(session: Session, argtext: str) -> None:
-    n = _number(argtext, "N") if argtext.strip() else 1
-    if n < 1:
-        raise ValidationError("N must be at least 1")
+    n = int(limits.parse("count", argtext, ".step N")) if argtext.strip() else 1
     program.require_binary(session.client, "stepping (130)")
     session.state["repeat_on_empty"] = ".step" if n == 1 else f".step {n}"
     def waiting(pc: int) -> None:
@@ -708,6 +706,7 @@ def cmd_step(session: Session, argtext: str) -> None:
     done = 0
     try:
         for done in range(1, n + 1):
+            session.time_left()  # the session's time limit, if it has one
             program.step_one(session.client, pc=pc, instruction_at=_stored(session),
                              on_wait=waiting)
             st = _read_status(session)
@@ -771,6 +770,7 @@ def cmd_continue(session: Session, argtext: str) -> None:
 
     def counted(n: int, pc: int) -> None:
         steps[0] = n
+        session.time_left()  # the session's time limit, if it has one
 
     stored = _stored(session)
 

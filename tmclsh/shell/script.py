@@ -413,6 +413,7 @@ class Runner:
             set_onerror(session, args, node)
             return
         typed = len(session.history)
+        session.time_left()  # a long .repeat stops at the session's time limit
         try:
             session.run_line(node.text)
         finally:
@@ -813,9 +814,14 @@ def cmd_wait(session: Session, args: str) -> None:
         ok, *last = check(expression, expr.SessionContext(session))
         return ok
 
+    left = session.time_left()
+    capped = left is not None and (timeout is None or timeout > left)
     try:
-        session.client.wait_until(holds, timeout, interval)
+        session.client.wait_until(holds, left if capped else timeout, interval)
     except TmclTimeoutError:
+        if capped:
+            time.sleep(0.001)
+            session.time_left()
         seen = ", ".join(x for x in last if x)
         raise TmclTimeoutError(f"timed out after {timeout:g} s waiting for {expression.text} "
                                f"({seen})") from None
@@ -827,6 +833,10 @@ def cmd_sleep(session: Session, args: str) -> None:
     if not args:
         raise ValidationError(".sleep needs seconds: .sleep 0.5")
     seconds = expr.seconds("sleep", expr.evaluate(session, args), ".sleep")
+    left = session.time_left()
+    if left is not None and seconds > left:
+        time.sleep(left)
+        session.time_left()  # raises: the time is up
     time.sleep(seconds)
 
 

@@ -503,6 +503,7 @@ class _Watch:
         """Returns why the watch ended: count, until, key, interrupt or pipe."""
         next_at = self.start
         while not self.intr.requested:
+            self.session.time_left()  # raises at the session's time limit, if it has one
             sample = poll(self.session, self.items, time.monotonic() - self.start)
             if self.state.samples == 0 and len(sample.errors) == len(self.items):
                 # nothing readable at all: an error, not a watch of dashes
@@ -524,6 +525,9 @@ class _Watch:
             # the next sample is due one interval after this one began; polling slower than
             # the interval starts the next at once, without a backlog of samples
             next_at = max(next_at + self.interval, time.monotonic())
+            left = self.session.time_left()
+            if left is not None:
+                next_at = min(next_at, time.monotonic() + left)
             ended = self._wait(next_at)
             if ended is not None:
                 return ended
