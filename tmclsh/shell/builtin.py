@@ -427,7 +427,7 @@ def _kind_prefix(query: str) -> tuple[str | None, int | None, str]:
     if len(words) >= 2 and words[0].lower() in kinds:
         kind = kinds[words[0].lower()]
         bank = None
-        if kind == "global" and len(words) >= 3 and words[2].isdigit():
+        if kind == "global" and len(words) >= 3 and re.fullmatch(r"\d{1,9}", words[2]):
             bank = int(words[2])
             words = words[:2]
         return kind, bank, " ".join(words[1:])
@@ -435,9 +435,10 @@ def _kind_prefix(query: str) -> tuple[str | None, int | None, str]:
 
 
 def _number(text: str) -> int | None:
-    if re.fullmatch(r"\d+", text):
+    # at most 40 digits: longer is no parameter number (and more than Python converts)
+    if re.fullmatch(r"\d{1,40}", text):
         return int(text)
-    if re.fullmatch(r"(\$|0[xX])[0-9A-Fa-f]+", text):
+    if re.fullmatch(r"(\$|0[xX])[0-9A-Fa-f]{1,40}", text):
         return int(text.lstrip("$").removeprefix("0x").removeprefix("0X"), 16)
     return None
 

@@ -155,7 +155,8 @@ def _number(text: str, what: str) -> int:
             return int(t[1:], 16)
         return int(t, 0)
     except ValueError:
-        raise ValidationError(f"{what} must be a number, got {text!r}") from None
+        shown = t if len(t) <= 40 else t[:40] + "..."
+        raise ValidationError(f"{what} must be a number, got {shown!r}") from None
 
 
 def _options(words: list[str], flags: set[str], valued: set[str]) -> tuple[list[str], dict]:
@@ -270,7 +271,7 @@ def resolve(session: Session, text: str, *, line_numbers: bool) -> tuple[int, st
     if t.startswith("@"):
         addr = check(_number(t[1:], "address"))
         return addr, f"@{addr}"
-    m = re.fullmatch(r"(.+):(\d+)", t)
+    m = re.fullmatch(r"(.+):(\d{1,9})", t)
     if m and not t[0].isdigit():
         if prog is None:
             raise ValidationError(f"no source file is known for the stored program; "
