@@ -193,16 +193,16 @@ MAX_CONFIG = 1024 * 1024  # bytes of a config file
 
 def load_config(path: Path | None = None) -> Config:
     """Read the config file; a missing file is an empty config, a bad one an error (a
-    directory or device where the file should be too: it is never silently ignored)."""
+    directory where the file should be too: it is never silently ignored)."""
     from .files import FileError, read_text
 
     path = path or config_file()
     try:
         if not path.exists() and not path.is_symlink():
             return Config(path)
-        if not path.is_file():
-            what = "a directory" if path.is_dir() else "not a regular file"
-            raise SettingError(f"{path}: the config file is {what}")
+        if path.is_dir():
+            raise SettingError(f"{path}: the config file is a directory")
+        # /dev/null (no config) and pipes (<(...)) are read like files, bounded
         text = read_text(path, MAX_CONFIG, "config file")
     except FileError as exc:
         raise SettingError(str(exc)) from None

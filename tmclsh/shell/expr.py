@@ -476,8 +476,8 @@ class _Parser:
     def call(self, start: int, func: str) -> Node:
         self.take()  # (
         self.nested()
-        args = [self.or_()]
-        while self.is_op(","):
+        args = [] if self.is_op(")") else [self.or_()]  # min() is an arity error, below
+        while args and self.is_op(","):
             self.take()
             args.append(self.or_())
         self.depth -= 1

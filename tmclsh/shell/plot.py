@@ -184,6 +184,9 @@ PLOT_OPTIONS = {"height": True, "width": True, "only": True}
          category="watch", complete=["--only", "--height", "--width"])
 def cmd_plot(session: Session, args: str) -> None:
     rest, opts = expr.split_options(args, PLOT_OPTIONS)
+    width = expr.option_int(opts, "width", max(20, min(100, session.out.console.width - 14)),
+                            minimum=10, limit="plot_size")
+    height = expr.option_int(opts, "height", 6, minimum=2, limit="plot_size")
     if rest:
         log = read_csv(Path(rest.strip("\"'")).expanduser())
     else:
@@ -191,9 +194,6 @@ def cmd_plot(session: Session, args: str) -> None:
         if not isinstance(last, Log) or not last.t:
             raise ValidationError("nothing to plot: run .watch first, or give a CSV file")
         log = last
-    width = expr.option_int(opts, "width", max(20, min(100, session.out.console.width - 14)),
-                            minimum=10, limit="plot_size")
-    height = expr.option_int(opts, "height", 6, minimum=2, limit="plot_size")
     only = [n.strip() for n in str(opts["only"]).split(",")] if "only" in opts else None
     assert width is not None and height is not None
     renderable = render(log, width, height, only)
