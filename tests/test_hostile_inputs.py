@@ -275,3 +275,10 @@ def test_f_dash_still_streams_line_by_line(env, tmp_path):
         assert p.wait(30) == 0
     finally:
         p.kill()
+
+
+def test_plot_of_a_csv_whose_names_look_like_markup(env, tmp_path):
+    (tmp_path / "m.csv").write_text("t,[/],[bold]x\n0,1,5\n1,2,6\n")
+    r = _tmclsh("--sim", "-c", ".plot m.csv", env=env, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "─ [/]  (2 samples)" in r.stdout and "─ [bold]x  (2 samples)" in r.stdout

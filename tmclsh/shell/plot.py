@@ -110,7 +110,7 @@ def render(log: Log, width: int = 60, height: int = 8, names: Sequence[str] | No
             raise ValidationError(f"no series {name!r} (have: {', '.join(log.names)})")
         good = [y for y in ys if y is not None]
         if not good:
-            panels.append(Panel(Text("no values", style="tmcl.note"), title=name,
+            panels.append(Panel(Text("no values", style="tmcl.note"), title=Text(name),
                                 title_align="left"))
             continue
         lo, hi = min(good), max(good)
