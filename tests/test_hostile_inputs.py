@@ -282,3 +282,13 @@ def test_plot_of_a_csv_whose_names_look_like_markup(env, tmp_path):
     r = _tmclsh("--sim", "-c", ".plot m.csv", env=env, cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     assert "─ [/]  (2 samples)" in r.stdout and "─ [bold]x  (2 samples)" in r.stdout
+
+
+def test_blocks_nested_without_end_of_the_stack(env, tmp_path):
+    deep = tmp_path / "deep.tmcl"
+    deep.write_text("\n".join([".repeat 1"] * 600 + ["GAP 1, 0"] + [".end"] * 600) + "\n")
+    r = _tmclsh("--sim", "-f", str(deep), env=env, cwd=tmp_path)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert r.stderr.strip() == f"{deep}:33: blocks nested more than 32 deep"
+    r = _tmclsh("--sim", "-c", deep.read_text(), env=env, cwd=tmp_path)
+    assert r.returncode == 1 and r.stderr.strip() == "error: <input>:33: blocks nested more than 32 deep"

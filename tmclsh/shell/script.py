@@ -139,6 +139,9 @@ def parse_condition(word: str, args: str) -> expr.Expression:
     return expr.parse(args)
 
 
+MAX_BLOCK_DEPTH = 32  # .repeat/.if blocks inside one another
+
+
 class Parser:
     """Lines in, nodes out; a node is yielded as soon as it is complete (for stdin)."""
 
@@ -149,16 +152,22 @@ class Parser:
         self.base = base
         self.stack = stack + (file,)
         self.precheck = True
+        self.outer_blocks = 0  # blocks open around the .source that includes this file
 
     def fail(self, line: int, message: str) -> ScriptSyntaxError:
         return ScriptSyntaxError(self.file, line, message)
 
     def nodes(self, lines: Iterable[str]) -> Iterator[Node]:
         open_: list[tuple[Node, list[Node]]] = []  # open blocks and the body being filled
+        held = 0  # lines inside open blocks: a block without .end on stdin is bounded too
         for number, raw in enumerate(lines, 1):
             text = strip_comment(raw)
             if not text:
                 continue
+            held = held + 1 if open_ else 0
+            if held > files.MAX_LINES:
+                raise self.fail(open_[-1][0].line, f"{_word(open_[-1][0].text)[0]} has no "
+                                f".end within {files.MAX_LINES:,} lines")
             node = self.line(number, text, open_)
             if node is None:
                 continue
@@ -189,6 +198,8 @@ class Parser:
                 self.session.client.encode(text)
             return Step(file, number, text)
         word, args = _word(text)
+        if word in (".repeat", ".if") and len(open_) + self.outer_blocks >= MAX_BLOCK_DEPTH:
+            raise self.fail(number, f"blocks nested more than {MAX_BLOCK_DEPTH} deep")
         if word == ".repeat":
             count, var = parse_repeat(args)
             expr.validate(self.session, count)
@@ -225,7 +236,7 @@ class Parser:
                 raise self.fail(number, ".end without .repeat or .if")
             return open_.pop()[0]
         if word == ".source":
-            return self.include(number, text, args)
+            return self.include(number, text, args, len(open_))
         cmd = commands.find(word)
         if cmd is None:
             raise self.fail(number, f"unknown shell command {word!r}; type .help for the list")
@@ -236,7 +247,7 @@ class Parser:
             self.precheck = False
         return Step(file, number, text)
 
-    def include(self, number: int, text: str, args: str) -> Include:
+    def include(self, number: int, text: str, args: str, blocks: int = 0) -> Include:
         if not args:
             raise self.fail(number, ".source needs a file name")
         if "${" in args:
@@ -249,6 +260,7 @@ class Parser:
         lines = read_lines(path, lambda msg: self.fail(number, msg))
         sub = Parser(self.session, str(path), path.parent, self.stack)
         sub.precheck = self.precheck
+        sub.outer_blocks = self.outer_blocks + blocks + 1  # an include nests like a block
         body = list(sub.nodes(lines))
         self.precheck = sub.precheck
         return Include(self.file, number, text, str(path), body)
