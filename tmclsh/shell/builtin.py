@@ -11,6 +11,7 @@ import re
 from typing import TYPE_CHECKING
 
 from .. import instructions as isa
+from .. import limits
 from ..errors import StatusError, TmclError, TmclTimeoutError, TransportError, ValidationError
 from ..modules import Module, Parameter, available, from_version_string, load
 from ..protocol import Control, Request, status_ok
@@ -888,9 +889,7 @@ def cmd_address(session: Session, arg: str) -> None:
         session.out.info(f"address {client.address}" + (f" (CAN id {client.can_id})"
                                                          if client.is_can else ""))
         return
-    n = _number(text)
-    if n is None or not 0 <= n <= 255:
-        raise ValidationError(f"an address is a number 0..255, not {text!r}")
+    n = int(limits.parse("address", text, ".address"))  # as -a and TMCLSH_ADDRESS take it
     old_addr, old_can = client.address, client.can_id
     client.address = n
     if client.is_can:
