@@ -115,7 +115,7 @@ def _number(text: str, kind: type) -> float | int | None:
         return None
     try:
         if kind is int:
-            return int(t, 0)
+            return int(t[1:], 16) if t.startswith("$") else int(t, 0)  # $1F as in TMCL
         return float(t)
     except ValueError:
         return None
