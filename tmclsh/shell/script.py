@@ -976,7 +976,9 @@ def _is_read(session: Session, line: str) -> bool:
 @command(".record", ".record FILE | .record off", "record what you type to a script file",
          category="script", complete=["off"],
          details="Every line typed from now on is written to FILE (results as // comments); "
-                 "replay it with tmclsh -f FILE. '.record off' stops; '.record' shows the state.")
+                 "replay it with tmclsh -f FILE. '.record off' stops; '.record' shows the state. "
+                 "FILE is replaced when the recording ends ('.record off' or leaving the "
+                 "shell); if it cannot be written, the old FILE stays as it was.")
 def cmd_record(session: Session, args: str) -> None:
     current: Recorder | None = session.state.get("record")  # type: ignore[assignment]
     if not args:
