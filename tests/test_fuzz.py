@@ -11,8 +11,10 @@ Fixed budget and derandomized (the same examples every run), so CI is repeatable
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import signal
 import time
 
 import pytest
@@ -201,13 +203,34 @@ def _session(json_mode: bool) -> tuple[Session, list[bytes]]:
     return session, received
 
 
+class Hung(Exception):
+    pass
+
+
+@contextlib.contextmanager
+def watchdog(seconds: float):
+    """A line that blocks far past the bound fails the example (with the line and where it
+    hung) instead of hanging the test run."""
+    def bark(signum, frame):
+        raise Hung(f"still running after {seconds:g} s")
+
+    old = signal.signal(signal.SIGALRM, bark)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, old)
+
+
 def _run(texts: list[str], json_mode: bool, capsys) -> None:
     session, received = _session(json_mode)
     try:
         for text in texts:
             began = time.monotonic()
             try:
-                session.run_line(text)
+                with watchdog(BOUND * 3):
+                    session.run_line(text)
             except (TmclError, QuitShell):
                 pass
             # anything else propagates and fails the example with its traceback

@@ -40,6 +40,7 @@ LINES = [
     (".sleep -1", 1, "from 0 to 86400"),
     (".wait GAP 1, 0 == 0 --interval 1e300", 1, "--interval: must be a number of seconds"),
     (".wait GAP 1, 0 == 1 --timeout nan", 1, "--timeout: must be a number of seconds"),
+    (".wait GAP 1, 0 == 5 --timeout 0.2 --interval 86400", 1, "timed out after 0.2 s"),
     (".repeat 1e999", 1, "number 1e999 is too large"),
     (".repeat 10000000\nGAP 1, 0\n.end", 1, ".repeat count: must be a whole number from 0 to"),
     (".watch GAP 1, 0 --count 1e999", 1, "--count: must be a whole number from 1 to"),
