@@ -33,7 +33,7 @@ from tmclsh.shell.session import QuitShell, Session
 from tmclsh.transport import open_sim
 
 # TMCLSH_FUZZ_EXAMPLES=5000 TMCLSH_FUZZ_RANDOM=1 for a longer hunt than CI's
-FUZZ = settings(max_examples=int(os.environ.get("TMCLSH_FUZZ_EXAMPLES", "120")), deadline=None,
+FUZZ = settings(max_examples=int(os.environ.get("TMCLSH_FUZZ_EXAMPLES", "250")), deadline=None,
                 derandomize=not os.environ.get("TMCLSH_FUZZ_RANDOM"), database=None,
                 suppress_health_check=[HealthCheck.function_scoped_fixture,
                                        HealthCheck.too_slow, HealthCheck.data_too_large])
@@ -56,7 +56,8 @@ HOSTILE = ["[/]", "[bold]", "[/bold]", "[link=x]", "${", "}", "${x}", "${1/0}", 
            "/dev/zero", "/dev/full", "/nonexistent/x", ".", "..", "-", "min(5)", "max()",
            "bit(1.5, 2)", "round(1, 2)", "abs(", "not", "and", "or"]
 MNEMONICS = sorted({s.mnemonic for s in isa.all_instructions()}) + ["FOO", "gap", "sap"]
-PARAMS = [p.name for p in MODULE.axis_params[:25]] + [p.name for p in MODULE.global_params[:15]]
+PARAMS = sorted({p.name for name in ("TMCM-1311", "TMCM-351", "TMCM-1640")
+                 for p in load(name).axis_params[:20] + load(name).global_params[:10]})
 DOTS = sorted(c.name for c in commands.all_commands() if c.name not in LEAVE) + ["help", "?",
                                                                                "quit"]
 
@@ -186,9 +187,11 @@ def sandbox(tmp_path, monkeypatch):
     return tmp_path
 
 
-def _session(json_mode: bool) -> tuple[Session, list[bytes]]:
-    client = Client(open_sim("TMCM-1311", 1, speed=20), module="TMCM-1311", timeout=0.3,
-                    retries=0)
+MODULES = ("TMCM-1311", "TMCM-351", "TMCM-1640")
+
+
+def _session(json_mode: bool, module: str = "TMCM-1311") -> tuple[Session, list[bytes]]:
+    client = Client(open_sim(module, 1, speed=20), module=module, timeout=0.3, retries=0)
     sim = client.transport.simulator
     received: list[bytes] = []
     write = sim.write
@@ -223,8 +226,8 @@ def watchdog(seconds: float):
         signal.signal(signal.SIGALRM, old)
 
 
-def _run(texts: list[str], json_mode: bool, capsys) -> None:
-    session, received = _session(json_mode)
+def _run(texts: list[str], json_mode: bool, capsys, module: str = "TMCM-1311") -> None:
+    session, received = _session(json_mode, module)
     try:
         for text in texts:
             began = time.monotonic()
@@ -239,7 +242,7 @@ def _run(texts: list[str], json_mode: bool, capsys) -> None:
     finally:
         session.close()
         session.client.close()
-    check_frames(b"".join(received))
+    check_frames(b"".join(received), load(module))
     out = capsys.readouterr().out
     if json_mode:
         for row in out.splitlines():
@@ -247,15 +250,15 @@ def _run(texts: list[str], json_mode: bool, capsys) -> None:
 
 
 @FUZZ
-@given(texts=lines)
-def test_shell_lines_text_mode(texts, sandbox, capsys):
-    _run(texts, False, capsys)
+@given(texts=lines, module=st.sampled_from(MODULES))
+def test_shell_lines_text_mode(texts, module, sandbox, capsys):
+    _run(texts, False, capsys, module)
 
 
 @FUZZ
-@given(texts=lines)
-def test_shell_lines_json_mode(texts, sandbox, capsys):
-    _run(texts, True, capsys)
+@given(texts=lines, module=st.sampled_from(MODULES))
+def test_shell_lines_json_mode(texts, module, sandbox, capsys):
+    _run(texts, True, capsys, module)
 
 
 def test_the_checker_catches_what_it_should():
