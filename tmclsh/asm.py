@@ -30,6 +30,8 @@ from typing import Callable, Iterator
 
 from . import instructions as isa
 from .errors import AsmError, RangeError, ValidationError
+from .files import MAX_FILE as MAX_SOURCE
+from .files import MAX_LINES, FileError, decode, read_bytes, size_text
 from .modules import Module, Parameter
 from .protocol import INSTRUCTION_LEN, INT32_MAX, INT32_MIN, UINT32_MAX, Control, Instruction
 
@@ -51,8 +53,12 @@ _TOKEN = re.compile(r"""
 _MAX_LITERAL = 40
 # Deepest nesting of parentheses and unary signs in one operand.
 _MAX_DEPTH = 64
+# Most binary operators in one operand: the tree of ``1+1+...`` is as deep as it is long.
+_MAX_OPERATORS = 128
 # Intermediate results of constant arithmetic are kept within this magnitude.
 _MAX_MAGNITUDE = 2**64
+# Longest source line (characters) and largest source file (bytes).
+MAX_LINE_LENGTH = 4096
 
 
 @dataclass(frozen=True)
@@ -64,6 +70,9 @@ class Token:
 
 
 def tokenize(text: str, line: int | None = None, file: str | None = None) -> list[Token]:
+    if len(text) > MAX_LINE_LENGTH:
+        raise AsmError(f"line longer than {MAX_LINE_LENGTH} characters", line,
+                       MAX_LINE_LENGTH + 1, file)
     tokens: list[Token] = []
     pos = 0
     while pos < len(text):
@@ -122,6 +131,7 @@ class _Parser:
         self.file = file
         self.end_col = end_col
         self.depth = 0
+        self.operators = 0
 
     def peek(self) -> Token | None:
         return self.toks[self.i] if self.i < len(self.toks) else None
@@ -140,9 +150,16 @@ class _Parser:
         tok = self.peek()
         return tok if tok is not None and tok.kind == "op" and tok.text in chars else None
 
+    def _operator(self, tok: Token) -> None:
+        self.operators += 1
+        if self.operators > _MAX_OPERATORS:
+            where = f" (column {tok.col})" if self.line is None else ""
+            raise self.error(f"expression has more than {_MAX_OPERATORS} operators{where}", tok)
+
     def expr(self) -> Expr:
         left = self.term()
         while (tok := self._is_op("+-")) is not None:
+            self._operator(tok)
             self.i += 1
             left = Expr(tok.text, left.col, args=(left, self.term()))
         return left
@@ -150,6 +167,7 @@ class _Parser:
     def term(self) -> Expr:
         left = self.unary()
         while (tok := self._is_op("*/%")) is not None:
+            self._operator(tok)
             self.i += 1
             left = Expr(tok.text, left.col, args=(left, self.unary()))
         return left
@@ -737,7 +755,10 @@ class Assembler:
                 key = str(path.resolve())
                 if key in stack:
                     raise line.error(f"recursive #include of {name}", line.include_col)
-                return key, path.read_text(encoding="utf-8", errors="replace")
+                data = read_bytes(path, MAX_SOURCE, "include file")
+                return key, data.decode("utf-8", errors="replace")
+            except FileError as exc:
+                raise line.error(str(exc), line.include_col) from None
             except (OSError, ValueError) as exc:  # unreadable, bad name (NUL, too long)
                 if isinstance(exc, AsmError):
                     raise
@@ -817,14 +838,40 @@ def assemble(text: str, module: Module, file: str = "<input>", origin: int = 0,
 
 
 def assemble_file(path: str | Path, module: Module, origin: int = 0) -> Program:
+    """Assemble a source file (at most ``MAX_SOURCE`` bytes, ``files.MAX_LINES`` lines)."""
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise AsmError(f"cannot read {p}: {exc.strerror}", file=str(p)) from None
-    except UnicodeDecodeError:
-        raise AsmError(f"{p} is not a text file", file=str(p)) from None
+        text = decode(read_bytes(p, MAX_SOURCE, "program"), str(p), "program")
+    except FileError as exc:
+        raise AsmError(str(exc), file=str(p)) from None
+    if text.count("\n") > MAX_LINES:
+        raise AsmError(f"{p}: program longer than {MAX_LINES:,} lines; not read")
     return Assembler(module, origin).assemble(text, str(p), p.parent)
+
+
+def image_limit(module: Module | None) -> int:
+    """Bytes of the largest image file worth reading for ``module``: its program memory
+    as hex text (the larger form), with room for line ends."""
+    memory = module.program_memory if module is not None else 2048
+    return memory * 32
+
+
+def read_image_file(path: str, module: Module | None) -> list[Instruction]:
+    """An image file (``-`` = stdin) no larger than the module's program memory."""
+    limit = image_limit(module)
+    try:
+        data = read_bytes(path, limit, "image")
+    except FileError as exc:
+        if "larger than" in str(exc) and module is not None:
+            raise AsmError(f"{path}: image larger than the {module.name}'s program memory "
+                           f"({module.program_memory} instructions, {size_text(limit)} "
+                           "of hex text); not read") from None
+        raise AsmError(str(exc)) from None
+    image = read_image(data)
+    if module is not None and len(image) > module.program_memory:
+        raise AsmError(f"{path}: image of {len(image)} instructions; the {module.name} "
+                       f"holds {module.program_memory}")
+    return image
 
 
 # -- images ------------------------------------------------------------------------------

@@ -639,11 +639,13 @@ def _exit_status() -> list[str]:
         (EXIT_OK, "Success."),
         (EXIT_ERROR, "A TMCL or shell command failed (a rejected line, an error status from "
                      "the module, a timeout), a script stopped at an error, asm or disasm "
-                     "failed, scan found no module, or a bad config file or environment "
-                     "variable."),
-        (EXIT_USAGE, "Usage: an unknown option or a bad option value; or a script given with "
-                     "-f that was not run (nothing was sent): no such file, a syntax error, a "
-                     "value out of range or another line the module would refuse."),
+                     "failed, a file could not be written (the message names it and why), or "
+                     "scan found no module."),
+        (EXIT_USAGE, "Usage: an unknown option or a bad option value, a bad environment "
+                     "variable, profile or config file (each checked against the same "
+                     "LIMITS); or a script given with -f that was not run (nothing was sent): "
+                     "it cannot be read, no such file, a syntax error, a value out of range or "
+                     "another line the module would refuse."),
         (EXIT_CONNECT, "The shell could not connect: the port or CAN bus cannot be opened, or "
                        "the module does not answer when its type is detected (command 136)."),
         (130, "Interrupted with Ctrl-C (motion was stopped first)."),
@@ -654,6 +656,32 @@ def _exit_status() -> list[str]:
     out = [".SH EXIT STATUS"]
     for code, text in rows:
         out += [".TP", _b(str(code)), _esc(text)]
+    return out
+
+
+def _limits() -> list[str]:
+    from .files import MAX_FILE, MAX_LINE, MAX_LINES, size_text
+    from .limits import LIMITS
+    from .shell.expr import MAX_DEPTH, MAX_LENGTH, MAX_LITERAL, MAX_OPERATORS
+
+    out = [".SH LIMITS",
+           "Every number a user sets is checked against one table, whether it comes from an "
+           "option, an environment variable, a profile or a shell command; a value outside "
+           "it is refused with one line naming the setting and the range, and nothing is "
+           "sent."]
+    for key, lim in LIMITS.items():
+        out += [".TP", _b(key), _esc(_sentence(f"{lim.describe()}: {lim.what}"))]
+    out += [".PP",
+            _esc(f"Files: scripts, sources, programs, CSV files and config files are read up "
+                 f"to {size_text(MAX_FILE)} ({MAX_LINES:,} lines for a script, "
+                 f"{MAX_LINE:,} characters a line, also for -f - which runs each line as it "
+                 "arrives); program images up to the module's program memory. Larger ones "
+                 f"are refused unread. Expressions: at most {MAX_LENGTH} characters, "
+                 f"{MAX_OPERATORS} operators and {MAX_DEPTH} levels of nesting; number "
+                 f"literals at most {MAX_LITERAL} digits. Every file "
+                 "tmclsh writes (asm -o, .record, .watch --csv, .dump, .echo >) is written "
+                 "beside its target and renamed over it when complete, so a failed write "
+                 "leaves the old file as it was.")]
     return out
 
 
@@ -815,6 +843,7 @@ def manpage(parser: argparse.ArgumentParser | None = None) -> str:
     out += _instructions_section()
     out += _configuration()
     out.append(_BACKUPS.rstrip("\n"))
+    out += _limits()
     out.append(_FILES.rstrip("\n"))
     out += _exit_status()
     out.append(_EXAMPLES.rstrip("\n"))

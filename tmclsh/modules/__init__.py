@@ -231,7 +231,7 @@ class Module:
         """Parameters matching ``query``: number, name prefix, word in name/manual name, fuzzy."""
         pool = self.axis_params + self.global_params if kind is None else self._pool(kind)
         q = query.strip()
-        if re.fullmatch(r"\d+", q):
+        if re.fullmatch(r"\d{1,40}", q):  # longer: no number (nor one Python converts)
             n = int(q)
             return [p for p in pool if p.covers(n)]
         ranked = self._ranked(q, kind)
@@ -317,5 +317,5 @@ def by_firmware_id(firmware_id: int) -> Module | None:
 
 def from_version_string(text: str) -> Module | None:
     """Identify a module from its 136 string (``1311V111`` -> TMCM-1311)."""
-    m = re.match(r"\s*0*(\d+)V", text)
+    m = re.match(r"\s*0*(\d{1,9})V", text)
     return by_firmware_id(int(m.group(1))) if m else None

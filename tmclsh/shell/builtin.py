@@ -11,6 +11,7 @@ import re
 from typing import TYPE_CHECKING
 
 from .. import instructions as isa
+from .. import limits
 from ..errors import StatusError, TmclError, TmclTimeoutError, TransportError, ValidationError
 from ..modules import Module, Parameter, available, from_version_string, load
 from ..protocol import Control, Request, status_ok
@@ -442,7 +443,7 @@ def _kind_prefix(query: str) -> tuple[str | None, int | None, str]:
     if len(words) >= 2 and words[0].lower() in kinds:
         kind = kinds[words[0].lower()]
         bank = None
-        if kind == "global" and len(words) >= 3 and words[2].isdigit():
+        if kind == "global" and len(words) >= 3 and re.fullmatch(r"\d{1,9}", words[2]):
             bank = int(words[2])
             words = words[:2]
         return kind, bank, " ".join(words[1:])
@@ -450,9 +451,10 @@ def _kind_prefix(query: str) -> tuple[str | None, int | None, str]:
 
 
 def _number(text: str) -> int | None:
-    if re.fullmatch(r"\d+", text):
+    # at most 40 digits: longer is no parameter number (and more than Python converts)
+    if re.fullmatch(r"\d{1,40}", text):
         return int(text)
-    if re.fullmatch(r"(\$|0[xX])[0-9A-Fa-f]+", text):
+    if re.fullmatch(r"(\$|0[xX])[0-9A-Fa-f]{1,40}", text):
         return int(text.lstrip("$").removeprefix("0x").removeprefix("0X"), 16)
     return None
 
@@ -922,9 +924,7 @@ def cmd_address(session: Session, arg: str) -> None:
         session.out.info(f"address {client.address}" + (f" (CAN id {client.can_id})"
                                                          if client.is_can else ""))
         return
-    n = _number(text)
-    if n is None or not 0 <= n <= 255:
-        raise ValidationError(f"an address is a number 0..255, not {text!r}")
+    n = int(limits.parse("address", text, ".address"))  # as -a and TMCLSH_ADDRESS take it
     old_addr, old_can = client.address, client.can_id
     client.address = n
     if client.is_can:

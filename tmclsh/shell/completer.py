@@ -535,7 +535,7 @@ def candidates(s: Suggestion, word: str, module: Module | None,
         return out
     if isinstance(s, ParamBank):
         key = s.param.strip()
-        if re.fullmatch(r"\d+", key):
+        if re.fullmatch(r"\d{1,9}", key):
             banks = [b for b in module.banks() if module.glob(int(key), b) is not None]
         elif key:
             banks = sorted({p.bank for p in module.global_params
@@ -547,7 +547,7 @@ def candidates(s: Suggestion, word: str, module: Module | None,
         return _port_candidates(module, s.outputs)
     if isinstance(s, IoBank):
         banks = module.io_banks()
-        if re.fullmatch(r"\d+", s.port.strip()):
+        if re.fullmatch(r"\d{1,9}", s.port.strip()):
             n = int(s.port)
             banks = [b for b in banks if module.port(b, n) is not None
                      or (n == module.io_all_port and b in module.io_all_banks)]
@@ -607,7 +607,8 @@ def _resolve_param(module: Module, kind: str, key: str, bank: str) -> Parameter 
     except ValueError:
         b = None
     try:
-        return module.lookup(kind, int(key, 0) if re.fullmatch(r"\d+|0x[0-9a-fA-F]+", key) else key, b)
+        return module.lookup(kind, int(key, 0) if re.fullmatch(r"\d{1,9}|0x[0-9a-fA-F]{1,8}", key)
+                             else key, b)
     except Exception:
         return None
 

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Iterator
 
-from .. import asm, program, sourcemap
+from .. import asm, files, limits, program, sourcemap
 from ..errors import AsmError, TmclError, ValidationError
 from ..program import AppStatus, UploadError
 from ..protocol import Instruction
@@ -156,7 +156,8 @@ def _number(text: str, what: str) -> int:
             return int(t[1:], 16)
         return int(t, 0)
     except ValueError:
-        raise ValidationError(f"{what} must be a number, got {text!r}") from None
+        shown = t if len(t) <= 40 else t[:40] + "..."
+        raise ValidationError(f"{what} must be a number, got {shown!r}") from None
 
 
 def _options(words: list[str], flags: set[str], valued: set[str]) -> tuple[list[str], dict]:
@@ -241,8 +242,9 @@ def _source_lines(session: Session, file: str) -> list[str] | None:
     dbg = state(session)
     if file not in dbg.files:
         try:
-            dbg.files[file] = Path(file).read_text(encoding="utf-8", errors="replace").splitlines()
-        except OSError:
+            dbg.files[file] = files.read_bytes(file, what="source").decode(
+                "utf-8", errors="replace").splitlines()
+        except files.FileError:
             dbg.files[file] = None
     return dbg.files[file]
 
@@ -270,7 +272,7 @@ def resolve(session: Session, text: str, *, line_numbers: bool) -> tuple[int, st
     if t.startswith("@"):
         addr = check(_number(t[1:], "address"))
         return addr, f"@{addr}"
-    m = re.fullmatch(r"(.+):(\d+)", t)
+    m = re.fullmatch(r"(.+):(\d{1,9})", t)
     if m and not t[0].isdigit():
         if prog is None:
             raise ValidationError(f"no source file is known for the stored program; "
@@ -399,7 +401,7 @@ def _progress(session: Session) -> Iterator[program.Progress | None]:
                                TimeRemainingColumn)
 
     names = {"upload": "uploading", "verify": "verifying", "read": "reading"}
-    with Progress(TextColumn("{task.description:>10}"), BarColumn(), MofNCompleteColumn(),
+    with Progress(TextColumn("{task.description:>10}", markup=False), BarColumn(), MofNCompleteColumn(),
                   TimeRemainingColumn(), console=out.console, transient=True) as bar:
         tasks: dict[str, object] = {}
 
@@ -607,10 +609,7 @@ def cmd_dump(session: Session, argtext: str) -> None:
             session.out.warn("warning: the disassembly does not reassemble to the same image")
     if pos:
         path = Path(pos[0]).expanduser()
-        try:
-            path.write_text(text, encoding="utf-8")
-        except OSError as exc:
-            raise DebuggerError(f"cannot write {path}: {exc.strerror}") from None
+        files.write_file(path, text)  # all or nothing
         if session.out.json:
             obj = {"dumped": len(image), "file": str(path), "identical": same}
             if kept is not None:
@@ -746,9 +745,7 @@ next and the .display values are shown. An empty line repeats the step. Ctrl-C s
 series. Where no instruction is stored (empty program memory, or past the program's end)
 it says so and sends nothing. Needs binary mode.""")
 def cmd_step(session: Session, argtext: str) -> None:
-    n = _number(argtext, "N") if argtext.strip() else 1
-    if n < 1:
-        raise ValidationError("N must be at least 1")
+    n = int(limits.parse("count", argtext, ".step N")) if argtext.strip() else 1
     program.require_binary(session.client, "stepping (130)")
     pc: int | None = program.program_counter(session.client)
     _check_something_to_step(session, pc)
@@ -759,6 +756,7 @@ def cmd_step(session: Session, argtext: str) -> None:
     done = 0
     try:
         for done in range(1, n + 1):
+            session.time_left()  # the session's time limit, if it has one
             program.step_one(session.client, pc=pc, instruction_at=_stored(session),
                              on_wait=waiting)
             st = _read_status(session)
@@ -855,6 +853,7 @@ def cmd_continue(session: Session, argtext: str) -> None:
 
     def counted(n: int, pc: int) -> None:
         steps[0] = n
+        session.time_left()  # the session's time limit, if it has one
 
     stored = _stored(session)
 

@@ -93,15 +93,23 @@ def _run(args: argparse.Namespace, client, settings: dict) -> int:
         from .trace import enable_trace
 
         enable_trace(session)
-    if args.command is not None:
-        return run_lines(session, session.split(args.command))
-    if args.script is not None or not interactive:
-        from .script import run_file
+    try:
+        if args.command is not None:
+            status = run_lines(session, session.split(args.command))
+        elif args.script is not None or not interactive:
+            from .script import run_file
 
-        return run_file(session, args.script or "-")
-    from .app import run_repl
+            status = run_file(session, args.script or "-")
+        else:
+            from .app import run_repl
 
-    return run_repl(session)
+            status = run_repl(session)
+    except BaseException:
+        session.close()
+        raise
+    if not session.close():  # a recording that could not be put in place
+        status = status or EXIT_ERROR
+    return status
 
 
 def _exit_cleanly_on_signals() -> None:

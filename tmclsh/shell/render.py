@@ -47,8 +47,11 @@ def _console(stderr: bool = False):
             return _TRAILING_BLANKS.sub(r"\1", super()._render_buffer(buffer))
 
     no_color = bool(os.environ.get("NO_COLOR")) or os.environ.get("TERM") == "dumb"
+    # markup=False: every string printed, in a table cell or title too, is shown as it is;
+    # user text ('.param [/]', a file name '[bold]x') is never read as rich markup. Styles
+    # are given as style= or Text spans, never as [tags] inside strings.
     return TrimmedConsole(stderr=stderr, theme=rich_theme(), highlight=False, soft_wrap=True,
-                          no_color=no_color or None)
+                          no_color=no_color or None, markup=False)
 
 
 class Output:

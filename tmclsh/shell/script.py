@@ -28,8 +28,9 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, TextIO
+from typing import TYPE_CHECKING
 
+from .. import files, limits
 from ..errors import AsmError, RangeError, TmclError, TmclTimeoutError, ValidationError
 from . import commands, expr
 from .commands import command
@@ -151,6 +152,9 @@ def parse_condition(word: str, args: str) -> expr.Expression:
     return expr.parse(args)
 
 
+MAX_BLOCK_DEPTH = 32  # .repeat/.if blocks inside one another
+
+
 class Parser:
     """Lines in, nodes out; a node is yielded as soon as it is complete (for stdin)."""
 
@@ -161,14 +165,20 @@ class Parser:
         self.base = base
         self.stack = stack + (file,)
         self.precheck = True
+        self.outer_blocks = 0  # blocks open around the .source that includes this file
 
     def fail(self, line: int, message: str, kind: str = SYNTAX) -> ScriptSyntaxError:
         return ScriptSyntaxError(self.file, line, message, kind)
 
     def nodes(self, lines: Iterable[str]) -> Iterator[Node]:
         open_: list[tuple[Node, list[Node]]] = []  # open blocks and the body being filled
+        held = 0  # lines inside open blocks: a block without .end on stdin is bounded too
         for number, raw in enumerate(lines, 1):
             for text in split_line(raw, owns_line):  # `GAP 1, 0; GAP 2, 0` is two lines
+                held = held + 1 if open_ else 0
+                if held > files.MAX_LINES:
+                    raise self.fail(open_[-1][0].line, f"{_word(open_[-1][0].text)[0]} has no "
+                                    f".end within {files.MAX_LINES:,} lines")
                 node = self.line(number, text, open_)
                 if node is None:
                     continue
@@ -199,6 +209,8 @@ class Parser:
                 self.session.client.encode(text)
             return Step(file, number, text)
         word, args = _word(text)
+        if word in (".repeat", ".if") and len(open_) + self.outer_blocks >= MAX_BLOCK_DEPTH:
+            raise self.fail(number, f"blocks nested more than {MAX_BLOCK_DEPTH} deep")
         if word == ".repeat":
             count, var = parse_repeat(args)
             expr.validate(self.session, count)
@@ -235,7 +247,7 @@ class Parser:
                 raise self.fail(number, ".end without .repeat or .if")
             return open_.pop()[0]
         if word == ".source":
-            return self.include(number, text, args)
+            return self.include(number, text, args, len(open_))
         cmd = commands.find(word)
         if cmd is None:
             raise self.fail(number, f"unknown shell command {word!r}; type .help for the list")
@@ -246,7 +258,7 @@ class Parser:
             self.precheck = False
         return Step(file, number, text)
 
-    def include(self, number: int, text: str, args: str) -> Include:
+    def include(self, number: int, text: str, args: str, blocks: int = 0) -> Include:
         if not args:
             raise self.fail(number, ".source needs a file name")
         if "${" in args:
@@ -259,6 +271,7 @@ class Parser:
         lines = read_lines(path, lambda msg, kind: self.fail(number, msg, kind))
         sub = Parser(self.session, str(path), path.parent, self.stack)
         sub.precheck = self.precheck
+        sub.outer_blocks = self.outer_blocks + blocks + 1  # an include nests like a block
         body = list(sub.nodes(lines))
         self.precheck = sub.precheck
         return Include(self.file, number, text, str(path), body)
@@ -272,17 +285,23 @@ def resolve(name: str, base: Path | None) -> Path:
 
 
 def read_lines(path: Path, fail: Callable[[str, str], Exception]) -> list[str]:
-    """The file's lines; ``fail(message, kind)`` makes the error when it cannot be read."""
+    """A script's lines: at most ``files.MAX_FILE`` bytes, ``files.MAX_LINES`` lines and
+    ``files.MAX_LINE`` characters a line (``/dev/zero`` is refused, not read to the end);
+    ``fail(message, kind)`` makes the error when it cannot be read."""
+    if not path.exists():
+        raise fail(f"no such file: {path}", NO_FILE)
     try:
-        return path.read_text(encoding="utf-8").splitlines()
-    except FileNotFoundError:
-        raise fail(f"no such file: {path}", NO_FILE) from None
-    except IsADirectoryError:
-        raise fail(f"{path} is a folder, not a script", UNREADABLE) from None
-    except UnicodeDecodeError:
-        raise fail(f"{path} is not a text file", UNREADABLE) from None
-    except OSError as exc:
-        raise fail(f"cannot read {path}: {exc.strerror}", UNREADABLE) from None
+        lines = files.read_lines(path, "script")
+    except files.FileError as exc:
+        raise fail(str(exc), UNREADABLE) from None
+    except (OSError, ValueError) as exc:
+        raise fail(f"cannot read {path}: {getattr(exc, 'strerror', None) or exc}",
+                   UNREADABLE) from None
+    for no, line in enumerate(lines, 1):
+        if len(line) > files.MAX_LINE:
+            raise fail(f"{path}:{no}: line longer than {files.MAX_LINE:,} characters",
+                       UNREADABLE)
+    return lines
 
 
 def check_var_name(name: str) -> None:
@@ -314,7 +333,8 @@ def _check_expr_options(options: dict[str, bool]) -> Callable[[Session, str], No
         rest, opts = expr.split_options(args, options)
         for name in opts:
             if options[name]:
-                expr.option_float(opts, name, None, allow_none=name == "timeout")
+                expr.option_float(opts, name, None, allow_none=name == "timeout",
+                                  limit="wait_timeout" if name == "timeout" else "interval")
         if not rest:
             raise ValidationError("an expression is needed")
         expr.validate(session, expr.parse(rest))
@@ -419,6 +439,7 @@ class Runner:
             set_onerror(session, args, node)
             return
         typed = len(session.history)
+        session.time_left()  # a long .repeat stops at the session's time limit
         try:
             session.run_line(node.text)
         finally:
@@ -453,13 +474,7 @@ class Runner:
 def repeat_count(session: Session, count: expr.Expression | None) -> int:
     assert count is not None
     value = count.evaluate(expr.SessionContext(session))
-    if isinstance(value, float):
-        if not value.is_integer():
-            raise ValidationError(f".repeat count must be a whole number, got {value}")
-        value = int(value)
-    if value < 0:
-        raise ValidationError(f".repeat count must not be negative, got {value}")
-    return value
+    return int(limits.check("repeat", value, ".repeat count"))
 
 
 def report(session: Session, node: Node, exc: TmclError) -> None:
@@ -508,7 +523,7 @@ def _progress(session: Session, name: str, nodes: list[Node]):
         return None
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+    progress = Progress(TextColumn("{task.description}", markup=False), BarColumn(), MofNCompleteColumn(),
                         TimeElapsedColumn(), console=session.out.console, transient=True)
     task = progress.add_task(Path(name).name, total=total)
 
@@ -566,8 +581,11 @@ def _run_nodes(runner: Runner, nodes: Iterable[Node]) -> None:
 
 
 def _stdin_lines() -> Iterator[str]:
-    for line in sys.stdin:
-        yield line.rstrip("\n")
+    """``-f -``: each line run as it arrives, none longer than ``files.MAX_LINE``."""
+    try:
+        yield from files.stream_lines(sys.stdin, STDIN)
+    except files.FileError as exc:
+        raise ScriptError(str(exc)) from None
 
 
 def _report_plain(session: Session, exc: TmclError) -> None:
@@ -664,7 +682,7 @@ def _open_block(session: Session, word: str, args: str) -> None:
          category="script",
          details="Runs the lines up to the matching .end COUNT times (an expression). With "
                  "'as NAME' the variable NAME counts 0..COUNT-1 (like ports and motors). "
-                 "Blocks nest.\n"
+                 "Blocks nest. COUNT is 0..1000000.\n"
                  "  .repeat 3 as i\n  MVP REL, 0, 1000\n  .wait GAP 8, 0 == 1\n  .end")
 def cmd_repeat(session: Session, args: str) -> None:
     _open_block(session, ".repeat", args)
@@ -805,12 +823,14 @@ WAIT_OPTIONS = {"timeout": True, "interval": True}
          "poll until a condition holds (default timeout 30 s, interval 0.05 s)",
          category="script", complete=["--timeout", "--interval"],
          details="  .wait GAP 8, 0 == 1 --timeout 10\n  .wait RFS STATUS, 0 == 0\n"
-                 "--timeout none waits forever. A timeout is an error that shows the last "
+                 "--timeout none waits forever; otherwise at most a day (86400 s); "
+                 "--interval 0.001..86400 s. A timeout is an error that shows the last "
                  "value read.")
 def cmd_wait(session: Session, args: str) -> None:
     rest, opts = expr.split_options(args, WAIT_OPTIONS)
-    timeout = expr.option_float(opts, "timeout", WAIT_TIMEOUT, allow_none=True)
-    interval = expr.option_float(opts, "interval", WAIT_INTERVAL, minimum=0.001)
+    timeout = expr.option_float(opts, "timeout", WAIT_TIMEOUT, allow_none=True,
+                                limit="wait_timeout")
+    interval = expr.option_float(opts, "interval", WAIT_INTERVAL, limit="interval")
     assert interval is not None
     if not rest:
         raise ValidationError(".wait needs a condition: .wait GAP 8, 0 == 1")
@@ -822,22 +842,29 @@ def cmd_wait(session: Session, args: str) -> None:
         ok, *last = check(expression, expr.SessionContext(session))
         return ok
 
+    left = session.time_left()
+    capped = left is not None and (timeout is None or timeout > left)
     try:
-        session.client.wait_until(holds, timeout, interval)
+        session.client.wait_until(holds, left if capped else timeout, interval)
     except TmclTimeoutError:
+        if capped:
+            time.sleep(0.001)
+            session.time_left()
         seen = ", ".join(x for x in last if x)
         raise TmclTimeoutError(f"timed out after {timeout:g} s waiting for {expression.text} "
                                f"({seen})") from None
 
 
-@command(".sleep", ".sleep SECONDS", "pause (seconds may be a fraction or an expression)",
-         category="script")
+@command(".sleep", ".sleep SECONDS", "pause up to a day (seconds may be a fraction or an "
+         "expression)", category="script")
 def cmd_sleep(session: Session, args: str) -> None:
     if not args:
         raise ValidationError(".sleep needs seconds: .sleep 0.5")
-    seconds = expr.evaluate(session, args)
-    if seconds < 0:
-        raise ValidationError(f".sleep wants seconds >= 0, got {expr.format_number(seconds)}")
+    seconds = expr.seconds("sleep", expr.evaluate(session, args), ".sleep")
+    left = session.time_left()
+    if left is not None and seconds > left:
+        time.sleep(left)
+        session.time_left()  # raises: the time is up
     time.sleep(seconds)
 
 
@@ -884,11 +911,12 @@ def cmd_echo(session: Session, args: str) -> None:
             session.out.print(line, markup=False)
         return
     path = Path(_unquote(session.expand(target))).expanduser()
-    try:
-        with open(path, mode, encoding="utf-8") as fh:
-            fh.write(line + "\n")
-    except OSError as exc:
-        raise ScriptError(f"cannot write {path}: {exc.strerror}") from None
+    before = ""
+    if mode == "a" and path.is_file():  # appended all or nothing, like any write
+        before = files.read_text(path, what="file")
+        if before and not before.endswith("\n"):
+            before += "\n"
+    files.write_file(path, before + line + "\n")
 
 
 # -- recording and history ---------------------------------------------------------------
@@ -900,7 +928,7 @@ class Recorder:
     ``.watch`` too (a script would wait in them forever).
     """
 
-    def __init__(self, session: Session, path: Path, fh: TextIO):
+    def __init__(self, session: Session, path: Path, fh: files.AtomicWriter):
         self.session = session
         self.path = path
         self.fh = fh
@@ -926,12 +954,33 @@ class Recorder:
             text = f"{line}    // = {outcome}"
         else:
             text = line
-        self.fh.write(text + "\n")
-        self.fh.flush()
+        try:
+            self.fh.write(text + "\n")
+            self.fh.flush()
+        except files.FileError as exc:  # disk full: stop recording, say so, keep the old file
+            self.stop()
+            self.session.out.error(None, f"{exc}; recording stopped, {self.path} unchanged")
+            return
         self.lines += 1
 
+    def stop(self) -> None:
+        """Forget the recording: the file keeps what it held before ``.record``."""
+        self.fh.abort()
+        self._detach()
+
+    def _detach(self) -> None:
+        s = self.session
+        if self in s.recorders:
+            s.recorders.remove(self)
+        if s.state.get("record") is self:
+            s.state.pop("record", None)
+        if self.close in s.closers:
+            s.closers.remove(self.close)
+
     def close(self) -> None:
-        self.fh.close()
+        """Put the recording in place of the file (``.record off``, or the session ends)."""
+        self._detach()
+        self.fh.commit()
 
 
 def _is_read(session: Session, line: str) -> bool:
@@ -943,7 +992,9 @@ def _is_read(session: Session, line: str) -> bool:
 @command(".record", ".record FILE | .record off", "record what you type to a script file",
          category="script", complete=["off"],
          details="Every line typed from now on is written to FILE (results as // comments); "
-                 "replay it with tmclsh -f FILE. '.record off' stops; '.record' shows the state.")
+                 "replay it with tmclsh -f FILE. '.record off' stops; '.record' shows the state. "
+                 "FILE is replaced when the recording ends ('.record off' or leaving the "
+                 "shell); if it cannot be written, the old FILE stays as it was.")
 def cmd_record(session: Session, args: str) -> None:
     current: Recorder | None = session.state.get("record")  # type: ignore[assignment]
     if not args:
@@ -953,19 +1004,16 @@ def cmd_record(session: Session, args: str) -> None:
             session.out.info(f"recording to {current.path} ({current.lines} lines)")
         return
     if current is not None:
-        session.recorders.remove(current) if current in session.recorders else None
         current.close()
-        session.state.pop("record", None)
         session.out.info(f"recorded {current.lines} lines to {current.path}")
     if args.strip().lower() == "off":
         if current is None:
             session.out.info("not recording")
         return
     path = Path(_unquote(args.strip())).expanduser()
-    try:
-        fh = open(path, "w", encoding="utf-8")
-    except OSError as exc:
-        raise ScriptError(f"cannot write {path}: {exc.strerror}") from None
+    # written beside PATH and moved over it at '.record off' or the end of the session, so
+    # a full disk or a crash never leaves half a script where a good one was
+    fh = files.atomic_writer(path)
     client = session.client
     module = client.module.name if client.module else "unknown module"
     fh.write(f"# recorded by tmclsh {datetime.now():%Y-%m-%d %H:%M} "
@@ -974,6 +1022,7 @@ def cmd_record(session: Session, args: str) -> None:
     rec = Recorder(session, path, fh)
     session.state["record"] = rec
     session.recorders.append(rec)
+    session.closers.append(rec.close)
     session.out.info(f"recording to {path} (.record off to stop)")
 
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 from .. import asm
 from ..client import Client, Result
-from ..errors import StatusError, TmclError, ValidationError
+from ..errors import StatusError, TmclError, TmclTimeoutError, ValidationError
 from ..modules import Module
 from ..protocol import Request, status_ok
 from . import commands
@@ -29,6 +29,10 @@ _VAR = re.compile(r"\$\{([^}]*)\}")
 
 class Abort(TmclError):
     """The user declined a confirmation; nothing was sent."""
+
+
+class TimeLimitError(TmclTimeoutError):
+    """A line ran past the session's ``time_limit`` and was stopped."""
 
 
 class QuitShell(Exception):
@@ -59,6 +63,8 @@ class Session:
         self.last_result: Result | None = None
         # hooks: called with (line, result-or-error-text) after every line (used by .record)
         self.recorders: list[Callable[[str, str], None]] = []
+        # called once when the session ends (a recording is put in place of its file)
+        self.closers: list[Callable[[], None]] = []
         # asks the user; the REPL replaces it with a prompt_toolkit confirm
         self.ask: Callable[[str], bool] | None = None
         # features keep their state here (debugger, watch, ...), keyed by feature name
@@ -66,8 +72,26 @@ class Session:
         self.location: tuple[str, int] | None = None  # script file and line being run
         # the REPL sets it False before each line; see end_interrupted_line
         self.interrupted_line_ended = True
+        # seconds one line (with the script or block it starts) may take; None: no limit.
+        # For programs that embed the shell and for tests: .sleep, .wait, .watch, blocks and
+        # the debugger's stepping end with a TimeLimitError at the deadline.
+        self.time_limit: float | None = None
+        self._deadline: float | None = None
         commands.load_all()
         install_expressions(self)  # ${expression} in any line
+
+    def close(self) -> bool:
+        """End the session: run the closers; a failing one is reported, the rest still run.
+        False if one failed."""
+        ok = True
+        while self.closers:
+            fn = self.closers.pop()
+            try:
+                fn()
+            except TmclError as exc:
+                ok = False
+                self.out.error(None, str(exc))
+        return ok
 
     # -- module -------------------------------------------------------------------------
     @property
@@ -119,8 +143,28 @@ class Session:
         its line (``.watch``) takes the rest of it."""
         return split_text(text, owns_line)
 
+    def time_left(self) -> float | None:
+        """Seconds the current line may still take (None: no limit); TimeLimitError once
+        the time is up."""
+        if self._deadline is None:
+            return None
+        left = self._deadline - time.monotonic()
+        if left <= 0:
+            raise TimeLimitError(f"stopped: the line took longer than the session's time "
+                                 f"limit of {self.time_limit:g} s")
+        return left
+
     def run_line(self, line: str) -> Result | None:
         """Run one line; raises TmclError (or Abort) on failure, after counting it."""
+        if self.time_limit is None or self._deadline is not None:  # nested: a script's line
+            return self._run_line(line)
+        self._deadline = time.monotonic() + self.time_limit
+        try:
+            return self._run_line(line)
+        finally:
+            self._deadline = None
+
+    def _run_line(self, line: str) -> Result | None:
         text = strip_comment(line)  # `GAP 1, 0 # where`, `.let a = 3 // why`
         if not text:
             return None

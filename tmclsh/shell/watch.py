@@ -32,6 +32,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
+from .. import files
 from ..errors import TmclError, ValidationError
 from . import expr, plot, script
 from .commands import command
@@ -389,7 +390,7 @@ def parse_args(session: Session, args: str, *, names: bool = True):
     only watched values or variables: variables set earlier in the script do not exist yet.
     """
     rest, opts = expr.split_options(args, WATCH_OPTIONS)
-    interval = expr.option_float(opts, "interval", DEFAULT_INTERVAL)
+    interval = expr.option_float(opts, "interval", DEFAULT_INTERVAL, limit="watch_interval")
     count = expr.option_int(opts, "count", None, minimum=1)
     assert interval is not None
     items = parse_items(session, rest) if rest else default_items(session)
@@ -422,13 +423,14 @@ class WatchResult:
 
 
 class _Csv:
+    """The samples as CSV, written beside the file and put in its place when the watch
+    ends (a full disk stops the watch with an error and leaves the old file as it was)."""
+
     def __init__(self, path: Path, names: Sequence[str]):
-        try:
-            self.fh = open(path, "w", newline="", encoding="utf-8", buffering=1)
-        except OSError as exc:
-            raise ValidationError(f"cannot write {path}: {exc.strerror}") from None
+        self.fh = files.atomic_writer(path, newline="")
         self.writer = csv.writer(self.fh)
         self.writer.writerow(["time", "t", *names])
+        self.fh.flush()
         self.names = names
 
     def write(self, sample: Sample) -> None:
@@ -436,9 +438,10 @@ class _Csv:
                               f"{sample.t:.4f}",
                               *("" if sample.values.get(n) is None else sample.values[n]
                                 for n in self.names)])
+        self.fh.flush()
 
     def close(self) -> None:
-        self.fh.close()
+        self.fh.commit()
 
 
 def run_watch(session: Session, items: Sequence[Item], *, interval: float = DEFAULT_INTERVAL,
@@ -515,6 +518,7 @@ class _Watch:
         """Returns why the watch ended: count, until, key, interrupt or pipe."""
         next_at = self.start
         while not self.intr.requested:
+            self.session.time_left()  # raises at the session's time limit, if it has one
             sample = poll(self.session, self.items, time.monotonic() - self.start)
             if self.state.samples == 0 and len(sample.errors) == len(self.items):
                 # nothing readable at all: an error, not a watch of dashes
@@ -536,6 +540,9 @@ class _Watch:
             # the next sample is due one interval after this one began; polling slower than
             # the interval starts the next at once, without a backlog of samples
             next_at = max(next_at + self.interval, time.monotonic())
+            left = self.session.time_left()
+            if left is not None:
+                next_at = min(next_at, time.monotonic() + left)
             ended = self._wait(next_at)
             if ended is not None:
                 return ended
@@ -590,7 +597,9 @@ class _Watch:
                  "Keys: s or space stops all motors (MST), q ends the watch. Ctrl-C ends the "
                  "watch and does NOT stop the motors. Under --json or in a pipe, each sample "
                  "is a JSON object {\"t\": s, \"values\": {...}}. With no expressions: the "
-                 "position and speed of each motor. .plot draws the last watch.")
+                 "position and speed of each motor. .plot draws the last watch. "
+                 "--interval is 0..86400 s, --count 1..1000000; the CSV file is put "
+                 "in place when the watch ends.")
 def cmd_watch(session: Session, args: str) -> None:
     items, interval, count, until, csv_path = parse_args(session, args)
     result = run_watch(session, items, interval=interval, count=count, until=until,
