@@ -6,7 +6,6 @@ Heavy modules (prompt_toolkit, rich, python-can) are imported only by the paths 
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 
 from .options import (EXIT_CONNECT, EXIT_ERROR, EXIT_OK, EXIT_USAGE,  # noqa: F401
@@ -27,25 +26,20 @@ def cmd_asm(args: argparse.Namespace) -> int:
     if str(out) == "-":
         sys.stdout.buffer.write(data)
         return EXIT_OK
-    tmp = out.with_name(out.name + ".tmp")
-    tmp.write_bytes(data)
-    os.replace(tmp, out)  # never leave a partial file behind
+    from .files import write_file
+
+    write_file(out, data)  # all or nothing: a failed write leaves OUT as it was
     print(f"{args.file}: {len(prog)} instructions for {prog.module.name} -> {out}", file=sys.stderr)
     return EXIT_OK
 
 
 def cmd_disasm(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
-    from .asm import disassemble, read_image
-    from .errors import AsmError
+    from .asm import disassemble, read_image_file
     from .modules import load
 
-    try:
-        data = sys.stdin.buffer.read() if args.file == "-" else Path(args.file).read_bytes()
-    except OSError as exc:
-        raise AsmError(f"cannot read {args.file}: {exc.strerror}") from None
-    sys.stdout.write(disassemble(read_image(data), load(args.module), origin=args.at))
+    module = load(args.module)
+    image = read_image_file(args.file, module)  # bounded by the module's program memory
+    sys.stdout.write(disassemble(image, module, origin=args.at))
     return EXIT_OK
 
 
@@ -175,7 +169,9 @@ def main(argv: list[str] | None = None) -> int:
         if debug:
             raise
         print(f"tmclsh: {exc}", file=sys.stderr)
-        return EXIT_ERROR
+        from .limits import SettingError
+
+        return EXIT_USAGE if isinstance(exc, SettingError) else EXIT_ERROR
     except OSError as exc:
         if debug:
             raise

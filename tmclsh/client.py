@@ -897,9 +897,11 @@ class Client:
         ``timeout`` s (None: wait forever)."""
         deadline = None if timeout is None else time.monotonic() + timeout
         while not predicate():
-            if deadline is not None and time.monotonic() >= deadline:
+            now = time.monotonic()
+            if deadline is not None and now >= deadline:
                 raise TmclTimeoutError(f"condition not met within {timeout:g} s")
-            time.sleep(interval)
+            # a long interval never sleeps past the deadline
+            time.sleep(interval if deadline is None else min(interval, deadline - now))
 
     def reconnect(self, wait: float = 0.0) -> None:
         """Close and reopen the transport (after the port was lost, e.g. USB unplugged).

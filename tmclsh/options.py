@@ -9,24 +9,29 @@ from __future__ import annotations
 
 import argparse
 
-from . import __version__
+from . import __version__, limits
 
 SUBCOMMANDS = ("asm", "disasm", "sim", "ports", "scan")
 EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_CONNECT = 0, 1, 2, 3
 
 
-def _int(text: str) -> int:
-    try:
-        return int(text, 0)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+def setting(key: str):
+    """An argparse type that checks a value against ``limits.LIMITS[key]``, so an option
+    takes exactly what the same setting takes from a variable or a profile."""
+    def convert(text: str) -> int | float:
+        try:
+            return limits.parse(key, text)
+        except limits.SettingError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+    convert.__name__ = key  # argparse names it in "invalid <name> value"
+    return convert
 
 
-def _address(text: str) -> int:
-    n = _int(text)
-    if not 0 <= n <= 255:
-        raise argparse.ArgumentTypeError(f"address must be 0..255, got {n}")
-    return n
+def _range(key: str) -> str:
+    return limits.LIMITS[key].short()
+
+
+_address = setting("address")
 
 
 def _faults(text: str) -> dict[str, float]:
@@ -38,14 +43,11 @@ def _faults(text: str) -> dict[str, float]:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def _positive(text: str) -> float:
+def _seed(text: str) -> int:
     try:
-        v = float(text)
+        return int(text, 0)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if v <= 0:
-        raise argparse.ArgumentTypeError("must be positive")
-    return v
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
 
 
 def add_connection(p: argparse.ArgumentParser) -> None:
@@ -58,23 +60,30 @@ def add_connection(p: argparse.ArgumentParser) -> None:
                    help="python-can bus, e.g. socketcan:can0, pcan:PCAN_USBBUS1, virtual:bench")
     x.add_argument("--sim", metavar="MODULE", nargs="?", const="TMCM-1311",
                    help="the built-in simulator, in process (default module TMCM-1311)")
-    g.add_argument("--baud", type=_int, metavar="N", help="baud rate (default 9600, the factory setting)")
-    g.add_argument("--can-id", type=_int, metavar="N", help="module's CAN id (GP 71, default 1)")
-    g.add_argument("--reply-id", type=_int, metavar="N", help="module's CAN reply id (GP 70, default 2)")
+    g.add_argument("--baud", type=setting("baud"), metavar="N",
+                   help=f"baud rate (default 9600, the factory setting; {_range('baud')})")
+    g.add_argument("--can-id", type=setting("can_id"), metavar="N",
+                   help=f"module's CAN id (GP 71, default 1; {_range('can_id')})")
+    g.add_argument("--reply-id", type=setting("reply_id"), metavar="N",
+                   help=f"module's CAN reply id (GP 70, default 2; {_range('reply_id')})")
     g.add_argument("--profile", metavar="NAME", help="connection profile from the config file")
 
 
 def add_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("options")
     g.add_argument("-m", "--module", metavar="NAME", help="module type (default: detected with command 136)")
-    g.add_argument("-a", "--address", type=_address, metavar="N", help="module address (default 1)")
-    g.add_argument("--host-address", type=_address, metavar="N", help="host address (default 2)")
+    g.add_argument("-a", "--address", type=_address, metavar="N",
+                   help=f"module address (default 1; {_range('address')})")
+    g.add_argument("--host-address", type=_address, metavar="N",
+                   help=f"host address (default 2; {_range('host_address')})")
     g.add_argument("--ascii", action="store_true", default=None,
                    help="talk to the module through its ASCII mode instead of binary frames")
     g.add_argument("--json", action="store_true", help="one JSON object per result on stdout")
     g.add_argument("--trace", action="store_true", help="every frame in hex, decoded, on stderr")
-    g.add_argument("--timeout", type=_positive, metavar="S", help="reply timeout in seconds (default 1)")
-    g.add_argument("--retries", type=_int, metavar="N", help="retries of idempotent commands (default 2)")
+    g.add_argument("--timeout", type=setting("timeout"), metavar="S",
+                   help=f"reply timeout in seconds (default 1; {_range('timeout')})")
+    g.add_argument("--retries", type=setting("retries"), metavar="N",
+                   help=f"retries of idempotent commands (default 2; {_range('retries')})")
     g.add_argument("--keep-going", action="store_true", help="scripts: continue after an error")
     g.add_argument("-y", "--yes", action="store_true",
                    help="do not ask before EEPROM writes, factory reset or program download")
@@ -102,12 +111,14 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("-m", "--module", metavar="NAME", default="TMCM-1311", help="target module (default TMCM-1311)")
     a.add_argument("-o", "--output", metavar="OUT", help="output file (default FILE with .bin, or .hex with --hex)")
     a.add_argument("--hex", action="store_true", help="hex text: one instruction per line, 7 bytes")
-    a.add_argument("--at", type=_int, metavar="ADDR", default=0, help="start address (default 0)")
+    a.add_argument("--at", type=setting("origin"), metavar="ADDR", default=0,
+                   help=f"start address (default 0; {_range('origin')})")
 
     d = sub.add_parser("disasm", help="disassemble a binary or hex image")
     d.add_argument("file", metavar="FILE")
     d.add_argument("-m", "--module", metavar="NAME", default="TMCM-1311", help="module for symbolic names")
-    d.add_argument("--at", type=_int, metavar="ADDR", default=0, help="address of the first instruction")
+    d.add_argument("--at", type=setting("origin"), metavar="ADDR", default=0,
+                   help=f"address of the first instruction (default 0; {_range('origin')})")
 
     s = sub.add_parser("sim", help="serve a simulated module on a pty, TCP or CAN")
     s.add_argument("-m", "--module", metavar="NAME", default="TMCM-1311")
@@ -123,7 +134,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "delay (held back 0.2..2 s), garbage (noise before it), dup (sent "
                         "twice), dup-late (a copy after the next request); e.g. "
                         "drop=0.1,corrupt=0.05,dup=0.05")
-    s.add_argument("--faults-seed", type=_int, metavar="N",
+    s.add_argument("--faults-seed", type=_seed, metavar="N",
                    help="seed for --faults, so a run misbehaves the same way again")
 
     sub.add_parser("ports", help="list serial ports (Trinamic USB devices marked)")
@@ -132,7 +143,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_connection(sc)
     sc.add_argument("--from", dest="first", type=_address, default=1, metavar="N")
     sc.add_argument("--to", dest="last", type=_address, default=255, metavar="N")
-    sc.add_argument("--timeout", type=_positive, default=0.05, metavar="S",
-                    help="per-address timeout (default 0.05)")
+    sc.add_argument("--timeout", type=setting("scan_timeout"), default=0.05, metavar="S",
+                    help=f"per-address timeout (default 0.05; {_range('scan_timeout')})")
     sc.add_argument("--json", action="store_true")
     return p

@@ -118,29 +118,48 @@ def _run(args: argparse.Namespace, client, settings: dict) -> int:
         from .trace import enable_trace
 
         enable_trace(session)
-    if not interactive:
-        # 138 messages are results too: in order with the others (the REPL shows them as
-        # they come; see app.py)
-        unlisten = lambda: None  # noqa: E731
-        wrote = _watch_for_writes(client)
-        if out.json:
-            unlisten = client.add_listener(lambda reply: out.event(reply, client.event_time))
-            client.start_event_poller()  # an event shows when it comes, not at the next line
-        try:
-            if args.command is not None:
-                return run_lines(session, session.split(args.command))
+    try:
+        if not interactive:
+            status = _run_unattended(args, session)
+        else:
+            from .app import run_repl
+
+            status = run_repl(session)
+    except BaseException:
+        session.close()
+        raise
+    if not session.close():  # a recording that could not be put in place
+        status = status or EXIT_ERROR
+    return status
+
+
+def _run_unattended(args: argparse.Namespace, session: Session) -> int:
+    """-c, -f, or stdin that is no terminal."""
+    client, out = session.client, session.out
+    # 138 messages are results too: in order with the others (the REPL shows them as they
+    # come; see app.py)
+    unlisten = lambda: None  # noqa: E731
+    wrote = _watch_for_writes(client)
+    if out.json:
+        unlisten = client.add_listener(lambda reply: out.event(reply, client.event_time))
+        client.start_event_poller()  # an event shows when it comes, not at the next line
+    finished = False
+    try:
+        if args.command is not None:
+            status = run_lines(session, session.split(args.command))
+        else:
             from .script import run_file
 
-            return run_file(session, args.script or "-")
-        finally:
-            client.stop_event_poller()
+            status = run_file(session, args.script or "-")
+        finished = True
+    finally:
+        client.stop_event_poller()
+        if finished:  # (after Ctrl-C: straight on to the stop, nothing else first)
             _last_events(session)
-            unlisten()
-            if wrote():  # only reads (or nothing) sent: nothing can have started
-                _note_left_running(session)
-    from .app import run_repl
-
-    return run_repl(session)
+        unlisten()
+        if wrote() and finished:  # only reads (or nothing) sent: nothing can have started
+            _note_left_running(session)
+    return status
 
 
 def _last_events(session: Session) -> None:

@@ -36,6 +36,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
+from .. import files
 from ..errors import TmclError, TransportError, ValidationError
 from . import expr, plot, script
 from .commands import command
@@ -72,14 +73,20 @@ def parse_items(session: Session, text: str) -> list[Item]:
     import re
 
     items: list[Item] = []
-    for part in text.split(";"):
+    parts = text.split(";")
+    for i, part in enumerate(parts):
         part = part.strip()
         if not part:
             continue
         m = re.match(r"([A-Za-z_][A-Za-z0-9_]*)\s*=(?!=)(.*)$", part, re.DOTALL)
         name, body = (m.group(1), m.group(2)) if m else (None, part)
-        expression = expr.parse(session.expand(body))
-        expr.validate(session, expression)
+        try:
+            expression = expr.parse(session.expand(body))
+            expr.validate(session, expression)
+        except TmclError as exc:
+            if i == 0:
+                raise
+            raise ValidationError(_after_semicolon(parts, i, exc)) from None
         name = name or expression.text
         if any(i.name == name for i in items):
             raise ValidationError(f"{name!r} is watched twice")
@@ -87,6 +94,15 @@ def parse_items(session: Session, text: str) -> list[Item]:
     if not items:
         raise ValidationError("nothing to watch")
     return items
+
+
+def _after_semicolon(parts: list[str], i: int, exc: TmclError) -> str:
+    """An expression after a ';' did not parse: perhaps it was meant as the next command."""
+    before = ";".join(parts[:i]).strip()
+    after = ";".join(parts[i:]).strip()
+    return (f"{parts[i].strip()!r} after ';' is not a watch expression ({exc}); .watch takes "
+            f"the rest of its line, ';' separating its expressions. To run {after!r} after "
+            f"the watch, put it on a line of its own:\n  .watch {before}\n  {after}")
 
 
 def default_items(session: Session) -> list[Item]:
@@ -390,7 +406,7 @@ def parse_args(session: Session, args: str, *, names: bool = True):
     only watched values or variables: variables set earlier in the script do not exist yet.
     """
     rest, opts = expr.split_options(args, WATCH_OPTIONS)
-    interval = expr.option_float(opts, "interval", DEFAULT_INTERVAL)
+    interval = expr.option_float(opts, "interval", DEFAULT_INTERVAL, limit="watch_interval")
     count = expr.option_int(opts, "count", None, minimum=1)
     assert interval is not None
     items = parse_items(session, rest) if rest else default_items(session)
@@ -423,13 +439,14 @@ class WatchResult:
 
 
 class _Csv:
+    """The samples as CSV, written beside the file and put in its place when the watch
+    ends (a full disk stops the watch with an error and leaves the old file as it was)."""
+
     def __init__(self, path: Path, names: Sequence[str]):
-        try:
-            self.fh = open(path, "w", newline="", encoding="utf-8", buffering=1)
-        except OSError as exc:
-            raise ValidationError(f"cannot write {path}: {exc.strerror}") from None
+        self.fh = files.atomic_writer(path, newline="")
         self.writer = csv.writer(self.fh)
         self.writer.writerow(["time", "t", *names])
+        self.fh.flush()
         self.names = names
 
     def write(self, sample: Sample) -> None:
@@ -437,9 +454,10 @@ class _Csv:
                               f"{sample.t:.4f}",
                               *("" if sample.values.get(n) is None else sample.values[n]
                                 for n in self.names)])
+        self.fh.flush()
 
     def close(self) -> None:
-        self.fh.close()
+        self.fh.commit()
 
 
 def run_watch(session: Session, items: Sequence[Item], *, interval: float = DEFAULT_INTERVAL,
@@ -516,6 +534,7 @@ class _Watch:
         """Returns why the watch ended: count, until, key, interrupt or pipe."""
         next_at = self.start
         while not self.intr.requested:
+            self.session.time_left()  # raises at the session's time limit, if it has one
             if self.state.lost is not None and not self._reconnect():
                 ended = self._wait(time.monotonic() + RECONNECT_EVERY)
                 if ended is not None:
@@ -550,6 +569,9 @@ class _Watch:
             # the next sample is due one interval after this one began; polling slower than
             # the interval starts the next at once, without a backlog of samples
             next_at = max(next_at + self.interval, time.monotonic())
+            left = self.session.time_left()
+            if left is not None:
+                next_at = min(next_at, time.monotonic() + left)
             ended = self._wait(next_at)
             if ended is not None:
                 return self._end(ended)
@@ -625,8 +647,10 @@ class _Watch:
 @command(".watch", ".watch [NAME=]EXPR; ... [--interval S] [--count N] [--until EXPR] "
          "[--csv FILE]",
          "poll values live: value, min, max, rate, recent history", category="watch",
-         complete=["--interval", "--count", "--until", "--csv"],
+         complete=["--interval", "--count", "--until", "--csv"], owns_line=True,
          details="  .watch pos=GAP 1, 0; speed=GAP 3, 0; in0=GIO 0, 0\n"
+                 "It takes the rest of its line (';' separates its expressions): put other "
+                 "commands on lines of their own.\n"
                  "  .watch rev=GAP 1, 0 / 51200 --until \"rev >= 2\" --csv run.csv\n"
                  "Keys: s or space stops everything (the stored program if it runs, then MST "
                  "to every motor, speeds read back) and keeps watching; Ctrl-C does the same "
@@ -634,7 +658,9 @@ class _Watch:
                  "A lost link shows as \"link lost\"; the watch reconnects and samples on "
                  "once the link is back. Under --json or in a pipe, each sample "
                  "is a JSON object {\"t\": s, \"values\": {...}}. With no expressions: the "
-                 "position and speed of each motor. .plot draws the last watch.")
+                 "position and speed of each motor. .plot draws the last watch. "
+                 "--interval is 0..86400 s, --count 1..1000000; the CSV file is put "
+                 "in place when the watch ends.")
 def cmd_watch(session: Session, args: str) -> None:
     items, interval, count, until, csv_path = parse_args(session, args)
     result = run_watch(session, items, interval=interval, count=count, until=until,
