@@ -372,7 +372,10 @@ def encode(line: Line, module: Module, symbols: Symbols | None = None, *,
         raise line.error(f"unknown command {line.mnemonic!r}{_suggest(line.mnemonic, known)}",
                          line.mnemonic_col)
     if not spec.on(module.name):
-        raise line.error(f"{spec.mnemonic} is not available on the {module.name}", line.mnemonic_col)
+        hint = (f" (no data on this module's commands: send it by number, {spec.opcode} "
+                "<type>, <motor>, <value>)") if module.generic else ""
+        raise line.error(f"{spec.mnemonic} is not available on the {module.name}{hint}",
+                         line.mnemonic_col)
     if direct and not spec.direct:
         raise line.error(f"{spec.mnemonic} only works inside a stored program, not as a direct "
                          "command (upload a program with .upload)", line.mnemonic_col)
@@ -597,7 +600,7 @@ class _Encoder:
             p = self.module.port(bank, port)
             if p is None:  # type_() refused unknown ports already
                 raise self.fail(f"no port {port} in I/O bank {bank}", expr)
-            if p.kind != "digital_out":
+            if p.kind not in ("digital_out", "unknown"):  # unknown: a generic module's port
                 raise self.fail(f"{p.name} (bank {p.bank} port {p.port}) is an input; "
                                 "SIO sets outputs", expr)
             lo, hi = p.min, p.max

@@ -147,7 +147,57 @@ def cmd_scan(args: argparse.Namespace) -> int:
     return EXIT_OK if found else EXIT_ERROR
 
 
+def cmd_modules(args: argparse.Namespace) -> int:
+    """The known modules and where each comes from, or (``check FILE``) one file validated."""
+    import json
+
+    from . import modules
+
+    if args.action == "check" or args.file:
+        if not args.file:
+            print("tmclsh: modules check wants a FILE", file=sys.stderr)
+            return EXIT_USAGE
+        try:
+            mod = modules.read_file(args.file)
+        except modules.ModuleFileError as exc:
+            print(f"tmclsh: {exc}", file=sys.stderr)
+            return EXIT_ERROR
+        print(f"{args.file}: {mod.name} (firmware id {mod.firmware_id}, version "
+              f"{mod.version_string}): {len(mod.axis_params)} axis and {len(mod.global_params)} "
+              f"global parameters, {len(mod.io)} I/O ports, commands of "
+              f"{modules.commands_of(mod)}: OK")
+        return EXIT_OK
+    built = set(modules.built_in())
+    for mod in modules.catalogue():
+        source = mod.source
+        if source != modules.BUILT_IN and mod.name in built:
+            source += " (replaces the built-in)"
+        if args.json:
+            print(json.dumps({"module": mod.name, "firmware_id": mod.firmware_id,
+                              "version_string": mod.version_string, "source": source}))
+        else:
+            print(f"{mod.name:<12} {mod.version_string:<10} {source}")
+    if not args.json:
+        print(f"{'generic':<12} {'any':<10} built in: numbers only, for any other TMCL module")
+    for problem in modules.problems():
+        print(f"tmclsh: not loaded: {problem}", file=sys.stderr)
+    return EXIT_ERROR if modules.problems() else EXIT_OK
+
+
 # -- entry point -------------------------------------------------------------------------
+
+def _user_modules(args: argparse.Namespace) -> None:
+    """Take in --module-file; a module file that cannot be used is one warning line and the
+    run goes on without it (``tmclsh modules`` reports them itself)."""
+    from . import modules
+
+    for path in getattr(args, "module_file", None) or ():
+        modules.add_file(path)
+    if args.subcommand == "modules":
+        return
+    for problem in modules.problems():
+        print(f"tmclsh: warning: {problem}; going on without it", file=sys.stderr)
+
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
@@ -162,8 +212,9 @@ def main(argv: list[str] | None = None) -> int:
 
             sys.stdout.write(completion_script(args.completions, parser))
             return EXIT_OK
+        _user_modules(args)
         handler = {"asm": cmd_asm, "disasm": cmd_disasm, "sim": cmd_sim, "ports": cmd_ports,
-                   "scan": cmd_scan}.get(args.subcommand or "")
+                   "scan": cmd_scan, "modules": cmd_modules}.get(args.subcommand or "")
         if handler is not None:
             return handler(args)
         from .shell.main import run_shell

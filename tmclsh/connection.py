@@ -119,7 +119,24 @@ def start(client: Client, *, ascii: bool = False) -> Client:
             AsciiLink.attach(client)
         if client.module is None:
             client.identify()
+        elif client.module.generic and not client.module.firmware_id:
+            _name_generic(client)
     except BaseException:
         client.close()
         raise
     return client
+
+
+def _name_generic(client: Client) -> None:
+    """``-m generic``: no data is used, but the banner can still say which type answers."""
+    from .errors import TmclError
+    from .modules import generic_for
+    from .protocol import Control, Request
+
+    try:
+        reply = client.request(Request(client.address, Control.GET_VERSION, 0, 0, 0))
+    except TmclError:
+        return
+    named = generic_for(reply.version) if reply is not None and reply.version else None
+    if named is not None:
+        client.module, client.version = named, reply.version  # type: ignore[union-attr]

@@ -43,7 +43,7 @@ PORT_GLOBS = ("/dev/ttyUSB*", "/dev/ttyACM*", "/dev/serial/by-id/*")
 # what to complete for an option's value, by the option's dest (or a positional's)
 VALUE_KINDS = {
     "port": "ports", "can": "can", "sim": "modules", "module": "modules", "profile": "profiles",
-    "script": "files", "file": "files", "output": "files",
+    "script": "files", "file": "files", "output": "files", "module_file": "files",
 }
 
 
@@ -175,9 +175,9 @@ def describe(parser: argparse.ArgumentParser | None = None) -> tuple[CommandLine
 # -- the rest of what is documented ----------------------------------------------------------
 
 def module_names() -> list[str]:
-    from .modules import available
+    from .modules import built_in
 
-    return available()
+    return built_in()  # never the generating user's own module files
 
 
 def can_interfaces() -> list[str]:

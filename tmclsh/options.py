@@ -11,7 +11,7 @@ import argparse
 
 from . import __version__
 
-SUBCOMMANDS = ("asm", "disasm", "sim", "ports", "scan")
+SUBCOMMANDS = ("asm", "disasm", "sim", "ports", "scan", "modules")
 EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_CONNECT = 0, 1, 2, 3
 
 
@@ -57,7 +57,12 @@ def add_connection(p: argparse.ArgumentParser) -> None:
 
 def add_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("options")
-    g.add_argument("-m", "--module", metavar="NAME", help="module type (default: detected with command 136)")
+    g.add_argument("-m", "--module", metavar="NAME",
+                   help="module type (default: detected with command 136; a type without data "
+                        "runs in generic mode, numbers only; \"generic\" forces it)")
+    g.add_argument("--module-file", metavar="PATH", action="append", dest="module_file",
+                   help="a module data file of your own (same format as the built-in ones; "
+                        "files in the config directory's modules/ are read too)")
     g.add_argument("-a", "--address", type=_address, metavar="N", help="module address (default 1)")
     g.add_argument("--host-address", type=_address, metavar="N", help="host address (default 2)")
     g.add_argument("--ascii", action="store_true", default=None,
@@ -76,7 +81,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="tmclsh",
         description="Interactive shell for Trinamic TMCL modules (TMCM-1311, TMCM-351, TMCM-1640).",
-        epilog="Subcommands: asm, disasm, sim, ports, scan ('tmclsh SUBCOMMAND --help').")
+        epilog="Subcommands: asm, disasm, sim, ports, scan, modules ('tmclsh SUBCOMMAND --help').")
     add_connection(p)
     add_options(p)
     run = p.add_mutually_exclusive_group()
@@ -109,7 +114,15 @@ def build_parser() -> argparse.ArgumentParser:
     how.add_argument("--tcp", metavar="HOST:PORT", help="serve on TCP, for socket:// URLs")
     how.add_argument("--can", metavar="IFACE:CHANNEL", help="serve on a python-can bus")
 
-    sub.add_parser("ports", help="list serial ports (Trinamic USB devices marked)")
+    po = sub.add_parser("ports", help="list serial ports (Trinamic USB devices marked)")
+    po.add_argument("--json", action="store_true", help="one JSON object per port")
+
+    mo = sub.add_parser("modules", help="known modules and where each comes from; "
+                                        "'modules check FILE' validates a module file")
+    mo.add_argument("action", nargs="?", choices=("check",), metavar="check",
+                    help="validate FILE: exit 0 if tmclsh can use it, else 1 naming the line")
+    mo.add_argument("file", nargs="?", metavar="FILE", help="the module file to check")
+    mo.add_argument("--json", action="store_true", help="one JSON object per module")
 
     sc = sub.add_parser("scan", help="find modules on a bus (address, type, firmware)")
     add_connection(sc)

@@ -185,7 +185,7 @@ def banner(session: Session):
     out = Text()
     out.append(f"tmclsh {__version__}", style="bold")
     out.append(" · ")
-    mod = c.module.name if c.module is not None else "unknown module"
+    mod = c.module.label if c.module is not None else "unknown module"
     out.append(mod, style="tmcl.name")
     out.append(f" at address {c.address}")
     if c.transport.simulated:

@@ -47,7 +47,7 @@ def create_toolbar_tokens_func(session: Session) -> Callable[[], Fragments]:
         else:
             out.append(("class:bottom-toolbar.on", f" {c.describe()} "))
         out.append(sep)
-        mod = c.module.name if c.module is not None else "module ?"
+        mod = c.module.label if c.module is not None else "module ?"
         out.append(("class:bottom-toolbar", f"{mod} @{c.address}"))
         out.append(sep)
         ascii_mode = c.mode == "ascii"
