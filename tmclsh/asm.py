@@ -512,6 +512,8 @@ class _Encoder:
                     self.param = mod.lookup(pkind, number, bank)
             except ValidationError as exc:
                 raise self.fail(str(exc), expr) from None
+            if mod.generic:
+                self.param = None  # a number without data: nothing to check or name it by
             return number
         if kind == "interrupt":
             value = self.number(expr, isa.interrupts())
