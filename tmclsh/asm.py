@@ -663,10 +663,11 @@ class Program:
         return len(self.instructions)
 
     def to_binary(self) -> bytes:
-        return b"".join(i.to_bytes() for i in self.instructions)
+        """The TMCL-IDE image: one 8-byte record per instruction (see ``image_bytes``)."""
+        return image_bytes(self.instructions)
 
     def to_hex(self) -> str:
-        return "".join(i.to_bytes().hex(" ") + "\n" for i in self.instructions)
+        return hex_text(self.instructions)
 
     def loc(self, address: int) -> SourceLoc | None:
         idx = address - self.origin
@@ -824,11 +825,44 @@ def assemble_file(path: str | Path, module: Module, origin: int = 0) -> Program:
 
 # -- images ------------------------------------------------------------------------------
 
-def read_image(data: bytes) -> list[Instruction]:
-    """Instructions from a binary image (7 bytes each) or the ``--hex`` text form.
+# The TMCL-IDE's binary image (and PyTrinamic's LoadTMCLBinary): per instruction command,
+# type, motor/bank, value (4 bytes, MSB first), then the 8-bit sum of those seven bytes.
+IMAGE_RECORD_LEN = INSTRUCTION_LEN + 1
 
-    The text form is one instruction per line, seven two-digit hex bytes separated by spaces
-    (what ``Program.to_hex`` writes).
+
+def image_bytes(instructions: list[Instruction]) -> bytes:
+    """Instructions as a TMCL-IDE binary image (8-byte records with their checksum)."""
+    out = bytearray()
+    for ins in instructions:
+        raw = ins.to_bytes()
+        out += raw + bytes((sum(raw) & 0xFF,))
+    return bytes(out)
+
+
+def hex_text(instructions: list[Instruction]) -> str:
+    """The ``--hex`` text form: one instruction per line, seven hex bytes."""
+    return "".join(i.to_bytes().hex(" ") + "\n" for i in instructions)
+
+
+def is_image_file(path: str | Path, data: bytes | None = None) -> bool:
+    """A ``.bin``/``.hex`` file, or bytes that are not text, hold an image, not source."""
+    if Path(path).suffix.lower() in (".bin", ".hex"):
+        return True
+    if data is None:
+        return False
+    try:
+        data.decode("utf-8")
+    except UnicodeDecodeError:
+        return True
+    return False
+
+
+def read_image(data: bytes) -> list[Instruction]:
+    """Instructions from a TMCL-IDE binary image or the ``--hex`` text form.
+
+    The binary image is 8-byte records whose last byte is the 8-bit sum of the other seven;
+    a record with another checksum is refused, naming it. The text form is one instruction
+    per line, seven two-digit hex bytes separated by spaces (what ``Program.to_hex`` writes).
     """
     try:
         text = data.decode("ascii")
@@ -844,11 +878,48 @@ def read_image(data: bytes) -> list[Instruction]:
                 raise AsmError(f"expected {INSTRUCTION_LEN} hex bytes, found {len(parts)}", no, 1)
             out.append(Instruction.from_bytes(bytes(int(x, 16) for x in parts)))
         return out
-    if len(data) % INSTRUCTION_LEN:
-        raise AsmError(f"a binary image is a multiple of {INSTRUCTION_LEN} bytes; "
-                       f"this one has {len(data)}")
-    return [Instruction.from_bytes(data[i:i + INSTRUCTION_LEN])
-            for i in range(0, len(data), INSTRUCTION_LEN)]
+    if len(data) % IMAGE_RECORD_LEN:
+        hint = (" (7-byte records without checksums are not a TMCL-IDE image; convert them "
+                "with the --hex text form)") if len(data) % INSTRUCTION_LEN == 0 else ""
+        raise AsmError(f"a binary image is {IMAGE_RECORD_LEN}-byte records; this one has "
+                       f"{len(data)} bytes{hint}")
+    out = []
+    for n, i in enumerate(range(0, len(data), IMAGE_RECORD_LEN), 1):
+        raw, check = data[i:i + INSTRUCTION_LEN], data[i + INSTRUCTION_LEN]
+        if sum(raw) & 0xFF != check:
+            raise AsmError(f"record {n} (bytes {i}..{i + IMAGE_RECORD_LEN - 1}) has checksum "
+                           f"{check:#04x}, expected {sum(raw) & 0xFF:#04x}; the image is "
+                           "damaged")
+        out.append(Instruction.from_bytes(raw))
+    return out
+
+
+def read_image_file(path: str | Path, module: Module, origin: int = 0) -> Program:
+    """A binary or hex image file as a Program (its "source" is the disassembly)."""
+    p = Path(path)
+    try:
+        data = p.read_bytes()
+    except OSError as exc:
+        raise AsmError(f"cannot read {p}: {exc.strerror}", file=str(p)) from None
+    try:
+        instructions = read_image(data)
+    except AsmError as exc:
+        raise AsmError(exc.message, exc.line, exc.col, file=str(p)) from None
+    source = [SourceLoc(str(p), n, disassemble_instruction(ins, module)[0])
+              for n, ins in enumerate(instructions, 1)]
+    return Program(module, instructions, source, {}, origin)
+
+
+def load_program(path: str | Path, module: Module, origin: int = 0) -> Program:
+    """What ``.upload`` and the debugger take: TMCL source, or an image (``.bin``/``.hex``)."""
+    if is_image_file(path):
+        return read_image_file(path, module, origin)
+    try:
+        return assemble_file(path, module, origin)
+    except AsmError as exc:
+        if "is not a text file" in exc.message:
+            return read_image_file(path, module, origin)
+        raise
 
 
 # -- the disassembler --------------------------------------------------------------------

@@ -45,7 +45,11 @@ def cmd_disasm(args: argparse.Namespace) -> int:
         data = sys.stdin.buffer.read() if args.file == "-" else Path(args.file).read_bytes()
     except OSError as exc:
         raise AsmError(f"cannot read {args.file}: {exc.strerror}") from None
-    sys.stdout.write(disassemble(read_image(data), load(args.module), origin=args.at))
+    try:
+        image = read_image(data)
+    except AsmError as exc:
+        raise AsmError(exc.message, exc.line, exc.col, file=args.file) from None
+    sys.stdout.write(disassemble(image, load(args.module), origin=args.at))
     return EXIT_OK
 
 

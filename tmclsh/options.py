@@ -96,11 +96,15 @@ def build_parser() -> argparse.ArgumentParser:
     a = sub.add_parser("asm", help="assemble a TMCL program")
     a.add_argument("file", metavar="FILE")
     a.add_argument("-m", "--module", metavar="NAME", default="TMCM-1311", help="target module (default TMCM-1311)")
-    a.add_argument("-o", "--output", metavar="OUT", help="output file (default FILE with .bin, or .hex with --hex)")
-    a.add_argument("--hex", action="store_true", help="hex text: one instruction per line, 7 bytes")
+    a.add_argument("-o", "--output", metavar="OUT",
+                   help="output file (default FILE with .bin, or .hex with --hex; \"-\" = stdout); "
+                        "binary output is the TMCL-IDE image: 8-byte records (command, type, "
+                        "motor, value MSB first, checksum = 8-bit sum of the seven)")
+    a.add_argument("--hex", action="store_true",
+                   help="hex text instead: one instruction per line, its 7 bytes in hex")
     a.add_argument("--at", type=_int, metavar="ADDR", default=0, help="start address (default 0)")
 
-    d = sub.add_parser("disasm", help="disassemble a binary or hex image")
+    d = sub.add_parser("disasm", help="disassemble a TMCL-IDE binary image (.bin) or hex text")
     d.add_argument("file", metavar="FILE")
     d.add_argument("-m", "--module", metavar="NAME", default="TMCM-1311", help="module for symbolic names")
     d.add_argument("--at", type=_int, metavar="ADDR", default=0, help="address of the first instruction")

@@ -459,7 +459,8 @@ def complete_breakpoints(session: Session, text: str) -> list[str | tuple[str, s
 @command(".upload", ".upload FILE [--at ADDR] [--yes] [--no-verify]",
          "assemble FILE for this module, store it in program memory and verify it",
          category=CATEGORY, complete=complete_file, details="""\
-Assembles FILE for the connected module, then: 132 (start download at ADDR, default 0), one
+Assembles FILE for the connected module (a .bin TMCL-IDE image or .hex text is taken as it
+is), then: 132 (start download at ADDR, default 0), one
 frame per instruction (each answered with status 101), 133 (quit download), and reads every
 instruction back with 134 to compare; the first difference is reported. Asks before
 overwriting the program unless --yes. A program larger than the memory is refused before
@@ -474,7 +475,7 @@ def cmd_upload(session: Session, argtext: str) -> None:
     module = session.module
     origin = _number(str(opts["--at"]), "--at") if "--at" in opts else 0
     path = _resolve_file(session, pos[0])
-    prog = asm.assemble_file(path, module, origin)
+    prog = asm.load_program(path, module, origin)
     if not len(prog):
         raise ValidationError(f"{path} holds no instructions; nothing to upload")
     program.check_fits(module, origin, len(prog))
@@ -539,7 +540,8 @@ def cmd_upload(session: Session, argtext: str) -> None:
 Reads program memory with 134 from ADDR (default 0) up to the end marker (opcode 0, or an
 erased cell) or the end of memory, or exactly N instructions with --count, and disassembles
 it with generated labels (L0012 for a jump target at 12). With FILE the text is written there;
-it assembles back to the same image (.upload FILE --at ADDR). Needs binary mode.""")
+it assembles back to the same image (.upload FILE --at ADDR); a FILE ending in .bin gets the
+TMCL-IDE binary image (8-byte records with checksums), .hex the hex text. Needs binary mode.""")
 def cmd_dump(session: Session, argtext: str) -> None:
     pos, opts = _options(_words(argtext), set(), {"--at", "--count"})
     if len(pos) > 1:
@@ -569,8 +571,16 @@ def cmd_dump(session: Session, argtext: str) -> None:
         session.out.warn("warning: the disassembly does not reassemble to the same image")
     if pos:
         path = Path(pos[0]).expanduser()
+        kind = path.suffix.lower()
+        if kind in (".bin", ".hex"):
+            same = True  # the bytes as read (a TMCL-IDE image, or hex text), no disassembly
         try:
-            path.write_text(text, encoding="utf-8")
+            if kind == ".bin":
+                path.write_bytes(asm.image_bytes(image))
+            elif kind == ".hex":
+                path.write_text(asm.hex_text(image), encoding="ascii")
+            else:
+                path.write_text(text, encoding="utf-8")
         except OSError as exc:
             raise DebuggerError(f"cannot write {path}: {exc.strerror}") from None
         if session.out.json:
@@ -617,7 +627,7 @@ def cmd_source_map(session: Session, argtext: str) -> None:
     module = session.module
     origin = _number(str(opts["--at"]), "--at") if "--at" in opts else 0
     path = _resolve_file(session, pos[0])
-    prog = asm.assemble_file(path, module, origin)
+    prog = asm.load_program(path, module, origin)
     message = f"{_show_path(str(path))} mapped to {origin}..{origin + len(prog) - 1}"
     if session.client.mode != "ascii" and len(prog):
         mm = program.verify_image(session.client, prog.instructions, origin)
