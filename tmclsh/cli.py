@@ -57,7 +57,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from .sim.serve import run
 
     return run(args.module, args.address, pty=args.pty, tcp=args.tcp, can=args.can,
-               host_address=args.host_address)
+               host_address=args.host_address, bitrate=args.bitrate)
 
 
 def cmd_ports(args: argparse.Namespace) -> int:
@@ -176,12 +176,12 @@ def cmd_modules(args: argparse.Namespace) -> int:
         source = mod.source
         if source != modules.BUILT_IN and mod.name in built:
             source += " (replaces the built-in)"
-        if args.json:
+        if getattr(args, "json", False):
             print(json.dumps({"module": mod.name, "firmware_id": mod.firmware_id,
                               "version_string": mod.version_string, "source": source}))
         else:
             print(f"{mod.name:<12} {mod.version_string:<10} {source}")
-    if not args.json:
+    if not getattr(args, "json", False):
         print(f"{'generic':<12} {'any':<10} built in: numbers only, for any other TMCL module")
     for problem in modules.problems():
         print(f"tmclsh: not loaded: {problem}", file=sys.stderr)
@@ -208,7 +208,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     debug = getattr(args, "debug", False)
-    from .errors import TmclError
+    from .errors import TmclError, UsageError
 
     try:
         if getattr(args, "completions", None):
@@ -226,6 +226,17 @@ def main(argv: list[str] | None = None) -> int:
         return run_shell(args)
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:  # `tmclsh modules | head`: the reader has gone; stop quietly
+        try:
+            sys.stdout = open(os.devnull, "w")
+        except OSError:
+            pass
+        return EXIT_ERROR
+    except UsageError as exc:
+        if debug:
+            raise
+        print(f"tmclsh: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     except TmclError as exc:
         if debug:
             raise

@@ -22,7 +22,7 @@ from functools import cache
 from importlib import resources
 from pathlib import Path
 
-from .errors import ValidationError
+from .errors import UsageError, ValidationError
 
 # environment variable -> connection setting
 ENVIRONMENT = {
@@ -47,7 +47,7 @@ OTHER_ENVIRONMENT = {
 
 # connection setting -> type (what a profile or variable may hold)
 CONNECTION_TYPES: dict[str, type] = {
-    "port": str, "baud": int, "can": str, "can_id": int, "reply_id": int, "sim": str,
+    "port": str, "baud": int, "can": str, "bitrate": int, "can_id": int, "reply_id": int, "sim": str,
     "module": str, "address": int, "host_address": int, "ascii": bool, "timeout": float,
     "retries": int,
 }
@@ -132,7 +132,7 @@ def _check_value(where: str, key: str, value: object, want: type) -> object:
 def _check_range(where: str, key: str, value: object) -> None:
     if key in ("address", "host_address") and not 0 <= value <= 255:  # type: ignore[operator]
         raise ValidationError(f"{where}: {key} must be 0..255, got {value}")
-    if key in ("baud", "timeout") and value <= 0:  # type: ignore[operator]
+    if key in ("baud", "timeout", "bitrate") and value <= 0:  # type: ignore[operator]
         raise ValidationError(f"{where}: {key} must be positive, got {value}")
     if key in ("can_id", "reply_id", "retries", "history_size") and value < 0:  # type: ignore[operator]
         raise ValidationError(f"{where}: {key} must not be negative, got {value}")
@@ -247,7 +247,7 @@ def resolve(cli: dict, config: Config, env: dict[str, str] | None = None) -> dic
     if profile_name:
         if profile_name not in config.profiles:
             known = ", ".join(sorted(config.profiles)) or "none defined"
-            raise ValidationError(f"no profile {profile_name!r} in {config.path} (known: {known})")
+            raise UsageError(f"no profile {profile_name!r} in {config.path} (known: {known})")
         profile = config.profiles[profile_name]
     merged: dict = dict(CONNECTION_DEFAULTS)
     for source in (profile, envs, {k: v for k, v in cli.items() if v is not None}):

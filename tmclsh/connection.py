@@ -10,6 +10,7 @@ from __future__ import annotations
 import sys
 from typing import TYPE_CHECKING
 
+from .canspec import FROM_PYTHON_CAN, parse_can
 from .client import Client
 from .errors import ValidationError
 from .transport.base import Transport
@@ -32,9 +33,12 @@ def connection_settings(args: argparse.Namespace) -> dict:
     from .config import load_config, resolve
 
     cli = {k: getattr(args, k, None) for k in
-           ("port", "baud", "can", "sim", "can_id", "reply_id", "module", "address",
+           ("port", "baud", "can", "bitrate", "sim", "can_id", "reply_id", "module", "address",
             "host_address", "ascii", "timeout", "retries", "profile")}
-    return resolve(cli, load_config())
+    settings = resolve(cli, load_config())
+    if settings.get("can") and settings["can"] != FROM_PYTHON_CAN:
+        parse_can(settings["can"])  # a malformed --can is a usage error, before opening anything
+    return settings
 
 
 def _setting(settings: dict, key: str, default):
@@ -51,7 +55,7 @@ def open_transport(settings: dict) -> Transport:
     if settings.get("port"):
         return tr.open_serial(settings["port"], baud)
     if settings.get("can"):
-        return tr.open_can(settings["can"])
+        return tr.open_can(settings["can"], settings.get("bitrate"))
     if not settings.get("sim"):
         found = trinamic_ports()
         if len(found) == 1:

@@ -34,6 +34,10 @@ class ValidationError(TmclError, ValueError):
     """Input refused before anything was sent: unknown name, value out of range, ..."""
 
 
+class UsageError(ValidationError):
+    """The command line itself is wrong (a malformed --can, an unknown profile): exit 2."""
+
+
 class StatusError(TmclError):
     """The module answered with an error status (1-6)."""
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 
 from . import __version__
+from .canspec import FROM_PYTHON_CAN
 
 SUBCOMMANDS = ("asm", "disasm", "sim", "ports", "scan", "modules")
 EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_CONNECT = 0, 1, 2, 3
@@ -39,17 +40,33 @@ def _positive(text: str) -> float:
     return v
 
 
+def _positive_int(text: str) -> int:
+    n = _int(text)
+    if n <= 0:
+        raise argparse.ArgumentTypeError("must be positive")
+    return n
+
+
 def add_connection(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("connection (default: the one attached Trinamic USB module, "
                              "else --sim TMCM-1311)")
     x = g.add_mutually_exclusive_group()
     x.add_argument("--port", metavar="PORT",
                    help="serial device or pyserial URL (socket://, rfc2217://, loop://, spy://, hwgrep://)")
-    x.add_argument("--can", metavar="IFACE:CHANNEL",
-                   help="python-can bus, e.g. socketcan:can0, pcan:PCAN_USBBUS1, virtual:bench")
+    x.add_argument("--can", metavar="IFACE:CHANNEL", nargs="?", const=FROM_PYTHON_CAN,
+                   help="python-can bus, e.g. socketcan:can0 (Linux; vcan0 for a virtual bus "
+                        "other programs can join), pcan:PCAN_USBBUS1, kvaser:0, "
+                        "slcan:/dev/ttyACM0 or slcan:COM5; alone: the bus python-can's own "
+                        "configuration names (~/can.conf, CAN_INTERFACE, CAN_CHANNEL, "
+                        "CAN_BITRATE). python-can's virtual interface works inside one "
+                        "process only, so it cannot reach a 'tmclsh sim'")
     x.add_argument("--sim", metavar="MODULE", nargs="?", const="TMCM-1311",
                    help="the built-in simulator, in process (default module TMCM-1311)")
     g.add_argument("--baud", type=_int, metavar="N", help="baud rate (default 9600, the factory setting)")
+    g.add_argument("--bitrate", type=_positive_int, metavar="N",
+                   help="CAN bit rate in bit/s; the modules' factory setting is 1000000 "
+                        "(GP 69 = 8); without it the adapter's own default or configuration "
+                        "applies, which is often lower")
     g.add_argument("--can-id", type=_int, metavar="N", help="module's CAN id (GP 71, default 1)")
     g.add_argument("--reply-id", type=_int, metavar="N", help="module's CAN reply id (GP 70, default 2)")
     g.add_argument("--profile", metavar="NAME", help="connection profile from the config file")
@@ -114,19 +131,28 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--address", type=_address, default=1, metavar="N", help="module address (default 1)")
     s.add_argument("--host-address", type=_address, default=2, metavar="N")
     how = s.add_mutually_exclusive_group(required=True)
-    how.add_argument("--pty", action="store_true", help="serve on a pseudo-terminal (path on the first line)")
+    how.add_argument("--pty", action="store_true",
+                     help="serve on a pseudo-terminal (path on the first line; Linux and "
+                          "macOS only: use --tcp on Windows)")
     how.add_argument("--tcp", metavar="HOST:PORT", help="serve on TCP, for socket:// URLs")
-    how.add_argument("--can", metavar="IFACE:CHANNEL", help="serve on a python-can bus")
+    how.add_argument("--can", metavar="IFACE:CHANNEL",
+                     help="serve on a python-can bus, IFACE:CHANNEL as the client reads it "
+                          "(socketcan:vcan0 to test on Linux; python-can's virtual interface "
+                          "cannot be reached from another process)")
+    s.add_argument("--bitrate", type=_positive_int, metavar="N", help="CAN bit rate in bit/s")
 
     po = sub.add_parser("ports", help="list serial ports (Trinamic USB devices marked)")
-    po.add_argument("--json", action="store_true", help="one JSON object per port")
+    # SUPPRESS: `tmclsh --json ports` and `tmclsh ports --json` both work
+    po.add_argument("--json", action="store_true", default=argparse.SUPPRESS,
+                    help="one JSON object per port")
 
     mo = sub.add_parser("modules", help="known modules and where each comes from; "
                                         "'modules check FILE' validates a module file")
     mo.add_argument("action", nargs="?", choices=("check",), metavar="check",
                     help="validate FILE: exit 0 if tmclsh can use it, else 1 naming the line")
     mo.add_argument("file", nargs="?", metavar="FILE", help="the module file to check")
-    mo.add_argument("--json", action="store_true", help="one JSON object per module")
+    mo.add_argument("--json", action="store_true", default=argparse.SUPPRESS,
+                    help="one JSON object per module")
 
     sc = sub.add_parser("scan", help="find modules on a bus (address, type, firmware)")
     add_connection(sc)
