@@ -18,7 +18,6 @@ the transport while the terminal runs.
 
 from __future__ import annotations
 
-import os
 import re
 import sys
 import threading
@@ -558,23 +557,30 @@ def translate_keys(data: bytes) -> list[bytes | int]:
     return out
 
 
-def run_raw_mode(term: Terminal) -> None:
-    import select
-    import termios
-    import tty
+def _read_raw(inp) -> bytes | None:
+    """Keys typed since the last call, as bytes (None: stdin closed). prompt_toolkit's input
+    reads the terminal on POSIX and the Windows console alike."""
+    if inp.closed:
+        return None
+    presses = inp.read_keys() or inp.flush_keys()  # flush: a lone Esc is not held back
+    if not presses:
+        time.sleep(0.01)
+        return b""
+    return "".join(p.data for p in presses).encode("utf-8", "replace")
 
-    fd = sys.stdin.fileno()
-    old = termios.tcgetattr(fd)
+
+def run_raw_mode(term: Terminal) -> None:
+    from prompt_toolkit.input import create_input
+
+    inp = create_input(sys.stdin)
+    raw = inp.raw_mode()
     typed = bytearray()  # the line the user has typed so far (for Ctrl-C)
-    tty.setraw(fd)
+    raw.__enter__()
     term.start_reader()
     try:
         while True:
-            ready, _, _ = select.select([fd], [], [], 0.1)
-            if not ready:
-                continue
-            keys = os.read(fd, 256)
-            if not keys:
+            keys = _read_raw(inp)
+            if keys is None:
                 break
             for key in translate_keys(keys):
                 if key == ESCAPE_KEY:
@@ -601,7 +607,7 @@ def run_raw_mode(term: Terminal) -> None:
                     term.write(term.raw_view.local(key))
     finally:
         term.stop_reader()
-        termios.tcsetattr(fd, termios.TCSADRAIN, old)
+        raw.__exit__(None, None, None)
         term.write([("", "\r\n")] if term.raw_view.shown else [])
 
 
