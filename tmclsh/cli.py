@@ -190,6 +190,27 @@ def cmd_modules(args: argparse.Namespace) -> int:
 
 # -- entry point -------------------------------------------------------------------------
 
+def show_manual(parser: argparse.ArgumentParser) -> int:
+    """The man page, generated now (so an editable install shows the current one): through
+    man(1) on a terminal where there is one, else the roff text."""
+    import shutil
+    import subprocess
+    import tempfile
+
+    from .docs import manpage
+
+    text = manpage(parser)
+    man = shutil.which("man")
+    if not sys.stdout.isatty() or man is None:
+        sys.stdout.write(text)
+        return EXIT_OK
+    with tempfile.TemporaryDirectory() as tmp:
+        page = os.path.join(tmp, "tmclsh.1")
+        with open(page, "w", encoding="utf-8") as f:
+            f.write(text)
+        return subprocess.call([man, page])  # a path with a slash: man reads that file
+
+
 def _user_modules(args: argparse.Namespace) -> None:
     """Take in --module-file; a module file that cannot be used is one warning line and the
     run goes on without it (``tmclsh modules`` reports them itself)."""
@@ -211,6 +232,8 @@ def main(argv: list[str] | None = None) -> int:
     from .errors import TmclError, UsageError
 
     try:
+        if getattr(args, "man", False):
+            return show_manual(parser)
         if getattr(args, "completions", None):
             from .docs import completion_script
 

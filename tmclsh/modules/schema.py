@@ -42,6 +42,35 @@ IO_KEYS: dict[str, tuple[str, bool]] = {
     "unit": ("str", False), "default": ("int", False),
 }
 TABLES = {"axis": PARAMETER_KEYS, "global": PARAMETER_KEYS, "io": IO_KEYS}
+# what each key means, for the man page (SCHEMA.md says the same at more length)
+MEANINGS = {
+    "module": {
+        "name": "the module's name, \"TMCM-1161\" (a built-in name replaces the built-in)",
+        "motors": "number of axes: motors 0..motors-1",
+        "program_memory": "TMCL program memory, in instructions",
+        "firmware_id": "the type number 136 reports (1161 for 1161V130)",
+        "version_string": "the 136 type 0 answer of the firmware described (\"1161V130\"); "
+                          "an exact match wins over one by type number",
+        "commands_like": "whose command set the module has: TMCM-1311, TMCM-351, TMCM-1640, "
+                         "or generic (the commands all of them have; the default)",
+        "position_min": "position range of MVP (position_max too; default 32 bits)",
+        "velocity_min": "velocity range of ROR/ROL (velocity_max too; default 32 bits)",
+    },
+    "axis": {
+        "number": "the parameter number (type field of SAP/GAP)",
+        "name": "the name typed on the command line (GAP MaxSpeed, 0)",
+        "access": "R, W, RW or RWE (E: may be stored with STAP/STGP)",
+        "min": "inclusive range (max too); choices = [..] lists the only legal values",
+        "bank": "global parameters only: the bank (0..3)",
+        "values": "names of values: { \"0\" = \"off\" }; bits names bits the same way",
+    },
+    "io": {
+        "bank": "0 digital inputs, 1 analog inputs, 2 digital outputs (as the manual numbers)",
+        "port": "the port number",
+        "kind": "one of digital_in, analog_in, digital_out",
+        "min": "the value range (max too)",
+    },
+}
 _TYPE_WORDS = {"str": "a string", "int": "an integer", "bool": "true or false",
                "table": "a table", "strs": "a list of strings", "ints": "a list of integers",
                "names": "a table of texts keyed by numbers (\"0\" = \"...\")"}

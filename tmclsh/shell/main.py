@@ -83,10 +83,11 @@ def _silence_stdout() -> None:
 def _run(args: argparse.Namespace, client, settings: dict) -> int:
     from ..config import load_settings
 
-    out = Output(json_mode=bool(args.json))
+    shell_settings = load_settings()
+    out = Output(json_mode=bool(args.json), color=str(shell_settings.get("color", "auto")))
     interactive = args.command is None and args.script is None and sys.stdin.isatty()
     # `confirm = false` in the config file is a standing --yes
-    yes = bool(args.yes) or load_settings().get("confirm") is False
+    yes = bool(args.yes) or shell_settings.get("confirm") is False
     session = Session(client, out, interactive=interactive, yes=yes,
                       keep_going=bool(args.keep_going), settings=settings)
     if client.module is not None and client.module.generic:
