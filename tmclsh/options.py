@@ -52,7 +52,8 @@ def add_connection(p: argparse.ArgumentParser) -> None:
                              "else --sim TMCM-1311)")
     x = g.add_mutually_exclusive_group()
     x.add_argument("--port", metavar="PORT",
-                   help="serial device or pyserial URL (socket://, rfc2217://, loop://, spy://, hwgrep://)")
+                   help="serial device (/dev/ttyACM0, COM3) or pyserial URL (socket://, "
+                        "rfc2217://, loop://, spy://, hwgrep://)")
     x.add_argument("--can", metavar="IFACE:CHANNEL", nargs="?", const=FROM_PYTHON_CAN,
                    help="python-can bus, e.g. socketcan:can0 (Linux; vcan0 for a virtual bus "
                         "other programs can join), pcan:PCAN_USBBUS1, kvaser:0, "

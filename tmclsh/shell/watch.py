@@ -9,10 +9,11 @@
   recent values, changed values highlighted. Under ``--json`` or when stdout is not a
   terminal: one JSON object per sample, ``{"t": seconds, "values": {name: number}}``
   (``null`` for a value whose read failed in that sample).
-* Keys (when stdin is a terminal; cbreak mode, restored on exit): ``s`` or space sends MST to
-  every motor and keeps watching; ``q`` or Esc ends the watch. Ctrl-C ends the watch too and
-  does NOT stop the motors. Ctrl-C is taken between reads, so a transaction is never cut in
-  half; a second Ctrl-C interrupts at once.
+* Keys (when stdin is a terminal; read through prompt_toolkit's input in raw mode, so the
+  Windows console works as a POSIX terminal does; restored on exit): ``s`` or space sends MST
+  to every motor and keeps watching; ``q`` or Esc ends the watch. Ctrl-C ends the watch too
+  and does NOT stop the motors. Ctrl-C (a key in raw mode, a signal otherwise) is taken
+  between reads, so a transaction is never cut in half; a second one interrupts at once.
 """
 
 from __future__ import annotations
