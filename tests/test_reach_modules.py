@@ -200,3 +200,31 @@ def test_responder_frames_are_the_manuals():
         s.close()
     finally:
         m.close()
+
+
+def test_the_simulator_refuses_generic_mode(run_tmclsh):
+    r = run_tmclsh("--sim", "generic", "-c", "GAP 1, 0")
+    assert r.returncode == 3 and "needs a module's data" in r.stderr
+    assert run_tmclsh("sim", "-m", "generic", "--tcp", "127.0.0.1:0").returncode == 2
+
+
+def test_a_user_module_can_be_simulated(config_home, run_tmclsh):
+    (config_home / "tmclsh" / "modules" / "mine.toml").write_text(USER_1161)
+    r = run_tmclsh("--sim", "TMCM-1161", "-c", "SAP MaxPositioningSpeed, 0, 2047; GAP 4, 0",
+                   env=_env(config_home))
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.splitlines()[-1] == "MaxPositioningSpeed = 2047"
+
+
+def test_version_string_must_be_what_136_answers(config_home, tmp_path, run_tmclsh):
+    path = tmp_path / "short.toml"
+    path.write_text(USER_1161.replace('"1161V130"', '"1161V1"'))
+    r = run_tmclsh("modules", "check", str(path), env=_env(config_home))
+    assert r.returncode == 1 and f"{path}:7:" in r.stderr and "8" in r.stderr
+
+
+def test_unknown_command_in_generic_mode_points_to_numbers(module_1161, config_home,
+                                                          run_tmclsh):
+    r = run_tmclsh("--port", module_1161.url, "-c", "XYZZY 1, 2", env=_env(config_home))
+    assert r.returncode == 1 and "by number" in r.stderr
+    assert module_1161.commands() == [136]

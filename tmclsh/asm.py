@@ -369,8 +369,10 @@ def encode(line: Line, module: Module, symbols: Symbols | None = None, *,
     spec = isa.by_mnemonic(line.mnemonic)
     if spec is None:
         known = [s.mnemonic for s in module.instructions]
-        raise line.error(f"unknown command {line.mnemonic!r}{_suggest(line.mnemonic, known)}",
-                         line.mnemonic_col)
+        hint = _suggest(line.mnemonic, known)
+        if module.generic and not hint:
+            hint = "; any command can be sent by number: <command> <type>, <motor>, <value>"
+        raise line.error(f"unknown command {line.mnemonic!r}{hint}", line.mnemonic_col)
     if not spec.on(module.name):
         hint = (f" (no data on this module's commands: send it by number, {spec.opcode} "
                 "<type>, <motor>, <value>)") if module.generic else ""

@@ -156,6 +156,9 @@ def check(data: dict, lines: _Lines, path: str) -> None:
     info = data["module"]
     if info["motors"] < 1:
         raise fail("module", 0, "motors", "[module] motors must be at least 1")
+    if len(info["version_string"]) != 8 or not info["version_string"].isascii():
+        raise fail("module", 0, "version_string", "[module] version_string must be the 8 "
+                   f"characters 136 answers (\"1161V130\"), got {info['version_string']!r}")
     if info["program_memory"] < 1:
         raise fail("module", 0, "program_memory", "[module] program_memory must be at least 1")
     like = info.get("commands_like")
