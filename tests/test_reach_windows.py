@@ -96,3 +96,34 @@ def test_ports_names_com_ports(monkeypatch, capsys):
     assert lines[1].startswith("COM1")
     assert cli.main(["ports", "--json"]) == 0
     assert json.loads(capsys.readouterr().out.splitlines()[0])["device"] == "COM7"
+
+
+def test_watch_keys_in_raw_mode_ctrl_c_is_a_key_and_motors_keep_turning(fast_client):
+    """Raw mode (prompt_toolkit's, as on the Windows console): Ctrl-C arrives as a key; it ends
+    the watch like the signal does and stops nothing."""
+    import os
+    import threading
+    import time
+
+    from tmclsh.shell import watch
+    from tmclsh.shell.render import Output
+    from tmclsh.shell.session import Session
+
+    session = Session(fast_client, Output(json_mode=True))
+    session.run_line("ROR 0, 40000")
+    master, slave = os.openpty()
+    tty = os.fdopen(slave, "r")
+
+    def typist():
+        time.sleep(0.3)
+        os.write(master, b"\x03")
+
+    threading.Thread(target=typist, daemon=True).start()
+    try:
+        result = watch.run_watch(session, watch.parse_items(session, "GAP 2, 0"), interval=0.02,
+                                 live=False, keys=watch.Keys(tty), emit=lambda obj: None)
+    finally:
+        tty.close()
+        os.close(master)
+    assert result.reason == "interrupt" and not result.stopped_motors
+    assert fast_client.value("GAP 2, 0") == 40000  # still turning
