@@ -70,7 +70,7 @@ def test_upload_an_ide_image_and_dump_it_back(tmp_path: Path, run_tmclsh):
     image = tmp_path / "ide.bin"
     image.write_bytes(build(PROGRAM))
     back, text = tmp_path / "back.bin", tmp_path / "back.hex"
-    r = run_tmclsh("--sim", "-c", f".upload {image} --yes\n.dump {back}\n.dump {text}")
+    r = run_tmclsh("--sim", "-c", f".upload {image} --yes\n.dump -o {back}\n.dump {text}")
     assert r.returncode == 0, r.stderr
     assert parse(back.read_bytes()) == PROGRAM  # what the simulated module stored, 8 at a time
     hex_lines = text.read_text().splitlines()

@@ -534,18 +534,25 @@ def cmd_upload(session: Session, argtext: str) -> None:
         pass
 
 
-@command(".dump", ".dump [FILE] [--at ADDR] [--count N]",
+@command(".dump", ".dump [[-o] FILE] [--at ADDR] [--count N]",
          "read the stored program back (134) and show it as source, or write it to FILE",
          aliases=(".disasm",), category=CATEGORY, complete=complete_file, details="""\
 Reads program memory with 134 from ADDR (default 0) up to the end marker (opcode 0, or an
 erased cell) or the end of memory, or exactly N instructions with --count, and disassembles
 it with generated labels (L0012 for a jump target at 12). With FILE the text is written there;
 it assembles back to the same image (.upload FILE --at ADDR); a FILE ending in .bin gets the
-TMCL-IDE binary image (8-byte records with checksums), .hex the hex text. Needs binary mode.""")
+TMCL-IDE binary image (8-byte records with checksums), .hex the hex text (-o FILE says the
+same as FILE). Needs binary mode.""")
 def cmd_dump(session: Session, argtext: str) -> None:
-    pos, opts = _options(_words(argtext), set(), {"--at", "--count"})
+    words = _words(argtext)
+    if "-o" in words:  # `.dump -o FILE`, as asm -o
+        i = words.index("-o")
+        if i + 1 >= len(words):
+            raise ValidationError("-o needs a FILE")
+        words = words[:i] + words[i + 1:]
+    pos, opts = _options(words, set(), {"--at", "--count"})
     if len(pos) > 1:
-        raise ValidationError("usage: .dump [FILE] [--at ADDR] [--count N]")
+        raise ValidationError("usage: .dump [[-o] FILE] [--at ADDR] [--count N]")
     program.require_binary(session.client, "reading program memory (134)")
     module = session.module
     start = _number(str(opts["--at"]), "--at") if "--at" in opts else 0
