@@ -504,11 +504,22 @@ Numbers in decimal or hex ({_b("$1F")}, {_b("0x1F")}); symbolic types ({_b("ABS 
 ({_b("GAP ActualPosition, 0")}). Any command number can be sent raw as well.
 .IP \\(bu 2
 Shell commands start with a dot ({_b(".help")}, {_b(".param")}, {_b(".watch")}, ...);
-{_b("help")} and {_b("quit")} also work bare. A shell command owns the rest of its line, so
-{_b(".watch a=GAP 1, 0; b=GIO 0, 0")} is one command; put other commands on a new line.
+{_b("help")}, {_b("?")} and {_b("quit")} also work bare ({_b("help")} or {_b("?")} alone is the
+overview).
 .IP \\(bu 2
-With {_b("-c")}, lines are separated by newlines or {_b(";")}. Empty lines and lines starting
-with {_b("#")} or {_b("//")} are ignored.
+Lines are separated by newlines or {_b(";")}, at the prompt, with {_b("-c")} and in scripts:
+{_b("help 4; help 5")} is two lines, a {_b(";")} inside quotes ({_b('.echo "a;b"')}) is not a
+separator. Only a command that owns the rest of its line takes the {_b(";")}: {_b(".watch")}
+separates its expressions with it ({_b(".watch a=GAP 1, 0; b=GIO 0, 0")} is one command) and
+{_b(".decode")} its pasted bytes; put other commands after those on a new line.
+.IP \\(bu 2
+{_b("//")} and {_b("#")} start a comment that runs to the end of the line ({_b("#")} at the start of
+a word, outside quotes: {_b("GAP 1, 0 # where it is")}). Empty lines are ignored.
+.IP \\(bu 2
+Questions (EEPROM writes, factory reset, program download, leaving {_b(".ascii")}) are answered
+with a line: {_b("y")} and Enter agrees, Enter alone takes the default shown in capitals
+({_b("[y/N]")}), anything else is no. Outside the interactive prompt nothing is asked: such
+commands are refused unless {_b("--yes")} is given.
 .IP \\(bu 2
 Scripts stop at the first error, reported as {_i("FILE")}:{_i("LINE")}, unless
 {_b("--keep-going")} is given.
@@ -618,8 +629,9 @@ def _exit_status() -> list[str]:
                      "failed, scan found no module, a bad config file or environment "
                      "variable, or a module file that cannot be used (tmclsh modules)."),
         (EXIT_USAGE, "Usage: an unknown option or a bad option value (a malformed --can, an "
-                     "unknown --profile); or a script given with -f that cannot be read or has "
-                     "a syntax error (nothing was sent)."),
+                     "unknown --profile); or a script given with -f that was not run (nothing "
+                     "was sent): no such file, a syntax error, a value out of range or another "
+                     "line the module would refuse."),
         (EXIT_CONNECT, "The shell could not connect: the port or CAN bus cannot be opened, or "
                        "the module does not answer when its type is detected (command 136); "
                        "or tmclsh sim cannot start its server."),
@@ -669,6 +681,54 @@ def _configuration() -> list[str]:
     for var, text in OTHER_ENVIRONMENT.items():
         out += [".TP", _b(var), _esc(_sentence(text))]
     return out
+
+
+_BACKUPS = f"""\
+.SH CONFIGURATION BACKUPS
+{_b(".save")} {_i("FILE")} writes a module's configuration as a tmclsh script, so the same file
+is a backup, a record of what changed and a way to set up a replacement module:
+.PP
+.nf
+// tmclsh configuration backup of a TMCM\\-1311 (.save); ...
+// module: TMCM\\-1311
+// firmware: 1311V111
+// address: 1
+// connection: /dev/ttyACM0 at 9600 baud (binary)
+// date: 2026\\-12\\-01 19:40:00 UTC
+// program: backup.program.tmcl        (only with \\-\\-program)
+
+// \\-\\- axis parameters, motor 0
+// ActualPosition = 51200 µsteps (state, not restored; AP 1, µsteps: ...)
+SAP MaxPositioningSpeed, 0, 51200  // AP 4, pps: Speed limit for positioning ...
+// \\-\\- global parameters, bank 2
+SGP 0, 2, 0  // GP 0: UserVariable #0
+.fi
+.PP
+The {_b("// key: value")} lines of the header are read back by {_b(".diff")} and
+{_b(".restore")}: {_b("module")} decides whether the file is another module type's.
+Each {_b("SAP")}/{_b("SGP")} line is one writable configuration parameter of one motor or
+bank, by name (a run of user variables by number), with its number, unit and meaning after
+{_b("//")}. Read\\-only values and motion state (parameters marked {_b("state")} in the module
+data: target and actual position and speed, counters, writes that start a move or an
+initialisation) are comments and are never written back. Parameters that change how the
+module is reached (marked {_b("link")}: address, baud rate, CAN ids, interface) are restored
+last and not read back.
+.PP
+{_b(".diff")} and {_b(".restore")} accept any script: every {_b("SAP")}/{_b("SGP")} line (by
+name or number, or as raw command 5 or 9) is parsed and checked against the module's data as
+a typed command would be, before anything is sent, and an error names {_i("FILE")}{_b(":")}{_i("LINE")};
+comments, blank lines, shell commands, lines with {_b("${...}")} and other TMCL commands are
+ignored, and for a parameter set twice the last line counts. Parameters are compared by
+number and motor/bank; a backup of another module type is carried over by name with
+{_b("--force")} (parameters the module lacks, motors it does not have and values outside its
+ranges are skipped and listed). A module without parameter data compares by number.
+.PP
+Replaying the file with {_b("tmclsh -f")} {_i("FILE")} {_b("--yes")} writes every line
+(global parameters of bank 0 go straight to EEPROM, hence {_b("--yes")}); {_b(".restore")}
+writes only what differs. With {_b("--program")} the stored program is read back and written
+as source to {_i("FILE")}{_b(".program.tmcl")} (the suffix of {_i("FILE")} replaced), which
+{_b(".upload")} puts back; {_b(".restore")} does not upload it.
+"""
 
 
 _WINDOWS_CONFIG = "%LOCALAPPDATA%\\tmclsh"
@@ -806,6 +866,7 @@ def manpage(parser: argparse.ArgumentParser | None = None) -> str:
     out += _shell_commands_section()
     out += _instructions_section()
     out += _configuration()
+    out.append(_BACKUPS.rstrip("\n"))
     out.append(_FILES.rstrip("\n"))
     out += _module_files()
     out.append(_IMAGES.rstrip("\n"))

@@ -35,11 +35,13 @@ PARAMETER_KEYS: dict[str, tuple[str, bool]] = {
     "count": ("int", False), "min": ("int", False), "max": ("int", False),
     "choices": ("ints", False), "unit": ("str", False), "default": ("int", False),
     "values": ("names", False), "bits": ("names", False), "note": ("str", False),
+    "source": ("str", False), "state": ("bool", False), "link": ("bool", False),
 }
 IO_KEYS: dict[str, tuple[str, bool]] = {
     "bank": ("int", True), "port": ("int", True), "name": ("str", True), "kind": ("str", True),
     "min": ("int", True), "max": ("int", True), "description": ("str", False),
-    "unit": ("str", False), "default": ("int", False),
+    "unit": ("str", False), "default": ("int", False), "note": ("str", False),
+    "source": ("str", False),
 }
 TABLES = {"axis": PARAMETER_KEYS, "global": PARAMETER_KEYS, "io": IO_KEYS}
 # what each key means, for the man page (SCHEMA.md says the same at more length)

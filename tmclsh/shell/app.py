@@ -171,13 +171,10 @@ def _dumb_echo(ps: PromptSession) -> None:
 
 
 def ask_yes_no(question: str) -> bool:
-    """``session.ask`` in the REPL: y/n, anything else (Ctrl-C, Ctrl-D) is no."""
-    from prompt_toolkit.shortcuts import confirm
+    """``session.ask`` in the REPL: ``[y/N]`` and Enter, as everywhere (ask.py)."""
+    from .ask import ask_yes_no as ask
 
-    try:
-        return bool(confirm(question))
-    except (KeyboardInterrupt, EOFError):
-        return False
+    return ask(question, default=False)
 
 
 def banner(session: Session):

@@ -355,14 +355,20 @@ def _status_hint(status: int) -> str:
 
 
 def binary_version(value: int, module: Module | None) -> tuple[int, int] | None:
-    """``(module type, version)`` from a 136 type 1 value, or None if it does not decode.
+    """``(module type, version)`` from a 136 type 1 value, or None if it does not decode."""
+    decoded = _binary_layout(value, module)
+    return None if decoded is None else decoded[:2]
+
+
+def _binary_layout(value: int, module: Module | None) -> tuple[int, int, bool] | None:
+    """``(module type, version, type first)``.
 
     The manuals differ in byte order (TMCM-1311: type high, type low, version low, version
     high; TMCM-1640: version low, version high, type low, type high): the layout whose type
     matches the module's firmware id wins."""
     b = (value & 0xFFFFFFFF).to_bytes(4, "big")
-    type_first = (b[0] << 8 | b[1], b[2] | b[3] << 8)
-    version_first = (b[2] | b[3] << 8, b[0] | b[1] << 8)
+    type_first = (b[0] << 8 | b[1], b[2] | b[3] << 8, True)
+    version_first = (b[2] | b[3] << 8, b[0] | b[1] << 8, False)
     if module is not None and version_first[0] == module.firmware_id:
         return version_first
     if module is None or type_first[0] == module.firmware_id:
@@ -370,13 +376,30 @@ def binary_version(value: int, module: Module | None) -> tuple[int, int] | None:
     return None
 
 
+def prose_list(items, empty: str = "none") -> str:
+    """``0, 1, 2`` for people, never ``[0, 1, 2]``; ``empty`` when there is nothing."""
+    words = [str(i) for i in items]
+    return ", ".join(words) if words else empty
+
+
 def version_text(value: int, module: Module | None) -> str:
-    """``module type 1311, firmware 1.11``."""
-    decoded = binary_version(value, module)
+    """The value field read the way the module's manual lays out its four bytes:
+    ``05 1F 6F 00: module type 1311 (05 1F), version 111 (6F 00, low byte first)``."""
+    b = [f"{x:02X}" for x in (value & 0xFFFFFFFF).to_bytes(4, "big")]
+    raw = " ".join(b)
+    decoded = _binary_layout(value, module)
     if decoded is None:
-        return f"value {value} ({value & 0xFFFFFFFF:#010x})"
-    kind, ver = decoded
-    return f"module type {kind}, firmware {ver // 100}.{ver % 100:02d}"
+        return f"{raw} (not a module type and version this module's manual describes)"
+    kind, ver, type_first = decoded
+    kind_bytes, ver_bytes = (b[:2], b[2:]) if type_first else (b[2:], b[:2])
+    return (f"{raw}: module type {kind} ({' '.join(kind_bytes)}{'' if type_first else ', low byte first'}), "
+            f"version {ver} ({' '.join(ver_bytes)}, low byte first)")
+
+
+def parse_version_string(text: str) -> tuple[int, int] | None:
+    """``(module type, version)`` from a 136 type 0 string (``1311V111`` -> (1311, 111))."""
+    m = re.fullmatch(r"\s*(\d+)V(\d+)\s*", text or "")
+    return (int(m.group(1)), int(m.group(2))) if m else None
 
 
 def _scaled(value: int, unit: str) -> str:

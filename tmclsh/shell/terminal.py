@@ -612,16 +612,9 @@ def run_raw_mode(term: Terminal) -> None:
 
 
 def _ask_yes_no(question: str, default: bool) -> bool:
-    from prompt_toolkit import prompt
+    from .ask import ask_yes_no
 
-    hint = "[Y/n]" if default else "[y/N]"
-    try:
-        answer = prompt(f"{question} {hint} ").strip().lower()
-    except (EOFError, KeyboardInterrupt):
-        return default
-    if not answer:
-        return default
-    return answer in ("y", "yes", "j", "ja")
+    return ask_yes_no(question, default)
 
 
 # -- shell commands ------------------------------------------------------------------------------
@@ -796,6 +789,7 @@ def cmd_ascii_config(session: Session, argtext: str) -> None:
     session.confirm(f"write GP 67 = {new} ({describe_gp67(new)}) to the module's EEPROM "
                     f"(now {current})?")
     reply = client.request(Request(client.address, _SGP, GP_ASCII_MODE, GP_BANK, new))
+    session.stats.commands += 1
     if reply is not None and not status_ok(reply.status):
         raise StatusError(reply.status, reply)
     if client.ascii_link is not None:
@@ -811,6 +805,7 @@ def cmd_ascii_config(session: Session, argtext: str) -> None:
 def _read_gp67(session: Session) -> int:
     client = session.client
     reply = client.request(Request(client.address, _GGP, GP_ASCII_MODE, GP_BANK, 0))
+    session.stats.commands += 1
     assert reply is not None
     if not status_ok(reply.status):
         raise StatusError(reply.status, reply)
