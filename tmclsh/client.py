@@ -40,7 +40,7 @@ from typing import TYPE_CHECKING
 
 from . import instructions as isa
 from .errors import ChecksumError, StatusError, TmclTimeoutError, TransportError, ValidationError
-from .modules import Module, from_version_string
+from .modules import Module, from_version_string, generic_for
 from .modules import load as load_module
 from .protocol import (SERIAL_FRAME_LEN, VERSION_STRING_LEN, Control, Reply, ReplyKind,
                        Request, Status, status_ok)
@@ -733,10 +733,10 @@ class Client:
             raise StatusError(status, reply, f"address {self.address} refused the version "
                               f"request (136): status {status}")
         self.version = reply.version
-        mod = from_version_string(reply.version)
+        mod = from_version_string(reply.version) or generic_for(reply.version)
         if mod is None:
             raise ValidationError(f"unknown module type in version string {reply.version!r}; "
-                                  "give it with --module")
+                                  "give it with --module (or --module generic)")
         self.module = mod
         return mod
 

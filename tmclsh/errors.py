@@ -34,6 +34,10 @@ class ValidationError(TmclError, ValueError):
     """Input refused before anything was sent: unknown name, value out of range, ..."""
 
 
+class UsageError(ValidationError):
+    """The command line itself is wrong (a malformed --can, an unknown profile): exit 2."""
+
+
 class RangeError(ValidationError):
     """A value outside what the module accepts: a parameter's range, a port's, a coordinate."""
 

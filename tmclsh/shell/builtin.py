@@ -342,6 +342,9 @@ def _help_number(session: Session, number: int) -> None:
     found = _params_by_number(mod, number)
     if found:
         _show_params(session, found, numbered=number)
+    elif mod.generic:
+        session.out.info(f"no parameter data for the {mod.type_name}: GAP {number}, 0 or "
+                         f"GGP {number}, 0 reads it; a module file (--module-file) names it")
     else:
         session.out.info(f"the {mod.name} has no parameter {number}")
     spec = isa.by_opcode(number)
@@ -828,11 +831,13 @@ def cmd_decode(session: Session, arg: str) -> None:
 
 # -- connection and module ---------------------------------------------------------------
 
-@command(".connect", ".connect [PORT | sim [MODULE] | can IFACE:CHANNEL]",
+@command(".connect", ".connect [PORT | sim [MODULE] | can [IFACE:CHANNEL]]",
          "reconnect, or switch to another port, simulator or CAN bus",
          complete=complete_connect, category="connection",
          details="Without an argument the current link is closed and opened again (after a "
-                 "cable was pulled). The module type is asked with 136 on a real link.")
+                 "cable was pulled). The module type is asked with 136 on a real link. "
+                 "'can' alone takes the bus from python-can's configuration, as --can does; "
+                 "the bit rate is --bitrate's.")
 def cmd_connect(session: Session, arg: str) -> None:
     from .. import transport as tr
 
@@ -855,10 +860,9 @@ def cmd_connect(session: Session, arg: str) -> None:
         module = load(module).name
         new = {"sim": module}
     elif words[0].lower() == "can":
-        if len(words) < 2:
-            raise ValidationError(".connect can IFACE:CHANNEL, e.g. .connect can socketcan:can0")
-        transport = tr.open_can(words[1])
-        new = {"can": words[1]}
+        spec = words[1] if len(words) > 1 else tr.FROM_PYTHON_CAN
+        transport = tr.open_can(spec, settings.get("bitrate"))
+        new = {"can": spec}
     else:
         transport = tr.open_serial(words[0], settings.get("baud") or 9600)
         new = {"port": words[0]}
@@ -979,7 +983,8 @@ def cmd_module(session: Session, arg: str) -> None:
     grid.add_column(style="tmcl.note")
     grid.add_column()
     grid.add_row("module", f"{mod.name}: {mod.summary}")
-    grid.add_row("motors", str(mod.motors))
+    grid.add_row("motors", "not known (motor numbers are sent as typed, 0..255)"
+                 if mod.generic else str(mod.motors))
     grid.add_row("firmware", client.version or "(not asked; .version)")
     grid.add_row("address", str(client.address))
     grid.add_row("connection", client.describe() + (" (SIMULATED)" if client.transport.simulated
@@ -987,7 +992,8 @@ def cmd_module(session: Session, arg: str) -> None:
                                                     else ""))
     grid.add_row("mode", client.mode)
     grid.add_row("parameters", f"{len(mod.axis_params)} axis, {len(mod.global_params)} global")
-    grid.add_row("program memory", f"{mod.program_memory} instructions")
+    grid.add_row("program memory", "not known" if mod.generic
+                 else f"{mod.program_memory} instructions")
     out.print(grid)
 
 

@@ -14,7 +14,7 @@ EXIT_OK, EXIT_ERROR, EXIT_CONNECT = 0, 1, 3
 
 def banner(session: Session) -> str:
     c = session.client
-    mod = c.module.name if c.module else "unknown module"
+    mod = c.module.label if c.module else "unknown module"
     sim = " [SIMULATED]" if c.transport.simulated else ""
     mode = " ASCII mode" if c.mode == "ascii" else ""
     return f"tmclsh: {mod} at address {c.address} on {c.describe()}{sim}{mode}"
@@ -83,12 +83,15 @@ def _silence_stdout() -> None:
 def _run(args: argparse.Namespace, client, settings: dict) -> int:
     from ..config import load_settings
 
-    out = Output(json_mode=bool(args.json))
+    shell_settings = load_settings()
+    out = Output(json_mode=bool(args.json), color=str(shell_settings.get("color", "auto")))
     interactive = args.command is None and args.script is None and sys.stdin.isatty()
     # `confirm = false` in the config file is a standing --yes
-    yes = bool(args.yes) or load_settings().get("confirm") is False
+    yes = bool(args.yes) or shell_settings.get("confirm") is False
     session = Session(client, out, interactive=interactive, yes=yes,
                       keep_going=bool(args.keep_going), settings=settings)
+    if client.module is not None and client.module.generic:
+        out.warn(f"{client.module.type_name}: {client.module.NOTICE}")  # once, at the start
     if args.trace:
         from .trace import enable_trace
 
