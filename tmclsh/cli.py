@@ -175,7 +175,9 @@ def main(argv: list[str] | None = None) -> int:
         if debug:
             raise
         print(f"tmclsh: {exc}", file=sys.stderr)
-        return EXIT_ERROR
+        from .errors import ConnectError
+
+        return EXIT_CONNECT if isinstance(exc, ConnectError) else EXIT_ERROR
     except OSError as exc:
         if debug:
             raise
