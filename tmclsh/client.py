@@ -900,6 +900,12 @@ class Client:
         with self._lock:
             self._buf.clear()
 
+    def forget_stale(self) -> None:
+        """The line was reset (its baud rate changed): nothing sent before can still arrive."""
+        with self._lock:
+            self._buf.clear()
+            self._dirty = False
+
     def resync_next(self) -> None:
         """Something else used the line (the module's ASCII mode): whatever is left on it is
         stale, so the next binary request starts with the resynchronisation marker."""

@@ -11,8 +11,8 @@ import sys
 from typing import TYPE_CHECKING
 
 from .client import Client
-from .errors import (ChecksumError, ConnectError, DownloadModeError, TmclTimeoutError,
-                     ValidationError)
+from .errors import (ChecksumError, ConnectError, DownloadModeError, NoAnswerError,
+                     TmclTimeoutError, ValidationError)
 from .transport.base import StreamTransport, Transport
 
 if TYPE_CHECKING:
@@ -175,7 +175,7 @@ def _attach_ascii(client: Client, expected: Module | None) -> None:
     try:
         AsciiLink.attach(client)
     except (TmclTimeoutError, ChecksumError) as exc:
-        raise ConnectError(no_answer_message(client, exc, ascii=True)) from exc
+        raise NoAnswerError(no_answer_message(client, exc, ascii=True)) from exc
     _check_type(client, expected)
 
 
@@ -203,7 +203,7 @@ def _bring_up(client: Client, expected: Module | None) -> None:
                 f"mode, {link.describe() if link else ''}; '.mode binary --keep' switches it "
                 "back to binary for good")
             return
-        raise ConnectError(no_answer_message(client, exc, ascii_tried=probed)) from exc
+        raise NoAnswerError(no_answer_message(client, exc, ascii_tried=probed)) from exc
     _check_type(client, expected)
     if client.ascii_link is None:
         client.leave_download_mode()

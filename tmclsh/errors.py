@@ -52,6 +52,11 @@ class ConnectError(TmclError):
     (exit status 3)."""
 
 
+class NoAnswerError(ConnectError, TmclTimeoutError):
+    """Nothing answered at connect (or only garbled replies came): the message says what was
+    tried and what to try next."""
+
+
 class AsmError(TmclError, ValueError):
     """An error in TMCL source text, with its location (1-based line and column)."""
 

@@ -39,9 +39,14 @@ def _positive(text: str) -> float:
     return v
 
 
-def add_connection(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group("connection (default: the one attached Trinamic USB module, "
-                             "else --sim TMCM-1311)")
+def _baud_or_auto(text: str) -> int | str:
+    return "auto" if text.strip().lower() == "auto" else _int(text)
+
+
+def add_connection(p: argparse.ArgumentParser, *, auto_baud: bool = False) -> None:
+    g = p.add_argument_group("connection (default: the one attached Trinamic USB module; "
+                             "without one the interactive shell simulates a TMCM-1311, "
+                             "other runs exit 3)")
     x = g.add_mutually_exclusive_group()
     x.add_argument("--port", metavar="PORT",
                    help="serial device or pyserial URL (socket://, rfc2217://, loop://, spy://, hwgrep://)")
@@ -49,7 +54,13 @@ def add_connection(p: argparse.ArgumentParser) -> None:
                    help="python-can bus, e.g. socketcan:can0, pcan:PCAN_USBBUS1, virtual:bench")
     x.add_argument("--sim", metavar="MODULE", nargs="?", const="TMCM-1311",
                    help="the built-in simulator, in process (default module TMCM-1311)")
-    g.add_argument("--baud", type=_int, metavar="N", help="baud rate (default 9600, the factory setting)")
+    if auto_baud:
+        g.add_argument("--baud", type=_baud_or_auto, metavar="N|auto",
+                       help="baud rate (default 9600, the factory setting); auto: each rate "
+                            "GP 65 can select, in turn")
+    else:
+        g.add_argument("--baud", type=_int, metavar="N",
+                       help="baud rate (default 9600, the factory setting)")
     g.add_argument("--can-id", type=_int, metavar="N", help="module's CAN id (GP 71, default 1)")
     g.add_argument("--reply-id", type=_int, metavar="N", help="module's CAN reply id (GP 70, default 2)")
     g.add_argument("--profile", metavar="NAME", help="connection profile from the config file")
@@ -112,10 +123,11 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_parser("ports", help="list serial ports (Trinamic USB devices marked)")
 
     sc = sub.add_parser("scan", help="find modules on a bus (address, type, firmware)")
-    add_connection(sc)
+    add_connection(sc, auto_baud=True)
     sc.add_argument("--from", dest="first", type=_address, default=1, metavar="N")
     sc.add_argument("--to", dest="last", type=_address, default=255, metavar="N")
-    sc.add_argument("--timeout", type=_positive, default=0.05, metavar="S",
-                    help="per-address timeout (default 0.05)")
+    sc.add_argument("--timeout", type=_positive, metavar="S",
+                    help="per-address timeout (default: from the link, the wire time of a "
+                         "request and its reply at the baud rate plus a margin)")
     sc.add_argument("--json", action="store_true")
     return p
