@@ -281,12 +281,15 @@ def no_answer_message(client: Client, exc: BaseException, *, ascii: bool = False
     url = getattr(client.transport, "url", where)
     usb = _is_usb_module(client)
     socket_url = "://" in url
-    modes = ("ASCII mode" if ascii else "binary and ASCII mode" if ascii_tried
-             else "binary mode")
     first = (f"replies came from {where} but were garbled (bad checksums)" if garbled else
              f"no module answered at address {addr} on {where}")
-    lines = [f"{first}: asked for its version (136) in {modes}, {tries} times, "
-             f"{client.timeout:g} s each. Likely causes, most likely first:"]
+    if ascii:
+        what = f"looked for it in ASCII mode, waiting {client.timeout:g} s"
+    else:
+        what = (f"asked for its version (136) {tries} time{'s' if tries > 1 else ''}, "
+                f"waiting {client.timeout:g} s each"
+                + (", and tried its ASCII mode" if ascii_tried else ""))
+    lines = [f"{first}: {what}. Likely causes, most likely first:"]
     if not usb and not socket_url:
         baud = getattr(client.transport, "baudrate", 9600)
         others = ", ".join(str(r) for r in baud_rates() if r != baud)

@@ -79,9 +79,14 @@ def address_timeout(transport: Transport, *, usb: bool = False) -> float:
 
 
 def _late_answerer(raw: bytes, host: int) -> int | None:
-    """The address a dropped frame came from, if it is a late answer to a presence probe."""
-    if (len(raw) == SERIAL_FRAME_LEN and raw[0] == host and raw[3] == Control.GET_VERSION
-            and sum(raw[:8]) & 0xFF == raw[8]):
+    """The address a dropped reply came from, if it may be a module's late or garbled answer
+    to a presence probe (a damaged reply that still starts with our host address most likely
+    names its sender next: worth a second look)."""
+    if len(raw) == SERIAL_FRAME_LEN and raw[0] == host and raw[3] == Control.GET_VERSION \
+            and sum(raw[:8]) & 0xFF == raw[8]:
+        return raw[1]
+    if 2 <= len(raw) <= 2 * SERIAL_FRAME_LEN and raw[0] == host and sum(raw[:8]) & 0xFF != \
+            (raw[8] if len(raw) > 8 else -1):
         return raw[1]
     return None
 
