@@ -142,13 +142,20 @@ def cmd_scan(args: argparse.Namespace) -> int:
                           f"firmware {hit.version or '?'}{at}", flush=True)
 
             if show_progress:
-                hits = _scan_with_progress(client, addresses, timeout, f"{ids} on {where}")
-                for hit in hits:
-                    row(hit)
+                hits = _scan_with_progress(client, addresses, timeout,
+                                           f"{ids} {args.first}..{args.last} on {where}", row)
             else:
-                hits = scan(client, addresses, timeout=timeout)
+                shown: set[int] = set()
+
+                def as_found(addr: int, hit) -> None:
+                    if hit is not None:
+                        shown.add(addr)
+                        row(hit)
+
+                hits = scan(client, addresses, timeout=timeout, progress=as_found)
                 for hit in hits:
-                    row(hit)
+                    if hit.address not in shown:  # found on the second, slower pass
+                        row(hit)
             found += hits
     finally:
         client.close()
@@ -169,27 +176,37 @@ def _is_usb(port: str) -> bool:
     return any(p.device == port for p in trinamic_ports())
 
 
-def _scan_with_progress(client, addresses: range, timeout: float, what: str) -> list:
-    """``scan`` under a rich progress bar on stderr (a terminal): addresses done, found."""
+def _scan_with_progress(client, addresses: range, timeout: float, what: str, row) -> list:
+    """``scan`` under a rich progress bar (stderr is a terminal): addresses done and found so
+    far; rows appear above the bar as modules are found (those of the second, slower pass at
+    the end). The bar goes where the rows go when stdout is the terminal too."""
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
     from .scan import scan
 
     found: list[int] = []
+    shown: set[int] = set()
+    same_terminal = sys.stdout.isatty()
     with Progress(TextColumn("scanning {task.description}"), BarColumn(),
                   MofNCompleteColumn(), TextColumn("{task.fields[found]}"),
-                  console=Console(stderr=True), transient=True,
-                  redirect_stdout=False) as bar:
+                  console=Console(stderr=not same_terminal), transient=True,
+                  redirect_stdout=same_terminal, redirect_stderr=False) as bar:
         task = bar.add_task(what, total=len(addresses), found="")
 
         def progress(addr: int, hit) -> None:
             if hit is not None:
                 found.append(addr)
+                shown.add(addr)
+                row(hit)
             bar.update(task, advance=1, found=("found " + ", ".join(map(str, found)))
                        if found else "")
 
-        return scan(client, addresses, timeout=timeout, progress=progress)
+        hits = scan(client, addresses, timeout=timeout, progress=progress)
+    for hit in hits:
+        if hit.address not in shown:
+            row(hit)
+    return hits
 
 
 # -- entry point -------------------------------------------------------------------------
