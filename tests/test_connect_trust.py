@@ -352,8 +352,8 @@ def test_nothing_answering_says_what_was_tried_and_what_to_try(run_tmclsh, respo
     err = p.stderr
     first, *causes = err.strip().splitlines()
     assert first == (f"tmclsh: no module answered at address 1 on {module.path} @ 9600: asked "
-                     "for its version (136) 3 times, waiting 0.1 s each, and tried its ASCII "
-                     "mode. Likely causes, most likely first:")
+                     "for its version (136) twice and tried its ASCII mode, waiting up to "
+                     "0.1 s each. Likely causes, most likely first:")
     assert [c.split(":")[0].strip() for c in causes] == [
         "- baud rate", "- address", "- a slow link", "- the port"]
     assert ("GP 65 allows 14400, 19200, 28800, 38400, 57600, 76800, 115200, 230400, 250000, "
@@ -478,3 +478,44 @@ def test_scan_shows_progress_on_a_terminal_and_a_summary(terminal, responders):
     assert "4 modules found at 3, 7, 9, 200" in screen
     assert "address   3  TMCM-1311" in screen and "address 200  TMCM-1311" in screen
     assert "scanning addresses 1..255" not in screen  # the bar replaced the plain line
+
+
+class Garbling(Responder):
+    """Answers, but every reply's checksum is off (what a wrong baud rate often looks like)."""
+
+    def answer(self, raw: bytes) -> bytes | None:
+        reply = super().answer(raw)
+        return None if reply is None else reply[:4] + bytes([reply[4] ^ 0x81]) + reply[5:]
+
+
+def test_garbled_replies_at_connect_point_at_the_baud_rate(run_tmclsh, responders):
+    module = responders(Garbling)
+    p = run_tmclsh("--port", module.path, "--timeout", "0.1", "-c", "GAP 1, 0")
+    assert p.returncode == 3 and p.stdout == ""
+    first, cause = p.stderr.splitlines()[:2]
+    assert first.startswith(f"tmclsh: replies came from {module.path} @ 9600 but were garbled "
+                            "(bad checksums)")
+    assert cause.startswith("  - baud rate:")
+
+
+def test_nothing_answering_on_can_names_bit_rate_and_ids(monkeypatch, capsys):
+    import uuid
+
+    monkeypatch.setenv("TMCLSH_CONFIG", os.devnull)
+    channel = f"nobody-{uuid.uuid4().hex[:8]}"
+    rc = cli.main(["--can", f"virtual:{channel}", "--timeout", "0.05", "--retries", "1",
+                   "-c", "GAP 1, 0"])
+    err = capsys.readouterr().err
+    assert rc == 3
+    first, *causes = err.strip().splitlines()
+    assert first == (f"tmclsh: no module answered on CAN virtual:{channel}: asked for its version "
+                     "(136) on CAN id 1, listening on reply id 2, 2 times, 0.05 s each. Likely "
+                     "causes, most likely first:")
+    assert [c.split(":")[0].strip() for c in causes] == [
+        "- bit rate", "- CAN ids", "- a slow bus", "- wiring"]
+
+
+def test_a_port_that_cannot_be_opened_is_exit_3_for_scan_too(run_tmclsh, tmp_path):
+    for args in (["-c", "GAP 1, 0"], ["scan"]):
+        p = run_tmclsh(*args, "--port", str(tmp_path / "ttyACM9"))
+        assert p.returncode == 3 and "no such port" in p.stderr

@@ -93,7 +93,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
 
     from .client import Client
     from .connection import baud_rates, connection_settings, open_transport
-    from .errors import ValidationError
+    from .errors import ConnectError, TransportError, ValidationError
     from .scan import address_timeout, scan
 
     if args.first > args.last:
@@ -102,7 +102,10 @@ def cmd_scan(args: argparse.Namespace) -> int:
     if auto:
         args.baud = None
     settings = connection_settings(args)
-    transport = open_transport(settings)
+    try:
+        transport = open_transport(settings)
+    except TransportError as exc:  # a port that cannot be opened: nothing to scan (exit 3)
+        raise ConnectError(str(exc)) from exc
     client = Client(transport, address=args.first, host_address=settings["host_address"],
                     timeout=1.0, retries=0, can_id=settings.get("can_id"),
                     reply_id=settings.get("reply_id"))

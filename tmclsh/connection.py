@@ -168,45 +168,96 @@ def start(client: Client, *, ascii: bool = False) -> Client:
     return client
 
 
-def _attach_ascii(client: Client, expected: Module | None) -> None:
+def _attach_ascii(client: Client, expected: Module | None, found=None) -> None:
     from .ascii import AsciiLink
 
     client.module = None  # so that the link asks 136 (stepping out of ASCII mode if need be)
     try:
-        AsciiLink.attach(client)
+        AsciiLink.attach(client, found=found)
     except (TmclTimeoutError, ChecksumError) as exc:
         raise NoAnswerError(no_answer_message(client, exc, ascii=True)) from exc
     _check_type(client, expected)
 
 
 def _bring_up(client: Client, expected: Module | None) -> None:
+    from .protocol import Control, Request
+
     client.module = None
     try:
         try:
-            client.identify()
+            # once: if this goes unanswered, the mode probe below is the second try (and
+            # tells a module in ASCII mode from a silent line)
+            reply = client.request(Request(client.address, Control.GET_VERSION, 0, 0, 0),
+                                   retries=0)
         except DownloadModeError:
             # a firmware that stores even 136 while downloading: end download mode first
             client.leave_download_mode()
+            reply = None
+        except (TmclTimeoutError, ChecksumError) as exc:
+            if not _answers_after_all(client, expected, exc):
+                return  # found in ASCII mode, and attached
+            reply = None
+        if reply is not None and reply.version is not None:
+            _adopt_version(client, reply.version)
+        else:
             client.identify()
     except ValidationError:
         if expected is None:  # a version string naming no module we know
             raise
         client.module = expected
-    except (TmclTimeoutError, ChecksumError) as exc:
-        probed = _can_probe_ascii(client)
-        if probed and _found_in_ascii_mode(client):
-            _attach_ascii(client, expected)
-            link = client.ascii_link
-            client.notice(
-                f"the module at address {client.address} is in its ASCII mode (it ignores "
-                "binary commands; GP 67 makes it start in it): talking to it through ASCII "
-                f"mode, {link.describe() if link else ''}; '.mode binary --keep' switches it "
-                "back to binary for good")
-            return
-        raise NoAnswerError(no_answer_message(client, exc, ascii_tried=probed)) from exc
     _check_type(client, expected)
     if client.ascii_link is None:
-        client.leave_download_mode()
+        try:
+            client.leave_download_mode()
+        except (TmclTimeoutError, ChecksumError) as exc:
+            tries = 1 + client.retries
+            raise NoAnswerError(no_answer_message(
+                client, exc, what=f"it answered 136 (version {client.version}), but not GGP "
+                f"129 (download mode), asked {tries} time{'s' if tries > 1 else ''}, "
+                f"waiting {client.timeout:g} s each")) from exc
+
+
+def _adopt_version(client: Client, version: str) -> None:
+    from .modules import from_version_string
+
+    client.version = version
+    mod = from_version_string(version)
+    if mod is None:
+        raise ValidationError(f"unknown module type in version string {version!r}; "
+                              "give it with --module")
+    client.module = mod
+
+
+def _answers_after_all(client: Client, expected: Module | None, exc: Exception) -> bool:
+    """After an unanswered 136: True if a binary module is there after all (slow, or a reply
+    lost); False if one in ASCII mode was found (and attached). Else a NoAnswerError."""
+    from .ascii import Mode, probe_mode
+    from .protocol import Control, Request
+
+    t = client.transport
+    if not isinstance(t, StreamTransport) or t.simulated:
+        for _ in range(client.retries):  # CAN, simulator: the client's own retries
+            try:
+                client.request(Request(client.address, Control.GET_VERSION, 0, 0, 0),
+                               retries=0)
+                return True
+            except (TmclTimeoutError, ChecksumError) as again:
+                exc = again
+        raise NoAnswerError(no_answer_message(client, exc)) from exc
+    try:
+        probe = probe_mode(client)
+    except (TmclTimeoutError, ChecksumError):
+        raise NoAnswerError(no_answer_message(client, exc, ascii_tried=True)) from exc
+    if probe.mode == Mode.BINARY:
+        return True
+    client.forget_stale()  # a module in ASCII mode sends no late binary replies
+    _attach_ascii(client, expected, probe)
+    link = client.ascii_link
+    echo = f" ({link.echo.text}; it stays in ASCII mode at exit)" if link else ""
+    client.notice(f"the module at address {client.address} is in its ASCII mode (it ignores "
+                  "binary commands; GP 67 makes it start in it): talking to it through ASCII "
+                  f"mode{echo}; '.mode binary --keep' switches it back to binary for good")
+    return False
 
 
 def _check_type(client: Client, expected: Module | None) -> None:
@@ -219,21 +270,6 @@ def _check_type(client: Client, expected: Module | None) -> None:
             f"-m {expected.name} does not match the module: address {client.address} says it "
             f"is a {found.name} (version {client.version}); leave -m out to use what the "
             f"module says, or give -m {found.name}")
-
-
-def _can_probe_ascii(client: Client) -> bool:
-    t = client.transport
-    return isinstance(t, StreamTransport) and not t.simulated
-
-
-def _found_in_ascii_mode(client: Client) -> bool:
-    """Does the silent module answer in its ASCII mode? (Serial links only.)"""
-    from .ascii import Mode, probe_mode
-
-    try:
-        return probe_mode(client).mode == Mode.ASCII
-    except (TmclTimeoutError, ChecksumError):
-        return False
 
 
 def baud_rates(module: Module | None = None) -> list[int]:
@@ -261,7 +297,7 @@ def _is_usb_module(client: Client) -> bool:
 
 
 def no_answer_message(client: Client, exc: BaseException, *, ascii: bool = False,
-                      ascii_tried: bool = False) -> str:
+                      ascii_tried: bool = False, what: str | None = None) -> str:
     """What was tried, in the user's words, then the likely causes, most likely first."""
     where = client.describe()
     addr = client.address
@@ -283,12 +319,17 @@ def no_answer_message(client: Client, exc: BaseException, *, ascii: bool = False
     socket_url = "://" in url
     first = (f"replies came from {where} but were garbled (bad checksums)" if garbled else
              f"no module answered at address {addr} on {where}")
-    if ascii:
+    if what is not None:
+        pass
+    elif ascii:
         what = f"looked for it in ASCII mode, waiting {client.timeout:g} s"
     else:
-        what = (f"asked for its version (136) {tries} time{'s' if tries > 1 else ''}, "
-                f"waiting {client.timeout:g} s each"
-                + (", and tried its ASCII mode" if ascii_tried else ""))
+        if ascii_tried:
+            what = ("asked for its version (136) twice and tried its ASCII mode, waiting up "
+                    f"to {client.timeout:g} s each")
+        else:
+            what = (f"asked for its version (136) {tries} time{'s' if tries > 1 else ''}, "
+                    f"waiting {client.timeout:g} s each")
     lines = [f"{first}: {what}. Likely causes, most likely first:"]
     if not usb and not socket_url:
         baud = getattr(client.transport, "baudrate", 9600)
