@@ -266,10 +266,13 @@ def _check_type(client: Client, expected: Module | None) -> None:
         client.module = found or expected
         return
     if found.name != expected.name:
+        if client.transport.simulated:
+            hint = f"--sim {expected.name} simulates a {expected.name}"
+        else:
+            hint = f"leave -m out to use what the module says, or give -m {found.name}"
         raise ConnectError(
             f"-m {expected.name} does not match the module: address {client.address} says it "
-            f"is a {found.name} (version {client.version}); leave -m out to use what the "
-            f"module says, or give -m {found.name}")
+            f"is a {found.name} (version {client.version}); {hint}")
 
 
 def baud_rates(module: Module | None = None) -> list[int]:

@@ -104,10 +104,14 @@ def _identify(client: Client, addr: int, binary, timeout: float) -> Found:
     mod = from_version_string(version) if version else None
     if mod is None and binary.status == 100:
         mod = by_firmware_id((binary.value >> 16) & 0xFFFF)
-    baud = getattr(client.transport, "baudrate", None) \
-        if isinstance(client.transport, StreamTransport) and "://" not in getattr(
-            client.transport, "url", "://") else None
-    return Found(addr, mod.name if mod else None, version, baud)
+    return Found(addr, mod.name if mod else None, version, _baud(client.transport))
+
+
+def _baud(t: Transport) -> int | None:
+    """The line's baud rate, if it has one (a pty or serial port; not CAN, TCP, simulator)."""
+    if isinstance(t, StreamTransport) and not t.simulated and "://" not in getattr(t, "url", ""):
+        return getattr(t, "baudrate", None)
+    return None
 
 
 def _probe(client: Client, addr: int, timeout: float, retries: int):
