@@ -519,3 +519,35 @@ def test_a_port_that_cannot_be_opened_is_exit_3_for_scan_too(run_tmclsh, tmp_pat
     for args in (["-c", "GAP 1, 0"], ["scan"]):
         p = run_tmclsh(*args, "--port", str(tmp_path / "ttyACM9"))
         assert p.returncode == 3 and "no such port" in p.stderr
+
+
+def test_killed_mid_upload_the_next_run_brings_the_module_out(run_tmclsh, make_pty_sim, tmp_path):
+    """SIGKILL leaves no chance to send 133: the module (the project's simulator, on a pty)
+    stays in download mode; the next tmclsh finds it so and ends it before anything else."""
+    import signal
+    import subprocess
+    import sys
+
+    from conftest import ROOT, tmclsh_env
+
+    sim, path = make_pty_sim()
+    src = tmp_path / "long.tmc"
+    src.write_text("loop:\n" + "SAP 4, 0, 1000\n" * 1500 + "JA loop\n")
+    proc = subprocess.Popen([sys.executable, "-m", "tmclsh", "--port", path, "--baud", "9600",
+                             "-c", f".upload {src} --yes"], env=tmclsh_env(), cwd=str(ROOT),
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 20
+        while not (sim.vm.download and sim.vm.download_addr > 50):
+            assert time.monotonic() < deadline and proc.poll() is None
+            time.sleep(0.005)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(5)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert sim.vm.download  # left in download mode
+    p = run_tmclsh("--port", path, "-c", "SAP 4, 0, 777; GAP 4, 0")
+    assert p.returncode == 0, p.stderr
+    assert "ended it with 133" in p.stderr and not sim.vm.download
+    assert p.stdout.splitlines()[-1] == "MaxPositioningSpeed = 777 pps"
