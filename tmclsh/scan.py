@@ -23,7 +23,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 from .client import Client
-from .errors import ChecksumError, TmclError, TmclTimeoutError
+from .errors import ChecksumError, DownloadModeError, TmclError, TmclTimeoutError
 from .protocol import SERIAL_FRAME_LEN, Control, Request
 from .transport.base import CanTransport, StreamTransport, Transport
 
@@ -118,8 +118,11 @@ def _probe(client: Client, addr: int, timeout: float, retries: int):
     client.address = addr
     if client.is_can:
         client.can_id = addr
-    return client.request(Request(addr, Control.GET_VERSION, 1, 0, 0), timeout=timeout,
-                          retries=retries)
+    try:
+        return client.request(Request(addr, Control.GET_VERSION, 1, 0, 0), timeout=timeout,
+                              retries=retries)
+    except DownloadModeError as exc:  # a firmware that stores even 136 there: it is present
+        return exc.reply
 
 
 def scan(client: Client, addresses: Iterable[int], *, timeout: float,
