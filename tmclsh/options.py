@@ -45,8 +45,7 @@ def _baud_or_auto(text: str) -> int | str:
 
 def add_connection(p: argparse.ArgumentParser, *, auto_baud: bool = False) -> None:
     g = p.add_argument_group("connection (default: the one attached Trinamic USB module; "
-                             "without one the interactive shell simulates a TMCM-1311, "
-                             "other runs exit 3)")
+                             "else --sim at the prompt, exit 3 elsewhere)")
     x = g.add_mutually_exclusive_group()
     x.add_argument("--port", metavar="PORT",
                    help="serial device or pyserial URL (socket://, rfc2217://, loop://, spy://, hwgrep://)")
