@@ -551,3 +551,19 @@ def test_killed_mid_upload_the_next_run_brings_the_module_out(run_tmclsh, make_p
     assert p.returncode == 0, p.stderr
     assert "ended it with 133" in p.stderr and not sim.vm.download
     assert p.stdout.splitlines()[-1] == "MaxPositioningSpeed = 777 pps"
+
+
+def test_ascii_asked_for_a_module_left_in_download_mode(run_tmclsh, make_pty_sim):
+    """--ascii needs 139, which a module in download mode refuses: download mode is ended
+    first (the project's simulator on a pty, put in download mode with a raw 132)."""
+    import serial
+
+    sim, path = make_pty_sim()
+    with serial.Serial(path, 9600, timeout=1) as port:
+        port.write(Request(1, START_DOWNLOAD, 0, 0, 0).to_bytes())
+        assert port.read(9)[2] == OK
+    assert sim.vm.download
+    p = run_tmclsh("--port", path, "--ascii", "-c", "SAP 4, 0, 555; GAP 4, 0")
+    assert p.returncode == 0, p.stderr
+    assert "ended it with 133" in p.stderr and not sim.vm.download
+    assert p.stdout.splitlines()[-1] == "MaxPositioningSpeed = 555 pps"

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 
 from .client import Client
 from .errors import (ChecksumError, ConnectError, DownloadModeError, NoAnswerError,
-                     TmclTimeoutError, ValidationError)
+                     StatusError, TmclTimeoutError, ValidationError)
 from .transport.base import StreamTransport, Transport
 
 if TYPE_CHECKING:
@@ -173,7 +173,14 @@ def _attach_ascii(client: Client, expected: Module | None, found=None) -> None:
 
     client.module = None  # so that the link asks 136 (stepping out of ASCII mode if need be)
     try:
-        AsciiLink.attach(client, found=found)
+        try:
+            AsciiLink.attach(client, found=found)
+        except StatusError as exc:
+            # 139 refused: a module in download mode takes no control command but 132-136;
+            # end download mode (with a notice), then try once more
+            if client.ascii_link is not None or not client.leave_download_mode():
+                raise
+            AsciiLink.attach(client)
     except (TmclTimeoutError, ChecksumError) as exc:
         raise NoAnswerError(no_answer_message(client, exc, ascii=True)) from exc
     _check_type(client, expected)
