@@ -198,7 +198,8 @@ def test_not_utf8(tmp_path):
 
 def test_settings_default_from_default_toml():
     s = load_settings(Config(Path("x")), env={})
-    assert s == {"color": "auto", "editing_mode": "emacs", "history_size": 1000, "confirm": True}
+    assert s == {"color": "auto", "editing_mode": "emacs", "history_size": 1000, "confirm": True,
+                 "pager": True}
     assert tuple(s) == config.SETTING_KEYS
 
 

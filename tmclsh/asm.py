@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from . import instructions as isa
-from .errors import AsmError, ValidationError
+from .errors import AsmError, RangeError, ValidationError
 from .modules import Module, Parameter
 from .protocol import INSTRUCTION_LEN, INT32_MAX, INT32_MIN, UINT32_MAX, Control, Instruction
 
@@ -202,8 +202,8 @@ class Line:
     include_col: int = 0
     comment: str = ""
 
-    def error(self, msg: str, col: int | None = None) -> AsmError:
-        return AsmError(msg, self.number, col, self.file)
+    def error(self, msg: str, col: int | None = None, kind: str = "syntax") -> AsmError:
+        return AsmError(msg, self.number, col, self.file, kind)
 
     @property
     def is_raw(self) -> bool:
@@ -333,8 +333,12 @@ def _eval(expr: Expr, line: Line, resolve: Callable[[Expr], int | None]) -> int:
         q = abs(a) // abs(b) * (1 if (a >= 0) == (b >= 0) else -1)  # truncate like C
         result = q if expr.op == "/" else a - q * b
     if abs(result) > _MAX_MAGNITUDE:
-        raise line.error("value too large", expr.col)
+        raise line.error("value too large", expr.col, "range")
     return result
+
+
+def _kind(exc: ValidationError) -> str:
+    return "range" if isinstance(exc, RangeError) else "check"
 
 
 def eval_constant(line: Line, symbols: Symbols) -> int:
@@ -345,7 +349,7 @@ def eval_constant(line: Line, symbols: Symbols) -> int:
 
 def _check_int32(value: int, line: Line, col: int) -> None:
     if not INT32_MIN <= value <= UINT32_MAX:
-        raise line.error(f"{value} does not fit in 32 bits", col)
+        raise line.error(f"{value} does not fit in 32 bits", col, "range")
 
 
 def _suggest(word: str, choices) -> str:
@@ -389,9 +393,10 @@ class _Encoder:
         self.param: Parameter | None = None
         self.label: str | None = None
 
-    def fail(self, msg: str, expr: Expr | None = None) -> AsmError:
+    def fail(self, msg: str, expr: Expr | None = None, kind: str = "check") -> AsmError:
+        """A well-formed line this module refuses; ``kind="range"`` for a value out of range."""
         col = expr.col if expr is not None else self.line.mnemonic_col
-        return self.line.error(msg, col)
+        return self.line.error(msg, col, kind)
 
     def number(self, expr: Expr, extra: dict[str, int] | None = None) -> int:
         def resolve(e: Expr) -> int | None:
@@ -412,11 +417,13 @@ class _Encoder:
             given = dict(zip(FIELDS, ops))  # `GAP 1, 0, 0`: don't-care fields written out
         else:
             raise self.fail(f"too many operands: {spec.syntax} (or all three fields: "
-                            f"{spec.mnemonic} <type>, <motor>, <value>)", ops[len(spec.fields)])
+                            f"{spec.mnemonic} <type>, <motor>, <value>)", ops[len(spec.fields)],
+                            "syntax")
         if "type" in spec.fields and "type" not in given:
-            raise self.fail(f"{spec.mnemonic} needs its first operand: {spec.syntax}")
+            raise self.fail(f"{spec.mnemonic} needs its first operand: {spec.syntax}",
+                            kind="syntax")
         if "value" in spec.fields and "value" not in given:
-            raise self.fail(f"{spec.mnemonic} needs a value: {spec.syntax}")
+            raise self.fail(f"{spec.mnemonic} needs a value: {spec.syntax}", kind="syntax")
         return given
 
     def run(self) -> Encoded:
@@ -475,7 +482,7 @@ class _Encoder:
                 raise self.fail(f"{mod.name} has no {what} {value}: banks "
                                 f"{', '.join(map(str, banks))}", expr)
         elif not 0 <= value <= 255:
-            raise self.fail(f"{value} does not fit the motor/bank byte (0..255)", expr)
+            raise self.fail(f"{value} does not fit the motor/bank byte (0..255)", expr, "range")
         return value
 
     def type_(self, expr: Expr, motor: int, motor_given: bool) -> int:
@@ -526,10 +533,11 @@ class _Encoder:
             return value
         if kind == "coordinate":
             if not 0 <= value < mod.coordinates:
-                raise self.fail(f"coordinate {value} out of range: 0..{mod.coordinates - 1}", expr)
+                raise self.fail(f"coordinate {value} out of range: 0..{mod.coordinates - 1}", expr,
+                                "range")
             return value
         if not 0 <= value <= 255:
-            raise self.fail(f"{value} does not fit the type byte (0..255)", expr)
+            raise self.fail(f"{value} does not fit the type byte (0..255)", expr, "range")
         return value
 
     def all_ports(self, port: int, bank: int) -> bool:
@@ -545,19 +553,20 @@ class _Encoder:
         if kind == "velocity":
             lo, hi = mod.velocity_min, mod.velocity_max
             if not lo <= value <= hi:
-                raise self.fail(f"velocity {value} out of range {lo}..{hi}", expr)
+                raise self.fail(f"velocity {value} out of range {lo}..{hi}", expr, "range")
         elif kind == "position":
             if spec.mnemonic == "MVP" and fields["type"] == spec.type_names(mod.name).get("COORD"):
                 if not 0 <= value < mod.coordinates:
-                    raise self.fail(f"coordinate {value} out of range: 0..{mod.coordinates - 1}", expr)
+                    raise self.fail(f"coordinate {value} out of range: 0..{mod.coordinates - 1}", expr,
+                                "range")
             elif not mod.position_min <= value <= mod.position_max:
                 raise self.fail(f"position {value} out of range "
-                                f"{mod.position_min}..{mod.position_max}", expr)
+                                f"{mod.position_min}..{mod.position_max}", expr, "range")
         elif kind == "param" and self.param is not None:
             try:
                 self.param.check(value)
             except ValidationError as exc:
-                raise self.fail(str(exc), expr) from None
+                raise self.fail(str(exc), expr, _kind(exc)) from None
         elif kind == "port_value":
             self.check_port_value(value, fields, expr)
         elif kind == "ticks":
@@ -602,7 +611,7 @@ class _Encoder:
                                 "SIO sets outputs", expr)
             lo, hi = p.min, p.max
         if not lo <= value <= hi:
-            raise self.fail(f"value {value} out of range {lo}..{hi} for this port", expr)
+            raise self.fail(f"value {value} out of range {lo}..{hi} for this port", expr, "range")
 
     def check_access(self) -> None:
         p, spec = self.param, self.spec
@@ -620,13 +629,14 @@ def _encode_raw(line: Line, symbols: Symbols, direct: bool) -> Encoded:
     """A bare command number with up to three numeric operands: sent as typed."""
     opcode = int(line.mnemonic or "0")
     if not 0 <= opcode <= 255:
-        raise line.error(f"command number {opcode} out of range 0..255", line.mnemonic_col)
+        raise line.error(f"command number {opcode} out of range 0..255", line.mnemonic_col,
+                         "range")
     vals = []
     for i, expr in enumerate(line.operands):
         v = _eval(expr, line, lambda e: symbols.lookup(e.name or ""))
         limit = (0, 255) if i < 2 else (INT32_MIN, UINT32_MAX)
         if not limit[0] <= v <= limit[1]:
-            raise line.error(f"{v} out of range {limit[0]}..{limit[1]}", expr.col)
+            raise line.error(f"{v} out of range {limit[0]}..{limit[1]}", expr.col, "range")
         vals.append(v)
     vals += [0] * (3 - len(vals))
     if direct and opcode == Control.FACTORY_DEFAULT and vals[2] != 1234:

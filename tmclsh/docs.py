@@ -510,11 +510,22 @@ Numbers in decimal or hex ({_b("$1F")}, {_b("0x1F")}); symbolic types ({_b("ABS 
 ({_b("GAP ActualPosition, 0")}). Any command number can be sent raw as well.
 .IP \\(bu 2
 Shell commands start with a dot ({_b(".help")}, {_b(".param")}, {_b(".watch")}, ...);
-{_b("help")} and {_b("quit")} also work bare. A shell command owns the rest of its line, so
-{_b(".watch a=GAP 1, 0; b=GIO 0, 0")} is one command; put other commands on a new line.
+{_b("help")}, {_b("?")} and {_b("quit")} also work bare ({_b("help")} or {_b("?")} alone is the
+overview).
 .IP \\(bu 2
-With {_b("-c")}, lines are separated by newlines or {_b(";")}. Empty lines and lines starting
-with {_b("#")} or {_b("//")} are ignored.
+Lines are separated by newlines or {_b(";")}, at the prompt, with {_b("-c")} and in scripts:
+{_b("help 4; help 5")} is two lines, a {_b(";")} inside quotes ({_b('.echo "a;b"')}) is not a
+separator. Only a command that owns the rest of its line takes the {_b(";")}: {_b(".watch")}
+separates its expressions with it ({_b(".watch a=GAP 1, 0; b=GIO 0, 0")} is one command) and
+{_b(".decode")} its pasted bytes; put other commands after those on a new line.
+.IP \\(bu 2
+{_b("//")} and {_b("#")} start a comment that runs to the end of the line ({_b("#")} at the start of
+a word, outside quotes: {_b("GAP 1, 0 # where it is")}). Empty lines are ignored.
+.IP \\(bu 2
+Questions (EEPROM writes, factory reset, program download, leaving {_b(".ascii")}) are answered
+with a line: {_b("y")} and Enter agrees, Enter alone takes the default shown in capitals
+({_b("[y/N]")}), anything else is no. Outside the interactive prompt nothing is asked: such
+commands are refused unless {_b("--yes")} is given.
 .IP \\(bu 2
 Scripts stop at the first error, reported as {_i("FILE")}:{_i("LINE")}, unless
 {_b("--keep-going")} is given.
@@ -530,7 +541,10 @@ with status 130.
 .TP
 {_b("Tab")}
 Completes mnemonics, symbolic types, parameter names (with their number, range and unit) and
-shell commands with their arguments. Completion never asks the module.
+shell commands with their arguments; inside expressions ({_b(".watch")} {_i("NAME")}{_b("=")},
+{_b(".wait")}, {_b(".expect")}, {_b(".if")}, {_b(".let")}, {_b(".display")}, {_b("${...}")}) the
+read commands with their parameters, motors and ports, variables and functions.
+Completion never asks the module.
 .TP
 {_b("Ctrl-C")}
 Stops all motors and clears the line.
@@ -540,6 +554,24 @@ Leaves the shell, like {_b(".quit")}.
 .TP
 {_b("Enter")} on an empty line
 Repeats the last {_b(".step")}.
+.PP
+Output longer than the terminal ({_b(".help")}, {_b(".params")}, {_b(".list")}, {_b(".dump")},
+a long {_b("help")}) is shown through {_b("$PAGER")} (default {_b("less")}; {_b("q")} leaves
+it), never in a pipe, with {_b("-c")} or {_b("-f")}; the {_b("pager")} setting turns it off.
+.SS Keys in the ASCII terminal (.ascii)
+.TP
+{_b("Ctrl-]")}, or {_b(".quit")} typed as a line
+Back to the shell (asks whether to send {_b("BIN")}). A {_b("BIN")} typed by the user is
+noticed: the module talks binary frames again and the terminal returns to the shell.
+.TP
+{_b("Ctrl-C")}
+Stops all motors (in {_b("--raw")}: first erases the line typed so far).
+.TP
+{_b("Ctrl-T")} then {_b("e")}, {_b("h")}, {_b("t")}, {_b("f")}, {_b("u")} or {_b("?")}
+The menu, as in tio: local echo on/off, hex view of what arrives on/off, timestamps on/off,
+log the session to a file ({_b("f")} again stops), send a file line by line (blank and comment
+lines left out, each reply waited for), this list. {_b("Ctrl-T Ctrl-T")} sends Ctrl-T in
+{_b("--raw")}.
 """
 
 _EXAMPLES = f"""\
@@ -623,7 +655,8 @@ def _exit_status() -> list[str]:
                      "the module, a timeout), a script stopped at an error, asm or disasm "
                      "failed, or a bad config file or environment variable."),
         (EXIT_USAGE, "Usage: an unknown option or a bad option value; or a script given with "
-                     "-f that cannot be read or has a syntax error (nothing was sent)."),
+                     "-f that was not run (nothing was sent): no such file, a syntax error, a "
+                     "value out of range or another line the module would refuse."),
         (EXIT_CONNECT, "No module to talk to: a run that is not interactive (-c, -f, standard "
                        "input not a terminal, scan) was given no connection and found no "
                        "module (--sim simulates one); two or more Trinamic USB modules are "
@@ -678,6 +711,54 @@ def _configuration() -> list[str]:
     return out
 
 
+_BACKUPS = f"""\
+.SH CONFIGURATION BACKUPS
+{_b(".save")} {_i("FILE")} writes a module's configuration as a tmclsh script, so the same file
+is a backup, a record of what changed and a way to set up a replacement module:
+.PP
+.nf
+// tmclsh configuration backup of a TMCM\\-1311 (.save); ...
+// module: TMCM\\-1311
+// firmware: 1311V111
+// address: 1
+// connection: /dev/ttyACM0 at 9600 baud (binary)
+// date: 2026\\-12\\-01 19:40:00 UTC
+// program: backup.program.tmcl        (only with \\-\\-program)
+
+// \\-\\- axis parameters, motor 0
+// ActualPosition = 51200 µsteps (state, not restored; AP 1, µsteps: ...)
+SAP MaxPositioningSpeed, 0, 51200  // AP 4, pps: Speed limit for positioning ...
+// \\-\\- global parameters, bank 2
+SGP 0, 2, 0  // GP 0: UserVariable #0
+.fi
+.PP
+The {_b("// key: value")} lines of the header are read back by {_b(".diff")} and
+{_b(".restore")}: {_b("module")} decides whether the file is another module type's.
+Each {_b("SAP")}/{_b("SGP")} line is one writable configuration parameter of one motor or
+bank, by name (a run of user variables by number), with its number, unit and meaning after
+{_b("//")}. Read\\-only values and motion state (parameters marked {_b("state")} in the module
+data: target and actual position and speed, counters, writes that start a move or an
+initialisation) are comments and are never written back. Parameters that change how the
+module is reached (marked {_b("link")}: address, baud rate, CAN ids, interface) are restored
+last and not read back.
+.PP
+{_b(".diff")} and {_b(".restore")} accept any script: every {_b("SAP")}/{_b("SGP")} line (by
+name or number, or as raw command 5 or 9) is parsed and checked against the module's data as
+a typed command would be, before anything is sent, and an error names {_i("FILE")}{_b(":")}{_i("LINE")};
+comments, blank lines, shell commands, lines with {_b("${...}")} and other TMCL commands are
+ignored, and for a parameter set twice the last line counts. Parameters are compared by
+number and motor/bank; a backup of another module type is carried over by name with
+{_b("--force")} (parameters the module lacks, motors it does not have and values outside its
+ranges are skipped and listed). A module without parameter data compares by number.
+.PP
+Replaying the file with {_b("tmclsh -f")} {_i("FILE")} {_b("--yes")} writes every line
+(global parameters of bank 0 go straight to EEPROM, hence {_b("--yes")}); {_b(".restore")}
+writes only what differs. With {_b("--program")} the stored program is read back and written
+as source to {_i("FILE")}{_b(".program.tmcl")} (the suffix of {_i("FILE")} replaced), which
+{_b(".upload")} puts back; {_b(".restore")} does not upload it.
+"""
+
+
 _FILES = f"""\
 .SH FILES
 .TP
@@ -686,6 +767,12 @@ The config file (default {_b("~/.config/tmclsh/config.toml")}; {_b("TMCLSH_CONFI
 .TP
 {_i("$XDG_STATE_HOME")}{_b("/tmclsh/history")}
 Command history of the interactive prompt (default {_b("~/.local/state/tmclsh/history")}).
+.TP
+{_i("$XDG_CACHE_HOME")}{_b("/tmclsh/programs/")}
+The source of each program uploaded with {_b(".upload")}, keyed by a hash of its image, so
+that {_b(".dump")} can show the original labels and comments while the module's memory holds
+exactly that image (default {_b("~/.cache/tmclsh/programs/")}; the user cache directory of
+the platform elsewhere). Safe to delete.
 .TP
 {_i("prefix")}{_b("/share/bash-completion/completions/tmclsh")}
 .TQ
@@ -744,6 +831,7 @@ def manpage(parser: argparse.ArgumentParser | None = None) -> str:
     out += _shell_commands_section()
     out += _instructions_section()
     out += _configuration()
+    out.append(_BACKUPS.rstrip("\n"))
     out.append(_FILES.rstrip("\n"))
     out += _exit_status()
     out.append(_EXAMPLES.rstrip("\n"))

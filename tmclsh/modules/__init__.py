@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from functools import cache, cached_property
 from importlib import resources
 
-from ..errors import ValidationError
+from ..errors import RangeError, ValidationError
 from ..instructions import InstructionSpec, all_instructions, controls
 
 ACCESS_CODES = ("R", "W", "RW", "RWE")
@@ -42,7 +42,14 @@ class Parameter:
     default: int | None = None
     values: dict[int, str] = field(default_factory=dict)
     bits: dict[int, str] = field(default_factory=dict)
-    note: str | None = None
+    note: str | None = None  # for users: shown by help and .param
+    source: str | None = None  # for maintainers: how the entry was read from the manual
+    # motion or module state (positions, speeds, counters) or a write that acts rather than
+    # configures: a configuration backup (.save) keeps it as a comment, .restore never writes it
+    state: bool = False
+    # writing it changes how the module is reached (address, baud rate, interface): a restore
+    # writes it last and cannot read it back over the same connection
+    link: bool = False
 
     @property
     def readable(self) -> bool:
@@ -89,7 +96,7 @@ class Parameter:
     def check(self, value: int) -> None:
         """Raise a ValidationError naming the parameter and its range if ``value`` is illegal."""
         if not self.in_range(value):
-            raise ValidationError(
+            raise RangeError(
                 f"{value} is out of range for {self.label} {self.name}: "
                 f"allowed {self.range_text}{' ' + self.unit if self.unit else ''}")
 
@@ -114,6 +121,8 @@ class IoPort:
     description: str = ""
     unit: str = ""
     default: int | None = None
+    note: str | None = None
+    source: str | None = None
 
 
 def _int_keys(table: dict | None) -> dict[int, str]:
@@ -127,7 +136,8 @@ def _parameter(kind: str, raw: dict) -> Parameter:
         count=raw.get("count", 1), min=raw.get("min"), max=raw.get("max"),
         choices=tuple(raw["choices"]) if raw.get("choices") else None, unit=raw.get("unit", ""),
         default=raw.get("default"), values=_int_keys(raw.get("values")),
-        bits=_int_keys(raw.get("bits")), note=raw.get("note"))
+        bits=_int_keys(raw.get("bits")), note=raw.get("note"), source=raw.get("source"),
+        state=bool(raw.get("state", False)), link=bool(raw.get("link", False)))
 
 
 def _normalise(name: str) -> str:

@@ -169,13 +169,10 @@ def _dumb_echo(ps: PromptSession) -> None:
 
 
 def ask_yes_no(question: str) -> bool:
-    """``session.ask`` in the REPL: y/n, anything else (Ctrl-C, Ctrl-D) is no."""
-    from prompt_toolkit.shortcuts import confirm
+    """``session.ask`` in the REPL: ``[y/N]`` and Enter, as everywhere (ask.py)."""
+    from .ask import ask_yes_no as ask
 
-    try:
-        return bool(confirm(question))
-    except (KeyboardInterrupt, EOFError):
-        return False
+    return ask(question, default=False)
 
 
 def banner(session: Session):
@@ -216,6 +213,7 @@ def run_repl(session: Session, prompt_session: PromptSession | None = None) -> i
 
     session.interactive = True
     session.ask = ask_yes_no
+    session.state["pager"] = repl_settings().get("pager", True) is not False
     if repl_settings().get("color") == "never":
         session.out.console.no_color = session.out.err.no_color = True
     from prompt_toolkit.utils import is_dumb_terminal

@@ -16,6 +16,7 @@ from ..modules import Module, Parameter, available, from_version_string, load
 from ..protocol import Control, Request, status_ok
 from .commands import all_commands, command, find
 from .completer import Candidate, param_meta
+from .render import paged
 
 if TYPE_CHECKING:
     from .session import Session
@@ -24,7 +25,8 @@ CATEGORY_ORDER = ("general", "parameters", "motion", "connection", "protocol")
 CATEGORY_TITLES = {"general": "General", "parameters": "Parameters", "motion": "Motion",
                    "connection": "Connection and module", "protocol": "Protocol",
                    "ascii": "ASCII mode", "program": "Stored program (debugger)",
-                   "script": "Scripts and variables", "watch": "Watching values"}
+                   "script": "Scripts and variables", "watch": "Watching values",
+                   "configuration": "Configuration backup (clone a module)"}
 
 _GAP = isa.Opcode.GAP
 _GGP = isa.Opcode.GGP
@@ -50,17 +52,20 @@ def complete_param(session: Session | None, text: str) -> list[Candidate]:
     mod = _module(session)
     if mod is None:
         return []
+    extra = [] if "--source" in text.split() else [
+        Candidate("--source", "also how the entry was read from the manual")]
     return [Candidate(p.name, param_meta(p), also=(p.manual_name,))
-            for p in mod.axis_params + mod.global_params]
+            for p in mod.axis_params + mod.global_params] + extra
 
 
 def complete_params(session: Session | None, text: str) -> list[Candidate]:
     words = text.split()
     if len(words) == 0 or (len(words) == 1 and not text.endswith(" ")):
         return [Candidate("axis", "axis parameters (SAP/GAP)"),
-                Candidate("global", "global parameters (SGP/GGP)")] + complete_param(session, text)
+                Candidate("global", "global parameters (SGP/GGP)")] + [
+            c for c in complete_param(session, text) if c.text != "--source"]
     kind = words[0].lower()
-    return [c for c in complete_param(session, text)
+    return [c for c in complete_param(session, text) if c.text != "--source"
             if kind not in ("axis", "global") or c.meta.startswith("AP" if kind == "axis" else "GP")]
 
 
@@ -93,7 +98,12 @@ def complete_module(session: Session | None, text: str) -> list[Candidate]:
          "show help: all commands, one command, a TMCL instruction, or a parameter",
          complete=complete_help, bare=True,
          details="`help SAP` explains an instruction; `help 140` shows axis parameter 140 (and "
-                 "global parameter 140 if there is one), like `.param 140`.")
+                 "global parameter 140 if there is one), like `.param 140`. `?` is the same "
+                 "as help (`? 140`). Lines: `;` separates commands (`help 4; help 5`) except "
+                 "after one that owns its line (.watch, .decode); `#` or `//` starts a comment "
+                 "to the end of the line. Questions are answered with y and Enter ([y/N]: "
+                 "Enter alone is no).")
+@paged
 def cmd_help(session: Session, arg: str) -> None:
     arg = arg.strip()
     if not arg:
@@ -363,13 +373,18 @@ command(".exit", ".exit", "leave the shell (same as .quit)", bare=True)(_quit)
 
 # -- .param / .params --------------------------------------------------------------------
 
-@command(".param", ".param QUERY", "explain a parameter: number, name or part of a name, "
-         "with its current value", complete=complete_param, category="parameters",
+@command(".param", ".param [--source] QUERY", "explain a parameter: number, name or part of "
+         "a name, with its current value", complete=complete_param, category="parameters",
          details="QUERY may be a number (140), a name (MicrostepResolution), part of one "
                  "(microstep) or `ap 140` / `gp 66 [bank]` to pick the kind. The current value "
-                 "is read from the module (GAP/GGP) when the parameter is readable.")
+                 "is read from the module (GAP/GGP) when the parameter is readable. --source "
+                 "also shows how the entry was read from the module's manual (where the manual "
+                 "is unclear or wrong, and what tmclsh assumes).")
+@paged
 def cmd_param(session: Session, arg: str, from_help: bool = False) -> None:
-    query = arg.strip()
+    words = arg.split()
+    source = "--source" in words
+    query = " ".join(w for w in words if w != "--source")
     if not query:
         raise ValidationError("which parameter? .param 140, .param MaxPositioningSpeed, "
                               ".param microstep")
@@ -387,7 +402,7 @@ def cmd_param(session: Session, arg: str, from_help: bool = False) -> None:
         if not found:
             what = {"axis": "axis ", "global": "global "}.get(kind or "", "")
             raise ValidationError(f"the {mod.name} has no {what}parameter {number}")
-        return _show_params(session, found, numbered=number)
+        return _show_params(session, found, numbered=number, source=source)
     found = mod.search(query, kind)
     if bank is not None:
         found = [p for p in found if p.bank == bank]
@@ -405,7 +420,7 @@ def cmd_param(session: Session, arg: str, from_help: bool = False) -> None:
                               + ("; .help lists the commands" if from_help else
                                  "; .params lists them all"))
     if len(found) == 1:
-        return _show_params(session, found)
+        return _show_params(session, found, source=source)
     _param_table(session, found, title=f"{len(found)} parameters match {query!r}", read=False)
     if not session.out.json:
         session.out.info("(.param NAME for one of them)")
@@ -451,6 +466,7 @@ def read_param(session: Session, p: Parameter, motor_or_number: int | None = Non
     else:
         req = Request(client.address, _GGP, p.number if number is None else number, p.bank, 0)
     reply = client.request(req)
+    session.stats.commands += 1  # a script's summary counts what .params read
     assert reply is not None
     if not status_ok(reply.status):
         raise StatusError(reply.status, reply)
@@ -480,7 +496,8 @@ def _current(session: Session, p: Parameter, number: int | None
     return rows
 
 
-def _show_params(session: Session, params: list[Parameter], numbered: int | None = None) -> None:
+def _show_params(session: Session, params: list[Parameter], numbered: int | None = None,
+                 source: bool = False) -> None:
     from rich.table import Table
     from rich.text import Text
 
@@ -489,7 +506,10 @@ def _show_params(session: Session, params: list[Parameter], numbered: int | None
         number = numbered if (numbered is not None and p.count > 1) else None
         current = _current(session, p, number)
         if out.json:
-            out.emit(_param_json(p, current))
+            obj = _param_json(p, current)
+            if source:
+                obj["source"] = p.source
+            out.emit(obj)
             continue
         if i:
             out.print()
@@ -519,6 +539,8 @@ def _show_params(session: Session, params: list[Parameter], numbered: int | None
             grid.add_row("  bits", "\n".join(f"bit {b}: {t}" for b, t in sorted(p.bits.items())))
         if p.note:
             grid.add_row("  note", p.note)
+        if source:
+            grid.add_row("  source", p.source or "as the manual prints it")
         for label, text, _ in current:
             grid.add_row("  now" + (f" ({label})" if label else ""),
                          Text(text, style="tmcl.value" if not text.startswith(
@@ -566,7 +588,8 @@ def _param_json(p: Parameter, current: list[tuple[str, str, int | None]] | None 
                 ) -> dict:
     obj = {"kind": p.kind, "number": p.number, "bank": p.bank, "name": p.name,
            "manual_name": p.manual_name, "description": p.description, "min": p.min,
-           "max": p.max, "unit": p.unit, "access": p.access, "default": p.default}
+           "max": p.max, "unit": p.unit, "access": p.access, "default": p.default,
+           "note": p.note}
     if p.count > 1:
         obj["count"] = p.count
     if p.values:
@@ -587,6 +610,7 @@ def _param_json(p: Parameter, current: list[tuple[str, str, int | None]] | None 
          complete=complete_params, category="parameters",
          details="FILTER narrows the list by number or (part of a) name. On a multi-axis "
                  "module each motor gets its own value column.")
+@paged
 def cmd_params(session: Session, arg: str) -> None:
     mod = session.module
     words = arg.split()
@@ -772,10 +796,11 @@ def cmd_trace(session: Session, arg: str) -> None:
                    ("reply", "read the bytes as a reply"),
                    ("memory", "a 134 (read program memory) reply"),
                    ("version", "a 136 version string reply")],
-         category="protocol",
+         category="protocol", owns_line=True,
          details="HEX: `01 06 04 00 00 00 00 00 0b`, `$01 $06 ...`, `0x01,0x06,...` or "
                  "`0106040000...`; several 9-byte frames at once are fine. Without a hint "
-                 "every plausible reading is shown.")
+                 "every plausible reading is shown. It takes the rest of its line (pasted "
+                 "bytes may be separated by ';').")
 def cmd_decode(session: Session, arg: str) -> None:
     from rich.text import Text
 
@@ -815,6 +840,7 @@ def cmd_connect(session: Session, arg: str) -> None:
         client.reconnect()
         if client.module is None:
             client.identify()
+        _refresh_program_state(session)
         session.out.ok(f"reconnected: {_where(session)}")
         return
     settings = session.settings
@@ -842,10 +868,19 @@ def cmd_connect(session: Session, arg: str) -> None:
         if client.module is None:
             client.identify()
     except TmclError as exc:
+        _refresh_program_state(session)
         session.out.warn(f"connected to {client.describe()}, but no module identified at "
                          f"address {client.address}: {exc}")
         return
+    _refresh_program_state(session)
     session.out.ok(f"connected: {_where(session)}")
+
+
+def _refresh_program_state(session: Session) -> None:
+    """The prompt and toolbar show the new link's program state at once (debugger.py)."""
+    from .debugger import refresh_program_state
+
+    refresh_program_state(session)
 
 
 def switch_transport(client, transport, module: str | None) -> None:
@@ -896,6 +931,7 @@ def cmd_address(session: Session, arg: str) -> None:
         client.can_id = n
     wait = min(client.timeout, 0.5)
     try:
+        session.stats.commands += 1
         reply = client.request(Request(n, Control.GET_VERSION, 0, 0, 0), timeout=wait,
                                retries=0)
     except TmclTimeoutError:
@@ -962,21 +998,37 @@ def cmd_version(session: Session, arg: str) -> None:
     reply = client.request(Request(client.address, Control.GET_VERSION, 0, 0, 0))
     version = reply.version if reply is not None else None
     binary = client.request(Request(client.address, Control.GET_VERSION, 1, 0, 0))
+    session.stats.commands += 2
     value = binary.value & 0xFFFFFFFF if binary is not None and binary.ok else None
     client.version = version or client.version
     mod = from_version_string(version) if version else None
+    from .render import binary_version, parse_version_string, version_text
+
+    layout_of = mod or client.module
+    from_string = parse_version_string(version) if version else None
+    from_binary = binary_version(value, layout_of) if value is not None else None
+    agrees = None if from_string is None or value is None else from_binary == from_string
     if session.out.json:
         session.out.emit({"version": version, "binary": value,
-                          "module": mod.name if mod else None})
+                          "module": mod.name if mod else None,
+                          "binary_type": from_binary[0] if from_binary else None,
+                          "binary_version": from_binary[1] if from_binary else None,
+                          "agrees": agrees})
         return
-    from .render import version_text
-
-    text = f"firmware {version}"
+    text = f"firmware {version}" if version else "firmware: no string reply (136 type 0)"
     if mod is not None:
         text += f" ({mod.name})"
-    if value is not None:
-        text += f"; binary (136 type 1): {version_text(value, mod or client.module)}"
     session.out.print(text, markup=False)
+    # the binary reply on a line of its own: two replies that contradict each other are
+    # never shown as one version
+    if value is None:
+        session.out.info("binary (136 type 1): no reply")
+    elif agrees:
+        session.out.print(f"binary (136 type 1): {version_text(value, layout_of)}; "
+                          "the same as the string", markup=False)
+    else:
+        session.out.warn(f"binary (136 type 1): {version_text(value, layout_of)}; "
+                         + ("does not match the string" if version else "no string to check"))
 
 
 # -- motion ------------------------------------------------------------------------------

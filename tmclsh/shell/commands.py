@@ -19,7 +19,7 @@ Handler = Callable[["Session", str], None]
 # completion of the argument text: returns candidate words (or (word, meta) pairs)
 ArgCompleter = Callable[["Session", str], Iterable["str | tuple[str, str]"]]
 
-FEATURES = ("builtin", "script", "watch", "debugger", "terminal")
+FEATURES = ("builtin", "script", "watch", "debugger", "terminal", "clone")
 
 
 @dataclass
@@ -33,6 +33,9 @@ class Command:
     category: str = "general"
     details: str = ""
     bare: bool = False  # also accepted without the dot (help, quit)
+    # the command's arguments may contain ';' (.watch separates its expressions with it), so
+    # it takes the rest of its line; for all others ';' ends the command and starts a new line
+    owns_line: bool = False
 
     def names(self) -> tuple[str, ...]:
         return (self.name, *self.aliases)
@@ -44,11 +47,13 @@ _ALIASES: dict[str, str] = {}
 
 def command(name: str, syntax: str, help: str, *, aliases: Iterable[str] = (),
             complete: ArgCompleter | list[str] | None = None, category: str = "general",
-            details: str = "", bare: bool = False) -> Callable[[Handler], Handler]:
+            details: str = "", bare: bool = False, owns_line: bool = False
+            ) -> Callable[[Handler], Handler]:
     """Register ``handler(session, argtext)`` as the dot-command ``name`` (with the dot)."""
 
     def register(fn: Handler) -> Handler:
-        cmd = Command(name, fn, syntax, help, tuple(aliases), complete, category, details, bare)
+        cmd = Command(name, fn, syntax, help, tuple(aliases), complete, category, details, bare,
+                      owns_line)
         REGISTRY[name] = cmd
         for alias in cmd.aliases:
             _ALIASES[alias] = name
@@ -58,6 +63,8 @@ def command(name: str, syntax: str, help: str, *, aliases: Iterable[str] = (),
 
 
 def find(word: str) -> Command | None:
+    if word == "?":  # `?` and `? 140` are help, as in most consoles
+        word = "help"
     if not word.startswith("."):
         cmd = REGISTRY.get("." + word.lower())
         return cmd if cmd is not None and cmd.bare else None

@@ -27,11 +27,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Iterator
 
-from .. import asm, program
+from .. import asm, program, sourcemap
 from ..errors import AsmError, TmclError, ValidationError
 from ..program import AppStatus, UploadError
 from ..protocol import Instruction
 from .commands import command
+from .render import paged, paging
 
 if TYPE_CHECKING:
     from .session import Session
@@ -501,6 +502,8 @@ def cmd_upload(session: Session, argtext: str) -> None:
     dbg.files.clear()
     if result.verified:
         dbg.memory.update({origin + i: ins for i, ins in enumerate(prog.instructions)})
+    if result.mismatch is None:
+        _keep_source(prog, module.name, origin, path)
     _rebind_breakpoints(session)
     seconds = result.upload_seconds + result.verify_seconds
     rate = f", {len(prog) / result.upload_seconds:.0f}/s" if result.upload_seconds > 0 else ""
@@ -533,13 +536,42 @@ def cmd_upload(session: Session, argtext: str) -> None:
         pass
 
 
+def _keep_source(prog: asm.Program, module: str, origin: int, path: Path) -> None:
+    """The source of an upload, for .dump later (sourcemap.py); never fails the upload."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        return
+    sourcemap.save(prog.instructions, module, origin, path, text)
+
+
+def _original_source(session: Session, image: list[Instruction], start: int,
+                     header: str) -> tuple[str, sourcemap.SourceMap] | None:
+    """The source this image was uploaded from, if tmclsh kept it and it still assembles
+    to exactly these bytes (an include file may have changed since)."""
+    module = session.module
+    kept = sourcemap.lookup(image, module.name, start)
+    if kept is None:
+        return None
+    text = (header + f"// source: {kept.file}, uploaded {kept.uploaded} (labels and comments "
+            "as written)\n" + kept.text)
+    try:
+        again = asm.assemble(text, module, kept.file, start, Path(kept.file).parent)
+    except AsmError:
+        return None
+    return (text, kept) if program.same_image(again.instructions, image) else None
+
+
 @command(".dump", ".dump [FILE] [--at ADDR] [--count N]",
          "read the stored program back (134) and show it as source, or write it to FILE",
          aliases=(".disasm",), category=CATEGORY, complete=complete_file, details="""\
 Reads program memory with 134 from ADDR (default 0) up to the end marker (opcode 0, or an
-erased cell) or the end of memory, or exactly N instructions with --count, and disassembles
-it with generated labels (L0012 for a jump target at 12). With FILE the text is written there;
-it assembles back to the same image (.upload FILE --at ADDR). Needs binary mode.""")
+erased cell) or the end of memory, or exactly N instructions with --count. When tmclsh
+uploaded exactly these instructions from a file (.upload keeps each upload's source in the
+user's cache directory, keyed by a hash of the image), that source is shown, with its labels
+and comments; otherwise the memory is disassembled with generated labels (L0012 for a jump
+target at 12). With FILE the text is written there; it assembles back to the same image
+(.upload FILE --at ADDR). Needs binary mode.""")
 def cmd_dump(session: Session, argtext: str) -> None:
     pos, opts = _options(_words(argtext), set(), {"--at", "--count"})
     if len(pos) > 1:
@@ -558,15 +590,21 @@ def cmd_dump(session: Session, argtext: str) -> None:
               f"({c.describe()}): {len(image)} instructions from {start}\n")
     if start:
         header += f"// assemble with --at {start}\n"
-    text = header + (asm.disassemble(image, module, start) if image else "")
-    try:
-        again = asm.assemble(text, module, "<dump>", start).instructions if image else []
-        same = program.same_image(again, image)
-    except AsmError as exc:  # pragma: no cover - a disassembler bug
-        same, again = False, []
-        session.out.warn(f"the disassembly does not assemble: {exc}")
-    if not same:
-        session.out.warn("warning: the disassembly does not reassemble to the same image")
+    original = _original_source(session, image, start, header) if image else None
+    if original is not None:
+        text, kept = original
+        same = True
+    else:
+        kept = None
+        text = header + (asm.disassemble(image, module, start) if image else "")
+        try:
+            again = asm.assemble(text, module, "<dump>", start).instructions if image else []
+            same = program.same_image(again, image)
+        except AsmError as exc:  # pragma: no cover - a disassembler bug
+            same, again = False, []
+            session.out.warn(f"the disassembly does not assemble: {exc}")
+        if not same:
+            session.out.warn("warning: the disassembly does not reassemble to the same image")
     if pos:
         path = Path(pos[0]).expanduser()
         try:
@@ -574,20 +612,29 @@ def cmd_dump(session: Session, argtext: str) -> None:
         except OSError as exc:
             raise DebuggerError(f"cannot write {path}: {exc.strerror}") from None
         if session.out.json:
-            session.out.emit({"dumped": len(image), "file": str(path), "identical": same})
+            obj = {"dumped": len(image), "file": str(path), "identical": same}
+            if kept is not None:
+                obj["uploaded_from"] = kept.file
+            session.out.emit(obj)
         else:
             session.out.print(f"wrote {len(image)} instructions ({start}.."
                               f"{start + len(image) - 1}) to {path}"
+                              + (f", the source uploaded from {_show_path(kept.file)}"
+                                 if kept is not None else "")
                               + ("; it assembles back to the same image" if same else ""),
                               style="tmcl.ok")
         return
     if session.out.json:
-        session.out.emit({"dumped": len(image), "source": text})
+        obj = {"dumped": len(image), "source": text}
+        if kept is not None:
+            obj["uploaded_from"] = kept.file
+        session.out.emit(obj)
         return
     if not image:
         session.out.info(f"program memory is empty at {start} (end marker)")
         return
-    session.out.print(text.rstrip("\n"), markup=False, highlight=False)
+    with session.out.paged(paging(session)):  # (not the progress bar of the reading)
+        session.out.print(text.rstrip("\n"), markup=False, highlight=False)
 
 
 @command(".source-map", ".source-map [FILE [--at ADDR] | --off]",
@@ -696,17 +743,19 @@ def cmd_where(session: Session, argtext: str) -> None:
          category=CATEGORY, details="""\
 130 steps one instruction; after each, the program counter (GP 130), the line about to run
 next and the .display values are shown. An empty line repeats the step. Ctrl-C stops a long
-series. Needs binary mode.""")
+series. Where no instruction is stored (empty program memory, or past the program's end)
+it says so and sends nothing. Needs binary mode.""")
 def cmd_step(session: Session, argtext: str) -> None:
     n = _number(argtext, "N") if argtext.strip() else 1
     if n < 1:
         raise ValidationError("N must be at least 1")
     program.require_binary(session.client, "stepping (130)")
+    pc: int | None = program.program_counter(session.client)
+    _check_something_to_step(session, pc)
     session.state["repeat_on_empty"] = ".step" if n == 1 else f".step {n}"
     def waiting(pc: int) -> None:
         session.out.info(f"  WAIT at @{pc}: waiting for it to finish (Ctrl-C stops waiting)")
 
-    pc: int | None = None
     done = 0
     try:
         for done in range(1, n + 1):
@@ -724,6 +773,39 @@ def cmd_step(session: Session, argtext: str) -> None:
         session.out.info(f"interrupted after {_plural(done - 1, 'step')}")
         report(session, _read_status(session), displays=False)
         raise  # the shell's Ctrl-C policy (stop the motors) applies as to any command
+
+
+def _check_something_to_step(session: Session, pc: int) -> None:
+    """Refuse (nothing sent) where no instruction is stored: memory never written, or the
+    end of the program."""
+    ins = _cached_instruction(session, pc)
+    if ins is None or not program.is_end_marker(ins):
+        return
+    first = ins if pc == 0 else _cached_instruction(session, 0)
+    _not_repeating(session)
+    if first is not None and program.is_end_marker(first):
+        raise DebuggerError(f"program memory of the {session.module.name} is empty (no "
+                            "instruction at address 0): nothing to step; .upload FILE "
+                            "stores a program")
+    raise DebuggerError(f"no instruction at @{pc} (the end of the stored program): nothing "
+                        "to step; .reset or .run LABEL starts it again")
+
+
+def refresh_program_state(session: Session) -> None:
+    """After .connect: the prompt and toolbar show the new module's program state at once,
+    and what was cached about the old module's memory is forgotten."""
+    dbg = state(session)
+    dbg.forget_memory()
+    dbg.last = None
+    session.state.pop("program_state", None)
+    _not_repeating(session)
+    client = session.client
+    if not client.connected or client.module is None or client.mode == "ascii":
+        return
+    try:
+        _read_status(session)
+    except TmclError:
+        pass  # no program state to show: the toolbar shows none rather than an old one
 
 
 def _stored(session: Session):
@@ -865,6 +947,7 @@ def cmd_delete(session: Session, argtext: str) -> None:
 '->' marks the line the program counter is at, 'B' a breakpoint; the program address of each
 line with an instruction is shown. Without a known source file the disassembly around the
 address is listed instead.""")
+@paged
 def cmd_list(session: Session, argtext: str) -> None:
     dbg = state(session)
     pc: int | None = None

@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from ..errors import TmclError
-from .render import Output
+from .render import Output, prose_list
 from .session import QuitShell, Session
 
 EXIT_OK, EXIT_ERROR, EXIT_CONNECT = 0, 1, 3
@@ -60,7 +60,7 @@ def run_shell(args: argparse.Namespace) -> int:
         return _run(args, client, settings)
     except KeyboardInterrupt:
         stopped = client.stop_all() if client.connected else []
-        print(f"\ninterrupted; motors stopped: {stopped}", file=sys.stderr)
+        print(f"\ninterrupted; motors stopped: {prose_list(stopped)}", file=sys.stderr)
         return 130
     except BrokenPipeError:
         # whoever read our output has gone (`tmclsh -c ... | head`): stop quietly, as other

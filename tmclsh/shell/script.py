@@ -30,10 +30,12 @@ from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
-from ..errors import TmclError, TmclTimeoutError, ValidationError
+from ..errors import AsmError, RangeError, TmclError, TmclTimeoutError, ValidationError
 from . import commands, expr
 from .commands import command
-from .session import QuitShell
+from .lines import split_line
+from .lines import strip_comment as _strip_comment
+from .session import QuitShell, owns_line
 
 if TYPE_CHECKING:
     from .session import Session
@@ -49,18 +51,41 @@ _RECHECK_AFTER = {".connect", ".module", ".mode", ".ascii", ".address"}
 _VIEWS = {".watch", ".plot", ".history", ".help", ".record"}  # not replayed by .record
 
 
+# What stopped a script before anything was sent, as the summary names it
+SYNTAX, RANGE, CHECK, NO_FILE, UNREADABLE = ("syntax", "range", "check", "no such file",
+                                             "unreadable")
+_KIND_TEXT = {SYNTAX: "syntax error", RANGE: "a value out of range",
+              CHECK: "a line the module would refuse", NO_FILE: "no such file",
+              UNREADABLE: "cannot read the file"}
+
+
 class ScriptError(TmclError):
     """A script problem that is not the module's: unreadable file, bad block structure."""
+
+    def __init__(self, message: str, kind: str = SYNTAX):
+        self.kind = kind
+        super().__init__(message)
 
 
 class CheckFailed(TmclError):
     """``.expect`` found the condition false."""
 
+    counted = True  # in checks_failed, not also in errors
+
 
 class ScriptSyntaxError(ScriptError):
-    def __init__(self, file: str, line: int, message: str):
+    def __init__(self, file: str, line: int, message: str, kind: str = SYNTAX):
         self.file, self.line, self.message = file, line, message
-        super().__init__(f"{file}:{line}: {message}")
+        super().__init__(f"{file}:{line}: {message}", kind)
+
+
+def error_kind(exc: TmclError) -> str:
+    """Why a line was refused before the run: syntax, a value out of range, or a check."""
+    if isinstance(exc, (ScriptError, AsmError)):
+        return exc.kind
+    if isinstance(exc, RangeError):
+        return RANGE
+    return SYNTAX
 
 
 # -- the parsed script -------------------------------------------------------------------
@@ -97,20 +122,8 @@ class Include(Node):
 
 
 def strip_comment(text: str) -> str:
-    """Drop a full-line ``#``/``//`` comment or a trailing ``//`` one (outside quotes)."""
-    s = text.strip()
-    if s.startswith("#") or s.startswith("//"):
-        return ""
-    quote = None
-    for i, ch in enumerate(s):
-        if quote:
-            if ch == quote:
-                quote = None
-        elif ch in "\"'":
-            quote = ch
-        elif ch == "/" and s.startswith("//", i):
-            return s[:i].rstrip()
-    return s
+    """Drop a ``#``/``//`` comment (outside quotes); see lines.py."""
+    return _strip_comment(text)
 
 
 def _word(text: str) -> tuple[str, str]:
@@ -149,22 +162,20 @@ class Parser:
         self.stack = stack + (file,)
         self.precheck = True
 
-    def fail(self, line: int, message: str) -> ScriptSyntaxError:
-        return ScriptSyntaxError(self.file, line, message)
+    def fail(self, line: int, message: str, kind: str = SYNTAX) -> ScriptSyntaxError:
+        return ScriptSyntaxError(self.file, line, message, kind)
 
     def nodes(self, lines: Iterable[str]) -> Iterator[Node]:
         open_: list[tuple[Node, list[Node]]] = []  # open blocks and the body being filled
         for number, raw in enumerate(lines, 1):
-            text = strip_comment(raw)
-            if not text:
-                continue
-            node = self.line(number, text, open_)
-            if node is None:
-                continue
-            if open_:
-                open_[-1][1].append(node)
-            else:
-                yield node
+            for text in split_line(raw, owns_line):  # `GAP 1, 0; GAP 2, 0` is two lines
+                node = self.line(number, text, open_)
+                if node is None:
+                    continue
+                if open_:
+                    open_[-1][1].append(node)
+                else:
+                    yield node
         if open_:
             node = open_[-1][0]
             raise self.fail(node.line, f"{_word(node.text)[0]} has no matching .end")
@@ -176,7 +187,7 @@ class Parser:
         except ScriptSyntaxError:
             raise
         except TmclError as exc:
-            raise self.fail(number, str(exc)) from None
+            raise self.fail(number, str(exc), error_kind(exc)) from None
 
     def _line(self, number: int, text: str, open_: list[tuple[Node, list[Node]]]) -> Node | None:
         file = self.file
@@ -245,7 +256,7 @@ class Parser:
             raise self.fail(number, f"{args} includes itself")
         if len(self.stack) > 16:
             raise self.fail(number, "includes nested more than 16 deep")
-        lines = read_lines(path, lambda msg: self.fail(number, msg))
+        lines = read_lines(path, lambda msg, kind: self.fail(number, msg, kind))
         sub = Parser(self.session, str(path), path.parent, self.stack)
         sub.precheck = self.precheck
         body = list(sub.nodes(lines))
@@ -260,15 +271,18 @@ def resolve(name: str, base: Path | None) -> Path:
     return path
 
 
-def read_lines(path: Path, fail: Callable[[str], Exception]) -> list[str]:
+def read_lines(path: Path, fail: Callable[[str, str], Exception]) -> list[str]:
+    """The file's lines; ``fail(message, kind)`` makes the error when it cannot be read."""
     try:
         return path.read_text(encoding="utf-8").splitlines()
     except FileNotFoundError:
-        raise fail(f"no such script: {path}") from None
+        raise fail(f"no such file: {path}", NO_FILE) from None
+    except IsADirectoryError:
+        raise fail(f"{path} is a folder, not a script", UNREADABLE) from None
     except UnicodeDecodeError:
-        raise fail(f"{path} is not a text file") from None
+        raise fail(f"{path} is not a text file", UNREADABLE) from None
     except OSError as exc:
-        raise fail(f"cannot read {path}: {exc.strerror}") from None
+        raise fail(f"cannot read {path}: {exc.strerror}", UNREADABLE) from None
 
 
 def check_var_name(name: str) -> None:
@@ -513,14 +527,14 @@ def run_file(session: Session, path: str) -> int:
     before = _counts(session)
     name = STDIN if path == "-" else path
     runner = Runner(session)
-    status = EXIT_OK
+    status, kind = EXIT_OK, SYNTAX
     try:
         if path == "-":
             parser = Parser(session, STDIN, Path.cwd())
             _run_nodes(runner, parser.nodes(_stdin_lines()))
         else:
             file = Path(path)
-            lines = read_lines(file, lambda msg: ScriptError(msg))
+            lines = read_lines(file, ScriptError)
             nodes = list(Parser(session, path, file.resolve().parent).nodes(lines))
             bar = _progress(session, path, nodes)
             if bar is None:
@@ -531,12 +545,12 @@ def run_file(session: Session, path: str) -> int:
                     _run_nodes(runner, nodes)
     except ScriptError as exc:
         _report_plain(session, exc)
-        status = EXIT_SYNTAX
+        status, kind = EXIT_SYNTAX, exc.kind
     finally:
         session.location = None
     if status == EXIT_OK and runner.failed:
         status = EXIT_FAILED
-    summary(session, name, before, time.monotonic() - start, status)
+    summary(session, name, before, time.monotonic() - start, status, kind)
     return status
 
 
@@ -563,15 +577,17 @@ def _report_plain(session: Session, exc: TmclError) -> None:
         session.out.err.print(str(exc), style="tmcl.error", markup=False)
 
 
-def summary(session: Session, name: str, before: Counts, elapsed: float, status: int) -> None:
+def summary(session: Session, name: str, before: Counts, elapsed: float, status: int,
+            kind: str = SYNTAX) -> None:
     now = _counts(session)
     sent = now.commands - before.commands
     passed, failed = now.passed - before.passed, now.failed - before.failed
     errors = now.errors - before.errors
+    why = _KIND_TEXT.get(kind, kind)
     if status == EXIT_SYNTAX and sent == 0:
-        text = f"{name}: not run (syntax error; nothing was sent)"
+        text = f"{name}: not run ({why}; nothing was sent)"
     elif status == EXIT_SYNTAX:  # stdin runs each line as it arrives, up to the bad one
-        text = (f"{name}: stopped at a syntax error after {sent} "
+        text = (f"{name}: stopped ({why}) after {sent} "
                 f"command{'s' if sent != 1 else ''} sent, {elapsed:.2f} s")
     else:
         text = (f"{name}: {sent} command{'s' if sent != 1 else ''} sent, "
@@ -590,7 +606,7 @@ def run_source(session: Session, path: str) -> bool:
     gets one ScriptError marked as shown.
     """
     file = resolve(path, None)  # relative to the current folder
-    lines = read_lines(file, lambda msg: ScriptError(msg))
+    lines = read_lines(file, ScriptError)
     nodes = list(Parser(session, str(file), file.parent).nodes(lines))
     runner = Runner(session)
     _run_nodes(runner, nodes)

@@ -21,6 +21,7 @@ from ..protocol import Request, status_ok
 from . import commands
 from .expr import format_number
 from .expr import install as install_expressions
+from .lines import split_text, strip_comment
 from .render import Output
 
 _VAR = re.compile(r"\$\{([^}]*)\}")
@@ -87,8 +88,8 @@ class Session:
         if self.yes:
             return
         if self.ask is not None and self.interactive:
-            # an Enter typed after the y/n key arrives as an empty line: it must not repeat
-            # the last .step (the debugger's repeat_on_empty)
+            # after a question, an empty line must not repeat the last .step (the debugger's
+            # repeat_on_empty): the user answered the question, not the debugger
             self.state.pop("repeat_on_empty", None)
             if self.ask(question):
                 return
@@ -114,24 +115,14 @@ class Session:
 
     # -- running lines ------------------------------------------------------------------
     def split(self, text: str) -> list[str]:
-        """Lines of a -c argument: newlines and ';' separate, a dot-command owns its line."""
-        out: list[str] = []
-        for raw in text.splitlines():
-            rest = raw.strip()
-            while rest:
-                if rest.startswith(".") or _is_bare_command(rest):
-                    out.append(rest)
-                    break
-                head, sep, rest = rest.partition(";")
-                if head.strip():
-                    out.append(head.strip())
-                rest = rest.strip()
-        return out
+        """Lines of typed text: newlines and ';' separate (see lines.py); a command that owns
+        its line (``.watch``) takes the rest of it."""
+        return split_text(text, owns_line)
 
     def run_line(self, line: str) -> Result | None:
         """Run one line; raises TmclError (or Abort) on failure, after counting it."""
-        text = line.strip()
-        if not text or text.startswith("#") or text.startswith("//"):
+        text = strip_comment(line)  # `GAP 1, 0 # where`, `.let a = 3 // why`
+        if not text:
             return None
         self.history.append(text)
         capture = self.state.get("capture")  # a block (.repeat/.if) collecting its lines
@@ -140,7 +131,8 @@ class Session:
         try:
             result = self._dispatch(text)
         except TmclError as exc:
-            self.stats.errors += 1
+            if not getattr(exc, "counted", False):  # a failed .expect counts as a failure
+                self.stats.errors += 1
             self._record(text, f"error: {exc}")
             raise
         return result
@@ -191,6 +183,13 @@ class Session:
     def _record(self, line: str, outcome: str) -> None:
         for fn in list(self.recorders):
             fn(line, outcome)
+
+
+def owns_line(text: str) -> bool:
+    """Whether ``text`` starts with a command that takes the rest of its line, ';' included."""
+    words = text.split(None, 1)
+    cmd = commands.find(words[0]) if words else None
+    return cmd is not None and cmd.owns_line
 
 
 def _is_bare_command(text: str) -> bool:

@@ -66,14 +66,20 @@ def parse_items(session: Session, text: str) -> list[Item]:
     import re
 
     items: list[Item] = []
-    for part in text.split(";"):
+    parts = text.split(";")
+    for i, part in enumerate(parts):
         part = part.strip()
         if not part:
             continue
         m = re.match(r"([A-Za-z_][A-Za-z0-9_]*)\s*=(?!=)(.*)$", part, re.DOTALL)
         name, body = (m.group(1), m.group(2)) if m else (None, part)
-        expression = expr.parse(session.expand(body))
-        expr.validate(session, expression)
+        try:
+            expression = expr.parse(session.expand(body))
+            expr.validate(session, expression)
+        except TmclError as exc:
+            if i == 0:
+                raise
+            raise ValidationError(_after_semicolon(parts, i, exc)) from None
         name = name or expression.text
         if any(i.name == name for i in items):
             raise ValidationError(f"{name!r} is watched twice")
@@ -81,6 +87,15 @@ def parse_items(session: Session, text: str) -> list[Item]:
     if not items:
         raise ValidationError("nothing to watch")
     return items
+
+
+def _after_semicolon(parts: list[str], i: int, exc: TmclError) -> str:
+    """An expression after a ';' did not parse: perhaps it was meant as the next command."""
+    before = ";".join(parts[:i]).strip()
+    after = ";".join(parts[i:]).strip()
+    return (f"{parts[i].strip()!r} after ';' is not a watch expression ({exc}); .watch takes "
+            f"the rest of its line, ';' separating its expressions. To run {after!r} after "
+            f"the watch, put it on a line of its own:\n  .watch {before}\n  {after}")
 
 
 def default_items(session: Session) -> list[Item]:
@@ -567,8 +582,10 @@ class _Watch:
 @command(".watch", ".watch [NAME=]EXPR; ... [--interval S] [--count N] [--until EXPR] "
          "[--csv FILE]",
          "poll values live: value, min, max, rate, recent history", category="watch",
-         complete=["--interval", "--count", "--until", "--csv"],
+         complete=["--interval", "--count", "--until", "--csv"], owns_line=True,
          details="  .watch pos=GAP 1, 0; speed=GAP 3, 0; in0=GIO 0, 0\n"
+                 "It takes the rest of its line (';' separates its expressions): put other "
+                 "commands on lines of their own.\n"
                  "  .watch rev=GAP 1, 0 / 51200 --until \"rev >= 2\" --csv run.csv\n"
                  "Keys: s or space stops all motors (MST), q ends the watch. Ctrl-C ends the "
                  "watch and does NOT stop the motors. Under --json or in a pipe, each sample "

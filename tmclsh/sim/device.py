@@ -423,6 +423,28 @@ class Simulator:
 
             self.store.add_live(GLOBAL, "TMCLCodeProtection",
                                 Live(lambda b: self.store.ram.get(key, 0), set_protection))
+        self._register_clear_on_null()
+
+    def _register_clear_on_null(self) -> None:
+        """TMCM-1311 AP 198 "can be used to set bit 2 of axis parameter 201": 1 sets it, 0
+        deletes it; the other bits of AP 201 (bit 3, the polarity bit 4) stay as they are.
+        Read back, AP 198 is that bit."""
+        store = self.store
+        mode = store.by_name(AXIS, "EncoderMode")
+        if mode is None or not store.has(AXIS, "ClearOnNull"):
+            return
+        bit = 1 << 2
+
+        def get(motor: int) -> int:
+            return store.ram.get((AXIS, motor, mode.number), 0) >> 2 & 1
+
+        def set_(motor: int, value: int) -> int:
+            key = (AXIS, motor, mode.number)
+            now = store.ram.get(key, 0)
+            store.ram[key] = now | bit if value else now & ~bit
+            return Status.OK
+
+        store.add_live(AXIS, "ClearOnNull", Live(get, set_))
 
     def _timer_period(self, irq: int) -> Live:
         """Timer interrupt periods (GP bank 3 #0-2): a period counts from when it is set."""
