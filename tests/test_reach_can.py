@@ -53,7 +53,7 @@ def test_bitrate_reaches_python_can_and_the_module_answers(monkeypatch, tmp_path
         out = capsys.readouterr()
         assert rc == 0, out.err
         assert json.loads(out.out.splitlines()[-1])["reply"] == 777
-        assert m.got == [(136, 0, 0, 0), (5, 4, 0, 777), (6, 4, 0, 0)]
+        assert m.got == [(136, 0, 0, 0), (10, 129, 0, 0), (5, 4, 0, 777), (6, 4, 0, 0)]
         ours = [kw for kw in bus_kwargs if kw.get("channel") == "reach-a"]
         assert ours and ours[-1]["bitrate"] == 1000000
     finally:

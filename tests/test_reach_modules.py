@@ -61,7 +61,7 @@ def test_unknown_type_runs_in_generic_mode_by_number(module_1161, config_home, r
     rows = [json.loads(x) for x in r.stdout.splitlines()]
     assert [row["reply"] for row in rows if row["op"] in (6, 10)] == [1234, 5]
     # the module got exactly these frames, after the 136 that named it
-    assert module_1161.got == [(136, 0, 0, 0), (5, 4, 0, 1234), (6, 4, 0, 0), (9, 77, 0, 5),
+    assert module_1161.got == [(136, 0, 0, 0), (10, 129, 0, 0), (5, 4, 0, 1234), (6, 4, 0, 0), (9, 77, 0, 5),
                                (10, 77, 0, 0)]
     # told once that checks needing data are skipped
     assert r.stderr.count("no parameter data") == 1
@@ -79,7 +79,7 @@ def test_generic_mode_refuses_names_and_what_does_not_fit_a_byte(module_1161, co
         assert r.returncode == 1, (line, r.stderr)
         assert words in r.stderr, (line, r.stderr)
         assert "Traceback" not in r.stderr
-        assert module_1161.got[len(before):] == [(136, 0, 0, 0)], line  # nothing else sent
+        assert module_1161.got[len(before):] == [(136, 0, 0, 0), (10, 129, 0, 0)], line  # nothing else sent
 
 
 def test_motor_numbers_are_bytes_not_the_data_files(module_1161, config_home, run_tmclsh):
@@ -129,7 +129,7 @@ def test_user_module_file_is_found_and_checked_against(module_1161, config_home,
     bad = run_tmclsh("--port", module_1161.url, "-c", "SAP MaxPositioningSpeed, 0, 5000",
                      env=_env(config_home))
     assert bad.returncode == 1 and "0..2047" in bad.stderr
-    assert module_1161.got[sent:] == [(136, 0, 0, 0)]  # the range came from the user's file
+    assert module_1161.got[sent:] == [(136, 0, 0, 0), (10, 129, 0, 0)]  # the range came from the user's file
 
 
 def test_module_file_option(module_1161, config_home, tmp_path, run_tmclsh):

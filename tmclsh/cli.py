@@ -80,65 +80,130 @@ def cmd_ports(args: argparse.Namespace) -> int:
 
 
 def cmd_scan(args: argparse.Namespace) -> int:
-    """Ask every address in --from..--to for its version.
-
-    Presence is tested with 136 type 1, whose serial reply names the module address and
-    opcode, so a slow module's late answer is never credited to the next address (the 136
-    type 0 string reply names neither). A module that answered is then asked for its version
-    string. On CAN the --from..--to range is the CAN ids (GP 71) and every module answers on
-    the one --reply-id; a CAN reply names no sender the client can rely on, so there the
-    per-id timeout must outlast the modules' answer time (a few ms).
-    """
+    """Ask every address in --from..--to who is there (``tmclsh.scan``); with ``--baud auto``
+    at each baud rate GP 65 can select. Rows on stdout as modules are found, progress (on a
+    terminal) and a summary on stderr."""
     import json
 
     from .client import Client
-    from .connection import connection_settings, open_transport
-    from .errors import ChecksumError, TmclError, TmclTimeoutError, ValidationError
-    from .modules import by_firmware_id, from_version_string
-    from .protocol import Control, Request
+    from .connection import baud_rates, connection_settings, open_transport
+    from .errors import ConnectError, TransportError, ValidationError
+    from .scan import address_timeout, scan
 
     if args.first > args.last:
         raise ValidationError(f"--from {args.first} is above --to {args.last}")
+    auto = args.baud == "auto"
+    if auto:
+        args.baud = None
     settings = connection_settings(args)
-    transport = open_transport(settings)
+    try:
+        transport = open_transport(settings)
+    except TransportError as exc:  # a port that cannot be opened: nothing to scan (exit 3)
+        raise ConnectError(str(exc)) from exc
     client = Client(transport, address=args.first, host_address=settings["host_address"],
-                    timeout=args.timeout, retries=0, can_id=settings.get("can_id"),
+                    timeout=1.0, retries=0, can_id=settings.get("can_id"),
                     reply_id=settings.get("reply_id"))
     ids = "CAN ids" if client.is_can else "addresses"
-    print(f"scanning {ids} {args.first}..{args.last} on {client.describe()}", file=sys.stderr)
-    found = 0
+    rates: list[int | None] = [None]
+    if auto:
+        if client.is_can or not hasattr(transport, "set_baudrate") or transport.simulated \
+                or "://" in getattr(transport, "url", "://"):
+            raise ValidationError("--baud auto needs a serial port (a CAN bus, a simulator or "
+                                  "a socket:// URL has no baud rate)")
+        rates = list(baud_rates())
+    addresses = range(args.first, args.last + 1)
+    found = []
+    tried = []
+    show_progress = not args.json and sys.stderr.isatty()
     try:
-        for addr in range(args.first, args.last + 1):
-            client.address = addr
-            if client.is_can:
-                client.can_id = addr
-            try:
-                binary = client.request(Request(addr, Control.GET_VERSION, 1, 0, 0))
-            except (TmclTimeoutError, ChecksumError):
-                continue
-            assert binary is not None
-            version = None
-            try:  # it is there: give it time and a retry for the string
-                reply = client.request(Request(addr, Control.GET_VERSION, 0, 0, 0),
-                                       timeout=max(args.timeout, 0.2), retries=1)
-                version = reply.version if reply is not None else None
-            except TmclError:
-                pass
-            mod = from_version_string(version) if version else None
-            if mod is None and binary.status == 100:
-                mod = by_firmware_id((binary.value >> 16) & 0xFFFF)
-            found += 1
-            row = {"address": addr, "module": mod.name if mod else None, "version": version}
-            if args.json:
-                print(json.dumps(row), flush=True)
+        for rate in rates:
+            if rate is not None:
+                transport.set_baudrate(rate)
+                client.forget_stale()  # nothing sent at another rate can still arrive
+            timeout = args.timeout or address_timeout(transport, usb=bool(
+                settings.get("port") and _is_usb(settings["port"])))
+            where = client.describe()
+            tried.append(f"{ids} {args.first}..{args.last} on {where} "
+                         f"({timeout * 1000:.0f} ms each)")
+            if not show_progress:
+                print(f"scanning {ids} {args.first}..{args.last} on {where}", file=sys.stderr)
+
+            def row(hit) -> None:
+                if args.json:
+                    print(json.dumps(hit.as_json() if auto else
+                                     {k: v for k, v in hit.as_json().items() if k != "baud"}),
+                          flush=True)
+                else:
+                    at = f"  {hit.baud} baud" if auto else ""
+                    print(f"address {hit.address:3d}  {hit.module or 'unknown module':<10}  "
+                          f"firmware {hit.version or '?'}{at}", flush=True)
+
+            if show_progress:
+                hits = _scan_with_progress(client, addresses, timeout,
+                                           f"{ids} {args.first}..{args.last} on {where}", row)
             else:
-                print(f"address {addr:3d}  {row['module'] or 'unknown module':<10}  "
-                      f"firmware {version or '?'}", flush=True)
+                shown: set[int] = set()
+
+                def as_found(addr: int, hit) -> None:
+                    if hit is not None:
+                        shown.add(addr)
+                        row(hit)
+
+                hits = scan(client, addresses, timeout=timeout, progress=as_found)
+                for hit in hits:
+                    if hit.address not in shown:  # found on the second, slower pass
+                        row(hit)
+            found += hits
     finally:
         client.close()
     if not found:
-        print(f"no module answered on {ids} {args.first}..{args.last}", file=sys.stderr)
-    return EXIT_OK if found else EXIT_ERROR
+        print(f"nothing answered; tried {'; '.join(tried)}"
+              + ("" if auto or client.is_can else "; other baud rates: --baud auto"),
+              file=sys.stderr)
+        return EXIT_CONNECT
+    where = ", ".join(str(f.address) + (f" ({f.baud} baud)" if auto else "") for f in found)
+    n = len(found)
+    print(f"{n} module{'s' if n != 1 else ''} found at {where}", file=sys.stderr)
+    return EXIT_OK
+
+
+def _is_usb(port: str) -> bool:
+    from .connection import trinamic_ports
+
+    return any(p.device == port for p in trinamic_ports())
+
+
+def _scan_with_progress(client, addresses: range, timeout: float, what: str, row) -> list:
+    """``scan`` under a rich progress bar (stderr is a terminal): addresses done and found so
+    far; rows appear above the bar as modules are found (those of the second, slower pass at
+    the end). The bar goes where the rows go when stdout is the terminal too."""
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
+
+    from .scan import scan
+
+    found: list[int] = []
+    shown: set[int] = set()
+    same_terminal = sys.stdout.isatty()
+    with Progress(TextColumn("scanning {task.description}"), BarColumn(),
+                  MofNCompleteColumn(), TextColumn("{task.fields[found]}"),
+                  console=Console(stderr=not same_terminal), transient=True,
+                  redirect_stdout=same_terminal, redirect_stderr=False) as bar:
+        task = bar.add_task(what, total=len(addresses), found="")
+
+        def progress(addr: int, hit) -> None:
+            if hit is not None:
+                found.append(addr)
+                shown.add(addr)
+                row(hit)
+            bar.update(task, advance=1, found=("found " + ", ".join(map(str, found)))
+                       if found else "")
+
+        hits = scan(client, addresses, timeout=timeout, progress=progress)
+    for hit in hits:
+        if hit.address not in shown:
+            row(hit)
+    return hits
 
 
 def cmd_modules(args: argparse.Namespace) -> int:
@@ -254,9 +319,9 @@ def main(argv: list[str] | None = None) -> int:
         if debug:
             raise
         print(f"tmclsh: {exc}", file=sys.stderr)
-        from .limits import SettingError
+        from .errors import ConnectError
 
-        return EXIT_USAGE if isinstance(exc, SettingError) else EXIT_ERROR
+        return EXIT_CONNECT if isinstance(exc, ConnectError) else EXIT_ERROR
     except OSError as exc:
         if debug:
             raise

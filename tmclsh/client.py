@@ -39,7 +39,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from . import instructions as isa
-from .errors import ChecksumError, StatusError, TmclTimeoutError, TransportError, ValidationError
+from .errors import (ChecksumError, DownloadModeError, StatusError, TmclTimeoutError,
+                     TransportError, ValidationError)
 from .modules import Module, from_version_string, generic_for
 from .modules import load as load_module
 from .protocol import (SERIAL_FRAME_LEN, VERSION_STRING_LEN, Control, Reply, ReplyKind,
@@ -69,6 +70,10 @@ _CAN_REPLY_LEN = 7
 _QUIET_AFTER_GARBAGE = 0.05
 # Download mode cannot use a marker: wait until the line has been quiet this long.
 _DRAIN_QUIET = 0.03
+_LOADED = int(Status.LOADED)
+# GP 129 "download mode" (all three manuals): read to find out whether the module executes
+# commands; in download mode the read itself is stored (answered with status 101) instead
+_GP_DOWNLOAD_MODE = 129
 
 # Commands a retry may repeat without changing the outcome. Anything else (CALC, SAC, the
 # user functions, CCO (it captures a position that moves on), run/step/download, raw numbers
@@ -153,6 +158,12 @@ class Client:
         self._stale_opaque = False
         self._drained = False
         self._events: deque[Reply] = deque()
+        # set by reconnect(): before the next command, check the module is not in download
+        # mode (a link lost mid-upload leaves it there)
+        self._check_download = False
+        # one-line notices about what the client did on its own (ended download mode); the
+        # shell points it at its output, else they are logged
+        self.on_notice: Callable[[str], None] | None = None
         # run by close() while the link is still open (the ASCII link restores the mode the
         # module was found in)
         self.close_hooks: list[Callable[[], None]] = []
@@ -261,12 +272,62 @@ class Client:
             raise ValueError(f"timeout must be a positive number of seconds, got {timeout!r}")
         try:
             with self._lock:
+                if self._check_download and not self.downloading and self.ascii_link is None:
+                    self._check_download = False
+                    try:
+                        self.leave_download_mode()
+                    except BaseException:
+                        self._check_download = True
+                        raise
                 if self.ascii_link is not None:
-                    return self.ascii_link.transact(req, timeout)
-                return self._request(req, timeout, self.retries if retries is None else retries)
+                    reply = self.ascii_link.transact(req, timeout)
+                else:
+                    reply = self._request(req, timeout,
+                                          self.retries if retries is None else retries)
+            if reply is not None and reply.status == _LOADED and not self.downloading:
+                raise DownloadModeError(
+                    _LOADED, reply,
+                    f"the module is in download mode (it stores commands instead of executing "
+                    f"them): {_name(req)} was stored in program memory, not executed; "
+                    "the line 133 (quit download mode) ends it")
+            return reply
         finally:
             if self._events:
                 self._deliver_events()
+
+    def notice(self, text: str) -> None:
+        """Tell the user about something the client did on its own."""
+        if self.on_notice is not None:
+            self.on_notice(text)
+        else:
+            log.warning("%s", text)
+
+    def leave_download_mode(self) -> bool:
+        """Bring a module found in download mode out of it (133), with a notice.
+
+        Asks GP 129 (download mode): a module in normal mode answers it, one in download mode
+        stores it and answers status 101. True if the module was in download mode.
+        """
+        try:
+            self.request(Request(self.address, Op.GGP, _GP_DOWNLOAD_MODE, 0, 0))
+        except DownloadModeError:
+            pass
+        else:
+            return False
+        self.downloading = True  # until 133 is answered, whatever is sent is stored
+        try:
+            reply = self.request(Request(self.address, Control.QUIT_DOWNLOAD, 0, 0, 0))
+        finally:
+            self.downloading = False
+        if reply is None or not reply.ok:
+            status = reply.status if reply is not None else 0
+            raise StatusError(status, reply, f"the module at address {self.address} is in "
+                              "download mode (it stores commands instead of executing them) "
+                              f"and refused to leave it (133): status {status}")
+        self.notice(f"the module at address {self.address} was in download mode (an upload "
+                    "was cut short?): ended it with 133; the program stored on it may be "
+                    "incomplete")
+        return True
 
     def _request(self, req: Request, timeout: float, retries: int) -> Reply | None:
         if not self.transport.is_open:
@@ -370,7 +431,7 @@ class Client:
         """Consume every late reply: drain, then a 136 marker whose reply comes last."""
         self.stats["resyncs"] += 1
         if self._tracers:
-            self._trace("note", b"", "resynchronising")
+            self._trace("note", b"", "checking the line with 136 after an earlier failure")
         if self.downloading:
             # a marker would be stored as an instruction: wait for a quiet line instead;
             # stale replies are still dropped by opcode matching. That proves nothing, so a
@@ -396,8 +457,8 @@ class Client:
             self._exchange(marker, kind, timeout)
         except (TmclTimeoutError, ChecksumError) as exc:
             self._mark_stale(marker, kind)
-            raise type(exc)(f"address {address} did not answer the resynchronisation "
-                            f"request (136) after an earlier failure: {exc}") from exc
+            raise type(exc)(f"address {address} stopped answering: {exc} (asked to check "
+                            "the line after an earlier failure)") from exc
         except BaseException:
             self._mark_stale(marker, kind)
             raise
@@ -811,6 +872,7 @@ class Client:
                     time.sleep(min(0.1, max(0.0, deadline - time.monotonic())))
             self._buf.clear()
             self._dirty = False
+            self._check_download = True
             self.stats["reconnects"] += 1
             if self._tracers:
                 self._trace("note", b"", f"reconnected to {self.describe()}")
@@ -839,6 +901,12 @@ class Client:
         """Forget bytes buffered for the binary framing (the line was in another mode)."""
         with self._lock:
             self._buf.clear()
+
+    def forget_stale(self) -> None:
+        """The line was reset (its baud rate changed): nothing sent before can still arrive."""
+        with self._lock:
+            self._buf.clear()
+            self._dirty = False
 
     def resync_next(self) -> None:
         """Something else used the line (the module's ASCII mode): whatever is left on it is

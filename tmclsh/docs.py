@@ -374,8 +374,12 @@ _SUB_NOTES = {
            "Windows too. Exit status 2 for a malformed argument, 3 when the server cannot "
            "start (address in use, no such CAN interface).",
     "ports": "The USB ids are shown; ports whose vendor is Trinamic (0x2A3C) are marked TRINAMIC.",
-    "scan": "Sends command 136 (firmware version) to each address and prints those that answer; "
-            "exit status 1 when none does.",
+    "scan": "Sends command 136 (firmware version) to each address and prints those that answer, "
+            "then a summary on standard error; a progress bar while it runs on a terminal. The "
+            "wait per address comes from the link (the wire time of request and reply at the "
+            "baud rate, plus a margin); addresses that answered late or garbled are asked again, "
+            "slower. --baud auto scans at each baud rate global parameter 65 can select. Exit "
+            "status 3 when nothing answers.",
 }
 
 
@@ -479,9 +483,19 @@ the reply is decoded; shell commands (starting with a dot) show help, watch live
 scripts, talk to the module's ASCII mode, and upload, run and single-step programs stored on the
 module. The same lines can be given with {_b("-c")} or replayed from a file with {_b("-f")}.
 .PP
-Without a connection option {_b(PROG)} uses the one attached Trinamic USB module if exactly one
-is found, else the built-in simulator of a TMCM-1311. The banner and the toolbar always say
-which; a simulator is labelled SIMULATED.
+Without a connection option (or a profile or variable naming one) {_b(PROG)} uses the one
+attached Trinamic USB module if exactly one is found. With none attached, the interactive
+shell starts the built-in simulator of a TMCM-1311, labelled SIMULATED in the banner and the
+toolbar; runs nobody watches ({_b("-c")}, {_b("-f")}, standard input that is not a terminal,
+{_b("scan")}) never fall back to it: they exit with status 3 ({_b("--sim")} asks for the
+simulator). Two or more Trinamic USB modules attached without {_b("--port")} are named, and
+{_b(PROG)} exits with status 3, in every mode.
+.PP
+At connect the module is asked, not assumed: its type with command 136 (a contradicting
+{_b("-m")} is an error naming both types); a module found in download mode (an upload cut
+short) is brought out of it with 133, with a notice, as after a reconnect; a module that
+answers only in its ASCII mode is driven through it, with a notice. When nothing answers, the
+message says what was tried and the likely causes, most likely first.
 .PP
 Bad input never reaches the module: an unknown mnemonic, a wrong type, a value out of the
 parameter's range, a write to a read-only parameter or a motor the module does not have each
@@ -656,9 +670,13 @@ def _exit_status() -> list[str]:
                      "was not run (nothing was sent): it cannot be read, no such file, a "
                      "syntax error, a value out of range or another line the module would "
                      "refuse."),
-        (EXIT_CONNECT, "The shell could not connect: the port or CAN bus cannot be opened, or "
-                       "the module does not answer when its type is detected (command 136); "
-                       "or tmclsh sim cannot start its server."),
+        (EXIT_CONNECT, "No module to talk to: a run that is not interactive (-c, -f, standard "
+                       "input not a terminal, scan) was given no connection and found no "
+                       "module (--sim simulates one); two or more Trinamic USB modules are "
+                       "attached and no --port picks one; the port or CAN bus cannot be "
+                       "opened; nothing answers at connect (command 136) or scan finds no "
+                       "module; -m names another type than the module reports; or tmclsh "
+                       "sim cannot start its server."),
         (130, "Interrupted with Ctrl-C (motion was stopped first)."),
         (129, "Hung up (SIGHUP: the terminal or SSH session went away)."),
         (143, "Terminated (SIGTERM). On both signals tmclsh still ends download mode and "

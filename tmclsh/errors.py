@@ -51,6 +51,20 @@ class StatusError(TmclError):
         super().__init__(message or f"module answered status {status}: {status_text(status)}")
 
 
+class DownloadModeError(StatusError):
+    """Status 101 outside an upload: the module stored the command instead of executing it."""
+
+
+class ConnectError(TmclError):
+    """No module to talk to: none found, several found, or the one named did not answer
+    (exit status 3)."""
+
+
+class NoAnswerError(ConnectError, TmclTimeoutError):
+    """Nothing answered at connect (or only garbled replies came): the message says what was
+    tried and what to try next."""
+
+
 class AsmError(TmclError, ValueError):
     """An error in TMCL source text, with its location (1-based line and column)."""
 

@@ -33,11 +33,16 @@ def _range(key: str) -> str:
 
 
 _address = setting("address")
+_baud = setting("baud")
 
 
-def add_connection(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group("connection (default: the one attached Trinamic USB module, "
-                             "else --sim TMCM-1311)")
+def _baud_or_auto(text: str) -> int | str:
+    return "auto" if text.strip().lower() == "auto" else _baud(text)
+
+
+def add_connection(p: argparse.ArgumentParser, *, auto_baud: bool = False) -> None:
+    g = p.add_argument_group("connection (default: the one attached Trinamic USB module; "
+                             "else --sim at the prompt, exit 3 elsewhere)")
     x = g.add_mutually_exclusive_group()
     x.add_argument("--port", metavar="PORT",
                    help="serial device (/dev/ttyACM0, COM3) or pyserial URL (socket://, "
@@ -51,8 +56,13 @@ def add_connection(p: argparse.ArgumentParser) -> None:
                         "process only, so it cannot reach a 'tmclsh sim'")
     x.add_argument("--sim", metavar="MODULE", nargs="?", const="TMCM-1311",
                    help="the built-in simulator, in process (default module TMCM-1311)")
-    g.add_argument("--baud", type=setting("baud"), metavar="N",
-                   help=f"baud rate (default 9600, the factory setting; {_range('baud')})")
+    if auto_baud:
+        g.add_argument("--baud", type=_baud_or_auto, metavar="N|auto",
+                       help="baud rate (default 9600, the factory setting); auto: each rate "
+                            f"GP 65 can select, in turn ({_range('baud')})")
+    else:
+        g.add_argument("--baud", type=setting("baud"), metavar="N",
+                       help=f"baud rate (default 9600, the factory setting; {_range('baud')})")
     g.add_argument("--bitrate", type=setting("bitrate"), metavar="N",
                    help="CAN bit rate in bit/s; the modules' factory setting is 1000000 "
                         "(GP 69 = 8); without it the adapter's own default or configuration "
@@ -157,10 +167,12 @@ def build_parser() -> argparse.ArgumentParser:
                     help="one JSON object per module")
 
     sc = sub.add_parser("scan", help="find modules on a bus (address, type, firmware)")
-    add_connection(sc)
+    add_connection(sc, auto_baud=True)
     sc.add_argument("--from", dest="first", type=_address, default=1, metavar="N")
     sc.add_argument("--to", dest="last", type=_address, default=255, metavar="N")
-    sc.add_argument("--timeout", type=setting("scan_timeout"), default=0.05, metavar="S",
-                    help=f"per-address timeout (default 0.05; {_range('scan_timeout')})")
+    sc.add_argument("--timeout", type=setting("scan_timeout"), metavar="S",
+                    help="per-address timeout (default: from the link, the wire time of a "
+                         f"request and its reply at the baud rate plus a margin; "
+                         f"{_range('scan_timeout')})")
     sc.add_argument("--json", action="store_true")
     return p

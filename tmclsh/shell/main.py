@@ -49,8 +49,10 @@ def run_shell(args: argparse.Namespace) -> int:
 
     _exit_cleanly_on_signals()
     settings = connection_settings(args)
+    # only a person at the prompt may be given the simulator for want of a module: a run
+    # nobody watches (-c, -f, piped input) fails instead (exit 3)
     try:
-        client = open_client(settings)
+        client = open_client(settings, fallback=_interactive(args), notice=_notice)
     except TmclError as exc:
         print(f"tmclsh: {exc}", file=sys.stderr)
         return EXIT_CONNECT
@@ -69,6 +71,14 @@ def run_shell(args: argparse.Namespace) -> int:
         client.close()  # leaves ASCII mode if tmclsh entered it, whatever happened
 
 
+def _interactive(args: argparse.Namespace) -> bool:
+    return args.command is None and args.script is None and sys.stdin.isatty()
+
+
+def _notice(text: str) -> None:
+    print(f"tmclsh: {text}", file=sys.stderr)
+
+
 def _silence_stdout() -> None:
     """Point stdout at /dev/null, so the interpreter's last flush does not fail again."""
     import os
@@ -85,13 +95,14 @@ def _run(args: argparse.Namespace, client, settings: dict) -> int:
 
     shell_settings = load_settings()
     out = Output(json_mode=bool(args.json), color=str(shell_settings.get("color", "auto")))
-    interactive = args.command is None and args.script is None and sys.stdin.isatty()
+    interactive = _interactive(args)
     # `confirm = false` in the config file is a standing --yes
     yes = bool(args.yes) or shell_settings.get("confirm") is False
     session = Session(client, out, interactive=interactive, yes=yes,
                       keep_going=bool(args.keep_going), settings=settings)
     if client.module is not None and client.module.generic:
         out.warn(f"{client.module.type_name}: {client.module.NOTICE}")  # once, at the start
+    client.on_notice = out.warn  # what the client does on its own (ends download mode)
     if args.trace:
         from .trace import enable_trace
 
