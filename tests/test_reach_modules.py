@@ -227,4 +227,4 @@ def test_unknown_command_in_generic_mode_points_to_numbers(module_1161, config_h
                                                           run_tmclsh):
     r = run_tmclsh("--port", module_1161.url, "-c", "XYZZY 1, 2", env=_env(config_home))
     assert r.returncode == 1 and "by number" in r.stderr
-    assert module_1161.commands() == [136]
+    assert module_1161.commands() == [136, 10]  # 136 and GGP 129 at connect; nothing for the line
