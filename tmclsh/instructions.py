@@ -29,7 +29,8 @@ class InstructionSpec:
     ascii: bool
     reads: bool = False
     persists: bool = False
-    note: str | None = None
+    note: str | None = None  # for users: shown by `help MNEMONIC`
+    source: str | None = None  # for maintainers: how the entry was read from the manuals
     types: dict[str, int] = field(default_factory=dict)
     types_for: dict[str, dict[str, int]] = field(default_factory=dict)
     # per module: motor/bank values with a special meaning besides the motor numbers
@@ -86,6 +87,7 @@ class ControlSpec:
     name: str
     modules: frozenset[str]
     note: str | None = None
+    source: str | None = None
 
     def on(self, module: str) -> bool:
         return _offered(self.modules, module)
@@ -138,7 +140,7 @@ def _tables() -> tuple[dict[int, InstructionSpec], dict[int, ControlSpec], dict[
                             "summary": raw["summary"].replace("0", str(n), 1)})
                 by_opcode[uf.opcode] = uf
     controls = {c["opcode"]: ControlSpec(c["opcode"], c["name"], frozenset(c["modules"]),
-                                         c.get("note")) for c in data["control"]}
+                                         c.get("note"), c.get("source")) for c in data["control"]}
     return by_opcode, controls, dict(data["interrupts"])
 
 
@@ -148,7 +150,7 @@ def _spec(raw: dict) -> InstructionSpec:
         fields=tuple(raw["fields"]), type_kind=raw["type"], motor_kind=raw["motor"],
         value_kind=raw["value"], modules=frozenset(raw["modules"]), direct=raw["direct"],
         ascii=raw["ascii"], reads=raw.get("reads", False), persists=raw.get("persists", False),
-        note=raw.get("note"), types=dict(raw.get("types", {})),
+        note=raw.get("note"), source=raw.get("source"), types=dict(raw.get("types", {})),
         types_for={k: dict(v) for k, v in raw.get("types_for", {}).items()},
         motor_special={mod: {int(k): v for k, v in table.items()}
                        for mod, table in raw.get("motor_special", {}).items()},
