@@ -11,6 +11,8 @@
   the simulator is ``pty_client.sim``.
 * ``run_tmclsh(*args, timeout=...)``: ``python -m tmclsh ARGS`` in a subprocess with this
   checkout on the path; returns the ``CompletedProcess`` (text, stdout and stderr captured).
+  Such a run is not interactive: without ``--sim``/``--port``/``--can`` it exits 3 (no
+  module found), it never falls back to the simulator.
 * ``terminal(**kw)``: a ``tmux.Terminal`` (tests/tmux.py), a real terminal on a private tmux
   server, killed afterwards.
 """

@@ -9,7 +9,7 @@ import sys
 import pytest
 
 import tmclsh
-from tmclsh.errors import StatusError, TmclError, TmclTimeoutError, ValidationError
+from tmclsh.errors import ConnectError, StatusError, TmclError, TmclTimeoutError, ValidationError
 from tmclsh.protocol import Status
 
 from conftest import ROOT, tmclsh_env
@@ -39,16 +39,18 @@ def test_connect_defaults_to_the_simulator_and_checks_its_arguments():
         tmclsh.connect(port="loop://", sim="TMCM-1311")
 
 
-def test_connect_with_module_given_does_not_ask(pty_sim):
+def test_connect_checks_the_module_given(pty_sim):
     sim, path = pty_sim
     with tmclsh.connect(port=path, module="TMCM-1311", timeout=0.5) as c:
-        assert c.stats["sent"] == 0 and c.version is None
+        assert c.version == "1311V111"  # asked (136), not assumed
+    with pytest.raises(ConnectError, match="-m TMCM-351 does not match.*is a TMCM-1311"):
+        tmclsh.connect(port=path, module="TMCM-351", timeout=0.5)
 
 
 def test_connect_to_nothing_fails_cleanly(tmp_path):
     with pytest.raises(TmclError, match="no such port"):
         tmclsh.connect(port=str(tmp_path / "ttyACM7"))
-    with pytest.raises(TmclTimeoutError):
+    with pytest.raises(TmclTimeoutError, match="no module answered at address 1"):
         tmclsh.connect(port="loop://", timeout=0.05, retries=0)  # nobody answers 136
 
 

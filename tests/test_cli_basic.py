@@ -48,12 +48,12 @@ def test_json_error_object_and_exit_status(tmp_path):
 
 
 def test_trace_on_stderr_and_nothing_sent_for_bad_input(tmp_path):
-    p = tmclsh("-c", "GAP 4, 0", "--trace", tmp=tmp_path)
+    p = tmclsh("--sim", "-c", "GAP 4, 0", "--trace", tmp=tmp_path)
     assert p.returncode == 0
     assert "tx> 01 06 04 00 00 00 00 00 0b  GAP 4, 0  // MaxPositioningSpeed" in p.stderr
     assert "<rx 02 01 64 06" in p.stderr
     assert "tx>" not in p.stdout and "MaxPositioningSpeed = " in p.stdout
-    p = tmclsh("-c", "SAP 140, 0, 99", "--trace", tmp=tmp_path)
+    p = tmclsh("--sim", "-c", "SAP 140, 0, 99", "--trace", tmp=tmp_path)
     assert p.returncode == 1
     assert "error: 99 is out of range" in p.stderr
     assert "tx>" not in p.stderr
@@ -61,10 +61,10 @@ def test_trace_on_stderr_and_nothing_sent_for_bad_input(tmp_path):
 
 
 def test_eeprom_write_needs_yes_in_scripts(tmp_path):
-    p = tmclsh("-c", "STAP MaxPositioningSpeed, 0", "--trace", tmp=tmp_path)
+    p = tmclsh("--sim", "-c", "STAP MaxPositioningSpeed, 0", "--trace", tmp=tmp_path)
     assert p.returncode == 1
     assert "--yes" in p.stderr and "tx>" not in p.stderr
-    p = tmclsh("-c", "STAP MaxPositioningSpeed, 0", "--yes", tmp=tmp_path)
+    p = tmclsh("--sim", "-c", "STAP MaxPositioningSpeed, 0", "--yes", tmp=tmp_path)
     assert p.returncode == 0, p.stderr
     assert "stored in EEPROM" in p.stdout
 

@@ -205,6 +205,9 @@ def test_help_argument_offers_commands_mnemonics_and_parameters():
     got = texts("help ")
     assert "SAP" in got and ".param" in got and "MicrostepResolution" in got
     assert texts("help SA")[0] == "SAP"
+    assert "--source" in texts("help --s")
+    assert texts("help --source RO")[:2] == ["ROR", "ROL"]
+    assert "--source" not in texts("help --source ")
 
 
 class _FakeProgram:

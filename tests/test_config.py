@@ -146,7 +146,7 @@ def test_unknown_profile_names_the_known_ones(bench):
 
 
 def test_unknown_profile_is_an_error_exit(bench, capsys):
-    assert cli.main(["--profile", "lab", "-c", "GAP 1, 0"]) == cli.EXIT_USAGE
+    assert cli.main(["--profile", "lab", "-c", "GAP 1, 0"]) == cli.EXIT_USAGE  # a usage error
     assert "no profile 'lab'" in capsys.readouterr().err
 
 

@@ -89,7 +89,7 @@ def test_move_check(fast, capsys):
 
 
 def test_io_test_as_a_new_user_runs_it():
-    proc = tmclsh("-f", "scripts/io_test.tmcl")
+    proc = tmclsh("--sim", "-f", "scripts/io_test.tmcl")
     assert proc.returncode == 0, proc.stderr
     out = proc.stdout
     for port in range(8):
@@ -103,7 +103,7 @@ def test_io_test_as_a_new_user_runs_it():
 def test_backup_writes_a_script_that_restores(tmp_path):
     # backup from a module with non-default settings ...
     setup = "SAP 4, 0, 123456\nSAP 6, 0, 128\nSAP 140, 0, 4\nSGP 2, 2, -77\n"
-    proc = tmclsh("-c", setup + f".source {SCRIPTS / 'backup.tmcl'}", cwd=tmp_path)
+    proc = tmclsh("--sim", "-c", setup + f".source {SCRIPTS / 'backup.tmcl'}", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert "saved 8 axis parameters and 4 user variables to params-restore.tmcl" in proc.stdout
     restore = (tmp_path / "params-restore.tmcl").read_text().splitlines()
@@ -114,7 +114,7 @@ def test_backup_writes_a_script_that_restores(tmp_path):
     assert "SGP 2, 2, -77" in restore
     assert all(line.startswith(("#", "SAP ", "SGP ", ".echo")) for line in restore)
     # ... and the restore script puts them back into a fresh (default) module
-    proc = tmclsh("--json", "-c", ".source params-restore.tmcl\nGAP 4, 0\nGAP 6, 0\nGAP 140, 0\n"
+    proc = tmclsh("--sim", "--json", "-c", ".source params-restore.tmcl\nGAP 4, 0\nGAP 6, 0\nGAP 140, 0\n"
                   "GGP 2, 2", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     replies = [json.loads(line) for line in proc.stdout.splitlines() if '"reply"' in line]

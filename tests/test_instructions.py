@@ -180,3 +180,52 @@ def test_351_types_for_its_unprinted_commands() -> None:
     for command in ("CALC", "JC", "WAIT", "CALCX", "CLE"):
         spec = isa.by_mnemonic(command)
         assert spec.type_names("TMCM-351") == spec.type_names("TMCM-1311")
+
+
+# -- what users read ------------------------------------------------------------------------------
+
+# The modules' vocabulary of transcribing a manual, plus the words the instruction notes used
+# for it ("the TMCM-1311 manual says", "copied from ROR", "follows the TMCM-351 wording").
+from test_modules import _TRANSCRIPTION  # noqa: E402
+
+_WORDS = re.compile(_TRANSCRIPTION.pattern + r"|wording|copied from|\bsays?\b|\bfollows\b",
+                    _TRANSCRIPTION.flags)
+
+
+def _user_texts() -> list[tuple[str, str]]:
+    """Every text `help`, the completer and the disassembler show about the instruction set."""
+    out: list[tuple[str, str]] = []
+    for spec in isa.all_instructions():
+        out += [(f"{spec.mnemonic} summary", spec.summary), (f"{spec.mnemonic} note",
+                                                               spec.note or "")]
+        out += [(f"{spec.mnemonic} type {name}", name) for name in spec.type_names()]
+        out += [(f"{spec.mnemonic} {mod} motor {n}", text)
+                for mod, table in spec.motor_special.items() for n, text in table.items()]
+    for ctl in isa.controls().values():
+        out += [(f"control {ctl.opcode} name", ctl.name),
+                (f"control {ctl.opcode} note", ctl.note or "")]
+    out += [(f"interrupt {name}", name) for name in isa.interrupts()]
+    return [(where, text) for where, text in out if text]
+
+
+@pytest.mark.parametrize("where, text", _user_texts(), ids=[w for w, _ in _user_texts()])
+def test_user_text_has_no_transcription_notes(where: str, text: str) -> None:
+    found = _WORDS.search(text)
+    assert found is None, f"{where} says {found.group()!r}: move it to source"
+
+
+def test_the_old_notes_are_sources_now() -> None:
+    """The maintainers' record survives word for word, and the check above would have refused
+    the notes that cited the manuals (CLE's only named the manual's syntax)."""
+    old = {"ROL": "TMCM-1311 manual §5.7.2 says 'positive direction' (copied from ROR)",
+           "RFS": "tmclsh follows the TMCM-351 wording",
+           "CALC": "'nine different arithmetic functions' and list ten",
+           "CLE": "The TMCM-1311 syntax names EPO but gives it no number"}
+    for mnemonic, text in old.items():
+        spec = isa.by_mnemonic(mnemonic)
+        assert spec.source and text in spec.source, mnemonic
+        assert _WORDS.search(spec.source) or mnemonic == "CLE", mnemonic
+        assert spec.note is None or not _WORDS.search(spec.note)
+    ctl = isa.control(128)
+    assert ctl.source and "§11.6 'run command with address'" in ctl.source
+    assert _WORDS.search(ctl.source) and ctl.note is None

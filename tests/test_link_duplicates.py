@@ -97,9 +97,23 @@ def test_counted_duplicates(dup_client):
     assert s.request.value == 9 and s.reply.value == 8
 
 
+def dup_first(sim, opcode: int, fault: str) -> None:
+    """The first reply to ``opcode`` gets ``fault`` (not the replies the connection asks for
+    before the script runs)."""
+    send, done = sim._send_reply, []
+
+    def sending(channel, module, op, ans):
+        if op == opcode and not done:
+            done.append(True)
+            setattr(sim.faults, fault, 1)
+        send(channel, module, op, ans)
+
+    sim._send_reply = sending
+
+
 def test_the_copy_is_traced_as_discarded(pty_sim):
     sim, path = pty_sim
-    sim.faults.dup_next = 1
+    dup_first(sim, 6, "dup_next")
     p = subprocess.run([sys.executable, "-m", "tmclsh", "--port", path, "-m", "TMCM-1311",
                         "--trace", "-c", "GAP 4, 0; GAP 4, 0"], capture_output=True, text=True,
                        timeout=30, env=tmclsh_env(), cwd=str(ROOT))
@@ -112,7 +126,7 @@ def test_a_suspect_answer_is_reported_in_json_and_fails_the_run(pty_sim, tmp_pat
     sim, path = pty_sim
     script = tmp_path / "s.tmcl"
     script.write_text("SGP 0, 2, 11\nSGP 0, 2, 12\nSGP 0, 2, 13\n")
-    sim.faults.dup_late_next = 1
+    dup_first(sim, SGP, "dup_late_next")
     p = subprocess.run([sys.executable, "-m", "tmclsh", "--port", path, "-m", "TMCM-1311",
                         "--json", "-f", str(script)], capture_output=True, text=True,
                        timeout=30, env=tmclsh_env(), cwd=str(ROOT))

@@ -55,7 +55,9 @@ def test_ci_runs_the_readme_commands_verbatim():
     run = [ln for ln in CI.splitlines() if not ln.lstrip().startswith("#")]
     first, second = README.splitlines()[1:3]
     assert any(f"( {second} )" in ln for ln in run), ".ci/run does not run the README's tests"
-    assert any(f"( {first} )" in ln for ln in run), ".ci/run does not run the README's first line"
+    # piped input is no person: without a module attached it must ask for the simulator
+    assert any(f"( {first} --sim )" in ln for ln in run), \
+        ".ci/run does not run the README's first line (with --sim)"
 
 
 def test_ci_fails_when_no_test_ran():
@@ -185,7 +187,7 @@ def test_the_tour_script_passes(tmp_path):
     (tmp_path / "check.tmcl").write_text(script)
     out = tmclsh("--sim", "-f", "check.tmcl", cwd=tmp_path)
     assert out.returncode == 0, out.stderr
-    shown = block_with("$ tmclsh -f check.tmcl").splitlines()[1:]
+    shown = block_with("$ tmclsh --sim -f check.tmcl").splitlines()[1:]
     got = normalise(out.stdout + out.stderr)
     for line in shown:
         assert normalise(line) in got, f"README shows {line!r}; tmclsh printed:\n{got}"
@@ -226,8 +228,10 @@ def test_the_ascii_mode_rescue_works(tmp_path):
     assert "binary" in out.stdout
 
 
-def test_the_first_command_starts_the_shell_on_the_simulator(tmp_path):
-    """What the README's first line ends with: the installed `tmclsh`, no module attached."""
+def test_the_first_command_piped_needs_sim_as_ci_gives_it(tmp_path):
+    """What the README's first line ends with: the installed `tmclsh`, no module attached,
+    fed a line on stdin as .ci/run does. Piped input is no person at the prompt: without
+    --sim it exits 3 (the interactive fallback is tested in a terminal, test_connect_trust)."""
     exe = Path(sys.executable).with_name("tmclsh")
     if not exe.exists():
         pytest.skip("tmclsh is not installed beside this Python")
@@ -237,5 +241,9 @@ def test_the_first_command_starts_the_shell_on_the_simulator(tmp_path):
     env.update(NO_COLOR="1", XDG_CONFIG_HOME=str(tmp_path), XDG_STATE_HOME=str(tmp_path))
     out = subprocess.run([str(exe)], input="GAP ActualPosition, 0\n", capture_output=True,
                          text=True, timeout=120, env=env, cwd=tmp_path)
+    assert out.returncode == 3 and out.stdout == ""
+    assert "no module found" in out.stderr and "--sim" in out.stderr
+    out = subprocess.run([str(exe), "--sim"], input="GAP ActualPosition, 0\n",
+                         capture_output=True, text=True, timeout=120, env=env, cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     assert "ActualPosition = 0" in out.stdout

@@ -11,6 +11,7 @@ from serial.tools import list_ports
 from serial.tools.list_ports_common import ListPortInfo
 
 from tmclsh import cli, connection
+from tmclsh.errors import ConnectError
 from tmclsh.protocol import Reply, Request
 from tmclsh.sim import SimBus, Simulator
 from tmclsh.sim.serve import serve_can
@@ -45,8 +46,9 @@ def test_scan_json_and_range(rs485_line, run_tmclsh):
 def test_scan_finding_nothing_fails(rs485_line, run_tmclsh):
     bus, path = rs485_line
     p = run_tmclsh("scan", "--port", path, "--from", "4", "--to", "6", "--timeout", "0.02")
-    assert p.returncode == 1 and p.stdout == ""
-    assert "no module answered on addresses 4..6" in p.stderr
+    assert p.returncode == 3 and p.stdout == ""
+    assert f"nothing answered; tried addresses 4..6 on {path} @ 9600 (20 ms each)" in p.stderr
+    assert "--baud auto" in p.stderr
 
 
 def test_scan_over_python_can_virtual(monkeypatch, capsys):
@@ -134,16 +136,26 @@ def test_default_connection_is_the_one_attached_trinamic_module(fake_ports, pty_
         client.close()
 
 
-def test_default_connection_with_two_modules_is_the_simulator(fake_ports, capsys):
-    fake_ports += [_port("/dev/ttyACM0", 0x2A3C, 1), _port("/dev/ttyACM1", 0x2A3C, 1)]
+def test_two_attached_modules_are_named_never_guessed(fake_ports):
+    fake_ports += [_port("/dev/ttyACM0", 0x2A3C, 1, "TMCM-1311", "0042"),
+                   _port("/dev/ttyACM1", 0x2A3C, 1, "TMCM-351")]
+    for fallback in (False, True):  # the interactive shell does not pick one either
+        with pytest.raises(ConnectError, match=r"2 Trinamic USB modules attached: "
+                           r"/dev/ttyACM0 \(TMCM-1311, serial 0042\), /dev/ttyACM1 \(TMCM-351\); "
+                           "pick one with --port"):
+            connection.open_transport({"address": 1}, fallback=fallback)
+
+
+def test_no_module_falls_back_to_the_simulator_only_when_asked(fake_ports):
+    with pytest.raises(ConnectError, match="no module found.*--sim to simulate"):
+        connection.open_transport({"address": 0})
     settings: dict = {"address": 0, "host_address": 5}
-    t = connection.open_transport(settings)
+    t = connection.open_transport(settings, fallback=True)
     try:
         assert t.simulated and settings["sim"] == "TMCM-1311"
         assert t.simulator.address == 0 and t.simulator.host_address == 5  # 0 is an address
     finally:
         t.close()
-    assert "2 Trinamic modules attached (/dev/ttyACM0, /dev/ttyACM1)" in capsys.readouterr().err
 
 
 def test_open_client_uses_the_settings(pty_sim):

@@ -91,6 +91,39 @@ def test_help_number_is_the_parameter(session, capsys):
     assert "now" in out and "8 (256 microsteps)" in out  # read from the module
 
 
+def test_instruction_help_shows_the_note_and_keeps_the_source_for_source(session, capsys):
+    """`help ROL` says what a technician needs; how the manuals were read shows only with
+    --source (before or after the mnemonic), as for `.param --source`."""
+    run(session, "help ROL")
+    out = capsys.readouterr().out
+    assert "The actual position decreases while ROL turns the motor." in out
+    assert "§" not in out and "copied from ROR" not in out and "source" not in out
+    run(session, "help --source ROL", "help RFS --source")
+    out = " ".join(capsys.readouterr().out.split())
+    assert "source TMCM-1311 manual §5.7.2 says 'positive direction' (copied from ROR)" in out
+    assert "tmclsh follows the TMCM-351 wording" in out
+    assert "STATUS replies 0 when no reference search is running" in out  # the note as well
+    run(session, "help --source ROR")  # nothing to say: as for parameters
+    assert "source as the manuals describe it" in " ".join(capsys.readouterr().out.split())
+
+
+def test_instruction_help_json_has_the_source_only_when_asked(capsys):
+    s = make_session(json_mode=True)
+    run(s, "help CALC", "help --source CALC")
+    plain, asked = (json.loads(line) for line in capsys.readouterr().out.splitlines())
+    assert "source" not in plain and "nine different" not in plain["note"]
+    assert plain["note"].startswith("The accumulator belongs to the stored program")
+    assert "'nine different arithmetic functions'" in asked["source"]
+    assert asked["note"] == plain["note"]
+
+
+def test_help_number_takes_source_like_param(session, capsys):
+    run(session, "help 140")
+    assert "source" not in capsys.readouterr().out
+    run(session, "help 140 --source")
+    assert "source   as the manual prints it" in capsys.readouterr().out
+
+
 def test_help_number_shows_axis_and_global_parameter(session, capsys):
     run(session, "help 0")
     out = capsys.readouterr().out

@@ -94,8 +94,9 @@ def test_stopall_json_gives_the_report(pty_module, capsys):
 class StubbornModule:
     """TMCM-1311 at address 1 on a pty, from the manual's byte tables: 9-byte frames (address,
     command, type, motor, value big-endian, checksum = sum of the 8 bytes), replies (host 2,
-    address, status 100, command, value, checksum). It answers 135 (application status) with
-    0 (stopped), MST with 100 and does nothing, GAP 3 (actual speed) with 1000, always."""
+    address, status 100, command, value, checksum); 136 type 0 with its version string (host
+    address and 8 characters). It answers 135 (application status) with 0 (stopped), MST
+    with 100 and does nothing, GAP 3 (actual speed) with 1000, always."""
 
     SPEED = 1000
 
@@ -134,7 +135,12 @@ class StubbornModule:
                 cmd, typ, motor = frame[1], frame[2], frame[3]
                 self.seen.append((cmd, typ, motor))
                 value = int.from_bytes(frame[4:8], "big")
-                if cmd == 135:
+                if cmd == 136 and typ == 0:  # the version string: host address, 8 characters
+                    os.write(self.master, bytes([2]) + b"1311V111")
+                    continue
+                if cmd == 10 and typ == 129:  # GGP 129: not in download mode
+                    value = 0
+                elif cmd == 135:
                     value = 0
                 elif cmd == 6 and typ == 3:
                     value = self.SPEED
@@ -162,6 +168,7 @@ def test_a_motor_that_keeps_turning_is_named(stubborn):
     assert "stopped motor" not in p.stdout + p.stderr
     assert p.returncode == 1
     cmds = [c for c, _, _ in stubborn.seen]
+    cmds = cmds[cmds.index(135):]  # after what the connection asks (136, GGP 129)
     assert cmds[:2] == [135, 3] and cmds.count(6) >= 2  # status, MST, speed read back (again)
 
 

@@ -259,8 +259,8 @@ def test_can_event_and_stale_reply(can_sim):
 
 def test_can_ids(can_sim):
     sim, channel = can_sim
-    c = tmclsh.connect(can=f"virtual:{channel}", module="TMCM-1311", timeout=0.1, retries=0,
-                       can_id=5)
+    c = tmclsh.connect(can=f"virtual:{channel}", module="TMCM-1311", timeout=0.1, retries=0)
+    c.can_id = 5
     try:
         with pytest.raises(TmclTimeoutError, match="sent to id 5"):
             c.send(GAP, 1, 0)  # nobody listens on id 5

@@ -530,8 +530,10 @@ class AsciiLink:
         return _LINKS.get(client)
 
     @classmethod
-    def attach(cls, client: Client, *, timeout: float | None = None) -> AsciiLink:
-        """Drive ``client`` through the module's ASCII mode (entering it with 139 if needed)."""
+    def attach(cls, client: Client, *, timeout: float | None = None,
+               found: Probe | None = None) -> AsciiLink:
+        """Drive ``client`` through the module's ASCII mode (entering it with 139 if needed).
+        ``found``: what a ``probe_mode`` just now found (it is not asked again)."""
         if client.ascii_link is not None:
             return client.ascii_link
         _transport(client)
@@ -539,7 +541,7 @@ class AsciiLink:
             raise ValidationError(f"the {client.module.name} has no ASCII mode")
         link = _LINKS.get(client)
         with client.lock:
-            probe = probe_mode(client, timeout)
+            probe = found or probe_mode(client, timeout)
             if probe.mode == Mode.ASCII and client.module is None:
                 # 136 does not exist in ASCII mode: step out briefly to identify the module
                 cls._bin(client)

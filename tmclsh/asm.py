@@ -391,10 +391,15 @@ def encode(line: Line, module: Module, symbols: Symbols | None = None, *,
     spec = isa.by_mnemonic(line.mnemonic)
     if spec is None:
         known = [s.mnemonic for s in module.instructions]
-        raise line.error(f"unknown command {line.mnemonic!r}{_suggest(line.mnemonic, known)}",
-                         line.mnemonic_col)
+        hint = _suggest(line.mnemonic, known)
+        if module.generic and not hint:
+            hint = "; any command can be sent by number: <command> <type>, <motor>, <value>"
+        raise line.error(f"unknown command {line.mnemonic!r}{hint}", line.mnemonic_col)
     if not spec.on(module.name):
-        raise line.error(f"{spec.mnemonic} is not available on the {module.name}", line.mnemonic_col)
+        hint = (f" (no data on this module's commands: send it by number, {spec.opcode} "
+                "<type>, <motor>, <value>)") if module.generic else ""
+        raise line.error(f"{spec.mnemonic} is not available on the {module.name}{hint}",
+                         line.mnemonic_col)
     if direct and not spec.direct:
         raise line.error(f"{spec.mnemonic} only works inside a stored program, not as a direct "
                          "command (upload a program with .upload)", line.mnemonic_col)
@@ -534,6 +539,8 @@ class _Encoder:
                     self.param = mod.lookup(pkind, number, bank)
             except ValidationError as exc:
                 raise self.fail(str(exc), expr) from None
+            if mod.generic:
+                self.param = None  # a number without data: nothing to check or name it by
             return number
         if kind == "interrupt":
             value = self.number(expr, isa.interrupts())
@@ -624,7 +631,7 @@ class _Encoder:
             p = self.module.port(bank, port)
             if p is None:  # type_() refused unknown ports already
                 raise self.fail(f"no port {port} in I/O bank {bank}", expr)
-            if p.kind != "digital_out":
+            if p.kind not in ("digital_out", "unknown"):  # unknown: a generic module's port
                 raise self.fail(f"{p.name} (bank {p.bank} port {p.port}) is an input; "
                                 "SIO sets outputs", expr)
             lo, hi = p.min, p.max
@@ -686,10 +693,11 @@ class Program:
         return len(self.instructions)
 
     def to_binary(self) -> bytes:
-        return b"".join(i.to_bytes() for i in self.instructions)
+        """The TMCL-IDE image: one 8-byte record per instruction (see ``image_bytes``)."""
+        return image_bytes(self.instructions)
 
     def to_hex(self) -> str:
-        return "".join(i.to_bytes().hex(" ") + "\n" for i in self.instructions)
+        return hex_text(self.instructions)
 
     def loc(self, address: int) -> SourceLoc | None:
         idx = address - self.origin
@@ -856,8 +864,9 @@ def image_limit(module: Module | None) -> int:
     return memory * 32
 
 
-def read_image_file(path: str, module: Module | None) -> list[Instruction]:
-    """An image file (``-`` = stdin) no larger than the module's program memory."""
+def read_image_instructions(path: str | Path, module: Module | None) -> list[Instruction]:
+    """An image file's instructions (``-`` = stdin), read no further than the module's
+    program memory could need; errors name the file."""
     limit = image_limit(module)
     try:
         data = read_bytes(path, limit, "image")
@@ -867,7 +876,10 @@ def read_image_file(path: str, module: Module | None) -> list[Instruction]:
                            f"({module.program_memory} instructions, {size_text(limit)} "
                            "of hex text); not read") from None
         raise AsmError(str(exc)) from None
-    image = read_image(data)
+    try:
+        image = read_image(data)
+    except AsmError as exc:
+        raise AsmError(exc.message, exc.line, exc.col, file=str(path)) from None
     if module is not None and len(image) > module.program_memory:
         raise AsmError(f"{path}: image of {len(image)} instructions; the {module.name} "
                        f"holds {module.program_memory}")
@@ -876,11 +888,44 @@ def read_image_file(path: str, module: Module | None) -> list[Instruction]:
 
 # -- images ------------------------------------------------------------------------------
 
-def read_image(data: bytes) -> list[Instruction]:
-    """Instructions from a binary image (7 bytes each) or the ``--hex`` text form.
+# The TMCL-IDE's binary image (and PyTrinamic's LoadTMCLBinary): per instruction command,
+# type, motor/bank, value (4 bytes, MSB first), then the 8-bit sum of those seven bytes.
+IMAGE_RECORD_LEN = INSTRUCTION_LEN + 1
 
-    The text form is one instruction per line, seven two-digit hex bytes separated by spaces
-    (what ``Program.to_hex`` writes).
+
+def image_bytes(instructions: list[Instruction]) -> bytes:
+    """Instructions as a TMCL-IDE binary image (8-byte records with their checksum)."""
+    out = bytearray()
+    for ins in instructions:
+        raw = ins.to_bytes()
+        out += raw + bytes((sum(raw) & 0xFF,))
+    return bytes(out)
+
+
+def hex_text(instructions: list[Instruction]) -> str:
+    """The ``--hex`` text form: one instruction per line, seven hex bytes."""
+    return "".join(i.to_bytes().hex(" ") + "\n" for i in instructions)
+
+
+def is_image_file(path: str | Path, data: bytes | None = None) -> bool:
+    """A ``.bin``/``.hex`` file, or bytes that are not text, hold an image, not source."""
+    if Path(path).suffix.lower() in (".bin", ".hex"):
+        return True
+    if data is None:
+        return False
+    try:
+        data.decode("utf-8")
+    except UnicodeDecodeError:
+        return True
+    return False
+
+
+def read_image(data: bytes) -> list[Instruction]:
+    """Instructions from a TMCL-IDE binary image or the ``--hex`` text form.
+
+    The binary image is 8-byte records whose last byte is the 8-bit sum of the other seven;
+    a record with another checksum is refused, naming it. The text form is one instruction
+    per line, seven two-digit hex bytes separated by spaces (what ``Program.to_hex`` writes).
     """
     try:
         text = data.decode("ascii")
@@ -896,11 +941,40 @@ def read_image(data: bytes) -> list[Instruction]:
                 raise AsmError(f"expected {INSTRUCTION_LEN} hex bytes, found {len(parts)}", no, 1)
             out.append(Instruction.from_bytes(bytes(int(x, 16) for x in parts)))
         return out
-    if len(data) % INSTRUCTION_LEN:
-        raise AsmError(f"a binary image is a multiple of {INSTRUCTION_LEN} bytes; "
-                       f"this one has {len(data)}")
-    return [Instruction.from_bytes(data[i:i + INSTRUCTION_LEN])
-            for i in range(0, len(data), INSTRUCTION_LEN)]
+    if len(data) % IMAGE_RECORD_LEN:
+        hint = (" (7-byte records without checksums are not a TMCL-IDE image; convert them "
+                "with the --hex text form)") if len(data) % INSTRUCTION_LEN == 0 else ""
+        raise AsmError(f"a binary image is {IMAGE_RECORD_LEN}-byte records; this one has "
+                       f"{len(data)} bytes{hint}")
+    out = []
+    for n, i in enumerate(range(0, len(data), IMAGE_RECORD_LEN), 1):
+        raw, check = data[i:i + INSTRUCTION_LEN], data[i + INSTRUCTION_LEN]
+        if sum(raw) & 0xFF != check:
+            raise AsmError(f"record {n} (bytes {i}..{i + IMAGE_RECORD_LEN - 1}) has checksum "
+                           f"{check:#04x}, expected {sum(raw) & 0xFF:#04x}; the image is "
+                           "damaged")
+        out.append(Instruction.from_bytes(raw))
+    return out
+
+
+def read_image_file(path: str | Path, module: Module, origin: int = 0) -> Program:
+    """A binary or hex image file as a Program (its "source" is the disassembly)."""
+    instructions = read_image_instructions(path, module)
+    source = [SourceLoc(str(path), n, disassemble_instruction(ins, module)[0])
+              for n, ins in enumerate(instructions, 1)]
+    return Program(module, instructions, source, {}, origin)
+
+
+def load_program(path: str | Path, module: Module, origin: int = 0) -> Program:
+    """What ``.upload`` and the debugger take: TMCL source, or an image (``.bin``/``.hex``)."""
+    if is_image_file(path):
+        return read_image_file(path, module, origin)
+    try:
+        return assemble_file(path, module, origin)
+    except AsmError as exc:
+        if "is not a text file" in exc.message:
+            return read_image_file(path, module, origin)
+        raise
 
 
 # -- the disassembler --------------------------------------------------------------------

@@ -34,11 +34,11 @@ def cmd_asm(args: argparse.Namespace) -> int:
 
 
 def cmd_disasm(args: argparse.Namespace) -> int:
-    from .asm import disassemble, read_image_file
+    from .asm import disassemble, read_image_instructions
     from .modules import load
 
     module = load(args.module)
-    image = read_image_file(args.file, module)  # bounded by the module's program memory
+    image = read_image_instructions(args.file, module)  # bounded by its program memory
     sys.stdout.write(disassemble(image, module, origin=args.at))
     return EXIT_OK
 
@@ -47,7 +47,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from .sim.serve import run
 
     return run(args.module, args.address, pty=args.pty, tcp=args.tcp, can=args.can,
-               host_address=args.host_address, faults=args.faults, seed=args.faults_seed)
+               host_address=args.host_address, bitrate=args.bitrate, faults=args.faults,
+               seed=args.faults_seed)
 
 
 def cmd_ports(args: argparse.Namespace) -> int:
@@ -80,84 +81,223 @@ def cmd_ports(args: argparse.Namespace) -> int:
 
 
 def cmd_scan(args: argparse.Namespace) -> int:
-    """Ask every address in --from..--to for its version.
-
-    Presence is tested with 136 type 1, whose serial reply names the module address and
-    opcode, so a slow module's late answer is never credited to the next address (the 136
-    type 0 string reply names neither). A module that answered is then asked for its version
-    string. On CAN the --from..--to range is the CAN ids (GP 71) and every module answers on
-    the one --reply-id; a CAN reply names no sender the client can rely on, so there the
-    per-id timeout must outlast the modules' answer time (a few ms).
-    """
+    """Ask every address in --from..--to who is there (``tmclsh.scan``); with ``--baud auto``
+    at each baud rate GP 65 can select. Rows on stdout as modules are found, progress (on a
+    terminal) and a summary on stderr."""
     import json
 
     from .client import Client
-    from .connection import connection_settings, open_transport
-    from .errors import ChecksumError, TmclError, TmclTimeoutError, ValidationError
-    from .modules import by_firmware_id, from_version_string
-    from .protocol import Control, Request
+    from .connection import baud_rates, connection_settings, open_transport
+    from .errors import ConnectError, TransportError, ValidationError
+    from .scan import address_timeout, scan
 
     if args.first > args.last:
         raise ValidationError(f"--from {args.first} is above --to {args.last}")
+    auto = args.baud == "auto"
+    if auto:
+        args.baud = None
     settings = connection_settings(args)
-    transport = open_transport(settings)
+    try:
+        transport = open_transport(settings)
+    except TransportError as exc:  # a port that cannot be opened: nothing to scan (exit 3)
+        raise ConnectError(str(exc)) from exc
     client = Client(transport, address=args.first, host_address=settings["host_address"],
-                    timeout=args.timeout, retries=0, can_id=settings.get("can_id"),
+                    timeout=1.0, retries=0, can_id=settings.get("can_id"),
                     reply_id=settings.get("reply_id"))
     ids = "CAN ids" if client.is_can else "addresses"
-    print(f"scanning {ids} {args.first}..{args.last} on {client.describe()}", file=sys.stderr)
-    found = 0
+    rates: list[int | None] = [None]
+    if auto:
+        if client.is_can or not hasattr(transport, "set_baudrate") or transport.simulated \
+                or "://" in getattr(transport, "url", "://"):
+            raise ValidationError("--baud auto needs a serial port (a CAN bus, a simulator or "
+                                  "a socket:// URL has no baud rate)")
+        rates = list(baud_rates())
+    addresses = range(args.first, args.last + 1)
+    found = []
+    tried = []
+    show_progress = not args.json and sys.stderr.isatty()
     try:
-        for addr in range(args.first, args.last + 1):
-            client.address = addr
-            if client.is_can:
-                client.can_id = addr
-            try:
-                binary = client.request(Request(addr, Control.GET_VERSION, 1, 0, 0))
-            except (TmclTimeoutError, ChecksumError):
-                continue
-            assert binary is not None
-            version = None
-            try:  # it is there: give it time and a retry for the string
-                reply = client.request(Request(addr, Control.GET_VERSION, 0, 0, 0),
-                                       timeout=max(args.timeout, 0.2), retries=1)
-                version = reply.version if reply is not None else None
-            except TmclError:
-                pass
-            mod = from_version_string(version) if version else None
-            if mod is None and binary.status == 100:
-                mod = by_firmware_id((binary.value >> 16) & 0xFFFF)
-            found += 1
-            row = {"address": addr, "module": mod.name if mod else None, "version": version}
-            if args.json:
-                print(json.dumps(row), flush=True)
+        for rate in rates:
+            if rate is not None:
+                transport.set_baudrate(rate)
+                client.forget_stale()  # nothing sent at another rate can still arrive
+            timeout = args.timeout or address_timeout(transport, usb=bool(
+                settings.get("port") and _is_usb(settings["port"])))
+            where = client.describe()
+            tried.append(f"{ids} {args.first}..{args.last} on {where} "
+                         f"({timeout * 1000:.0f} ms each)")
+            if not show_progress:
+                print(f"scanning {ids} {args.first}..{args.last} on {where}", file=sys.stderr)
+
+            def row(hit) -> None:
+                if args.json:
+                    print(json.dumps(hit.as_json() if auto else
+                                     {k: v for k, v in hit.as_json().items() if k != "baud"}),
+                          flush=True)
+                else:
+                    at = f"  {hit.baud} baud" if auto else ""
+                    print(f"address {hit.address:3d}  {hit.module or 'unknown module':<10}  "
+                          f"firmware {hit.version or '?'}{at}", flush=True)
+
+            if show_progress:
+                hits = _scan_with_progress(client, addresses, timeout,
+                                           f"{ids} {args.first}..{args.last} on {where}", row)
             else:
-                print(f"address {addr:3d}  {row['module'] or 'unknown module':<10}  "
-                      f"firmware {version or '?'}", flush=True)
+                shown: set[int] = set()
+
+                def as_found(addr: int, hit) -> None:
+                    if hit is not None:
+                        shown.add(addr)
+                        row(hit)
+
+                hits = scan(client, addresses, timeout=timeout, progress=as_found)
+                for hit in hits:
+                    if hit.address not in shown:  # found on the second, slower pass
+                        row(hit)
+            found += hits
     finally:
         client.close()
     if not found:
-        print(f"no module answered on {ids} {args.first}..{args.last}", file=sys.stderr)
-    return EXIT_OK if found else EXIT_ERROR
+        print(f"nothing answered; tried {'; '.join(tried)}"
+              + ("" if auto or client.is_can else "; other baud rates: --baud auto"),
+              file=sys.stderr)
+        return EXIT_CONNECT
+    where = ", ".join(str(f.address) + (f" ({f.baud} baud)" if auto else "") for f in found)
+    n = len(found)
+    print(f"{n} module{'s' if n != 1 else ''} found at {where}", file=sys.stderr)
+    return EXIT_OK
+
+
+def _is_usb(port: str) -> bool:
+    from .connection import trinamic_ports
+
+    return any(p.device == port for p in trinamic_ports())
+
+
+def _scan_with_progress(client, addresses: range, timeout: float, what: str, row) -> list:
+    """``scan`` under a rich progress bar (stderr is a terminal): addresses done and found so
+    far; rows appear above the bar as modules are found (those of the second, slower pass at
+    the end). The bar goes where the rows go when stdout is the terminal too."""
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
+
+    from .scan import scan
+
+    found: list[int] = []
+    shown: set[int] = set()
+    same_terminal = sys.stdout.isatty()
+    with Progress(TextColumn("scanning {task.description}"), BarColumn(),
+                  MofNCompleteColumn(), TextColumn("{task.fields[found]}"),
+                  console=Console(stderr=not same_terminal), transient=True,
+                  redirect_stdout=same_terminal, redirect_stderr=False) as bar:
+        task = bar.add_task(what, total=len(addresses), found="")
+
+        def progress(addr: int, hit) -> None:
+            if hit is not None:
+                found.append(addr)
+                shown.add(addr)
+                row(hit)
+            bar.update(task, advance=1, found=("found " + ", ".join(map(str, found)))
+                       if found else "")
+
+        hits = scan(client, addresses, timeout=timeout, progress=progress)
+    for hit in hits:
+        if hit.address not in shown:
+            row(hit)
+    return hits
+
+
+def cmd_modules(args: argparse.Namespace) -> int:
+    """The known modules and where each comes from, or (``check FILE``) one file validated."""
+    import json
+
+    from . import modules
+
+    if args.action == "check" or args.file:
+        if not args.file:
+            print("tmclsh: modules check wants a FILE", file=sys.stderr)
+            return EXIT_USAGE
+        try:
+            mod = modules.read_file(args.file)
+        except modules.ModuleFileError as exc:
+            print(f"tmclsh: {exc}", file=sys.stderr)
+            return EXIT_ERROR
+        print(f"{args.file}: {mod.name} (firmware id {mod.firmware_id}, version "
+              f"{mod.version_string}): {len(mod.axis_params)} axis and {len(mod.global_params)} "
+              f"global parameters, {len(mod.io)} I/O ports, commands of "
+              f"{modules.commands_of(mod)}: OK")
+        return EXIT_OK
+    built = set(modules.built_in())
+    for mod in modules.catalogue():
+        source = mod.source
+        if source != modules.BUILT_IN and mod.name in built:
+            source += " (replaces the built-in)"
+        if getattr(args, "json", False):
+            print(json.dumps({"module": mod.name, "firmware_id": mod.firmware_id,
+                              "version_string": mod.version_string, "source": source}))
+        else:
+            print(f"{mod.name:<12} {mod.version_string:<10} {source}")
+    if not getattr(args, "json", False):
+        print(f"{'generic':<12} {'any':<10} built in: numbers only, for any other TMCL module")
+    for problem in modules.problems():
+        print(f"tmclsh: not loaded: {problem}", file=sys.stderr)
+    return EXIT_ERROR if modules.problems() else EXIT_OK
 
 
 # -- entry point -------------------------------------------------------------------------
+
+def show_manual(parser: argparse.ArgumentParser) -> int:
+    """The man page, generated now (so an editable install shows the current one): through
+    man(1) on a terminal where there is one, else the roff text."""
+    import shutil
+    import subprocess
+    import tempfile
+
+    from .docs import manpage
+
+    text = manpage(parser)
+    man = shutil.which("man")
+    if not sys.stdout.isatty() or man is None:
+        sys.stdout.write(text)
+        return EXIT_OK
+    with tempfile.TemporaryDirectory() as tmp:
+        page = os.path.join(tmp, "tmclsh.1")
+        with open(page, "w", encoding="utf-8") as f:
+            f.write(text)
+        return subprocess.call([man, page])  # a path with a slash: man reads that file
+
+
+def _user_modules(args: argparse.Namespace) -> None:
+    """Take in --module-file; a module file that cannot be used is one warning line and the
+    run goes on without it (``tmclsh modules`` reports them itself)."""
+    from . import modules
+
+    for path in getattr(args, "module_file", None) or ():
+        modules.add_file(path)
+    if args.subcommand == "modules":
+        return
+    for problem in modules.problems():
+        print(f"tmclsh: warning: {problem}; going on without it", file=sys.stderr)
+
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     parser = build_parser()
     args = parser.parse_args(argv)
     debug = getattr(args, "debug", False)
-    from .errors import TmclError
+    from .errors import TmclError, UsageError
 
     try:
+        if getattr(args, "man", False):
+            return show_manual(parser)
         if getattr(args, "completions", None):
             from .docs import completion_script
 
             sys.stdout.write(completion_script(args.completions, parser))
             return EXIT_OK
+        _user_modules(args)
         handler = {"asm": cmd_asm, "disasm": cmd_disasm, "sim": cmd_sim, "ports": cmd_ports,
-                   "scan": cmd_scan}.get(args.subcommand or "")
+                   "scan": cmd_scan, "modules": cmd_modules}.get(args.subcommand or "")
         if handler is not None:
             return handler(args)
         from .shell.main import run_shell
@@ -165,13 +305,24 @@ def main(argv: list[str] | None = None) -> int:
         return run_shell(args)
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:  # `tmclsh modules | head`: the reader has gone; stop quietly
+        try:
+            sys.stdout = open(os.devnull, "w")
+        except OSError:
+            pass
+        return EXIT_ERROR
+    except UsageError as exc:
+        if debug:
+            raise
+        print(f"tmclsh: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     except TmclError as exc:
         if debug:
             raise
         print(f"tmclsh: {exc}", file=sys.stderr)
-        from .limits import SettingError
+        from .errors import ConnectError
 
-        return EXIT_USAGE if isinstance(exc, SettingError) else EXIT_ERROR
+        return EXIT_CONNECT if isinstance(exc, ConnectError) else EXIT_ERROR
     except OSError as exc:
         if debug:
             raise

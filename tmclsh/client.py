@@ -47,8 +47,9 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from . import instructions as isa
-from .errors import ChecksumError, StatusError, TmclTimeoutError, TransportError, ValidationError
-from .modules import Module, from_version_string
+from .errors import (ChecksumError, DownloadModeError, StatusError, TmclTimeoutError,
+                     TransportError, ValidationError)
+from .modules import Module, from_version_string, generic_for
 from .modules import load as load_module
 from .protocol import (SERIAL_FRAME_LEN, VERSION_STRING_LEN, Control, Reply, ReplyKind,
                        Request, Status, status_ok)
@@ -77,6 +78,10 @@ _CAN_REPLY_LEN = 7
 _QUIET_AFTER_GARBAGE = 0.05
 # Download mode cannot use a marker: wait until the line has been quiet this long.
 _DRAIN_QUIET = 0.03
+_LOADED = int(Status.LOADED)
+# GP 129 "download mode" (all three manuals): read to find out whether the module executes
+# commands; in download mode the read itself is stored (answered with status 101) instead
+_GP_DOWNLOAD_MODE = 129
 
 # Commands a retry may repeat without changing the outcome. Anything else (CALC, SAC, the
 # user functions, CCO (it captures a position that moves on), run/step/download, raw numbers
@@ -188,6 +193,12 @@ class Client:
         self._last: tuple[Request, Reply] | None = None
         self._recent: deque[Reply] = deque(maxlen=4)  # replies taken lately, markers too
         self._suspects: deque[Suspect] = deque(maxlen=64)
+        # set by reconnect(): before the next command, check the module is not in download
+        # mode (a link lost mid-upload leaves it there)
+        self._check_download = False
+        # one-line notices about what the client did on its own (ended download mode); the
+        # shell points it at its output, else they are logged
+        self.on_notice: Callable[[str], None] | None = None
         # run by close() while the link is still open (the ASCII link restores the mode the
         # module was found in)
         self.close_hooks: list[Callable[[], None]] = []
@@ -297,12 +308,62 @@ class Client:
             raise ValueError(f"timeout must be a positive number of seconds, got {timeout!r}")
         try:
             with self._lock:
+                if self._check_download and not self.downloading and self.ascii_link is None:
+                    self._check_download = False
+                    try:
+                        self.leave_download_mode()
+                    except BaseException:
+                        self._check_download = True
+                        raise
                 if self.ascii_link is not None:
-                    return self.ascii_link.transact(req, timeout)
-                return self._request(req, timeout, self.retries if retries is None else retries)
+                    reply = self.ascii_link.transact(req, timeout)
+                else:
+                    reply = self._request(req, timeout,
+                                          self.retries if retries is None else retries)
+            if reply is not None and reply.status == _LOADED and not self.downloading:
+                raise DownloadModeError(
+                    _LOADED, reply,
+                    f"the module is in download mode (it stores commands instead of executing "
+                    f"them): {_name(req)} was stored in program memory, not executed; "
+                    "the line 133 (quit download mode) ends it")
+            return reply
         finally:
             if self._events:
                 self._deliver_events()
+
+    def notice(self, text: str) -> None:
+        """Tell the user about something the client did on its own."""
+        if self.on_notice is not None:
+            self.on_notice(text)
+        else:
+            log.warning("%s", text)
+
+    def leave_download_mode(self) -> bool:
+        """Bring a module found in download mode out of it (133), with a notice.
+
+        Asks GP 129 (download mode): a module in normal mode answers it, one in download mode
+        stores it and answers status 101. True if the module was in download mode.
+        """
+        try:
+            self.request(Request(self.address, Op.GGP, _GP_DOWNLOAD_MODE, 0, 0))
+        except DownloadModeError:
+            pass
+        else:
+            return False
+        self.downloading = True  # until 133 is answered, whatever is sent is stored
+        try:
+            reply = self.request(Request(self.address, Control.QUIT_DOWNLOAD, 0, 0, 0))
+        finally:
+            self.downloading = False
+        if reply is None or not reply.ok:
+            status = reply.status if reply is not None else 0
+            raise StatusError(status, reply, f"the module at address {self.address} is in "
+                              "download mode (it stores commands instead of executing them) "
+                              f"and refused to leave it (133): status {status}")
+        self.notice(f"the module at address {self.address} was in download mode (an upload "
+                    "was cut short?): ended it with 133; the program stored on it may be "
+                    "incomplete")
+        return True
 
     def _request(self, req: Request, timeout: float, retries: int) -> Reply | None:
         if not self.transport.is_open:
@@ -462,7 +523,7 @@ class Client:
         """Consume every late reply: drain, then a 136 marker whose reply comes last."""
         self.stats["resyncs"] += 1
         if self._tracers:
-            self._trace("note", b"", "resynchronising")
+            self._trace("note", b"", "checking the line with 136 after an earlier failure")
         if self.downloading:
             # a marker would be stored as an instruction: wait for a quiet line instead;
             # stale replies are still dropped by opcode matching. That proves nothing, so a
@@ -490,8 +551,8 @@ class Client:
                 self._recent.append(got)
         except (TmclTimeoutError, ChecksumError) as exc:
             self._mark_stale(marker, kind)
-            raise type(exc)(f"address {address} did not answer the resynchronisation "
-                            f"request (136) after an earlier failure: {exc}") from exc
+            raise type(exc)(f"address {address} stopped answering: {exc} (asked to check "
+                            "the line after an earlier failure)") from exc
         except BaseException:
             self._mark_stale(marker, kind)
             raise
@@ -630,6 +691,18 @@ class Client:
             return True
         return False
 
+    def _version_copy(self, head: bytes) -> bool:
+        """Is ``head`` a copy of a version string taken lately (a duplicated 136 reply)?"""
+        if head[0] != self.host_address or not _printable(head, 1):
+            return False
+        text = head[1:].decode("latin-1")
+        if not any(r.version == text for r in self._recent):
+            return False
+        self.stats["unsolicited"] += 1
+        self._stale_opaque = True
+        self._discard(head, "copy of the version string")
+        return True
+
     def _rx_event(self, raw: bytes, reply: Reply) -> None:
         self.stats["events"] += 1
         if self._tracers:
@@ -663,7 +736,7 @@ class Client:
             if sum(head[:8]) & 0xFF != head[8] or (
                     head[0] == self.host_address and head[2] not in _STATUSES) or (
                     head[0] != self.host_address and junk):  # (see _take)
-                if self._late_version(head):
+                if self._late_version(head) or self._version_copy(head):
                     self._noise = self._noise or bool(junk)
                     self._drop(junk, "bytes that are no frame")
                     del buf[:_FRAME]
@@ -843,10 +916,10 @@ class Client:
             raise StatusError(status, reply, f"address {self.address} refused the version "
                               f"request (136): status {status}")
         self.version = reply.version
-        mod = from_version_string(reply.version)
+        mod = from_version_string(reply.version) or generic_for(reply.version)
         if mod is None:
             raise ValidationError(f"unknown module type in version string {reply.version!r}; "
-                                  "give it with --module")
+                                  "give it with --module (or --module generic)")
         self.module = mod
         return mod
 
@@ -923,6 +996,7 @@ class Client:
             self._buf.clear()
             self._dirty = False
             self._last = None  # whatever comes now says nothing about answers before
+            self._check_download = True
             self.stats["reconnects"] += 1
             if self._tracers:
                 self._trace("note", b"", f"reconnected to {self.describe()}")
@@ -951,6 +1025,12 @@ class Client:
         """Forget bytes buffered for the binary framing (the line was in another mode)."""
         with self._lock:
             self._buf.clear()
+
+    def forget_stale(self) -> None:
+        """The line was reset (its baud rate changed): nothing sent before can still arrive."""
+        with self._lock:
+            self._buf.clear()
+            self._dirty = False
 
     def resync_next(self) -> None:
         """Something else used the line (the module's ASCII mode): whatever is left on it is

@@ -8,8 +8,9 @@ Shell settings (colour, editing mode, history size, confirmations) come from the
 table of the config file merged over the packaged, commented ``default.toml``, which is also
 the single list of setting names, their types and their defaults.
 
-The config file is ``$TMCLSH_CONFIG`` if set, else ``$XDG_CONFIG_HOME/tmclsh/config.toml``
-(``~/.config/tmclsh/config.toml``). Unknown keys, unknown profiles and values of the wrong
+The config file is ``$TMCLSH_CONFIG`` if set, else ``config.toml`` in the platform's config
+directory (platformdirs): ``$XDG_CONFIG_HOME/tmclsh/config.toml`` (``~/.config/tmclsh/``) on
+Linux. Unknown keys, unknown profiles and values of the wrong
 type are errors that name the file, the key and what is allowed.
 """
 
@@ -23,7 +24,7 @@ from importlib import resources
 from pathlib import Path
 
 from . import limits
-from .errors import ValidationError
+from .errors import UsageError, ValidationError
 from .limits import SettingError
 
 # environment variable -> connection setting
@@ -51,7 +52,7 @@ OTHER_ENVIRONMENT = {
 
 # connection setting -> type (what a profile or variable may hold)
 CONNECTION_TYPES: dict[str, type] = {
-    "port": str, "baud": int, "can": str, "can_id": int, "reply_id": int, "sim": str,
+    "port": str, "baud": int, "can": str, "bitrate": int, "can_id": int, "reply_id": int, "sim": str,
     "module": str, "address": int, "host_address": int, "ascii": bool, "timeout": float,
     "retries": int,
 }
@@ -72,13 +73,19 @@ _FALSE = ("0", "false", "no", "off", "")
 
 
 def config_dir() -> Path:
-    base = os.environ.get("XDG_CONFIG_HOME") or str(Path.home() / ".config")
-    return Path(base) / "tmclsh"
+    """The platform's config directory: $XDG_CONFIG_HOME/tmclsh (~/.config/tmclsh) on Linux,
+    ~/Library/Application Support/tmclsh on macOS, %LOCALAPPDATA%\\tmclsh on Windows."""
+    import platformdirs
+
+    return Path(platformdirs.user_config_dir("tmclsh", appauthor=False))
 
 
 def state_dir() -> Path:
-    base = os.environ.get("XDG_STATE_HOME") or str(Path.home() / ".local" / "state")
-    return Path(base) / "tmclsh"
+    """Where the history is kept: $XDG_STATE_HOME/tmclsh (~/.local/state/tmclsh) on Linux,
+    the platform's own place elsewhere."""
+    import platformdirs
+
+    return Path(platformdirs.user_state_dir("tmclsh", appauthor=False))
 
 
 def config_file() -> Path:
@@ -255,7 +262,7 @@ def resolve(cli: dict, config: Config, env: dict[str, str] | None = None) -> dic
     if profile_name:
         if profile_name not in config.profiles:
             known = ", ".join(sorted(config.profiles)) or "none defined"
-            raise SettingError(f"no profile {profile_name!r} in {config.path} (known: {known})")
+            raise UsageError(f"no profile {profile_name!r} in {config.path} (known: {known})")
         profile = config.profiles[profile_name]
     merged: dict = dict(CONNECTION_DEFAULTS)
     for source in (profile, envs, {k: v for k, v in cli.items() if v is not None}):

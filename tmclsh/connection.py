@@ -10,12 +10,17 @@ from __future__ import annotations
 import sys
 from typing import TYPE_CHECKING
 
+from .canspec import FROM_PYTHON_CAN, parse_can
 from .client import Client
-from .errors import ValidationError
-from .transport.base import Transport
+from .errors import (ChecksumError, ConnectError, DownloadModeError, NoAnswerError,
+                     StatusError, TmclTimeoutError, ValidationError)
+from .transport.base import StreamTransport, Transport
 
 if TYPE_CHECKING:
     import argparse
+    from collections.abc import Callable
+
+    from .modules import Module
 
 TRINAMIC_VID = 0x2A3C
 
@@ -32,9 +37,12 @@ def connection_settings(args: argparse.Namespace) -> dict:
     from .config import load_config, resolve
 
     cli = {k: getattr(args, k, None) for k in
-           ("port", "baud", "can", "sim", "can_id", "reply_id", "module", "address",
+           ("port", "baud", "can", "bitrate", "sim", "can_id", "reply_id", "module", "address",
             "host_address", "ascii", "timeout", "retries", "profile")}
-    return resolve(cli, load_config())
+    settings = resolve(cli, load_config())
+    if settings.get("can") and settings["can"] != FROM_PYTHON_CAN:
+        parse_can(settings["can"])  # a malformed --can is a usage error, before opening anything
+    return settings
 
 
 def _setting(settings: dict, key: str, default):
@@ -42,40 +50,71 @@ def _setting(settings: dict, key: str, default):
     return default if value is None else value  # address 0 is an address
 
 
-def open_transport(settings: dict) -> Transport:
-    """The transport the settings name: port, CAN bus, the one attached Trinamic module, or
-    else the in-process simulator (``settings["port"]``/``["sim"]`` record which)."""
+def _port_label(p) -> str:
+    what = [x for x in (p.description if p.description not in (None, "n/a") else None,
+                        f"serial {p.serial_number}" if p.serial_number else None) if x]
+    return f"{p.device} ({', '.join(what)})" if what else p.device
+
+
+def attached_module_port() -> str | None:
+    """The one attached Trinamic USB module's port; None if there is none. Several are a
+    ``ConnectError`` naming them: tmclsh never picks one of them by itself."""
+    found = trinamic_ports()
+    if len(found) > 1:
+        raise ConnectError(f"{len(found)} Trinamic USB modules attached: "
+                           f"{', '.join(_port_label(p) for p in found)}; "
+                           "pick one with --port")
+    return found[0].device if found else None
+
+
+def open_transport(settings: dict, *, fallback: bool = False) -> Transport:
+    """The transport the settings name: port, CAN bus, simulator, else the one attached
+    Trinamic USB module (``settings["port"]``/``["sim"]`` record which).
+
+    With nothing named and no module attached, ``fallback`` (the interactive shell) starts
+    the simulator; otherwise (scripts, ``-c``, ``scan``) that is a ``ConnectError``: a run
+    nobody watches must not pass on a simulator by accident.
+    """
     from . import transport as tr
 
     baud = _setting(settings, "baud", 9600)
     if settings.get("port"):
         return tr.open_serial(settings["port"], baud)
     if settings.get("can"):
-        return tr.open_can(settings["can"])
+        return tr.open_can(settings["can"], settings.get("bitrate"))
     if not settings.get("sim"):
-        found = trinamic_ports()
-        if len(found) == 1:
-            settings["port"] = found[0].device
-            return tr.open_serial(found[0].device, baud)
-        if len(found) > 1:
-            print(f"tmclsh: {len(found)} Trinamic modules attached "
-                  f"({', '.join(p.device for p in found)}); pick one with --port. "
-                  "Starting the simulator.", file=sys.stderr)
+        port = attached_module_port()
+        if port is not None:
+            settings["port"] = port
+            return tr.open_serial(port, baud)
+        if not fallback:
+            raise ConnectError(
+                "no module found: no --port, --can or --sim given (nor a profile or "
+                "TMCLSH_PORT/TMCLSH_CAN naming one) and no Trinamic USB module attached "
+                f"(USB vendor {TRINAMIC_VID:04x}); give --port PORT ('tmclsh ports' lists "
+                "the serial ports), or --sim to simulate")
     module = settings.get("sim") or settings.get("module") or "TMCM-1311"
     settings["sim"] = module
     return tr.open_sim(module, _setting(settings, "address", 1),
                        host_address=_setting(settings, "host_address", 2))
 
 
-def open_client(settings: dict) -> Client:
-    """A client on ``open_transport(settings)``, in ASCII mode if asked, module identified."""
-    transport = open_transport(settings)
+def open_client(settings: dict, *, fallback: bool = False,
+                notice: Callable[[str], None] | None = None) -> Client:
+    """A client on ``open_transport(settings)``, in ASCII mode if asked, module identified
+    and out of download mode (see ``start``); ``notice`` gets what it did on its own."""
+    transport = open_transport(settings, fallback=fallback)
     module = settings.get("module") or settings.get("sim")
-    client = Client(transport, address=_setting(settings, "address", 1),
-                    host_address=_setting(settings, "host_address", 2), module=module,
-                    timeout=_setting(settings, "timeout", 1.0),
-                    retries=_setting(settings, "retries", 2),
-                    can_id=settings.get("can_id"), reply_id=settings.get("reply_id"))
+    try:
+        client = Client(transport, address=_setting(settings, "address", 1),
+                        host_address=_setting(settings, "host_address", 2), module=module,
+                        timeout=_setting(settings, "timeout", 1.0),
+                        retries=_setting(settings, "retries", 2),
+                        can_id=settings.get("can_id"), reply_id=settings.get("reply_id"))
+    except BaseException:
+        transport.close()
+        raise
+    client.on_notice = notice
     return start(client, ascii=bool(settings.get("ascii")))
 
 
@@ -88,7 +127,8 @@ def connect(port: str | None = None, *, baud: int = 9600, can: str | None = None
     ``connect(can="virtual:bench")``, ``connect(sim="TMCM-351")``; with none of them, the
     built-in simulated TMCM-1311.
 
-    The module type is asked with 136 unless ``module`` is given.
+    The module type is asked with 136; a ``module`` that contradicts the answer is a
+    ``ConnectError``.
     """
     from . import transport as tr
 
@@ -108,18 +148,222 @@ def connect(port: str | None = None, *, baud: int = 9600, can: str | None = None
 
 
 def start(client: Client, *, ascii: bool = False) -> Client:
-    """Bring a new client up: into ASCII mode if asked, module type identified (136).
+    """Bring a new client up, checking rather than assuming what the module is:
+
+    * its type is asked with 136; a module type given beforehand (``-m``) that contradicts
+      the answer is a ``ConnectError`` naming both;
+    * a module found in download mode (an upload cut short) is brought out of it with 133,
+      with a notice (``client.on_notice``);
+    * a serial module that answers only in its ASCII mode is driven through it, with a
+      notice (``ascii=True`` asks for ASCII mode anyway);
+    * when nothing answers, a ``ConnectError`` says what was tried and what to try next.
 
     On any failure the client is closed, so a half-opened port is never left behind.
     """
+    expected = client.module
     try:
         if ascii:
-            from .ascii import AsciiLink
-
-            AsciiLink.attach(client)
-        if client.module is None:
-            client.identify()
+            _attach_ascii(client, expected)
+        else:
+            _bring_up(client, expected)
     except BaseException:
         client.close()
         raise
     return client
+
+
+def _attach_ascii(client: Client, expected: Module | None, found=None) -> None:
+    from .ascii import AsciiLink
+
+    client.module = None  # so that the link asks 136 (stepping out of ASCII mode if need be)
+    try:
+        try:
+            AsciiLink.attach(client, found=found)
+        except StatusError as exc:
+            # 139 refused: a module in download mode takes no control command but 132-136;
+            # end download mode (with a notice), then try once more
+            if client.ascii_link is not None or not client.leave_download_mode():
+                raise
+            AsciiLink.attach(client)
+    except (TmclTimeoutError, ChecksumError) as exc:
+        raise NoAnswerError(no_answer_message(client, exc, ascii=True)) from exc
+    _check_type(client, expected)
+
+
+def _bring_up(client: Client, expected: Module | None) -> None:
+    from .protocol import Control, Request
+
+    client.module = None
+    try:
+        try:
+            # once: if this goes unanswered, the mode probe below is the second try (and
+            # tells a module in ASCII mode from a silent line)
+            reply = client.request(Request(client.address, Control.GET_VERSION, 0, 0, 0),
+                                   retries=0)
+        except DownloadModeError:
+            # a firmware that stores even 136 while downloading: end download mode first
+            client.leave_download_mode()
+            reply = None
+        except (TmclTimeoutError, ChecksumError) as exc:
+            if not _answers_after_all(client, expected, exc):
+                return  # found in ASCII mode, and attached
+            reply = None
+        if reply is not None and reply.version is not None:
+            _adopt_version(client, reply.version)
+        else:
+            client.identify()
+    except ValidationError:
+        if expected is None:  # a version string naming no module we know
+            raise
+        client.module = expected
+    _check_type(client, expected)
+    if client.ascii_link is None:
+        try:
+            client.leave_download_mode()
+        except (TmclTimeoutError, ChecksumError) as exc:
+            tries = 1 + client.retries
+            raise NoAnswerError(no_answer_message(
+                client, exc, what=f"it answered 136 (version {client.version}), but not GGP "
+                f"129 (download mode), asked {tries} time{'s' if tries > 1 else ''}, "
+                f"waiting {client.timeout:g} s each")) from exc
+
+
+def _adopt_version(client: Client, version: str) -> None:
+    from .modules import from_version_string, generic_for
+
+    client.version = version
+    mod = from_version_string(version) or generic_for(version)  # no data: numbers only
+    if mod is None:
+        raise ValidationError(f"unknown module type in version string {version!r}; "
+                              "give it with --module (or --module generic)")
+    client.module = mod
+
+
+def _answers_after_all(client: Client, expected: Module | None, exc: Exception) -> bool:
+    """After an unanswered 136: True if a binary module is there after all (slow, or a reply
+    lost); False if one in ASCII mode was found (and attached). Else a NoAnswerError."""
+    from .ascii import Mode, probe_mode
+    from .protocol import Control, Request
+
+    t = client.transport
+    if not isinstance(t, StreamTransport) or t.simulated:
+        for _ in range(client.retries):  # CAN, simulator: the client's own retries
+            try:
+                client.request(Request(client.address, Control.GET_VERSION, 0, 0, 0),
+                               retries=0)
+                return True
+            except (TmclTimeoutError, ChecksumError) as again:
+                exc = again
+        raise NoAnswerError(no_answer_message(client, exc)) from exc
+    try:
+        probe = probe_mode(client)
+    except (TmclTimeoutError, ChecksumError):
+        raise NoAnswerError(no_answer_message(client, exc, ascii_tried=True)) from exc
+    if probe.mode == Mode.BINARY:
+        return True
+    client.forget_stale()  # a module in ASCII mode sends no late binary replies
+    _attach_ascii(client, expected, probe)
+    link = client.ascii_link
+    echo = f" ({link.echo.text}; it stays in ASCII mode at exit)" if link else ""
+    client.notice(f"the module at address {client.address} is in its ASCII mode (it ignores "
+                  "binary commands; GP 67 makes it start in it): talking to it through ASCII "
+                  f"mode{echo}; '.mode binary --keep' switches it back to binary for good")
+    return False
+
+
+def _check_type(client: Client, expected: Module | None) -> None:
+    found = client.module
+    if expected is not None and expected.generic:
+        # -m generic: no data is used, but the banner still names the type that answered
+        from .modules import generic_for
+
+        named = generic_for(client.version) if client.version else None
+        client.module = named or expected
+        return
+    if expected is None or found is None:
+        client.module = found or expected
+        return
+    if found.name != expected.name:
+        if client.transport.simulated:
+            hint = f"--sim {expected.name} simulates a {expected.name}"
+        else:
+            hint = f"leave -m out to use what the module says, or give -m {found.name}"
+        raise ConnectError(
+            f"-m {expected.name} does not match the module: address {client.address} says it "
+            f"is a {found.name} (version {client.version}); {hint}")
+
+
+def baud_rates(module: Module | None = None) -> list[int]:
+    """The baud rates GP 65 can select, from the module database (``module``'s, or those of
+    every known module), in the order of their codes."""
+    from .modules import available, load
+
+    mods = [module] if module is not None else [load(n) for n in available()]
+    rates: dict[int, int] = {}
+    for mod in mods:
+        p = mod.glob(65)
+        for code, text in (p.values.items() if p is not None else ()):
+            word = text.split()[0] if text.split() else ""
+            if word.isdigit():
+                rates.setdefault(int(word), code)
+    return sorted(rates, key=lambda r: (rates[r], r))
+
+
+def _is_usb_module(client: Client) -> bool:
+    url = getattr(client.transport, "url", "")
+    try:
+        return any(p.device == url for p in trinamic_ports())
+    except Exception:  # listing ports is best effort here
+        return False
+
+
+def no_answer_message(client: Client, exc: BaseException, *, ascii: bool = False,
+                      ascii_tried: bool = False, what: str | None = None) -> str:
+    """What was tried, in the user's words, then the likely causes, most likely first."""
+    where = client.describe()
+    addr = client.address
+    tries = 1 + client.retries
+    garbled = isinstance(exc, ChecksumError)
+    if client.is_can:
+        return (
+            f"no module answered on {where}: asked for its version (136) on CAN id "
+            f"{client.can_id}, listening on reply id {client.reply_id}, {tries} times, "
+            f"{client.timeout:g} s each. Likely causes, most likely first:\n"
+            "  - bit rate: every node on the bus must use the module's CAN bit rate "
+            "(GP 69; factory setting 1000 kbit/s)\n"
+            f"  - CAN ids: the module's id (GP 71, factory 1) and reply id (GP 70, factory "
+            f"2) must match --can-id and --reply-id; 'tmclsh scan --can ...' tries the ids\n"
+            f"  - a slow bus: --timeout {max(2 * client.timeout, 2):g}\n"
+            "  - wiring: termination (120 ohm at both ends), CAN_H/CAN_L, power")
+    url = getattr(client.transport, "url", where)
+    usb = _is_usb_module(client)
+    socket_url = "://" in url
+    first = (f"replies came from {where} but were garbled (bad checksums)" if garbled else
+             f"no module answered at address {addr} on {where}")
+    if what is not None:
+        pass
+    elif ascii:
+        what = f"looked for it in ASCII mode, waiting {client.timeout:g} s"
+    else:
+        if ascii_tried:
+            what = ("asked for its version (136) twice and tried its ASCII mode, waiting up "
+                    f"to {client.timeout:g} s each")
+        else:
+            what = (f"asked for its version (136) {tries} time{'s' if tries > 1 else ''}, "
+                    f"waiting {client.timeout:g} s each")
+    lines = [f"{first}: {what}. Likely causes, most likely first:"]
+    if not usb and not socket_url:
+        baud = getattr(client.transport, "baudrate", 9600)
+        others = ", ".join(str(r) for r in baud_rates() if r != baud)
+        lines.append(f"  - baud rate: the module may be set to another rate than {baud} (GP 65 "
+                     f"allows {others}); try --baud 115200, or 'tmclsh scan --port {url} "
+                     "--baud auto' tries each")
+    lines.append(f"  - address: the module may have another address than {addr} (GP 66, "
+                 f"factory 1): 'tmclsh scan --port {url}' lists who answers; then -a N")
+    if not ascii and not ascii_tried:
+        lines.append("  - ASCII mode: a module in its ASCII mode ignores binary commands: "
+                     "try --ascii")
+    lines.append(f"  - a slow link: --timeout {max(2 * client.timeout, 2):g}")
+    lines.append("  - the port: is it the module's? 'tmclsh ports' lists the serial ports; "
+                 "check cable and power")
+    return "\n".join(lines)

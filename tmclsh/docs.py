@@ -43,7 +43,7 @@ PORT_GLOBS = ("/dev/ttyUSB*", "/dev/ttyACM*", "/dev/serial/by-id/*")
 # what to complete for an option's value, by the option's dest (or a positional's)
 VALUE_KINDS = {
     "port": "ports", "can": "can", "sim": "modules", "module": "modules", "profile": "profiles",
-    "script": "files", "file": "files", "output": "files",
+    "script": "files", "file": "files", "output": "files", "module_file": "files",
 }
 
 
@@ -175,9 +175,9 @@ def describe(parser: argparse.ArgumentParser | None = None) -> tuple[CommandLine
 # -- the rest of what is documented ----------------------------------------------------------
 
 def module_names() -> list[str]:
-    from .modules import available
+    from .modules import built_in
 
-    return available()
+    return built_in()  # never the generating user's own module files
 
 
 def can_interfaces() -> list[str]:
@@ -360,14 +360,26 @@ _SUB_NOTES = {
     "asm": "Source lines are TMCL as in the TMCL-IDE: labels (NAME:), constants "
            "(#define NAME VALUE or NAME = VALUE), #include \"FILE\", comments after // or #. "
            "Errors name FILE:LINE:COLUMN and no output file is written.",
-    "disasm": "FILE (or - for standard input) is a binary image (7 bytes per instruction) or "
-              "hex text as written by asm --hex.",
+    "disasm": "FILE (or - for standard input) is a TMCL-IDE binary image or hex text as "
+              "written by asm --hex (see PROGRAM IMAGES).",
+    "modules": "Lists each module tmclsh has data for, with its version string and where the "
+               "data comes from: built in, or the path of a user's module file (see MODULE "
+               "FILES). Exit status 1 when a user's file cannot be used (each named on "
+               "standard error). modules check FILE validates one file: exit 0 and a summary "
+               "if tmclsh can use it, else 1 and one line naming the file, the line and what "
+               "is wrong.",
     "sim": "The first line on standard output is the pseudo-terminal's path or the endpoint; "
            "connect to it with --port PATH, --port socket://HOST:PORT or --can IFACE:CHANNEL. "
-           "Runs until interrupted.",
+           "Runs until interrupted. --pty needs Linux or macOS; --tcp and --can work on "
+           "Windows too. Exit status 2 for a malformed argument, 3 when the server cannot "
+           "start (address in use, no such CAN interface).",
     "ports": "The USB ids are shown; ports whose vendor is Trinamic (0x2A3C) are marked TRINAMIC.",
-    "scan": "Sends command 136 (firmware version) to each address and prints those that answer; "
-            "exit status 1 when none does.",
+    "scan": "Sends command 136 (firmware version) to each address and prints those that answer, "
+            "then a summary on standard error; a progress bar while it runs on a terminal. The "
+            "wait per address comes from the link (the wire time of request and reply at the "
+            "baud rate, plus a margin); addresses that answered late or garbled are asked again, "
+            "slower. --baud auto scans at each baud rate global parameter 65 can select. Exit "
+            "status 3 when nothing answers.",
 }
 
 
@@ -471,9 +483,19 @@ the reply is decoded; shell commands (starting with a dot) show help, watch live
 scripts, talk to the module's ASCII mode, and upload, run and single-step programs stored on the
 module. The same lines can be given with {_b("-c")} or replayed from a file with {_b("-f")}.
 .PP
-Without a connection option {_b(PROG)} uses the one attached Trinamic USB module if exactly one
-is found, else the built-in simulator of a TMCM-1311. The banner and the toolbar always say
-which; a simulator is labelled SIMULATED.
+Without a connection option (or a profile or variable naming one) {_b(PROG)} uses the one
+attached Trinamic USB module if exactly one is found. With none attached, the interactive
+shell starts the built-in simulator of a TMCM-1311, labelled SIMULATED in the banner and the
+toolbar; runs nobody watches ({_b("-c")}, {_b("-f")}, standard input that is not a terminal,
+{_b("scan")}) never fall back to it: they exit with status 3 ({_b("--sim")} asks for the
+simulator). Two or more Trinamic USB modules attached without {_b("--port")} are named, and
+{_b(PROG)} exits with status 3, in every mode.
+.PP
+At connect the module is asked, not assumed: its type with command 136 (a contradicting
+{_b("-m")} is an error naming both types); a module found in download mode (an upload cut
+short) is brought out of it with 133, with a notice, as after a reconnect; a module that
+answers only in its ASCII mode is driven through it, with a notice. When nothing answers, the
+message says what was tried and the likely causes, most likely first.
 .PP
 Bad input never reaches the module: an unknown mnemonic, a wrong type, a value out of the
 parameter's range, a write to a read-only parameter or a motor the module does not have each
@@ -672,15 +694,22 @@ def _exit_status() -> list[str]:
         (EXIT_OK, "Success."),
         (EXIT_ERROR, "A TMCL or shell command failed (a rejected line, an error status from "
                      "the module, a timeout), a script stopped at an error, asm or disasm "
-                     "failed, a file could not be written (the message names it and why), or "
-                     "scan found no module."),
-        (EXIT_USAGE, "Usage: an unknown option or a bad option value, a bad environment "
-                     "variable, profile or config file (each checked against the same "
-                     "LIMITS); or a script given with -f that was not run (nothing was sent): "
-                     "it cannot be read, no such file, a syntax error, a value out of range or "
-                     "another line the module would refuse."),
-        (EXIT_CONNECT, "The shell could not connect: the port or CAN bus cannot be opened, or "
-                       "the module does not answer when its type is detected (command 136)."),
+                     "failed, a file could not be written (the message names it and why), "
+                     "scan found no module, or a module file that cannot be used (tmclsh "
+                     "modules)."),
+        (EXIT_USAGE, "Usage: an unknown option or a bad option value (a malformed --can, an "
+                     "unknown --profile), a bad environment variable, profile or config file "
+                     "(each checked against the same LIMITS); or a script given with -f that "
+                     "was not run (nothing was sent): it cannot be read, no such file, a "
+                     "syntax error, a value out of range or another line the module would "
+                     "refuse."),
+        (EXIT_CONNECT, "No module to talk to: a run that is not interactive (-c, -f, standard "
+                       "input not a terminal, scan) was given no connection and found no "
+                       "module (--sim simulates one); two or more Trinamic USB modules are "
+                       "attached and no --port picks one; the port or CAN bus cannot be "
+                       "opened; nothing answers at connect (command 136) or scan finds no "
+                       "module; -m names another type than the module reports; or tmclsh "
+                       "sim cannot start its server."),
         (130, "Interrupted with Ctrl-C (the program and the motors were stopped first)."),
         (129, "Hung up (SIGHUP: the terminal or SSH session went away)."),
         (143, "Terminated (SIGTERM). On both signals tmclsh still ends download mode and "
@@ -803,14 +832,21 @@ as source to {_i("FILE")}{_b(".program.tmcl")} (the suffix of {_i("FILE")} repla
 """
 
 
+_WINDOWS_CONFIG = "%LOCALAPPDATA%\\tmclsh"
 _FILES = f"""\
 .SH FILES
 .TP
 {_i("$XDG_CONFIG_HOME")}{_b("/tmclsh/config.toml")}
 The config file (default {_b("~/.config/tmclsh/config.toml")}; {_b("TMCLSH_CONFIG")} overrides).
+On macOS the directory is {_b("~/Library/Application Support/tmclsh")}, on Windows
+{_b(_WINDOWS_CONFIG)} (the platform's config directory).
+.TP
+{_i("$XDG_CONFIG_HOME")}{_b("/tmclsh/modules/*.toml")}
+Module files of your own (see MODULE FILES), in the same config directory.
 .TP
 {_i("$XDG_STATE_HOME")}{_b("/tmclsh/history")}
-Command history of the interactive prompt (default {_b("~/.local/state/tmclsh/history")}).
+Command history of the interactive prompt (default {_b("~/.local/state/tmclsh/history")}; the
+platform's state directory elsewhere).
 .TP
 {_i("$XDG_CACHE_HOME")}{_b("/tmclsh/programs/")}
 The source of each program uploaded with {_b(".upload")}, keyed by a hash of its image, so
@@ -824,11 +860,73 @@ the platform elsewhere). Safe to delete.
 .TQ
 {_i("prefix")}{_b("/share/fish/vendor_completions.d/tmclsh.fish")}
 The completions for bash, zsh and fish, installed with the package ({_i("prefix")} is the
-virtual environment or the installation prefix); or load them with
-{_b("tmclsh --completions")} {_i("SHELL")}.
+virtual environment or the installation prefix). Recent bash\\-completion versions find them
+next to the tmclsh they complete, fish when {_i("prefix")}{_b("/share")} is in
+{_b("XDG_DATA_DIRS")} (a system or user install). zsh finds them in a system prefix; for a
+virtual environment add {_b("fpath=(")}{_i("prefix")}{_b("/share/zsh/site-functions $fpath)")}
+to {_b("~/.zshrc")} before {_b("compinit")}, and for fish add
+{_b("set -p fish_complete_path")} {_i("prefix")}{_b("/share/fish/vendor_completions.d")}.
+Or load them from tmclsh itself: {_b("tmclsh --completions")} {_i("SHELL")}.
 .TP
 {_i("prefix")}{_b("/share/man/man1/tmclsh.1")}
-This manual.
+This manual. An editable install ({_b("pip install -e")}) installs no manual, so
+{_b("man tmclsh")} cannot find it: read it with {_b("tmclsh --man")}, or
+{_b("man ./man/tmclsh.1")} in the source tree.
+"""
+
+
+def _module_files() -> list[str]:
+    from .modules.schema import IO_KEYS, MEANINGS, MODULE_KEYS, PARAMETER_KEYS
+
+    out = [".SH MODULE FILES",
+           "A module tmclsh has no data for still works: when its 136 answer names another "
+           "type (" + _b("1161V130") + "), or with " + _b("-m generic") + ", the shell runs in "
+           "generic mode: banner and toolbar say " + _b("TMCM-1161 (no parameter data: "
+           "numbers only)") + ", commands go by number with the commands every documented "
+           "module has, types and motors are checked as bytes and values as 32 bits, names "
+           "of parameters are refused, and ranges, read-only parameters and motor numbers are "
+           "not checked (said once at the start).",
+           ".PP",
+           "To give tmclsh the data, write a module file: TOML in the same form as the "
+           "built-in ones, in the config directory's " + _b("modules/") + " (every " +
+           _b("*.toml") + " there is read) or named with " + _b("--module-file") + " " +
+           _i("PATH") + ". A module is matched by its " + _b("version_string") + ", then by " +
+           _b("firmware_id") + ", like the built-in ones. Each file is checked when it is "
+           "read; a mistake is one line naming the file and the line, and tmclsh goes on "
+           "without that file. Check one with " + _b("tmclsh modules check") + " " +
+           _i("FILE") + ". The tables and their keys (* required):"]
+    for title, keys, meaning in (("[module]", MODULE_KEYS, MEANINGS["module"]),
+                                 ("[[axis]] and [[global]], one per parameter", PARAMETER_KEYS,
+                                  MEANINGS["axis"]),
+                                 ("[[io]], one per I/O port", IO_KEYS, MEANINGS["io"])):
+        out += [".TP", _b(title),
+                _esc(", ".join(k + ("*" if req else "") for k, (_, req) in keys.items()) + ".")]
+        for key, text in meaning.items():
+            out += [".RS 4", ".TP", _b(key), _esc(_sentence(text)), ".RE"]
+    out += [".PP", "For example:", ".PP", ".RS 4", ".nf",
+            "[module]", 'name = "TMCM\\-1161"', "motors = 1", "program_memory = 2048",
+            "firmware_id = 1161", 'version_string = "1161V130"', 'commands_like = "TMCM\\-1311"',
+            "", "[[axis]]", "number = 4", 'name = "MaxPositioningSpeed"', 'access = "RWE"',
+            "min = 0", "max = 2047", ".fi", ".RE",
+            ".PP", "The full schema, with every optional key, is tmclsh/modules/SCHEMA.md in "
+            "the source."]
+    return out
+
+
+_IMAGES = f"""\
+.SH PROGRAM IMAGES
+.TP
+{_b("Binary (.bin)")}
+The TMCL\\-IDE's image, as its assembler writes it and PyTrinamic's LoadTMCLBinary reads it:
+one 8\\-byte record per instruction: command, type, motor or bank, value (4 bytes, most
+significant first), then a checksum, the 8\\-bit sum of those seven bytes.
+{_b("asm")} writes it, {_b("disasm")}, {_b(".upload")} and {_b(".source-map")} read it, and
+{_b(".dump")} {_i("FILE")}{_b(".bin")} writes what the module holds. A record whose checksum is
+wrong is refused, naming the record and the checksum it should have; nothing is sent.
+.TP
+{_b("Hex text (.hex, asm --hex)")}
+One instruction per line: its seven bytes in hex, separated by spaces, no checksum
+({_b("05 04 00 00 00 03 e8")} is SAP 4, 0, 1000).
 """
 
 
@@ -878,6 +976,8 @@ def manpage(parser: argparse.ArgumentParser | None = None) -> str:
     out.append(_BACKUPS.rstrip("\n"))
     out += _limits()
     out.append(_FILES.rstrip("\n"))
+    out += _module_files()
+    out.append(_IMAGES.rstrip("\n"))
     out += _exit_status()
     out.append(_EXAMPLES.rstrip("\n"))
     out += [".SH SEE ALSO",

@@ -34,6 +34,10 @@ class ValidationError(TmclError, ValueError):
     """Input refused before anything was sent: unknown name, value out of range, ..."""
 
 
+class UsageError(ValidationError):
+    """The command line itself is wrong (a malformed --can, an unknown profile): exit 2."""
+
+
 class RangeError(ValidationError):
     """A value outside what the module accepts: a parameter's range, a port's, a coordinate."""
 
@@ -45,6 +49,20 @@ class StatusError(TmclError):
         self.status = status
         self.reply = reply
         super().__init__(message or f"module answered status {status}: {status_text(status)}")
+
+
+class DownloadModeError(StatusError):
+    """Status 101 outside an upload: the module stored the command instead of executing it."""
+
+
+class ConnectError(TmclError):
+    """No module to talk to: none found, several found, or the one named did not answer
+    (exit status 3)."""
+
+
+class NoAnswerError(ConnectError, TmclTimeoutError):
+    """Nothing answered at connect (or only garbled replies came): the message says what was
+    tried and what to try next."""
 
 
 class AsmError(TmclError, ValueError):

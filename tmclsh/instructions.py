@@ -29,7 +29,8 @@ class InstructionSpec:
     ascii: bool
     reads: bool = False
     persists: bool = False
-    note: str | None = None
+    note: str | None = None  # for users: shown by `help MNEMONIC`
+    source: str | None = None  # for maintainers: how the entry was read from the manuals
     types: dict[str, int] = field(default_factory=dict)
     types_for: dict[str, dict[str, int]] = field(default_factory=dict)
     # per module: motor/bank values with a special meaning besides the motor numbers
@@ -38,6 +39,9 @@ class InstructionSpec:
 
     def type_names(self, module: str | None = None) -> dict[str, int]:
         """Symbolic types valid on ``module`` (all documented ones when None)."""
+        module = None if module is None else _LIKE.get(module, module)
+        if module == GENERIC:
+            return self.types
         if module is not None and module in self.types_for:
             return self.types_for[module]
         if module is None and self.types_for:
@@ -54,7 +58,7 @@ class InstructionSpec:
         return None
 
     def on(self, module: str) -> bool:
-        return module in self.modules
+        return _offered(self.modules, module)
 
     @property
     def jumps(self) -> bool:
@@ -83,6 +87,39 @@ class ControlSpec:
     name: str
     modules: frozenset[str]
     note: str | None = None
+    source: str | None = None
+
+    def on(self, module: str) -> bool:
+        return _offered(self.modules, module)
+
+
+# A module the manuals above do not describe (a user's module file, or one known only by its
+# 136 answer) borrows the command set of a documented module, or the generic one: the
+# commands every documented module has, i.e. the TMCL family's common core.
+GENERIC = "generic"
+_LIKE: dict[str, str] = {}
+
+
+def use_commands_of(module: str, like: str) -> None:
+    """Let ``module`` have the commands of ``like`` (a documented module, or ``"generic"``)."""
+    _LIKE[module] = like
+
+
+def commands_like(module: str) -> str:
+    return _LIKE.get(module, module)
+
+
+def _offered(modules: frozenset[str], module: str) -> bool:
+    module = _LIKE.get(module, module)
+    if module == GENERIC:
+        return modules >= family()
+    return module in modules
+
+
+@cache
+def family() -> frozenset[str]:
+    """The modules the instruction table documents."""
+    return frozenset().union(*(s.modules for s in _tables()[0].values()))
 
 
 def _load() -> dict:
@@ -103,7 +140,7 @@ def _tables() -> tuple[dict[int, InstructionSpec], dict[int, ControlSpec], dict[
                             "summary": raw["summary"].replace("0", str(n), 1)})
                 by_opcode[uf.opcode] = uf
     controls = {c["opcode"]: ControlSpec(c["opcode"], c["name"], frozenset(c["modules"]),
-                                         c.get("note")) for c in data["control"]}
+                                         c.get("note"), c.get("source")) for c in data["control"]}
     return by_opcode, controls, dict(data["interrupts"])
 
 
@@ -113,7 +150,7 @@ def _spec(raw: dict) -> InstructionSpec:
         fields=tuple(raw["fields"]), type_kind=raw["type"], motor_kind=raw["motor"],
         value_kind=raw["value"], modules=frozenset(raw["modules"]), direct=raw["direct"],
         ascii=raw["ascii"], reads=raw.get("reads", False), persists=raw.get("persists", False),
-        note=raw.get("note"), types=dict(raw.get("types", {})),
+        note=raw.get("note"), source=raw.get("source"), types=dict(raw.get("types", {})),
         types_for={k: dict(v) for k, v in raw.get("types_for", {}).items()},
         motor_special={mod: {int(k): v for k, v in table.items()}
                        for mod, table in raw.get("motor_special", {}).items()},

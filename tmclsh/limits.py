@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .errors import ValidationError
+from .errors import UsageError
 
 DAY = 86400.0
 # the modules' RS485/RS232 baud rates (GP 65 codes 0..11 in all three manuals)
@@ -27,7 +27,7 @@ BAUD_RATES = (9600, 14400, 19200, 28800, 38400, 57600, 76800, 115200, 230400, 25
 MAX_DIGITS = 40  # longest number literal taken from any text
 
 
-class SettingError(ValidationError):
+class SettingError(UsageError):
     """A setting out of its range or of the wrong kind: a usage error (exit status 2)."""
 
 

@@ -10,8 +10,9 @@ from __future__ import annotations
 import argparse
 
 from . import __version__, limits
+from .canspec import FROM_PYTHON_CAN
 
-SUBCOMMANDS = ("asm", "disasm", "sim", "ports", "scan")
+SUBCOMMANDS = ("asm", "disasm", "sim", "ports", "scan", "modules")
 EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_CONNECT = 0, 1, 2, 3
 
 
@@ -32,6 +33,7 @@ def _range(key: str) -> str:
 
 
 _address = setting("address")
+_baud = setting("baud")
 
 
 def _faults(text: str) -> dict[str, float]:
@@ -50,18 +52,37 @@ def _seed(text: str) -> int:
         raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
 
 
-def add_connection(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group("connection (default: the one attached Trinamic USB module, "
-                             "else --sim TMCM-1311)")
+def _baud_or_auto(text: str) -> int | str:
+    return "auto" if text.strip().lower() == "auto" else _baud(text)
+
+
+def add_connection(p: argparse.ArgumentParser, *, auto_baud: bool = False) -> None:
+    g = p.add_argument_group("connection (default: the one attached Trinamic USB module; "
+                             "else --sim at the prompt, exit 3 elsewhere)")
     x = g.add_mutually_exclusive_group()
     x.add_argument("--port", metavar="PORT",
-                   help="serial device or pyserial URL (socket://, rfc2217://, loop://, spy://, hwgrep://)")
-    x.add_argument("--can", metavar="IFACE:CHANNEL",
-                   help="python-can bus, e.g. socketcan:can0, pcan:PCAN_USBBUS1, virtual:bench")
+                   help="serial device (/dev/ttyACM0, COM3) or pyserial URL (socket://, "
+                        "rfc2217://, loop://, spy://, hwgrep://)")
+    x.add_argument("--can", metavar="IFACE:CHANNEL", nargs="?", const=FROM_PYTHON_CAN,
+                   help="python-can bus, e.g. socketcan:can0 (Linux; vcan0 for a virtual bus "
+                        "other programs can join), pcan:PCAN_USBBUS1, kvaser:0, "
+                        "slcan:/dev/ttyACM0 or slcan:COM5; alone: the bus python-can's own "
+                        "configuration names (~/can.conf, CAN_INTERFACE, CAN_CHANNEL, "
+                        "CAN_BITRATE). python-can's virtual interface works inside one "
+                        "process only, so it cannot reach a 'tmclsh sim'")
     x.add_argument("--sim", metavar="MODULE", nargs="?", const="TMCM-1311",
                    help="the built-in simulator, in process (default module TMCM-1311)")
-    g.add_argument("--baud", type=setting("baud"), metavar="N",
-                   help=f"baud rate (default 9600, the factory setting; {_range('baud')})")
+    if auto_baud:
+        g.add_argument("--baud", type=_baud_or_auto, metavar="N|auto",
+                       help="baud rate (default 9600, the factory setting); auto: each rate "
+                            f"GP 65 can select, in turn ({_range('baud')})")
+    else:
+        g.add_argument("--baud", type=setting("baud"), metavar="N",
+                       help=f"baud rate (default 9600, the factory setting; {_range('baud')})")
+    g.add_argument("--bitrate", type=setting("bitrate"), metavar="N",
+                   help="CAN bit rate in bit/s; the modules' factory setting is 1000000 "
+                        "(GP 69 = 8); without it the adapter's own default or configuration "
+                        f"applies, which is often lower ({_range('bitrate')})")
     g.add_argument("--can-id", type=setting("can_id"), metavar="N",
                    help=f"module's CAN id (GP 71, default 1; {_range('can_id')})")
     g.add_argument("--reply-id", type=setting("reply_id"), metavar="N",
@@ -71,7 +92,12 @@ def add_connection(p: argparse.ArgumentParser) -> None:
 
 def add_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("options")
-    g.add_argument("-m", "--module", metavar="NAME", help="module type (default: detected with command 136)")
+    g.add_argument("-m", "--module", metavar="NAME",
+                   help="module type (default: detected with command 136; a type without data "
+                        "runs in generic mode, numbers only; \"generic\" forces it)")
+    g.add_argument("--module-file", metavar="PATH", action="append", dest="module_file",
+                   help="a module data file of your own (same format as the built-in ones; "
+                        "files in the config directory's modules/ are read too)")
     g.add_argument("-a", "--address", type=_address, metavar="N",
                    help=f"module address (default 1; {_range('address')})")
     g.add_argument("--host-address", type=_address, metavar="N",
@@ -94,7 +120,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="tmclsh",
         description="Interactive shell for Trinamic TMCL modules (TMCM-1311, TMCM-351, TMCM-1640).",
-        epilog="Subcommands: asm, disasm, sim, ports, scan ('tmclsh SUBCOMMAND --help').")
+        epilog="Subcommands: asm, disasm, sim, ports, scan, modules ('tmclsh SUBCOMMAND --help').")
     add_connection(p)
     add_options(p)
     run = p.add_mutually_exclusive_group()
@@ -103,18 +129,25 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("-f", metavar="SCRIPT", dest="script", help="replay a script file ('-' = stdin), exit")
     p.add_argument("--completions", metavar="SHELL", choices=("bash", "zsh", "fish"),
                    help="print the completion script for bash, zsh or fish")
+    p.add_argument("--man", action="store_true",
+                   help="show this manual (also where 'man tmclsh' cannot find it: an "
+                        "editable install has none)")
     p.add_argument("--version", action="version", version=f"tmclsh {__version__}")
     sub = p.add_subparsers(dest="subcommand", metavar="SUBCOMMAND")
 
     a = sub.add_parser("asm", help="assemble a TMCL program")
     a.add_argument("file", metavar="FILE")
     a.add_argument("-m", "--module", metavar="NAME", default="TMCM-1311", help="target module (default TMCM-1311)")
-    a.add_argument("-o", "--output", metavar="OUT", help="output file (default FILE with .bin, or .hex with --hex)")
-    a.add_argument("--hex", action="store_true", help="hex text: one instruction per line, 7 bytes")
+    a.add_argument("-o", "--output", metavar="OUT",
+                   help="output file (default FILE with .bin, or .hex with --hex; \"-\" = stdout); "
+                        "binary output is the TMCL-IDE image: 8-byte records (command, type, "
+                        "motor, value MSB first, checksum = 8-bit sum of the seven)")
+    a.add_argument("--hex", action="store_true",
+                   help="hex text instead: one instruction per line, its 7 bytes in hex")
     a.add_argument("--at", type=setting("origin"), metavar="ADDR", default=0,
                    help=f"start address (default 0; {_range('origin')})")
 
-    d = sub.add_parser("disasm", help="disassemble a binary or hex image")
+    d = sub.add_parser("disasm", help="disassemble a TMCL-IDE binary image (.bin) or hex text")
     d.add_argument("file", metavar="FILE")
     d.add_argument("-m", "--module", metavar="NAME", default="TMCM-1311", help="module for symbolic names")
     d.add_argument("--at", type=setting("origin"), metavar="ADDR", default=0,
@@ -125,9 +158,16 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--address", type=_address, default=1, metavar="N", help="module address (default 1)")
     s.add_argument("--host-address", type=_address, default=2, metavar="N")
     how = s.add_mutually_exclusive_group(required=True)
-    how.add_argument("--pty", action="store_true", help="serve on a pseudo-terminal (path on the first line)")
+    how.add_argument("--pty", action="store_true",
+                     help="serve on a pseudo-terminal (path on the first line; Linux and "
+                          "macOS only: use --tcp on Windows)")
     how.add_argument("--tcp", metavar="HOST:PORT", help="serve on TCP, for socket:// URLs")
-    how.add_argument("--can", metavar="IFACE:CHANNEL", help="serve on a python-can bus")
+    how.add_argument("--can", metavar="IFACE:CHANNEL",
+                     help="serve on a python-can bus, IFACE:CHANNEL as the client reads it "
+                          "(socketcan:vcan0 to test on Linux; python-can's virtual interface "
+                          "cannot be reached from another process)")
+    s.add_argument("--bitrate", type=setting("bitrate"), metavar="N",
+                   help=f"CAN bit rate in bit/s ({_range('bitrate')})")
     s.add_argument("--faults", type=_faults, metavar="KIND=P,...",
                    help="misbehave at random: for each reply, the probability P (0..1) of each "
                         "fault: drop (not sent), corrupt (a bit flipped), truncate (half sent), "
@@ -137,13 +177,26 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--faults-seed", type=_seed, metavar="N",
                    help="seed for --faults, so a run misbehaves the same way again")
 
-    sub.add_parser("ports", help="list serial ports (Trinamic USB devices marked)")
+    po = sub.add_parser("ports", help="list serial ports (Trinamic USB devices marked)")
+    # SUPPRESS: `tmclsh --json ports` and `tmclsh ports --json` both work
+    po.add_argument("--json", action="store_true", default=argparse.SUPPRESS,
+                    help="one JSON object per port")
+
+    mo = sub.add_parser("modules", help="known modules and where each comes from; "
+                                        "'modules check FILE' validates a module file")
+    mo.add_argument("action", nargs="?", choices=("check",), metavar="check",
+                    help="validate FILE: exit 0 if tmclsh can use it, else 1 naming the line")
+    mo.add_argument("file", nargs="?", metavar="FILE", help="the module file to check")
+    mo.add_argument("--json", action="store_true", default=argparse.SUPPRESS,
+                    help="one JSON object per module")
 
     sc = sub.add_parser("scan", help="find modules on a bus (address, type, firmware)")
-    add_connection(sc)
+    add_connection(sc, auto_baud=True)
     sc.add_argument("--from", dest="first", type=_address, default=1, metavar="N")
     sc.add_argument("--to", dest="last", type=_address, default=255, metavar="N")
-    sc.add_argument("--timeout", type=setting("scan_timeout"), default=0.05, metavar="S",
-                    help=f"per-address timeout (default 0.05; {_range('scan_timeout')})")
+    sc.add_argument("--timeout", type=setting("scan_timeout"), metavar="S",
+                    help="per-address timeout (default: from the link, the wire time of a "
+                         f"request and its reply at the baud rate plus a margin; "
+                         f"{_range('scan_timeout')})")
     sc.add_argument("--json", action="store_true")
     return p

@@ -135,6 +135,8 @@ def build_prompt_session(session: Session, **kw) -> PromptSession:
         kw.setdefault("editing_mode", EditingMode.VI)
     if settings.get("color") == "never":
         kw.setdefault("color_depth", ColorDepth.DEPTH_1_BIT)
+    elif settings.get("color") == "always":  # prompt_toolkit would follow NO_COLOR itself
+        kw.setdefault("color_depth", ColorDepth.DEPTH_8_BIT)
     return PromptSession(
         message=prompt_message(session),
         auto_suggest=AutoSuggestFromHistory(),
@@ -236,7 +238,7 @@ def banner(session: Session):
     out = Text()
     out.append(f"tmclsh {__version__}", style="bold")
     out.append(" · ")
-    mod = c.module.name if c.module is not None else "unknown module"
+    mod = c.module.label if c.module is not None else "unknown module"
     out.append(mod, style="tmcl.name")
     out.append(f" at address {c.address}")
     if c.transport.simulated:

@@ -46,6 +46,8 @@ def complete_help(session: Session | None, text: str) -> list[Candidate]:
     out += [Candidate(s.mnemonic, s.summary) for s in specs]
     if mod is not None:
         out += [Candidate(p.name, param_meta(p)) for p in mod.axis_params + mod.global_params]
+    if "--source" not in text.split():
+        out.append(Candidate("--source", "also how the entry was read from the manuals"))
     return out
 
 
@@ -95,7 +97,7 @@ def complete_module(session: Session | None, text: str) -> list[Candidate]:
 
 # -- .help -------------------------------------------------------------------------------
 
-@command(".help", ".help [COMMAND|MNEMONIC|NUMBER|PARAMETER]",
+@command(".help", ".help [--source] [COMMAND|MNEMONIC|NUMBER|PARAMETER]",
          "show help: all commands, one command, a TMCL instruction, or a parameter",
          complete=complete_help, bare=True,
          details="`help SAP` explains an instruction; `help 140` shows axis parameter 140 (and "
@@ -103,13 +105,16 @@ def complete_module(session: Session | None, text: str) -> list[Candidate]:
                  "as help (`? 140`). Lines: `;` separates commands (`help 4; help 5`) except "
                  "after one that owns its line (.watch, .decode); `#` or `//` starts a comment "
                  "to the end of the line. Questions are answered with y and Enter ([y/N]: "
-                 "Enter alone is no).")
+                 "Enter alone is no). --source also shows how an instruction or parameter "
+                 "was read from the module manuals (where they are unclear or disagree, and "
+                 "what tmclsh assumes), like .param --source.")
 @paged
 def cmd_help(session: Session, arg: str) -> None:
     arg = arg.strip()
-    if not arg:
+    source = "--source" in arg.split()
+    if not arg or arg == "--source":
         return _help_overview(session)
-    word = arg.split()[0]
+    word = next(w for w in arg.split() if w != "--source")
     cmd = find(word)  # `.param`, or a bare word: `help quit`
     if cmd is not None:
         return _help_command(session, cmd)
@@ -117,10 +122,10 @@ def cmd_help(session: Session, arg: str) -> None:
         raise ValidationError(f"unknown shell command {word!r}; .help lists them")
     spec = isa.by_mnemonic(word)
     if spec is not None:
-        return _help_instruction(session, spec)
+        return _help_instruction(session, spec, source=source)
     number = _number(word)
     if number is not None:
-        return _help_number(session, number)
+        return _help_number(session, number, source=source)
     if find("." + word) is not None:
         return _help_command(session, find("." + word))  # type: ignore[arg-type]
     return cmd_param(session, arg, from_help=True)
@@ -246,7 +251,8 @@ def _paragraphs(text: str) -> str:
     return "\n".join(out)
 
 
-def _help_instruction(session: Session, spec: isa.InstructionSpec) -> None:
+def _help_instruction(session: Session, spec: isa.InstructionSpec,
+                      source: bool = False) -> None:
     from rich.table import Table
     from rich.text import Text
 
@@ -257,7 +263,7 @@ def _help_instruction(session: Session, spec: isa.InstructionSpec) -> None:
         out.emit({"mnemonic": spec.mnemonic, "opcode": spec.opcode, "summary": spec.summary,
                   "syntax": spec.syntax, "types": spec.type_names(modname),
                   "modules": sorted(spec.modules), "direct": spec.direct, "ascii": spec.ascii,
-                  "note": spec.note})
+                  "note": spec.note, **({"source": spec.source} if source else {})})
         return
     title = Text()
     title.append(spec.mnemonic, style="tmcl.mnemonic")
@@ -281,6 +287,8 @@ def _help_instruction(session: Session, spec: isa.InstructionSpec) -> None:
         grid.add_row("EEPROM", "writes the module's EEPROM (asks for confirmation)")
     if spec.note:
         grid.add_row("note", spec.note)
+    if source:
+        grid.add_row("source", spec.source or "as the manuals describe it")
     out.print(grid)
 
 
@@ -337,11 +345,14 @@ def _field_help(spec: isa.InstructionSpec, fld: str, mod: Module | None) -> str:
             "velocity": "velocity", "position": "position"}.get(kind, "number")
 
 
-def _help_number(session: Session, number: int) -> None:
+def _help_number(session: Session, number: int, source: bool = False) -> None:
     mod = session.module
     found = _params_by_number(mod, number)
     if found:
-        _show_params(session, found, numbered=number)
+        _show_params(session, found, numbered=number, source=source)
+    elif mod.generic:
+        session.out.info(f"no parameter data for the {mod.type_name}: GAP {number}, 0 or "
+                         f"GGP {number}, 0 reads it; a module file (--module-file) names it")
     else:
         session.out.info(f"the {mod.name} has no parameter {number}")
     spec = isa.by_opcode(number)
@@ -828,11 +839,13 @@ def cmd_decode(session: Session, arg: str) -> None:
 
 # -- connection and module ---------------------------------------------------------------
 
-@command(".connect", ".connect [PORT | sim [MODULE] | can IFACE:CHANNEL]",
+@command(".connect", ".connect [PORT | sim [MODULE] | can [IFACE:CHANNEL]]",
          "reconnect, or switch to another port, simulator or CAN bus",
          complete=complete_connect, category="connection",
          details="Without an argument the current link is closed and opened again (after a "
-                 "cable was pulled). The module type is asked with 136 on a real link.")
+                 "cable was pulled). The module type is asked with 136 on a real link. "
+                 "'can' alone takes the bus from python-can's configuration, as --can does; "
+                 "the bit rate is --bitrate's.")
 def cmd_connect(session: Session, arg: str) -> None:
     from .. import transport as tr
 
@@ -855,10 +868,9 @@ def cmd_connect(session: Session, arg: str) -> None:
         module = load(module).name
         new = {"sim": module}
     elif words[0].lower() == "can":
-        if len(words) < 2:
-            raise ValidationError(".connect can IFACE:CHANNEL, e.g. .connect can socketcan:can0")
-        transport = tr.open_can(words[1])
-        new = {"can": words[1]}
+        spec = words[1] if len(words) > 1 else tr.FROM_PYTHON_CAN
+        transport = tr.open_can(spec, settings.get("bitrate"))
+        new = {"can": spec}
     else:
         transport = tr.open_serial(words[0], settings.get("baud") or 9600)
         new = {"port": words[0]}
@@ -979,7 +991,8 @@ def cmd_module(session: Session, arg: str) -> None:
     grid.add_column(style="tmcl.note")
     grid.add_column()
     grid.add_row("module", f"{mod.name}: {mod.summary}")
-    grid.add_row("motors", str(mod.motors))
+    grid.add_row("motors", "not known (motor numbers are sent as typed, 0..255)"
+                 if mod.generic else str(mod.motors))
     grid.add_row("firmware", client.version or "(not asked; .version)")
     grid.add_row("address", str(client.address))
     grid.add_row("connection", client.describe() + (" (SIMULATED)" if client.transport.simulated
@@ -987,7 +1000,8 @@ def cmd_module(session: Session, arg: str) -> None:
                                                     else ""))
     grid.add_row("mode", client.mode)
     grid.add_row("parameters", f"{len(mod.axis_params)} axis, {len(mod.global_params)} global")
-    grid.add_row("program memory", f"{mod.program_memory} instructions")
+    grid.add_row("program memory", "not known" if mod.generic
+                 else f"{mod.program_memory} instructions")
     out.print(grid)
 
 

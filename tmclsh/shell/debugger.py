@@ -462,7 +462,8 @@ def complete_breakpoints(session: Session, text: str) -> list[str | tuple[str, s
 @command(".upload", ".upload FILE [--at ADDR] [--yes] [--no-verify]",
          "assemble FILE for this module, store it in program memory and verify it",
          category=CATEGORY, complete=complete_file, details="""\
-Assembles FILE for the connected module, then: 132 (start download at ADDR, default 0), one
+Assembles FILE for the connected module (a .bin TMCL-IDE image or .hex text is taken as it
+is), then: 132 (start download at ADDR, default 0), one
 frame per instruction (each answered with status 101), 133 (quit download), and reads every
 instruction back with 134 to compare; the first difference is reported. Asks before
 overwriting the program unless --yes. A program larger than the memory is refused before
@@ -477,7 +478,7 @@ def cmd_upload(session: Session, argtext: str) -> None:
     module = session.module
     origin = _number(str(opts["--at"]), "--at") if "--at" in opts else 0
     path = _resolve_file(session, pos[0])
-    prog = asm.assemble_file(path, module, origin)
+    prog = asm.load_program(path, module, origin)
     if not len(prog):
         raise ValidationError(f"{path} holds no instructions; nothing to upload")
     program.check_fits(module, origin, len(prog))
@@ -564,7 +565,7 @@ def _original_source(session: Session, image: list[Instruction], start: int,
     return (text, kept) if program.same_image(again.instructions, image) else None
 
 
-@command(".dump", ".dump [FILE] [--at ADDR] [--count N]",
+@command(".dump", ".dump [[-o] FILE] [--at ADDR] [--count N]",
          "read the stored program back (134) and show it as source, or write it to FILE",
          aliases=(".disasm",), category=CATEGORY, complete=complete_file, details="""\
 Reads program memory with 134 from ADDR (default 0) up to the end marker (opcode 0, or an
@@ -573,11 +574,19 @@ uploaded exactly these instructions from a file (.upload keeps each upload's sou
 user's cache directory, keyed by a hash of the image), that source is shown, with its labels
 and comments; otherwise the memory is disassembled with generated labels (L0012 for a jump
 target at 12). With FILE the text is written there; it assembles back to the same image
-(.upload FILE --at ADDR). Needs binary mode.""")
+(.upload FILE --at ADDR); a FILE ending in .bin gets the TMCL-IDE binary image (8-byte
+records with checksums), .hex the hex text (-o FILE says the same as FILE). Needs binary
+mode.""")
 def cmd_dump(session: Session, argtext: str) -> None:
-    pos, opts = _options(_words(argtext), set(), {"--at", "--count"})
+    words = _words(argtext)
+    if "-o" in words:  # `.dump -o FILE`, as asm -o
+        i = words.index("-o")
+        if i + 1 >= len(words):
+            raise ValidationError("-o needs a FILE")
+        words = words[:i] + words[i + 1:]
+    pos, opts = _options(words, set(), {"--at", "--count"})
     if len(pos) > 1:
-        raise ValidationError("usage: .dump [FILE] [--at ADDR] [--count N]")
+        raise ValidationError("usage: .dump [[-o] FILE] [--at ADDR] [--count N]")
     program.require_binary(session.client, "reading program memory (134)")
     module = session.module
     start = _number(str(opts["--at"]), "--at") if "--at" in opts else 0
@@ -609,7 +618,16 @@ def cmd_dump(session: Session, argtext: str) -> None:
             session.out.warn("warning: the disassembly does not reassemble to the same image")
     if pos:
         path = Path(pos[0]).expanduser()
-        files.write_file(path, text)  # all or nothing
+        kind = path.suffix.lower()
+        if kind in (".bin", ".hex"):
+            same = True  # the bytes as read (a TMCL-IDE image, or hex text), no disassembly
+        if kind == ".bin":
+            data: str | bytes = asm.image_bytes(image)
+        elif kind == ".hex":
+            data = asm.hex_text(image)
+        else:
+            data = text
+        files.write_file(path, data)  # all or nothing
         if session.out.json:
             obj = {"dumped": len(image), "file": str(path), "identical": same}
             if kept is not None:
@@ -663,7 +681,7 @@ def cmd_source_map(session: Session, argtext: str) -> None:
     module = session.module
     origin = _number(str(opts["--at"]), "--at") if "--at" in opts else 0
     path = _resolve_file(session, pos[0])
-    prog = asm.assemble_file(path, module, origin)
+    prog = asm.load_program(path, module, origin)
     message = f"{_show_path(str(path))} mapped to {origin}..{origin + len(prog) - 1}"
     if session.client.mode != "ascii" and len(prog):
         mm = program.verify_image(session.client, prog.instructions, origin)

@@ -14,7 +14,7 @@ EXIT_OK, EXIT_ERROR, EXIT_CONNECT = 0, 1, 3
 
 def banner(session: Session) -> str:
     c = session.client
-    mod = c.module.name if c.module else "unknown module"
+    mod = c.module.label if c.module else "unknown module"
     sim = " [SIMULATED]" if c.transport.simulated else ""
     mode = " ASCII mode" if c.mode == "ascii" else ""
     return f"tmclsh: {mod} at address {c.address} on {c.describe()}{sim}{mode}"
@@ -51,8 +51,10 @@ def run_shell(args: argparse.Namespace) -> int:
 
     _exit_cleanly_on_signals()
     settings = connection_settings(args)
+    # only a person at the prompt may be given the simulator for want of a module: a run
+    # nobody watches (-c, -f, piped input) fails instead (exit 3)
     try:
-        client = open_client(settings)
+        client = open_client(settings, fallback=_interactive(args), notice=_notice)
     except TmclError as exc:
         print(f"tmclsh: {exc}", file=sys.stderr)
         return EXIT_CONNECT
@@ -94,6 +96,14 @@ def _stop_on_interrupt(client) -> None:
         print(text, file=sys.stderr)
 
 
+def _interactive(args: argparse.Namespace) -> bool:
+    return args.command is None and args.script is None and sys.stdin.isatty()
+
+
+def _notice(text: str) -> None:
+    print(f"tmclsh: {text}", file=sys.stderr)
+
+
 def _silence_stdout() -> None:
     """Point stdout at /dev/null, so the interpreter's last flush does not fail again."""
     import os
@@ -108,12 +118,16 @@ def _silence_stdout() -> None:
 def _run(args: argparse.Namespace, client, settings: dict) -> int:
     from ..config import load_settings
 
-    out = Output(json_mode=bool(args.json))
-    interactive = args.command is None and args.script is None and sys.stdin.isatty()
+    shell_settings = load_settings()
+    out = Output(json_mode=bool(args.json), color=str(shell_settings.get("color", "auto")))
+    interactive = _interactive(args)
     # `confirm = false` in the config file is a standing --yes
-    yes = bool(args.yes) or load_settings().get("confirm") is False
+    yes = bool(args.yes) or shell_settings.get("confirm") is False
     session = Session(client, out, interactive=interactive, yes=yes,
                       keep_going=bool(args.keep_going), settings=settings)
+    if client.module is not None and client.module.generic:
+        out.warn(f"{client.module.type_name}: {client.module.NOTICE}")  # once, at the start
+    client.on_notice = out.warn  # what the client does on its own (ends download mode)
     if args.trace:
         from .trace import enable_trace
 
@@ -139,7 +153,7 @@ def _run_unattended(args: argparse.Namespace, session: Session) -> int:
     # 138 messages are results too: in order with the others (the REPL shows them as they
     # come; see app.py)
     unlisten = lambda: None  # noqa: E731
-    wrote = _watch_for_writes(client)
+    started = _watch_for_starts(client)
     if out.json:
         unlisten = client.add_listener(lambda reply: out.event(reply, client.event_time))
         client.start_event_poller()  # an event shows when it comes, not at the next line
@@ -157,7 +171,7 @@ def _run_unattended(args: argparse.Namespace, session: Session) -> int:
         if finished:  # (after Ctrl-C: straight on to the stop, nothing else first)
             _last_events(session)
         unlisten()
-        if wrote() and finished:  # only reads (or nothing) sent: nothing can have started
+        if started() and finished:  # else nothing this run sent can have started anything
             _note_left_running(session)
     return status
 
@@ -173,28 +187,31 @@ def _last_events(session: Session) -> None:
         pass
 
 
-# commands that only read: a run of nothing else cannot have started a motor or the program
-_READS = frozenset({6, 10, 15, 128, 134, 135, 136})  # GAP GGP GIO, stop, 134-136
+# commands that start a motor or the program: ROR ROL MVP RFS, run (129), step (130); and
+# SAP 2 (target speed: in velocity mode the motor follows it)
+_STARTS = frozenset({1, 2, 4, 13, 129, 130})
+_SAP, _TARGET_SPEED = 5, 2
 
 
-def _watch_for_writes(client):
-    """A tracer noting whether anything but a read was sent; returns the question."""
+def _watch_for_starts(client):
+    """A tracer noting whether anything that starts motion was sent; returns the question."""
     from ..protocol import Request
 
     sent = []
 
     def tracer(direction: str, raw: bytes, decoded: object) -> None:
-        if not sent and direction == "tx" and isinstance(decoded, Request) \
-                and decoded.opcode not in _READS:
+        if not sent and direction == "tx" and isinstance(decoded, Request) and (
+                decoded.opcode in _STARTS
+                or (decoded.opcode == _SAP and decoded.type == _TARGET_SPEED)):
             sent.append(True)
 
     remove = client.add_tracer(tracer)
 
-    def wrote() -> bool:
+    def started() -> bool:
         remove()
         return bool(sent)
 
-    return wrote
+    return started
 
 
 def _note_left_running(session: Session) -> None:

@@ -39,21 +39,33 @@ from .style import rich_theme
 _TRAILING_BLANKS = re.compile(r"[ \t]+((?:\x1b\[[0-9;]*m)*)$", re.M)
 
 
-def _console(stderr: bool = False):
+def _console(stderr: bool = False, color: str = "auto"):
     """A rich console that writes to whatever sys.stdout/sys.stderr is *now* (so output from
-    other threads goes through prompt_toolkit's ``patch_stdout`` while the prompt runs)."""
+    other threads goes through prompt_toolkit's ``patch_stdout`` while the prompt runs).
+
+    ``color`` is the setting: "always" colours even a pipe, NO_COLOR and a dumb terminal
+    notwithstanding (someone asked for it: ``| less -R``); "never" never; "auto" when writing to
+    a terminal that is not dumb and NO_COLOR is unset."""
     from rich.console import Console
 
     class TrimmedConsole(Console):
         def _render_buffer(self, buffer) -> str:
             return _TRAILING_BLANKS.sub(r"\1", super()._render_buffer(buffer))
 
-    no_color = bool(os.environ.get("NO_COLOR")) or os.environ.get("TERM") == "dumb"
+    kw: dict[str, Any] = {}
+    if color == "always":
+        kw.update(force_terminal=True, no_color=False)
+        if os.environ.get("TERM", "") in ("dumb", "unknown"):
+            kw["color_system"] = "standard"  # rich would detect "no colours" for these
+    else:
+        no_color = (color == "never" or bool(os.environ.get("NO_COLOR"))
+                    or os.environ.get("TERM") == "dumb")
+        kw["no_color"] = no_color or None
     # markup=False: every string printed, in a table cell or title too, is shown as it is;
     # user text ('.param [/]', a file name '[bold]x') is never read as rich markup. Styles
     # are given as style= or Text spans, never as [tags] inside strings.
     return TrimmedConsole(stderr=stderr, theme=rich_theme(), highlight=False, soft_wrap=True,
-                          no_color=no_color or None, markup=False)
+                          markup=False, **kw)
 
 
 _EMIT_LOCK = threading.Lock()
@@ -62,11 +74,11 @@ _EMIT_LOCK = threading.Lock()
 class Output:
     """Where results go: rich text for people, JSON lines for programs, errors to stderr."""
 
-    def __init__(self, json_mode: bool = False):
+    def __init__(self, json_mode: bool = False, color: str = "auto"):
         self.json = json_mode
-        self.console = _console()
+        self.console = _console(color=color)
         self._paging = False  # inside paged(): a nested one adds nothing
-        self.err = _console(stderr=True)
+        self.err = _console(stderr=True, color=color)
         # whether results come from the built-in simulator (the session sets it): every
         # JSON object then says so, so no program takes them for a module's
         self.simulated: Callable[[], bool] = lambda: False

@@ -79,7 +79,7 @@ def toolbar_fragments(session: Session, columns: int) -> Fragments:
         short = where.split(" @ ")[0]  # `/dev/ttyUSB0 @ 115200`: the port alone
         items["connection"] = [[("class:bottom-toolbar.on", f" {where} ")],
                                [("class:bottom-toolbar.on", f" {short} ")]]
-    mod = c.module.name if c.module is not None else "module ?"
+    mod = c.module.label if c.module is not None else "module ?"
     items["module"] = [[("class:bottom-toolbar", f"{mod} @{c.address}")]]
     if c.mode == "ascii":
         items["ascii"] = [[("class:bottom-toolbar.on", "ASCII")]]

@@ -9,12 +9,13 @@
   recent values, changed values highlighted. Under ``--json`` or when stdout is not a
   terminal: one JSON object per sample, ``{"t": seconds, "values": {name: number}}``
   (``null`` for a value whose read failed in that sample).
-* Keys (when stdin is a terminal; cbreak mode, restored on exit): ``s`` or space stops
+* Keys (when stdin is a terminal; read through prompt_toolkit's input in raw mode, so the
+  Windows console works as a POSIX terminal does; restored on exit): ``s`` or space stops
   everything (the stored program if it runs, MST to every motor, speeds read back: the
   shell's one stop, ``program.stop_everything``) and keeps watching; Ctrl-C does the same
-  and ends the watch; ``q`` or Esc ends the watch quietly (motors keep running). Ctrl-C is
-  taken between reads, so a transaction is never cut in half; a second Ctrl-C interrupts
-  at once.
+  and ends the watch; ``q`` or Esc ends the watch quietly (motors keep running). Ctrl-C (a
+  key in raw mode, a signal otherwise) is taken between reads, so a transaction is never
+  cut in half; a second one interrupts at once.
 * A lost link (the port is gone) shows as "link lost: REASON" in the table; the watch keeps
   trying to reconnect every ``RECONNECT_EVERY`` seconds and samples again once it is back.
 """
@@ -23,8 +24,6 @@ from __future__ import annotations
 
 import csv
 import math
-import os
-import select
 import signal
 import sys
 import threading
@@ -321,55 +320,58 @@ def render(snapshot: Snapshot, width: int | None = None):
 # -- keys ----------------------------------------------------------------------------------
 
 class Keys:
-    """Single key presses from a terminal stdin, in cbreak mode (Ctrl-C still signals).
+    """Single key presses from a terminal stdin, through prompt_toolkit's input (the POSIX
+    terminal and the Windows console alike), in raw mode: Ctrl-C arrives as the key "\x03".
 
-    Inactive (``wait`` just sleeps) when stdin is not a terminal or termios is missing.
+    Inactive (``wait`` just sleeps) when stdin is not a terminal.
     """
 
     def __init__(self, stream: TextIO | None = None):
         self.stream = stream if stream is not None else sys.stdin
-        self.fd: int | None = None
-        self._saved = None
+        self._input = None
+        self._mode = None
 
     def __enter__(self) -> Keys:
         try:
-            import termios
-            import tty
-
             if self.stream is None or not self.stream.isatty():
                 return self
-            fd = self.stream.fileno()
-            self._saved = termios.tcgetattr(fd)
-            tty.setcbreak(fd, termios.TCSANOW)
-            self.fd = fd
-        except (ImportError, OSError, ValueError, AttributeError):
-            self.fd = None
+            from prompt_toolkit.input import create_input
+
+            inp = create_input(self.stream)
+            mode = inp.raw_mode()
+            mode.__enter__()
+            self._input, self._mode = inp, mode
+        except (OSError, ValueError, AttributeError, NotImplementedError):
+            self._input = self._mode = None
         return self
 
     def __exit__(self, *exc: object) -> None:
-        if self.fd is not None and self._saved is not None:
-            import termios
-
-            termios.tcsetattr(self.fd, termios.TCSADRAIN, self._saved)
-        self.fd = None
+        if self._mode is not None:
+            self._mode.__exit__(None, None, None)
+        self._input = self._mode = None
 
     @property
     def active(self) -> bool:
-        return self.fd is not None
+        return self._input is not None
 
     def wait(self, timeout: float) -> str:
-        """Wait up to ``timeout`` seconds; return the keys pressed (possibly several)."""
-        if self.fd is None:
+        """Wait up to ``timeout`` seconds; return the keys pressed (possibly several): single
+        characters, "\x1b" for Esc; arrows and other sequences are left out."""
+        if self._input is None:
             if timeout > 0:
                 time.sleep(timeout)
             return ""
-        ready, _, _ = select.select([self.fd], [], [], max(0.0, timeout))
-        if not ready:
-            return ""
-        try:
-            return os.read(self.fd, 64).decode("utf-8", errors="replace")
-        except OSError:
-            return ""
+        from prompt_toolkit.keys import Keys as Key
+
+        deadline = time.monotonic() + max(0.0, timeout)
+        while True:
+            presses = self._input.read_keys() or self._input.flush_keys()
+            text = "".join("\x1b" if p.key == Key.Escape else p.data for p in presses
+                           if p.key == Key.Escape or len(p.data) == 1)
+            left = deadline - time.monotonic()
+            if text or left <= 0 or self._input.closed:
+                return text
+            time.sleep(min(0.01, left))
 
 
 class _Interrupt:
@@ -385,6 +387,9 @@ class _Interrupt:
         return self
 
     def _handle(self, signum, frame) -> None:
+        self.press()
+
+    def press(self) -> None:
         if self.requested:
             raise KeyboardInterrupt
         self.requested = True
@@ -613,7 +618,9 @@ class _Watch:
                 if pressed == "\x1b":  # Esc alone (not the start of an arrow key's sequence)
                     return "key"
                 for key in pressed:  # several keys may arrive at once: act on each
-                    if key in STOP_KEYS:
+                    if key == "\x03":  # Ctrl-C typed in raw mode: as the signal would be
+                        self.intr.press()
+                    elif key in STOP_KEYS:
                         self._stop_all()
                     elif key in QUIT_KEYS:
                         return "key"

@@ -163,6 +163,12 @@ class Simulator:
                  host_address: int = 2, ascii_startup: bool | None = None,
                  autostart: bool = True, speed: float = 1.0):
         self.module = load(module) if isinstance(module, str) else module
+        if self.module.generic:  # a simulated module is its data: there is nothing to simulate
+            from ..errors import ValidationError
+
+            raise ValidationError("the simulator needs a module's data; generic mode is for "
+                                  "real modules tmclsh has no data for (simulate one of "
+                                  "TMCM-1311, TMCM-351, TMCM-1640 or a module file's)")
         for name, value in (("address", address), ("host_address", host_address)):
             if not 0 <= value <= 255:
                 raise ValueError(f"{name} must be 0..255, got {value}")
