@@ -190,7 +190,6 @@ def can_interfaces() -> list[str]:
 def shell_commands() -> list:
     from .shell import commands
 
-    commands.load_all()
     return commands.all_commands()
 
 

@@ -89,11 +89,7 @@ def complete_module(session: Session | None, text: str) -> list[Candidate]:
 
 # -- .help -------------------------------------------------------------------------------
 
-@command(".help", ".help [COMMAND|MNEMONIC|NUMBER|PARAMETER]",
-         "show help: all commands, one command, a TMCL instruction, or a parameter",
-         complete=complete_help, bare=True,
-         details="`help SAP` explains an instruction; `help 140` shows axis parameter 140 (and "
-                 "global parameter 140 if there is one), like `.param 140`.")
+@command(".help")
 def cmd_help(session: Session, arg: str) -> None:
     arg = arg.strip()
     if not arg:
@@ -180,16 +176,17 @@ def _help_overview(session: Session) -> None:
 def _unique_commands():
     """Commands in name order; entries sharing a handler (.quit/.exit) shown once, under the
     one registered first."""
-    from .commands import REGISTRY
+    return [c for c in all_commands() if not c.same_as]
 
-    primary: dict[object, object] = {}
-    for c in REGISTRY.values():  # registration order
-        primary.setdefault(c.handler, c)
-    return [c for c in all_commands() if primary[c.handler] is c]
+
+def _twins(c) -> list[str]:
+    """The other names of the same handler (``.exit`` for ``.quit`` and back)."""
+    key = c.same_as or c.name
+    return [o.name for o in all_commands() if (o.same_as or o.name) == key and o is not c]
 
 
 def _command_title(c) -> str:
-    twins = [o.name for o in all_commands() if o.handler is c.handler and o is not c]
+    twins = _twins(c)
     names = [c.syntax] + list(c.aliases) + twins
     return ", ".join(names)
 
@@ -206,8 +203,7 @@ def _help_command(session: Session, cmd) -> None:
     out.print(_indented(cmd.help), soft_wrap=False)
     if cmd.details:
         out.print(_indented(_paragraphs(cmd.details)), soft_wrap=False)
-    extra = list(cmd.aliases) + [o.name for o in all_commands()
-                                 if o.handler is cmd.handler and o is not cmd]
+    extra = list(cmd.aliases) + _twins(cmd)
     if cmd.bare:
         extra.append(cmd.name[1:])
     if extra:
@@ -357,17 +353,13 @@ def _quit(session: Session, arg: str) -> None:
     raise QuitShell()
 
 
-command(".quit", ".quit", "leave the shell (also Ctrl-D)", bare=True)(_quit)
-command(".exit", ".exit", "leave the shell (same as .quit)", bare=True)(_quit)
+command(".quit")(_quit)
+command(".exit")(_quit)
 
 
 # -- .param / .params --------------------------------------------------------------------
 
-@command(".param", ".param QUERY", "explain a parameter: number, name or part of a name, "
-         "with its current value", complete=complete_param, category="parameters",
-         details="QUERY may be a number (140), a name (MicrostepResolution), part of one "
-                 "(microstep) or `ap 140` / `gp 66 [bank]` to pick the kind. The current value "
-                 "is read from the module (GAP/GGP) when the parameter is readable.")
+@command(".param")
 def cmd_param(session: Session, arg: str, from_help: bool = False) -> None:
     query = arg.strip()
     if not query:
@@ -582,11 +574,7 @@ def _param_json(p: Parameter, current: list[tuple[str, str, int | None]] | None 
     return obj
 
 
-@command(".params", ".params [axis|global] [FILTER]",
-         "table of all parameters with their live values (one GAP/GGP each)",
-         complete=complete_params, category="parameters",
-         details="FILTER narrows the list by number or (part of a) name. On a multi-axis "
-                 "module each motor gets its own value column.")
+@command(".params")
 def cmd_params(session: Session, arg: str) -> None:
     mod = session.module
     words = arg.split()
@@ -747,10 +735,7 @@ def _build_param_table(params: list[Parameter], rows: list[dict[str, object]], t
 
 # -- trace and decode --------------------------------------------------------------------
 
-@command(".trace", ".trace [on|off]", "show every frame in hex, decoded, on stderr",
-         complete=[("on", "start tracing"), ("off", "stop tracing")], category="protocol",
-         details="Without an argument it toggles. Lines show time, direction (tx> / <rx), the "
-                 "bytes and what they mean. --trace does the same from the start.")
+@command(".trace")
 def cmd_trace(session: Session, arg: str) -> None:
     from .trace import disable_trace, enable_trace, trace_enabled
 
@@ -766,16 +751,7 @@ def cmd_trace(session: Session, arg: str) -> None:
         session.out.info("trace off")
 
 
-@command(".decode", ".decode [request|reply|memory|version] HEX",
-         "decode bytes pasted from elsewhere: request or reply, checksum, 134/136 layouts",
-         complete=[("request", "read the bytes as a request"),
-                   ("reply", "read the bytes as a reply"),
-                   ("memory", "a 134 (read program memory) reply"),
-                   ("version", "a 136 version string reply")],
-         category="protocol",
-         details="HEX: `01 06 04 00 00 00 00 00 0b`, `$01 $06 ...`, `0x01,0x06,...` or "
-                 "`0106040000...`; several 9-byte frames at once are fine. Without a hint "
-                 "every plausible reading is shown.")
+@command(".decode")
 def cmd_decode(session: Session, arg: str) -> None:
     from rich.text import Text
 
@@ -801,11 +777,7 @@ def cmd_decode(session: Session, arg: str) -> None:
 
 # -- connection and module ---------------------------------------------------------------
 
-@command(".connect", ".connect [PORT | sim [MODULE] | can IFACE:CHANNEL]",
-         "reconnect, or switch to another port, simulator or CAN bus",
-         complete=complete_connect, category="connection",
-         details="Without an argument the current link is closed and opened again (after a "
-                 "cable was pulled). The module type is asked with 136 on a real link.")
+@command(".connect")
 def cmd_connect(session: Session, arg: str) -> None:
     from .. import transport as tr
 
@@ -876,10 +848,7 @@ def complete_address(session: Session | None, text: str) -> list[Candidate]:
     return [Candidate(str(session.client.address), "the current address")]
 
 
-@command(".address", ".address [N]", "talk to the module with address N on the same bus",
-         complete=complete_address, category="connection",
-         details="The new address is checked with a 136 (version) request; if nothing answers, "
-                 "the old address stays. On CAN, N is the module's CAN id.")
+@command(".address")
 def cmd_address(session: Session, arg: str) -> None:
     client = session.client
     text = arg.strip()
@@ -914,10 +883,7 @@ def cmd_address(session: Session, arg: str) -> None:
                    + (f", firmware {version}" if version else ""))
 
 
-@command(".module", ".module [NAME]", "show the module type, or override it",
-         complete=complete_module, category="connection",
-         details="The type normally comes from the 136 version string. Overriding it changes "
-                 "which parameters, ranges and commands the shell checks against.")
+@command(".module")
 def cmd_module(session: Session, arg: str) -> None:
     from rich.table import Table
 
@@ -955,8 +921,7 @@ def cmd_module(session: Session, arg: str) -> None:
     out.print(grid)
 
 
-@command(".version", ".version", "ask the module for its firmware version (command 136)",
-         category="connection")
+@command(".version")
 def cmd_version(session: Session, arg: str) -> None:
     client = session.client
     reply = client.request(Request(client.address, Control.GET_VERSION, 0, 0, 0))
@@ -981,8 +946,7 @@ def cmd_version(session: Session, arg: str) -> None:
 
 # -- motion ------------------------------------------------------------------------------
 
-@command(".stopall", ".stopall", "stop every motor (MST on each; Ctrl-C does the same)",
-         category="motion")
+@command(".stopall")
 def cmd_stopall(session: Session, arg: str) -> None:
     report_stop(session, session.client.stop_all())
 

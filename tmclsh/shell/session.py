@@ -65,7 +65,6 @@ class Session:
         self.location: tuple[str, int] | None = None  # script file and line being run
         # the REPL sets it False before each line; see end_interrupted_line
         self.interrupted_line_ended = True
-        commands.load_all()
         install_expressions(self)  # ${expression} in any line
 
     # -- module -------------------------------------------------------------------------

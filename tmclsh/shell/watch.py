@@ -564,16 +564,7 @@ class _Watch:
                                        markup=False)
 
 
-@command(".watch", ".watch [NAME=]EXPR; ... [--interval S] [--count N] [--until EXPR] "
-         "[--csv FILE]",
-         "poll values live: value, min, max, rate, recent history", category="watch",
-         complete=["--interval", "--count", "--until", "--csv"],
-         details="  .watch pos=GAP 1, 0; speed=GAP 3, 0; in0=GIO 0, 0\n"
-                 "  .watch rev=GAP 1, 0 / 51200 --until \"rev >= 2\" --csv run.csv\n"
-                 "Keys: s or space stops all motors (MST), q ends the watch. Ctrl-C ends the "
-                 "watch and does NOT stop the motors. Under --json or in a pipe, each sample "
-                 "is a JSON object {\"t\": s, \"values\": {...}}. With no expressions: the "
-                 "position and speed of each motor. .plot draws the last watch.")
+@command(".watch")
 def cmd_watch(session: Session, args: str) -> None:
     items, interval, count, until, csv_path = parse_args(session, args)
     result = run_watch(session, items, interval=interval, count=count, until=until,
