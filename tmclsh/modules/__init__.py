@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import difflib
 import re
-import tomllib
 from dataclasses import dataclass, field
 from functools import cache, cached_property
 from importlib import resources
 
+from ..datafiles import load_toml
 from ..errors import ValidationError
 from ..instructions import InstructionSpec, all_instructions, controls
 
@@ -277,7 +277,7 @@ def available() -> list[str]:
     names = []
     for entry in files.iterdir():
         if entry.name.endswith(".toml"):
-            names.append(tomllib.loads(entry.read_text("utf-8"))["module"]["name"])
+            names.append(load_toml(__package__, entry.name)["module"]["name"])
     return sorted(names)
 
 
@@ -294,7 +294,7 @@ def _load(file_name: str) -> Module | None:
     entry = resources.files(__package__).joinpath(file_name)
     if not entry.is_file():
         return None
-    return Module(tomllib.loads(entry.read_text("utf-8")))
+    return Module(load_toml(__package__, file_name))
 
 
 def by_firmware_id(firmware_id: int) -> Module | None:

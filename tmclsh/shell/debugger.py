@@ -381,7 +381,7 @@ def _line(session: Session, text) -> None:
     """One line; on a terminal a long one (a source line's comment) ends in '…' instead of
     wrapping. Piped output keeps every character."""
     out = session.out
-    if out.console.is_terminal:
+    if out.is_terminal:
         out.print(text, soft_wrap=False, no_wrap=True, overflow="ellipsis")
     else:
         out.print(text)
@@ -391,7 +391,7 @@ def _line(session: Session, text) -> None:
 def _progress(session: Session) -> Iterator[program.Progress | None]:
     """A rich progress bar on a terminal; nothing under --json or when piped."""
     out = session.out
-    if out.json or not out.console.is_terminal:
+    if out.json or not out.is_terminal:
         yield None
         return
     from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
@@ -736,7 +736,7 @@ def cmd_continue(session: Session, argtext: str) -> None:
 
     began = time.monotonic()
     try:
-        if not session.out.json and session.out.console.is_terminal:
+        if not session.out.json and session.out.is_terminal:
             with session.out.console.status("stepping to a breakpoint (Ctrl-C stops)"):
                 info = program.continue_to(session.client, targets, max_steps=limit,
                                            on_step=counted, instruction_at=stored)

@@ -487,7 +487,7 @@ def count_steps(nodes: Iterable[Node]) -> tuple[int, bool]:
 
 def _progress(session: Session, name: str, nodes: list[Node]):
     """A rich progress bar for long scripts on a terminal (None otherwise)."""
-    if session.out.json or not session.out.console.is_terminal:
+    if session.out.json or not session.out.is_terminal:
         return None
     total, views = count_steps(nodes)
     if total < PROGRESS_MIN_STEPS or views:

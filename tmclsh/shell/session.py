@@ -17,7 +17,7 @@ from .. import asm
 from ..client import Client, Result
 from ..errors import StatusError, TmclError, ValidationError
 from ..modules import Module
-from ..protocol import Request, status_ok
+from ..protocol import status_ok
 from . import commands
 from .expr import format_number
 from .expr import install as install_expressions
@@ -157,11 +157,9 @@ class Session:
 
     def run_tmcl(self, text: str, *, show: bool = True) -> Result:
         expanded = self.expand(text)
-        enc = self.client.encode(expanded)
+        enc, req = self.client.prepare(expanded)
         self._confirm_persistent(enc)
-        ins = enc.instruction
-        reply = self.client.request(Request(self.client.address, ins.opcode, ins.type,
-                                            ins.motor, ins.value))
+        reply = self.client.request(req)
         result = Result(text, enc, reply)
         self.last_result = result
         self.stats.commands += 1

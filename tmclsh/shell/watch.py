@@ -435,7 +435,7 @@ def run_watch(session: Session, items: Sequence[Item], *, interval: float = DEFA
     Ctrl-C; show a live table (``live``) or emit one JSON object per sample."""
     out = session.out
     if live is None:
-        live = not out.json and out.console.is_terminal
+        live = not out.json and out.is_terminal
     w = _Watch(session, items, interval, count, until, emit or out.emit)
     sink = _Csv(csv_path, [i.name for i in items]) if csv_path is not None else None
     w.sink = sink
@@ -588,4 +588,4 @@ def cmd_watch(session: Session, args: str) -> None:
 
 def out_is_pipe(session: Session) -> bool:
     """Samples went to stdout as JSON: keep status text on stderr."""
-    return session.out.json or not session.out.console.is_terminal
+    return session.out.json or not session.out.is_terminal
