@@ -95,10 +95,18 @@ class Styled:
         return out
 
 
+_CONTROL = dict.fromkeys((7, 8, 11, 12, 13))  # bell, backspace, vertical tab, form feed, CR
+
+
 def _write_plain(stream, text: str) -> None:
     """A line as the trimmed rich console writes it to a pipe: trailing blanks removed, and
     flushed at once (as rich does), so stdout and stderr keep their order in one file."""
-    stream.write(_TRAILING_BLANKS.sub(r"\1", text) + "\n")
+    if not text.isprintable():
+        text = text.translate(_CONTROL).expandtabs(8)  # as rich writes them
+        text = "\n".join(line.rstrip(" ") for line in text.split("\n"))
+    else:
+        text = text.rstrip(" \t")
+    stream.write(text + "\n")
     stream.flush()
 
 
@@ -123,6 +131,7 @@ class Output:
         self.json = json_mode
         self._console = None
         self._err = None
+        self._terminal: dict[int, tuple[object, bool]] = {}  # is_terminal, by stream
 
     # the rich consoles, made when first needed (a test may put its own in place)
     @property
@@ -150,14 +159,23 @@ class Output:
         """Whether results go to a terminal (colour, live views, progress bars)."""
         if self._console is not None:
             return self._console.is_terminal
-        return is_terminal(sys.stdout)
+        return self._is_terminal(sys.stdout)
+
+    def _is_terminal(self, stream) -> bool:
+        """is_terminal(stream), asked once per stream (isatty is a system call per line)."""
+        known = self._terminal.get(id(stream))
+        if known is None or known[0] is not stream:
+            known = self._terminal[id(stream)] = (stream, is_terminal(stream))
+        return known[1]
 
     def _plain(self, stderr: bool = False):
         """The stream to write plain text to, or None when rich must write (a terminal, or a
         console put in place)."""
         if stderr:
-            return sys.stderr if self._err is None and not is_terminal(sys.stderr) else None
-        return sys.stdout if self._console is None and not is_terminal(sys.stdout) else None
+            stream = sys.stderr
+            return stream if self._err is None and not self._is_terminal(stream) else None
+        stream = sys.stdout
+        return stream if self._console is None and not self._is_terminal(stream) else None
 
     # -- JSON ---------------------------------------------------------------------------
     def emit(self, obj: dict[str, Any]) -> None:

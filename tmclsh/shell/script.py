@@ -101,6 +101,8 @@ def strip_comment(text: str) -> str:
     s = text.strip()
     if s.startswith("#") or s.startswith("//"):
         return ""
+    if "/" not in s:
+        return s  # (most lines: no comment to look for)
     quote = None
     for i, ch in enumerate(s):
         if quote:
