@@ -634,11 +634,6 @@ def evaluate(session: Session, text: str, extra: Mapping[str, Number] | None = N
     return expression.evaluate(SessionContext(session, extra or {}))
 
 
-def install(session: Session) -> None:
-    """Make ``${expression}`` work in every line of this session."""
-    session.state["evaluate"] = evaluate
-
-
 # -- option splitting for dot-commands ------------------------------------------------------
 
 _OPTION = re.compile(r"--([A-Za-z][A-Za-z0-9-]*)")

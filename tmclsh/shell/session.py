@@ -19,8 +19,6 @@ from ..errors import StatusError, TmclError, ValidationError
 from ..modules import Module
 from ..protocol import status_ok
 from . import commands
-from .expr import format_number
-from .expr import install as install_expressions
 from .render import Output
 
 _VAR = re.compile(r"\$\{([^}]*)\}")
@@ -65,7 +63,7 @@ class Session:
         self.location: tuple[str, int] | None = None  # script file and line being run
         # the REPL sets it False before each line; see end_interrupted_line
         self.interrupted_line_ended = True
-        install_expressions(self)  # ${expression} in any line
+        self.state["evaluate"] = _evaluate  # ${expression} in any line
 
     # -- module -------------------------------------------------------------------------
     @property
@@ -99,6 +97,7 @@ class Session:
         """Replace ``${name}`` (or ``${expression}``) by its value."""
         if "${" not in line:
             return line
+        from .expr import format_number
 
         def sub(m: re.Match) -> str:
             inner = m.group(1).strip()
@@ -188,6 +187,13 @@ class Session:
     def _record(self, line: str, outcome: str) -> None:
         for fn in list(self.recorders):
             fn(line, outcome)
+
+
+def _evaluate(session: Session, text: str) -> int | float:
+    """The expression engine, imported the first time a line holds ``${...}``."""
+    from .expr import evaluate
+
+    return evaluate(session, text)
 
 
 def _is_bare_command(text: str) -> bool:
