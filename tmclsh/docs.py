@@ -669,6 +669,10 @@ The config file (default {_b("~/.config/tmclsh/config.toml")}; {_b("TMCLSH_CONFI
 {_i("$XDG_STATE_HOME")}{_b("/tmclsh/history")}
 Command history of the interactive prompt (default {_b("~/.local/state/tmclsh/history")}).
 .TP
+{_i("$XDG_CACHE_HOME")}{_b("/tmclsh/data/")}
+The instruction set and module tables as parsed at the first start (default
+{_b("~/.cache/tmclsh/data/")}); kept under each data file's content hash, safe to delete.
+.TP
 {_i("prefix")}{_b("/share/bash-completion/completions/tmclsh")}
 .TQ
 {_i("prefix")}{_b("/share/zsh/site-functions/_tmclsh")}
