@@ -54,7 +54,9 @@ def say(text: str) -> None:
 
 def tree_env(args: argparse.Namespace, **extra: str) -> dict[str, str]:
     """Environment for a tmclsh subprocess of the measured tree: no user config, its own
-    history, nothing from the developer's TMCLSH_* settings."""
+    history, nothing from the developer's TMCLSH_* settings. (They run in ``args.state_dir``:
+    ``python -m`` puts the current folder first on sys.path, and this checkout's tmclsh must
+    not win from there.)"""
     env = {k: v for k, v in os.environ.items() if not k.startswith("TMCLSH_")
            and k not in ("PYTHONUNBUFFERED", "PYTHONDONTWRITEBYTECODE")}  # as a user runs it
     env["PYTHONPATH"] = str(args.tree) + os.pathsep + os.environ.get("PYTHONPATH", "")
@@ -262,14 +264,18 @@ def _script_row(args: argparse.Namespace, json_mode: bool) -> dict:
     short_script.write_text(lines[0] + "\n")
     frame = gap_frame()
 
+    out_file = tmp / "script.out"
+
     def run(path: str, script: Path) -> float:
         argv = tmclsh_cmd("--port", path, "-m", args.module, *(["--json"] if json_mode else []),
                           "-f", str(script))
-        t0 = time.perf_counter()
-        proc = subprocess.run(argv, capture_output=True, text=True, env=tree_env(args),
-                              timeout=300)
-        took = time.perf_counter() - t0
-        results = proc.stdout.count("\n") - (0 if json_mode else 1)  # text: a summary line
+        with open(out_file, "w") as out:  # a file: no reader process woken per line
+            t0 = time.perf_counter()
+            proc = subprocess.run(argv, stdout=out, stderr=subprocess.PIPE, text=True,
+                                  env=tree_env(args), cwd=args.state_dir, timeout=300)
+            took = time.perf_counter() - t0
+        text = out_file.read_text()
+        results = text.count("\n") - (0 if json_mode else 1)  # text: a summary line
         if proc.returncode != 0 or results != (n if script is long_script else 1):
             raise RuntimeError(f"script run failed: {proc.stderr[-500:]}")
         return took
@@ -305,12 +311,12 @@ def bench_script_json(args: argparse.Namespace) -> dict:
 
 # -- start-up ---------------------------------------------------------------------------------
 
-def _fastest(argv: list[str], env: dict, runs: int) -> float:
+def _fastest(argv: list[str], env: dict, runs: int, cwd: str) -> float:
     best = float("inf")
     for _ in range(runs):
         t0 = time.perf_counter()
         proc = subprocess.run(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
-                              timeout=60)
+                              cwd=cwd, timeout=60)
         best = min(best, time.perf_counter() - t0)
         if proc.returncode != 0:
             raise RuntimeError(f"{argv} failed: {proc.stderr.decode()[-500:]}")
@@ -323,10 +329,11 @@ def bench_process(args: argparse.Namespace) -> dict:
     env = tree_env(args)
     with SimProcess(args.module) as sim:
         argv = tmclsh_cmd("--port", sim.path, "-m", args.module, "-c", "GAP 1, 0")
-        _fastest(argv, env, 1)  # the data cache, the page cache
+        _fastest(argv, env, 1, args.state_dir)  # the data cache, the page cache
         best = alternate(args.rounds, {
-            "python": lambda: _fastest([sys.executable, "-c", "import serial"], env, runs // 2),
-            "tmclsh": lambda: _fastest(argv, env, runs // 2)}, args.verbose)
+            "python": lambda: _fastest([sys.executable, "-c", "import serial"], env, runs // 2,
+                                       args.state_dir),
+            "tmclsh": lambda: _fastest(argv, env, runs // 2, args.state_dir)}, args.verbose)
     ratio = best["tmclsh"] / best["python"]
     say(f"process: python -c 'import serial' {best['python'] * 1e3:.1f} ms, tmclsh -c "
         f"{best['tmclsh'] * 1e3:.1f} ms: {ratio:.2f}x")
@@ -350,7 +357,7 @@ def bench_imports(args: argparse.Namespace) -> dict:
     with SimProcess(args.module) as sim:
         proc = subprocess.run([sys.executable, "-c", DUMP_MODULES, "--port", sim.path, "-m",
                                args.module, "-c", "GAP 1, 0"], capture_output=True, text=True,
-                              env=tree_env(args), timeout=60)
+                              env=tree_env(args), cwd=args.state_dir, timeout=60)
     modules = json.loads(proc.stderr.rstrip().splitlines()[-1][len("MODULES "):])
     heavy = sorted({m.split(".")[0] for m in modules if m.split(".")[0] in HEAVY}
                    | ({"tmclsh.sim"} if any(m.startswith("tmclsh.sim") for m in modules) else set()))
@@ -372,6 +379,7 @@ def bench_repl(args: argparse.Namespace) -> dict:
         pid, fd = pty.fork()
         if pid == 0:
             env = tree_env(args, TERM="xterm", COLUMNS="100", LINES="30")
+            os.chdir(args.state_dir)
             os.execvpe(sys.executable, tmclsh_cmd("--port", path, "-m", args.module), env)
         t0 = time.perf_counter()
         seen = b""
@@ -511,7 +519,7 @@ def bench_scan(args: argparse.Namespace) -> dict:
                           "--to", "255")
         t0 = time.perf_counter()
         proc = subprocess.run(argv, capture_output=True, text=True, env=tree_env(args),
-                              timeout=600)
+                              cwd=args.state_dir, timeout=600)
         took = time.perf_counter() - t0
     found = [line for line in proc.stdout.splitlines() if line.startswith("address")]
     say(f"scan: {took:.2f} s, found {len(found)} module(s)")
