@@ -15,6 +15,7 @@ import sys
 import pytest
 
 import tmclsh.shell
+from conftest import ROOT, tmclsh_env
 from tmclsh.shell import commands
 
 
@@ -80,3 +81,16 @@ def test_the_table_is_read_without_importing_a_feature() -> None:
 def test_an_undescribed_handler_is_refused_with_a_clear_message() -> None:
     with pytest.raises(LookupError, match=r"'\.frobnicate'.*no entry in COMMANDS"):
         commands.command(".frobnicate")(lambda session, arg: None)
+
+
+def test_a_script_checks_a_feature_command_before_the_feature_ran(tmp_path) -> None:
+    """.watch's options are checked when the script is read (nothing sent yet), though its
+    module is imported only then."""
+    script = tmp_path / "bad.tmcl"
+    script.write_text("MVP ABS, 0, 1000\n.watch pos=GAP 1, 0 --intervall 1\n")
+    proc = subprocess.run([sys.executable, "-m", "tmclsh", "--sim", "-f", str(script)],
+                          capture_output=True, text=True, timeout=60,
+                          env=tmclsh_env(), cwd=str(ROOT))
+    assert proc.returncode != 0
+    assert f"{script}:2: " in proc.stderr and "--intervall" in proc.stderr, proc.stderr
+    assert "moving" not in proc.stdout and "nothing was sent" in proc.stdout  # no MVP ran

@@ -67,9 +67,9 @@ class Command:
                                   "handler")
         return self._handler
 
-    @property
-    def loaded(self) -> bool:
-        return self._handler is not None
+    def load(self) -> Handler:
+        """Import the feature module now (a script's check of the line may live there)."""
+        return self.handler
 
     def completion(self) -> list | ArgCompleter | None:
         """The argument completion: a list as written, or the feature's function (imported

@@ -186,7 +186,9 @@ class Output:
     def print(self, *items: Any, **kw: Any) -> None:
         if self.json:
             return
-        stream = self._plain() if kw.get("markup") is False else None
+        # plain strings, not wrapped (soft_wrap=False wraps at the width even in a pipe)
+        stream = self._plain() if kw.get("markup") is False and kw.get("soft_wrap", True) \
+            else None
         if stream is not None and all(isinstance(i, str) for i in items) \
                 and set(kw) <= {"markup", "style", "soft_wrap"}:
             _write_plain(stream, " ".join(items))  # the text as rich would write it

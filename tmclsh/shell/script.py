@@ -230,6 +230,7 @@ class Parser:
         cmd = commands.find(word)
         if cmd is None:
             raise self.fail(number, f"unknown shell command {word!r}; type .help for the list")
+        cmd.load()  # its feature module, which may add its check to CHECKS (.watch does)
         check = CHECKS.get(cmd.name)
         if check is not None:
             check(self.session, args)
