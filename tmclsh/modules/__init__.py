@@ -271,14 +271,16 @@ def _file_name(name: str) -> str:
     return _normalise(name if _normalise(name).startswith("tmcm") else "tmcm" + name) + ".toml"
 
 
+def _headers() -> dict[str, dict]:
+    """The ``[module]`` table of every data file, by file name (no Module is built)."""
+    files = resources.files(__package__)
+    return {entry.name: load_toml(__package__, entry.name)["module"]
+            for entry in files.iterdir() if entry.name.endswith(".toml")}
+
+
 def available() -> list[str]:
     """Module names that have a data file, e.g. ``["TMCM-1311", "TMCM-1640", "TMCM-351"]``."""
-    files = resources.files(__package__)
-    names = []
-    for entry in files.iterdir():
-        if entry.name.endswith(".toml"):
-            names.append(load_toml(__package__, entry.name)["module"]["name"])
-    return sorted(names)
+    return sorted(h["name"] for h in _headers().values())
 
 
 def load(name: str) -> Module:
@@ -298,10 +300,10 @@ def _load(file_name: str) -> Module | None:
 
 
 def by_firmware_id(firmware_id: int) -> Module | None:
-    for name in available():
-        mod = load(name)
-        if mod.firmware_id == firmware_id:
-            return mod
+    """The module whose data file names this firmware id (only that one is loaded)."""
+    for file_name, header in sorted(_headers().items(), key=lambda kv: kv[1]["name"]):
+        if header["firmware_id"] == firmware_id:
+            return _load(file_name)
     return None
 
 
