@@ -38,7 +38,7 @@ from typing import TYPE_CHECKING, Protocol
 
 from .. import instructions as isa
 from ..errors import StatusError, TmclError, ValidationError
-from ..protocol import Request, status_ok, status_text
+from ..protocol import status_ok, status_text
 
 if TYPE_CHECKING:
     from ..asm import Encoded
@@ -579,18 +579,9 @@ class SessionContext:
 
 
 def encode_read(session: Session, text: str) -> Encoded:
-    """Check a read's TMCL text against the module (no bus I/O), cached per module."""
-    client = session.client
-    module = client.module.name if client.module is not None else ""
-    cache: dict = session.state.setdefault("expr.encoded", {})  # type: ignore[assignment]
-    key = (module, client.mode, text)
-    enc = cache.get(key)
-    if enc is None:
-        enc = client.encode(text)
-        if len(cache) > 4096:
-            cache.clear()
-        cache[key] = enc
-    return enc
+    """Check a read's TMCL text against the module (no bus I/O; the client keeps the result
+    for the module and mode, so a watch pays the parser once per expression)."""
+    return session.client.encode(text)
 
 
 def read_value(session: Session, text: str) -> Number:
@@ -599,10 +590,9 @@ def read_value(session: Session, text: str) -> Number:
     Goes straight to the client: a read inside an expression is counted as a command sent,
     but is not shown, recorded or added to the history (the line that holds it is).
     """
-    enc = encode_read(session, text)
-    ins = enc.instruction
     client = session.client
-    reply = client.request(Request(client.address, ins.opcode, ins.type, ins.motor, ins.value))
+    enc, req = client.prepare(text)
+    reply = client.request(req)
     session.stats.commands += 1
     if reply is None:
         raise ExprError(f"{text} gives no reply value")
