@@ -441,6 +441,15 @@ class Client:
                 if self._tracers:
                     self._trace("rx", head, reply)
                 return reply
+            if (len(head) == _FRAME and kind == _MEMORY and head[0] == self.host_address
+                    and sum(head[:8]) & 0xFF == head[8]
+                    and not (head[2] == _EVENT and head[3] == _TARGET_REACHED)):
+                # a 134 read-back (upload's verify), taken as _take takes it from a line that
+                # was just absorbed
+                reply = Reply.from_memory_frame(head, req.address, req.opcode)
+                if self._tracers:
+                    self._trace("rx", head, reply)
+                return reply
             buf += head
             wait = deadline - time.monotonic()
         else:
@@ -519,7 +528,7 @@ class Client:
             self._rx_event(head, Reply.from_frame(head))
             return _SKIPPED
         if kind == _MEMORY:
-            reply = Reply.from_bytes(head, kind, module=req.address, opcode=req.opcode)
+            reply = Reply.from_memory_frame(head, req.address, req.opcode)
         elif (head[1] != req.address or opcode != req.opcode
               or (kind == _VERSION and status == _OK)):
             # (a normal frame answering 136 type 0 can only carry an error status)
