@@ -143,16 +143,37 @@ def row(result: dict, name: str, value: float, unit: str, target: float, note: s
     return result
 
 
+CPU: dict[str, float] = {}  # the last alternate(): least CPU seconds of one run, by name
+
+
+def _cpu_seconds() -> float:
+    """CPU of this process and of its children that have ended (a tmclsh run; the
+    simulator's own process is still running, so it is not in here)."""
+    import resource
+
+    me = resource.getrusage(resource.RUSAGE_SELF)
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
+
+
 def alternate(rounds: int, runs: dict[str, Callable[[], float]], verbose: bool) -> dict[str, float]:
     """Run each of ``runs`` once per round, in alternating order; each returns its figure for
-    the round (lower is better). Returns the best round's figure for each."""
+    the round (lower is better). Returns the best round's figure for each, and leaves the
+    least CPU time one run of each took in ``CPU`` (a loaded machine adds waiting to the wall
+    clock far more than CPU time: the CPU figures say what the code itself costs)."""
     figures: dict[str, list[float]] = {name: [] for name in runs}
+    cpu: dict[str, list[float]] = {name: [] for name in runs}
     for rnd in range(rounds):
         order = list(runs) if rnd % 2 == 0 else list(reversed(runs))
         for name in order:
+            c0 = _cpu_seconds()
             figures[name].append(runs[name]())
+            cpu[name].append(_cpu_seconds() - c0)
             if verbose:
-                say(f"  round {rnd + 1} {name:<10}: {figures[name][-1]:.2f}")
+                say(f"  round {rnd + 1} {name:<10}: {figures[name][-1]:.2f}  "
+                    f"(cpu {cpu[name][-1]:.3f} s)")
+    CPU.clear()
+    CPU.update({name: min(v) for name, v in cpu.items()})
     return {name: min(v) for name, v in figures.items()}
 
 
@@ -226,9 +247,13 @@ def _client_rows(args: argparse.Namespace, which: str) -> dict:
             "raw": lambda: statistics.median(raw_latencies(sim.path, frame, warm, count)) * 1e6,
             which: lambda: path_fn(sim.path)}, args.verbose)
     ratio = best[which] / best["raw"]
-    say(f"  raw pyserial {best['raw']:.1f} us, {which} {best[which]:.1f} us: {ratio:.2f}x")
+    ops = warm + count
+    cpu_raw, cpu_path = CPU["raw"] / ops * 1e6, CPU[which] / ops * 1e6
+    say(f"  raw pyserial {best['raw']:.1f} us, {which} {best[which]:.1f} us: {ratio:.2f}x "
+        f"(CPU per round trip: raw {cpu_raw:.1f} us, {which} {cpu_path:.1f} us)")
     result = {"benchmark": which, "floor_us": round(best["raw"], 1),
-              "us": round(best[which], 1)}
+              "us": round(best[which], 1), "floor_cpu_us": round(cpu_raw, 1),
+              "cpu_us": round(cpu_path, 1)}
     names = {"request": ("Client.request(Request)", 1.15),
              "execute": ('Client.execute("GAP 1, 0")', 1.25),
              "pytrinamic": ("PyTrinamic get_axis_parameter (for comparison)", float("inf"))}
@@ -291,10 +316,14 @@ def _script_row(args: argparse.Namespace, json_mode: bool) -> dict:
             "short": lambda: run(sim.path, short_script)}, args.verbose)
     best["script"] = (best["long"] - best["short"]) / (n - 1) * 1e6
     ratio = best["script"] / best["raw"]
+    cpu_raw = CPU["raw"] / (n + 100) * 1e6
+    cpu_line = (CPU["long"] - CPU["short"]) / (n - 1) * 1e6
     say(f"  raw pyserial {best['raw']:.1f} us, per script line {best['script']:.1f} us: "
-        f"{ratio:.2f}x")
+        f"{ratio:.2f}x (CPU: raw {cpu_raw:.1f} us per round trip, tmclsh {cpu_line:.1f} us "
+        "per line)")
     result = {"benchmark": "script-json" if json_mode else "script", "lines": n,
-              "floor_us": round(best["raw"], 1), "us_per_line": round(best["script"], 1)}
+              "floor_us": round(best["raw"], 1), "us_per_line": round(best["script"], 1),
+              "floor_cpu_us": round(cpu_raw, 1), "cpu_us_per_line": round(cpu_line, 1)}
     name = "tmclsh -f script --json, per line" if json_mode else "tmclsh -f script, per line"
     return row(result, name, ratio, "x floor", 1.3)
 

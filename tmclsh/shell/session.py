@@ -197,5 +197,6 @@ def _evaluate(session: Session, text: str) -> int | float:
 
 
 def _is_bare_command(text: str) -> bool:
-    word = text.split(None, 1)[0] if text.split() else ""
-    return commands.find(word) is not None and not word.startswith(".")
+    parts = text.split(None, 1)
+    word = parts[0] if parts else ""
+    return not word.startswith(".") and commands.find(word) is not None
