@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import importlib
 from collections.abc import Callable, Iterable
+from dataclasses import KW_ONLY, dataclass, field
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
@@ -22,34 +23,34 @@ if TYPE_CHECKING:
 Handler = Callable[["Session", str], None]
 # completion of the argument text: returns candidate words (or (word, meta) pairs)
 ArgCompleter = Callable[["Session", str], Iterable["str | tuple[str, str]"]]
-# in the table: words or (word, meta) pairs, or the name of an ArgCompleter in the feature
-Completion = "list[str | tuple[str, str]] | str | ArgCompleter | None"  # (an annotation only)
+if TYPE_CHECKING:
+    # in the table: words or (word, meta) pairs, or the name of an ArgCompleter in the feature
+    Completion = list[str | tuple[str, str]] | str | ArgCompleter | None
 
 
+@dataclass(eq=False)
 class Command:
     """One dot-command. ``feature`` names the module in this package whose
     ``@command(name)`` is the handler; ``complete`` is a list of words or (word, meta) pairs,
     or the name of a completion function in that module; ``same_as`` names the command whose
-    handler this one shares (``.exit`` is ``.quit``), so help lists them together."""
+    handler this one shares (``.exit`` is ``.quit``), so help lists them together. A new
+    property of every command is one more field here (with a default)."""
 
-    __slots__ = ("name", "feature", "syntax", "help", "aliases", "complete", "category",
-                 "details", "bare", "same_as", "_handler")
+    name: str
+    feature: str
+    syntax: str
+    help: str
+    _: KW_ONLY
+    aliases: tuple[str, ...] = ()
+    complete: Completion = None
+    category: str = "general"
+    details: str = ""
+    bare: bool = False  # also accepted without the dot (help, quit)
+    same_as: str = ""
+    _handler: Handler | None = field(default=None, repr=False)
 
-    def __init__(self, name: str, feature: str, syntax: str, help: str, *,
-                 aliases: Iterable[str] = (), complete: Completion = None,
-                 category: str = "general", details: str = "", bare: bool = False,
-                 same_as: str = "", handler: Handler | None = None):
-        self.name = name
-        self.feature = feature
-        self.syntax = syntax
-        self.help = help
-        self.aliases = tuple(aliases)
-        self.complete = complete
-        self.category = category
-        self.details = details
-        self.bare = bare  # also accepted without the dot (help, quit)
-        self.same_as = same_as
-        self._handler = handler
+    def __post_init__(self) -> None:
+        self.aliases = tuple(self.aliases)
 
     def __repr__(self) -> str:
         return f"Command({self.name!r}, {self.feature!r})"
@@ -107,8 +108,8 @@ def command(name: str, syntax: str | None = None, help: str | None = None, *,
             if cmd is not None and cmd.feature != "":
                 raise LookupError(f"{name!r} is described in COMMANDS (tmclsh/shell/"
                                   f"commands.py): register its handler with @command({name!r})")
-            add(Command(name, "", syntax, help or "", aliases=aliases, complete=complete,
-                        category=category, details=details, bare=bare, handler=fn))
+            add(Command(name, "", syntax, help or "", aliases=tuple(aliases), complete=complete,
+                        category=category, details=details, bare=bare, _handler=fn))
         HANDLERS[name] = fn.__module__
         return fn
 
