@@ -81,7 +81,7 @@ class Styled:
 
     @property
     def plain(self) -> str:
-        return "".join(text for text, _ in self.parts)
+        return "".join([text for text, _ in self.parts])
 
     def __str__(self) -> str:
         return self.plain
