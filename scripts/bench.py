@@ -608,6 +608,103 @@ def bench_watch(args: argparse.Namespace) -> dict:
             "sample_us": round(best["watch"], 1), "ratio": round(ratio, 3)}
 
 
+# -- configuration backup -----------------------------------------------------------------------
+
+@benchmark("save", ".save of a whole module (one GAP/GGP per parameter) vs the same reads raw")
+def bench_save(args: argparse.Namespace) -> dict:
+    """Seconds for ``.save FILE`` of the module (every readable axis parameter of every
+    motor, every global parameter, one request each, the file written atomically), beside
+    the raw floor: exactly the same GAP/GGP frames written and their 9-byte replies read with
+    bare pyserial against the same pty-served simulator (its own process), in the same run.
+    The port is opened at 115200 baud (a pty does not pace bytes, so this measures the
+    software path, not the line rate: at 9600 baud each 18-byte round trip adds ~19 ms of
+    wire time). Rounds alternate raw and tmclsh; figures are the best round (other work on
+    the machine only adds time) and the median round.
+    """
+    import io
+    import tempfile
+
+    import serial
+
+    from tmclsh.client import Client
+    from tmclsh.modules import load
+    from tmclsh.protocol import Request
+    from tmclsh.shell.clone import READ, readable_slots
+    from tmclsh.shell.render import Output
+    from tmclsh.shell.session import Session
+    from tmclsh.transport import open_serial
+
+    module = load(args.module)
+    frames = [Request(1, READ[kind], number, index, 0).to_bytes()
+              for kind, _, number, index in readable_slots(module)]
+    times: dict[str, list[float]] = {"raw": [], "save": []}
+    tmp = Path(tempfile.mkdtemp(prefix="tmclsh-bench-"))
+    target = tmp / "backup.tmcl"
+
+    def raw_round(path: str) -> None:
+        ser = serial.serial_for_url(path, baudrate=115200, timeout=1.0)
+        try:
+            t0 = time.perf_counter()
+            for f in frames:
+                ser.write(f)
+                reply = ser.read(9)
+                assert len(reply) == 9, reply
+            times["raw"].append(time.perf_counter() - t0)
+        finally:
+            ser.close()
+
+    def save_round(path: str) -> None:
+        client = Client(open_serial(path, 115200), module=args.module, timeout=1.0)
+        client.version = module.version_string  # as after the connect banner: no 136 here
+        try:
+            session = Session(client, Output(json_mode=True))
+            stdout, sys.stdout = sys.stdout, io.StringIO()
+            try:
+                t0 = time.perf_counter()
+                session.run_line(f".save {target}")
+                times["save"].append(time.perf_counter() - t0)
+            finally:
+                sys.stdout = stdout
+            assert client.stats["sent"] == len(frames) and client.stats["timeouts"] == 0, \
+                client.stats
+        finally:
+            client.close()
+
+    try:
+        with SimProcess(args.module) as sim:
+            say(f"save: {args.rounds} round(s) of a {args.module} backup ({len(frames)} reads) "
+                f"on {sim.path} at 115200 baud")
+            for rnd in range(args.rounds):
+                order = (raw_round, save_round) if rnd % 2 == 0 else (save_round, raw_round)
+                for fn in order:
+                    fn(sim.path)
+    finally:
+        for f in tmp.iterdir():
+            f.unlink()
+        tmp.rmdir()
+    best = {k: min(v) for k, v in times.items()}
+    med = {k: statistics.median(v) for k, v in times.items()}
+    result = {
+        "benchmark": "save",
+        "module": args.module,
+        "transactions": len(frames),
+        "rounds": args.rounds,
+        "save_s": round(best["save"], 4),
+        "raw_s": round(best["raw"], 4),
+        "save_median_s": round(med["save"], 4),
+        "raw_median_s": round(med["raw"], 4),
+        "ratio": round(best["save"] / best["raw"], 3),
+        "wire_s_at_9600": round(len(frames) * 18 * 10 / 9600, 2),
+    }
+    say(f"  .save ({len(frames)} GAP/GGP + file) : {best['save'] * 1000:>7.1f} ms "
+        f"(median {med['save'] * 1000:.1f} ms)")
+    say(f"  raw pyserial, same frames     : {best['raw'] * 1000:>7.1f} ms "
+        f"(median {med['raw'] * 1000:.1f} ms)")
+    say(f"  ratio save / raw              : {result['ratio']:.2f}   (wire time alone at 9600 "
+        f"baud: {result['wire_s_at_9600']} s)")
+    return result
+
+
 # -- entry point ------------------------------------------------------------------------------
 
 def print_table(results: list[dict], tree: Path) -> None:

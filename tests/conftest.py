@@ -117,6 +117,12 @@ def pty_client(pty_sim):
     c.close()
 
 
+@pytest.fixture(autouse=True)
+def _own_cache_dir(tmp_path, monkeypatch):
+    """Each test its own user cache directory (uploads keep their source maps there)."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+
+
 @pytest.fixture
 def terminal(tmp_path):
     """``terminal(**kw)`` -> a ``tmux.Terminal`` on its own tmux server (see tests/tmux.py),

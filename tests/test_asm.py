@@ -333,8 +333,10 @@ def test_origin_shifts_labels() -> None:
 
 
 def test_read_image_errors() -> None:
-    with pytest.raises(AsmError, match="multiple of 7 bytes; this one has 8"):
-        asm.read_image(bytes(8))
+    with pytest.raises(AsmError, match="8-byte records; this one has 7 bytes"):
+        asm.read_image(bytes(7))
+    with pytest.raises(AsmError, match="record 2 .* expected 0x0b"):
+        asm.read_image(bytes(8) + bytes((5, 4, 0, 0, 0, 0, 2, 0)))
     with pytest.raises(AsmError, match="expected 7 hex bytes, found 3") as info:
         asm.read_image(b"05 04 00 00 00 03 e8\n05 04 00\n")
     assert info.value.line == 2

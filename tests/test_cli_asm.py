@@ -51,7 +51,7 @@ def test_asm_hex_is_seven_lowercase_bytes_per_line(program: Path) -> None:
 def test_binary_disassembles_to_source_that_reassembles(program: Path, tmp_path: Path) -> None:
     binary = tmp_path / "loop.bin"
     assert tmclsh("asm", str(program), "-o", str(binary)).returncode == 0
-    assert binary.stat().st_size == 6 * 7
+    assert binary.stat().st_size == 6 * 8  # TMCL-IDE records: 7 bytes and a checksum
     r = tmclsh("disasm", str(binary))
     assert r.returncode == 0, r.stderr
     assert "JA L0001" in r.stdout and "L0001:" in r.stdout and "MVP ABS, 0, -10000" in r.stdout

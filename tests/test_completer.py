@@ -242,3 +242,56 @@ def test_ascii_mode_hides_commands_the_ascii_interface_refuses():
     got = [c.text for c in complete("", module=None, session=s)]
     assert "SAP" in got
     assert all(c in got for c in ("ROR", "GAP"))
+
+
+# -- inside expressions --------------------------------------------------------------------
+
+def menu(text: str, session=None) -> list[tuple[str, str]]:
+    return [(c.text, c.display_meta_text) for c in complete(text, session=session)]
+
+
+@pytest.mark.parametrize("prefix", [
+    ".watch pos=", ".watch a=GAP 1, 0; b=", ".watch p=GAP 1, 0 --until \"", ".wait ",
+    ".expect ", ".if ", ".elif ", ".display ", ".let x = ", "SAP 4, 0, ${", ".expect 5 < ",
+    ".wait abs(", ".if not ", ".expect GAP 1, 0 > 3 and ",
+])
+@pytest.mark.parametrize("tmcl", ["GAP MaxPos", "GAP 4, ", "GGP ", "GGP SerialAddress, ",
+                                  "GIO ", "GIO 1, "])
+def test_a_read_inside_an_expression_completes_as_at_the_prompt(prefix, tmcl):
+    at_prompt = menu(tmcl)
+    assert at_prompt  # each read has something to offer at the prompt
+    assert menu(prefix + tmcl) == at_prompt
+
+
+def test_where_a_value_is_expected_the_reads_variables_and_functions():
+    s = _FakeSession()
+    s.variables = {"target": 5000}
+    got = [c.text for c in complete(".expect ", module=None, session=s)]
+    # the module's read commands (RFS only as RFS STATUS), not commands that move
+    assert {"GAP", "GGP", "GIO", "GCO", "RFS"} <= set(got)
+    assert not {"SAP", "MVP", "ROR", "MST"} & set(got)
+    assert "target" in got and "abs(" in got
+    assert [c.text for c in complete(".expect GAP 1, 0 == t", module=None, session=s)][0] \
+        == "target"
+    assert [c.text for c in complete(".wait RFS ", module=None, session=s)] == ["STATUS"]
+
+
+def test_watch_until_offers_the_watched_names():
+    got = texts(".watch pos=GAP 1, 0; v=GAP 3, 0 --until \"")
+    assert got[:2] == ["pos", "v"]
+
+
+def test_after_a_value_or_outside_the_expression_nothing_from_it():
+    assert texts(".expect GAP 1, 0 ") == []  # an operator comes next
+    assert texts(".let x") == []  # the variable's name, before =
+    assert texts(".wait GAP 8, 0 == 1 --time") == ["--timeout"]  # the command's options
+    assert "GAP" not in texts(".watch pos=GAP 1, 0 --interval ")
+    assert "GAP" not in texts('.watch p=GAP 1, 0 --until "p > 5" ')  # the quoted value ended
+    assert "GAP" in texts('.watch p=GAP 1, 0 --until "p > ')
+    # a closed ${...} is over: the line's own slot completes again
+    assert texts("SAP 140, ${m}, ") == texts("SAP 140, 0, ") != []
+
+
+def test_a_computed_operand_keeps_the_read_going():
+    assert texts(".expect GAP (GGP 0, 2), ") == texts("GAP 1, ")
+    assert texts(".if GAP 1, (m) == GGP ") == texts("GGP ")

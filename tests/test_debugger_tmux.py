@@ -26,8 +26,8 @@ def test_step_break_continue_stop_reset_in_a_terminal(pane, tmp_path):
     pane.wait("TMCM-1311:1>")
 
     pane.line(".upload timer.tmc")
-    pane.wait("(y/n")
-    pane.keys("y")
+    pane.wait("[y/N]")
+    pane.line("y")
     pane.wait("uploaded 15 instructions from timer.tmc to 0..14; verified: read back identical")
 
     pane.run(".step", "step @1  timer.tmc:2  SGP 0, 3, 1000")

@@ -144,10 +144,12 @@ def test_upload_reports_source_errors_with_location(session, tmp_path) -> None:
 
 
 def test_step_argument_checked(session) -> None:
-    with pytest.raises(ValidationError, match="N must be a number"):
+    with pytest.raises(ValidationError, match=r"\.step N: must be a whole number from 1 to"):
         session.run_line(".step x")
-    with pytest.raises(ValidationError, match="at least 1"):
+    with pytest.raises(ValidationError, match="from 1 to 1000000, got '0'"):
         session.run_line(".step 0")
+    with pytest.raises(ValidationError, match="from 1 to 1000000"):
+        session.run_line(".step " + "9" * 5000)
 
 
 def test_vars_range_checked(session) -> None:

@@ -160,8 +160,8 @@ def _has_range(p: Parameter) -> bool:
 
 
 def _explained(p: Parameter, printed: set[str]) -> bool:
-    """The database's access code is the printed one, or its note says why not."""
-    note = p.note or ""
+    """The database's access code is the printed one, or its source says why not."""
+    note = p.source or ""
     if p.access in printed:
         return True
     if not printed:
@@ -192,7 +192,7 @@ def test_every_axis_parameter_of_the_manual_is_in_the_database(module: str) -> N
         assert any(_same_name(r.name, p.manual_name) for r in printed), (
             f"{module} AP {number}: manual prints {printed[0].name!r}, database says "
             f"{p.manual_name!r}")
-        assert _has_range(p) or p.note, f"{module} AP {number}: no range and no note why"
+        assert _has_range(p) or p.source, f"{module} AP {number}: no range and no source why"
         assert p.access in ACCESS_CODES
 
 
@@ -240,7 +240,7 @@ def test_every_global_parameter_of_the_manual_is_in_the_database(module: str) ->
         assert p.name and p.manual_name
         assert any(_same_name(r.name, p.manual_name) for r in printed), (
             f"{module} GP {number}: manual prints {row.name!r}, database {p.manual_name!r}")
-        assert _has_range(p) or p.note, f"{module} {p.label}: no range and no note why"
+        assert _has_range(p) or p.source, f"{module} {p.label}: no range and no source why"
         if module != "TMCM-351":  # the 351 prints no access column (see the list test)
             codes = set().union(*(r.access for r in printed))
             assert _explained(p, codes), (
@@ -298,7 +298,7 @@ def test_parameter_entry_consistent(module: str, p: Parameter) -> None:
         assert p.min <= p.max
         assert -(2**31) <= p.min and p.max <= 2**32 - 1, "fits the 32-bit value field"
     else:
-        assert p.choices or p.note, "no range: the note must say why"
+        assert p.choices or p.source, "no range: the source must say why"
     if p.choices:
         assert len(set(p.choices)) == len(p.choices)
         if p.min is not None:
@@ -397,3 +397,52 @@ def test_parameter_check_messages() -> None:
     with pytest.raises(ValidationError, match=r"9 is out of range for AP 140 MicrostepResolution"):
         p.check(9)
     assert p.describe_value(8).startswith("256")
+
+
+# -- what users read ------------------------------------------------------------------------------
+
+# Words of transcribing a manual: they belong in `source`, never in what `help` shows a user.
+_TRANSCRIPTION = re.compile(
+    r"decod|misprint|decided|decision|printed|garbled|superscript|typo|§|chapter|taken as|"
+    r"\bkept\b|chosen|-era\b|dropped digit|\bread as\b|the table|revision|"
+    r"(?-i:[\u0100-\u017f])",  # the TMCM-351 manual's shifted font (`.Ğ4`, `ē`)
+    re.IGNORECASE)
+
+_USER_TEXTS = [(m, p.label, field, text) for m in MODULES for p in modules.load(m).axis_params
+               + modules.load(m).global_params
+               for field, text in (("note", p.note), ("description", p.description),
+                                   ("manual_name", p.manual_name)) if text] + [
+    (m, f"{port.name} (bank {port.bank})", field, text) for m in MODULES
+    for port in modules.load(m).io for field, text in (("note", port.note),
+                                                        ("description", port.description)) if text]
+
+
+@pytest.mark.parametrize("module, label, field, text", _USER_TEXTS,
+                         ids=[f"{m}-{label}-{f}" for m, label, f, _ in _USER_TEXTS])
+def test_user_text_has_no_transcription_notes(module: str, label: str, field: str,
+                                              text: str) -> None:
+    found = _TRANSCRIPTION.search(text)
+    assert found is None, f"{module} {label} {field} says {found.group()!r}: move it to source"
+
+
+def test_vocabulary_check_catches_the_old_notes() -> None:
+    """The check above would have refused what `help 140` showed on the TMCM-351."""
+    assert _TRANSCRIPTION.search("Range printed garbled '.\u011e4', decoded 0…6.")
+    assert _TRANSCRIPTION.search("decided RWE like all neighbouring configuration parameters")
+    assert _TRANSCRIPTION.search("'5535' is likely a misprint")
+    assert not _TRANSCRIPTION.search("Should always be 1; do not change it.")
+
+
+def test_a_source_is_kept_where_the_note_was_split() -> None:
+    """The maintainers' record survives: every decision text is still in the data."""
+    mod = modules.load("TMCM-351")
+    p = mod.axis(140)
+    assert p.note and "\u011e4" not in p.note
+    assert p.source and "decoded 0…6" in p.source
+
+
+@pytest.mark.parametrize("module, p", ALL_PARAMS, ids=lambda x: getattr(x, "label", x))
+def test_no_default_where_the_source_says_none_was_printed(module: str, p: Parameter) -> None:
+    source = (p.source or "").lower()
+    if re.search(r"no default printed|default not printed", source):
+        assert p.default is None, f"{module} {p.label}: the manual gives no default"

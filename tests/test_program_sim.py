@@ -313,7 +313,8 @@ def test_shell_walkthrough_json(client, sim, timer_file, tmp_path, capsys):
 
     dumped = tmp_path / "dumped.tmc"
     (d,) = run_json(s, capsys, f".dump {dumped}")
-    assert d == {"dumped": 15, "file": str(dumped), "identical": True}
+    assert d == {"dumped": 15, "file": str(dumped), "identical": True,
+                 "uploaded_from": str(timer_file.resolve())}  # the source map of the upload
     again = asm.assemble_file(dumped, client.module)
     assert program.same_image(again.instructions, asm.assemble_file(timer_file, client.module)
                               .instructions)

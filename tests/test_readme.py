@@ -205,7 +205,7 @@ def test_the_tour_program_uploads_and_steps(tmp_path):
     assert out.returncode == 0, out.stderr
     got = normalise(out.stdout)
     for line in shown.splitlines():
-        if re.match(r"TMCM-\d+:\d+", line) or "(y/n)" in line:
+        if re.match(r"TMCM-\d+:\d+", line) or "[y/N]" in line:
             continue  # prompts, and the question only asked at the prompt
         assert normalise(line) in got, f"README shows {line!r}; tmclsh printed:\n{got}"
 

@@ -255,13 +255,13 @@ def test_eeprom_write_asks_and_no_sends_nothing(repl):
     frames = Frames(repl.session.client)
     repl.type("STAP MaxPositioningSpeed, 0" + ENTER)
     repl.expect("EEPROM")
-    repl.type("n")
+    repl.type("n" + ENTER)
     repl.expect("cancelled; nothing was sent")
     assert frames.tx == []
     repl.wait_prompt()
     repl.type("STAP MaxPositioningSpeed, 0" + ENTER)
     repl.expect("EEPROM")
-    repl.type("y")
+    repl.type("y" + ENTER)
     repl.expect("stored in EEPROM")
     assert [f.opcode for f in frames.tx] == [7]
     assert repl.quit() == 0

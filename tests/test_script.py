@@ -86,7 +86,7 @@ def test_expect_passes_and_fails_with_expected_and_actual(session, tmp_path, cap
     assert "not reached" not in cap.out
     assert session.stats.checks_passed == 1 and session.stats.checks_failed == 1
     # the summary: commands, checks, time
-    assert "check.tmcl: 3 commands sent, 1 check passed, 1 failed, 1 error" in cap.out
+    assert "check.tmcl: 3 commands sent, 1 check passed, 1 failed, 0 errors" in cap.out
 
 
 def test_expect_names_both_sides_when_the_right_one_is_computed(session, tmp_path, capsys):
@@ -212,7 +212,7 @@ def test_error_in_an_included_file_names_that_file(session, tmp_path, capsys):
     (".if 1\n.else\n.else\n.end\n", 3, ".else after .else"),
     (".wait GAP 8, 0 == 1 --timout 3\n", 1, "unknown option --timout"),
     (".expect GAP 99, 0 == 1\n", 1, "GAP 99, 0"),
-    (".source nowhere.tmcl\n", 1, "no such script"),
+    (".source nowhere.tmcl\n", 1, "no such file"),
     (".let and = 1\n", 1, "reserved word"),
 ])
 def test_syntax_errors_stop_before_anything_is_sent(session, tmp_path, capsys, body, line,
@@ -245,7 +245,7 @@ def test_keep_going_runs_on_and_still_fails(session, tmp_path, capsys):
     cap = capsys.readouterr()
     assert "kg.tmcl:1: expectation failed" in cap.err and "kg.tmcl:2: module answered" in cap.err
     assert "reached the end" in cap.out
-    assert "0 checks passed, 1 failed, 2 errors" in cap.out
+    assert "0 checks passed, 1 failed, 1 error," in cap.out
 
 
 def test_onerror_runs_when_the_script_stops(session, tmp_path, capsys):
@@ -301,7 +301,7 @@ def test_cli_exit_status_and_located_errors(tmp_path, capsys):
     assert cli.main(["--sim", "-f", str(syntax)]) == 2
     assert cli.main(["--sim", "-f", str(tmp_path / "missing.tmcl")]) == 2
     err = capsys.readouterr().err
-    assert f"{syntax}:2: " in err and "no such script" in err
+    assert f"{syntax}:2: " in err and "no such file" in err
 
 
 def test_cli_dash_reads_stdin(monkeypatch, capsys):

@@ -102,7 +102,7 @@ def test_help_number_shows_axis_and_global_parameter(session, capsys):
 def test_help_for_a_command_and_a_bare_word(session, capsys):
     run(session, "help .param", "help quit")
     out = capsys.readouterr().out
-    assert ".param QUERY" in out
+    assert ".param [--source] QUERY" in out
     assert ".quit" in out and "leave the shell" in out
 
 

@@ -91,7 +91,8 @@ def test_version_string_and_binary_layouts():
     r = result("136 0, 0, 0")
     r = Result(r.line, r.encoded, Reply(2, 1, 100, 136, 0, version="1311V111"))
     assert render_result(r, M).plain == "firmware 1311V111"
-    assert version_text(0x051F6F00, M) == "module type 1311, firmware 1.11"
+    assert version_text(0x051F6F00, M) == (
+        "05 1F 6F 00: module type 1311 (05 1F), version 111 (6F 00, low byte first)")
     # the TMCM-1640 manual: version low, version high, type low, type high
     v = int.from_bytes(bytes((210, 0, 1640 & 0xFF, 1640 >> 8)), "big")
     assert binary_version(v, M1640) == (1640, 210)

@@ -270,3 +270,22 @@ def test_terminal_through_the_cli_without_a_tty(run_tmclsh):
 def test_terminal_raw_needs_a_tty(run_tmclsh):
     res = run_tmclsh("--sim", "-c", ".ascii --raw")
     assert res.returncode != 0 and "needs a terminal" in res.stderr
+
+
+def test_bin_sent_from_the_terminal_returns_to_the_binary_link(run_tmclsh):
+    res = run_tmclsh("--sim", "-c", ".ascii\nGAP 1, 0",
+                     input="SAP 1, 0, 77\nBIN\nGAP 1, 0\n")
+    assert res.returncode == 0, res.stderr
+    out, notes = res.stdout.splitlines(), res.stderr.splitlines()
+    # the line after BIN is not sent in ASCII: the terminal has ended; the -c line after
+    # .ascii runs on binary frames
+    assert out == ["BA 100 77   ok, value 77", "BA 100 0   ok, value 0",
+                   "ActualPosition = 77 µsteps"]
+    assert "--- module left ASCII mode (BIN): back to the shell on the binary link" in notes
+    assert not any("send BIN" in n for n in notes)
+
+
+def test_quit_in_the_terminal_without_a_tty(run_tmclsh):
+    res = run_tmclsh("--sim", "-c", ".ascii --bin\nGAP 1, 0", input="SAP 1, 0, 5\n.quit\nGAP 1, 0\n")
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.splitlines() == ["BA 100 5   ok, value 5", "ActualPosition = 5 µsteps"]

@@ -3,6 +3,8 @@ read back. The module is a simulator served on a pty in this process. Skips with
 
 from __future__ import annotations
 
+import re
+
 import pytest
 from conftest import tmclsh_env
 from tmux import Terminal, needs_tmux
@@ -74,3 +76,126 @@ def test_raw_mode_backspace(served, pane):
     p.wait("EXIT=0")
     assert "module stays in ASCII mode" in p.screen()
     assert sim.ascii_active
+
+
+def test_bin_typed_in_the_terminal_is_noticed(served, pane):
+    sim, path = served
+    p = pane("--port", path)
+    p.wait("trace off")
+    p.keys(".ascii", "Enter")
+    p.wait("ascii A>")
+    p.keys("GAP 1, 0", "Enter")
+    p.wait("BA 100 0   ok, value 0")
+    p.keys("BIN", "Enter")
+    p.wait("--- module left ASCII mode (BIN): back to the shell on the binary link")
+    assert not sim.ascii_active
+    screen = p.wait("TMCM-1311:1>", more_than=1)  # the shell's prompt again, not the terminal's
+    assert "send BIN" not in screen  # nothing to ask: the module is in binary mode already
+    p.keys("GAP 1, 0", "Enter")  # the binary link answers
+    p.wait("ActualPosition = 0")
+    p.wait_for(lambda s: "binary" in s.splitlines()[-1])  # the toolbar
+    p.keys("C-d")
+    p.wait("EXIT=0")
+
+
+def test_quit_typed_in_the_terminal_leaves_it(served, pane):
+    sim, path = served
+    p = pane("--port", path, "-c", ".ascii --bin")
+    p.wait("ascii A>")
+    p.keys(".quit", "Enter")
+    p.wait("EXIT=0")
+    screen = p.screen()
+    assert "--- BIN sent: module in binary mode" in screen
+    assert "error" not in screen  # .quit was not sent to the module
+    assert not sim.ascii_active
+
+
+def test_raw_mode_quit(served, pane):
+    sim, path = served
+    p = pane("--port", path, "-c", ".ascii --raw --no-bin")
+    p.wait("Ctrl-]: back to the shell")
+    p.keys(".quit", "Enter")
+    p.wait("EXIT=0")
+    assert "module stays in ASCII mode" in p.screen()
+    assert "error" not in p.screen()  # the module forgot the typed word (backspaces)
+
+
+def test_raw_mode_bin(served, pane):
+    sim, path = served
+    p = pane("--port", path, "-c", ".ascii --raw")
+    p.wait("Ctrl-]: back to the shell")
+    p.keys("ABIN", "Enter")
+    p.wait("--- module left ASCII mode (BIN): back to the shell on the binary link")
+    p.wait("EXIT=0")
+    assert not sim.ascii_active
+
+
+def hex_seen(screen: str) -> str:
+    """The bytes of the hex view's lines (``41 47 ...  |AG..|``), joined."""
+    after = screen.split("--- hex view on", 1)[-1]
+    rows = re.findall(r"^((?:[0-9a-f]{2} )*[0-9a-f]{2}) +\|", after, re.M)
+    return " ".join(rows)
+
+
+def test_the_ctrl_t_menu(served, pane, tmp_path):
+    sim, path = served
+    log = tmp_path / "session.log"
+    lines = tmp_path / "lines.tmcl"
+    lines.write_text("# set and read back\nSAP 4, 0, 777\n\nGAP 4, 0\n")
+    p = pane("--port", path, "-c", ".ascii --no-bin")
+    p.wait("ascii A>")
+    p.hex("14")  # Ctrl-T
+    p.wait("Ctrl-T: e echo [off] · h hex [off] · t time [off] · f log [off] · u send file")
+    p.keys("?")
+    p.wait("f  log the session to a file (again: stop logging) [off]")
+    p.hex("14")
+    p.keys("t")
+    p.wait("--- timestamps on")
+    p.keys("GAP 1, 0", "Enter")
+    screen = p.wait("BA 100 0   ok, value 0")
+    assert re.search(r"\[\d\d:\d\d:\d\d\.\d{3}\] BA 100 0   ok, value 0", screen)
+    p.hex("14")
+    p.keys("t")
+    p.wait("--- timestamps off")
+    p.hex("14")
+    p.keys("h")
+    p.wait("--- hex view on")
+    p.keys("GAP 1, 0", "Enter")
+    p.wait_for(lambda s: "42 41 20 31 30 30 20 30 0d" in hex_seen(s),
+               what="the reply's bytes not shown")  # BA 100 0 CR, in however many reads
+    p.hex("14")
+    p.keys("h")
+    p.wait("--- hex view off")
+    p.hex("14")
+    p.keys("f")
+    p.wait("log the session to file:")
+    p.type(str(log))
+    p.keys("Enter")
+    p.wait(f"--- logging the session to {log}")
+    p.hex("14")
+    p.keys("u")
+    p.wait("send the lines of file:")
+    p.type(str(lines))
+    p.keys("Enter")
+    p.wait("--- sent 2 of 2 lines")
+    screen = p.screen()
+    assert "BA 100 777   ok, value 777" in screen
+    assert screen.count("BA 100 777") == 2  # SAP and GAP, each answered
+    p.hex("14")
+    p.keys("e")
+    p.wait("--- local echo on")
+    p.keys("GAP 4, 0", "Enter")
+    p.wait("AGAP 4, 0")  # the line as sent
+    p.hex("14")
+    p.keys("f")
+    p.wait(f"--- log closed: {log}")
+    p.hex("14")  # the menu, then Enter: Enter does its job and the menu is gone
+    p.keys("Enter")
+    p.keys("SAP 4, 0, 4321", "Enter")  # typed as a line, S not taken for the menu
+    p.wait("BA 100 4321   ok, value 4321")
+    assert "no such menu entry" not in p.screen()
+    p.hex("1d")
+    p.wait("EXIT=0")
+    text = log.read_text()
+    assert "BA 100 777   ok, value 777" in text and "\x1b" not in text
+    assert sim.ascii_active  # --no-bin

@@ -40,6 +40,7 @@ class Terminal:
                  height: int = 36, history: int = 0, timeout: float = 15.0):
         self.env = {"XDG_STATE_HOME": str(tmp_path / "state"),
                     "XDG_CONFIG_HOME": str(tmp_path / "config"),
+                    "XDG_CACHE_HOME": str(tmp_path / "cache"),
                     "PYTHONPATH": str(ROOT), "TERM": "xterm-256color", **(env or {})}
         self.unset = ("COLUMNS", "LINES", *unset)
         self.cwd, self.width, self.height = cwd, width, height

@@ -29,7 +29,9 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from . import instructions as isa
-from .errors import AsmError, ValidationError
+from .errors import AsmError, RangeError, ValidationError
+from .files import MAX_FILE as MAX_SOURCE
+from .files import MAX_LINES, FileError, decode, read_bytes, size_text
 from .modules import Module, Parameter
 from .protocol import INSTRUCTION_LEN, INT32_MAX, INT32_MIN, UINT32_MAX, Control, Instruction
 
@@ -51,8 +53,12 @@ _TOKEN = re.compile(r"""
 _MAX_LITERAL = 40
 # Deepest nesting of parentheses and unary signs in one operand.
 _MAX_DEPTH = 64
+# Most binary operators in one operand: the tree of ``1+1+...`` is as deep as it is long.
+_MAX_OPERATORS = 128
 # Intermediate results of constant arithmetic are kept within this magnitude.
 _MAX_MAGNITUDE = 2**64
+# Longest source line (characters) and largest source file (bytes).
+MAX_LINE_LENGTH = 4096
 
 
 @dataclass(frozen=True)
@@ -64,6 +70,9 @@ class Token:
 
 
 def tokenize(text: str, line: int | None = None, file: str | None = None) -> list[Token]:
+    if len(text) > MAX_LINE_LENGTH:
+        raise AsmError(f"line longer than {MAX_LINE_LENGTH} characters", line,
+                       MAX_LINE_LENGTH + 1, file)
     tokens: list[Token] = []
     pos = 0
     while pos < len(text):
@@ -122,6 +131,7 @@ class _Parser:
         self.file = file
         self.end_col = end_col
         self.depth = 0
+        self.operators = 0
 
     def peek(self) -> Token | None:
         return self.toks[self.i] if self.i < len(self.toks) else None
@@ -140,9 +150,16 @@ class _Parser:
         tok = self.peek()
         return tok if tok is not None and tok.kind == "op" and tok.text in chars else None
 
+    def _operator(self, tok: Token) -> None:
+        self.operators += 1
+        if self.operators > _MAX_OPERATORS:
+            where = f" (column {tok.col})" if self.line is None else ""
+            raise self.error(f"expression has more than {_MAX_OPERATORS} operators{where}", tok)
+
     def expr(self) -> Expr:
         left = self.term()
         while (tok := self._is_op("+-")) is not None:
+            self._operator(tok)
             self.i += 1
             left = Expr(tok.text, left.col, args=(left, self.term()))
         return left
@@ -150,6 +167,7 @@ class _Parser:
     def term(self) -> Expr:
         left = self.unary()
         while (tok := self._is_op("*/%")) is not None:
+            self._operator(tok)
             self.i += 1
             left = Expr(tok.text, left.col, args=(left, self.unary()))
         return left
@@ -202,8 +220,8 @@ class Line:
     include_col: int = 0
     comment: str = ""
 
-    def error(self, msg: str, col: int | None = None) -> AsmError:
-        return AsmError(msg, self.number, col, self.file)
+    def error(self, msg: str, col: int | None = None, kind: str = "syntax") -> AsmError:
+        return AsmError(msg, self.number, col, self.file, kind)
 
     @property
     def is_raw(self) -> bool:
@@ -333,8 +351,12 @@ def _eval(expr: Expr, line: Line, resolve: Callable[[Expr], int | None]) -> int:
         q = abs(a) // abs(b) * (1 if (a >= 0) == (b >= 0) else -1)  # truncate like C
         result = q if expr.op == "/" else a - q * b
     if abs(result) > _MAX_MAGNITUDE:
-        raise line.error("value too large", expr.col)
+        raise line.error("value too large", expr.col, "range")
     return result
+
+
+def _kind(exc: ValidationError) -> str:
+    return "range" if isinstance(exc, RangeError) else "check"
 
 
 def eval_constant(line: Line, symbols: Symbols) -> int:
@@ -345,7 +367,7 @@ def eval_constant(line: Line, symbols: Symbols) -> int:
 
 def _check_int32(value: int, line: Line, col: int) -> None:
     if not INT32_MIN <= value <= UINT32_MAX:
-        raise line.error(f"{value} does not fit in 32 bits", col)
+        raise line.error(f"{value} does not fit in 32 bits", col, "range")
 
 
 def _suggest(word: str, choices) -> str:
@@ -369,10 +391,15 @@ def encode(line: Line, module: Module, symbols: Symbols | None = None, *,
     spec = isa.by_mnemonic(line.mnemonic)
     if spec is None:
         known = [s.mnemonic for s in module.instructions]
-        raise line.error(f"unknown command {line.mnemonic!r}{_suggest(line.mnemonic, known)}",
-                         line.mnemonic_col)
+        hint = _suggest(line.mnemonic, known)
+        if module.generic and not hint:
+            hint = "; any command can be sent by number: <command> <type>, <motor>, <value>"
+        raise line.error(f"unknown command {line.mnemonic!r}{hint}", line.mnemonic_col)
     if not spec.on(module.name):
-        raise line.error(f"{spec.mnemonic} is not available on the {module.name}", line.mnemonic_col)
+        hint = (f" (no data on this module's commands: send it by number, {spec.opcode} "
+                "<type>, <motor>, <value>)") if module.generic else ""
+        raise line.error(f"{spec.mnemonic} is not available on the {module.name}{hint}",
+                         line.mnemonic_col)
     if direct and not spec.direct:
         raise line.error(f"{spec.mnemonic} only works inside a stored program, not as a direct "
                          "command (upload a program with .upload)", line.mnemonic_col)
@@ -389,9 +416,10 @@ class _Encoder:
         self.param: Parameter | None = None
         self.label: str | None = None
 
-    def fail(self, msg: str, expr: Expr | None = None) -> AsmError:
+    def fail(self, msg: str, expr: Expr | None = None, kind: str = "check") -> AsmError:
+        """A well-formed line this module refuses; ``kind="range"`` for a value out of range."""
         col = expr.col if expr is not None else self.line.mnemonic_col
-        return self.line.error(msg, col)
+        return self.line.error(msg, col, kind)
 
     def number(self, expr: Expr, extra: dict[str, int] | None = None) -> int:
         def resolve(e: Expr) -> int | None:
@@ -412,11 +440,13 @@ class _Encoder:
             given = dict(zip(FIELDS, ops))  # `GAP 1, 0, 0`: don't-care fields written out
         else:
             raise self.fail(f"too many operands: {spec.syntax} (or all three fields: "
-                            f"{spec.mnemonic} <type>, <motor>, <value>)", ops[len(spec.fields)])
+                            f"{spec.mnemonic} <type>, <motor>, <value>)", ops[len(spec.fields)],
+                            "syntax")
         if "type" in spec.fields and "type" not in given:
-            raise self.fail(f"{spec.mnemonic} needs its first operand: {spec.syntax}")
+            raise self.fail(f"{spec.mnemonic} needs its first operand: {spec.syntax}",
+                            kind="syntax")
         if "value" in spec.fields and "value" not in given:
-            raise self.fail(f"{spec.mnemonic} needs a value: {spec.syntax}")
+            raise self.fail(f"{spec.mnemonic} needs a value: {spec.syntax}", kind="syntax")
         return given
 
     def run(self) -> Encoded:
@@ -475,7 +505,7 @@ class _Encoder:
                 raise self.fail(f"{mod.name} has no {what} {value}: banks "
                                 f"{', '.join(map(str, banks))}", expr)
         elif not 0 <= value <= 255:
-            raise self.fail(f"{value} does not fit the motor/bank byte (0..255)", expr)
+            raise self.fail(f"{value} does not fit the motor/bank byte (0..255)", expr, "range")
         return value
 
     def type_(self, expr: Expr, motor: int, motor_given: bool) -> int:
@@ -509,6 +539,8 @@ class _Encoder:
                     self.param = mod.lookup(pkind, number, bank)
             except ValidationError as exc:
                 raise self.fail(str(exc), expr) from None
+            if mod.generic:
+                self.param = None  # a number without data: nothing to check or name it by
             return number
         if kind == "interrupt":
             value = self.number(expr, isa.interrupts())
@@ -526,10 +558,11 @@ class _Encoder:
             return value
         if kind == "coordinate":
             if not 0 <= value < mod.coordinates:
-                raise self.fail(f"coordinate {value} out of range: 0..{mod.coordinates - 1}", expr)
+                raise self.fail(f"coordinate {value} out of range: 0..{mod.coordinates - 1}", expr,
+                                "range")
             return value
         if not 0 <= value <= 255:
-            raise self.fail(f"{value} does not fit the type byte (0..255)", expr)
+            raise self.fail(f"{value} does not fit the type byte (0..255)", expr, "range")
         return value
 
     def all_ports(self, port: int, bank: int) -> bool:
@@ -545,19 +578,20 @@ class _Encoder:
         if kind == "velocity":
             lo, hi = mod.velocity_min, mod.velocity_max
             if not lo <= value <= hi:
-                raise self.fail(f"velocity {value} out of range {lo}..{hi}", expr)
+                raise self.fail(f"velocity {value} out of range {lo}..{hi}", expr, "range")
         elif kind == "position":
             if spec.mnemonic == "MVP" and fields["type"] == spec.type_names(mod.name).get("COORD"):
                 if not 0 <= value < mod.coordinates:
-                    raise self.fail(f"coordinate {value} out of range: 0..{mod.coordinates - 1}", expr)
+                    raise self.fail(f"coordinate {value} out of range: 0..{mod.coordinates - 1}", expr,
+                                "range")
             elif not mod.position_min <= value <= mod.position_max:
                 raise self.fail(f"position {value} out of range "
-                                f"{mod.position_min}..{mod.position_max}", expr)
+                                f"{mod.position_min}..{mod.position_max}", expr, "range")
         elif kind == "param" and self.param is not None:
             try:
                 self.param.check(value)
             except ValidationError as exc:
-                raise self.fail(str(exc), expr) from None
+                raise self.fail(str(exc), expr, _kind(exc)) from None
         elif kind == "port_value":
             self.check_port_value(value, fields, expr)
         elif kind == "ticks":
@@ -597,12 +631,12 @@ class _Encoder:
             p = self.module.port(bank, port)
             if p is None:  # type_() refused unknown ports already
                 raise self.fail(f"no port {port} in I/O bank {bank}", expr)
-            if p.kind != "digital_out":
+            if p.kind not in ("digital_out", "unknown"):  # unknown: a generic module's port
                 raise self.fail(f"{p.name} (bank {p.bank} port {p.port}) is an input; "
                                 "SIO sets outputs", expr)
             lo, hi = p.min, p.max
         if not lo <= value <= hi:
-            raise self.fail(f"value {value} out of range {lo}..{hi} for this port", expr)
+            raise self.fail(f"value {value} out of range {lo}..{hi} for this port", expr, "range")
 
     def check_access(self) -> None:
         p, spec = self.param, self.spec
@@ -620,13 +654,14 @@ def _encode_raw(line: Line, symbols: Symbols, direct: bool) -> Encoded:
     """A bare command number with up to three numeric operands: sent as typed."""
     opcode = int(line.mnemonic or "0")
     if not 0 <= opcode <= 255:
-        raise line.error(f"command number {opcode} out of range 0..255", line.mnemonic_col)
+        raise line.error(f"command number {opcode} out of range 0..255", line.mnemonic_col,
+                         "range")
     vals = []
     for i, expr in enumerate(line.operands):
         v = _eval(expr, line, lambda e: symbols.lookup(e.name or ""))
         limit = (0, 255) if i < 2 else (INT32_MIN, UINT32_MAX)
         if not limit[0] <= v <= limit[1]:
-            raise line.error(f"{v} out of range {limit[0]}..{limit[1]}", expr.col)
+            raise line.error(f"{v} out of range {limit[0]}..{limit[1]}", expr.col, "range")
         vals.append(v)
     vals += [0] * (3 - len(vals))
     if direct and opcode == Control.FACTORY_DEFAULT and vals[2] != 1234:
@@ -658,10 +693,11 @@ class Program:
         return len(self.instructions)
 
     def to_binary(self) -> bytes:
-        return b"".join(i.to_bytes() for i in self.instructions)
+        """The TMCL-IDE image: one 8-byte record per instruction (see ``image_bytes``)."""
+        return image_bytes(self.instructions)
 
     def to_hex(self) -> str:
-        return "".join(i.to_bytes().hex(" ") + "\n" for i in self.instructions)
+        return hex_text(self.instructions)
 
     def loc(self, address: int) -> SourceLoc | None:
         idx = address - self.origin
@@ -727,7 +763,10 @@ class Assembler:
                 key = str(path.resolve())
                 if key in stack:
                     raise line.error(f"recursive #include of {name}", line.include_col)
-                return key, path.read_text(encoding="utf-8", errors="replace")
+                data = read_bytes(path, MAX_SOURCE, "include file")
+                return key, data.decode("utf-8", errors="replace")
+            except FileError as exc:
+                raise line.error(str(exc), line.include_col) from None
             except (OSError, ValueError) as exc:  # unreadable, bad name (NUL, too long)
                 if isinstance(exc, AsmError):
                     raise
@@ -807,23 +846,86 @@ def assemble(text: str, module: Module, file: str = "<input>", origin: int = 0,
 
 
 def assemble_file(path: str | Path, module: Module, origin: int = 0) -> Program:
+    """Assemble a source file (at most ``MAX_SOURCE`` bytes, ``files.MAX_LINES`` lines)."""
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise AsmError(f"cannot read {p}: {exc.strerror}", file=str(p)) from None
-    except UnicodeDecodeError:
-        raise AsmError(f"{p} is not a text file", file=str(p)) from None
+        text = decode(read_bytes(p, MAX_SOURCE, "program"), str(p), "program")
+    except FileError as exc:
+        raise AsmError(str(exc), file=str(p)) from None
+    if text.count("\n") > MAX_LINES:
+        raise AsmError(f"{p}: program longer than {MAX_LINES:,} lines; not read")
     return Assembler(module, origin).assemble(text, str(p), p.parent)
+
+
+def image_limit(module: Module | None) -> int:
+    """Bytes of the largest image file worth reading for ``module``: its program memory
+    as hex text (the larger form), with room for line ends."""
+    memory = module.program_memory if module is not None else 2048
+    return memory * 32
+
+
+def read_image_instructions(path: str | Path, module: Module | None) -> list[Instruction]:
+    """An image file's instructions (``-`` = stdin), read no further than the module's
+    program memory could need; errors name the file."""
+    limit = image_limit(module)
+    try:
+        data = read_bytes(path, limit, "image")
+    except FileError as exc:
+        if "larger than" in str(exc) and module is not None:
+            raise AsmError(f"{path}: image larger than the {module.name}'s program memory "
+                           f"({module.program_memory} instructions, {size_text(limit)} "
+                           "of hex text); not read") from None
+        raise AsmError(str(exc)) from None
+    try:
+        image = read_image(data)
+    except AsmError as exc:
+        raise AsmError(exc.message, exc.line, exc.col, file=str(path)) from None
+    if module is not None and len(image) > module.program_memory:
+        raise AsmError(f"{path}: image of {len(image)} instructions; the {module.name} "
+                       f"holds {module.program_memory}")
+    return image
 
 
 # -- images ------------------------------------------------------------------------------
 
-def read_image(data: bytes) -> list[Instruction]:
-    """Instructions from a binary image (7 bytes each) or the ``--hex`` text form.
+# The TMCL-IDE's binary image (and PyTrinamic's LoadTMCLBinary): per instruction command,
+# type, motor/bank, value (4 bytes, MSB first), then the 8-bit sum of those seven bytes.
+IMAGE_RECORD_LEN = INSTRUCTION_LEN + 1
 
-    The text form is one instruction per line, seven two-digit hex bytes separated by spaces
-    (what ``Program.to_hex`` writes).
+
+def image_bytes(instructions: list[Instruction]) -> bytes:
+    """Instructions as a TMCL-IDE binary image (8-byte records with their checksum)."""
+    out = bytearray()
+    for ins in instructions:
+        raw = ins.to_bytes()
+        out += raw + bytes((sum(raw) & 0xFF,))
+    return bytes(out)
+
+
+def hex_text(instructions: list[Instruction]) -> str:
+    """The ``--hex`` text form: one instruction per line, seven hex bytes."""
+    return "".join(i.to_bytes().hex(" ") + "\n" for i in instructions)
+
+
+def is_image_file(path: str | Path, data: bytes | None = None) -> bool:
+    """A ``.bin``/``.hex`` file, or bytes that are not text, hold an image, not source."""
+    if Path(path).suffix.lower() in (".bin", ".hex"):
+        return True
+    if data is None:
+        return False
+    try:
+        data.decode("utf-8")
+    except UnicodeDecodeError:
+        return True
+    return False
+
+
+def read_image(data: bytes) -> list[Instruction]:
+    """Instructions from a TMCL-IDE binary image or the ``--hex`` text form.
+
+    The binary image is 8-byte records whose last byte is the 8-bit sum of the other seven;
+    a record with another checksum is refused, naming it. The text form is one instruction
+    per line, seven two-digit hex bytes separated by spaces (what ``Program.to_hex`` writes).
     """
     try:
         text = data.decode("ascii")
@@ -839,11 +941,40 @@ def read_image(data: bytes) -> list[Instruction]:
                 raise AsmError(f"expected {INSTRUCTION_LEN} hex bytes, found {len(parts)}", no, 1)
             out.append(Instruction.from_bytes(bytes(int(x, 16) for x in parts)))
         return out
-    if len(data) % INSTRUCTION_LEN:
-        raise AsmError(f"a binary image is a multiple of {INSTRUCTION_LEN} bytes; "
-                       f"this one has {len(data)}")
-    return [Instruction.from_bytes(data[i:i + INSTRUCTION_LEN])
-            for i in range(0, len(data), INSTRUCTION_LEN)]
+    if len(data) % IMAGE_RECORD_LEN:
+        hint = (" (7-byte records without checksums are not a TMCL-IDE image; convert them "
+                "with the --hex text form)") if len(data) % INSTRUCTION_LEN == 0 else ""
+        raise AsmError(f"a binary image is {IMAGE_RECORD_LEN}-byte records; this one has "
+                       f"{len(data)} bytes{hint}")
+    out = []
+    for n, i in enumerate(range(0, len(data), IMAGE_RECORD_LEN), 1):
+        raw, check = data[i:i + INSTRUCTION_LEN], data[i + INSTRUCTION_LEN]
+        if sum(raw) & 0xFF != check:
+            raise AsmError(f"record {n} (bytes {i}..{i + IMAGE_RECORD_LEN - 1}) has checksum "
+                           f"{check:#04x}, expected {sum(raw) & 0xFF:#04x}; the image is "
+                           "damaged")
+        out.append(Instruction.from_bytes(raw))
+    return out
+
+
+def read_image_file(path: str | Path, module: Module, origin: int = 0) -> Program:
+    """A binary or hex image file as a Program (its "source" is the disassembly)."""
+    instructions = read_image_instructions(path, module)
+    source = [SourceLoc(str(path), n, disassemble_instruction(ins, module)[0])
+              for n, ins in enumerate(instructions, 1)]
+    return Program(module, instructions, source, {}, origin)
+
+
+def load_program(path: str | Path, module: Module, origin: int = 0) -> Program:
+    """What ``.upload`` and the debugger take: TMCL source, or an image (``.bin``/``.hex``)."""
+    if is_image_file(path):
+        return read_image_file(path, module, origin)
+    try:
+        return assemble_file(path, module, origin)
+    except AsmError as exc:
+        if "is not a text file" in exc.message:
+            return read_image_file(path, module, origin)
+        raise
 
 
 # -- the disassembler --------------------------------------------------------------------

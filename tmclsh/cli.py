@@ -6,7 +6,6 @@ Heavy modules (prompt_toolkit, rich, python-can) are imported only by the paths 
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 
 from .options import (EXIT_CONNECT, EXIT_ERROR, EXIT_OK, EXIT_USAGE,  # noqa: F401
@@ -27,25 +26,20 @@ def cmd_asm(args: argparse.Namespace) -> int:
     if str(out) == "-":
         sys.stdout.buffer.write(data)
         return EXIT_OK
-    tmp = out.with_name(out.name + ".tmp")
-    tmp.write_bytes(data)
-    os.replace(tmp, out)  # never leave a partial file behind
+    from .files import write_file
+
+    write_file(out, data)  # all or nothing: a failed write leaves OUT as it was
     print(f"{args.file}: {len(prog)} instructions for {prog.module.name} -> {out}", file=sys.stderr)
     return EXIT_OK
 
 
 def cmd_disasm(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
-    from .asm import disassemble, read_image
-    from .errors import AsmError
+    from .asm import disassemble, read_image_instructions
     from .modules import load
 
-    try:
-        data = sys.stdin.buffer.read() if args.file == "-" else Path(args.file).read_bytes()
-    except OSError as exc:
-        raise AsmError(f"cannot read {args.file}: {exc.strerror}") from None
-    sys.stdout.write(disassemble(read_image(data), load(args.module), origin=args.at))
+    module = load(args.module)
+    image = read_image_instructions(args.file, module)  # bounded by its program memory
+    sys.stdout.write(disassemble(image, module, origin=args.at))
     return EXIT_OK
 
 
@@ -53,7 +47,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from .sim.serve import run
 
     return run(args.module, args.address, pty=args.pty, tcp=args.tcp, can=args.can,
-               host_address=args.host_address)
+               host_address=args.host_address, bitrate=args.bitrate)
 
 
 def cmd_ports(args: argparse.Namespace) -> int:
@@ -147,23 +141,97 @@ def cmd_scan(args: argparse.Namespace) -> int:
     return EXIT_OK if found else EXIT_ERROR
 
 
+def cmd_modules(args: argparse.Namespace) -> int:
+    """The known modules and where each comes from, or (``check FILE``) one file validated."""
+    import json
+
+    from . import modules
+
+    if args.action == "check" or args.file:
+        if not args.file:
+            print("tmclsh: modules check wants a FILE", file=sys.stderr)
+            return EXIT_USAGE
+        try:
+            mod = modules.read_file(args.file)
+        except modules.ModuleFileError as exc:
+            print(f"tmclsh: {exc}", file=sys.stderr)
+            return EXIT_ERROR
+        print(f"{args.file}: {mod.name} (firmware id {mod.firmware_id}, version "
+              f"{mod.version_string}): {len(mod.axis_params)} axis and {len(mod.global_params)} "
+              f"global parameters, {len(mod.io)} I/O ports, commands of "
+              f"{modules.commands_of(mod)}: OK")
+        return EXIT_OK
+    built = set(modules.built_in())
+    for mod in modules.catalogue():
+        source = mod.source
+        if source != modules.BUILT_IN and mod.name in built:
+            source += " (replaces the built-in)"
+        if getattr(args, "json", False):
+            print(json.dumps({"module": mod.name, "firmware_id": mod.firmware_id,
+                              "version_string": mod.version_string, "source": source}))
+        else:
+            print(f"{mod.name:<12} {mod.version_string:<10} {source}")
+    if not getattr(args, "json", False):
+        print(f"{'generic':<12} {'any':<10} built in: numbers only, for any other TMCL module")
+    for problem in modules.problems():
+        print(f"tmclsh: not loaded: {problem}", file=sys.stderr)
+    return EXIT_ERROR if modules.problems() else EXIT_OK
+
+
 # -- entry point -------------------------------------------------------------------------
+
+def show_manual(parser: argparse.ArgumentParser) -> int:
+    """The man page, generated now (so an editable install shows the current one): through
+    man(1) on a terminal where there is one, else the roff text."""
+    import shutil
+    import subprocess
+    import tempfile
+
+    from .docs import manpage
+
+    text = manpage(parser)
+    man = shutil.which("man")
+    if not sys.stdout.isatty() or man is None:
+        sys.stdout.write(text)
+        return EXIT_OK
+    with tempfile.TemporaryDirectory() as tmp:
+        page = os.path.join(tmp, "tmclsh.1")
+        with open(page, "w", encoding="utf-8") as f:
+            f.write(text)
+        return subprocess.call([man, page])  # a path with a slash: man reads that file
+
+
+def _user_modules(args: argparse.Namespace) -> None:
+    """Take in --module-file; a module file that cannot be used is one warning line and the
+    run goes on without it (``tmclsh modules`` reports them itself)."""
+    from . import modules
+
+    for path in getattr(args, "module_file", None) or ():
+        modules.add_file(path)
+    if args.subcommand == "modules":
+        return
+    for problem in modules.problems():
+        print(f"tmclsh: warning: {problem}; going on without it", file=sys.stderr)
+
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     parser = build_parser()
     args = parser.parse_args(argv)
     debug = getattr(args, "debug", False)
-    from .errors import TmclError
+    from .errors import TmclError, UsageError
 
     try:
+        if getattr(args, "man", False):
+            return show_manual(parser)
         if getattr(args, "completions", None):
             from .docs import completion_script
 
             sys.stdout.write(completion_script(args.completions, parser))
             return EXIT_OK
+        _user_modules(args)
         handler = {"asm": cmd_asm, "disasm": cmd_disasm, "sim": cmd_sim, "ports": cmd_ports,
-                   "scan": cmd_scan}.get(args.subcommand or "")
+                   "scan": cmd_scan, "modules": cmd_modules}.get(args.subcommand or "")
         if handler is not None:
             return handler(args)
         from .shell.main import run_shell
@@ -171,11 +239,24 @@ def main(argv: list[str] | None = None) -> int:
         return run_shell(args)
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:  # `tmclsh modules | head`: the reader has gone; stop quietly
+        try:
+            sys.stdout = open(os.devnull, "w")
+        except OSError:
+            pass
+        return EXIT_ERROR
+    except UsageError as exc:
+        if debug:
+            raise
+        print(f"tmclsh: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     except TmclError as exc:
         if debug:
             raise
         print(f"tmclsh: {exc}", file=sys.stderr)
-        return EXIT_ERROR
+        from .limits import SettingError
+
+        return EXIT_USAGE if isinstance(exc, SettingError) else EXIT_ERROR
     except OSError as exc:
         if debug:
             raise

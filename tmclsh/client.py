@@ -40,7 +40,7 @@ from typing import TYPE_CHECKING
 
 from . import instructions as isa
 from .errors import ChecksumError, StatusError, TmclTimeoutError, TransportError, ValidationError
-from .modules import Module, from_version_string
+from .modules import Module, from_version_string, generic_for
 from .modules import load as load_module
 from .protocol import (SERIAL_FRAME_LEN, VERSION_STRING_LEN, Control, Reply, ReplyKind,
                        Request, Status, status_ok)
@@ -746,10 +746,10 @@ class Client:
             raise StatusError(status, reply, f"address {self.address} refused the version "
                               f"request (136): status {status}")
         self.version = reply.version
-        mod = from_version_string(reply.version)
+        mod = from_version_string(reply.version) or generic_for(reply.version)
         if mod is None:
             raise ValidationError(f"unknown module type in version string {reply.version!r}; "
-                                  "give it with --module")
+                                  "give it with --module (or --module generic)")
         self.module = mod
         return mod
 
@@ -823,9 +823,11 @@ class Client:
         ``timeout`` s (None: wait forever)."""
         deadline = None if timeout is None else time.monotonic() + timeout
         while not predicate():
-            if deadline is not None and time.monotonic() >= deadline:
+            now = time.monotonic()
+            if deadline is not None and now >= deadline:
                 raise TmclTimeoutError(f"condition not met within {timeout:g} s")
-            time.sleep(interval)
+            # a long interval never sleeps past the deadline
+            time.sleep(interval if deadline is None else min(interval, deadline - now))
 
     def reconnect(self, wait: float = 0.0) -> None:
         """Close and reopen the transport (after the port was lost, e.g. USB unplugged).

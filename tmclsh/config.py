@@ -8,8 +8,9 @@ Shell settings (colour, editing mode, history size, confirmations) come from the
 table of the config file merged over the packaged, commented ``default.toml``, which is also
 the single list of setting names, their types and their defaults.
 
-The config file is ``$TMCLSH_CONFIG`` if set, else ``$XDG_CONFIG_HOME/tmclsh/config.toml``
-(``~/.config/tmclsh/config.toml``). Unknown keys, unknown profiles and values of the wrong
+The config file is ``$TMCLSH_CONFIG`` if set, else ``config.toml`` in the platform's config
+directory (platformdirs): ``$XDG_CONFIG_HOME/tmclsh/config.toml`` (``~/.config/tmclsh/``) on
+Linux. Unknown keys, unknown profiles and values of the wrong
 type are errors that name the file, the key and what is allowed.
 """
 
@@ -21,7 +22,9 @@ from functools import cache
 from importlib import resources
 from pathlib import Path
 
-from .errors import ValidationError
+from . import limits
+from .errors import UsageError, ValidationError
+from .limits import SettingError
 
 # environment variable -> connection setting
 ENVIRONMENT = {
@@ -34,6 +37,8 @@ ENVIRONMENT = {
     "TMCLSH_ADDRESS": "address",
     "TMCLSH_ASCII": "ascii",
     "TMCLSH_TIMEOUT": "timeout",
+    "TMCLSH_RETRIES": "retries",
+    "TMCLSH_HOST_ADDRESS": "host_address",
     "TMCLSH_PROFILE": "profile",
 }
 # variables that are not connection settings, for the man page
@@ -46,7 +51,7 @@ OTHER_ENVIRONMENT = {
 
 # connection setting -> type (what a profile or variable may hold)
 CONNECTION_TYPES: dict[str, type] = {
-    "port": str, "baud": int, "can": str, "can_id": int, "reply_id": int, "sim": str,
+    "port": str, "baud": int, "can": str, "bitrate": int, "can_id": int, "reply_id": int, "sim": str,
     "module": str, "address": int, "host_address": int, "ascii": bool, "timeout": float,
     "retries": int,
 }
@@ -67,13 +72,19 @@ _FALSE = ("0", "false", "no", "off", "")
 
 
 def config_dir() -> Path:
-    base = os.environ.get("XDG_CONFIG_HOME") or str(Path.home() / ".config")
-    return Path(base) / "tmclsh"
+    """The platform's config directory: $XDG_CONFIG_HOME/tmclsh (~/.config/tmclsh) on Linux,
+    ~/Library/Application Support/tmclsh on macOS, %LOCALAPPDATA%\\tmclsh on Windows."""
+    import platformdirs
+
+    return Path(platformdirs.user_config_dir("tmclsh", appauthor=False))
 
 
 def state_dir() -> Path:
-    base = os.environ.get("XDG_STATE_HOME") or str(Path.home() / ".local" / "state")
-    return Path(base) / "tmclsh"
+    """Where the history is kept: $XDG_STATE_HOME/tmclsh (~/.local/state/tmclsh) on Linux,
+    the platform's own place elsewhere."""
+    import platformdirs
+
+    return Path(platformdirs.user_state_dir("tmclsh", appauthor=False))
 
 
 def config_file() -> Path:
@@ -125,27 +136,25 @@ def _check_value(where: str, key: str, value: object, want: type) -> object:
     if want is float and isinstance(value, int) and not isinstance(value, bool):
         value, ok = float(value), True
     if not ok:
-        raise ValidationError(f"{where}: {key} must be {_type_name(want)}, got {value!r}")
-    _check_range(where, key, value)
+        raise SettingError(f"{where}: {key} must be {_type_name(want)}, got {value!r}")
+    return _check_range(where, key, value)
+
+
+def _check_range(where: str, key: str, value: object) -> object:
+    """Numbers against the one table of limits (``limits.LIMITS``), strings against their
+    choices; the same check the command line and the variables make."""
+    if key in limits.LIMITS:
+        return limits.check(key, value, f"{where} {key}")
+    choices = SETTING_CHOICES.get(key)
+    if choices is not None and value not in choices:
+        raise SettingError(f"{where}: {key} must be one of {', '.join(choices)}, got {value!r}")
+    if key in KINDS and not value:
+        raise SettingError(f"{where}: {key} must not be empty")
     return value
 
 
-def _check_range(where: str, key: str, value: object) -> None:
-    if key in ("address", "host_address") and not 0 <= value <= 255:  # type: ignore[operator]
-        raise ValidationError(f"{where}: {key} must be 0..255, got {value}")
-    if key in ("baud", "timeout") and value <= 0:  # type: ignore[operator]
-        raise ValidationError(f"{where}: {key} must be positive, got {value}")
-    if key in ("can_id", "reply_id", "retries", "history_size") and value < 0:  # type: ignore[operator]
-        raise ValidationError(f"{where}: {key} must not be negative, got {value}")
-    choices = SETTING_CHOICES.get(key)
-    if choices is not None and value not in choices:
-        raise ValidationError(f"{where}: {key} must be one of {', '.join(choices)}, got {value!r}")
-    if key in KINDS and not value:
-        raise ValidationError(f"{where}: {key} must not be empty")
-
-
 def _unknown(where: str, what: str, bad: set, known: tuple[str, ...]) -> ValidationError:
-    return ValidationError(f"{where}: unknown {what} {', '.join(sorted(map(str, bad)))}; "
+    return SettingError(f"{where}: unknown {what} {', '.join(sorted(map(str, bad)))}; "
                            f"known: {', '.join(known)}")
 
 
@@ -156,13 +165,15 @@ def parse_config(text: str, path: Path) -> Config:
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise ValidationError(f"{path}: {exc}") from None
+        raise SettingError(f"{path}: {exc}") from None
+    except RecursionError:  # tomllib recurses per nesting level ([[[[...]]]] 3,000 deep)
+        raise SettingError(f"{path}: values nested too deeply") from None
     extra = set(data) - {"settings", "profiles"}
     if extra:
         raise _unknown(str(path), "table(s)", extra, ("settings", "profiles"))
     raw_settings = data.get("settings", {})
     if not isinstance(raw_settings, dict):
-        raise ValidationError(f"{path}: settings must be a table ([settings])")
+        raise SettingError(f"{path}: settings must be a table ([settings])")
     bad = set(raw_settings) - set(SETTING_KEYS)
     if bad:
         raise _unknown(f"{path} [settings]", "setting(s)", bad, SETTING_KEYS)
@@ -171,33 +182,42 @@ def parse_config(text: str, path: Path) -> Config:
                 for k, v in raw_settings.items()}
     raw_profiles = data.get("profiles", {})
     if not isinstance(raw_profiles, dict):
-        raise ValidationError(f"{path}: profiles must be tables ([profiles.NAME])")
+        raise SettingError(f"{path}: profiles must be tables ([profiles.NAME])")
     profiles: dict[str, dict] = {}
     for name, prof in raw_profiles.items():
         where = f"{path} [profiles.{name}]"
         if not isinstance(prof, dict):
-            raise ValidationError(f"{where}: a profile must be a table of settings")
+            raise SettingError(f"{where}: a profile must be a table of settings")
         bad = set(prof) - set(CONNECTION_KEYS)
         if bad:
             raise _unknown(where, "key(s)", bad, CONNECTION_KEYS)
         profiles[name] = {k: _check_value(where, k, v, CONNECTION_TYPES[k]) for k, v in prof.items()}
         kinds = [k for k in KINDS if k in prof]
         if len(kinds) > 1:
-            raise ValidationError(f"{where}: {' and '.join(kinds)} exclude each other; keep one")
+            raise SettingError(f"{where}: {' and '.join(kinds)} exclude each other; keep one")
     return Config(path, settings, profiles)
 
 
+MAX_CONFIG = 1024 * 1024  # bytes of a config file
+
+
 def load_config(path: Path | None = None) -> Config:
-    """Read the config file; a missing file is an empty config, a bad one an error."""
+    """Read the config file; a missing file is an empty config, a bad one an error (a
+    directory where the file should be too: it is never silently ignored)."""
+    from .files import FileError, read_text
+
     path = path or config_file()
-    if not path.is_file():
-        return Config(path)
     try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError as exc:
-        raise ValidationError(f"{path}: not UTF-8 text ({exc.reason})") from None
-    except OSError as exc:
-        raise ValidationError(f"cannot read {path}: {exc.strerror}") from None
+        if not path.exists() and not path.is_symlink():
+            return Config(path)
+        if path.is_dir():
+            raise SettingError(f"{path}: the config file is a directory")
+        # /dev/null (no config) and pipes (<(...)) are read like files, bounded
+        text = read_text(path, MAX_CONFIG, "config file")
+    except FileError as exc:
+        raise SettingError(str(exc)) from None
+    except OSError as exc:  # a path the OS refuses to look at (too long, no permission)
+        raise SettingError(f"cannot read {path}: {exc.strerror}") from None
     return parse_config(text, path)
 
 
@@ -217,20 +237,15 @@ def from_environment(env: dict[str, str] | None = None) -> dict:
         if not val:
             continue
         want = CONNECTION_TYPES.get(key, str)
-        try:
-            if want is bool:
-                if val.strip().lower() not in _TRUE + _FALSE:
-                    raise ValueError(val)
-                value: object = val.strip().lower() in _TRUE
-            elif want is int:
-                value = int(val, 0)
-            elif want is float:
-                value = float(val)
-            else:
-                value = val
-        except ValueError:
-            raise ValidationError(f"{var}={val!r} must be {_type_name(want)}") from None
-        _check_range(var, key, value)
+        if key in limits.LIMITS:  # the very check --timeout, --baud, ... make
+            out[key] = limits.parse(key, val, var)
+            continue
+        if want is bool:
+            if val.strip().lower() not in _TRUE + _FALSE:
+                raise SettingError(f"{var}={val[:40]!r} must be {_type_name(want)}")
+            value: object = val.strip().lower() in _TRUE
+        else:
+            value = val
         out[key] = value
     return out
 
@@ -250,7 +265,7 @@ def resolve(cli: dict, config: Config, env: dict[str, str] | None = None) -> dic
     if profile_name:
         if profile_name not in config.profiles:
             known = ", ".join(sorted(config.profiles)) or "none defined"
-            raise ValidationError(f"no profile {profile_name!r} in {config.path} (known: {known})")
+            raise UsageError(f"no profile {profile_name!r} in {config.path} (known: {known})")
         profile = config.profiles[profile_name]
     merged: dict = dict(CONNECTION_DEFAULTS)
     for source in (profile, envs, {k: v for k, v in cli.items() if v is not None}):

@@ -10,6 +10,7 @@ from __future__ import annotations
 import sys
 from typing import TYPE_CHECKING
 
+from .canspec import FROM_PYTHON_CAN, parse_can
 from .client import Client
 from .errors import ValidationError
 from .transport.base import Transport
@@ -32,9 +33,12 @@ def connection_settings(args: argparse.Namespace) -> dict:
     from .config import load_config, resolve
 
     cli = {k: getattr(args, k, None) for k in
-           ("port", "baud", "can", "sim", "can_id", "reply_id", "module", "address",
+           ("port", "baud", "can", "bitrate", "sim", "can_id", "reply_id", "module", "address",
             "host_address", "ascii", "timeout", "retries", "profile")}
-    return resolve(cli, load_config())
+    settings = resolve(cli, load_config())
+    if settings.get("can") and settings["can"] != FROM_PYTHON_CAN:
+        parse_can(settings["can"])  # a malformed --can is a usage error, before opening anything
+    return settings
 
 
 def _setting(settings: dict, key: str, default):
@@ -51,7 +55,7 @@ def open_transport(settings: dict) -> Transport:
     if settings.get("port"):
         return tr.open_serial(settings["port"], baud)
     if settings.get("can"):
-        return tr.open_can(settings["can"])
+        return tr.open_can(settings["can"], settings.get("bitrate"))
     if not settings.get("sim"):
         found = trinamic_ports()
         if len(found) == 1:
@@ -119,7 +123,24 @@ def start(client: Client, *, ascii: bool = False) -> Client:
             AsciiLink.attach(client)
         if client.module is None:
             client.identify()
+        elif client.module.generic and not client.module.firmware_id:
+            _name_generic(client)
     except BaseException:
         client.close()
         raise
     return client
+
+
+def _name_generic(client: Client) -> None:
+    """``-m generic``: no data is used, but the banner can still say which type answers."""
+    from .errors import TmclError
+    from .modules import generic_for
+    from .protocol import Control, Request
+
+    try:
+        reply = client.request(Request(client.address, Control.GET_VERSION, 0, 0, 0))
+    except TmclError:
+        return
+    named = generic_for(reply.version) if reply is not None and reply.version else None
+    if named is not None:
+        client.module, client.version = named, reply.version  # type: ignore[union-attr]

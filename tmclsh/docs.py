@@ -43,7 +43,7 @@ PORT_GLOBS = ("/dev/ttyUSB*", "/dev/ttyACM*", "/dev/serial/by-id/*")
 # what to complete for an option's value, by the option's dest (or a positional's)
 VALUE_KINDS = {
     "port": "ports", "can": "can", "sim": "modules", "module": "modules", "profile": "profiles",
-    "script": "files", "file": "files", "output": "files",
+    "script": "files", "file": "files", "output": "files", "module_file": "files",
 }
 
 
@@ -175,9 +175,9 @@ def describe(parser: argparse.ArgumentParser | None = None) -> tuple[CommandLine
 # -- the rest of what is documented ----------------------------------------------------------
 
 def module_names() -> list[str]:
-    from .modules import available
+    from .modules import built_in
 
-    return available()
+    return built_in()  # never the generating user's own module files
 
 
 def can_interfaces() -> list[str]:
@@ -359,11 +359,19 @@ _SUB_NOTES = {
     "asm": "Source lines are TMCL as in the TMCL-IDE: labels (NAME:), constants "
            "(#define NAME VALUE or NAME = VALUE), #include \"FILE\", comments after // or #. "
            "Errors name FILE:LINE:COLUMN and no output file is written.",
-    "disasm": "FILE (or - for standard input) is a binary image (7 bytes per instruction) or "
-              "hex text as written by asm --hex.",
+    "disasm": "FILE (or - for standard input) is a TMCL-IDE binary image or hex text as "
+              "written by asm --hex (see PROGRAM IMAGES).",
+    "modules": "Lists each module tmclsh has data for, with its version string and where the "
+               "data comes from: built in, or the path of a user's module file (see MODULE "
+               "FILES). Exit status 1 when a user's file cannot be used (each named on "
+               "standard error). modules check FILE validates one file: exit 0 and a summary "
+               "if tmclsh can use it, else 1 and one line naming the file, the line and what "
+               "is wrong.",
     "sim": "The first line on standard output is the pseudo-terminal's path or the endpoint; "
            "connect to it with --port PATH, --port socket://HOST:PORT or --can IFACE:CHANNEL. "
-           "Runs until interrupted.",
+           "Runs until interrupted. --pty needs Linux or macOS; --tcp and --can work on "
+           "Windows too. Exit status 2 for a malformed argument, 3 when the server cannot "
+           "start (address in use, no such CAN interface).",
     "ports": "The USB ids are shown; ports whose vendor is Trinamic (0x2A3C) are marked TRINAMIC.",
     "scan": "Sends command 136 (firmware version) to each address and prints those that answer; "
             "exit status 1 when none does.",
@@ -495,11 +503,22 @@ Numbers in decimal or hex ({_b("$1F")}, {_b("0x1F")}); symbolic types ({_b("ABS 
 ({_b("GAP ActualPosition, 0")}). Any command number can be sent raw as well.
 .IP \\(bu 2
 Shell commands start with a dot ({_b(".help")}, {_b(".param")}, {_b(".watch")}, ...);
-{_b("help")} and {_b("quit")} also work bare. A shell command owns the rest of its line, so
-{_b(".watch a=GAP 1, 0; b=GIO 0, 0")} is one command; put other commands on a new line.
+{_b("help")}, {_b("?")} and {_b("quit")} also work bare ({_b("help")} or {_b("?")} alone is the
+overview).
 .IP \\(bu 2
-With {_b("-c")}, lines are separated by newlines or {_b(";")}. Empty lines and lines starting
-with {_b("#")} or {_b("//")} are ignored.
+Lines are separated by newlines or {_b(";")}, at the prompt, with {_b("-c")} and in scripts:
+{_b("help 4; help 5")} is two lines, a {_b(";")} inside quotes ({_b('.echo "a;b"')}) is not a
+separator. Only a command that owns the rest of its line takes the {_b(";")}: {_b(".watch")}
+separates its expressions with it ({_b(".watch a=GAP 1, 0; b=GIO 0, 0")} is one command) and
+{_b(".decode")} its pasted bytes; put other commands after those on a new line.
+.IP \\(bu 2
+{_b("//")} and {_b("#")} start a comment that runs to the end of the line ({_b("#")} at the start of
+a word, outside quotes: {_b("GAP 1, 0 # where it is")}). Empty lines are ignored.
+.IP \\(bu 2
+Questions (EEPROM writes, factory reset, program download, leaving {_b(".ascii")}) are answered
+with a line: {_b("y")} and Enter agrees, Enter alone takes the default shown in capitals
+({_b("[y/N]")}), anything else is no. Outside the interactive prompt nothing is asked: such
+commands are refused unless {_b("--yes")} is given.
 .IP \\(bu 2
 Scripts stop at the first error, reported as {_i("FILE")}:{_i("LINE")}, unless
 {_b("--keep-going")} is given.
@@ -515,7 +534,10 @@ with status 130.
 .TP
 {_b("Tab")}
 Completes mnemonics, symbolic types, parameter names (with their number, range and unit) and
-shell commands with their arguments. Completion never asks the module.
+shell commands with their arguments; inside expressions ({_b(".watch")} {_i("NAME")}{_b("=")},
+{_b(".wait")}, {_b(".expect")}, {_b(".if")}, {_b(".let")}, {_b(".display")}, {_b("${...}")}) the
+read commands with their parameters, motors and ports, variables and functions.
+Completion never asks the module.
 .TP
 {_b("Ctrl-C")}
 Stops all motors and clears the line.
@@ -525,6 +547,24 @@ Leaves the shell, like {_b(".quit")}.
 .TP
 {_b("Enter")} on an empty line
 Repeats the last {_b(".step")}.
+.PP
+Output longer than the terminal ({_b(".help")}, {_b(".params")}, {_b(".list")}, {_b(".dump")},
+a long {_b("help")}) is shown through {_b("$PAGER")} (default {_b("less")}; {_b("q")} leaves
+it), never in a pipe, with {_b("-c")} or {_b("-f")}; the {_b("pager")} setting turns it off.
+.SS Keys in the ASCII terminal (.ascii)
+.TP
+{_b("Ctrl-]")}, or {_b(".quit")} typed as a line
+Back to the shell (asks whether to send {_b("BIN")}). A {_b("BIN")} typed by the user is
+noticed: the module talks binary frames again and the terminal returns to the shell.
+.TP
+{_b("Ctrl-C")}
+Stops all motors (in {_b("--raw")}: first erases the line typed so far).
+.TP
+{_b("Ctrl-T")} then {_b("e")}, {_b("h")}, {_b("t")}, {_b("f")}, {_b("u")} or {_b("?")}
+The menu, as in tio: local echo on/off, hex view of what arrives on/off, timestamps on/off,
+log the session to a file ({_b("f")} again stops), send a file line by line (blank and comment
+lines left out, each reply waited for), this list. {_b("Ctrl-T Ctrl-T")} sends Ctrl-T in
+{_b("--raw")}.
 """
 
 _EXAMPLES = f"""\
@@ -606,12 +646,18 @@ def _exit_status() -> list[str]:
         (EXIT_OK, "Success."),
         (EXIT_ERROR, "A TMCL or shell command failed (a rejected line, an error status from "
                      "the module, a timeout), a script stopped at an error, asm or disasm "
-                     "failed, scan found no module, or a bad config file or environment "
-                     "variable."),
-        (EXIT_USAGE, "Usage: an unknown option or a bad option value; or a script given with "
-                     "-f that cannot be read or has a syntax error (nothing was sent)."),
+                     "failed, a file could not be written (the message names it and why), "
+                     "scan found no module, or a module file that cannot be used (tmclsh "
+                     "modules)."),
+        (EXIT_USAGE, "Usage: an unknown option or a bad option value (a malformed --can, an "
+                     "unknown --profile), a bad environment variable, profile or config file "
+                     "(each checked against the same LIMITS); or a script given with -f that "
+                     "was not run (nothing was sent): it cannot be read, no such file, a "
+                     "syntax error, a value out of range or another line the module would "
+                     "refuse."),
         (EXIT_CONNECT, "The shell could not connect: the port or CAN bus cannot be opened, or "
-                       "the module does not answer when its type is detected (command 136)."),
+                       "the module does not answer when its type is detected (command 136); "
+                       "or tmclsh sim cannot start its server."),
         (130, "Interrupted with Ctrl-C (motion was stopped first)."),
         (129, "Hung up (SIGHUP: the terminal or SSH session went away)."),
         (143, "Terminated (SIGTERM). On both signals tmclsh still ends download mode and "
@@ -620,6 +666,32 @@ def _exit_status() -> list[str]:
     out = [".SH EXIT STATUS"]
     for code, text in rows:
         out += [".TP", _b(str(code)), _esc(text)]
+    return out
+
+
+def _limits() -> list[str]:
+    from .files import MAX_FILE, MAX_LINE, MAX_LINES, size_text
+    from .limits import LIMITS
+    from .shell.expr import MAX_DEPTH, MAX_LENGTH, MAX_LITERAL, MAX_OPERATORS
+
+    out = [".SH LIMITS",
+           "Every number a user sets is checked against one table, whether it comes from an "
+           "option, an environment variable, a profile or a shell command; a value outside "
+           "it is refused with one line naming the setting and the range, and nothing is "
+           "sent."]
+    for key, lim in LIMITS.items():
+        out += [".TP", _b(key), _esc(_sentence(f"{lim.describe()}: {lim.what}"))]
+    out += [".PP",
+            _esc(f"Files: scripts, sources, programs, CSV files and config files are read up "
+                 f"to {size_text(MAX_FILE)} ({MAX_LINES:,} lines for a script, "
+                 f"{MAX_LINE:,} characters a line, also for -f - which runs each line as it "
+                 "arrives); program images up to the module's program memory. Larger ones "
+                 f"are refused unread. Expressions: at most {MAX_LENGTH} characters, "
+                 f"{MAX_OPERATORS} operators and {MAX_DEPTH} levels of nesting; number "
+                 f"literals at most {MAX_LITERAL} digits. Every file "
+                 "tmclsh writes (asm -o, .record, .watch --csv, .dump, .echo >) is written "
+                 "beside its target and renamed over it when complete, so a failed write "
+                 "leaves the old file as it was.")]
     return out
 
 
@@ -660,14 +732,75 @@ def _configuration() -> list[str]:
     return out
 
 
+_BACKUPS = f"""\
+.SH CONFIGURATION BACKUPS
+{_b(".save")} {_i("FILE")} writes a module's configuration as a tmclsh script, so the same file
+is a backup, a record of what changed and a way to set up a replacement module:
+.PP
+.nf
+// tmclsh configuration backup of a TMCM\\-1311 (.save); ...
+// module: TMCM\\-1311
+// firmware: 1311V111
+// address: 1
+// connection: /dev/ttyACM0 at 9600 baud (binary)
+// date: 2026\\-12\\-01 19:40:00 UTC
+// program: backup.program.tmcl        (only with \\-\\-program)
+
+// \\-\\- axis parameters, motor 0
+// ActualPosition = 51200 µsteps (state, not restored; AP 1, µsteps: ...)
+SAP MaxPositioningSpeed, 0, 51200  // AP 4, pps: Speed limit for positioning ...
+// \\-\\- global parameters, bank 2
+SGP 0, 2, 0  // GP 0: UserVariable #0
+.fi
+.PP
+The {_b("// key: value")} lines of the header are read back by {_b(".diff")} and
+{_b(".restore")}: {_b("module")} decides whether the file is another module type's.
+Each {_b("SAP")}/{_b("SGP")} line is one writable configuration parameter of one motor or
+bank, by name (a run of user variables by number), with its number, unit and meaning after
+{_b("//")}. Read\\-only values and motion state (parameters marked {_b("state")} in the module
+data: target and actual position and speed, counters, writes that start a move or an
+initialisation) are comments and are never written back. Parameters that change how the
+module is reached (marked {_b("link")}: address, baud rate, CAN ids, interface) are restored
+last and not read back.
+.PP
+{_b(".diff")} and {_b(".restore")} accept any script: every {_b("SAP")}/{_b("SGP")} line (by
+name or number, or as raw command 5 or 9) is parsed and checked against the module's data as
+a typed command would be, before anything is sent, and an error names {_i("FILE")}{_b(":")}{_i("LINE")};
+comments, blank lines, shell commands, lines with {_b("${...}")} and other TMCL commands are
+ignored, and for a parameter set twice the last line counts. Parameters are compared by
+number and motor/bank; a backup of another module type is carried over by name with
+{_b("--force")} (parameters the module lacks, motors it does not have and values outside its
+ranges are skipped and listed). A module without parameter data compares by number.
+.PP
+Replaying the file with {_b("tmclsh -f")} {_i("FILE")} {_b("--yes")} writes every line
+(global parameters of bank 0 go straight to EEPROM, hence {_b("--yes")}); {_b(".restore")}
+writes only what differs. With {_b("--program")} the stored program is read back and written
+as source to {_i("FILE")}{_b(".program.tmcl")} (the suffix of {_i("FILE")} replaced), which
+{_b(".upload")} puts back; {_b(".restore")} does not upload it.
+"""
+
+
+_WINDOWS_CONFIG = "%LOCALAPPDATA%\\tmclsh"
 _FILES = f"""\
 .SH FILES
 .TP
 {_i("$XDG_CONFIG_HOME")}{_b("/tmclsh/config.toml")}
 The config file (default {_b("~/.config/tmclsh/config.toml")}; {_b("TMCLSH_CONFIG")} overrides).
+On macOS the directory is {_b("~/Library/Application Support/tmclsh")}, on Windows
+{_b(_WINDOWS_CONFIG)} (the platform's config directory).
+.TP
+{_i("$XDG_CONFIG_HOME")}{_b("/tmclsh/modules/*.toml")}
+Module files of your own (see MODULE FILES), in the same config directory.
 .TP
 {_i("$XDG_STATE_HOME")}{_b("/tmclsh/history")}
-Command history of the interactive prompt (default {_b("~/.local/state/tmclsh/history")}).
+Command history of the interactive prompt (default {_b("~/.local/state/tmclsh/history")}; the
+platform's state directory elsewhere).
+.TP
+{_i("$XDG_CACHE_HOME")}{_b("/tmclsh/programs/")}
+The source of each program uploaded with {_b(".upload")}, keyed by a hash of its image, so
+that {_b(".dump")} can show the original labels and comments while the module's memory holds
+exactly that image (default {_b("~/.cache/tmclsh/programs/")}; the user cache directory of
+the platform elsewhere). Safe to delete.
 .TP
 {_i("$XDG_CACHE_HOME")}{_b("/tmclsh/data/")}
 The instruction set and module tables as parsed at the first start (default
@@ -679,11 +812,73 @@ The instruction set and module tables as parsed at the first start (default
 .TQ
 {_i("prefix")}{_b("/share/fish/vendor_completions.d/tmclsh.fish")}
 The completions for bash, zsh and fish, installed with the package ({_i("prefix")} is the
-virtual environment or the installation prefix); or load them with
-{_b("tmclsh --completions")} {_i("SHELL")}.
+virtual environment or the installation prefix). Recent bash\\-completion versions find them
+next to the tmclsh they complete, fish when {_i("prefix")}{_b("/share")} is in
+{_b("XDG_DATA_DIRS")} (a system or user install). zsh finds them in a system prefix; for a
+virtual environment add {_b("fpath=(")}{_i("prefix")}{_b("/share/zsh/site-functions $fpath)")}
+to {_b("~/.zshrc")} before {_b("compinit")}, and for fish add
+{_b("set -p fish_complete_path")} {_i("prefix")}{_b("/share/fish/vendor_completions.d")}.
+Or load them from tmclsh itself: {_b("tmclsh --completions")} {_i("SHELL")}.
 .TP
 {_i("prefix")}{_b("/share/man/man1/tmclsh.1")}
-This manual.
+This manual. An editable install ({_b("pip install -e")}) installs no manual, so
+{_b("man tmclsh")} cannot find it: read it with {_b("tmclsh --man")}, or
+{_b("man ./man/tmclsh.1")} in the source tree.
+"""
+
+
+def _module_files() -> list[str]:
+    from .modules.schema import IO_KEYS, MEANINGS, MODULE_KEYS, PARAMETER_KEYS
+
+    out = [".SH MODULE FILES",
+           "A module tmclsh has no data for still works: when its 136 answer names another "
+           "type (" + _b("1161V130") + "), or with " + _b("-m generic") + ", the shell runs in "
+           "generic mode: banner and toolbar say " + _b("TMCM-1161 (no parameter data: "
+           "numbers only)") + ", commands go by number with the commands every documented "
+           "module has, types and motors are checked as bytes and values as 32 bits, names "
+           "of parameters are refused, and ranges, read-only parameters and motor numbers are "
+           "not checked (said once at the start).",
+           ".PP",
+           "To give tmclsh the data, write a module file: TOML in the same form as the "
+           "built-in ones, in the config directory's " + _b("modules/") + " (every " +
+           _b("*.toml") + " there is read) or named with " + _b("--module-file") + " " +
+           _i("PATH") + ". A module is matched by its " + _b("version_string") + ", then by " +
+           _b("firmware_id") + ", like the built-in ones. Each file is checked when it is "
+           "read; a mistake is one line naming the file and the line, and tmclsh goes on "
+           "without that file. Check one with " + _b("tmclsh modules check") + " " +
+           _i("FILE") + ". The tables and their keys (* required):"]
+    for title, keys, meaning in (("[module]", MODULE_KEYS, MEANINGS["module"]),
+                                 ("[[axis]] and [[global]], one per parameter", PARAMETER_KEYS,
+                                  MEANINGS["axis"]),
+                                 ("[[io]], one per I/O port", IO_KEYS, MEANINGS["io"])):
+        out += [".TP", _b(title),
+                _esc(", ".join(k + ("*" if req else "") for k, (_, req) in keys.items()) + ".")]
+        for key, text in meaning.items():
+            out += [".RS 4", ".TP", _b(key), _esc(_sentence(text)), ".RE"]
+    out += [".PP", "For example:", ".PP", ".RS 4", ".nf",
+            "[module]", 'name = "TMCM\\-1161"', "motors = 1", "program_memory = 2048",
+            "firmware_id = 1161", 'version_string = "1161V130"', 'commands_like = "TMCM\\-1311"',
+            "", "[[axis]]", "number = 4", 'name = "MaxPositioningSpeed"', 'access = "RWE"',
+            "min = 0", "max = 2047", ".fi", ".RE",
+            ".PP", "The full schema, with every optional key, is tmclsh/modules/SCHEMA.md in "
+            "the source."]
+    return out
+
+
+_IMAGES = f"""\
+.SH PROGRAM IMAGES
+.TP
+{_b("Binary (.bin)")}
+The TMCL\\-IDE's image, as its assembler writes it and PyTrinamic's LoadTMCLBinary reads it:
+one 8\\-byte record per instruction: command, type, motor or bank, value (4 bytes, most
+significant first), then a checksum, the 8\\-bit sum of those seven bytes.
+{_b("asm")} writes it, {_b("disasm")}, {_b(".upload")} and {_b(".source-map")} read it, and
+{_b(".dump")} {_i("FILE")}{_b(".bin")} writes what the module holds. A record whose checksum is
+wrong is refused, naming the record and the checksum it should have; nothing is sent.
+.TP
+{_b("Hex text (.hex, asm --hex)")}
+One instruction per line: its seven bytes in hex, separated by spaces, no checksum
+({_b("05 04 00 00 00 03 e8")} is SAP 4, 0, 1000).
 """
 
 
@@ -730,7 +925,11 @@ def manpage(parser: argparse.ArgumentParser | None = None) -> str:
     out += _shell_commands_section()
     out += _instructions_section()
     out += _configuration()
+    out.append(_BACKUPS.rstrip("\n"))
+    out += _limits()
     out.append(_FILES.rstrip("\n"))
+    out += _module_files()
+    out.append(_IMAGES.rstrip("\n"))
     out += _exit_status()
     out.append(_EXAMPLES.rstrip("\n"))
     out += [".SH SEE ALSO",

@@ -34,6 +34,14 @@ class ValidationError(TmclError, ValueError):
     """Input refused before anything was sent: unknown name, value out of range, ..."""
 
 
+class UsageError(ValidationError):
+    """The command line itself is wrong (a malformed --can, an unknown profile): exit 2."""
+
+
+class RangeError(ValidationError):
+    """A value outside what the module accepts: a parameter's range, a port's, a coordinate."""
+
+
 class StatusError(TmclError):
     """The module answered with an error status (1-6)."""
 
@@ -47,7 +55,10 @@ class AsmError(TmclError, ValueError):
     """An error in TMCL source text, with its location (1-based line and column)."""
 
     def __init__(self, message: str, line: int | None = None, col: int | None = None,
-                 file: str | None = None):
+                 file: str | None = None, kind: str = "syntax"):
+        # "syntax": the text is not TMCL; "range": a value the module does not accept;
+        # "check": well-formed, but refused for this module (read-only, no such motor, ...)
+        self.kind = kind
         self.message = message
         self.line = line
         self.col = col

@@ -37,6 +37,9 @@ class InstructionSpec:
 
     def type_names(self, module: str | None = None) -> dict[str, int]:
         """Symbolic types valid on ``module`` (all documented ones when None)."""
+        module = None if module is None else _LIKE.get(module, module)
+        if module == GENERIC:
+            return self.types
         if module is not None and module in self.types_for:
             return self.types_for[module]
         if module is None and self.types_for:
@@ -53,7 +56,7 @@ class InstructionSpec:
         return None
 
     def on(self, module: str) -> bool:
-        return module in self.modules
+        return _offered(self.modules, module)
 
     @property
     def jumps(self) -> bool:
@@ -82,6 +85,38 @@ class ControlSpec:
     name: str
     modules: frozenset[str]
     note: str | None = None
+
+    def on(self, module: str) -> bool:
+        return _offered(self.modules, module)
+
+
+# A module the manuals above do not describe (a user's module file, or one known only by its
+# 136 answer) borrows the command set of a documented module, or the generic one: the
+# commands every documented module has, i.e. the TMCL family's common core.
+GENERIC = "generic"
+_LIKE: dict[str, str] = {}
+
+
+def use_commands_of(module: str, like: str) -> None:
+    """Let ``module`` have the commands of ``like`` (a documented module, or ``"generic"``)."""
+    _LIKE[module] = like
+
+
+def commands_like(module: str) -> str:
+    return _LIKE.get(module, module)
+
+
+def _offered(modules: frozenset[str], module: str) -> bool:
+    module = _LIKE.get(module, module)
+    if module == GENERIC:
+        return modules >= family()
+    return module in modules
+
+
+@cache
+def family() -> frozenset[str]:
+    """The modules the instruction table documents."""
+    return frozenset().union(*(s.modules for s in _tables()[0].values()))
 
 
 def _load() -> dict:

@@ -12,12 +12,17 @@ import re
 from dataclasses import dataclass, field
 from functools import cache, cached_property
 from importlib import resources
+from pathlib import Path
 
 from ..datafiles import load_toml
-from ..errors import ValidationError
-from ..instructions import InstructionSpec, all_instructions, controls
+from ..errors import RangeError, ValidationError
+from ..instructions import (GENERIC, InstructionSpec, all_instructions, controls, family,
+                            use_commands_of)
+from .schema import ACCESS_CODES, ModuleFileError  # noqa: F401
+from .schema import read as read_data
 
-ACCESS_CODES = ("R", "W", "RW", "RWE")
+BUILT_IN = "built in"
+INT32_MIN, UINT32_MAX = -(2**31), 2**32 - 1
 
 # How well a name matches a query (Module.search / Module.lookup), best first.
 _RANK_EXACT, _RANK_PREFIX, _RANK_SUBSTRING, _RANK_SUBSEQUENCE, _RANK_FUZZY = range(5)
@@ -42,7 +47,14 @@ class Parameter:
     default: int | None = None
     values: dict[int, str] = field(default_factory=dict)
     bits: dict[int, str] = field(default_factory=dict)
-    note: str | None = None
+    note: str | None = None  # for users: shown by help and .param
+    source: str | None = None  # for maintainers: how the entry was read from the manual
+    # motion or module state (positions, speeds, counters) or a write that acts rather than
+    # configures: a configuration backup (.save) keeps it as a comment, .restore never writes it
+    state: bool = False
+    # writing it changes how the module is reached (address, baud rate, interface): a restore
+    # writes it last and cannot read it back over the same connection
+    link: bool = False
 
     @property
     def readable(self) -> bool:
@@ -89,7 +101,7 @@ class Parameter:
     def check(self, value: int) -> None:
         """Raise a ValidationError naming the parameter and its range if ``value`` is illegal."""
         if not self.in_range(value):
-            raise ValidationError(
+            raise RangeError(
                 f"{value} is out of range for {self.label} {self.name}: "
                 f"allowed {self.range_text}{' ' + self.unit if self.unit else ''}")
 
@@ -114,6 +126,8 @@ class IoPort:
     description: str = ""
     unit: str = ""
     default: int | None = None
+    note: str | None = None
+    source: str | None = None
 
 
 def _int_keys(table: dict | None) -> dict[int, str]:
@@ -127,7 +141,8 @@ def _parameter(kind: str, raw: dict) -> Parameter:
         count=raw.get("count", 1), min=raw.get("min"), max=raw.get("max"),
         choices=tuple(raw["choices"]) if raw.get("choices") else None, unit=raw.get("unit", ""),
         default=raw.get("default"), values=_int_keys(raw.get("values")),
-        bits=_int_keys(raw.get("bits")), note=raw.get("note"))
+        bits=_int_keys(raw.get("bits")), note=raw.get("note"), source=raw.get("source"),
+        state=bool(raw.get("state", False)), link=bool(raw.get("link", False)))
 
 
 def _normalise(name: str) -> str:
@@ -137,9 +152,12 @@ def _normalise(name: str) -> str:
 class Module:
     """Everything tmclsh knows about one module type, read from its data file."""
 
-    def __init__(self, data: dict):
+    generic = False  # a module known by number only (GenericModule)
+
+    def __init__(self, data: dict, source: str = BUILT_IN):
         info = data["module"]
         self.data = data
+        self.source = source  # BUILT_IN or the path of the user's file
         self.name: str = info["name"]
         self.summary: str = info.get("summary", "")
         self.motors: int = info["motors"]
@@ -175,7 +193,12 @@ class Module:
 
     def has_control(self, opcode: int) -> bool:
         spec = controls().get(opcode)
-        return spec is not None and self.name in spec.modules
+        return spec is not None and spec.on(self.name)
+
+    @property
+    def label(self) -> str:
+        """The name as banner and toolbar show it."""
+        return self.name
 
     def check_motor(self, motor: int) -> None:
         if not 0 <= motor < self.motors:
@@ -221,7 +244,7 @@ class Module:
         """Parameters matching ``query``: number, name prefix, word in name/manual name, fuzzy."""
         pool = self.axis_params + self.global_params if kind is None else self._pool(kind)
         q = query.strip()
-        if re.fullmatch(r"\d+", q):
+        if re.fullmatch(r"\d{1,40}", q):  # longer: no number (nor one Python converts)
             n = int(q)
             return [p for p in pool if p.covers(n)]
         ranked = self._ranked(q, kind)
@@ -267,27 +290,179 @@ def _subsequence(needle: str, hay: str) -> bool:
     return all(ch in it for ch in needle)
 
 
+class GenericModule(Module):
+    """A TMCL module tmclsh has no data for: commands by number, the family's common commands.
+
+    Types and motors are checked as the bytes they are, values as 32 bits; what needs the
+    module's data (ranges, read-only parameters, which motors exist) is not checked.
+    """
+
+    generic = True
+
+    def __init__(self, type_name: str | None = None, version: str = ""):
+        firmware_id = int(type_name.split("-")[-1]) if type_name and type_name[-1:].isdigit() else 0
+        name = type_name or "TMCL module"
+        if name in family():  # `-m generic` on a documented module: keep its own command set
+            name += " (generic)"
+        super().__init__({"module": {
+            "name": name, "summary": "no parameter data: numbers only", "motors": 1,
+            "program_memory": 65536, "firmware_id": firmware_id, "version_string": version,
+            "coordinates": 256}})
+        self.type_name = type_name or "TMCL module"
+        use_commands_of(self.name, GENERIC)
+
+    @property
+    def label(self) -> str:
+        return f"{self.type_name} (no parameter data: numbers only)"
+
+    NOTICE = ("no parameter data for this module: commands go by number; ranges, read-only "
+              "parameters and motor numbers are not checked")
+
+    def check_motor(self, motor: int) -> None:
+        if not 0 <= motor <= 255:
+            raise ValidationError(f"{motor} does not fit the motor byte (0..255)")
+
+    def banks(self) -> list[int]:
+        return list(range(256))
+
+    def io_banks(self) -> list[int]:
+        return list(range(256))
+
+    def port(self, bank: int, port: int) -> IoPort | None:
+        if not (0 <= bank <= 255 and 0 <= port <= 255):
+            return None
+        return IoPort(bank, port, f"port {port}", "unknown", INT32_MIN, UINT32_MAX)
+
+    def lookup(self, kind: str, key: int | str, bank: int | None = None) -> Parameter:
+        if isinstance(key, int):
+            if not 0 <= key <= 255:
+                raise ValidationError(f"{key} does not fit the type byte (0..255)")
+            return Parameter(kind, key, f"{'AP' if kind == 'axis' else 'GP'} {key}",
+                             "", "", "RWE", bank=bank or 0)
+        raise ValidationError(
+            f"{self.type_name} has no parameter data, so {key!r} means nothing here: give the "
+            f"{kind} parameter by number (e.g. {'GAP 1, 0' if kind == 'axis' else 'GGP 66, 0'}),"
+            " or describe the module in a module file (--module-file)")
+
+
 def _file_name(name: str) -> str:
     return _normalise(name if _normalise(name).startswith("tmcm") else "tmcm" + name) + ".toml"
 
 
-def _headers() -> dict[str, dict]:
-    """The ``[module]`` table of every data file, by file name (no Module is built)."""
+# -- the user's module files ------------------------------------------------------------------
+
+_extra_files: list[Path] = []
+_user_scan: tuple[list[Module], list[str]] | None = None
+
+
+def user_dir() -> Path:
+    """Where the user's own module files are found: the config directory's ``modules/``."""
+    from ..config import config_dir
+
+    return config_dir() / "modules"
+
+
+def add_file(path: str | Path) -> None:
+    """Use one more module file (``--module-file``); read with the others on first lookup."""
+    global _user_scan
+    _extra_files.append(Path(path))
+    _user_scan = None
+
+
+def forget_user_files() -> None:
+    """Read the user's files again on the next lookup (tests, a changed config dir)."""
+    global _user_scan
+    _extra_files.clear()
+    _user_scan = None
+
+
+def read_file(path: str | Path) -> Module:
+    """A module from a user's data file, checked (ModuleFileError: one line, file and line)."""
+    path = Path(path)
+    data = read_data(path)
+    mod = Module(data, source=str(path))
+    like = data["module"].get("commands_like")
+    if like is not None or mod.name not in family():
+        use_commands_of(mod.name, like or GENERIC)
+    return mod
+
+
+def commands_of(mod: Module) -> str:
+    """Whose command set ``mod`` uses: its own (a documented module), another's, or generic."""
+    from ..instructions import commands_like
+
+    return commands_like(mod.name)
+
+
+def _user() -> tuple[list[Module], list[str]]:
+    global _user_scan
+    if _user_scan is None:
+        folder = user_dir()
+        try:
+            files = sorted(folder.glob("*.toml")) if folder.is_dir() else []
+        except OSError:
+            files = []
+        files += [p for p in _extra_files if p not in files]
+        mods: list[Module] = []
+        problems: list[str] = []
+        for path in files:
+            try:
+                mods.append(read_file(path))
+            except ModuleFileError as exc:
+                problems.append(str(exc))
+        _user_scan = (mods, problems)
+    return _user_scan
+
+
+def user_modules() -> list[Module]:
+    """The user's modules that loaded (a later file with the same name wins)."""
+    return list(_user()[0])
+
+
+def problems() -> list[str]:
+    """One line per user module file that could not be used (file:line: what)."""
+    return list(_user()[1])
+
+
+def _find_user(name: str) -> Module | None:
+    want = _file_name(name)
+    return next((m for m in reversed(_user()[0]) if _file_name(m.name) == want), None)
+
+
+@cache
+def _built_in_names() -> tuple[str, ...]:
     files = resources.files(__package__)
-    return {entry.name: load_toml(__package__, entry.name)["module"]
-            for entry in files.iterdir() if entry.name.endswith(".toml")}
+    names = []
+    for entry in files.iterdir():
+        if entry.name.endswith(".toml"):
+            names.append(load_toml(__package__, entry.name)["module"]["name"])
+    return tuple(sorted(names))
+
+
+def built_in() -> list[str]:
+    """The names of the modules shipped with tmclsh."""
+    return list(_built_in_names())
 
 
 def available() -> list[str]:
-    """Module names that have a data file, e.g. ``["TMCM-1311", "TMCM-1640", "TMCM-351"]``."""
-    return sorted(h["name"] for h in _headers().values())
+    """Module names with data, built in and the user's, e.g. ``["TMCM-1311", ...]``."""
+    return sorted(set(_built_in_names()) | {m.name for m in _user()[0]})
+
+
+def catalogue() -> list[Module]:
+    """Every known module as it is used (a user's file replaces a built-in of that name)."""
+    return [load(n) for n in available()]
 
 
 def load(name: str) -> Module:
-    """Load a module by name: ``TMCM-1311``, ``tmcm1311`` and ``1311`` all give the same object."""
-    module = _load(_file_name(name))
+    """Load a module by name: ``TMCM-1311``, ``tmcm1311`` and ``1311`` all give the same object;
+    ``generic`` gives the numbers-only module."""
+    if _normalise(name) == GENERIC:
+        return GenericModule()
+    module = _find_user(name) or _load(_file_name(name))
     if module is None:
-        raise ValidationError(f"unknown module {name!r}; known: {', '.join(available())}")
+        raise ValidationError(f"unknown module {name!r}; known: {', '.join(available())}, "
+                              "or generic (numbers only)")
     return module
 
 
@@ -300,14 +475,24 @@ def _load(file_name: str) -> Module | None:
 
 
 def by_firmware_id(firmware_id: int) -> Module | None:
-    """The module whose data file names this firmware id (only that one is loaded)."""
-    for file_name, header in sorted(_headers().items(), key=lambda kv: kv[1]["name"]):
-        if header["firmware_id"] == firmware_id:
-            return _load(file_name)
+    for name in available():
+        mod = load(name)
+        if mod.firmware_id == firmware_id:
+            return mod
     return None
 
 
 def from_version_string(text: str) -> Module | None:
-    """Identify a module from its 136 string (``1311V111`` -> TMCM-1311)."""
-    m = re.match(r"\s*0*(\d+)V", text)
+    """Identify a module from its 136 string (``1311V111`` -> TMCM-1311): a module whose
+    version_string is exactly this first (a user's file for one firmware), else by type number."""
+    exact = [m for m in _user()[0] if m.version_string == text.strip()]
+    if exact:
+        return exact[-1]
+    m = re.match(r"\s*0*(\d{1,9})V", text)
     return by_firmware_id(int(m.group(1))) if m else None
+
+
+def generic_for(text: str) -> GenericModule | None:
+    """The numbers-only module for a 136 string naming a type with no data (``1161V130``)."""
+    m = re.match(r"\s*0*(\d+)V", text)
+    return GenericModule(f"TMCM-{int(m.group(1))}", text.strip()) if m else None

@@ -135,6 +135,8 @@ def build_prompt_session(session: Session, **kw) -> PromptSession:
         kw.setdefault("editing_mode", EditingMode.VI)
     if settings.get("color") == "never":
         kw.setdefault("color_depth", ColorDepth.DEPTH_1_BIT)
+    elif settings.get("color") == "always":  # prompt_toolkit would follow NO_COLOR itself
+        kw.setdefault("color_depth", ColorDepth.DEPTH_8_BIT)
     return PromptSession(
         message=prompt_message(session),
         auto_suggest=AutoSuggestFromHistory(),
@@ -169,13 +171,10 @@ def _dumb_echo(ps: PromptSession) -> None:
 
 
 def ask_yes_no(question: str) -> bool:
-    """``session.ask`` in the REPL: y/n, anything else (Ctrl-C, Ctrl-D) is no."""
-    from prompt_toolkit.shortcuts import confirm
+    """``session.ask`` in the REPL: ``[y/N]`` and Enter, as everywhere (ask.py)."""
+    from .ask import ask_yes_no as ask
 
-    try:
-        return bool(confirm(question))
-    except (KeyboardInterrupt, EOFError):
-        return False
+    return ask(question, default=False)
 
 
 def banner(session: Session):
@@ -185,7 +184,7 @@ def banner(session: Session):
     out = Text()
     out.append(f"tmclsh {__version__}", style="bold")
     out.append(" · ")
-    mod = c.module.name if c.module is not None else "unknown module"
+    mod = c.module.label if c.module is not None else "unknown module"
     out.append(mod, style="tmcl.name")
     out.append(f" at address {c.address}")
     if c.transport.simulated:
@@ -216,6 +215,7 @@ def run_repl(session: Session, prompt_session: PromptSession | None = None) -> i
 
     session.interactive = True
     session.ask = ask_yes_no
+    session.state["pager"] = repl_settings().get("pager", True) is not False
     if repl_settings().get("color") == "never":
         session.out.console.no_color = session.out.err.no_color = True
     from prompt_toolkit.utils import is_dumb_terminal

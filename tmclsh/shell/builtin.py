@@ -11,11 +11,13 @@ import re
 from typing import TYPE_CHECKING
 
 from .. import instructions as isa
+from .. import limits
 from ..errors import StatusError, TmclError, TmclTimeoutError, TransportError, ValidationError
 from ..modules import Module, Parameter, available, from_version_string, load
 from ..protocol import Control, Request, status_ok
 from .commands import all_commands, command, find
 from .completer import Candidate, param_meta
+from .render import paged
 
 if TYPE_CHECKING:
     from .session import Session
@@ -24,7 +26,8 @@ CATEGORY_ORDER = ("general", "parameters", "motion", "connection", "protocol")
 CATEGORY_TITLES = {"general": "General", "parameters": "Parameters", "motion": "Motion",
                    "connection": "Connection and module", "protocol": "Protocol",
                    "ascii": "ASCII mode", "program": "Stored program (debugger)",
-                   "script": "Scripts and variables", "watch": "Watching values"}
+                   "script": "Scripts and variables", "watch": "Watching values",
+                   "configuration": "Configuration backup (clone a module)"}
 
 _GAP = isa.Opcode.GAP
 _GGP = isa.Opcode.GGP
@@ -50,17 +53,20 @@ def complete_param(session: Session | None, text: str) -> list[Candidate]:
     mod = _module(session)
     if mod is None:
         return []
+    extra = [] if "--source" in text.split() else [
+        Candidate("--source", "also how the entry was read from the manual")]
     return [Candidate(p.name, param_meta(p), also=(p.manual_name,))
-            for p in mod.axis_params + mod.global_params]
+            for p in mod.axis_params + mod.global_params] + extra
 
 
 def complete_params(session: Session | None, text: str) -> list[Candidate]:
     words = text.split()
     if len(words) == 0 or (len(words) == 1 and not text.endswith(" ")):
         return [Candidate("axis", "axis parameters (SAP/GAP)"),
-                Candidate("global", "global parameters (SGP/GGP)")] + complete_param(session, text)
+                Candidate("global", "global parameters (SGP/GGP)")] + [
+            c for c in complete_param(session, text) if c.text != "--source"]
     kind = words[0].lower()
-    return [c for c in complete_param(session, text)
+    return [c for c in complete_param(session, text) if c.text != "--source"
             if kind not in ("axis", "global") or c.meta.startswith("AP" if kind == "axis" else "GP")]
 
 
@@ -90,6 +96,7 @@ def complete_module(session: Session | None, text: str) -> list[Candidate]:
 # -- .help -------------------------------------------------------------------------------
 
 @command(".help")
+@paged
 def cmd_help(session: Session, arg: str) -> None:
     arg = arg.strip()
     if not arg:
@@ -327,6 +334,9 @@ def _help_number(session: Session, number: int) -> None:
     found = _params_by_number(mod, number)
     if found:
         _show_params(session, found, numbered=number)
+    elif mod.generic:
+        session.out.info(f"no parameter data for the {mod.type_name}: GAP {number}, 0 or "
+                         f"GGP {number}, 0 reads it; a module file (--module-file) names it")
     else:
         session.out.info(f"the {mod.name} has no parameter {number}")
     spec = isa.by_opcode(number)
@@ -360,8 +370,11 @@ command(".exit")(_quit)
 # -- .param / .params --------------------------------------------------------------------
 
 @command(".param")
+@paged
 def cmd_param(session: Session, arg: str, from_help: bool = False) -> None:
-    query = arg.strip()
+    words = arg.split()
+    source = "--source" in words
+    query = " ".join(w for w in words if w != "--source")
     if not query:
         raise ValidationError("which parameter? .param 140, .param MaxPositioningSpeed, "
                               ".param microstep")
@@ -379,7 +392,7 @@ def cmd_param(session: Session, arg: str, from_help: bool = False) -> None:
         if not found:
             what = {"axis": "axis ", "global": "global "}.get(kind or "", "")
             raise ValidationError(f"the {mod.name} has no {what}parameter {number}")
-        return _show_params(session, found, numbered=number)
+        return _show_params(session, found, numbered=number, source=source)
     found = mod.search(query, kind)
     if bank is not None:
         found = [p for p in found if p.bank == bank]
@@ -397,7 +410,7 @@ def cmd_param(session: Session, arg: str, from_help: bool = False) -> None:
                               + ("; .help lists the commands" if from_help else
                                  "; .params lists them all"))
     if len(found) == 1:
-        return _show_params(session, found)
+        return _show_params(session, found, source=source)
     _param_table(session, found, title=f"{len(found)} parameters match {query!r}", read=False)
     if not session.out.json:
         session.out.info("(.param NAME for one of them)")
@@ -419,7 +432,7 @@ def _kind_prefix(query: str) -> tuple[str | None, int | None, str]:
     if len(words) >= 2 and words[0].lower() in kinds:
         kind = kinds[words[0].lower()]
         bank = None
-        if kind == "global" and len(words) >= 3 and words[2].isdigit():
+        if kind == "global" and len(words) >= 3 and re.fullmatch(r"\d{1,9}", words[2]):
             bank = int(words[2])
             words = words[:2]
         return kind, bank, " ".join(words[1:])
@@ -427,9 +440,10 @@ def _kind_prefix(query: str) -> tuple[str | None, int | None, str]:
 
 
 def _number(text: str) -> int | None:
-    if re.fullmatch(r"\d+", text):
+    # at most 40 digits: longer is no parameter number (and more than Python converts)
+    if re.fullmatch(r"\d{1,40}", text):
         return int(text)
-    if re.fullmatch(r"(\$|0[xX])[0-9A-Fa-f]+", text):
+    if re.fullmatch(r"(\$|0[xX])[0-9A-Fa-f]{1,40}", text):
         return int(text.lstrip("$").removeprefix("0x").removeprefix("0X"), 16)
     return None
 
@@ -443,6 +457,7 @@ def read_param(session: Session, p: Parameter, motor_or_number: int | None = Non
     else:
         req = Request(client.address, _GGP, p.number if number is None else number, p.bank, 0)
     reply = client.request(req)
+    session.stats.commands += 1  # a script's summary counts what .params read
     assert reply is not None
     if not status_ok(reply.status):
         raise StatusError(reply.status, reply)
@@ -472,7 +487,8 @@ def _current(session: Session, p: Parameter, number: int | None
     return rows
 
 
-def _show_params(session: Session, params: list[Parameter], numbered: int | None = None) -> None:
+def _show_params(session: Session, params: list[Parameter], numbered: int | None = None,
+                 source: bool = False) -> None:
     from rich.table import Table
     from rich.text import Text
 
@@ -481,7 +497,10 @@ def _show_params(session: Session, params: list[Parameter], numbered: int | None
         number = numbered if (numbered is not None and p.count > 1) else None
         current = _current(session, p, number)
         if out.json:
-            out.emit(_param_json(p, current))
+            obj = _param_json(p, current)
+            if source:
+                obj["source"] = p.source
+            out.emit(obj)
             continue
         if i:
             out.print()
@@ -511,6 +530,8 @@ def _show_params(session: Session, params: list[Parameter], numbered: int | None
             grid.add_row("  bits", "\n".join(f"bit {b}: {t}" for b, t in sorted(p.bits.items())))
         if p.note:
             grid.add_row("  note", p.note)
+        if source:
+            grid.add_row("  source", p.source or "as the manual prints it")
         for label, text, _ in current:
             grid.add_row("  now" + (f" ({label})" if label else ""),
                          Text(text, style="tmcl.value" if not text.startswith(
@@ -558,7 +579,8 @@ def _param_json(p: Parameter, current: list[tuple[str, str, int | None]] | None 
                 ) -> dict:
     obj = {"kind": p.kind, "number": p.number, "bank": p.bank, "name": p.name,
            "manual_name": p.manual_name, "description": p.description, "min": p.min,
-           "max": p.max, "unit": p.unit, "access": p.access, "default": p.default}
+           "max": p.max, "unit": p.unit, "access": p.access, "default": p.default,
+           "note": p.note}
     if p.count > 1:
         obj["count"] = p.count
     if p.values:
@@ -575,6 +597,7 @@ def _param_json(p: Parameter, current: list[tuple[str, str, int | None]] | None 
 
 
 @command(".params")
+@paged
 def cmd_params(session: Session, arg: str) -> None:
     mod = session.module
     words = arg.split()
@@ -787,6 +810,7 @@ def cmd_connect(session: Session, arg: str) -> None:
         client.reconnect()
         if client.module is None:
             client.identify()
+        _refresh_program_state(session)
         session.out.ok(f"reconnected: {_where(session)}")
         return
     settings = session.settings
@@ -799,10 +823,9 @@ def cmd_connect(session: Session, arg: str) -> None:
         module = load(module).name
         new = {"sim": module}
     elif words[0].lower() == "can":
-        if len(words) < 2:
-            raise ValidationError(".connect can IFACE:CHANNEL, e.g. .connect can socketcan:can0")
-        transport = tr.open_can(words[1])
-        new = {"can": words[1]}
+        spec = words[1] if len(words) > 1 else tr.FROM_PYTHON_CAN
+        transport = tr.open_can(spec, settings.get("bitrate"))
+        new = {"can": spec}
     else:
         transport = tr.open_serial(words[0], settings.get("baud") or 9600)
         new = {"port": words[0]}
@@ -814,10 +837,19 @@ def cmd_connect(session: Session, arg: str) -> None:
         if client.module is None:
             client.identify()
     except TmclError as exc:
+        _refresh_program_state(session)
         session.out.warn(f"connected to {client.describe()}, but no module identified at "
                          f"address {client.address}: {exc}")
         return
+    _refresh_program_state(session)
     session.out.ok(f"connected: {_where(session)}")
+
+
+def _refresh_program_state(session: Session) -> None:
+    """The prompt and toolbar show the new link's program state at once (debugger.py)."""
+    from .debugger import refresh_program_state
+
+    refresh_program_state(session)
 
 
 def switch_transport(client, transport, module: str | None) -> None:
@@ -856,15 +888,14 @@ def cmd_address(session: Session, arg: str) -> None:
         session.out.info(f"address {client.address}" + (f" (CAN id {client.can_id})"
                                                          if client.is_can else ""))
         return
-    n = _number(text)
-    if n is None or not 0 <= n <= 255:
-        raise ValidationError(f"an address is a number 0..255, not {text!r}")
+    n = int(limits.parse("address", text, ".address"))  # as -a and TMCLSH_ADDRESS take it
     old_addr, old_can = client.address, client.can_id
     client.address = n
     if client.is_can:
         client.can_id = n
     wait = min(client.timeout, 0.5)
     try:
+        session.stats.commands += 1
         reply = client.request(Request(n, Control.GET_VERSION, 0, 0, 0), timeout=wait,
                                retries=0)
     except TmclTimeoutError:
@@ -909,7 +940,8 @@ def cmd_module(session: Session, arg: str) -> None:
     grid.add_column(style="tmcl.note")
     grid.add_column()
     grid.add_row("module", f"{mod.name}: {mod.summary}")
-    grid.add_row("motors", str(mod.motors))
+    grid.add_row("motors", "not known (motor numbers are sent as typed, 0..255)"
+                 if mod.generic else str(mod.motors))
     grid.add_row("firmware", client.version or "(not asked; .version)")
     grid.add_row("address", str(client.address))
     grid.add_row("connection", client.describe() + (" (SIMULATED)" if client.transport.simulated
@@ -917,7 +949,8 @@ def cmd_module(session: Session, arg: str) -> None:
                                                     else ""))
     grid.add_row("mode", client.mode)
     grid.add_row("parameters", f"{len(mod.axis_params)} axis, {len(mod.global_params)} global")
-    grid.add_row("program memory", f"{mod.program_memory} instructions")
+    grid.add_row("program memory", "not known" if mod.generic
+                 else f"{mod.program_memory} instructions")
     out.print(grid)
 
 
@@ -927,21 +960,37 @@ def cmd_version(session: Session, arg: str) -> None:
     reply = client.request(Request(client.address, Control.GET_VERSION, 0, 0, 0))
     version = reply.version if reply is not None else None
     binary = client.request(Request(client.address, Control.GET_VERSION, 1, 0, 0))
+    session.stats.commands += 2
     value = binary.value & 0xFFFFFFFF if binary is not None and binary.ok else None
     client.version = version or client.version
     mod = from_version_string(version) if version else None
+    from .render import binary_version, parse_version_string, version_text
+
+    layout_of = mod or client.module
+    from_string = parse_version_string(version) if version else None
+    from_binary = binary_version(value, layout_of) if value is not None else None
+    agrees = None if from_string is None or value is None else from_binary == from_string
     if session.out.json:
         session.out.emit({"version": version, "binary": value,
-                          "module": mod.name if mod else None})
+                          "module": mod.name if mod else None,
+                          "binary_type": from_binary[0] if from_binary else None,
+                          "binary_version": from_binary[1] if from_binary else None,
+                          "agrees": agrees})
         return
-    from .render import version_text
-
-    text = f"firmware {version}"
+    text = f"firmware {version}" if version else "firmware: no string reply (136 type 0)"
     if mod is not None:
         text += f" ({mod.name})"
-    if value is not None:
-        text += f"; binary (136 type 1): {version_text(value, mod or client.module)}"
     session.out.print(text, markup=False)
+    # the binary reply on a line of its own: two replies that contradict each other are
+    # never shown as one version
+    if value is None:
+        session.out.info("binary (136 type 1): no reply")
+    elif agrees:
+        session.out.print(f"binary (136 type 1): {version_text(value, layout_of)}; "
+                          "the same as the string", markup=False)
+    else:
+        session.out.warn(f"binary (136 type 1): {version_text(value, layout_of)}; "
+                         + ("does not match the string" if version else "no string to check"))
 
 
 # -- motion ------------------------------------------------------------------------------

@@ -46,6 +46,9 @@ class Command:
     category: str = "general"
     details: str = ""
     bare: bool = False  # also accepted without the dot (help, quit)
+    # the command's arguments may contain ';' (.watch separates its expressions with it), so
+    # it takes the rest of its line; for all others ';' ends the command and starts a new line
+    owns_line: bool = False
     same_as: str = ""
     _handler: Handler | None = field(default=None, repr=False)
 
@@ -88,8 +91,8 @@ def _import_feature(feature: str):
 
 def command(name: str, syntax: str | None = None, help: str | None = None, *,
             aliases: Iterable[str] = (), complete: Completion = None,
-            category: str = "general", details: str = "",
-            bare: bool = False) -> Callable[[Handler], Handler]:
+            category: str = "general", details: str = "", bare: bool = False,
+            owns_line: bool = False) -> Callable[[Handler], Handler]:
     """Register ``handler(session, argtext)`` as the handler of ``name`` (with the dot),
     whose entry is in ``COMMANDS``.
 
@@ -109,7 +112,8 @@ def command(name: str, syntax: str | None = None, help: str | None = None, *,
                 raise LookupError(f"{name!r} is described in COMMANDS (tmclsh/shell/"
                                   f"commands.py): register its handler with @command({name!r})")
             add(Command(name, "", syntax, help or "", aliases=tuple(aliases), complete=complete,
-                        category=category, details=details, bare=bare, _handler=fn))
+                        category=category, details=details, bare=bare, owns_line=owns_line,
+                        _handler=fn))
         HANDLERS[name] = fn.__module__
         return fn
 
@@ -123,6 +127,8 @@ def add(cmd: Command) -> None:
 
 
 def find(word: str) -> Command | None:
+    if word == "?":  # `?` and `? 140` are help, as in most consoles
+        word = "help"
     if not word.startswith("."):
         cmd = REGISTRY.get("." + word.lower())
         return cmd if cmd is not None and cmd.bare else None
@@ -158,20 +164,26 @@ COMMANDS: tuple[Command, ...] = (
             'show help: all commands, one command, a TMCL instruction, or a parameter',
             complete='complete_help', bare=True,
             details=('`help SAP` explains an instruction; `help 140` shows axis parameter '
-                     '140 (and global parameter 140 if there is one), like `.param 140`.')),
+                     '140 (and global parameter 140 if there is one), like `.param 140`. `?` '
+                     'is the same as help (`? 140`). Lines: `;` separates commands (`help 4; '
+                     'help 5`) except after one that owns its line (.watch, .decode); `#` or '
+                     '`//` starts a comment to the end of the line. Questions are answered '
+                     'with y and Enter ([y/N]: Enter alone is no).')),
     Command('.quit', 'builtin', '.quit',
             'leave the shell (also Ctrl-D)',
             bare=True),
     Command('.exit', 'builtin', '.exit',
             'leave the shell (same as .quit)',
             bare=True, same_as='.quit'),
-    Command('.param', 'builtin', '.param QUERY',
+    Command('.param', 'builtin', '.param [--source] QUERY',
             'explain a parameter: number, name or part of a name, with its current value',
             complete='complete_param', category='parameters',
             details=('QUERY may be a number (140), a name (MicrostepResolution), part of one '
                      '(microstep) or `ap 140` / `gp 66 [bank]` to pick the kind. The current '
                      'value is read from the module (GAP/GGP) when the parameter is '
-                     'readable.')),
+                     "readable. --source also shows how the entry was read from the module's "
+                     'manual (where the manual is unclear or wrong, and what tmclsh '
+                     'assumes).')),
     Command('.params', 'builtin', '.params [axis|global] [FILTER]',
             'table of all parameters with their live values (one GAP/GGP each)',
             complete='complete_params', category='parameters',
@@ -189,15 +201,18 @@ COMMANDS: tuple[Command, ...] = (
                       ('reply', 'read the bytes as a reply'),
                       ('memory', 'a 134 (read program memory) reply'),
                       ('version', 'a 136 version string reply')],
-            category='protocol',
+            category='protocol', owns_line=True,
             details=('HEX: `01 06 04 00 00 00 00 00 0b`, `$01 $06 ...`, `0x01,0x06,...` or '
                      '`0106040000...`; several 9-byte frames at once are fine. Without a '
-                     'hint every plausible reading is shown.')),
-    Command('.connect', 'builtin', '.connect [PORT | sim [MODULE] | can IFACE:CHANNEL]',
+                     'hint every plausible reading is shown. It takes the rest of its line '
+                     "(pasted bytes may be separated by ';').")),
+    Command('.connect', 'builtin', '.connect [PORT | sim [MODULE] | can [IFACE:CHANNEL]]',
             'reconnect, or switch to another port, simulator or CAN bus',
             complete='complete_connect', category='connection',
             details=('Without an argument the current link is closed and opened again (after '
-                     'a cable was pulled). The module type is asked with 136 on a real link.')),
+                     'a cable was pulled). The module type is asked with 136 on a real link. '
+                     "'can' alone takes the bus from python-can's configuration, as --can "
+                     "does; the bit rate is --bitrate's.")),
     Command('.address', 'builtin', '.address [N]',
             'talk to the module with address N on the same bus',
             complete='complete_address', category='connection',
@@ -220,7 +235,7 @@ COMMANDS: tuple[Command, ...] = (
             category='script',
             details=('Runs the lines up to the matching .end COUNT times (an expression). '
                      "With 'as NAME' the variable NAME counts 0..COUNT-1 (like ports and "
-                     'motors). Blocks nest.\n'
+                     'motors). Blocks nest. COUNT is 0..1000000.\n'
                      '  .repeat 3 as i\n'
                      '  MVP REL, 0, 1000\n'
                      '  .wait GAP 8, 0 == 1\n'
@@ -274,10 +289,11 @@ COMMANDS: tuple[Command, ...] = (
             complete=['--timeout', '--interval'], category='script',
             details=('  .wait GAP 8, 0 == 1 --timeout 10\n'
                      '  .wait RFS STATUS, 0 == 0\n'
-                     '--timeout none waits forever. A timeout is an error that shows the '
-                     'last value read.')),
+                     '--timeout none waits forever; otherwise at most a day (86400 s); '
+                     '--interval 0.001..86400 s. A timeout is an error that shows the last '
+                     'value read.')),
     Command('.sleep', 'script', '.sleep SECONDS',
-            'pause (seconds may be a fraction or an expression)',
+            'pause up to a day (seconds may be a fraction or an expression)',
             category='script'),
     Command('.echo', 'script', '.echo TEXT [> FILE | >> FILE]',
             'print a line (${...} expanded), or write it to a file',
@@ -290,7 +306,9 @@ COMMANDS: tuple[Command, ...] = (
             complete=['off'], category='script',
             details=('Every line typed from now on is written to FILE (results as // '
                      "comments); replay it with tmclsh -f FILE. '.record off' stops; "
-                     "'.record' shows the state.")),
+                     "'.record' shows the state. FILE is replaced when the recording ends "
+                     "('.record off' or leaving the shell); if it cannot be written, the old "
+                     'FILE stays as it was.')),
     Command('.history', 'script', '.history [N]',
             'show the lines of this session (the last N)',
             category='script'),
@@ -301,18 +319,23 @@ COMMANDS: tuple[Command, ...] = (
             '.watch [NAME=]EXPR; ... [--interval S] [--count N] [--until EXPR] [--csv FILE]',
             'poll values live: value, min, max, rate, recent history',
             complete=['--interval', '--count', '--until', '--csv'], category='watch',
+            owns_line=True,
             details=('  .watch pos=GAP 1, 0; speed=GAP 3, 0; in0=GIO 0, 0\n'
+                     "It takes the rest of its line (';' separates its expressions): put "
+                     'other commands on lines of their own.\n'
                      '  .watch rev=GAP 1, 0 / 51200 --until "rev >= 2" --csv run.csv\n'
                      'Keys: s or space stops all motors (MST), q ends the watch. Ctrl-C ends '
                      'the watch and does NOT stop the motors. Under --json or in a pipe, '
                      'each sample is a JSON object {"t": s, "values": {...}}. With no '
                      'expressions: the position and speed of each motor. .plot draws the '
-                     'last watch.')),
+                     'last watch. --interval is 0..86400 s, --count 1..1000000; the CSV file '
+                     'is put in place when the watch ends.')),
     Command('.upload', 'debugger', '.upload FILE [--at ADDR] [--yes] [--no-verify]',
             'assemble FILE for this module, store it in program memory and verify it',
             complete='complete_file', category='program',
-            details=('Assembles FILE for the connected module, then: 132 (start download at '
-                     'ADDR, default 0), one\n'
+            details=('Assembles FILE for the connected module (a .bin TMCL-IDE image or .hex '
+                     'text is taken as it\n'
+                     'is), then: 132 (start download at ADDR, default 0), one\n'
                      'frame per instruction (each answered with status 101), 133 (quit '
                      'download), and reads every\n'
                      'instruction back with 134 to compare; the first difference is '
@@ -325,17 +348,26 @@ COMMANDS: tuple[Command, ...] = (
                      'are written.\n'
                      'Under --json: {"uploaded": N, "verified": true|false}. Needs binary '
                      'mode.')),
-    Command('.dump', 'debugger', '.dump [FILE] [--at ADDR] [--count N]',
+    Command('.dump', 'debugger', '.dump [[-o] FILE] [--at ADDR] [--count N]',
             'read the stored program back (134) and show it as source, or write it to FILE',
             aliases=('.disasm',), complete='complete_file', category='program',
             details=('Reads program memory with 134 from ADDR (default 0) up to the end '
                      'marker (opcode 0, or an\n'
                      'erased cell) or the end of memory, or exactly N instructions with '
-                     '--count, and disassembles\n'
-                     'it with generated labels (L0012 for a jump target at 12). With FILE '
-                     'the text is written there;\n'
-                     'it assembles back to the same image (.upload FILE --at ADDR). Needs '
-                     'binary mode.')),
+                     '--count. When tmclsh\n'
+                     'uploaded exactly these instructions from a file (.upload keeps each '
+                     "upload's source in the\n"
+                     "user's cache directory, keyed by a hash of the image), that source is "
+                     'shown, with its labels\n'
+                     'and comments; otherwise the memory is disassembled with generated '
+                     'labels (L0012 for a jump\n'
+                     'target at 12). With FILE the text is written there; it assembles back '
+                     'to the same image\n'
+                     '(.upload FILE --at ADDR); a FILE ending in .bin gets the TMCL-IDE '
+                     'binary image (8-byte\n'
+                     'records with checksums), .hex the hex text (-o FILE says the same as '
+                     'FILE). Needs binary\n'
+                     'mode.')),
     Command('.source-map', 'debugger', '.source-map [FILE [--at ADDR] | --off]',
             'use FILE as the source of the stored program (lines and labels in the debugger)',
             complete='complete_file', category='program',
@@ -381,7 +413,9 @@ COMMANDS: tuple[Command, ...] = (
                      'the line about to run\n'
                      'next and the .display values are shown. An empty line repeats the '
                      'step. Ctrl-C stops a long\n'
-                     'series. Needs binary mode.')),
+                     'series. Where no instruction is stored (empty program memory, or past '
+                     "the program's end)\n"
+                     'it says so and sends nothing. Needs binary mode.')),
     Command('.continue', 'debugger', '.continue [MAXSTEPS]',
             'step until a breakpoint is reached',
             aliases=('.cont',), category='program',
@@ -437,9 +471,15 @@ COMMANDS: tuple[Command, ...] = (
             details=('Enters ASCII mode (command 139) if the module is not in it yet. Lines '
                      'are edited locally and sent whole with the address character added; '
                      "--raw sends every key as typed, so the module's own echo and backspace "
-                     'handling show. Replies are shown with the status decoded. Leaving asks '
-                     'whether to send BIN (back to binary mode); --bin/--no-bin answer in '
-                     'advance.')),
+                     'handling show. Replies are shown with the status decoded. Ctrl-] or '
+                     '.quit leaves; leaving asks whether to send BIN (back to binary mode); '
+                     '--bin/--no-bin answer in advance. BIN typed in the terminal is '
+                     'noticed: the module talks binary again and the terminal returns to the '
+                     'shell.\n'
+                     'Ctrl-T opens a menu, as in tio: e local echo on/off, h hex view of '
+                     'what arrives, t timestamps, f log the session to a file (f again '
+                     'stops), u send a file line by line (each reply waited for), ? the '
+                     'menu; Ctrl-T Ctrl-T sends Ctrl-T in --raw.')),
     Command('.mode', 'terminal', '.mode [ascii|binary] [--keep]',
             "show or switch the link: binary frames or the module's ASCII mode",
             complete='_complete_mode', category='ascii',
@@ -454,6 +494,64 @@ COMMANDS: tuple[Command, ...] = (
                      'kept). GP 67 is one of the bank-0 parameters 64..128 that SGP writes '
                      'to EEPROM directly (manual §10.1), so the change is permanent and asks '
                      'first (--yes). The start-up mode applies from the next power-up.')),
+    Command('.save', 'clone', '.save FILE [--program]',
+            "back up the module's configuration as a replayable script",
+            complete='complete_file', category='configuration',
+            details=('Reads every readable axis parameter of every motor and the global '
+                     'parameters of every bank\n'
+                     "(one request each; the RAM-only user variables are a program's scratch "
+                     'space and are not\n'
+                     'read) and writes FILE: a header (module, firmware, address, '
+                     'connection, date),\n'
+                     'then one SAP/SGP line per writable configuration parameter with its '
+                     'number, unit and meaning\n'
+                     'as a comment. Read-only values and motion state (positions, speeds, '
+                     'counters, anything that\n'
+                     'starts a move) are written as comments and never restored. FILE is '
+                     'replaced only once it is\n'
+                     'complete. --program also reads the stored program back (binary mode) '
+                     'and writes it, as\n'
+                     'source, beside FILE with .program.tmcl in place of its suffix '
+                     '(backup.tmcl:\n'
+                     'backup.program.tmcl; put it back with .upload). JSON: {"saved": N,\n'
+                     '"file": FILE} (and "program": PATH, "instructions": N with --program).')),
+    Command('.diff', 'clone', '.diff FILE [--exit-code] [--force]',
+            'compare the module with a backup (or any script of SAP/SGP lines)',
+            complete='complete_file', category='configuration',
+            details=("Reads FILE with the shell's own line parser (every SAP/SGP line is "
+                     'checked against the\n'
+                     "module's data first; other lines are ignored), reads each parameter it "
+                     'sets from the module\n'
+                     '(one request each) and shows only the ones that differ: name, number, '
+                     'motor or bank, saved\n'
+                     'value, live value and unit. Motion state lines are not compared. JSON: '
+                     'one {"name", "number",\n'
+                     '"motor"|"bank", "saved", "live"} object per difference, nothing for '
+                     'equal values. Exits 0\n'
+                     'either way; with --exit-code a difference is a failure (exit status '
+                     '1). A backup of another\n'
+                     'module type is compared by parameter name only with --force.')),
+    Command('.restore', 'clone', '.restore FILE [--yes] [--store] [--force]',
+            'write the parameters that differ from a backup back to the module',
+            complete='complete_file', category='configuration',
+            details=('Compares like .diff, then writes only the parameters that differ '
+                     '(SAP/SGP), each checked\n'
+                     "against the module's data before anything is sent, and reads each one "
+                     'back to verify it.\n'
+                     'Asks first (--yes or -y skips the question; scripts need it). A value '
+                     'the module refuses is\n'
+                     'reported and the rest are still restored; the command then fails. '
+                     '--store also stores the\n'
+                     'written parameters in EEPROM (STAP/STGP) after asking. Address, baud '
+                     'rate and other link\n'
+                     'settings are written last and not read back (reconnect with the new '
+                     'settings). A backup of\n'
+                     'another module type is refused unless --force: then only parameters '
+                     'both modules have (by\n'
+                     'name) are restored, and the skipped ones are listed. Motion state is '
+                     'never written. JSON:\n'
+                     '{"file", "restored": [...], "failed": [...], "skipped": [...], '
+                     '"stored": N}.')),
 )
 
 REGISTRY: dict[str, Command] = {}

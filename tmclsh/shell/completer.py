@@ -45,6 +45,7 @@ class CommandArg(NamedTuple):
 
 class SymbolicType(NamedTuple):
     mnemonic: str
+    only: tuple[str, ...] = ()  # inside an expression RFS reads only as RFS STATUS
 
 
 class AxisParam(NamedTuple):
@@ -98,8 +99,24 @@ class ParamValue(NamedTuple):
     bank: str
 
 
+class ReadMnemonic(NamedTuple):
+    """A read (GAP, GGP, GIO, ...) where an expression expects a value."""
+
+
+class Variable(NamedTuple):
+    """A shell variable (``.let``) where an expression expects a value; ``extra`` are names
+    the command itself defines (the watched names inside ``.watch --until``)."""
+
+    extra: tuple[str, ...] = ()
+
+
+class Function(NamedTuple):
+    """An expression function (``abs``, ``min``, ...)."""
+
+
 Suggestion = (Mnemonic | ShellCommand | CommandArg | SymbolicType | AxisParam | GlobalParam
-              | MotorNumber | ParamBank | IoPort | IoBank | Interrupt | Label | ParamValue)
+              | MotorNumber | ParamBank | IoPort | IoBank | Interrupt | Label | ParamValue
+              | ReadMnemonic | Variable | Function)
 
 # which access a mnemonic needs from the parameter in its type slot
 _ACCESS = {"SAP": "W", "SGP": "W", "AAP": "W", "AGP": "W", "GAP": "R", "GGP": "R",
@@ -119,15 +136,21 @@ def suggest(text: str, module: Module | None = None) -> list[Suggestion]:
     """What may come at the end of ``text`` (the line up to the cursor)."""
     if "//" in text:
         return []
+    inner = open_substitution(text)
+    if inner is not None:  # `SAP 4, 0, ${GAP 4, ` completes the expression inside
+        return suggest_expression(inner)
     stripped = text.lstrip()
     if not stripped:
         return [Mnemonic(), ShellCommand(dotted=True)]
     first, sep, rest = _split_first(stripped)
     if first.startswith("."):
-        return [CommandArg(first, rest)] if sep else [ShellCommand(dotted=True)]
+        if not sep:
+            return [ShellCommand(dotted=True)]
+        cmd = commands.find(first)
+        return _command_arg(cmd.name if cmd is not None else first, rest)
     cmd = commands.find(first)
     if cmd is not None and sep:
-        return [CommandArg(cmd.name, rest)]
+        return _command_arg(cmd.name, rest)
     m = _LABEL_PREFIX.match(stripped)
     if m:  # `Loop: MVP ...`: complete after the label
         stripped = stripped[m.end():]
@@ -204,6 +227,162 @@ def _split_operands(text: str) -> list[str]:
             cur.append(ch)
     out.append("".join(cur))
     return out
+
+
+# -- inside expressions -------------------------------------------------------------------
+# The commands whose argument is (partly) an expression, and how to find the expression part
+# of their argument text. An expression embeds TMCL reads (``GAP 1, 0 > 500``); inside a read
+# the completion is the prompt's own (``suggest`` on the read's text).
+
+_WATCH_NAME = re.compile(r"\s*[A-Za-z_][A-Za-z0-9_]*\s*=(?!=)")
+_LET_NAME = re.compile(r"\s*[A-Za-z_][A-Za-z0-9_]*\s*=(?!=)")
+_EXPR_OPTION = re.compile(r"(?:^|\s)--([A-Za-z][A-Za-z0-9-]*)(?:\s+|$)")
+
+
+def open_substitution(text: str) -> str | None:
+    """The text inside a ``${`` that is not closed before the end, else None."""
+    start = text.rfind("${")
+    if start < 0 or "}" in text[start:]:
+        return None
+    return text[start + 2:]
+
+
+def _after_options(text: str, expr_options: tuple[str, ...]) -> str | None:
+    """The expression being typed, given the text after the command's fixed part: the text
+    itself before any ``--option``; after ``--until`` (an expression option) what follows it
+    (a leading quote dropped); after any other option None (its value is not an expression)."""
+    last = None
+    for m in _EXPR_OPTION.finditer(text):
+        last = m
+    if last is None:
+        if re.search(r"(?:^|\s)-{1,2}[A-Za-z-]*$", text):
+            return None  # typing an option name
+        return text
+    if last.group(1).lower() in expr_options and last.group().endswith((" ", "\t")):
+        value = text[last.end():]
+        if value[:1] in ("'", '"'):
+            quote, value = value[0], value[1:]
+            return None if quote in value else value  # a closed quote: the value is over
+        return value
+    return None
+
+
+def expression_part(command: str, text: str) -> tuple[str, tuple[str, ...]] | None:
+    """For a command that takes an expression: the expression before the cursor and the
+    names the command itself defines; None where the cursor is not in an expression."""
+    if command in (".expect", ".if", ".elif", ".display", ".sleep", ".repeat"):
+        if command == ".repeat" and re.search(r"\sas\b", text, re.I):
+            return None  # `.repeat 3 as i`: a name, not an expression
+        return text, ()
+    if command == ".wait":
+        part = _after_options(text, ())
+        return (part, ()) if part is not None else None
+    if command == ".let":
+        m = _LET_NAME.match(text)
+        return (text[m.end():], ()) if m else None
+    if command == ".watch":
+        items = text.split(";")
+        names = tuple(m.group().split("=")[0].strip() for item in items
+                      if (m := _WATCH_NAME.match(item)))
+        part = _after_options(items[-1], ("until",))
+        if part is None:
+            return None
+        if part is not items[-1]:  # after --until: the watched names are values too
+            return part, names
+        m = _WATCH_NAME.match(part)
+        return (part[m.end():] if m else part), ()
+    return None
+
+
+def _command_arg(command: str, rest: str) -> list[Suggestion]:
+    part = expression_part(command, rest)
+    if part is None:
+        return [CommandArg(command, rest)]
+    text, names = part
+    out = suggest_expression(text, names)
+    # the command's own options (``--timeout``) when one is being typed
+    return out if out or not rest.strip() else [CommandArg(command, rest)]
+
+
+_EXPR_TOKEN = re.compile(r"""
+    (?P<ws>\s+)
+  | (?P<num>(?:\$|0[xX])[0-9A-Fa-f]*|[0-9]+\.?[0-9]*(?:[eE][-+]?[0-9]+)?|\.[0-9]+)
+  | (?P<name>[A-Za-z_][A-Za-z0-9_]*)
+  | (?P<op>==|!=|<=|>=|.)
+""", re.VERBOSE | re.S)
+
+_EXPR_KEYWORDS = ("and", "or", "not")
+
+
+def _read_fields() -> dict[str, int]:
+    return {s.mnemonic: len(s.fields) for s in isa.all_instructions() if s.reads} | {"RFS": 2}
+
+
+def suggest_expression(text: str, names: tuple[str, ...] = ()) -> list[Suggestion]:
+    """What may come at the end of an expression's text: inside a read (``GAP Max``) what
+    the prompt offers for that read; where a value is expected a read, a variable or a
+    function; after a value nothing."""
+    reads = _read_fields()
+    tokens = [(m.lastgroup, m.group(), m.start()) for m in _EXPR_TOKEN.finditer(text)
+              if m.lastgroup != "ws"]
+    if tokens and tokens[-1][0] in ("name", "num") and not text[-1:].isspace():
+        tokens.pop()  # the word being typed: what it may become is the question
+    # a stack of open parentheses and reads; a read frame is [mnemonic, start, given, wants]
+    stack: list[list] = []
+    want_value = True
+    for kind, tok, pos in tokens:
+        top = stack[-1] if stack else None
+        in_read = top is not None and top[0] != "("
+        if in_read and not top[3]:  # a read whose operand just ended
+            if tok == "," and top[2] < reads[top[0]]:
+                top[3] = True
+                continue
+            stack.pop()  # anything else ends the read; the token belongs outside it
+            want_value = False
+            top = stack[-1] if stack else None
+            in_read = top is not None and top[0] != "("
+        if in_read and top[3]:  # a read wants an operand
+            if tok == "(":
+                stack.append(["(", pos, 0, False])
+                want_value = True
+            elif kind in ("name", "num"):
+                top[2] += 1
+                top[3] = False
+            elif tok != "-":  # `-5`: the sign belongs to the operand
+                return []
+            continue
+        if kind == "name" and tok.upper() in reads and want_value:
+            stack.append([tok.upper(), pos, 0, True])
+        elif kind in ("name", "num"):
+            want_value = kind == "name" and tok.lower() in _EXPR_KEYWORDS
+        elif tok == "(":
+            stack.append(["(", pos, 0, False])
+            want_value = True
+        elif tok == ")":
+            while stack and stack[-1][0] != "(":
+                stack.pop()
+            if stack:
+                stack.pop()
+            want_value = False
+            top = stack[-1] if stack else None
+            if top is not None and top[0] != "(" and top[3]:  # `GAP (n), `: operand done
+                top[2] += 1
+                top[3] = False
+        else:
+            want_value = True
+    top = stack[-1] if stack else None
+    if top is not None and top[0] != "(":
+        if not top[3]:
+            return []
+        fragment = top[0] + text[top[1] + len(top[0]):]
+        out = suggest(fragment)
+        if top[0] == "RFS":
+            out = [SymbolicType("RFS", ("STATUS",)) if isinstance(s, SymbolicType) else s
+                   for s in out]
+        return out
+    if want_value:
+        return [Variable(names), ReadMnemonic(), Function()]
+    return []
 
 
 # -- ranking -----------------------------------------------------------------------------
@@ -322,7 +501,25 @@ def candidates(s: Suggestion, word: str, module: Module | None,
     if isinstance(s, SymbolicType):
         spec = isa.by_mnemonic(s.mnemonic)
         names = spec.type_names(module.name if module else None) if spec else {}
-        return [Candidate(n, f"type {v}") for n, v in names.items()]
+        return [Candidate(n, f"type {v}") for n, v in names.items()
+                if not s.only or n in s.only]
+    if isinstance(s, ReadMnemonic):
+        specs = module.instructions if module is not None else isa.all_instructions()
+        ascii_mode = session is not None and session.client.mode == "ascii"
+        return [Candidate(sp.mnemonic, sp.summary) for sp in specs
+                if sp.reads and sp.direct and (sp.ascii or not ascii_mode)] + (
+            [Candidate("RFS", "RFS STATUS, motor: reference search running?")]
+            if any(sp.mnemonic == "RFS" for sp in specs) else [])
+    if isinstance(s, Variable):
+        values = dict(getattr(session, "variables", None) or {})
+        out = [Candidate(n, "watched value") for n in s.extra]
+        out += [Candidate(n, f"variable = {v}") for n, v in sorted(values.items())
+                if n not in s.extra]
+        return out
+    if isinstance(s, Function):
+        from .expr import FUNCTIONS
+
+        return [Candidate(f"{n}(", "function", display=f"{n}()") for n in FUNCTIONS]
     if module is None:
         return []
     if isinstance(s, AxisParam):
@@ -338,7 +535,7 @@ def candidates(s: Suggestion, word: str, module: Module | None,
         return out
     if isinstance(s, ParamBank):
         key = s.param.strip()
-        if re.fullmatch(r"\d+", key):
+        if re.fullmatch(r"\d{1,9}", key):
             banks = [b for b in module.banks() if module.glob(int(key), b) is not None]
         elif key:
             banks = sorted({p.bank for p in module.global_params
@@ -350,7 +547,7 @@ def candidates(s: Suggestion, word: str, module: Module | None,
         return _port_candidates(module, s.outputs)
     if isinstance(s, IoBank):
         banks = module.io_banks()
-        if re.fullmatch(r"\d+", s.port.strip()):
+        if re.fullmatch(r"\d{1,9}", s.port.strip()):
             n = int(s.port)
             banks = [b for b in banks if module.port(b, n) is not None
                      or (n == module.io_all_port and b in module.io_all_banks)]
@@ -410,7 +607,8 @@ def _resolve_param(module: Module, kind: str, key: str, bank: str) -> Parameter 
     except ValueError:
         b = None
     try:
-        return module.lookup(kind, int(key, 0) if re.fullmatch(r"\d+|0x[0-9a-fA-F]+", key) else key, b)
+        return module.lookup(kind, int(key, 0) if re.fullmatch(r"\d{1,9}|0x[0-9a-fA-F]{1,8}", key)
+                             else key, b)
     except Exception:
         return None
 

@@ -27,11 +27,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Iterator
 
-from .. import asm, program
+from .. import asm, files, limits, program, sourcemap
 from ..errors import AsmError, TmclError, ValidationError
 from ..program import AppStatus, UploadError
 from ..protocol import Instruction
 from .commands import command
+from .render import paged, paging
 
 if TYPE_CHECKING:
     from .session import Session
@@ -155,7 +156,8 @@ def _number(text: str, what: str) -> int:
             return int(t[1:], 16)
         return int(t, 0)
     except ValueError:
-        raise ValidationError(f"{what} must be a number, got {text!r}") from None
+        shown = t if len(t) <= 40 else t[:40] + "..."
+        raise ValidationError(f"{what} must be a number, got {shown!r}") from None
 
 
 def _options(words: list[str], flags: set[str], valued: set[str]) -> tuple[list[str], dict]:
@@ -240,8 +242,9 @@ def _source_lines(session: Session, file: str) -> list[str] | None:
     dbg = state(session)
     if file not in dbg.files:
         try:
-            dbg.files[file] = Path(file).read_text(encoding="utf-8", errors="replace").splitlines()
-        except OSError:
+            dbg.files[file] = files.read_bytes(file, what="source").decode(
+                "utf-8", errors="replace").splitlines()
+        except files.FileError:
             dbg.files[file] = None
     return dbg.files[file]
 
@@ -269,7 +272,7 @@ def resolve(session: Session, text: str, *, line_numbers: bool) -> tuple[int, st
     if t.startswith("@"):
         addr = check(_number(t[1:], "address"))
         return addr, f"@{addr}"
-    m = re.fullmatch(r"(.+):(\d+)", t)
+    m = re.fullmatch(r"(.+):(\d{1,9})", t)
     if m and not t[0].isdigit():
         if prog is None:
             raise ValidationError(f"no source file is known for the stored program; "
@@ -398,7 +401,7 @@ def _progress(session: Session) -> Iterator[program.Progress | None]:
                                TimeRemainingColumn)
 
     names = {"upload": "uploading", "verify": "verifying", "read": "reading"}
-    with Progress(TextColumn("{task.description:>10}"), BarColumn(), MofNCompleteColumn(),
+    with Progress(TextColumn("{task.description:>10}", markup=False), BarColumn(), MofNCompleteColumn(),
                   TimeRemainingColumn(), console=out.console, transient=True) as bar:
         tasks: dict[str, object] = {}
 
@@ -465,7 +468,7 @@ def cmd_upload(session: Session, argtext: str) -> None:
     module = session.module
     origin = _number(str(opts["--at"]), "--at") if "--at" in opts else 0
     path = _resolve_file(session, pos[0])
-    prog = asm.assemble_file(path, module, origin)
+    prog = asm.load_program(path, module, origin)
     if not len(prog):
         raise ValidationError(f"{path} holds no instructions; nothing to upload")
     program.check_fits(module, origin, len(prog))
@@ -492,6 +495,8 @@ def cmd_upload(session: Session, argtext: str) -> None:
     dbg.files.clear()
     if result.verified:
         dbg.memory.update({origin + i: ins for i, ins in enumerate(prog.instructions)})
+    if result.mismatch is None:
+        _keep_source(prog, module.name, origin, path)
     _rebind_breakpoints(session)
     seconds = result.upload_seconds + result.verify_seconds
     rate = f", {len(prog) / result.upload_seconds:.0f}/s" if result.upload_seconds > 0 else ""
@@ -524,11 +529,43 @@ def cmd_upload(session: Session, argtext: str) -> None:
         pass
 
 
+def _keep_source(prog: asm.Program, module: str, origin: int, path: Path) -> None:
+    """The source of an upload, for .dump later (sourcemap.py); never fails the upload."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        return
+    sourcemap.save(prog.instructions, module, origin, path, text)
+
+
+def _original_source(session: Session, image: list[Instruction], start: int,
+                     header: str) -> tuple[str, sourcemap.SourceMap] | None:
+    """The source this image was uploaded from, if tmclsh kept it and it still assembles
+    to exactly these bytes (an include file may have changed since)."""
+    module = session.module
+    kept = sourcemap.lookup(image, module.name, start)
+    if kept is None:
+        return None
+    text = (header + f"// source: {kept.file}, uploaded {kept.uploaded} (labels and comments "
+            "as written)\n" + kept.text)
+    try:
+        again = asm.assemble(text, module, kept.file, start, Path(kept.file).parent)
+    except AsmError:
+        return None
+    return (text, kept) if program.same_image(again.instructions, image) else None
+
+
 @command(".dump")
 def cmd_dump(session: Session, argtext: str) -> None:
-    pos, opts = _options(_words(argtext), set(), {"--at", "--count"})
+    words = _words(argtext)
+    if "-o" in words:  # `.dump -o FILE`, as asm -o
+        i = words.index("-o")
+        if i + 1 >= len(words):
+            raise ValidationError("-o needs a FILE")
+        words = words[:i] + words[i + 1:]
+    pos, opts = _options(words, set(), {"--at", "--count"})
     if len(pos) > 1:
-        raise ValidationError("usage: .dump [FILE] [--at ADDR] [--count N]")
+        raise ValidationError("usage: .dump [[-o] FILE] [--at ADDR] [--count N]")
     program.require_binary(session.client, "reading program memory (134)")
     module = session.module
     start = _number(str(opts["--at"]), "--at") if "--at" in opts else 0
@@ -543,36 +580,57 @@ def cmd_dump(session: Session, argtext: str) -> None:
               f"({c.describe()}): {len(image)} instructions from {start}\n")
     if start:
         header += f"// assemble with --at {start}\n"
-    text = header + (asm.disassemble(image, module, start) if image else "")
-    try:
-        again = asm.assemble(text, module, "<dump>", start).instructions if image else []
-        same = program.same_image(again, image)
-    except AsmError as exc:  # pragma: no cover - a disassembler bug
-        same, again = False, []
-        session.out.warn(f"the disassembly does not assemble: {exc}")
-    if not same:
-        session.out.warn("warning: the disassembly does not reassemble to the same image")
+    original = _original_source(session, image, start, header) if image else None
+    if original is not None:
+        text, kept = original
+        same = True
+    else:
+        kept = None
+        text = header + (asm.disassemble(image, module, start) if image else "")
+        try:
+            again = asm.assemble(text, module, "<dump>", start).instructions if image else []
+            same = program.same_image(again, image)
+        except AsmError as exc:  # pragma: no cover - a disassembler bug
+            same, again = False, []
+            session.out.warn(f"the disassembly does not assemble: {exc}")
+        if not same:
+            session.out.warn("warning: the disassembly does not reassemble to the same image")
     if pos:
         path = Path(pos[0]).expanduser()
-        try:
-            path.write_text(text, encoding="utf-8")
-        except OSError as exc:
-            raise DebuggerError(f"cannot write {path}: {exc.strerror}") from None
+        kind = path.suffix.lower()
+        if kind in (".bin", ".hex"):
+            same = True  # the bytes as read (a TMCL-IDE image, or hex text), no disassembly
+        if kind == ".bin":
+            data: str | bytes = asm.image_bytes(image)
+        elif kind == ".hex":
+            data = asm.hex_text(image)
+        else:
+            data = text
+        files.write_file(path, data)  # all or nothing
         if session.out.json:
-            session.out.emit({"dumped": len(image), "file": str(path), "identical": same})
+            obj = {"dumped": len(image), "file": str(path), "identical": same}
+            if kept is not None:
+                obj["uploaded_from"] = kept.file
+            session.out.emit(obj)
         else:
             session.out.print(f"wrote {len(image)} instructions ({start}.."
                               f"{start + len(image) - 1}) to {path}"
+                              + (f", the source uploaded from {_show_path(kept.file)}"
+                                 if kept is not None else "")
                               + ("; it assembles back to the same image" if same else ""),
                               style="tmcl.ok")
         return
     if session.out.json:
-        session.out.emit({"dumped": len(image), "source": text})
+        obj = {"dumped": len(image), "source": text}
+        if kept is not None:
+            obj["uploaded_from"] = kept.file
+        session.out.emit(obj)
         return
     if not image:
         session.out.info(f"program memory is empty at {start} (end marker)")
         return
-    session.out.print(text.rstrip("\n"), markup=False, highlight=False)
+    with session.out.paged(paging(session)):  # (not the progress bar of the reading)
+        session.out.print(text.rstrip("\n"), markup=False, highlight=False)
 
 
 @command(".source-map")
@@ -596,7 +654,7 @@ def cmd_source_map(session: Session, argtext: str) -> None:
     module = session.module
     origin = _number(str(opts["--at"]), "--at") if "--at" in opts else 0
     path = _resolve_file(session, pos[0])
-    prog = asm.assemble_file(path, module, origin)
+    prog = asm.load_program(path, module, origin)
     message = f"{_show_path(str(path))} mapped to {origin}..{origin + len(prog) - 1}"
     if session.client.mode != "ascii" and len(prog):
         mm = program.verify_image(session.client, prog.instructions, origin)
@@ -662,18 +720,18 @@ def cmd_where(session: Session, argtext: str) -> None:
 
 @command(".step")
 def cmd_step(session: Session, argtext: str) -> None:
-    n = _number(argtext, "N") if argtext.strip() else 1
-    if n < 1:
-        raise ValidationError("N must be at least 1")
+    n = int(limits.parse("count", argtext, ".step N")) if argtext.strip() else 1
     program.require_binary(session.client, "stepping (130)")
+    pc: int | None = program.program_counter(session.client)
+    _check_something_to_step(session, pc)
     session.state["repeat_on_empty"] = ".step" if n == 1 else f".step {n}"
     def waiting(pc: int) -> None:
         session.out.info(f"  WAIT at @{pc}: waiting for it to finish (Ctrl-C stops waiting)")
 
-    pc: int | None = None
     done = 0
     try:
         for done in range(1, n + 1):
+            session.time_left()  # the session's time limit, if it has one
             program.step_one(session.client, pc=pc, instruction_at=_stored(session),
                              on_wait=waiting)
             st = _read_status(session)
@@ -688,6 +746,39 @@ def cmd_step(session: Session, argtext: str) -> None:
         session.out.info(f"interrupted after {_plural(done - 1, 'step')}")
         report(session, _read_status(session), displays=False)
         raise  # the shell's Ctrl-C policy (stop the motors) applies as to any command
+
+
+def _check_something_to_step(session: Session, pc: int) -> None:
+    """Refuse (nothing sent) where no instruction is stored: memory never written, or the
+    end of the program."""
+    ins = _cached_instruction(session, pc)
+    if ins is None or not program.is_end_marker(ins):
+        return
+    first = ins if pc == 0 else _cached_instruction(session, 0)
+    _not_repeating(session)
+    if first is not None and program.is_end_marker(first):
+        raise DebuggerError(f"program memory of the {session.module.name} is empty (no "
+                            "instruction at address 0): nothing to step; .upload FILE "
+                            "stores a program")
+    raise DebuggerError(f"no instruction at @{pc} (the end of the stored program): nothing "
+                        "to step; .reset or .run LABEL starts it again")
+
+
+def refresh_program_state(session: Session) -> None:
+    """After .connect: the prompt and toolbar show the new module's program state at once,
+    and what was cached about the old module's memory is forgotten."""
+    dbg = state(session)
+    dbg.forget_memory()
+    dbg.last = None
+    session.state.pop("program_state", None)
+    _not_repeating(session)
+    client = session.client
+    if not client.connected or client.module is None or client.mode == "ascii":
+        return
+    try:
+        _read_status(session)
+    except TmclError:
+        pass  # no program state to show: the toolbar shows none rather than an old one
 
 
 def _stored(session: Session):
@@ -731,6 +822,7 @@ def cmd_continue(session: Session, argtext: str) -> None:
 
     def counted(n: int, pc: int) -> None:
         steps[0] = n
+        session.time_left()  # the session's time limit, if it has one
 
     stored = _stored(session)
 
@@ -813,6 +905,7 @@ def cmd_delete(session: Session, argtext: str) -> None:
 # -- looking at the program --------------------------------------------------------------
 
 @command(".list")
+@paged
 def cmd_list(session: Session, argtext: str) -> None:
     dbg = state(session)
     pc: int | None = None

@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Protocol
 
 from .. import instructions as isa
+from .. import limits
 from ..errors import StatusError, TmclError, ValidationError
 from ..protocol import status_ok, status_text
 
@@ -48,6 +49,7 @@ Number = int | float
 
 MAX_LENGTH = 2000  # characters in one expression
 MAX_DEPTH = 64  # nesting of parentheses and unary operators
+MAX_OPERATORS = 128  # binary operators in one expression (``1+1+...`` nests as deep)
 MAX_LITERAL = 40  # digits in one number literal
 
 
@@ -84,7 +86,7 @@ class Token:
 
 def tokenize(text: str) -> list[Token]:
     if len(text) > MAX_LENGTH:
-        raise ExprError(f"expression longer than {MAX_LENGTH} characters")
+        raise ExprError(f"expression longer than {MAX_LENGTH} characters", MAX_LENGTH + 1, text)
     out: list[Token] = []
     pos = 0
     while pos < len(text):
@@ -103,6 +105,8 @@ def tokenize(text: str) -> list[Token]:
                 value = int(tok)
             else:
                 value = float(tok)
+                if not math.isfinite(value):
+                    raise ExprError(f"number {tok} is too large", pos + 1, text)
             out.append(Token("num", tok, pos + 1, value))
         elif kind != "ws":
             out.append(Token(kind, tok, pos + 1))
@@ -227,8 +231,8 @@ def _bit(x: Number, n: Number) -> int:
 FUNCTIONS: dict[str, tuple[Callable[..., Number], int, int]] = {
     # name: (function, min args, max args)
     "abs": (abs, 1, 1),
-    "min": (min, 1, 16),
-    "max": (max, 1, 16),
+    "min": (lambda *a: min(a), 1, 16),  # min(5) is 5, not "int is not iterable"
+    "max": (lambda *a: max(a), 1, 16),
     "round": (_round, 1, 1),
     "int": (lambda x: int(x), 1, 1),  # truncates toward zero
     "bit": (_bit, 2, 2),
@@ -248,7 +252,7 @@ class Call(Node):
         values = [a.evaluate(ctx) for a in self.args]
         try:
             return _check(fn(*values), self)
-        except (ValueError, OverflowError) as exc:
+        except (ValueError, OverflowError, TypeError, ArithmeticError) as exc:
             raise ExprError(f"{self.func}(): {exc}", self.col) from None
 
 
@@ -309,6 +313,7 @@ class _Parser:
         self.toks = tokenize(text)
         self.i = 0
         self.depth = 0
+        self.operators = 0
         self.reads = read_mnemonics()
 
     # helpers
@@ -338,6 +343,13 @@ class _Parser:
         last_tok = self.toks[self.i - 1]
         return self.text[first:last_tok.col - 1 + len(last_tok.text)].strip()
 
+    def binary_op(self) -> Token:
+        tok = self.take()
+        self.operators += 1
+        if self.operators > MAX_OPERATORS:
+            raise self.error(f"expression has more than {MAX_OPERATORS} operators", tok)
+        return tok
+
     def nested(self) -> None:
         self.depth += 1
         if self.depth > MAX_DEPTH:
@@ -362,7 +374,7 @@ class _Parser:
         start = self.i
         left = self.and_()
         while self.is_word("or"):
-            self.take()
+            self.binary_op()
             left = self._binary(start, "or", left, self.and_())
         return left
 
@@ -370,7 +382,7 @@ class _Parser:
         start = self.i
         left = self.not_()
         while self.is_word("and"):
-            self.take()
+            self.binary_op()
             left = self._binary(start, "and", left, self.not_())
         return left
 
@@ -388,7 +400,7 @@ class _Parser:
         start = self.i
         left = self.sum()
         if self.is_op(*COMPARISONS):
-            op = self.take().text
+            op = self.binary_op().text
             node = self._binary(start, op, left, self.sum())
             if self.is_op(*COMPARISONS):
                 raise self.error("comparisons cannot be chained; join them with 'and'")
@@ -399,7 +411,7 @@ class _Parser:
         start = self.i
         left = self.product()
         while self.is_op("+", "-"):
-            op = self.take().text
+            op = self.binary_op().text
             left = self._binary(start, op, left, self.product())
         return left
 
@@ -407,7 +419,7 @@ class _Parser:
         start = self.i
         left = self.unary()
         while self.is_op("*", "/", "%"):
-            op = self.take().text
+            op = self.binary_op().text
             left = self._binary(start, op, left, self.unary())
         return left
 
@@ -464,8 +476,8 @@ class _Parser:
     def call(self, start: int, func: str) -> Node:
         self.take()  # (
         self.nested()
-        args = [self.or_()]
-        while self.is_op(","):
+        args = [] if self.is_op(")") else [self.or_()]  # min() is an arity error, below
+        while args and self.is_op(","):
             self.take()
             args.append(self.or_())
         self.depth -= 1
@@ -688,32 +700,36 @@ def split_options(text: str, options: Mapping[str, bool]) -> tuple[str, dict[str
 
 
 def option_float(opts: Mapping[str, str | bool], name: str, default: float | None, *,
-                 minimum: float = 0.0, allow_none: bool = False) -> float | None:
-    """A seconds-like option: a non-negative number (``none``/``inf`` = no limit if allowed)."""
+                 minimum: float = 0.0, allow_none: bool = False,
+                 limit: str = "duration") -> float | None:
+    """A seconds-like option (``none``/``inf`` = no limit if allowed), within ``minimum``
+    and the bounds of ``limits.LIMITS[limit]`` (at most a day)."""
     raw = opts.get(name)
     if raw is None:
         return default
     text = str(raw).strip().lower()
     if allow_none and text in ("none", "inf", "forever"):
         return None
-    try:
-        value = float(text)
-    except ValueError:
-        raise ValidationError(f"--{name} wants a number of seconds, got {raw!r}") from None
-    if not math.isfinite(value) or value < minimum:
-        raise ValidationError(f"--{name} must be a number >= {minimum:g}, got {raw!r}")
+    value = limits.parse(limit, text, f"--{name}")
+    if value < minimum:
+        raise ValidationError(f"--{name}: must be {limits.LIMITS[limit].describe()} and "
+                              f"at least {minimum:g}, got {raw!r}")
     return value
 
 
 def option_int(opts: Mapping[str, str | bool], name: str, default: int | None, *,
-               minimum: int = 1) -> int | None:
+               minimum: int = 1, limit: str = "count") -> int | None:
+    """A count option, within ``minimum`` and the bounds of ``limits.LIMITS[limit]``."""
     raw = opts.get(name)
     if raw is None:
         return default
-    try:
-        value = int(str(raw), 0)
-    except ValueError:
-        raise ValidationError(f"--{name} wants a whole number, got {raw!r}") from None
+    value = int(limits.parse(limit, str(raw), f"--{name}" if name.isalpha() and
+                             name.islower() else name))
     if value < minimum:
         raise ValidationError(f"--{name} must be at least {minimum}, got {value}")
     return value
+
+
+def seconds(key: str, value: Number, what: str) -> float:
+    """An evaluated duration (``.sleep 2*60``) within the bounds of ``limits.LIMITS[key]``."""
+    return float(limits.check(key, value, what))

@@ -33,10 +33,12 @@ from ..modules import Module, available, load
 _TOKEN = re.compile(r"""
     (?P<ws>[ \t\r\f\v]+)
   | (?P<comment>//.*)
+  | (?P<hash>(?<![^ \t])\#.*)
   | (?P<hex>(?:\$|0[xX])[0-9A-Fa-f]+\b)
   | (?P<bin>0[bB][01]+\b)
   | (?P<num>[0-9]+\b)
   | (?P<name>[A-Za-z_][A-Za-z0-9_.]*)
+  | (?P<help>\?)
   | (?P<op>[-+*/%=])
   | (?P<punct>[(),:;])
   | (?P<other>.)
@@ -133,6 +135,8 @@ class TmclLexer(Lexer):
                 yield at, Whitespace, tok
             elif kind == "comment":
                 yield at, Comment.Single, tok
+            elif kind == "hash":  # `GAP 1, 0 # where`: a comment to the end of the line
+                yield at, Comment.Single, tok
             elif kind == "hex":
                 yield at, Number.Hex, tok
             elif kind == "bin":
@@ -143,6 +147,8 @@ class TmclLexer(Lexer):
                 yield at, Operator, tok
             elif kind == "punct":
                 yield at, Punctuation, tok
+            elif kind == "help":  # `?` is help where a command goes, else no TMCL
+                yield at, Keyword.Pseudo if i == command_at else Error, tok
             elif kind == "other":
                 yield at, Error, tok
             elif labelled and i == significant[0]:

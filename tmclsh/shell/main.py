@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from ..errors import TmclError
-from .render import Output
+from .render import Output, prose_list
 from .session import QuitShell, Session
 
 EXIT_OK, EXIT_ERROR, EXIT_CONNECT = 0, 1, 3
@@ -14,7 +14,7 @@ EXIT_OK, EXIT_ERROR, EXIT_CONNECT = 0, 1, 3
 
 def banner(session: Session) -> str:
     c = session.client
-    mod = c.module.name if c.module else "unknown module"
+    mod = c.module.label if c.module else "unknown module"
     sim = " [SIMULATED]" if c.transport.simulated else ""
     mode = " ASCII mode" if c.mode == "ascii" else ""
     return f"tmclsh: {mod} at address {c.address} on {c.describe()}{sim}{mode}"
@@ -58,7 +58,7 @@ def run_shell(args: argparse.Namespace) -> int:
         return _run(args, client, settings)
     except KeyboardInterrupt:
         stopped = client.stop_all() if client.connected else []
-        print(f"\ninterrupted; motors stopped: {stopped}", file=sys.stderr)
+        print(f"\ninterrupted; motors stopped: {prose_list(stopped)}", file=sys.stderr)
         return 130
     except BrokenPipeError:
         # whoever read our output has gone (`tmclsh -c ... | head`): stop quietly, as other
@@ -83,25 +83,36 @@ def _silence_stdout() -> None:
 def _run(args: argparse.Namespace, client, settings: dict) -> int:
     from ..config import load_settings
 
-    out = Output(json_mode=bool(args.json))
+    shell_settings = load_settings()
+    out = Output(json_mode=bool(args.json), color=str(shell_settings.get("color", "auto")))
     interactive = args.command is None and args.script is None and sys.stdin.isatty()
     # `confirm = false` in the config file is a standing --yes
-    yes = bool(args.yes) or load_settings().get("confirm") is False
+    yes = bool(args.yes) or shell_settings.get("confirm") is False
     session = Session(client, out, interactive=interactive, yes=yes,
                       keep_going=bool(args.keep_going), settings=settings)
+    if client.module is not None and client.module.generic:
+        out.warn(f"{client.module.type_name}: {client.module.NOTICE}")  # once, at the start
     if args.trace:
         from .trace import enable_trace
 
         enable_trace(session)
-    if args.command is not None:
-        return run_lines(session, session.split(args.command))
-    if args.script is not None or not interactive:
-        from .script import run_file
+    try:
+        if args.command is not None:
+            status = run_lines(session, session.split(args.command))
+        elif args.script is not None or not interactive:
+            from .script import run_file
 
-        return run_file(session, args.script or "-")
-    from .app import run_repl
+            status = run_file(session, args.script or "-")
+        else:
+            from .app import run_repl
 
-    return run_repl(session)
+            status = run_repl(session)
+    except BaseException:
+        session.close()
+        raise
+    if not session.close():  # a recording that could not be put in place
+        status = status or EXIT_ERROR
+    return status
 
 
 def _exit_cleanly_on_signals() -> None:

@@ -7,12 +7,14 @@ the rich renderable; nothing here talks to the module.
 from __future__ import annotations
 
 import csv
+import io
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from .. import files
 from ..errors import ValidationError
 from . import expr
 from .commands import command
@@ -108,7 +110,7 @@ def render(log: Log, width: int = 60, height: int = 8, names: Sequence[str] | No
             raise ValidationError(f"no series {name!r} (have: {', '.join(log.names)})")
         good = [y for y in ys if y is not None]
         if not good:
-            panels.append(Panel(Text("no values", style="tmcl.note"), title=name,
+            panels.append(Panel(Text("no values", style="tmcl.note"), title=Text(name),
                                 title_align="left"))
             continue
         lo, hi = min(good), max(good)
@@ -124,20 +126,20 @@ def render(log: Log, width: int = 60, height: int = 8, names: Sequence[str] | No
         t0, t1 = (log.t[0], log.t[-1]) if log.t else (0.0, 0.0)
         left, right = f"{t0:.1f} s", f"{t1:.1f} s"
         body.append(" " * (pad + 2) + left + right.rjust(width - len(left)), style="tmcl.note")
-        panels.append(Panel(body, title=f"{name}  ({len(good)} samples)", title_align="left",
+        panels.append(Panel(body, title=Text(f"{name}  ({len(good)} samples)"), title_align="left",
                             expand=False))
     return Group(*panels)
 
 
 def read_csv(path: Path) -> Log:
     """A CSV with a ``t`` column (seconds; else the first numeric column) and value columns."""
+    if not path.exists():
+        raise ValidationError(f"no such file: {path}")
+    text = files.read_text(path, what="CSV file")  # bounded: not /dev/zero to the end
     try:
-        with open(path, newline="", encoding="utf-8") as fh:
-            rows = list(csv.reader(fh))
-    except FileNotFoundError:
-        raise ValidationError(f"no such file: {path}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ValidationError(f"cannot read {path}: {exc}") from None
+        rows = list(csv.reader(io.StringIO(text, newline="")))
+    except csv.Error as exc:
+        raise ValidationError(f"{path}: not a CSV file ({exc})") from None
     if len(rows) < 2:
         raise ValidationError(f"{path}: no samples (a header and at least one row needed)")
     header = [h.strip() for h in rows[0]]
@@ -180,6 +182,9 @@ PLOT_OPTIONS = {"height": True, "width": True, "only": True}
 @command(".plot")
 def cmd_plot(session: Session, args: str) -> None:
     rest, opts = expr.split_options(args, PLOT_OPTIONS)
+    width = expr.option_int(opts, "width", max(20, min(100, session.out.console.width - 14)),
+                            minimum=10, limit="plot_size")
+    height = expr.option_int(opts, "height", 6, minimum=2, limit="plot_size")
     if rest:
         log = read_csv(Path(rest.strip("\"'")).expanduser())
     else:
@@ -187,9 +192,6 @@ def cmd_plot(session: Session, args: str) -> None:
         if not isinstance(last, Log) or not last.t:
             raise ValidationError("nothing to plot: run .watch first, or give a CSV file")
         log = last
-    width = expr.option_int(opts, "width", max(20, min(100, session.out.console.width - 14)),
-                            minimum=10)
-    height = expr.option_int(opts, "height", 6, minimum=2)
     only = [n.strip() for n in str(opts["only"]).split(",")] if "only" in opts else None
     assert width is not None and height is not None
     renderable = render(log, width, height, only)

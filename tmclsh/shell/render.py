@@ -24,6 +24,9 @@ import json
 import os
 import re
 import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from functools import wraps
 from typing import Any
 
 from .. import instructions as isa
@@ -110,25 +113,42 @@ def _write_plain(stream, text: str) -> None:
     stream.flush()
 
 
-def _console(stderr: bool = False):
+def _console(stderr: bool = False, color: str = "auto"):
     """A rich console that writes to whatever sys.stdout/sys.stderr is *now* (so output from
-    other threads goes through prompt_toolkit's ``patch_stdout`` while the prompt runs)."""
+    other threads goes through prompt_toolkit's ``patch_stdout`` while the prompt runs).
+
+    ``color`` is the setting: "always" colours even a pipe, NO_COLOR and a dumb terminal
+    notwithstanding (someone asked for it: ``| less -R``); "never" never; "auto" when writing to
+    a terminal that is not dumb and NO_COLOR is unset."""
     from rich.console import Console
 
     class TrimmedConsole(Console):
         def _render_buffer(self, buffer) -> str:
             return _TRAILING_BLANKS.sub(r"\1", super()._render_buffer(buffer))
 
-    no_color = bool(os.environ.get("NO_COLOR")) or os.environ.get("TERM") == "dumb"
+    kw: dict[str, Any] = {}
+    if color == "always":
+        kw.update(force_terminal=True, no_color=False)
+        if os.environ.get("TERM", "") in ("dumb", "unknown"):
+            kw["color_system"] = "standard"  # rich would detect "no colours" for these
+    else:
+        no_color = (color == "never" or bool(os.environ.get("NO_COLOR"))
+                    or os.environ.get("TERM") == "dumb")
+        kw["no_color"] = no_color or None
+    # markup=False: every string printed, in a table cell or title too, is shown as it is;
+    # user text ('.param [/]', a file name '[bold]x') is never read as rich markup. Styles
+    # are given as style= or Text spans, never as [tags] inside strings.
     return TrimmedConsole(stderr=stderr, theme=rich_theme(), highlight=False, soft_wrap=True,
-                          no_color=no_color or None)
+                          markup=False, **kw)
 
 
 class Output:
     """Where results go: rich text for people, JSON lines for programs, errors to stderr."""
 
-    def __init__(self, json_mode: bool = False):
+    def __init__(self, json_mode: bool = False, color: str = "auto"):
         self.json = json_mode
+        self._color = color
+        self._paging = False  # inside paged(): a nested one adds nothing
         self._console = None
         self._err = None
         self._terminal: dict[int, tuple[object, bool]] = {}  # is_terminal, by stream
@@ -137,7 +157,7 @@ class Output:
     @property
     def console(self):
         if self._console is None:
-            self._console = _console()
+            self._console = _console(color=self._color)
         return self._console
 
     @console.setter
@@ -147,7 +167,7 @@ class Output:
     @property
     def err(self):
         if self._err is None:
-            self._err = _console(stderr=True)
+            self._err = _console(stderr=True, color=self._color)
         return self._err
 
     @err.setter
@@ -157,8 +177,8 @@ class Output:
     @property
     def is_terminal(self) -> bool:
         """Whether results go to a terminal (colour, live views, progress bars)."""
-        if self._console is not None:
-            return self._console.is_terminal
+        if self._console is not None or self._color == "always":
+            return self.console.is_terminal
         return self._is_terminal(sys.stdout)
 
     def _is_terminal(self, stream) -> bool:
@@ -169,8 +189,10 @@ class Output:
         return known[1]
 
     def _plain(self, stderr: bool = False):
-        """The stream to write plain text to, or None when rich must write (a terminal, or a
-        console put in place)."""
+        """The stream to write plain text to, or None when rich must write (a terminal, colour
+        asked for in a pipe, or a console put in place)."""
+        if self._color == "always":
+            return None
         if stderr:
             stream = sys.stderr
             return stream if self._err is None and not self._is_terminal(stream) else None
@@ -186,8 +208,9 @@ class Output:
     def print(self, *items: Any, **kw: Any) -> None:
         if self.json:
             return
-        # plain strings, not wrapped (soft_wrap=False wraps at the width even in a pipe)
-        stream = self._plain() if kw.get("markup") is False and kw.get("soft_wrap", True) \
+        # plain strings (no markup: the console reads none), not wrapped (soft_wrap=False
+        # wraps at the width even in a pipe)
+        stream = self._plain() if kw.get("markup", False) is False and kw.get("soft_wrap", True) \
             else None
         if stream is not None and all(isinstance(i, str) for i in items) \
                 and set(kw) <= {"markup", "style", "soft_wrap"}:
@@ -223,6 +246,32 @@ class Output:
         else:
             _write_plain(stream, text.plain)
 
+    @contextmanager
+    def paged(self, enabled: bool = True) -> Iterator[None]:
+        """Output printed inside goes through the pager when it would not fit the terminal
+        (``$PAGER``, else less; ``q`` leaves it), else straight out. Errors (stderr) are not
+        held back. Only for a person at a terminal: JSON and pipes get the text as it is."""
+        console = self.console
+        if not enabled or self.json or self._paging or not console.is_terminal:
+            yield
+            return
+        capture = console.capture()
+        self._paging = True
+        done = False
+        try:
+            with capture:
+                yield
+            done = True
+        finally:
+            self._paging = False
+            text = capture.get()
+            # an interrupted or failed command shows what it printed, without a pager
+            if not done or _rows(text, console.size.width) < console.size.height:
+                console.file.write(text)
+                console.file.flush()
+            else:
+                _page(text)
+
     def event(self, reply: Reply) -> None:
         """A 138 event (or any unsolicited reply), shown when it arrives."""
         if self.json:
@@ -243,6 +292,52 @@ class Output:
             _message(self.err if stderr else self.console, text, style)
         else:
             _write_plain(stream, text)
+
+
+def _rows(text: str, width: int) -> int:
+    """Terminal rows ``text`` takes, long lines wrapped."""
+    from rich.cells import cell_len
+    from rich.text import Text
+
+    width = max(width, 1)
+    return sum(max(1, -(-cell_len(line) // width))
+               for line in Text.from_ansi(text).plain.splitlines())
+
+
+def _page(text: str) -> None:
+    """Through rich's system pager (pydoc's: $MANPAGER, $PAGER, else less or more). Colours
+    stay only where the pager shows them (less -R); any other pager gets plain text."""
+    from rich.pager import SystemPager
+    from rich.text import Text
+
+    pager = os.environ.get("MANPAGER") or os.environ.get("PAGER")
+    if pager is None:
+        # colours (rich's documentation asks less users for -R), and the last page stays on
+        # the screen after q (-X), so the table is still there to read at the prompt
+        os.environ.setdefault("LESS", "-RX")
+    less_raw = "R" in os.environ.get("LESS", "").upper() or "-R" in (pager or "").upper()
+    if not ((pager is None or "less" in pager) and less_raw):
+        text = Text.from_ansi(text).plain
+    SystemPager().show(text)
+
+
+def paging(session: Any) -> bool:
+    """Long output is paged in the interactive shell when the ``pager`` setting is on
+    (app.py keeps it in ``session.state``), never in -c, -f or a script run from the shell."""
+    return bool(session.interactive and session.state.get("pager")
+                and not session.state.get("script.depth"))
+
+
+def paged(handler: Callable[[Any, str], None]) -> Callable[[Any, str], None]:
+    """A dot-command whose output may be long (``.help``, ``.params``): paged (see
+    ``Output.paged``)."""
+
+    @wraps(handler)
+    def run(session: Any, arg: str, *args: Any, **kw: Any) -> None:
+        with session.out.paged(paging(session)):
+            handler(session, arg, *args, **kw)
+
+    return run
 
 
 def _message(console, text: str, style: str) -> None:
@@ -478,14 +573,20 @@ def _status_hint(status: int) -> str:
 
 
 def binary_version(value: int, module: Module | None) -> tuple[int, int] | None:
-    """``(module type, version)`` from a 136 type 1 value, or None if it does not decode.
+    """``(module type, version)`` from a 136 type 1 value, or None if it does not decode."""
+    decoded = _binary_layout(value, module)
+    return None if decoded is None else decoded[:2]
+
+
+def _binary_layout(value: int, module: Module | None) -> tuple[int, int, bool] | None:
+    """``(module type, version, type first)``.
 
     The manuals differ in byte order (TMCM-1311: type high, type low, version low, version
     high; TMCM-1640: version low, version high, type low, type high): the layout whose type
     matches the module's firmware id wins."""
     b = (value & 0xFFFFFFFF).to_bytes(4, "big")
-    type_first = (b[0] << 8 | b[1], b[2] | b[3] << 8)
-    version_first = (b[2] | b[3] << 8, b[0] | b[1] << 8)
+    type_first = (b[0] << 8 | b[1], b[2] | b[3] << 8, True)
+    version_first = (b[2] | b[3] << 8, b[0] | b[1] << 8, False)
     if module is not None and version_first[0] == module.firmware_id:
         return version_first
     if module is None or type_first[0] == module.firmware_id:
@@ -493,13 +594,30 @@ def binary_version(value: int, module: Module | None) -> tuple[int, int] | None:
     return None
 
 
+def prose_list(items, empty: str = "none") -> str:
+    """``0, 1, 2`` for people, never ``[0, 1, 2]``; ``empty`` when there is nothing."""
+    words = [str(i) for i in items]
+    return ", ".join(words) if words else empty
+
+
 def version_text(value: int, module: Module | None) -> str:
-    """``module type 1311, firmware 1.11``."""
-    decoded = binary_version(value, module)
+    """The value field read the way the module's manual lays out its four bytes:
+    ``05 1F 6F 00: module type 1311 (05 1F), version 111 (6F 00, low byte first)``."""
+    b = [f"{x:02X}" for x in (value & 0xFFFFFFFF).to_bytes(4, "big")]
+    raw = " ".join(b)
+    decoded = _binary_layout(value, module)
     if decoded is None:
-        return f"value {value} ({value & 0xFFFFFFFF:#010x})"
-    kind, ver = decoded
-    return f"module type {kind}, firmware {ver // 100}.{ver % 100:02d}"
+        return f"{raw} (not a module type and version this module's manual describes)"
+    kind, ver, type_first = decoded
+    kind_bytes, ver_bytes = (b[:2], b[2:]) if type_first else (b[2:], b[:2])
+    return (f"{raw}: module type {kind} ({' '.join(kind_bytes)}{'' if type_first else ', low byte first'}), "
+            f"version {ver} ({' '.join(ver_bytes)}, low byte first)")
+
+
+def parse_version_string(text: str) -> tuple[int, int] | None:
+    """``(module type, version)`` from a 136 type 0 string (``1311V111`` -> (1311, 111))."""
+    m = re.fullmatch(r"\s*(\d+)V(\d+)\s*", text or "")
+    return (int(m.group(1)), int(m.group(2))) if m else None
 
 
 def _scaled(value: int, unit: str) -> str:

@@ -28,12 +28,15 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, TextIO
+from typing import TYPE_CHECKING
 
-from ..errors import TmclError, TmclTimeoutError, ValidationError
+from .. import files, limits
+from ..errors import AsmError, RangeError, TmclError, TmclTimeoutError, ValidationError
 from . import commands, expr
 from .commands import command
-from .session import QuitShell
+from .lines import split_line
+from .lines import strip_comment as _strip_comment
+from .session import QuitShell, owns_line
 
 if TYPE_CHECKING:
     from .session import Session
@@ -49,18 +52,41 @@ _RECHECK_AFTER = {".connect", ".module", ".mode", ".ascii", ".address"}
 _VIEWS = {".watch", ".plot", ".history", ".help", ".record"}  # not replayed by .record
 
 
+# What stopped a script before anything was sent, as the summary names it
+SYNTAX, RANGE, CHECK, NO_FILE, UNREADABLE = ("syntax", "range", "check", "no such file",
+                                             "unreadable")
+_KIND_TEXT = {SYNTAX: "syntax error", RANGE: "a value out of range",
+              CHECK: "a line the module would refuse", NO_FILE: "no such file",
+              UNREADABLE: "cannot read the file"}
+
+
 class ScriptError(TmclError):
     """A script problem that is not the module's: unreadable file, bad block structure."""
+
+    def __init__(self, message: str, kind: str = SYNTAX):
+        self.kind = kind
+        super().__init__(message)
 
 
 class CheckFailed(TmclError):
     """``.expect`` found the condition false."""
 
+    counted = True  # in checks_failed, not also in errors
+
 
 class ScriptSyntaxError(ScriptError):
-    def __init__(self, file: str, line: int, message: str):
+    def __init__(self, file: str, line: int, message: str, kind: str = SYNTAX):
         self.file, self.line, self.message = file, line, message
-        super().__init__(f"{file}:{line}: {message}")
+        super().__init__(f"{file}:{line}: {message}", kind)
+
+
+def error_kind(exc: TmclError) -> str:
+    """Why a line was refused before the run: syntax, a value out of range, or a check."""
+    if isinstance(exc, (ScriptError, AsmError)):
+        return exc.kind
+    if isinstance(exc, RangeError):
+        return RANGE
+    return SYNTAX
 
 
 # -- the parsed script -------------------------------------------------------------------
@@ -97,22 +123,8 @@ class Include(Node):
 
 
 def strip_comment(text: str) -> str:
-    """Drop a full-line ``#``/``//`` comment or a trailing ``//`` one (outside quotes)."""
-    s = text.strip()
-    if s.startswith("#") or s.startswith("//"):
-        return ""
-    if "/" not in s:
-        return s  # (most lines: no comment to look for)
-    quote = None
-    for i, ch in enumerate(s):
-        if quote:
-            if ch == quote:
-                quote = None
-        elif ch in "\"'":
-            quote = ch
-        elif ch == "/" and s.startswith("//", i):
-            return s[:i].rstrip()
-    return s
+    """Drop a ``#``/``//`` comment (outside quotes); see lines.py."""
+    return _strip_comment(text)
 
 
 def _word(text: str) -> tuple[str, str]:
@@ -140,6 +152,9 @@ def parse_condition(word: str, args: str) -> expr.Expression:
     return expr.parse(args)
 
 
+MAX_BLOCK_DEPTH = 32  # .repeat/.if blocks inside one another
+
+
 class Parser:
     """Lines in, nodes out; a node is yielded as soon as it is complete (for stdin)."""
 
@@ -150,23 +165,27 @@ class Parser:
         self.base = base
         self.stack = stack + (file,)
         self.precheck = True
+        self.outer_blocks = 0  # blocks open around the .source that includes this file
 
-    def fail(self, line: int, message: str) -> ScriptSyntaxError:
-        return ScriptSyntaxError(self.file, line, message)
+    def fail(self, line: int, message: str, kind: str = SYNTAX) -> ScriptSyntaxError:
+        return ScriptSyntaxError(self.file, line, message, kind)
 
     def nodes(self, lines: Iterable[str]) -> Iterator[Node]:
         open_: list[tuple[Node, list[Node]]] = []  # open blocks and the body being filled
+        held = 0  # lines inside open blocks: a block without .end on stdin is bounded too
         for number, raw in enumerate(lines, 1):
-            text = strip_comment(raw)
-            if not text:
-                continue
-            node = self.line(number, text, open_)
-            if node is None:
-                continue
-            if open_:
-                open_[-1][1].append(node)
-            else:
-                yield node
+            for text in split_line(raw, owns_line):  # `GAP 1, 0; GAP 2, 0` is two lines
+                held = held + 1 if open_ else 0
+                if held > files.MAX_LINES:
+                    raise self.fail(open_[-1][0].line, f"{_word(open_[-1][0].text)[0]} has no "
+                                    f".end within {files.MAX_LINES:,} lines")
+                node = self.line(number, text, open_)
+                if node is None:
+                    continue
+                if open_:
+                    open_[-1][1].append(node)
+                else:
+                    yield node
         if open_:
             node = open_[-1][0]
             raise self.fail(node.line, f"{_word(node.text)[0]} has no matching .end")
@@ -178,7 +197,7 @@ class Parser:
         except ScriptSyntaxError:
             raise
         except TmclError as exc:
-            raise self.fail(number, str(exc)) from None
+            raise self.fail(number, str(exc), error_kind(exc)) from None
 
     def _line(self, number: int, text: str, open_: list[tuple[Node, list[Node]]]) -> Node | None:
         file = self.file
@@ -190,6 +209,8 @@ class Parser:
                 self.session.client.encode(text)
             return Step(file, number, text)
         word, args = _word(text)
+        if word in (".repeat", ".if") and len(open_) + self.outer_blocks >= MAX_BLOCK_DEPTH:
+            raise self.fail(number, f"blocks nested more than {MAX_BLOCK_DEPTH} deep")
         if word == ".repeat":
             count, var = parse_repeat(args)
             expr.validate(self.session, count)
@@ -226,7 +247,7 @@ class Parser:
                 raise self.fail(number, ".end without .repeat or .if")
             return open_.pop()[0]
         if word == ".source":
-            return self.include(number, text, args)
+            return self.include(number, text, args, len(open_))
         cmd = commands.find(word)
         if cmd is None:
             raise self.fail(number, f"unknown shell command {word!r}; type .help for the list")
@@ -238,7 +259,7 @@ class Parser:
             self.precheck = False
         return Step(file, number, text)
 
-    def include(self, number: int, text: str, args: str) -> Include:
+    def include(self, number: int, text: str, args: str, blocks: int = 0) -> Include:
         if not args:
             raise self.fail(number, ".source needs a file name")
         if "${" in args:
@@ -248,9 +269,10 @@ class Parser:
             raise self.fail(number, f"{args} includes itself")
         if len(self.stack) > 16:
             raise self.fail(number, "includes nested more than 16 deep")
-        lines = read_lines(path, lambda msg: self.fail(number, msg))
+        lines = read_lines(path, lambda msg, kind: self.fail(number, msg, kind))
         sub = Parser(self.session, str(path), path.parent, self.stack)
         sub.precheck = self.precheck
+        sub.outer_blocks = self.outer_blocks + blocks + 1  # an include nests like a block
         body = list(sub.nodes(lines))
         self.precheck = sub.precheck
         return Include(self.file, number, text, str(path), body)
@@ -263,15 +285,24 @@ def resolve(name: str, base: Path | None) -> Path:
     return path
 
 
-def read_lines(path: Path, fail: Callable[[str], Exception]) -> list[str]:
+def read_lines(path: Path, fail: Callable[[str, str], Exception]) -> list[str]:
+    """A script's lines: at most ``files.MAX_FILE`` bytes, ``files.MAX_LINES`` lines and
+    ``files.MAX_LINE`` characters a line (``/dev/zero`` is refused, not read to the end);
+    ``fail(message, kind)`` makes the error when it cannot be read."""
+    if not path.exists():
+        raise fail(f"no such file: {path}", NO_FILE)
     try:
-        return path.read_text(encoding="utf-8").splitlines()
-    except FileNotFoundError:
-        raise fail(f"no such script: {path}") from None
-    except UnicodeDecodeError:
-        raise fail(f"{path} is not a text file") from None
-    except OSError as exc:
-        raise fail(f"cannot read {path}: {exc.strerror}") from None
+        lines = files.read_lines(path, "script")
+    except files.FileError as exc:
+        raise fail(str(exc), UNREADABLE) from None
+    except (OSError, ValueError) as exc:
+        raise fail(f"cannot read {path}: {getattr(exc, 'strerror', None) or exc}",
+                   UNREADABLE) from None
+    for no, line in enumerate(lines, 1):
+        if len(line) > files.MAX_LINE:
+            raise fail(f"{path}:{no}: line longer than {files.MAX_LINE:,} characters",
+                       UNREADABLE)
+    return lines
 
 
 def check_var_name(name: str) -> None:
@@ -303,7 +334,8 @@ def _check_expr_options(options: dict[str, bool]) -> Callable[[Session, str], No
         rest, opts = expr.split_options(args, options)
         for name in opts:
             if options[name]:
-                expr.option_float(opts, name, None, allow_none=name == "timeout")
+                expr.option_float(opts, name, None, allow_none=name == "timeout",
+                                  limit="wait_timeout" if name == "timeout" else "interval")
         if not rest:
             raise ValidationError("an expression is needed")
         expr.validate(session, expr.parse(rest))
@@ -408,6 +440,7 @@ class Runner:
             set_onerror(session, args, node)
             return
         typed = len(session.history)
+        session.time_left()  # a long .repeat stops at the session's time limit
         try:
             session.run_line(node.text)
         finally:
@@ -442,13 +475,7 @@ class Runner:
 def repeat_count(session: Session, count: expr.Expression | None) -> int:
     assert count is not None
     value = count.evaluate(expr.SessionContext(session))
-    if isinstance(value, float):
-        if not value.is_integer():
-            raise ValidationError(f".repeat count must be a whole number, got {value}")
-        value = int(value)
-    if value < 0:
-        raise ValidationError(f".repeat count must not be negative, got {value}")
-    return value
+    return int(limits.check("repeat", value, ".repeat count"))
 
 
 def report(session: Session, node: Node, exc: TmclError) -> None:
@@ -497,7 +524,7 @@ def _progress(session: Session, name: str, nodes: list[Node]):
         return None
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+    progress = Progress(TextColumn("{task.description}", markup=False), BarColumn(), MofNCompleteColumn(),
                         TimeElapsedColumn(), console=session.out.console, transient=True)
     task = progress.add_task(Path(name).name, total=total)
 
@@ -516,14 +543,14 @@ def run_file(session: Session, path: str) -> int:
     before = _counts(session)
     name = STDIN if path == "-" else path
     runner = Runner(session)
-    status = EXIT_OK
+    status, kind = EXIT_OK, SYNTAX
     try:
         if path == "-":
             parser = Parser(session, STDIN, Path.cwd())
             _run_nodes(runner, parser.nodes(_stdin_lines()))
         else:
             file = Path(path)
-            lines = read_lines(file, lambda msg: ScriptError(msg))
+            lines = read_lines(file, ScriptError)
             nodes = list(Parser(session, path, file.resolve().parent).nodes(lines))
             bar = _progress(session, path, nodes)
             if bar is None:
@@ -534,12 +561,12 @@ def run_file(session: Session, path: str) -> int:
                     _run_nodes(runner, nodes)
     except ScriptError as exc:
         _report_plain(session, exc)
-        status = EXIT_SYNTAX
+        status, kind = EXIT_SYNTAX, exc.kind
     finally:
         session.location = None
     if status == EXIT_OK and runner.failed:
         status = EXIT_FAILED
-    summary(session, name, before, time.monotonic() - start, status)
+    summary(session, name, before, time.monotonic() - start, status, kind)
     return status
 
 
@@ -555,8 +582,11 @@ def _run_nodes(runner: Runner, nodes: Iterable[Node]) -> None:
 
 
 def _stdin_lines() -> Iterator[str]:
-    for line in sys.stdin:
-        yield line.rstrip("\n")
+    """``-f -``: each line run as it arrives, none longer than ``files.MAX_LINE``."""
+    try:
+        yield from files.stream_lines(sys.stdin, STDIN)
+    except files.FileError as exc:
+        raise ScriptError(str(exc)) from None
 
 
 def _report_plain(session: Session, exc: TmclError) -> None:
@@ -566,15 +596,17 @@ def _report_plain(session: Session, exc: TmclError) -> None:
         session.out.err.print(str(exc), style="tmcl.error", markup=False)
 
 
-def summary(session: Session, name: str, before: Counts, elapsed: float, status: int) -> None:
+def summary(session: Session, name: str, before: Counts, elapsed: float, status: int,
+            kind: str = SYNTAX) -> None:
     now = _counts(session)
     sent = now.commands - before.commands
     passed, failed = now.passed - before.passed, now.failed - before.failed
     errors = now.errors - before.errors
+    why = _KIND_TEXT.get(kind, kind)
     if status == EXIT_SYNTAX and sent == 0:
-        text = f"{name}: not run (syntax error; nothing was sent)"
+        text = f"{name}: not run ({why}; nothing was sent)"
     elif status == EXIT_SYNTAX:  # stdin runs each line as it arrives, up to the bad one
-        text = (f"{name}: stopped at a syntax error after {sent} "
+        text = (f"{name}: stopped ({why}) after {sent} "
                 f"command{'s' if sent != 1 else ''} sent, {elapsed:.2f} s")
     else:
         text = (f"{name}: {sent} command{'s' if sent != 1 else ''} sent, "
@@ -593,7 +625,7 @@ def run_source(session: Session, path: str) -> bool:
     gets one ScriptError marked as shown.
     """
     file = resolve(path, None)  # relative to the current folder
-    lines = read_lines(file, lambda msg: ScriptError(msg))
+    lines = read_lines(file, ScriptError)
     nodes = list(Parser(session, str(file), file.parent).nodes(lines))
     runner = Runner(session)
     _run_nodes(runner, nodes)
@@ -663,9 +695,11 @@ def _outside_block(word: str) -> Callable[[Session, str], None]:
     return handler
 
 
-command(".elif")(_outside_block(".elif"))
+command(".elif")(
+    _outside_block(".elif"))
 command(".else")(_outside_block(".else"))
-command(".end")(_outside_block(".end"))
+command(".end")(
+    _outside_block(".end"))
 
 
 # -- the commands ------------------------------------------------------------------------
@@ -766,8 +800,9 @@ WAIT_OPTIONS = {"timeout": True, "interval": True}
 @command(".wait")
 def cmd_wait(session: Session, args: str) -> None:
     rest, opts = expr.split_options(args, WAIT_OPTIONS)
-    timeout = expr.option_float(opts, "timeout", WAIT_TIMEOUT, allow_none=True)
-    interval = expr.option_float(opts, "interval", WAIT_INTERVAL, minimum=0.001)
+    timeout = expr.option_float(opts, "timeout", WAIT_TIMEOUT, allow_none=True,
+                                limit="wait_timeout")
+    interval = expr.option_float(opts, "interval", WAIT_INTERVAL, limit="interval")
     assert interval is not None
     if not rest:
         raise ValidationError(".wait needs a condition: .wait GAP 8, 0 == 1")
@@ -779,9 +814,14 @@ def cmd_wait(session: Session, args: str) -> None:
         ok, *last = check(expression, expr.SessionContext(session))
         return ok
 
+    left = session.time_left()
+    capped = left is not None and (timeout is None or timeout > left)
     try:
-        session.client.wait_until(holds, timeout, interval)
+        session.client.wait_until(holds, left if capped else timeout, interval)
     except TmclTimeoutError:
+        if capped:
+            time.sleep(0.001)
+            session.time_left()
         seen = ", ".join(x for x in last if x)
         raise TmclTimeoutError(f"timed out after {timeout:g} s waiting for {expression.text} "
                                f"({seen})") from None
@@ -791,9 +831,11 @@ def cmd_wait(session: Session, args: str) -> None:
 def cmd_sleep(session: Session, args: str) -> None:
     if not args:
         raise ValidationError(".sleep needs seconds: .sleep 0.5")
-    seconds = expr.evaluate(session, args)
-    if seconds < 0:
-        raise ValidationError(f".sleep wants seconds >= 0, got {expr.format_number(seconds)}")
+    seconds = expr.seconds("sleep", expr.evaluate(session, args), ".sleep")
+    left = session.time_left()
+    if left is not None and seconds > left:
+        time.sleep(left)
+        session.time_left()  # raises: the time is up
     time.sleep(seconds)
 
 
@@ -837,11 +879,12 @@ def cmd_echo(session: Session, args: str) -> None:
             session.out.print(line, markup=False)
         return
     path = Path(_unquote(session.expand(target))).expanduser()
-    try:
-        with open(path, mode, encoding="utf-8") as fh:
-            fh.write(line + "\n")
-    except OSError as exc:
-        raise ScriptError(f"cannot write {path}: {exc.strerror}") from None
+    before = ""
+    if mode == "a" and path.is_file():  # appended all or nothing, like any write
+        before = files.read_text(path, what="file")
+        if before and not before.endswith("\n"):
+            before += "\n"
+    files.write_file(path, before + line + "\n")
 
 
 # -- recording and history ---------------------------------------------------------------
@@ -853,7 +896,7 @@ class Recorder:
     ``.watch`` too (a script would wait in them forever).
     """
 
-    def __init__(self, session: Session, path: Path, fh: TextIO):
+    def __init__(self, session: Session, path: Path, fh: files.AtomicWriter):
         self.session = session
         self.path = path
         self.fh = fh
@@ -879,12 +922,33 @@ class Recorder:
             text = f"{line}    // = {outcome}"
         else:
             text = line
-        self.fh.write(text + "\n")
-        self.fh.flush()
+        try:
+            self.fh.write(text + "\n")
+            self.fh.flush()
+        except files.FileError as exc:  # disk full: stop recording, say so, keep the old file
+            self.stop()
+            self.session.out.error(None, f"{exc}; recording stopped, {self.path} unchanged")
+            return
         self.lines += 1
 
+    def stop(self) -> None:
+        """Forget the recording: the file keeps what it held before ``.record``."""
+        self.fh.abort()
+        self._detach()
+
+    def _detach(self) -> None:
+        s = self.session
+        if self in s.recorders:
+            s.recorders.remove(self)
+        if s.state.get("record") is self:
+            s.state.pop("record", None)
+        if self.close in s.closers:
+            s.closers.remove(self.close)
+
     def close(self) -> None:
-        self.fh.close()
+        """Put the recording in place of the file (``.record off``, or the session ends)."""
+        self._detach()
+        self.fh.commit()
 
 
 def _is_read(session: Session, line: str) -> bool:
@@ -903,19 +967,16 @@ def cmd_record(session: Session, args: str) -> None:
             session.out.info(f"recording to {current.path} ({current.lines} lines)")
         return
     if current is not None:
-        session.recorders.remove(current) if current in session.recorders else None
         current.close()
-        session.state.pop("record", None)
         session.out.info(f"recorded {current.lines} lines to {current.path}")
     if args.strip().lower() == "off":
         if current is None:
             session.out.info("not recording")
         return
     path = Path(_unquote(args.strip())).expanduser()
-    try:
-        fh = open(path, "w", encoding="utf-8")
-    except OSError as exc:
-        raise ScriptError(f"cannot write {path}: {exc.strerror}") from None
+    # written beside PATH and moved over it at '.record off' or the end of the session, so
+    # a full disk or a crash never leaves half a script where a good one was
+    fh = files.atomic_writer(path)
     client = session.client
     module = client.module.name if client.module else "unknown module"
     fh.write(f"# recorded by tmclsh {datetime.now():%Y-%m-%d %H:%M} "
@@ -924,6 +985,7 @@ def cmd_record(session: Session, args: str) -> None:
     rec = Recorder(session, path, fh)
     session.state["record"] = rec
     session.recorders.append(rec)
+    session.closers.append(rec.close)
     session.out.info(f"recording to {path} (.record off to stop)")
 
 

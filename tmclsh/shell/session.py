@@ -15,10 +15,11 @@ from dataclasses import dataclass, field
 
 from .. import asm
 from ..client import Client, Result
-from ..errors import StatusError, TmclError, ValidationError
+from ..errors import StatusError, TmclError, TmclTimeoutError, ValidationError
 from ..modules import Module
 from ..protocol import status_ok
 from . import commands
+from .lines import split_text, strip_comment
 from .render import Output
 
 _VAR = re.compile(r"\$\{([^}]*)\}")
@@ -26,6 +27,10 @@ _VAR = re.compile(r"\$\{([^}]*)\}")
 
 class Abort(TmclError):
     """The user declined a confirmation; nothing was sent."""
+
+
+class TimeLimitError(TmclTimeoutError):
+    """A line ran past the session's ``time_limit`` and was stopped."""
 
 
 class QuitShell(Exception):
@@ -56,6 +61,8 @@ class Session:
         self.last_result: Result | None = None
         # hooks: called with (line, result-or-error-text) after every line (used by .record)
         self.recorders: list[Callable[[str, str], None]] = []
+        # called once when the session ends (a recording is put in place of its file)
+        self.closers: list[Callable[[], None]] = []
         # asks the user; the REPL replaces it with a prompt_toolkit confirm
         self.ask: Callable[[str], bool] | None = None
         # features keep their state here (debugger, watch, ...), keyed by feature name
@@ -63,7 +70,25 @@ class Session:
         self.location: tuple[str, int] | None = None  # script file and line being run
         # the REPL sets it False before each line; see end_interrupted_line
         self.interrupted_line_ended = True
+        # seconds one line (with the script or block it starts) may take; None: no limit.
+        # For programs that embed the shell and for tests: .sleep, .wait, .watch, blocks and
+        # the debugger's stepping end with a TimeLimitError at the deadline.
+        self.time_limit: float | None = None
+        self._deadline: float | None = None
         self.state["evaluate"] = _evaluate  # ${expression} in any line
+
+    def close(self) -> bool:
+        """End the session: run the closers; a failing one is reported, the rest still run.
+        False if one failed."""
+        ok = True
+        while self.closers:
+            fn = self.closers.pop()
+            try:
+                fn()
+            except TmclError as exc:
+                ok = False
+                self.out.error(None, str(exc))
+        return ok
 
     # -- module -------------------------------------------------------------------------
     @property
@@ -84,8 +109,8 @@ class Session:
         if self.yes:
             return
         if self.ask is not None and self.interactive:
-            # an Enter typed after the y/n key arrives as an empty line: it must not repeat
-            # the last .step (the debugger's repeat_on_empty)
+            # after a question, an empty line must not repeat the last .step (the debugger's
+            # repeat_on_empty): the user answered the question, not the debugger
             self.state.pop("repeat_on_empty", None)
             if self.ask(question):
                 return
@@ -112,24 +137,34 @@ class Session:
 
     # -- running lines ------------------------------------------------------------------
     def split(self, text: str) -> list[str]:
-        """Lines of a -c argument: newlines and ';' separate, a dot-command owns its line."""
-        out: list[str] = []
-        for raw in text.splitlines():
-            rest = raw.strip()
-            while rest:
-                if rest.startswith(".") or _is_bare_command(rest):
-                    out.append(rest)
-                    break
-                head, sep, rest = rest.partition(";")
-                if head.strip():
-                    out.append(head.strip())
-                rest = rest.strip()
-        return out
+        """Lines of typed text: newlines and ';' separate (see lines.py); a command that owns
+        its line (``.watch``) takes the rest of it."""
+        return split_text(text, owns_line)
+
+    def time_left(self) -> float | None:
+        """Seconds the current line may still take (None: no limit); TimeLimitError once
+        the time is up."""
+        if self._deadline is None:
+            return None
+        left = self._deadline - time.monotonic()
+        if left <= 0:
+            raise TimeLimitError(f"stopped: the line took longer than the session's time "
+                                 f"limit of {self.time_limit:g} s")
+        return left
 
     def run_line(self, line: str) -> Result | None:
         """Run one line; raises TmclError (or Abort) on failure, after counting it."""
-        text = line.strip()
-        if not text or text.startswith("#") or text.startswith("//"):
+        if self.time_limit is None or self._deadline is not None:  # nested: a script's line
+            return self._run_line(line)
+        self._deadline = time.monotonic() + self.time_limit
+        try:
+            return self._run_line(line)
+        finally:
+            self._deadline = None
+
+    def _run_line(self, line: str) -> Result | None:
+        text = strip_comment(line)  # `GAP 1, 0 # where`, `.let a = 3 // why`
+        if not text:
             return None
         self.history.append(text)
         capture = self.state.get("capture")  # a block (.repeat/.if) collecting its lines
@@ -138,7 +173,8 @@ class Session:
         try:
             result = self._dispatch(text)
         except TmclError as exc:
-            self.stats.errors += 1
+            if not getattr(exc, "counted", False):  # a failed .expect counts as a failure
+                self.stats.errors += 1
             self._record(text, f"error: {exc}")
             raise
         return result
@@ -194,6 +230,13 @@ def _evaluate(session: Session, text: str) -> int | float:
     from .expr import evaluate
 
     return evaluate(session, text)
+
+
+def owns_line(text: str) -> bool:
+    """Whether ``text`` starts with a command that takes the rest of its line, ';' included."""
+    words = text.split(None, 1)
+    cmd = commands.find(words[0]) if words else None
+    return cmd is not None and cmd.owns_line
 
 
 def _is_bare_command(text: str) -> bool:

@@ -6,8 +6,14 @@ The terminal shows what the module sends as it arrives. By default input is edit
 address character added unless one was typed; the echo of that line is hidden because the
 prompt already shows it, and replies are shown with their status decoded
 (``BA 100 -5000   ok, value -5000``). ``.ascii --raw`` passes keys through one by one, so the
-module's own echo and backspace handling are what the user sees. Ctrl-] returns to the shell;
-leaving asks whether to send BIN (``--bin``/``--no-bin`` answer in advance).
+module's own echo and backspace handling are what the user sees. Ctrl-] (or ``.quit``)
+returns to the shell; leaving asks whether to send BIN (``--bin``/``--no-bin`` answer in
+advance). A ``BIN`` the user sends is noticed: the module talks binary frames after it, so the
+terminal says so and returns to the shell on the binary link. Ctrl-T opens tio's menu of
+conveniences (termtools.py): local echo, hex view, timestamps, a log file, sending a file.
+
+Keys come through prompt_toolkit's input in both modes (its raw mode, its key parser), so the
+terminal works wherever prompt_toolkit does.
 
 The views (``LineView``, ``RawView``) are pure: bytes in, display segments out, so they are
 tested on canned byte sequences; the loops around them only move bytes and draw.
@@ -18,7 +24,6 @@ the transport while the terminal runs.
 
 from __future__ import annotations
 
-import os
 import re
 import sys
 import threading
@@ -35,6 +40,8 @@ from ..ascii import (BS, CR, GP_ASCII_MODE, GP_BANK, ECHO_NAMES, AsciiLink, Echo
 from ..errors import StatusError, ValidationError
 from ..protocol import Reply, Request, status_ok
 from .commands import command
+from .termtools import (MENU_KEY, MenuState, SessionLog, Stamper, choose, file_lines, hex_hint,
+                        hex_lines, is_bin, is_quit, menu_hint, menu_text)
 
 if TYPE_CHECKING:
     from .session import Session
@@ -124,6 +131,7 @@ class RawView:
     shown: int = 0  # characters on the current display line
     ended: bytes | None = None  # the line the user ended with Enter, until its echo is over
     last_cr: bool = False
+    replies: int = 0  # reply lines seen (a file being sent waits for each)
 
     def user_enter(self, typed: bytes) -> None:
         """The user pressed Enter after typing ``typed`` (backspaces applied)."""
@@ -150,6 +158,7 @@ class RawView:
         out: list[Segment] = []
         kind, reply = classify_line(bytes(self.line))
         if reply is not None:
+            self.replies += 1
             style = "tmcl.ok" if status_ok(reply.status) else "tmcl.error"
             out += [("", "   "), (style, reply_summary(reply))]
         out.append(("", "\r\n"))
@@ -286,18 +295,40 @@ class Terminal:
         self._replied = threading.Event()
         self.line_view = LineView()
         self.raw_view = RawView()
+        self.menu = MenuState(local_echo=opts.local_echo)
+        self._lines = Stamper()  # where lines start in the module's output (timestamps)
+        self.left_ascii = False  # the user sent BIN: the module talks binary frames now
 
     # -- output ---------------------------------------------------------------------------
     def write(self, segments: Iterable[Segment]) -> None:
-        """What the module sent (stdout)."""
-        text = self.paint(segments)
+        """What the module sent (stdout), with timestamps at line starts if they are on."""
+        stamped: list[Segment] = []
+        for style, text in segments:
+            for is_stamp, piece in self._lines.pieces(text, self.menu.timestamps):
+                stamped.append(("tmcl.note" if is_stamp else style, piece))
+        self.log("".join(t for _, t in stamped))
+        text = self.paint(stamped)
         if text:
             self._emit(0, text)
 
     def note(self, text: str) -> None:
         """A status line of our own, ``---`` in front (stderr, as miniterm does)."""
-        eol = "\r\n" if self.opts.raw else "\n"
-        self._emit(1, self.paint([("tmcl.note", f"--- {text}"), ("", eol)]))
+        eol = self.eol
+        text = f"--- {text}"
+        if self.opts.raw and not self._lines.at_line_start:
+            text = eol + text  # in the middle of the module's line: a line of its own
+            self._lines.at_line_start = True
+        self.log(text + eol)
+        self._emit(1, self.paint([("tmcl.note", text), ("", eol)]))
+
+    def log(self, text: str) -> None:
+        """Into the session's log file, if one is open (Ctrl-T f)."""
+        if self.menu.log is not None and text:
+            self.menu.log.write(text)
+
+    @property
+    def eol(self) -> str:
+        return "\r\n" if self.opts.raw else "\n"
 
     def _emit(self, stream: int, text: str) -> None:
         with self._write_lock:
@@ -347,8 +378,14 @@ class Terminal:
                 self.show(data)
 
     def show(self, data: bytes) -> None:
+        if self.menu.hex_view:
+            self._show_hex(data)
+            return
         if self.opts.raw:
+            before = self.raw_view.replies
             self.write(self.raw_view.feed(data))
+            if self.raw_view.replies != before:
+                self._replied.set()
             return
         for item in self.line_view.feed(data):
             if item.kind == LineKind.ECHO:
@@ -357,10 +394,28 @@ class Terminal:
             if item.kind == LineKind.REPLY:
                 self._replied.set()
 
+    def _show_hex(self, data: bytes) -> None:
+        """The bytes as they arrived, in hex; the views still follow the lines (a sent line
+        still waits for its reply), but what they would show is not shown."""
+        if self.opts.raw:
+            before = self.raw_view.replies
+            self.raw_view.feed(data)
+            self.raw_view.shown = 0
+            replied = self.raw_view.replies != before
+        else:
+            replied = any(i.kind == LineKind.REPLY for i in self.line_view.feed(data))
+        segments: list[Segment] = [] if self._lines.at_line_start else [("", self.eol)]
+        for line in hex_lines(data):
+            segments += [("tmcl.value", line), ("", self.eol)]
+        self.write(segments)
+        if replied:
+            self._replied.set()
+
     # -- line mode ------------------------------------------------------------------------
     def send_line(self, text: str, wait: float | None = None) -> bytes | None:
         """Send one typed line (address character added unless typed); wait up to ``wait``
-        seconds for its reply so that output and prompt stay in order."""
+        seconds for its reply so that output and prompt stay in order. A BIN for this
+        module sets ``left_ascii``."""
         text = text.strip()
         if not text:
             return None
@@ -369,10 +424,93 @@ class Terminal:
                 .encode("latin-1", errors="replace") + CR)
         self._replied.clear()
         self.line_view.expect(line)
+        if self.opts.raw:
+            self.raw_view.user_enter(line[:-1])
+        if self.menu.local_echo and not self.opts.raw:
+            self.write([("tmcl.note", line[:-1].decode("latin-1")), ("", "\n")])
         self.link.write_raw(line)
+        if is_bin(line[:-1], self.session.client.address):
+            self.left_ascii = True
         if wait:
             self._replied.wait(wait)
         return line
+
+    def send_file(self, name: str, between: Callable[[], None] | None = None) -> None:
+        """Ctrl-T u: each line of the file (blank and comment lines left out) sent and its
+        reply waited for; stops after a BIN. ``between`` runs after each line (line mode
+        writes out what arrived)."""
+        try:
+            lines = file_lines(name)
+        except ValidationError as exc:
+            self.note(str(exc))
+            return
+        self.note(f"sending {len(lines)} line{'s' if len(lines) != 1 else ''} from "
+                  f"{name.strip()}")
+        sent = 0
+        for text in lines:
+            self.send_line(text, wait=self.session.client.timeout)
+            sent += 1
+            if between is not None:
+                between()
+            if self.left_ascii:
+                break
+        self.note(f"sent {sent} of {len(lines)} lines from {name.strip()}")
+
+    def toggle_log(self, name: str | None) -> None:
+        """Ctrl-T f: stop the log that is open, else start one in file ``name``."""
+        if self.menu.log is not None:
+            path = self.menu.log.path
+            self.note(f"log closed: {path}")
+            self.menu.log.close()
+            self.menu.log = None
+            return
+        try:
+            self.menu.log = SessionLog.open(name or "")
+        except ValidationError as exc:
+            self.note(str(exc))
+            return
+        self.note(f"logging the session to {self.menu.log.path} (Ctrl-T f stops)")
+
+    def menu_key(self, key: str) -> str | None:
+        """A key after Ctrl-T. Switches flip here (and say so); for ``f`` and ``u`` the key
+        is returned: the loop asks for the file name first (f while logging stops it)."""
+        picked = choose(key)
+        if picked is None:
+            self.note(f"Ctrl-T {printable(key.encode('latin-1', 'replace'))}: no such menu "
+                      "entry (Ctrl-T ? lists them)")
+            return None
+        if picked == "?":
+            for line in menu_text(self.menu):
+                self.note(line)
+            return None
+        if picked == "f" and self.menu.log is not None:
+            self.toggle_log(None)
+            return None
+        if picked in ("f", "u"):
+            return picked
+        said = self.menu.toggle(picked)
+        if picked == "e" and not self.opts.raw:
+            said += " (the line as sent, address character included)"
+        if picked == "h":
+            said += hex_hint(self.menu.hex_view)
+        self.note(str(said))
+        return None
+
+    def back_to_binary(self) -> None:
+        """After the user's BIN: the link is binary frames again; tmclsh leaves it so."""
+        from ..errors import TmclError
+        from ..protocol import Control
+
+        client = self.session.client
+        self.link.detach(send_bin=False)
+        client.resync_next()
+        self.link.on_exit = Mode.BINARY
+        try:
+            client.request(Request(client.address, Control.GET_VERSION, 1, 0, 0))
+        except TmclError as exc:
+            self.note(f"BIN sent, but the module does not answer binary commands ({exc})")
+            return
+        self.note("module left ASCII mode (BIN): back to the shell on the binary link")
 
     def stop_motors(self) -> None:
         mod = self.session.client.module
@@ -386,12 +524,13 @@ class Terminal:
                   f"({address_char(c.host_address)}), {self.link.echo.text}")
         if self.opts.raw:
             if self.link.echo != Echo.CHAR and not self.opts.local_echo:
-                self.note("the module does not echo while you type (--echo echoes locally)")
-            self.note("keys go to the module as typed; Ctrl-C: stop motors; "
+                self.note("the module does not echo while you type (--echo or Ctrl-T e "
+                          "echoes locally)")
+            self.note("keys go to the module as typed; Ctrl-C: stop motors; Ctrl-T: menu; "
                       "Ctrl-]: back to the shell")
         else:
             self.note(f"'{address_char(c.address)}' goes in front of lines unless typed; "
-                      "Ctrl-C: stop motors; Ctrl-]: back to the shell")
+                      "Ctrl-C: stop motors; Ctrl-T: menu; Ctrl-] or .quit: back to the shell")
 
 
 # -- loops ---------------------------------------------------------------------------------------
@@ -475,6 +614,55 @@ def ascii_completions(session: Session, text: str) -> list[AsciiCompletion]:
     return out
 
 
+@dataclass(frozen=True)
+class _MenuFile:
+    """The line-mode prompt left for a menu entry that needs a file name; ``text`` is what
+    was typed on the prompt meanwhile (it comes back)."""
+
+    key: str
+    text: str
+
+
+_ASK = {"f": "--- log the session to file: ", "u": "--- send the lines of file: "}
+
+
+def _ask_file(question: str, **kw) -> str:
+    from prompt_toolkit import PromptSession
+    from prompt_toolkit.completion import PathCompleter
+
+    try:
+        return PromptSession(**kw).prompt(question, completer=PathCompleter(expanduser=True))
+    except (EOFError, KeyboardInterrupt):
+        return ""
+
+
+def _menu_bindings(term: Terminal, kb) -> Callable[[object], None]:
+    """Ctrl-T and the key after it, on the line-mode prompt. Returns the hook for the key
+    processor's ``after_key_press``: a key with a binding of its own (Enter, Tab, an arrow)
+    does its usual job and closes the menu, so a later letter is typed, not taken for it."""
+    from prompt_toolkit.filters import Condition
+
+    menu = {"state": None}  # None, "opened" (Ctrl-T just pressed), "waiting"
+
+    @kb.add("c-t", eager=True)
+    def _(event) -> None:
+        menu["state"] = "opened"
+        term.note(menu_hint(term.menu))
+
+    # not eager: the terminal's own reports (cursor position) keep their bindings
+    @kb.add("<any>", filter=Condition(lambda: menu["state"] is not None))
+    def _(event) -> None:
+        menu["state"] = None
+        key = term.menu_key(event.data)
+        if key is not None:
+            event.app.exit(result=_MenuFile(key, event.app.current_buffer.text))
+
+    def after_key(_processor: object) -> None:
+        menu["state"] = "waiting" if menu["state"] == "opened" else None
+
+    return after_key
+
+
 def run_line_mode(term: Terminal) -> None:
     """Prompt, send, repeat; what arrives is printed above the prompt by the reader."""
     from prompt_toolkit import PromptSession
@@ -490,27 +678,52 @@ def run_line_mode(term: Terminal) -> None:
     def _(event) -> None:
         event.app.exit(exception=_Leave())
 
+    after_key = _menu_bindings(term, kb)
     prompt = PromptSession(history=_history(), completer=_completer(session), key_bindings=kb,
                            style=prompt_style(), complete_while_typing=False)
+    prompt.app.key_processor.after_key_press += after_key
     message = [("class:prompt", f"ascii {address_char(session.client.address)}> ")]
     # between prompts nothing is drawn by prompt_toolkit: write to the terminal itself
     direct = (_real_write(sys.__stdout__), _real_write(sys.__stderr__))
+
+    def between() -> None:  # what arrived for one line of a file, before the next is sent
+        term.release()
+        term.hold(*direct)
+
     term.hold(*direct)
+    typed = ""
     with patch_stdout(raw=True):
         term.start_reader()
         try:
-            while True:
+            while not term.left_ascii:
                 term.release()
                 try:
-                    text = prompt.prompt(message)
+                    text = prompt.prompt(message, default=typed)
                 except KeyboardInterrupt:
                     term.hold(*direct)
+                    typed = ""
                     term.stop_motors()
                     continue
                 except (EOFError, _Leave):
                     term.hold(*direct)
                     break
+                typed = ""
+                if isinstance(text, _MenuFile):
+                    typed = text.text
+                    name = _ask_file(_ASK[text.key])
+                    term.hold(*direct)
+                    if text.key == "f":
+                        term.toggle_log(name)
+                    else:
+                        try:
+                            term.send_file(name, between)
+                        except KeyboardInterrupt:  # Ctrl-C while a file is being sent
+                            term.stop_motors()
+                    continue
                 term.hold(*direct)
+                if is_quit(text):
+                    break
+                term.log(f"{message[0][1]}{text}\n")
                 try:
                     term.send_line(text, wait=session.client.timeout)
                 except KeyboardInterrupt:  # Ctrl-C while waiting for the reply
@@ -528,9 +741,11 @@ def run_plain_lines(term: Terminal, lines: Iterable[str]) -> None:
     term.start_reader()
     try:
         for text in lines:
-            if text.strip() == "\x1d":
+            if text.strip() == "\x1d" or is_quit(text):
                 break
             term.send_line(text, wait=term.session.client.timeout)
+            if term.left_ascii:
+                break
         time.sleep(0.05)
     finally:
         term.stop_reader()
@@ -543,11 +758,12 @@ _ESC_SEQ = re.compile(rb"\x1b(?:\[[0-?]*[ -/]*[@-~]|O.|.)?", re.S)
 
 def translate_keys(data: bytes) -> list[bytes | int]:
     """Keys typed in raw mode to what the module gets: DEL becomes BS, Enter a CR, escape
-    sequences (arrows, function keys) are dropped; Ctrl-] and Ctrl-C come back as ints."""
+    sequences (arrows, function keys) are dropped; Ctrl-], Ctrl-C and Ctrl-T come back as
+    ints."""
     data = _ESC_SEQ.sub(b"", data)
     out: list[bytes | int] = []
     for b in data:
-        if b in (ESCAPE_KEY, CTRL_C):
+        if b in (ESCAPE_KEY, CTRL_C, MENU_KEY):
             out.append(b)
         elif b == 0x7F:
             out.append(BS)
@@ -558,64 +774,134 @@ def translate_keys(data: bytes) -> list[bytes | int]:
     return out
 
 
-def run_raw_mode(term: Terminal) -> None:
-    import select
-    import termios
-    import tty
+def key_bytes(key_press) -> bytes:
+    """What a prompt_toolkit KeyPress typed, as bytes for the module (pasted text whole;
+    arrows, function keys and terminal reports nothing)."""
+    from prompt_toolkit.keys import Keys
 
-    fd = sys.stdin.fileno()
-    old = termios.tcgetattr(fd)
-    typed = bytearray()  # the line the user has typed so far (for Ctrl-C)
-    tty.setraw(fd)
+    data = key_press.data or ""
+    if key_press.key == Keys.BracketedPaste:
+        return data.replace("\r\n", "\r").replace("\n", "\r").encode("latin-1", "replace")
+    if data.startswith("\x1b") and len(data) > 1:
+        return b""
+    return data.encode("latin-1", "replace")
+
+
+class RawKeys:
+    """Raw mode's keys: each goes to the module as typed, except Ctrl-] (leave), Ctrl-C (erase
+    the line, or stop the motors), Ctrl-T (the menu) and Enter after ``.quit`` (leave).
+    ``press`` returns "leave", a menu key that needs a file name ("f", "u"), or None."""
+
+    def __init__(self, term: Terminal):
+        self.term = term
+        self.typed = bytearray()  # the line typed so far (for Ctrl-C, .quit and BIN)
+        self.menu_open = False
+
+    def press(self, key: bytes | int) -> str | None:
+        term = self.term
+        if self.menu_open:
+            self.menu_open = False
+            if key == MENU_KEY:  # Ctrl-T twice: the module gets one
+                term.link.write_raw(bytes((MENU_KEY,)))
+                return None
+            char = key if isinstance(key, bytes) else bytes((key,))
+            return term.menu_key(char.decode("latin-1"))
+        if key == ESCAPE_KEY:
+            return "leave"
+        if key == MENU_KEY:
+            self.menu_open = True
+            term.note(menu_hint(term.menu))
+            return None
+        if key == CTRL_C:
+            if self.typed:
+                term.link.write_raw(BS * len(self.typed))
+                self.typed.clear()
+                term.note("line erased; Ctrl-C again stops the motors")
+            else:
+                term.stop_motors()
+            return None
+        assert isinstance(key, bytes)
+        if key == CR and is_quit(self.typed.decode("latin-1")):
+            term.link.write_raw(BS * len(self.typed))  # the module forgets the typed word
+            self.typed.clear()
+            return "leave"
+        term.link.write_raw(key)
+        if key == CR:
+            term.raw_view.user_enter(bytes(self.typed))
+            if is_bin(bytes(self.typed), term.session.client.address):
+                term.left_ascii = True
+            self.typed.clear()
+        elif key == BS:
+            if self.typed:
+                self.typed.pop()
+        else:
+            self.typed += key
+        if term.menu.local_echo:
+            term.write(term.raw_view.local(key))
+        return "leave" if term.left_ascii else None
+
+
+async def _raw_loop(term: Terminal, inp) -> None:
+    import asyncio
+
+    queue: asyncio.Queue = asyncio.Queue()
+
+    def ready() -> None:
+        for key_press in inp.read_keys():
+            queue.put_nowait(key_press)
+
+    keys = RawKeys(term)
+    with inp.raw_mode(), inp.attach(ready):
+        while True:
+            key_press = await queue.get()
+            for key in translate_keys(key_bytes(key_press)):
+                action = keys.press(key)
+                if action == "leave":
+                    if term.left_ascii:
+                        await asyncio.sleep(min(term.session.client.timeout, 0.3))  # its reply
+                    return
+                if action in _ASK:
+                    name = await _ask_file_async(inp, _ASK[action])
+                    if action == "f":
+                        term.toggle_log(name)
+                    else:
+                        await asyncio.to_thread(term.send_file, name)
+                        if term.left_ascii:
+                            return
+
+
+async def _ask_file_async(inp, question: str) -> str:
+    """A file name, asked on the raw terminal's own input (prompt_toolkit restores raw mode
+    and our key reader afterwards)."""
+    from prompt_toolkit import PromptSession
+    from prompt_toolkit.completion import PathCompleter
+
+    try:
+        return await PromptSession(input=inp).prompt_async(
+            question, completer=PathCompleter(expanduser=True))
+    except (EOFError, KeyboardInterrupt):
+        return ""
+
+
+def run_raw_mode(term: Terminal) -> None:
+    import asyncio
+
+    from prompt_toolkit.input import create_input
+
+    inp = create_input()
     term.start_reader()
     try:
-        while True:
-            ready, _, _ = select.select([fd], [], [], 0.1)
-            if not ready:
-                continue
-            keys = os.read(fd, 256)
-            if not keys:
-                break
-            for key in translate_keys(keys):
-                if key == ESCAPE_KEY:
-                    return
-                if key == CTRL_C:
-                    if typed:
-                        term.link.write_raw(BS * len(typed))
-                        typed.clear()
-                        term.note("line erased; Ctrl-C again stops the motors")
-                    else:
-                        term.stop_motors()
-                    continue
-                assert isinstance(key, bytes)
-                term.link.write_raw(key)
-                if key == CR:
-                    term.raw_view.user_enter(bytes(typed))
-                    typed.clear()
-                elif key == BS:
-                    if typed:
-                        typed.pop()
-                else:
-                    typed += key
-                if term.opts.local_echo:
-                    term.write(term.raw_view.local(key))
+        asyncio.run(_raw_loop(term, inp))
     finally:
         term.stop_reader()
-        termios.tcsetattr(fd, termios.TCSADRAIN, old)
-        term.write([("", "\r\n")] if term.raw_view.shown else [])
+        term.write([("", "\r\n")] if not term._lines.at_line_start else [])
+        inp.close()
 
 
 def _ask_yes_no(question: str, default: bool) -> bool:
-    from prompt_toolkit import prompt
+    from .ask import ask_yes_no
 
-    hint = "[Y/n]" if default else "[y/N]"
-    try:
-        answer = prompt(f"{question} {hint} ").strip().lower()
-    except (EOFError, KeyboardInterrupt):
-        return default
-    if not answer:
-        return default
-    return answer in ("y", "yes", "j", "ja")
+    return ask_yes_no(question, default)
 
 
 # -- shell commands ------------------------------------------------------------------------------
@@ -644,12 +930,19 @@ def cmd_ascii(session: Session, argtext: str) -> None:
         term.note("module entered ASCII mode (command 139)" if link.entered
                   else "module was already in ASCII mode")
     term.banner()
-    if opts.raw:
-        run_raw_mode(term)
-    elif tty_in:
-        run_line_mode(term)
-    else:
-        run_plain_lines(term, sys.stdin)
+    try:
+        if opts.raw:
+            run_raw_mode(term)
+        elif tty_in:
+            run_line_mode(term)
+        else:
+            run_plain_lines(term, sys.stdin)
+    finally:
+        if term.menu.log is not None:
+            term.toggle_log(None)
+    if term.left_ascii:
+        term.back_to_binary()
+        return
     _leave(term, tty_in)
 
 
@@ -773,6 +1066,7 @@ def cmd_ascii_config(session: Session, argtext: str) -> None:
     session.confirm(f"write GP 67 = {new} ({describe_gp67(new)}) to the module's EEPROM "
                     f"(now {current})?")
     reply = client.request(Request(client.address, _SGP, GP_ASCII_MODE, GP_BANK, new))
+    session.stats.commands += 1
     if reply is not None and not status_ok(reply.status):
         raise StatusError(reply.status, reply)
     if client.ascii_link is not None:
@@ -788,6 +1082,7 @@ def cmd_ascii_config(session: Session, argtext: str) -> None:
 def _read_gp67(session: Session) -> int:
     client = session.client
     reply = client.request(Request(client.address, _GGP, GP_ASCII_MODE, GP_BANK, 0))
+    session.stats.commands += 1
     assert reply is not None
     if not status_ok(reply.status):
         raise StatusError(reply.status, reply)

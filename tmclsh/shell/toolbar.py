@@ -34,56 +34,111 @@ def create_toolbar_tokens_func(session: Session) -> Callable[[], Fragments]:
     """``bottom_toolbar=create_toolbar_tokens_func(session)``."""
 
     def get_toolbar_tokens() -> Fragments:
-        from .trace import trace_enabled
-
-        c = session.client
-        out: Fragments = []
-        sep = ("class:bottom-toolbar.dim", " | ")
-        if not c.connected:
-            out.append(("class:bottom-toolbar.off", f" DISCONNECTED {c.describe()} "))
-            out.append(("class:bottom-toolbar", " .connect to retry "))
-        elif c.transport.simulated:
-            out.append(("class:bottom-toolbar.sim", " SIMULATED "))
-        else:
-            out.append(("class:bottom-toolbar.on", f" {c.describe()} "))
-        out.append(sep)
-        mod = c.module.name if c.module is not None else "module ?"
-        out.append(("class:bottom-toolbar", f"{mod} @{c.address}"))
-        out.append(sep)
-        ascii_mode = c.mode == "ascii"
-        out.append(("class:bottom-toolbar.on" if ascii_mode else "class:bottom-toolbar",
-                    "ASCII" if ascii_mode else "binary"))
-        out.append(sep)
-        on = trace_enabled(session)
-        out.append(("class:bottom-toolbar.on" if on else "class:bottom-toolbar.dim",
-                    f"trace {'on' if on else 'off'}"))
-        state = _program_state(session)
-        if state:
-            out.append(sep)
-            style = ("class:bottom-toolbar.on" if state.startswith(("run", "step"))
-                     else "class:bottom-toolbar")
-            out.append((style, f"program {state}"))
-        # the key hints, as many as fit: a cut-off toolbar (`^D qu`) looks broken
-        room = _columns() - sum(len(text) for _, text in out) - len(sep[1])
-        for hints in _HINTS:
-            if sum(len(k) + len(t) for k, t in hints) <= room:
-                if hints:
-                    out.append(sep)
-                for key, text in hints:
-                    out.append(("class:bottom-toolbar.key", key))
-                    out.append(("class:bottom-toolbar.dim", text))
-                break
-        return out
+        return toolbar_fragments(session, _columns())
 
     return get_toolbar_tokens
 
 
-_HINTS = (
-    (("Tab", " complete  "), ("^C", " stop motors  "), ("^D", " quit")),
-    (("^C", " stop motors  "), ("^D", " quit")),
-    (("^C", " stop"),),
-    (),
-)
+# An item is its forms from the fullest to the shortest; an empty form drops the item.
+Item = list[Fragments]
+SEP = ("class:bottom-toolbar.dim", " | ")
+
+_HINTS: Item = [
+    [("class:bottom-toolbar.key", "Tab"), ("class:bottom-toolbar.dim", " complete  "),
+     ("class:bottom-toolbar.key", "^C"), ("class:bottom-toolbar.dim", " stop motors  "),
+     ("class:bottom-toolbar.key", "^D"), ("class:bottom-toolbar.dim", " quit")],
+    [("class:bottom-toolbar.key", "^C"), ("class:bottom-toolbar.dim", " stop motors  "),
+     ("class:bottom-toolbar.key", "^D"), ("class:bottom-toolbar.dim", " quit")],
+    [("class:bottom-toolbar.key", "^C"), ("class:bottom-toolbar.dim", " stop motors")],
+    [("class:bottom-toolbar.key", "^C"), ("class:bottom-toolbar.dim", " stop")],
+    [],
+]
+
+# What goes first when the terminal is narrow (least useful first): each step shortens one
+# item to its next form. The connection and the module never go.
+_SHRINK = ("hints", "hints", "hints", "trace_off", "binary", "program", "retry", "hints",
+           "connection", "trace_on")
+
+
+def toolbar_fragments(session: Session, columns: int) -> Fragments:
+    """The toolbar for a terminal ``columns`` wide: every item that fits, whole words only
+    (prompt_toolkit would cut the line at the edge: ``^D qu`` looks broken)."""
+    from .trace import trace_enabled
+
+    c = session.client
+    items: dict[str, Item] = {}
+    if not c.connected:
+        where = c.describe()
+        items["connection"] = [[("class:bottom-toolbar.off", f" DISCONNECTED {where} ")],
+                               [("class:bottom-toolbar.off", " DISCONNECTED ")]]
+        items["retry"] = [[("class:bottom-toolbar", " .connect to retry ")], []]
+    elif c.transport.simulated:
+        items["connection"] = [[("class:bottom-toolbar.sim", " SIMULATED ")]]
+    else:
+        where = c.describe()
+        short = where.split(" @ ")[0]  # `/dev/ttyUSB0 @ 115200`: the port alone
+        items["connection"] = [[("class:bottom-toolbar.on", f" {where} ")],
+                               [("class:bottom-toolbar.on", f" {short} ")]]
+    mod = c.module.label if c.module is not None else "module ?"
+    items["module"] = [[("class:bottom-toolbar", f"{mod} @{c.address}")]]
+    if c.mode == "ascii":
+        items["ascii"] = [[("class:bottom-toolbar.on", "ASCII")]]
+    else:
+        items["binary"] = [[("class:bottom-toolbar", "binary")], []]
+    if trace_enabled(session):
+        items["trace_on"] = [[("class:bottom-toolbar.on", "trace on")], []]
+    else:
+        items["trace_off"] = [[("class:bottom-toolbar.dim", "trace off")], []]
+    state = _program_state(session)
+    if state:
+        style = ("class:bottom-toolbar.on" if state.startswith(("run", "step"))
+                 else "class:bottom-toolbar")
+        items["program"] = [[(style, f"program {state}")], [(style, state)]]
+    items["hints"] = _HINTS
+    form = dict.fromkeys(items, 0)
+
+    def build() -> Fragments:
+        out: Fragments = []
+        for name, forms in items.items():
+            if name == "retry":  # it belongs to the connection, without a separator
+                out.extend(forms[form[name]])
+                continue
+            frags = forms[form[name]]
+            if frags:
+                if out:
+                    out.append(SEP)
+                out.extend(frags)
+        return out
+
+    out = build()
+    for name in _SHRINK:
+        if _width(out) <= columns:
+            return out
+        if name in form and form[name] + 1 < len(items[name]):
+            form[name] += 1
+            out = build()
+    return _whole_words(out, columns)
+
+
+def _width(fragments: Fragments) -> int:
+    return sum(len(text) for _, text in fragments)
+
+
+def _whole_words(fragments: Fragments, columns: int) -> Fragments:
+    """The last resort: fragments from the end go, then words, never half a word."""
+    out = list(fragments)
+    while out and _width(out) > columns:
+        style, text = out.pop()
+        room = columns - _width(out)
+        words = text.rstrip().split(" ")
+        while words and len(" ".join(words)) > room:
+            words.pop()
+        if words and any(words):
+            out.append((style, " ".join(words)))
+            break
+    while out and out[-1] == SEP:
+        out.pop()
+    return out
 
 
 def _columns() -> int:

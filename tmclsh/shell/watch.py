@@ -9,18 +9,17 @@
   recent values, changed values highlighted. Under ``--json`` or when stdout is not a
   terminal: one JSON object per sample, ``{"t": seconds, "values": {name: number}}``
   (``null`` for a value whose read failed in that sample).
-* Keys (when stdin is a terminal; cbreak mode, restored on exit): ``s`` or space sends MST to
-  every motor and keeps watching; ``q`` or Esc ends the watch. Ctrl-C ends the watch too and
-  does NOT stop the motors. Ctrl-C is taken between reads, so a transaction is never cut in
-  half; a second Ctrl-C interrupts at once.
+* Keys (when stdin is a terminal; read through prompt_toolkit's input in raw mode, so the
+  Windows console works as a POSIX terminal does; restored on exit): ``s`` or space sends MST
+  to every motor and keeps watching; ``q`` or Esc ends the watch. Ctrl-C ends the watch too
+  and does NOT stop the motors. Ctrl-C (a key in raw mode, a signal otherwise) is taken
+  between reads, so a transaction is never cut in half; a second one interrupts at once.
 """
 
 from __future__ import annotations
 
 import csv
 import math
-import os
-import select
 import signal
 import sys
 import threading
@@ -32,6 +31,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
+from .. import files
 from ..errors import TmclError, ValidationError
 from . import expr, plot, script
 from .commands import command
@@ -66,14 +66,20 @@ def parse_items(session: Session, text: str) -> list[Item]:
     import re
 
     items: list[Item] = []
-    for part in text.split(";"):
+    parts = text.split(";")
+    for i, part in enumerate(parts):
         part = part.strip()
         if not part:
             continue
         m = re.match(r"([A-Za-z_][A-Za-z0-9_]*)\s*=(?!=)(.*)$", part, re.DOTALL)
         name, body = (m.group(1), m.group(2)) if m else (None, part)
-        expression = expr.parse(session.expand(body))
-        expr.validate(session, expression)
+        try:
+            expression = expr.parse(session.expand(body))
+            expr.validate(session, expression)
+        except TmclError as exc:
+            if i == 0:
+                raise
+            raise ValidationError(_after_semicolon(parts, i, exc)) from None
         name = name or expression.text
         if any(i.name == name for i in items):
             raise ValidationError(f"{name!r} is watched twice")
@@ -81,6 +87,15 @@ def parse_items(session: Session, text: str) -> list[Item]:
     if not items:
         raise ValidationError("nothing to watch")
     return items
+
+
+def _after_semicolon(parts: list[str], i: int, exc: TmclError) -> str:
+    """An expression after a ';' did not parse: perhaps it was meant as the next command."""
+    before = ";".join(parts[:i]).strip()
+    after = ";".join(parts[i:]).strip()
+    return (f"{parts[i].strip()!r} after ';' is not a watch expression ({exc}); .watch takes "
+            f"the rest of its line, ';' separating its expressions. To run {after!r} after "
+            f"the watch, put it on a line of its own:\n  .watch {before}\n  {after}")
 
 
 def default_items(session: Session) -> list[Item]:
@@ -289,55 +304,58 @@ def render(snapshot: Snapshot, width: int | None = None):
 # -- keys ----------------------------------------------------------------------------------
 
 class Keys:
-    """Single key presses from a terminal stdin, in cbreak mode (Ctrl-C still signals).
+    """Single key presses from a terminal stdin, through prompt_toolkit's input (the POSIX
+    terminal and the Windows console alike), in raw mode: Ctrl-C arrives as the key "\x03".
 
-    Inactive (``wait`` just sleeps) when stdin is not a terminal or termios is missing.
+    Inactive (``wait`` just sleeps) when stdin is not a terminal.
     """
 
     def __init__(self, stream: TextIO | None = None):
         self.stream = stream if stream is not None else sys.stdin
-        self.fd: int | None = None
-        self._saved = None
+        self._input = None
+        self._mode = None
 
     def __enter__(self) -> Keys:
         try:
-            import termios
-            import tty
-
             if self.stream is None or not self.stream.isatty():
                 return self
-            fd = self.stream.fileno()
-            self._saved = termios.tcgetattr(fd)
-            tty.setcbreak(fd, termios.TCSANOW)
-            self.fd = fd
-        except (ImportError, OSError, ValueError, AttributeError):
-            self.fd = None
+            from prompt_toolkit.input import create_input
+
+            inp = create_input(self.stream)
+            mode = inp.raw_mode()
+            mode.__enter__()
+            self._input, self._mode = inp, mode
+        except (OSError, ValueError, AttributeError, NotImplementedError):
+            self._input = self._mode = None
         return self
 
     def __exit__(self, *exc: object) -> None:
-        if self.fd is not None and self._saved is not None:
-            import termios
-
-            termios.tcsetattr(self.fd, termios.TCSADRAIN, self._saved)
-        self.fd = None
+        if self._mode is not None:
+            self._mode.__exit__(None, None, None)
+        self._input = self._mode = None
 
     @property
     def active(self) -> bool:
-        return self.fd is not None
+        return self._input is not None
 
     def wait(self, timeout: float) -> str:
-        """Wait up to ``timeout`` seconds; return the keys pressed (possibly several)."""
-        if self.fd is None:
+        """Wait up to ``timeout`` seconds; return the keys pressed (possibly several): single
+        characters, "\x1b" for Esc; arrows and other sequences are left out."""
+        if self._input is None:
             if timeout > 0:
                 time.sleep(timeout)
             return ""
-        ready, _, _ = select.select([self.fd], [], [], max(0.0, timeout))
-        if not ready:
-            return ""
-        try:
-            return os.read(self.fd, 64).decode("utf-8", errors="replace")
-        except OSError:
-            return ""
+        from prompt_toolkit.keys import Keys as Key
+
+        deadline = time.monotonic() + max(0.0, timeout)
+        while True:
+            presses = self._input.read_keys() or self._input.flush_keys()
+            text = "".join("\x1b" if p.key == Key.Escape else p.data for p in presses
+                           if p.key == Key.Escape or len(p.data) == 1)
+            left = deadline - time.monotonic()
+            if text or left <= 0 or self._input.closed:
+                return text
+            time.sleep(min(0.01, left))
 
 
 class _Interrupt:
@@ -353,6 +371,9 @@ class _Interrupt:
         return self
 
     def _handle(self, signum, frame) -> None:
+        self.press()
+
+    def press(self) -> None:
         if self.requested:
             raise KeyboardInterrupt
         self.requested = True
@@ -374,7 +395,7 @@ def parse_args(session: Session, args: str, *, names: bool = True):
     only watched values or variables: variables set earlier in the script do not exist yet.
     """
     rest, opts = expr.split_options(args, WATCH_OPTIONS)
-    interval = expr.option_float(opts, "interval", DEFAULT_INTERVAL)
+    interval = expr.option_float(opts, "interval", DEFAULT_INTERVAL, limit="watch_interval")
     count = expr.option_int(opts, "count", None, minimum=1)
     assert interval is not None
     items = parse_items(session, rest) if rest else default_items(session)
@@ -407,13 +428,14 @@ class WatchResult:
 
 
 class _Csv:
+    """The samples as CSV, written beside the file and put in its place when the watch
+    ends (a full disk stops the watch with an error and leaves the old file as it was)."""
+
     def __init__(self, path: Path, names: Sequence[str]):
-        try:
-            self.fh = open(path, "w", newline="", encoding="utf-8", buffering=1)
-        except OSError as exc:
-            raise ValidationError(f"cannot write {path}: {exc.strerror}") from None
+        self.fh = files.atomic_writer(path, newline="")
         self.writer = csv.writer(self.fh)
         self.writer.writerow(["time", "t", *names])
+        self.fh.flush()
         self.names = names
 
     def write(self, sample: Sample) -> None:
@@ -421,9 +443,10 @@ class _Csv:
                               f"{sample.t:.4f}",
                               *("" if sample.values.get(n) is None else sample.values[n]
                                 for n in self.names)])
+        self.fh.flush()
 
     def close(self) -> None:
-        self.fh.close()
+        self.fh.commit()
 
 
 def run_watch(session: Session, items: Sequence[Item], *, interval: float = DEFAULT_INTERVAL,
@@ -500,6 +523,7 @@ class _Watch:
         """Returns why the watch ended: count, until, key, interrupt or pipe."""
         next_at = self.start
         while not self.intr.requested:
+            self.session.time_left()  # raises at the session's time limit, if it has one
             sample = poll(self.session, self.items, time.monotonic() - self.start)
             if self.state.samples == 0 and len(sample.errors) == len(self.items):
                 # nothing readable at all: an error, not a watch of dashes
@@ -521,6 +545,9 @@ class _Watch:
             # the next sample is due one interval after this one began; polling slower than
             # the interval starts the next at once, without a backlog of samples
             next_at = max(next_at + self.interval, time.monotonic())
+            left = self.session.time_left()
+            if left is not None:
+                next_at = min(next_at, time.monotonic() + left)
             ended = self._wait(next_at)
             if ended is not None:
                 return ended
@@ -542,7 +569,9 @@ class _Watch:
                 if pressed == "\x1b":  # Esc alone (not the start of an arrow key's sequence)
                     return "key"
                 for key in pressed:  # several keys may arrive at once: act on each
-                    if key in STOP_KEYS:
+                    if key == "\x03":  # Ctrl-C typed in raw mode: as the signal would be
+                        self.intr.press()
+                    elif key in STOP_KEYS:
                         self._stop_motors()
                     elif key in QUIT_KEYS:
                         return "key"

@@ -101,6 +101,12 @@ class Simulator:
                  host_address: int = 2, ascii_startup: bool | None = None,
                  autostart: bool = True, speed: float = 1.0):
         self.module = load(module) if isinstance(module, str) else module
+        if self.module.generic:  # a simulated module is its data: there is nothing to simulate
+            from ..errors import ValidationError
+
+            raise ValidationError("the simulator needs a module's data; generic mode is for "
+                                  "real modules tmclsh has no data for (simulate one of "
+                                  "TMCM-1311, TMCM-351, TMCM-1640 or a module file's)")
         for name, value in (("address", address), ("host_address", host_address)):
             if not 0 <= value <= 255:
                 raise ValueError(f"{name} must be 0..255, got {value}")
@@ -423,6 +429,28 @@ class Simulator:
 
             self.store.add_live(GLOBAL, "TMCLCodeProtection",
                                 Live(lambda b: self.store.ram.get(key, 0), set_protection))
+        self._register_clear_on_null()
+
+    def _register_clear_on_null(self) -> None:
+        """TMCM-1311 AP 198 "can be used to set bit 2 of axis parameter 201": 1 sets it, 0
+        deletes it; the other bits of AP 201 (bit 3, the polarity bit 4) stay as they are.
+        Read back, AP 198 is that bit."""
+        store = self.store
+        mode = store.by_name(AXIS, "EncoderMode")
+        if mode is None or not store.has(AXIS, "ClearOnNull"):
+            return
+        bit = 1 << 2
+
+        def get(motor: int) -> int:
+            return store.ram.get((AXIS, motor, mode.number), 0) >> 2 & 1
+
+        def set_(motor: int, value: int) -> int:
+            key = (AXIS, motor, mode.number)
+            now = store.ram.get(key, 0)
+            store.ram[key] = now | bit if value else now & ~bit
+            return Status.OK
+
+        store.add_live(AXIS, "ClearOnNull", Live(get, set_))
 
     def _timer_period(self, irq: int) -> Live:
         """Timer interrupt periods (GP bank 3 #0-2): a period counts from when it is set."""

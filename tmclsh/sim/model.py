@@ -32,11 +32,13 @@ UNLOCK_WRITE = 4321  # ... and 4321 unlocks it (module notes of all three data f
 # They are simulator assumptions, keyed by parameter name (never by number) and module;
 # everything not listed starts at the data file's `default`, else 0 (or the range minimum).
 START_VALUES: dict[str, dict[str, int]] = {
-    "*": {"EEPROMMagic": EEPROM_MAGIC},
+    # the factory addresses every example telegram of the manuals uses (module 1, host 2)
+    "*": {"EEPROMMagic": EEPROM_MAGIC, "SerialAddress": 1, "SerialHostAddress": 2},
     "TMCM-1311": {"MaxPositioningSpeed": 51200, "MaxAcceleration": 51200},
     "TMCM-351": {"MaxPositioningSpeed": 1000, "MaxAcceleration": 100, "PulseDivisor": 3,
                  "RampDivisor": 7},
-    "TMCM-1640": {"MaxPositioningSpeed": 4000, "Acceleration": 2000},
+    # MotorPoles: the QBL4208 the manual names as its example motor has 8 poles
+    "TMCM-1640": {"MaxPositioningSpeed": 4000, "Acceleration": 2000, "MotorPoles": 8},
 }
 
 Key = tuple[str, int, int]  # (kind, motor or bank, number)

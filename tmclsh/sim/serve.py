@@ -16,7 +16,6 @@ import signal
 import socket
 import sys
 import threading
-import tty
 from typing import Any
 
 from .device import SimBus, Simulator
@@ -79,6 +78,8 @@ class PtyServer(_Server):
 
     def __init__(self, target: Target):
         super().__init__(target)
+        import tty  # POSIX only, like the pty itself: the TCP and CAN servers run anywhere
+
         self.master, self._slave = os.openpty()
         tty.setraw(self._slave)  # no echo, no line editing, no CR/LF translation
         self.path = os.ttyname(self._slave)
@@ -256,11 +257,15 @@ def _split(spec: str, what: str) -> tuple[str, str]:
 
 
 def run(module: str, address: int, *, pty: bool = False, tcp: str | None = None,
-        can: str | None = None, host_address: int = 2) -> int:
+        can: str | None = None, host_address: int = 2, bitrate: int | None = None) -> int:
     """Serve one simulated module until SIGINT/SIGTERM; the first stdout line is the endpoint.
 
-    Exit status 0 after a signal, 2 for bad arguments.
+    Exit status 0 after a signal, 2 for bad arguments, 3 when the server cannot start (the
+    port is taken, the CAN interface is missing, no pty on this system).
     """
+    from ..canspec import parse_can
+    from ..errors import ValidationError
+
     chosen = [x for x in (pty, tcp, can) if x]
     if len(chosen) != 1:
         log.error("choose exactly one of --pty, --tcp HOST:PORT, --can IFACE:CHANNEL")
@@ -271,27 +276,38 @@ def run(module: str, address: int, *, pty: bool = False, tcp: str | None = None,
         log.error("%s", exc)
         return 2
     server: _Server
+    try:  # the arguments first: a malformed one is a usage error, before anything is opened
+        if tcp:
+            host, port_text = _split(tcp, "--tcp")
+            port = int(port_text)
+        if can:
+            iface, channel = parse_can(can)
+        if pty and not hasattr(os, "openpty"):
+            raise OSError("a pseudo-terminal needs Linux or macOS; use --tcp HOST:PORT here")
+    except (ValueError, ValidationError) as exc:
+        sim.close()
+        log.error("%s", exc)
+        return 2
+    except OSError as exc:
+        sim.close()
+        log.error("cannot start the simulator server: %s", exc)
+        return 3
     try:
         if pty:
             server = serve_pty(sim)
             endpoint = server.path  # type: ignore[attr-defined]
         elif tcp:
-            host, port = _split(tcp, "--tcp")
-            server = serve_tcp(sim, host, int(port))
+            server = serve_tcp(sim, host, port)
             bound_host, bound_port = server.address  # type: ignore[attr-defined]
             endpoint = f"{bound_host}:{bound_port}"
         else:
-            iface, channel = _split(can or "", "--can")
-            server = serve_can(sim, iface, channel)
+            server = serve_can(sim, iface, channel,
+                               **({"bitrate": bitrate} if bitrate is not None else {}))
             endpoint = f"{iface}:{channel}"
-    except (ValueError, OSError, ImportError) as exc:
+    except Exception as exc:  # OSError, python-can's own errors for unknown interfaces, ...
         sim.close()
         log.error("cannot start the simulator server: %s", exc)
-        return 2
-    except Exception as exc:  # python-can raises its own errors for unknown interfaces
-        sim.close()
-        log.error("cannot start the simulator server: %s", exc)
-        return 2
+        return 3
     stop = threading.Event()
     previous = {}
     if threading.current_thread() is threading.main_thread():

@@ -6,6 +6,7 @@ links, the simulator only for ``--sim``), so start-up stays fast.
 
 from __future__ import annotations
 
+from ..canspec import FROM_PYTHON_CAN, parse_can
 from .base import CanTransport, StreamTransport, Transport
 
 # pyserial's URL handlers (serial.serial_for_url); anything else with "://" is refused by it
@@ -28,22 +29,16 @@ def open_serial(port: str, baudrate: int = 9600) -> StreamTransport:
     return t
 
 
-def parse_can(spec: str) -> tuple[str, str]:
-    """``IFACE:CHANNEL`` -> (interface, channel); the channel may contain colons."""
-    from ..errors import ValidationError
-
-    iface, sep, channel = spec.partition(":")
-    if not sep or not iface or not channel:
-        raise ValidationError(f"--can wants IFACE:CHANNEL (e.g. socketcan:can0, virtual:bench), "
-                              f"got {spec!r}")
-    return iface, channel
-
-
 def open_can(spec: str, bitrate: int | None = None, **kw) -> CanTransport:
-    """``IFACE:CHANNEL`` as in ``socketcan:can0``, ``virtual:bench``, ``slcan:/dev/ttyACM0``."""
-    from .can import PythonCanTransport
+    """``IFACE:CHANNEL`` as in ``socketcan:can0``, ``pcan:PCAN_USBBUS1``, ``slcan:/dev/ttyACM0``;
+    or ``FROM_PYTHON_CAN`` (``--can`` alone): python-can's own configuration names the bus."""
+    from .can import PythonCanTransport, python_can_config
 
-    iface, channel = parse_can(spec)
+    if spec == FROM_PYTHON_CAN:
+        iface, channel, configured = python_can_config()
+        bitrate = bitrate if bitrate is not None else configured
+    else:
+        iface, channel = parse_can(spec)
     t = PythonCanTransport(iface, channel, bitrate, **kw)
     t.open()
     return t
@@ -60,4 +55,4 @@ def open_sim(module: str = "TMCM-1311", address: int = 1, **kw) -> StreamTranspo
 
 
 __all__ = ["Transport", "StreamTransport", "CanTransport", "open_serial", "open_can", "open_sim",
-           "parse_can", "PYSERIAL_SCHEMES"]
+           "parse_can", "PYSERIAL_SCHEMES", "FROM_PYTHON_CAN"]

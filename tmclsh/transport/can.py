@@ -6,8 +6,32 @@ for its import (about 0.1 s).
 
 from __future__ import annotations
 
-from ..errors import TransportError
+from ..errors import TransportError, ValidationError
 from .base import CanTransport
+
+
+def python_can_config() -> tuple[str, str, int | None]:
+    """(interface, channel, bit rate) as python-can's own tools find them: its config files
+    (~/can.conf, ~/.canrc, ./can.ini on Windows, ...) and CAN_INTERFACE, CAN_CHANNEL,
+    CAN_BITRATE."""
+    import can
+
+    try:
+        config = can.util.load_config()
+    except (can.CanInterfaceNotImplementedError, ValueError) as exc:
+        what = "names no interface" if '"None"' in str(exc) else f"is not usable ({exc})"
+        raise ValidationError(
+            f"--can without IFACE:CHANNEL takes the bus from python-can's configuration, which "
+            f"{what}; set CAN_INTERFACE and CAN_CHANNEL, write "
+            f"~/can.conf ([default] interface = ..., channel = ...), or give --can IFACE:CHANNEL"
+        ) from None
+    channel = config.get("channel")
+    if channel is None:
+        raise ValidationError(f"python-can's configuration names the interface "
+                              f"{config['interface']!r} but no channel; set CAN_CHANNEL or "
+                              "channel in ~/can.conf, or give --can IFACE:CHANNEL")
+    bitrate = config.get("bitrate")
+    return str(config["interface"]), str(channel), int(bitrate) if bitrate else None
 
 
 class PythonCanTransport(CanTransport):

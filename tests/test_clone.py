@@ -1,0 +1,502 @@
+""".save/.diff/.restore through real bytes: the simulator served on a pty (binary and ASCII
+links, all three modules, three motors on the TMCM-351), an independent responder written
+here from the manuals' frame tables, and the CLI in a subprocess.
+
+The responder is the check that does not agree with the client by construction: it knows
+only the 9-byte frames (address, command, type, motor, value big-endian, checksum; replies
+host, module, status, command, value, checksum) and a dictionary of values.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import struct
+import threading
+import tty
+from pathlib import Path
+
+import pytest
+
+from tmclsh import modules
+from tmclsh.ascii import AsciiLink
+from tmclsh.client import Client
+from tmclsh.errors import AsmError, TmclError
+from tmclsh.shell.clone import CloneError, readable_slots
+from tmclsh.shell.render import Output
+from tmclsh.shell.session import Abort, Session
+from tmclsh.sim import Simulator
+from tmclsh.transport import open_serial
+
+LINE = re.compile(r"^(SAP|SGP) (\w+), (\d+), (-?\d+)", re.M)
+
+
+def shell(client: Client, json_mode: bool = False, yes: bool = False) -> Session:
+    return Session(client, Output(json_mode=json_mode), yes=yes)
+
+
+def json_lines(text: str) -> list[dict]:
+    return [json.loads(x) for x in text.splitlines() if x.startswith("{")]
+
+
+def file_values(path: Path, module) -> dict[tuple[str, int, int], int]:
+    """(kind, number, motor/bank) -> value of every SAP/SGP line, read with a regex and the
+    module's data file (not the project's parser)."""
+    out = {}
+    for mn, target, index, value in LINE.findall(path.read_text(encoding="utf-8")):
+        kind = "axis" if mn == "SAP" else "global"
+        if target.isdigit():
+            number = int(target)
+        else:
+            pool = module.axis_params if kind == "axis" else module.global_params
+            number = next(p.number for p in pool if p.name == target)
+        out[(kind, number, int(index))] = int(value)
+    return out
+
+
+def changes(module) -> list[tuple[str, str, int]]:
+    """A few configuration parameters to change: (line, kind, ...) on the last motor, plus a
+    user variable; values inside each parameter's range."""
+    motor = module.motors - 1
+    picked = [p for p in module.axis_params
+              if p.writable and p.readable and not p.state and not p.link
+              and p.min is not None and p.max is not None and p.max - p.min >= 3][:2]
+    lines = [(f"SAP {p.name}, {motor}, {p.min + 3}", "axis", p.number, motor) for p in picked]
+    lines.append(("SGP 7, 2, 1234", "global", 7, 2))
+    return lines
+
+
+@pytest.fixture
+def pty_client(make_pty_sim):
+    made: list[Client] = []
+
+    def make(module: str, *, ascii: bool = False, target=None) -> tuple[Simulator, Client]:
+        sim, path = make_pty_sim(module, target=target)
+        client = Client(open_serial(path, 115200), module=module, timeout=0.5, retries=2)
+        made.append(client)
+        if ascii:
+            AsciiLink.attach(client)
+        return sim, client
+
+    yield make
+    for c in made:
+        c.close()
+
+
+# -- the round trip on every module, binary and ASCII -----------------------------------------
+
+@pytest.mark.parametrize("module,ascii", [
+    ("TMCM-1311", False), ("TMCM-351", False), ("TMCM-1640", False),
+    ("TMCM-1311", True), ("TMCM-351", True)])
+def test_save_change_diff_restore(pty_client, tmp_path, capsys, module, ascii):
+    sim, client = pty_client(module, ascii=ascii)
+    mod = modules.load(module)
+    s = shell(client, json_mode=True)
+    path = tmp_path / "backup.tmcl"
+    s.run_line(f".save {path}")
+    saved = json_lines(capsys.readouterr().out)
+    values = file_values(path, mod)
+    assert saved == [{"saved": len(values), "file": str(path)}]
+    if mod.motors > 1:  # every motor's parameters are in the file
+        assert {k[2] for k in values if k[0] == "axis"} == set(range(mod.motors))
+    head = path.read_text(encoding="utf-8").splitlines()[:6]
+    assert f"// module: {module}" in head and "// address: 1" in head
+
+    edits = changes(mod)
+    for line, *_ in edits:
+        s.run_line(line)
+    capsys.readouterr()
+    s.run_line(f".diff {path}")
+    diffs = json_lines(capsys.readouterr().out)
+    where = {(d["number"], d.get("motor", d.get("bank"))): d for d in diffs}
+    assert len(diffs) == len(edits)
+    for line, kind, number, index in edits:
+        d = where[(number, index)]
+        assert d["saved"] == values[(kind, number, index)]
+        assert d["live"] == int(line.rsplit(",", 1)[1])
+        assert set(d) == {"name", "number", "motor" if kind == "axis" else "bank", "saved", "live"}
+
+    s.run_line(f".restore {path} --yes")
+    out = json_lines(capsys.readouterr().out)
+    assert len(out) == 1 and len(out[0]["restored"]) == len(edits) and out[0]["failed"] == []
+    s.run_line(f".diff {path} --exit-code")
+    assert json_lines(capsys.readouterr().out) == []
+    # and the module holds the file's values (read with plain GAP/GGP lines)
+    for line, kind, number, index in edits:
+        mn = "GAP" if kind == "axis" else "GGP"
+        assert client.value(f"{mn} {number}, {index}") == values[(kind, number, index)]
+
+
+def test_state_is_a_comment_and_never_restored(pty_client, tmp_path, capsys):
+    sim, client = pty_client("TMCM-1311")
+    s = shell(client)
+    s.run_line("SAP ActualPosition, 0, 51200")
+    path = tmp_path / "b.tmcl"
+    s.run_line(f".save {path}")
+    text = path.read_text(encoding="utf-8")
+    assert "// ActualPosition = 51200 µsteps (state, not restored" in text
+    assert not re.search(r"^SAP (ActualPosition|TargetPosition|ActualSpeed|TargetSpeed)\b", text, re.M)
+    # a hand-written state line is neither compared nor written
+    path.write_text(text + "SAP ActualPosition, 0, 7\n", encoding="utf-8")
+    s.run_line("SAP ActualPosition, 0, 100")
+    capsys.readouterr()
+    s.run_line(f".restore {path} --yes")
+    assert "nothing to restore" in capsys.readouterr().out
+    assert client.value("GAP ActualPosition, 0") == 100
+
+
+# -- an independent responder: partial restore when it refuses one value ---------------------
+
+class Responder:
+    """A module that stores SAP/SGP values and answers GAP/GGP, from the manual's frame layout
+    only; ``refuse`` holds (command, type, motor) it answers with status 4 (invalid value)."""
+
+    def __init__(self, address: int = 1, host: int = 2):
+        self.address, self.host = address, host
+        self.values: dict[tuple[int, int, int], int] = {}  # (type, motor, is_global) -> value
+        self.refuse: set[tuple[int, int, int]] = set()
+        self.frames: list[bytes] = []
+        self.master, slave = os.openpty()
+        tty.setraw(slave)
+        self.path = os.ttyname(slave)
+        self._slave = slave
+        self._stop = False
+        self.thread = threading.Thread(target=self.run, daemon=True)
+        self.thread.start()
+
+    def run(self) -> None:
+        buf = b""
+        while not self._stop:
+            try:
+                data = os.read(self.master, 64)
+            except OSError:
+                return
+            buf += data
+            while len(buf) >= 9:
+                frame, buf = buf[:9], buf[9:]
+                self.frames.append(frame)
+                os.write(self.master, self.answer(frame))
+
+    def answer(self, frame: bytes) -> bytes:
+        addr, cmd, typ, motor, value = struct.unpack(">BBBBi", frame[:8])
+        status, out = 100, value
+        if sum(frame[:8]) & 0xFF != frame[8]:
+            status = 1  # wrong checksum
+        elif (cmd, typ, motor) in self.refuse:
+            status = 4
+        elif cmd in (5, 9):  # SAP, SGP
+            self.values[(typ, motor, cmd == 9)] = value
+        elif cmd in (6, 10):  # GAP, GGP
+            out = self.values.get((typ, motor, cmd == 10), 0)
+        elif cmd not in (7, 11):  # STAP/STGP answer ok; anything else is not known here
+            status = 2
+        head = struct.pack(">BBBBi", self.host, self.address, status, cmd, out)
+        return head + bytes([sum(head) & 0xFF])
+
+    def close(self) -> None:
+        self._stop = True
+        os.close(self._slave)
+        os.close(self.master)
+
+
+@pytest.fixture
+def responder():
+    r = Responder()
+    yield r
+    r.close()
+
+
+def test_restore_onto_independent_responder_with_one_refusal(pty_client, responder, tmp_path,
+                                                            capsys):
+    sim, client = pty_client("TMCM-1311")
+    path = tmp_path / "b.tmcl"
+    shell(client).run_line(f".save {path}")
+    mod = modules.load("TMCM-1311")
+    want = file_values(path, mod)
+    # the responder starts with every value the file has, except three
+    for (kind, number, index), value in want.items():
+        responder.values[(number, index, kind == "global")] = value
+    responder.values[(4, 0, False)] = 999  # MaxPositioningSpeed
+    responder.values[(6, 0, False)] = 17  # MaxCurrent: refused below
+    responder.values[(12, 2, True)] = -5  # UserVariable #12
+    responder.refuse.add((5, 6, 0))
+    other = Client(open_serial(responder.path), module="TMCM-1311", timeout=0.5, retries=0)
+    try:
+        s = shell(other, json_mode=True)
+        with pytest.raises(CloneError, match="1 of 3 parameters were not restored"):
+            s.run_line(f".restore {path} --yes")
+        out = json_lines(capsys.readouterr().out)[0]
+        assert [(w["name"], w["old"], w["new"]) for w in out["restored"]] == [
+            ("MaxPositioningSpeed", 999, want[("axis", 4, 0)]),
+            ("UserVariable#12", -5, want[("global", 12, 2)])]
+        assert out["failed"][0]["name"] == "MaxCurrent" and "status 4" in out["failed"][0]["error"]
+        for (kind, number, index), value in want.items():
+            got = responder.values[(number, index, kind == "global")]
+            assert got == (17 if (kind, number, index) == ("axis", 6, 0) else value)
+        # the fewest writes: one SAP/SGP per difference, nothing for equal values
+        writes = [f for f in responder.frames if f[1] in (5, 9)]
+        assert sorted((f[1], f[2], f[3]) for f in writes) == [(5, 4, 0), (5, 6, 0), (9, 12, 2)]
+    finally:
+        other.close()
+
+
+# -- refused before anything is sent --------------------------------------------------------
+
+class Recording(Simulator):
+    """The simulator, remembering every byte it received."""
+
+    def __init__(self, *a, **kw):
+        super().__init__(*a, **kw)
+        self.received = bytearray()
+
+    def write(self, data: bytes) -> None:
+        self.received += data
+        super().write(data)
+
+
+def test_out_of_range_line_refused_at_its_line_before_sending(pty_client, tmp_path):
+    sim, client = pty_client("TMCM-351", target=Recording("TMCM-351"))
+    s = shell(client)
+    path = tmp_path / "b.tmcl"
+    s.run_line(f".save {path}")
+    lines = path.read_text(encoding="utf-8").splitlines()
+    n = next(i for i, t in enumerate(lines, 1) if t.startswith("SAP MaxCurrent, 1,"))
+    lines[n - 1] = "SAP MaxCurrent, 1, 300  // hand-edited"
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    s.run_line("SAP MaxCurrent, 0, 5")  # a real difference on an earlier line
+    sim.received.clear()
+    for cmd in (".restore", ".diff"):
+        with pytest.raises(AsmError) as exc:
+            s.run_line(f"{cmd} {path} --yes" if cmd == ".restore" else f"{cmd} {path}")
+        assert f"{path}:{n}:" in str(exc.value) and "out of range" in str(exc.value)
+    assert bytes(sim.received) == b""
+
+
+# -- across modules -------------------------------------------------------------------------
+
+def test_other_module_refused_unless_force(pty_client, tmp_path, capsys):
+    sim, c1311 = pty_client("TMCM-1311")
+    path = tmp_path / "b1311.tmcl"
+    s = shell(c1311)
+    s.run_line("SAP MaxCurrent, 0, 77")
+    s.run_line(f".save {path}")
+    rec, c351 = pty_client("TMCM-351", target=Recording("TMCM-351"))
+    t = shell(c351, json_mode=True)
+    with pytest.raises(CloneError, match="backup of a TMCM-1311.*--force"):
+        t.run_line(f".restore {path} --yes")
+    assert bytes(rec.received) == b""
+    capsys.readouterr()
+    t.run_line(f".restore {path} --yes --force")
+    cap = capsys.readouterr()
+    out = json_lines(cap.out)[0]
+    assert [w["name"] for w in out["restored"]] == ["MaxCurrent"]
+    assert any(x.startswith("ChopperMode ") for x in out["skipped"])
+    assert any(x.startswith("MaxPositioningSpeed ") for x in out["skipped"])  # out of range
+    assert "ChopperMode" in cap.err and "has no such parameter" in cap.err
+    assert c351.value("GAP MaxCurrent, 0") == 77
+    assert c351.value("GAP MaxCurrent, 1") == 0  # the 1311 has no motor 1
+
+
+# -- plain scripts, the CLI, replay -----------------------------------------------------------
+
+def test_any_script_of_sap_sgp_lines(pty_client, tmp_path, capsys):
+    sim, client = pty_client("TMCM-1311")
+    path = tmp_path / "hand.tmcl"
+    path.write_text("// set up the axis\n.let speed = 1\nMVP ABS, 0, 0\nSAP 4, 0, 2000\n"
+                    "SAP MaxCurrent, 0, 40  // run current\n6 140, 0, 0\nSGP 3, 2, 9\n",
+                    encoding="utf-8")
+    s = shell(client)
+    s.run_line(f".diff {path}")
+    out = capsys.readouterr().out
+    assert "3 of 3 parameters differ" in out and "MaxCurrent" in out
+    s.run_line(f".restore {path} -y")
+    capsys.readouterr()
+    s.run_line(f".diff {path}")
+    assert "no differences" in capsys.readouterr().out
+    assert client.value("GAP 4, 0") == 2000 and client.value("GGP 3, 2") == 9
+
+
+def test_cli_exit_code_json_and_replay(make_pty_sim, run_tmclsh, tmp_path):
+    sim, pty = make_pty_sim("TMCM-351")
+    path = tmp_path / "b.tmcl"
+    r = run_tmclsh("--port", pty, "-m", "TMCM-351", "--json", "-c", f".save {path}")
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout) == {"saved": len(LINE.findall(path.read_text("utf-8"))),
+                                    "file": str(path)}
+    change = "SAP MaxCurrent, 2, 9\n"
+    r = run_tmclsh("--port", pty, "-m", "TMCM-351", "-c", change + f".diff {path}")
+    assert r.returncode == 0 and "MaxCurrent" in r.stdout, r.stderr
+    r = run_tmclsh("--port", pty, "-m", "TMCM-351", "--json", "-c", f".diff {path} --exit-code")
+    assert r.returncode == 1
+    assert [json.loads(x) for x in r.stdout.splitlines()] == [
+        {"name": "MaxCurrent", "number": 6, "motor": 2, "saved": 0, "live": 9}]
+    # replaying the backup as a script puts it back too
+    r = run_tmclsh("--port", pty, "-m", "TMCM-351", "--yes", "-f", str(path))
+    assert r.returncode == 0, r.stderr
+    r = run_tmclsh("--port", pty, "-m", "TMCM-351", "-c", f".diff {path} --exit-code")
+    assert r.returncode == 0 and "no differences" in r.stdout, r.stdout + r.stderr
+    # and the file replays on a fresh simulated module
+    r = run_tmclsh("--sim", "TMCM-351", "--yes", "-f", str(path))
+    assert r.returncode == 0, r.stderr
+
+
+def test_restore_asks_first(pty_client, tmp_path, capsys):
+    sim, client = pty_client("TMCM-1311", target=Recording("TMCM-1311"))
+    s = shell(client)
+    path = tmp_path / "b.tmcl"
+    s.run_line(f".save {path}")
+    s.run_line("SAP MaxCurrent, 0, 33")
+    with pytest.raises(Abort, match="pass --yes"):
+        s.run_line(f".restore {path}")
+    assert client.value("GAP MaxCurrent, 0") == 33
+    writes = [f for f in _frames(sim.received) if f[1] in (5, 9)]
+    assert [tuple(f[1:4]) for f in writes] == [(5, 6, 0)]  # only the change typed above
+
+
+def _frames(data: bytes) -> list[bytes]:
+    return [bytes(data[i:i + 9]) for i in range(0, len(data) - len(data) % 9, 9)]
+
+
+def test_store_after_restore(pty_client, tmp_path, capsys):
+    sim, client = pty_client("TMCM-1311", target=Recording("TMCM-1311"))
+    s = shell(client, json_mode=True, yes=True)
+    path = tmp_path / "b.tmcl"
+    s.run_line(f".save {path}")
+    s.run_line("SAP MaxCurrent, 0, 33")
+    s.run_line("SAP ChopperMode, 0, 1")  # RW: not storable
+    sim.received.clear()
+    capsys.readouterr()
+    s.run_line(f".restore {path} --store")
+    out = json_lines(capsys.readouterr().out)[0]
+    assert out["stored"] == 1
+    stores = [tuple(f[1:4]) for f in _frames(sim.received) if f[1] in (7, 11)]
+    assert stores == [(7, 6, 0)]
+
+
+def test_save_write_failure_is_one_line(pty_client, tmp_path):
+    sim, client = pty_client("TMCM-1640")
+    s = shell(client)
+    missing = tmp_path / "no" / "such" / "b.tmcl"
+    with pytest.raises(CloneError, match=rf"cannot write {re.escape(str(missing))}: No such file"):
+        s.run_line(f".save {missing}")
+    # an existing backup is not half-overwritten when the save fails part-way
+    good = tmp_path / "b.tmcl"
+    good.write_text("old\n", encoding="utf-8")
+    sim.faults.lose_next = 1000
+    client.retries = 0
+    client.timeout = 0.05
+    with pytest.raises(TmclError):
+        s.run_line(f".save {good}")
+    assert good.read_text(encoding="utf-8") == "old\n"
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+def test_save_program(pty_client, tmp_path, capsys):
+    sim, client = pty_client("TMCM-1311")
+    src = tmp_path / "p.tmcl"
+    src.write_text("loop: MVP ABS, 0, 1000\n WAIT POS, 0, 0\n JA loop\n", encoding="utf-8")
+    s = shell(client, json_mode=True, yes=True)
+    s.run_line(f".upload {src}")
+    capsys.readouterr()
+    path = tmp_path / "b.tmcl"
+    s.run_line(f".save {path} --program")
+    out = json_lines(capsys.readouterr().out)[0]
+    prog = tmp_path / "b.program.tmcl"
+    assert out == {"saved": out["saved"], "file": str(path), "program": str(prog),
+                   "instructions": 3}
+    assert "// program: b.program.tmcl" in path.read_text(encoding="utf-8")
+    text = prog.read_text(encoding="utf-8")
+    assert "MVP ABS, 0, 1000" in text and "JA" in text
+
+
+def test_one_request_per_parameter(pty_client, tmp_path):
+    sim, client = pty_client("TMCM-1311", target=Recording("TMCM-1311"))
+    client.version = "1311V111"  # known already: no 136 in the count
+    shell(client).run_line(f".save {tmp_path / 'b.tmcl'}")
+    frames = _frames(sim.received)
+    assert len(frames) == len(list(readable_slots(modules.load("TMCM-1311"))))
+    assert {f[1] for f in frames} == {6, 10}
+
+
+def test_numbers_only_module_compares_a_named_backup_by_number(pty_client, tmp_path, capsys):
+    """A module without parameter data (generic mode) still diffs and restores a backup whose
+    header names a known module: the names give the numbers, compared by number."""
+    from tmclsh.modules import Module
+
+    sim, client = pty_client("TMCM-1311")
+    path = tmp_path / "b.tmcl"
+    shell(client).run_line(f".save {path}")
+    bare = Module({"module": {"name": "generic", "motors": 1, "program_memory": 2048,
+                              "firmware_id": 0, "version_string": ""}})
+    client.module = bare
+    s = shell(client, json_mode=True, yes=True)
+    s.run_line("5 6, 0, 99")  # SAP 6 (MaxCurrent) as a raw command
+    capsys.readouterr()
+    s.run_line(f".diff {path}")
+    assert json_lines(capsys.readouterr().out) == [
+        {"name": None, "number": 6, "motor": 0, "saved": 0, "live": 99}]
+    s.run_line(f".restore {path}")
+    capsys.readouterr()
+    s.run_line(f".diff {path} --exit-code")
+    assert json_lines(capsys.readouterr().out) == []
+
+
+def test_bench_save_runs(tmp_path):
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parent.parent
+    p = subprocess.run([sys.executable, str(root / "scripts" / "bench.py"), "save", "--rounds",
+                        "1", "--json"], capture_output=True, text=True, timeout=120, cwd=root)
+    assert p.returncode == 0, p.stderr
+    result = json.loads(p.stdout)
+    assert result["transactions"] == len(list(readable_slots(modules.load("TMCM-1311"))))
+    assert result["save_s"] > 0 and result["raw_s"] > 0 and "ratio" in result
+
+
+def test_link_settings_are_written_last_and_not_read_back(pty_client, tmp_path, capsys):
+    sim, client = pty_client("TMCM-1311", target=Recording("TMCM-1311"))
+    s = shell(client, yes=True)
+    path = tmp_path / "b.tmcl"
+    s.run_line(f".save {path}")
+    text = path.read_text(encoding="utf-8")
+    assert re.search(r"^SGP SerialAddress, 0, 1\b", text, re.M)
+    # a replacement module that answers at address 1, restored from a backup of address 5
+    text = re.sub(r"^SGP SerialAddress, 0, 1\b", "SGP SerialAddress, 0, 5", text, flags=re.M)
+    path.write_text(text, encoding="utf-8")
+    s.run_line("SAP MaxCurrent, 0, 44")
+    sim.received.clear()
+    capsys.readouterr()
+    s.run_line(f".restore {path}")
+    cap = capsys.readouterr()
+    sent = [tuple(f[:4]) for f in _frames(sim.received)]
+    writes = [f for f in sent if f[1] in (5, 9)]
+    assert writes == [(1, 5, 6, 0), (1, 9, 66, 0)]  # the address last
+    assert sent[-1] == (1, 9, 66, 0)  # ... and not read back at the old address
+    assert "SerialAddress is now 5" in cap.err and "reconnect" in cap.err
+    client.address = 5
+    assert client.value("GAP MaxCurrent, 0") == 0
+
+
+def test_save_from_independent_responder(responder, tmp_path):
+    """The file holds what the module answered: values set in the responder, read by GAP/GGP
+    frames only, come back in the file's SAP/SGP lines (unsigned ones as unsigned)."""
+    mod = modules.load("TMCM-1640")
+    for kind, p, number, index in readable_slots(mod):
+        if p.writable and not p.state:
+            v = (p.min or 0) + (number * 7 + index) % max(1, min((p.max or 255) - (p.min or 0), 200))
+            responder.values[(number, index, kind == "global")] = v
+    responder.values[(26, 0, False)] = -1  # I2tLimit, 0..4294967295: 0xFFFFFFFF on the wire
+    client = Client(open_serial(responder.path), module="TMCM-1640", timeout=0.5, retries=0)
+    client.version = "1640V100"
+    try:
+        shell(client).run_line(f".save {tmp_path / 'b.tmcl'}")
+    finally:
+        client.close()
+    got = file_values(tmp_path / "b.tmcl", mod)
+    want = {(("global" if g else "axis"), n, i): v for (n, i, g), v in responder.values.items()}
+    want[("axis", 26, 0)] = 4294967295
+    assert got == want
+    assert {f[1] for f in responder.frames} == {6, 10}
+    assert len(responder.frames) == len(list(readable_slots(mod)))

@@ -1,0 +1,260 @@
+"""Reading and writing users' files safely: every read bounded, every write all-or-nothing.
+
+A user may name any path: ``/dev/zero``, a FIFO, a directory, a full disk, a missing folder.
+Reads go in bounded chunks and stop at a stated limit, so no input grows the process; a
+write goes to a temporary file beside the target and replaces it only when complete, so a
+failed write never leaves a half-written file where a good one was. Failures are
+``FileError`` (a ``TmclError``) naming the path and the reason, never a bare ``OSError``.
+
+    data = read_bytes(path, limit=MAX_FILE, what="image")
+    lines = read_lines(path, what="script")            # <= MAX_LINES lines
+    write_file(path, text)                             # all or nothing
+    with atomic_writer(path) as fh:                    # streaming, replaced on close
+        fh.write(...)
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+from typing import IO, Any
+
+from .errors import TmclError
+
+MAX_FILE = 16 * 1024 * 1024  # bytes of any text or image a user names
+MAX_LINES = 100_000  # lines of a script
+MAX_LINE = 64 * 1024  # characters of one line (scripts, stdin)
+_CHUNK = 64 * 1024
+
+
+class FileError(TmclError, OSError):
+    """A user's file could not be read or written; the message names the path and why."""
+
+
+def _reason(exc: BaseException) -> str:
+    if isinstance(exc, OSError):
+        return exc.strerror or str(exc)
+    return str(exc)
+
+
+def size_text(n: int) -> str:
+    if n >= 1024 * 1024 and n % (1024 * 1024) == 0:
+        return f"{n // (1024 * 1024)} MiB"
+    if n >= 1024 and n % 1024 == 0:
+        return f"{n // 1024} KiB"
+    return f"{n} bytes"
+
+
+# -- reading -----------------------------------------------------------------------------
+
+def read_stream(fh: IO[bytes], limit: int, name: str, what: str = "file") -> bytes:
+    """At most ``limit`` bytes from an open binary stream, in chunks; more is refused."""
+    parts: list[bytes] = []
+    total = 0
+    while True:
+        chunk = fh.read(min(_CHUNK, limit + 1 - total))
+        if not chunk:
+            return b"".join(parts)
+        total += len(chunk)
+        if total > limit:
+            raise FileError(f"{name}: {what} larger than {size_text(limit)}; not read")
+        parts.append(chunk)
+
+
+def read_bytes(path: str | os.PathLike, limit: int = MAX_FILE, what: str = "file") -> bytes:
+    """The bytes of ``path`` (``-`` is stdin), refused past ``limit``."""
+    name = str(path)
+    if name == "-":
+        import sys
+
+        return read_stream(sys.stdin.buffer, limit, "stdin", what)
+    p = Path(path)
+    try:
+        if p.is_dir():
+            raise FileError(f"cannot read {name}: it is a directory")
+        with open(p, "rb") as fh:
+            return read_stream(fh, limit, name, what)
+    except FileError:
+        raise
+    except FileNotFoundError:
+        raise FileError(f"cannot read {name}: no such file") from None
+    except (OSError, ValueError) as exc:  # ValueError: a NUL in the name
+        raise FileError(f"cannot read {name}: {_reason(exc)}") from None
+
+
+def decode(data: bytes, name: str, what: str = "file") -> str:
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise FileError(f"{name} is not a text file (not UTF-8)") from None
+
+
+def read_text(path: str | os.PathLike, limit: int = MAX_FILE, what: str = "file") -> str:
+    """A UTF-8 text file, refused past ``limit`` bytes."""
+    return decode(read_bytes(path, limit, what), str(path), what)
+
+
+def read_lines(path: str | os.PathLike, what: str = "script", max_lines: int = MAX_LINES,
+               limit: int = MAX_FILE) -> list[str]:
+    """The lines of a text file, refused past ``max_lines`` lines or ``limit`` bytes."""
+    lines = read_text(path, limit, what).splitlines()
+    if len(lines) > max_lines:
+        raise FileError(f"{path}: {what} longer than {max_lines:,} lines; not run")
+    return lines
+
+
+def stream_lines(stream: Iterable[str], name: str = "stdin",
+                 max_line: int = MAX_LINE) -> Iterator[str]:
+    """Lines of a text stream as they arrive (``-f -``), each at most ``max_line`` long.
+
+    Reads with ``readline(limit)`` when the stream has it, so an endless line (``/dev/zero``)
+    is refused after ``max_line`` characters instead of filling the memory.
+    """
+    readline = getattr(stream, "readline", None)
+    if readline is None:
+        for no, line in enumerate(stream, 1):
+            if len(line) > max_line:
+                raise FileError(f"{name}:{no}: line longer than {max_line:,} characters")
+            yield line.rstrip("\r\n")
+        return
+    no = 0
+    while True:
+        try:
+            line = readline(max_line + 1)
+        except UnicodeDecodeError:
+            raise FileError(f"{name}:{no + 1}: not UTF-8 text") from None
+        if not line:
+            return
+        no += 1
+        if len(line) > max_line and not line.endswith("\n"):
+            raise FileError(f"{name}:{no}: line longer than {max_line:,} characters")
+        yield line.rstrip("\r\n")
+
+
+# -- writing -----------------------------------------------------------------------------
+
+class AtomicWriter:
+    """A file written beside ``path`` and moved over it by ``commit()``; ``abort()`` (or an
+    exception in a ``with`` block) removes it and leaves ``path`` as it was.
+
+    Every failure (cannot create, disk full, cannot rename) is a ``FileError`` naming
+    ``path``. Text mode unless ``binary``; ``newline`` as for ``open``.
+    """
+
+    def __init__(self, path: str | os.PathLike, *, binary: bool = False,
+                 encoding: str = "utf-8", newline: str | None = None):
+        self.path = Path(path)
+        self.binary = binary
+        self.closed = False
+        target = self.path
+        self.direct = False  # a device or pipe (/dev/null, a FIFO) is written as it is
+        try:
+            if target.is_dir():
+                raise IsADirectoryError(21, "it is a directory")
+            if target.exists() and not target.is_file():
+                self.direct = True
+                fd = os.open(target, os.O_WRONLY)
+                tmp = str(target)
+            else:
+                fd, tmp = tempfile.mkstemp(dir=target.parent if str(target.parent) else ".",
+                                           prefix=f".{target.name}.", suffix=".tmp")
+        except (OSError, ValueError) as exc:
+            raise self._error(exc) from None
+        self.tmp = Path(tmp)
+        try:
+            if binary:
+                self.fh: IO[Any] = os.fdopen(fd, "wb")
+            else:
+                self.fh = os.fdopen(fd, "w", encoding=encoding, newline=newline)
+        except OSError as exc:
+            os.close(fd)
+            self._remove()
+            raise self._error(exc) from None
+
+    def _error(self, exc: BaseException) -> FileError:
+        return FileError(f"cannot write {self.path}: {_reason(exc)}")
+
+    def _remove(self) -> None:
+        if self.direct:
+            return
+        try:
+            self.tmp.unlink()
+        except OSError:
+            pass
+
+    def write(self, data: Any) -> None:
+        try:
+            self.fh.write(data)
+        except (OSError, ValueError) as exc:
+            self.abort()
+            raise self._error(exc) from None
+
+    def flush(self) -> None:
+        """Push what is written to the temporary file (so a full disk shows now)."""
+        try:
+            self.fh.flush()
+        except (OSError, ValueError) as exc:
+            self.abort()
+            raise self._error(exc) from None
+
+    def commit(self) -> None:
+        if self.closed:
+            return
+        self.closed = True
+        try:
+            self.fh.flush()
+            if self.direct:
+                self.fh.close()
+                return
+            os.fsync(self.fh.fileno())
+            self.fh.close()
+            try:  # keep the mode of the file being replaced
+                os.chmod(self.tmp, self.path.stat().st_mode & 0o7777)
+            except OSError:
+                os.chmod(self.tmp, 0o666 & ~_umask())
+            os.replace(self.tmp, self.path)
+        except (OSError, ValueError) as exc:
+            try:
+                self.fh.close()
+            except (OSError, ValueError):
+                pass
+            self._remove()
+            raise self._error(exc) from None
+
+    def abort(self) -> None:
+        if self.closed:
+            return
+        self.closed = True
+        try:
+            self.fh.close()
+        except (OSError, ValueError):
+            pass
+        self._remove()
+
+    def __enter__(self) -> AtomicWriter:
+        return self
+
+    def __exit__(self, kind, exc, tb) -> None:
+        if kind is None:
+            self.commit()
+        else:
+            self.abort()
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def atomic_writer(path: str | os.PathLike, *, binary: bool = False,
+                  newline: str | None = None) -> AtomicWriter:
+    return AtomicWriter(path, binary=binary, newline=newline)
+
+
+def write_file(path: str | os.PathLike, data: str | bytes) -> None:
+    """Write all of ``data`` to ``path`` or nothing (``FileError`` with path and reason)."""
+    with AtomicWriter(path, binary=isinstance(data, bytes)) as fh:
+        fh.write(data)

@@ -1,0 +1,708 @@
+"""Clone a module: back its configuration up as a script, compare it, restore what differs.
+
+The backup is a plain tmclsh script, so it is replayed, diffed and edited like any other: one
+``SAP``/``SGP`` line per writable configuration parameter, everything else (read-only values,
+motion state) as ``//`` comments that document the module without ever being written back.
+``.diff`` and ``.restore`` read any script of SAP/SGP lines through the shell's own line
+parser, so a hand-written file is checked exactly as typed commands are, before any byte is
+sent. Parameters are keyed by number and motor/bank; names are only needed to carry a file
+across module types (and for people), so a module without parameter data compares by number.
+
+Which parameters are state and which change the link is data (``state``/``link`` in the
+module files), never a list here.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shlex
+import tempfile
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from .. import asm
+from .. import modules as moddb
+from ..errors import TmclError, ValidationError
+from ..modules import Module, Parameter
+from ..protocol import Control, Request, status_ok, status_text
+from .commands import command
+
+if TYPE_CHECKING:
+    from .session import Session
+
+CATEGORY = "configuration"
+SAP, GAP, STAP, SGP, GGP, STGP = 5, 6, 7, 9, 10, 11
+WRITE = {"axis": SAP, "global": SGP}
+READ = {"axis": GAP, "global": GGP}
+STORE = {"axis": STAP, "global": STGP}
+HEADER_LINES = 30  # the header keys are looked for in the file's first lines only
+_HEADER = re.compile(r"^\s*//\s*(module|firmware|address|connection|date|program)\s*:\s*(.*?)\s*$",
+                     re.IGNORECASE)
+
+
+class CloneError(TmclError):
+    """A backup that cannot be written or read, or a restore the module did not complete."""
+
+
+# -- one parameter slot ------------------------------------------------------------------
+
+@dataclass
+class Slot:
+    """One parameter of one motor (axis) or bank (global) with a value.
+
+    ``param`` is the module's entry when the module has parameter data; without it the slot
+    is known by number only (generic mode)."""
+
+    kind: str  # "axis" | "global"
+    number: int
+    index: int  # motor (axis) or bank (global)
+    value: int
+    param: Parameter | None = None
+    line: int | None = None  # where a file gave it
+
+    @property
+    def key(self) -> tuple[str, int, int]:
+        return self.kind, self.number, self.index
+
+    @property
+    def name(self) -> str | None:
+        p = self.param
+        if p is None:
+            return None
+        return p.name if p.count == 1 else f"{p.name}#{self.number - p.number}"
+
+    @property
+    def label(self) -> str:
+        return f"AP {self.number}" if self.kind == "axis" else f"GP {self.number}"
+
+    @property
+    def where(self) -> str:
+        return f"motor {self.index}" if self.kind == "axis" else f"bank {self.index}"
+
+    def title(self) -> str:
+        return f"{self.name or self.label} ({self.label}, {self.where})"
+
+    def to_json(self) -> dict[str, object]:
+        return {"name": self.name, "number": self.number,
+                ("motor" if self.kind == "axis" else "bank"): self.index}
+
+
+def _shown(value: int, param: Parameter | None) -> int:
+    """A reply's value as the parameter reads: unsigned parameters arrive as negative numbers."""
+    if param is not None and param.min is not None and param.min >= 0 and value < 0:
+        return value & 0xFFFFFFFF
+    return value
+
+
+def _same(a: int, b: int) -> bool:
+    return (a & 0xFFFFFFFF) == (b & 0xFFFFFFFF)
+
+
+def _with_unit(value: int, param: Parameter | None) -> str:
+    return f"{value} {param.unit}" if param is not None and param.unit else str(value)
+
+
+def readable_slots(module: Module) -> Iterator[tuple[str, Parameter, int, int]]:
+    """(kind, parameter, number, motor/bank) of everything a backup reads, in file order:
+    each motor's axis parameters, then the global parameters bank by bank. A ``state`` run
+    of RAM variables is not read (it is a program's scratch space, not configuration)."""
+    for motor in range(module.motors):
+        for p in module.axis_params:
+            if p.readable:
+                yield "axis", p, p.number, motor
+    for p in sorted(module.global_params, key=lambda q: (q.bank, q.number)):
+        if not p.readable or (p.state and p.count > 1):
+            continue
+        for n in range(p.number, p.number + p.count):
+            yield "global", p, n, p.bank
+
+
+def _request(session: Session, opcode: int, slot: Slot | tuple[str, int, int],
+             value: int = 0):
+    c = session.client
+    number, index = (slot.number, slot.index) if isinstance(slot, Slot) else slot[1:]
+    return c.request(Request.make(c.address, opcode, number, index, value))
+
+
+# -- argument parsing --------------------------------------------------------------------
+
+def _args(argtext: str, usage: str, flags: dict[str, str]) -> tuple[str, set[str]]:
+    """FILE and the flags given (short forms mapped to long ones by ``flags``)."""
+    try:
+        words = shlex.split(argtext)
+    except ValueError as exc:
+        raise ValidationError(f"cannot split arguments: {exc}; usage: {usage}") from None
+    pos, given = [], set()
+    for w in words:
+        if w.startswith("-") and len(w) > 1:
+            if w not in flags:
+                known = ", ".join(sorted({v for v in flags.values()}))
+                raise ValidationError(f"unknown option {w!r} (known: {known}); usage: {usage}")
+            given.add(flags[w])
+        else:
+            pos.append(w)
+    if len(pos) != 1:
+        raise ValidationError(f"usage: {usage}")
+    return pos[0], given
+
+
+def _file(session: Session, name: str) -> Path:
+    p = Path(name).expanduser()
+    if not p.exists() and not p.is_absolute() and session.location is not None:
+        beside = Path(session.location[0]).parent / name
+        if beside.exists():
+            return beside
+    return p
+
+
+def complete_file(session: Session, text: str) -> list[str]:
+    """Paths for FILE (the options after it are typed, not completed)."""
+    import glob
+
+    word = text.split()[-1] if text and not text.endswith(" ") else ""
+    if word.startswith("-"):
+        return []
+    return [p + (os.sep if os.path.isdir(p) else "")
+            for p in sorted(glob.glob(os.path.expanduser(word) + "*"))]
+
+
+# -- progress ----------------------------------------------------------------------------
+
+class _Progress:
+    """A rich progress bar on a terminal; nothing under --json or in a pipe."""
+
+    def __init__(self, session: Session, what: str, total: int):
+        out = session.out
+        self.bar = None
+        if not out.json and out.is_terminal and total:
+            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
+
+            self.bar = Progress(TextColumn(what), BarColumn(), MofNCompleteColumn(),
+                                console=out.console, transient=True)
+            self.task = self.bar.add_task(what, total=total)
+
+    def __enter__(self) -> Callable[[], None]:
+        if self.bar is None:
+            return lambda: None
+        self.bar.start()
+        return lambda: self.bar.advance(self.task)  # type: ignore[union-attr]
+
+    def __exit__(self, *exc: object) -> None:
+        if self.bar is not None:
+            self.bar.stop()
+
+
+# -- .save ---------------------------------------------------------------------------------
+
+def write_atomically(path: Path, text: str) -> None:
+    """Write ``text`` to a temporary file beside ``path`` and rename it over ``path``, so a
+    failed or interrupted save never leaves half a backup in place of a whole one."""
+    tmp = None
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp",
+                                   dir=str(path.parent) if str(path.parent) else ".")
+        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+        tmp = None
+    except OSError as exc:
+        raise CloneError(f"cannot write {path}: {exc.strerror or exc}") from None
+    finally:
+        if tmp is not None:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
+
+
+def _firmware(session: Session) -> str:
+    c = session.client
+    if c.version:
+        return c.version
+    try:
+        reply = c.request(Request(c.address, Control.GET_VERSION, 0, 0, 0))
+    except TmclError:
+        return "unknown"
+    if reply is not None and reply.version:
+        c.version = reply.version
+        return reply.version
+    return "unknown"
+
+
+def _comment(p: Parameter, number: int) -> str:
+    unit = f", {p.unit}" if p.unit else ""
+    return f"{'AP' if p.kind == 'axis' else 'GP'} {number}{unit}: {p.description}"
+
+
+def save_lines(session: Session, path: Path, with_program: Path | None) -> tuple[str, int]:
+    """The backup's text and how many parameters it restores (SAP/SGP lines)."""
+    c = session.client
+    module = session.module
+    firmware = _firmware(session)
+    slots = list(readable_slots(module))
+    body: list[str] = []
+    saved = 0
+    last_section = None
+    with _Progress(session, "reading", len(slots)) as advance:
+        for kind, p, number, index in slots:
+            section = (kind, index)
+            if section != last_section:
+                where = f"motor {index}" if kind == "axis" else f"bank {index}"
+                body.append("")
+                body.append(f"// -- {'axis' if kind == 'axis' else 'global'} parameters, {where}")
+                last_section = section
+            slot = Slot(kind, number, index, 0, p)
+            reply = _request(session, READ[kind], slot)
+            advance()
+            name = slot.name or slot.label
+            comment = _comment(p, number)
+            if reply is None or not status_ok(reply.status):
+                status = reply.status if reply is not None else 0
+                body.append(f"// {name}: not read, the module answered status {status} "
+                            f"({status_text(status)})")
+                continue
+            value = _shown(reply.value, p)
+            if p.state or not p.writable:
+                why = "state, not restored" if p.state else "read-only"
+                body.append(f"// {name} = {_with_unit(value, p)} ({why}; {comment})")
+                continue
+            mn = "SAP" if kind == "axis" else "SGP"
+            target = p.name if p.count == 1 else str(number)  # a run is addressed by number
+            if p.count > 1:
+                comment = f"GP {number}: {p.name} #{number - p.number}"
+            body.append(f"{mn} {target}, {index}, {value}  // {comment}")
+            saved += 1
+    when = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
+    head = [
+        f"// tmclsh configuration backup of a {module.name} (.save); format: man tmclsh, CONFIGURATION BACKUPS",
+        f"// module: {module.name}",
+        f"// firmware: {firmware}",
+        f"// address: {c.address}",
+        f"// connection: {c.describe()} ({c.mode})",
+        f"// date: {when}",
+    ]
+    if with_program is not None:
+        head.append(f"// program: {with_program.name}")
+    head += [
+        f"// {saved} SAP/SGP lines restore the configuration; commented values are read-only",
+        "// or motion state and are never written back.",
+        "// Compare with the module: .diff FILE   write what differs: .restore FILE [--store]",
+        "// Replay every line: tmclsh -f FILE --yes (bank 0 global parameters go to EEPROM)",
+    ]
+    return "\n".join(head + body) + "\n", saved
+
+
+def _program_path(path: Path) -> Path:
+    stem = path.name[: -len(path.suffix)] if path.suffix else path.name
+    return path.with_name(f"{stem}.program.tmcl")
+
+
+def _program_text(session: Session) -> tuple[str, int]:
+    from .. import program
+
+    c = session.client
+    module = session.module
+    with _Progress(session, "program", module.program_memory) as advance:
+        image = program.read_program(c, progress=lambda phase, done, total: advance())
+    head = (f"// stored program of the {module.name} at address {c.address} "
+            f"({c.describe()}): {len(image)} instructions\n"
+            "// upload it with .upload FILE\n")
+    return head + (asm.disassemble(image, module) if image else ""), len(image)
+
+
+@command(".save")
+def cmd_save(session: Session, argtext: str) -> None:
+    usage = ".save FILE [--program]"
+    name, given = _args(argtext, usage, {"--program": "--program"})
+    path = Path(name).expanduser()
+    if path.is_dir():
+        raise CloneError(f"cannot write {path}: it is a directory")
+    prog_path = _program_path(path) if "--program" in given else None
+    if prog_path is not None and session.client.mode == "ascii":
+        raise ValidationError("--program reads program memory (134), which needs binary mode "
+                              "(.mode binary)")
+    text, saved = save_lines(session, path, prog_path)
+    instructions = None
+    if prog_path is not None:
+        prog_text, instructions = _program_text(session)
+        write_atomically(prog_path, prog_text)
+    write_atomically(path, text)
+    out = session.out
+    if out.json:
+        obj: dict[str, object] = {"saved": saved, "file": str(path)}
+        if prog_path is not None:
+            obj.update({"program": str(prog_path), "instructions": instructions})
+        out.emit(obj)
+        return
+    out.ok(f"saved {saved} parameters of the {session.module.name} to {path}")
+    if prog_path is not None:
+        out.ok(f"saved the stored program ({instructions} instructions) to {prog_path}")
+
+
+# -- reading a backup --------------------------------------------------------------------
+
+@dataclass
+class Backup:
+    """What a script says the parameters should be."""
+
+    path: Path
+    module_name: str | None = None  # from the header, when it names one
+    program: str | None = None
+    slots: dict[tuple[str, int, int], Slot] = field(default_factory=dict)
+    ignored: int = 0  # lines that are not SAP/SGP
+    state: list[Slot] = field(default_factory=list)  # state lines a hand-written file sets
+    skipped: list[tuple[str, str]] = field(default_factory=list)  # (what, why), across modules
+
+
+def _header(lines: list[str]) -> dict[str, str]:
+    found: dict[str, str] = {}
+    for text in lines[:HEADER_LINES]:
+        m = _HEADER.match(text)
+        if m:
+            found.setdefault(m.group(1).lower(), m.group(2))
+    return found
+
+
+def _source_module(name: str | None, live: Module) -> Module | None:
+    """The module the file's names belong to: its header's, when tmclsh knows that module."""
+    if name is None or _norm(name) == _norm(live.name):
+        return None
+    try:
+        return moddb.load(name)
+    except ValidationError:
+        return None
+
+
+def _norm(name: str) -> str:
+    return re.sub(r"[^a-z0-9]", "", name.lower())
+
+
+def _has_data(module: Module) -> bool:
+    return bool(module.axis_params or module.global_params)
+
+
+def _counterpart(live: Module, p: Parameter, number: int, index: int) -> Parameter | None:
+    """The live module's parameter with the same name (and bank), or None."""
+    if p.kind == "axis":
+        return next((q for q in live.axis_params if _norm(q.name) == _norm(p.name)), None)
+    return next((q for q in live.global_params
+                 if _norm(q.name) == _norm(p.name) and q.bank == p.bank
+                 and q.count == p.count), None)
+
+
+def read_backup(session: Session, path: Path, *, force: bool) -> Backup:
+    """Parse and check every SAP/SGP line of ``path`` against the live module (nothing is
+    sent). A line the module's data refuses is an error at FILE:LINE."""
+    live = session.module
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise CloneError(f"cannot read {path}: no such file") from None
+    except UnicodeDecodeError:
+        raise CloneError(f"cannot read {path}: not a text file (UTF-8)") from None
+    except OSError as exc:
+        raise CloneError(f"cannot read {path}: {exc.strerror or exc}") from None
+    lines = text.splitlines()
+    head = _header(lines)
+    backup = Backup(path, head.get("module"), head.get("program"))
+    source = _source_module(backup.module_name, live)
+    other = backup.module_name is not None and _norm(backup.module_name) != _norm(live.name)
+    if other and not force and _has_data(live):
+        raise CloneError(f"{path} is a backup of a {backup.module_name}, this is a {live.name}; "
+                         "restore by parameter name with --force (parameters the "
+                         f"{live.name} does not have are skipped)")
+    ascii_mode = session.client.mode == "ascii"
+    for number, raw in enumerate(lines, 1):
+        s = raw.strip()
+        if not s or s.startswith("//") or s.startswith("#"):
+            continue
+        if s.startswith(".") or "${" in s:
+            backup.ignored += 1  # shell commands and variables: not configuration values
+            continue
+        line = asm.parse_line(raw, number, str(path))
+        if line.mnemonic is None:
+            continue  # a label or a constant
+        if line.mnemonic not in ("SAP", "SGP", str(SAP), str(SGP)):
+            backup.ignored += 1
+            continue
+        enc = asm.encode(line, source or live, direct=True, ascii=ascii_mode)
+        ins = enc.instruction
+        kind = "axis" if ins.opcode == SAP else "global"
+        p = enc.parameter
+        if p is not None and p.state:  # the file's own module says it is state
+            backup.state.append(Slot(kind, ins.type, ins.motor, ins.value, p, number))
+            continue
+        if source is not None and p is not None:
+            slot = _carry(backup, live, p, ins.type, ins.motor, ins.value, number)
+            if slot is None:
+                continue
+        else:
+            if p is None and line.is_raw and _has_data(live):
+                # `5 4, 0, 100`: sent as typed when replayed; checked here like a named line
+                p = live.axis(ins.type) if kind == "axis" else live.glob(ins.type, ins.motor)
+                if p is None:
+                    raise line.error(f"{live.name} has no {kind} parameter {ins.type}"
+                                     + (f" in bank {ins.motor}" if kind == "global" else ""))
+                try:
+                    if kind == "axis":
+                        live.check_motor(ins.motor)
+                    if not p.writable:
+                        raise ValidationError(f"{p.label} {p.name} is read-only")
+                    p.check(_shown(ins.value, p))
+                except ValidationError as exc:
+                    raise line.error(str(exc)) from None
+            slot = Slot(kind, ins.type, ins.motor, _shown(ins.value, p), p, number)
+        if slot.param is not None and slot.param.state:
+            backup.state.append(slot)
+            continue
+        backup.slots[slot.key] = slot  # a later line for the same parameter wins, as replayed
+    return backup
+
+
+def _carry(backup: Backup, live: Module, p: Parameter, number: int, index: int, value: int,
+           line: int) -> Slot | None:
+    """A line of another module's backup, mapped onto the live module by name (or skipped)."""
+    if not _has_data(live):  # numbers only (generic mode): the file's names give the numbers
+        return Slot(p.kind, number, index, value, None, line)
+    what = f"{p.name if p.count == 1 else f'{p.name}#{number - p.number}'} " \
+           f"({'motor' if p.kind == 'axis' else 'bank'} {index}, line {line})"
+    q = _counterpart(live, p, number, index)
+    if q is None:
+        backup.skipped.append((what, f"the {live.name} has no such parameter"))
+        return None
+    if p.kind == "axis" and index >= live.motors:
+        backup.skipped.append((what, f"the {live.name} has no motor {index}"))
+        return None
+    if not q.writable:
+        backup.skipped.append((what, f"read-only on the {live.name}"))
+        return None
+    new_number = q.number + (number - p.number)
+    shown = _shown(value, q)
+    if not q.in_range(shown):
+        backup.skipped.append((what, f"{shown} is out of range on the {live.name} "
+                                     f"({q.range_text}{' ' + q.unit if q.unit else ''})"))
+        return None
+    return Slot(p.kind, new_number, q.bank if p.kind == "global" else index, shown, q, line)
+
+
+@dataclass
+class Difference:
+    slot: Slot  # the saved value
+    live: int
+
+    def to_json(self) -> dict[str, object]:
+        return {**self.slot.to_json(), "saved": self.slot.value, "live": self.live}
+
+
+def compare(session: Session, backup: Backup) -> list[Difference]:
+    """Read each saved parameter from the module (one request each); the ones that differ."""
+    diffs: list[Difference] = []
+    slots = list(backup.slots.values())
+    with _Progress(session, "comparing", len(slots)) as advance:
+        for slot in slots:
+            reply = _request(session, READ[slot.kind], slot)
+            advance()
+            if reply is None or not status_ok(reply.status):
+                status = reply.status if reply is not None else 0
+                raise CloneError(f"{backup.path}:{slot.line}: reading {slot.title()} failed: "
+                                 f"status {status} ({status_text(status)})")
+            live = _shown(reply.value, slot.param)
+            if not _same(live, slot.value):
+                diffs.append(Difference(slot, live))
+    return diffs
+
+
+def _notes(session: Session, backup: Backup, live: Module) -> None:
+    out = session.out
+    if backup.skipped:
+        out.info(f"{len(backup.skipped)} parameters of the {backup.module_name} backup skipped "
+                 f"on the {live.name}:")
+        for what, why in backup.skipped:
+            out.info(f"  {what}: {why}")
+    if backup.state:
+        names = ", ".join(s.name or s.label for s in backup.state[:6])
+        more = "..." if len(backup.state) > 6 else ""
+        out.info(f"{len(backup.state)} state lines in {backup.path.name} not compared or "
+                 f"restored ({names}{more})")
+
+
+def _table(session: Session, title: str, columns: list[str], rows: list[list[str]]) -> None:
+    from rich.table import Table
+
+    table = Table(title=title, title_justify="left", show_edge=False, pad_edge=False)
+    for col in columns:
+        table.add_column(col, justify="right" if col in ("number", "saved", "live", "old",
+                                                         "new", "motor/bank") else "left")
+    for row in rows:
+        table.add_row(*row)
+    session.out.print(table)
+
+
+def _count(n: int) -> str:
+    return f"{n} parameter" + ("" if n == 1 else "s")
+
+
+class DiffFound(TmclError):
+    """``.diff --exit-code``: the module differs from the file."""
+
+
+@command(".diff")
+def cmd_diff(session: Session, argtext: str) -> None:
+    usage = ".diff FILE [--exit-code] [--force]"
+    name, given = _args(argtext, usage, {"--exit-code": "--exit-code", "--force": "--force",
+                                         "-f": "--force"})
+    live = session.module
+    backup = read_backup(session, _file(session, name), force="--force" in given)
+    diffs = compare(session, backup)
+    out = session.out
+    _notes(session, backup, live)
+    if out.json:
+        for d in diffs:
+            out.emit(d.to_json())
+    elif not diffs:
+        out.ok(f"no differences: the {live.name} matches {backup.path.name} "
+               f"({len(backup.slots)} parameters compared)")
+    else:
+        rows = [[d.slot.name or "", d.slot.label, d.slot.where, str(d.slot.value), str(d.live),
+                 d.slot.param.unit if d.slot.param else ""] for d in diffs]
+        _table(session, f"{len(diffs)} of {len(backup.slots)} parameters differ from "
+                        f"{backup.path.name}", ["name", "number", "motor/bank", "saved", "live",
+                                                "unit"], rows)
+    if diffs and "--exit-code" in given:
+        err = DiffFound(f"{len(diffs)} parameters differ from {backup.path}")
+        err.shown = True  # type: ignore[attr-defined]  # the table (or the JSON) said it
+        raise err
+
+
+# -- .restore ------------------------------------------------------------------------------
+
+@dataclass
+class Written:
+    diff: Difference
+    error: str | None = None
+    read_back: int | None = None
+    stored: bool = False
+
+    def to_json(self) -> dict[str, object]:
+        obj = {**self.diff.slot.to_json(), "old": self.diff.live, "new": self.diff.slot.value}
+        if self.error:
+            obj["error"] = self.error
+        return obj
+
+
+@command(".restore")
+def cmd_restore(session: Session, argtext: str) -> None:
+    usage = ".restore FILE [--yes] [--store] [--force]"
+    name, given = _args(argtext, usage, {"--yes": "--yes", "-y": "--yes", "--store": "--store",
+                                         "--force": "--force", "-f": "--force"})
+    live = session.module
+    c = session.client
+    backup = read_backup(session, _file(session, name), force="--force" in given)
+    diffs = compare(session, backup)
+    out = session.out
+    _notes(session, backup, live)
+    if backup.program:
+        out.info(f"{backup.path.name} names a stored program ({backup.program}); .restore "
+                 f"does not upload it (use .upload {backup.program})")
+    if not diffs:
+        if out.json:
+            out.emit({"file": str(backup.path), "restored": [], "failed": [],
+                      "skipped": [w for w, _ in backup.skipped], "stored": 0})
+        else:
+            out.ok(f"nothing to restore: the {live.name} matches {backup.path.name}")
+        return
+    yes = "--yes" in given
+    eeprom = sum(1 for d in diffs if d.slot.kind == "global" and d.slot.param is not None
+                 and d.slot.param.storable and d.slot.index == 0)
+    question = (f"write {_count(len(diffs))} from {backup.path.name} to the {live.name} at "
+                f"address {c.address}?")
+    if eeprom:
+        question += f" ({eeprom} global parameters of bank 0 are written straight to EEPROM)"
+    if not yes:
+        session.confirm(question)
+    # link settings last: after one of them the module may no longer hear this connection
+    order = sorted(diffs, key=lambda d: d.slot.param is not None and d.slot.param.link)
+    done: list[Written] = []
+    link_changed: list[Written] = []
+    with _Progress(session, "restoring", len(order)) as advance:
+        for d in order:
+            slot = d.slot
+            w = Written(d)
+            done.append(w)
+            try:
+                reply = _request(session, WRITE[slot.kind], slot, slot.value)
+                if reply is not None and not status_ok(reply.status):
+                    w.error = (f"the module refused {slot.value}: status {reply.status} "
+                               f"({status_text(reply.status)})")
+                    continue
+                if slot.param is not None and slot.param.link:
+                    link_changed.append(w)
+                    continue
+                back = _request(session, READ[slot.kind], slot)
+                if back is None or not status_ok(back.status):
+                    w.error = "written, but reading it back failed"
+                    continue
+                w.read_back = _shown(back.value, slot.param)
+                if not _same(w.read_back, slot.value):
+                    w.error = f"written {slot.value}, but the module reads back {w.read_back}"
+            except TmclError as exc:
+                w.error = str(exc)
+                if link_changed:
+                    break  # the link changed under us; the rest cannot be reached
+            finally:
+                advance()
+    ok = [w for w in done if w.error is None]
+    stored = 0
+    if "--store" in given and ok:
+        storable = [w for w in ok if w.diff.slot.param is not None and w.diff.slot.param.storable
+                    and w not in link_changed]
+        if storable:
+            if not yes:
+                session.confirm(f"store {len(storable)} restored parameters permanently in "
+                                "the module's EEPROM (STAP/STGP)?")
+            for w in storable:
+                slot = w.diff.slot
+                reply = _request(session, STORE[slot.kind], slot)
+                if reply is not None and not status_ok(reply.status):
+                    w.error = (f"restored, but storing it failed: status {reply.status} "
+                               f"({status_text(reply.status)})")
+                else:
+                    w.stored = True
+                    stored += 1
+    failed = [w for w in done if w.error is not None]
+    restored = [w for w in done if w.error is None]
+    _report_restore(session, backup, restored, failed, link_changed, stored)
+    if failed:
+        err = CloneError(f"{len(failed)} of {_count(len(done))} were not restored")
+        err.shown = session.out.json  # type: ignore[attr-defined]  # the JSON object said it
+        raise err
+
+
+def _report_restore(session: Session, backup: Backup, restored: list[Written],
+                    failed: list[Written], link_changed: list[Written], stored: int) -> None:
+    out = session.out
+    if out.json:
+        out.emit({"file": str(backup.path), "restored": [w.to_json() for w in restored],
+                  "failed": [w.to_json() for w in failed],
+                  "skipped": [w for w, _ in backup.skipped], "stored": stored})
+        return
+    if restored:
+        rows = [[w.diff.slot.name or "", w.diff.slot.label, w.diff.slot.where,
+                 str(w.diff.live), str(w.diff.slot.value),
+                 ("not read back (link)" if w in link_changed else "read back")
+                 + (", stored" if w.stored else "")] for w in restored]
+        _table(session, f"restored {_count(len(restored))} from {backup.path.name}",
+               ["name", "number", "motor/bank", "old", "new", "verified"], rows)
+    for w in failed:
+        out.warn(f"not restored: {w.diff.slot.title()}: {w.error}")
+    for w in link_changed:
+        if w.error is None:
+            p = w.diff.slot.param
+            out.warn(f"{p.name if p else w.diff.slot.label} is now {w.diff.slot.value}: the "
+                     "module may only answer with the new setting (reconnect)")

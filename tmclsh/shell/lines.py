@@ -1,0 +1,78 @@
+"""Cutting typed text into shell lines: comments off, then ``;`` between commands.
+
+One set of rules for the REPL, ``-c``, ``-f`` and ``.source``, so a line means the same
+wherever it is typed:
+
+- ``// comment`` and ``# comment`` run to the end of the line. ``#`` starts a comment only at
+  the start of a word (``GAP 1, 0 # where``), so nothing that contains one mid-word is cut.
+  Neither counts inside quotes (``.echo "a # b"``).
+- ``;`` outside quotes separates lines (``help 4; help 5``), except after a command that owns
+  the rest of its line (``Command.owns_line``: ``.watch`` separates its expressions with ``;``).
+
+A quote opens only at the start of a word, so the apostrophe in ``.echo don't`` is a letter.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+
+def _scan(text: str):
+    """``(index, char, quoted)`` for each character; ``quoted`` is True inside quotes."""
+    quote: str | None = None
+    for i, ch in enumerate(text):
+        if quote is not None:
+            yield i, ch, True
+            if ch == quote:
+                quote = None
+        elif ch in "\"'" and (i == 0 or text[i - 1].isspace() or text[i - 1] in "=(,"):
+            quote = ch
+            yield i, ch, True
+        else:
+            yield i, ch, False
+
+
+def comment_at(text: str) -> int | None:
+    """Where a ``//`` or ``#`` comment starts in ``text`` (None if it has none)."""
+    if "/" not in text and "#" not in text:
+        return None  # most lines of a script: nothing to scan for (a scan is per character)
+    for i, ch, quoted in _scan(text):
+        if quoted:
+            continue
+        if ch == "/" and text.startswith("//", i):
+            return i
+        if ch == "#" and (i == 0 or text[i - 1].isspace()):
+            return i
+    return None
+
+
+def strip_comment(text: str) -> str:
+    """``text`` without its comment, stripped."""
+    at = comment_at(text)
+    return (text if at is None else text[:at]).strip()
+
+
+def split_line(text: str, owns_line: Callable[[str], bool]) -> list[str]:
+    """One physical line as the shell lines in it (comment removed, ``;`` separating).
+
+    ``owns_line(line)`` tells whether a line starts with a command that takes the rest of
+    the line, ``;`` included."""
+    rest = strip_comment(text)
+    if ";" not in rest:
+        return [rest] if rest else []  # what the loop below gives, without its scan
+    out: list[str] = []
+    while rest:
+        if owns_line(rest):
+            out.append(rest)
+            break
+        cut = next((i for i, ch, quoted in _scan(rest) if ch == ";" and not quoted), None)
+        head, rest = (rest, "") if cut is None else (rest[:cut], rest[cut + 1:])
+        if head.strip():
+            out.append(head.strip())
+        rest = rest.strip()
+    return out
+
+
+def split_text(text: str, owns_line: Callable[[str], bool]) -> list[str]:
+    """Every shell line of ``text`` (newlines and ``;`` separate)."""
+    return [line for raw in text.splitlines() for line in split_line(raw, owns_line)]
