@@ -328,7 +328,7 @@ def _script_row(args: argparse.Namespace, json_mode: bool) -> dict:
     return row(result, name, ratio, "x floor", 1.3)
 
 
-@benchmark("script", "tmclsh -f SCRIPT per line (text output to a pipe) vs raw pyserial")
+@benchmark("script", "tmclsh -f SCRIPT per line (text output to a file) vs raw pyserial")
 def bench_script(args: argparse.Namespace) -> dict:
     return _script_row(args, False)
 
