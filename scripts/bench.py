@@ -1,16 +1,21 @@
 #!/usr/bin/env python3
-"""tmclsh benchmarks.
+"""tmclsh benchmarks: every path as a ratio to the wire's floor, measured in the same run.
 
-    python scripts/bench.py                 # run every benchmark
-    python scripts/bench.py client          # run one (or several) by name
-    python scripts/bench.py client --count 200 --rounds 1   # a quick smoke run
+    python scripts/bench.py                 # every row, then the table against the targets
+    python scripts/bench.py request execute # some rows
+    python scripts/bench.py --count 500 --rounds 2   # a quick run
+    python scripts/bench.py --tree ../main  # measure another checkout (before/after)
     python scripts/bench.py --list
 
-Each benchmark is a function registered in ``BENCHMARKS`` with ``@benchmark(name, help)``.
-It gets the parsed arguments (``count``, ``rounds``, ``module``, ``json``) and returns a dict
-of results; ``main`` prints the dict (one JSON object per line with ``--json``) and the
-benchmark prints its own human-readable lines to stderr.
+The floor is raw pyserial: write a 9-byte GAP, read the 9-byte reply, against the same
+simulator served on a pty (``tmclsh sim --pty`` in its own process, always from this checkout,
+so two trees are measured against the same module). Rounds alternate floor and path, so both
+see the same machine load; the figures are the best round's medians (other work on the machine
+only ever adds time). Start-up rows are the fastest of several runs.
 
+Each benchmark is registered with ``@benchmark(name, help)``, gets the parsed arguments and
+returns a dict; rows with a target carry ``row``, ``value``, ``unit``, ``target`` and ``ok``,
+and ``main`` prints them as one table at the end (one JSON object per line with ``--json``).
 These are measurements, not tests: nothing here fails on a slow machine.
 """
 
@@ -22,13 +27,13 @@ import os
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
+BAUD = 115200
 
 Benchmark = Callable[[argparse.Namespace], dict]
 BENCHMARKS: dict[str, tuple[Benchmark, str]] = {}
@@ -47,9 +52,27 @@ def say(text: str) -> None:
 
 # -- shared helpers ---------------------------------------------------------------------------
 
+def tree_env(args: argparse.Namespace, **extra: str) -> dict[str, str]:
+    """Environment for a tmclsh subprocess of the measured tree: no user config, its own
+    history, nothing from the developer's TMCLSH_* settings. (They run in ``args.state_dir``:
+    ``python -m`` puts the current folder first on sys.path, and this checkout's tmclsh must
+    not win from there.)"""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("TMCLSH_")
+           and k not in ("PYTHONUNBUFFERED", "PYTHONDONTWRITEBYTECODE")}  # as a user runs it
+    env["PYTHONPATH"] = str(args.tree) + os.pathsep + os.environ.get("PYTHONPATH", "")
+    env["TMCLSH_CONFIG"] = os.devnull
+    env["XDG_STATE_HOME"] = args.state_dir
+    env.update(extra)
+    return env
+
+
+def tmclsh_cmd(*argv: str) -> list[str]:
+    return [sys.executable, "-m", "tmclsh", *argv]
+
+
 class SimProcess:
-    """``tmclsh sim --pty`` in a subprocess (its own interpreter, so it does not share the
-    benchmark's GIL); ``path`` is the pty to open."""
+    """``tmclsh sim --pty`` of this checkout in a subprocess (its own interpreter, so it does
+    not share the benchmark's GIL); ``path`` is the pty to open."""
 
     def __init__(self, module: str = "TMCM-1311", address: int = 1):
         env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
@@ -83,13 +106,19 @@ def _per_second(seconds: float, count: int) -> float:
     return count / seconds if seconds > 0 else float("inf")
 
 
+def gap_frame() -> bytes:
+    """GAP 1, 0 to address 1, built here (not by the measured tree)."""
+    body = bytes((1, 6, 1, 0, 0, 0, 0, 0))
+    return body + bytes((sum(body) & 0xFF,))
+
+
 def raw_latencies(path: str, frame: bytes, warm: int, count: int) -> list[float]:
     """Seconds per raw pyserial round trip (write ``frame``, read the 9-byte reply), after
-    ``warm`` untimed ones: the floor a tmclsh feature is compared with."""
+    ``warm`` untimed ones: the floor every path is compared with."""
     import serial
 
     clock = time.perf_counter
-    ser = serial.serial_for_url(path, baudrate=9600, timeout=1.0)
+    ser = serial.serial_for_url(path, baudrate=BAUD, timeout=1.0)
     try:
         for _ in range(warm):
             ser.write(frame)
@@ -107,253 +136,334 @@ def raw_latencies(path: str, frame: bytes, warm: int, count: int) -> list[float]
     return out
 
 
-# -- client round trips -----------------------------------------------------------------------
+def row(result: dict, name: str, value: float, unit: str, target: float, note: str = "") -> dict:
+    """A table row: ``value`` against ``target`` (both in ``unit``; lower is better)."""
+    result.update(row=name, value=round(value, 3), unit=unit, target=target,
+                  ok=bool(value <= target), note=note)
+    return result
 
-@benchmark("client", "GAP round trips/s: tmclsh client vs raw pyserial, same pty-served simulator")
-def bench_client(args: argparse.Namespace) -> dict:
-    """GAP round trips per second through the client, beside raw pyserial writes and reads of
-    the same 9-byte frames against the same simulator, in the same run.
 
-    The simulator runs in its own process (``tmclsh sim --pty``). Rounds alternate the
-    order of raw and client so both see the same machine load, and every round trip is timed
-    on its own. The headline figures are the best round's median for each: other work on
-    the machine only ever adds time, and a round it disturbed says nothing about the client
-    (``*_all_us`` are the medians over all rounds, for comparison). Two more figures explain
-    the result: the raw descriptor floor (``os.write``/``select``/
-    ``os.read``, no pyserial) and the simulator's own cost per request (``Simulator.write``
-    and ``read`` in process, no pty): when that is most of the raw round trip, the simulator
-    is the bottleneck for both.
-    """
-    import select
+CPU: dict[str, float] = {}  # the last alternate(): least CPU seconds of one run, by name
 
-    import serial
 
+def _cpu_seconds() -> float:
+    """CPU of this process and of its children that have ended (a tmclsh run; the
+    simulator's own process is still running, so it is not in here)."""
+    import resource
+
+    me = resource.getrusage(resource.RUSAGE_SELF)
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+def alternate(rounds: int, runs: dict[str, Callable[[], float]], verbose: bool) -> dict[str, float]:
+    """Run each of ``runs`` once per round, in alternating order; each returns its figure for
+    the round (lower is better). Returns the best round's figure for each, and leaves the
+    least CPU time one run of each took in ``CPU`` (a loaded machine adds waiting to the wall
+    clock far more than CPU time: the CPU figures say what the code itself costs)."""
+    figures: dict[str, list[float]] = {name: [] for name in runs}
+    cpu: dict[str, list[float]] = {name: [] for name in runs}
+    for rnd in range(rounds):
+        order = list(runs) if rnd % 2 == 0 else list(reversed(runs))
+        for name in order:
+            c0 = _cpu_seconds()
+            figures[name].append(runs[name]())
+            cpu[name].append(_cpu_seconds() - c0)
+            if verbose:
+                say(f"  round {rnd + 1} {name:<10}: {figures[name][-1]:.2f}  "
+                    f"(cpu {cpu[name][-1]:.3f} s)")
+    CPU.clear()
+    CPU.update({name: min(v) for name, v in cpu.items()})
+    return {name: min(v) for name, v in figures.items()}
+
+
+# -- in-process round trips -------------------------------------------------------------------
+
+def _client_rows(args: argparse.Namespace, which: str) -> dict:
     from tmclsh.client import Client
-    from tmclsh.protocol import Reply, Request
-    from tmclsh.sim import Simulator
+    from tmclsh.protocol import Request
     from tmclsh.transport import open_serial
 
-    count, rounds = args.count, args.rounds
-    frame = Request(1, 6, 1, 0, 0).to_bytes()  # GAP 1, 0 (actual position)
+    count = args.count
     warm = min(200, count)
+    frame = gap_frame()
     clock = time.perf_counter
-    lat: dict[str, list[float]] = {"raw": [], "fd": [], "client": []}
 
-    def run_raw(path: str) -> None:
-        ser = serial.serial_for_url(path, baudrate=9600, timeout=1.0)
+    def make_client(path: str) -> Client:
+        return Client(open_serial(path, BAUD), module=args.module, timeout=1.0)
+
+    def run_request(path: str) -> float:
+        client = make_client(path)
+        req = Request(1, 6, 1, 0, 0)
         try:
             for _ in range(warm):
-                ser.write(frame)
-                ser.read(9)
-            out = lat["raw"]
+                client.request(req)
+            lat = []
             for _ in range(count):
                 t0 = clock()
-                ser.write(frame)
-                reply = ser.read(9)
-                out.append(clock() - t0)
-            assert len(reply) == 9 and Reply.from_bytes(reply).opcode == 6, reply
-        finally:
-            ser.close()
-
-    def run_fd(path: str) -> None:
-        ser = serial.serial_for_url(path, baudrate=9600, timeout=1.0)
-        fd = ser.fd
-        try:
-            out = lat["fd"]
-            for i in range(warm + count):
-                t0 = clock()
-                os.write(fd, frame)
-                reply = b""
-                while len(reply) < 9:
-                    if not select.select((fd,), (), (), 1.0)[0]:
-                        raise RuntimeError("raw descriptor read timed out")
-                    reply += os.read(fd, 9 - len(reply))
-                if i >= warm:
-                    out.append(clock() - t0)
-            assert Reply.from_bytes(reply).opcode == 6, reply
-        finally:
-            ser.close()
-
-    def run_client(path: str) -> None:
-        client = Client(open_serial(path), module=args.module, timeout=1.0)
-        try:
-            for _ in range(warm):
-                client.send(6, 1, 0)
-            out = lat["client"]
-            for _ in range(count):
-                t0 = clock()
-                r = client.send(6, 1, 0)
-                out.append(clock() - t0)
+                r = client.request(req)
+                lat.append(clock() - t0)
             assert r is not None and r.opcode == 6 and r.ok, r
             assert client.stats["timeouts"] == 0, client.stats
         finally:
             client.close()
+        return statistics.median(lat) * 1e6
 
-    runs = {"raw": run_raw, "fd": run_fd, "client": run_client}
-    rounds_med: dict[str, list[float]] = {name: [] for name in runs}
-    with SimProcess(args.module) as sim:
-        say(f"client: {rounds} round(s) of {count} GAP round trips on {sim.path} "
-            "(simulator in a subprocess)")
-        for rnd in range(rounds):
-            order = list(runs) if rnd % 2 == 0 else list(reversed(runs))
-            for name in order:
-                before = len(lat[name])
-                runs[name](sim.path)
-                rounds_med[name].append(statistics.median(lat[name][before:]) * 1e6)
-                if args.verbose:
-                    say(f"  round {rnd + 1} {name:<6}: median {rounds_med[name][-1]:.1f} us")
-
-    # the simulator alone: what one request costs it, without pty and pyserial
-    simulator = Simulator(args.module)
-    try:
-        for _ in range(warm):
-            simulator.write(frame)
-            simulator.read(0)
-        sim_lat = []
-        for _ in range(count):
-            t0 = clock()
-            simulator.write(frame)
-            out = simulator.read(0)
-            sim_lat.append(clock() - t0)
-        assert len(out) == 9, out
-    finally:
-        simulator.close()
-
-    med = {k: min(v) for k, v in rounds_med.items()}
-    pooled = {k: statistics.median(v) * 1e6 for k, v in lat.items()}
-    sim_us = statistics.median(sim_lat) * 1e6
-    result = {
-        "benchmark": "client",
-        "count": count,
-        "rounds": rounds,
-        "raw_per_s": round(1e6 / med["raw"]),
-        "client_per_s": round(1e6 / med["client"]),
-        "raw_us": round(med["raw"], 1),
-        "client_us": round(med["client"], 1),
-        "overhead_pct": round((med["client"] / med["raw"] - 1) * 100, 1),
-        "target_pct": 30,
-        "raw_all_us": round(pooled["raw"], 1),
-        "client_all_us": round(pooled["client"], 1),
-        "overhead_all_pct": round((pooled["client"] / pooled["raw"] - 1) * 100, 1),
-        "fd_floor_us": round(med["fd"], 1),
-        "client_over_fd_pct": round((med["client"] / med["fd"] - 1) * 100, 1),
-        "sim_us": round(sim_us, 1),
-        "sim_share_of_raw_pct": round(sim_us / med["raw"] * 100, 1),
-    }
-    say(f"  raw pyserial     : {result['raw_per_s']:>7} round trips/s  ({med['raw']:.1f} us each)")
-    say(f"  tmclsh client    : {result['client_per_s']:>7} round trips/s  "
-        f"({med['client']:.1f} us each)")
-    say(f"  client overhead over raw pyserial: {result['overhead_pct']:+.1f} % (target <= 30 %; "
-        f"over all rounds {result['overhead_all_pct']:+.1f} %)")
-    say(f"  raw descriptor floor (no pyserial): {med['fd']:.1f} us; client "
-        f"{result['client_over_fd_pct']:+.1f} % over it")
-    say(f"  simulator alone: {sim_us:.1f} us per request = "
-        f"{result['sim_share_of_raw_pct']:.0f} % of the raw pyserial round trip")
-    return result
-
-
-# -- watch polling --------------------------------------------------------------------------
-
-WATCH_EXPRESSIONS = "pos=GAP 1, 0; speed=GAP 3, 0; in0=GIO 0, 0; volts=GIO 8, 1 / 10"
-
-
-@benchmark("watch", "samples/s of a 4-expression .watch vs the raw pyserial round-trip floor")
-def bench_watch(args: argparse.Namespace) -> dict:
-    """Samples per second a ``.watch`` of four expressions (four distinct reads) sustains
-    against the pty-served simulator, beside the raw round-trip floor measured in the same run
-    (pyserial writes a 9-byte GAP and reads the 9-byte reply).
-
-    One sample costs four round trips, so the floor is raw round trips/s divided by four; the
-    ratio is watch samples/s over that floor (1.0: the watch adds nothing to the round trips).
-    The watch runs as in a pipe: no interval, one JSON object per sample (written to
-    /dev/null), no live table. Rounds alternate raw and watch. Like ``client``, every round
-    trip and every sample is timed on its own and the figures are medians, which a busy
-    machine disturbs far less than totals; the mean rate of the watch is reported beside.
-    """
-    import io
-
-    from tmclsh.client import Client
-    from tmclsh.protocol import Request
-    from tmclsh.shell import watch
-    from tmclsh.shell.render import Output
-    from tmclsh.shell.session import Session
-    from tmclsh.transport import open_serial
-
-    count, rounds = args.count, args.rounds
-    warm = min(200, count)
-    frame = Request(1, 6, 1, 0, 0).to_bytes()  # GAP 1, 0
-    clock = time.perf_counter
-    lat: dict[str, list[float]] = {"raw": [], "watch": []}
-    mean_rates: list[float] = []
-
-    def run_raw(path: str) -> None:
-        lat["raw"] += raw_latencies(path, frame, warm, count)
-
-    def run_watch(path: str) -> None:
-        client = Client(open_serial(path), module=args.module, timeout=1.0)
+    def run_execute(path: str) -> float:
+        client = make_client(path)
         try:
-            session = Session(client, Output(json_mode=True))
-            items = watch.parse_items(session, WATCH_EXPRESSIONS)
-            stamps: list[float] = []
-            with open(os.devnull, "w") as sink:
-                def emit(obj: dict) -> None:
-                    sink.write(json.dumps(obj) + "\n")
-                    stamps.append(clock())
-
-                watch.run_watch(session, items, interval=0, count=warm, live=False,
-                                keys=watch.Keys(io.StringIO()), emit=emit)
-                stamps.clear()
-                result = watch.run_watch(session, items, interval=0, count=count + 1,
-                                         live=False, keys=watch.Keys(io.StringIO()), emit=emit)
-            lat["watch"] += [b - a for a, b in zip(stamps, stamps[1:])]
-            mean_rates.append(_per_second(stamps[-1] - stamps[0], len(stamps) - 1))
-            assert result.samples == count + 1 and client.stats["timeouts"] == 0, client.stats
+            for _ in range(warm):
+                client.execute("GAP 1, 0")
+            lat = []
+            for _ in range(count):
+                t0 = clock()
+                r = client.execute("GAP 1, 0")
+                lat.append(clock() - t0)
+            assert r.ok and client.stats["timeouts"] == 0, client.stats
         finally:
             client.close()
+        return statistics.median(lat) * 1e6
 
-    runs = {"raw": run_raw, "watch": run_watch}
+    def run_pytrinamic(path: str) -> float:
+        from pytrinamic.connections.serial_tmcl_interface import SerialTmclInterface
+
+        iface = SerialTmclInterface(path, datarate=BAUD, timeout_s=1)
+        try:
+            for _ in range(warm):
+                iface.get_axis_parameter(1, 0)
+            lat = []
+            for _ in range(count):
+                t0 = clock()
+                iface.get_axis_parameter(1, 0)
+                lat.append(clock() - t0)
+        finally:
+            iface.close()
+        return statistics.median(lat) * 1e6
+
+    path_fn = {"request": run_request, "execute": run_execute, "pytrinamic": run_pytrinamic}[which]
     with SimProcess(args.module) as sim:
-        say(f"watch: {rounds} round(s) of {count} raw GAP round trips and {count} samples of "
-            f"'{WATCH_EXPRESSIONS}' on {sim.path} (simulator in a subprocess)")
-        for rnd in range(rounds):
-            for name in (list(runs) if rnd % 2 == 0 else list(reversed(runs))):
-                before = len(lat[name])
-                runs[name](sim.path)
-                if args.verbose:
-                    say(f"  round {rnd + 1} {name:<5}: median "
-                        f"{statistics.median(lat[name][before:]) * 1e6:.1f} us")
+        say(f"{which}: {args.rounds} round(s) of {count} GAP round trips on {sim.path}")
+        best = alternate(args.rounds, {
+            "raw": lambda: statistics.median(raw_latencies(sim.path, frame, warm, count)) * 1e6,
+            which: lambda: path_fn(sim.path)}, args.verbose)
+    ratio = best[which] / best["raw"]
+    ops = warm + count
+    cpu_raw, cpu_path = CPU["raw"] / ops * 1e6, CPU[which] / ops * 1e6
+    say(f"  raw pyserial {best['raw']:.1f} us, {which} {best[which]:.1f} us: {ratio:.2f}x "
+        f"(CPU per round trip: raw {cpu_raw:.1f} us, {which} {cpu_path:.1f} us)")
+    result = {"benchmark": which, "floor_us": round(best["raw"], 1),
+              "us": round(best[which], 1), "floor_cpu_us": round(cpu_raw, 1),
+              "cpu_us": round(cpu_path, 1)}
+    names = {"request": ("Client.request(Request)", 1.15),
+             "execute": ('Client.execute("GAP 1, 0")', 1.25),
+             "pytrinamic": ("PyTrinamic get_axis_parameter (for comparison)", float("inf"))}
+    return row(result, names[which][0], ratio, "x floor", names[which][1])
 
-    raw = 1 / statistics.median(lat["raw"])
-    samples = 1 / statistics.median(lat["watch"])
-    floor = raw / 4
-    result = {
-        "benchmark": "watch",
-        "count": count,
-        "rounds": rounds,
-        "expressions": 4,
-        "watch_samples_per_s": round(samples, 1),
-        "watch_mean_samples_per_s": round(statistics.median(mean_rates), 1),
-        "raw_round_trips_per_s": round(raw),
-        "floor_samples_per_s": round(floor, 1),
-        "ratio": round(samples / floor, 3),
-    }
-    say(f"  raw pyserial round trips : {raw:>8.0f}/s  -> floor {floor:.0f} samples/s "
-        "(4 round trips each)")
-    say(f"  .watch of 4 expressions  : {samples:>8.1f} samples/s (median sample; mean rate "
-        f"{result['watch_mean_samples_per_s']:.1f}/s)")
-    say(f"  ratio watch / floor      : {samples / floor:.2f}")
-    return result
+
+@benchmark("request", "Client.request(Request) round trip vs raw pyserial")
+def bench_request(args: argparse.Namespace) -> dict:
+    return _client_rows(args, "request")
+
+
+@benchmark("execute", 'Client.execute("GAP 1, 0") (parse, check, send) vs raw pyserial')
+def bench_execute(args: argparse.Namespace) -> dict:
+    return _client_rows(args, "execute")
+
+
+@benchmark("pytrinamic", "PyTrinamic's GAP round trip on the same module vs raw pyserial")
+def bench_pytrinamic(args: argparse.Namespace) -> dict:
+    return _client_rows(args, "pytrinamic")
+
+
+# -- scripts ---------------------------------------------------------------------------------
+
+def _script_row(args: argparse.Namespace, json_mode: bool) -> dict:
+    """Per line of ``tmclsh -f``: (time of an N-line script - time of a 1-line script) / (N-1),
+    output to a pipe read by the benchmark, beside the raw round trip."""
+    n = max(args.count, 200)
+    lines = ["GAP 1, 0", "GAP 4, 0", "SAP 4, 0, 1000", "GIO 0, 0"]
+    tmp = Path(args.state_dir)
+    long_script = tmp / "long.tmcl"
+    long_script.write_text("".join(lines[i % len(lines)] + "\n" for i in range(n)))
+    short_script = tmp / "short.tmcl"
+    short_script.write_text(lines[0] + "\n")
+    frame = gap_frame()
+
+    out_file = tmp / "script.out"
+
+    def run(path: str, script: Path) -> float:
+        argv = tmclsh_cmd("--port", path, "-m", args.module, *(["--json"] if json_mode else []),
+                          "-f", str(script))
+        with open(out_file, "w") as out:  # a file: no reader process woken per line
+            t0 = time.perf_counter()
+            proc = subprocess.run(argv, stdout=out, stderr=subprocess.PIPE, text=True,
+                                  env=tree_env(args), cwd=args.state_dir, timeout=300)
+            took = time.perf_counter() - t0
+        text = out_file.read_text()
+        results = text.count("\n") - (0 if json_mode else 1)  # text: a summary line
+        if proc.returncode != 0 or results != (n if script is long_script else 1):
+            raise RuntimeError(f"script run failed: {proc.stderr[-500:]}")
+        return took
+
+    with SimProcess(args.module) as sim:
+        say(f"script{' --json' if json_mode else ''}: {args.rounds} round(s) of a {n}-line "
+            f"script on {sim.path}")
+        run(sim.path, short_script)  # warm the caches
+        # the fastest long run less the fastest short run: start-up noise cancels best that way
+        best = alternate(args.rounds, {
+            "raw": lambda: statistics.median(raw_latencies(sim.path, frame, 100, n)) * 1e6,
+            "long": lambda: run(sim.path, long_script),
+            "short": lambda: run(sim.path, short_script)}, args.verbose)
+    best["script"] = (best["long"] - best["short"]) / (n - 1) * 1e6
+    ratio = best["script"] / best["raw"]
+    cpu_raw = CPU["raw"] / (n + 100) * 1e6
+    cpu_line = (CPU["long"] - CPU["short"]) / (n - 1) * 1e6
+    say(f"  raw pyserial {best['raw']:.1f} us, per script line {best['script']:.1f} us: "
+        f"{ratio:.2f}x (CPU: raw {cpu_raw:.1f} us per round trip, tmclsh {cpu_line:.1f} us "
+        "per line)")
+    result = {"benchmark": "script-json" if json_mode else "script", "lines": n,
+              "floor_us": round(best["raw"], 1), "us_per_line": round(best["script"], 1),
+              "floor_cpu_us": round(cpu_raw, 1), "cpu_us_per_line": round(cpu_line, 1)}
+    name = "tmclsh -f script --json, per line" if json_mode else "tmclsh -f script, per line"
+    return row(result, name, ratio, "x floor", 1.3)
+
+
+@benchmark("script", "tmclsh -f SCRIPT per line (text output to a file) vs raw pyserial")
+def bench_script(args: argparse.Namespace) -> dict:
+    return _script_row(args, False)
+
+
+@benchmark("script-json", "tmclsh -f SCRIPT --json per line vs raw pyserial")
+def bench_script_json(args: argparse.Namespace) -> dict:
+    return _script_row(args, True)
+
+
+# -- start-up ---------------------------------------------------------------------------------
+
+def _fastest(argv: list[str], env: dict, runs: int, cwd: str) -> float:
+    best = float("inf")
+    for _ in range(runs):
+        t0 = time.perf_counter()
+        proc = subprocess.run(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
+                              cwd=cwd, timeout=60)
+        best = min(best, time.perf_counter() - t0)
+        if proc.returncode != 0:
+            raise RuntimeError(f"{argv} failed: {proc.stderr.decode()[-500:]}")
+    return best
+
+
+@benchmark("process", 'whole-process tmclsh --port P -c "GAP 1, 0" vs python -c "import serial"')
+def bench_process(args: argparse.Namespace) -> dict:
+    runs = max(5, args.rounds * 4)
+    env = tree_env(args)
+    with SimProcess(args.module) as sim:
+        argv = tmclsh_cmd("--port", sim.path, "-m", args.module, "-c", "GAP 1, 0")
+        _fastest(argv, env, 1, args.state_dir)  # the data cache, the page cache
+        best = alternate(args.rounds, {
+            "python": lambda: _fastest([sys.executable, "-c", "import serial"], env, runs // 2,
+                                       args.state_dir),
+            "tmclsh": lambda: _fastest(argv, env, runs // 2, args.state_dir)}, args.verbose)
+    ratio = best["tmclsh"] / best["python"]
+    say(f"process: python -c 'import serial' {best['python'] * 1e3:.1f} ms, tmclsh -c "
+        f"{best['tmclsh'] * 1e3:.1f} ms: {ratio:.2f}x")
+    return row({"benchmark": "process", "python_ms": round(best["python"] * 1e3, 1),
+                "tmclsh_ms": round(best["tmclsh"] * 1e3, 1)},
+               'tmclsh --port P -m TMCM-1311 -c "GAP 1, 0", whole process', ratio,
+               'x python -c "import serial"', 6.0)
+
+
+HEAVY = ("prompt_toolkit", "rich", "pygments", "asyncio", "can")
+DUMP_MODULES = """
+import atexit, json, runpy, sys
+atexit.register(lambda: print("MODULES " + json.dumps(sorted(sys.modules)), file=sys.stderr))
+sys.argv = ["tmclsh", *sys.argv[1:]]
+runpy.run_module("tmclsh", run_name="__main__", alter_sys=True)
+"""
+
+
+@benchmark("imports", "heavy modules imported on the -c path (a count, not a time)")
+def bench_imports(args: argparse.Namespace) -> dict:
+    with SimProcess(args.module) as sim:
+        proc = subprocess.run([sys.executable, "-c", DUMP_MODULES, "--port", sim.path, "-m",
+                               args.module, "-c", "GAP 1, 0"], capture_output=True, text=True,
+                              env=tree_env(args), cwd=args.state_dir, timeout=60)
+    modules = json.loads(proc.stderr.rstrip().splitlines()[-1][len("MODULES "):])
+    heavy = sorted({m.split(".")[0] for m in modules if m.split(".")[0] in HEAVY}
+                   | ({"tmclsh.sim"} if any(m.startswith("tmclsh.sim") for m in modules) else set()))
+    say(f"imports: {len(modules)} modules on the -c path; heavy: {', '.join(heavy) or 'none'}")
+    return row({"benchmark": "imports", "modules": len(modules), "heavy": heavy},
+               "heavy modules on that -c path", len(heavy), "modules", 0,
+               note=", ".join(heavy) or "none")
+
+
+@benchmark("repl", "REPL: start to first prompt on a pty (seconds)")
+def bench_repl(args: argparse.Namespace) -> dict:
+    """Seconds from starting ``tmclsh --port P -m TMCM-1311`` on a pseudo-terminal to the
+    prompt appearing on it (the fastest of several starts)."""
+    import pty
+    import re
+    import select
+
+    def start(path: str) -> float:
+        pid, fd = pty.fork()
+        if pid == 0:
+            env = tree_env(args, TERM="xterm", COLUMNS="100", LINES="30")
+            os.chdir(args.state_dir)
+            os.execvpe(sys.executable, tmclsh_cmd("--port", path, "-m", args.module), env)
+        t0 = time.perf_counter()
+        seen = b""
+        took = float("inf")
+        try:
+            while time.perf_counter() - t0 < 20:
+                ready, _, _ = select.select([fd], [], [], 1)
+                if not ready:
+                    continue
+                try:
+                    chunk = os.read(fd, 4096)
+                except OSError:
+                    break
+                if b"\x1b[6n" in chunk:
+                    os.write(fd, b"\x1b[1;1R")  # answer the cursor position request
+                seen += chunk
+                if re.search(rb"TMCM-\d+:\d+(\x1b\[[0-9;?]*[a-zA-Z])*> ", seen):
+                    took = time.perf_counter() - t0
+                    break
+            os.write(fd, b"\x04")  # Ctrl-D: leave
+            deadline = time.time() + 5
+            while time.time() < deadline:
+                done, _ = os.waitpid(pid, os.WNOHANG)
+                if done:
+                    break
+                if select.select([fd], [], [], 0.1)[0]:
+                    try:
+                        os.read(fd, 4096)
+                    except OSError:
+                        pass
+            else:
+                os.kill(pid, 9)
+                os.waitpid(pid, 0)
+        finally:
+            os.close(fd)
+        if took == float("inf"):
+            raise RuntimeError(f"no prompt within 20 s; the terminal showed {seen[-300:]!r}")
+        return took
+
+    runs = max(3, args.rounds * 2)
+    with SimProcess(args.module) as sim:
+        start(sim.path)
+        best = min(start(sim.path) for _ in range(runs))
+    say(f"repl: first prompt after {best:.3f} s (fastest of {runs})")
+    return row({"benchmark": "repl"}, "REPL: start to first prompt", best, "s", 0.3)
 
 
 # -- program upload ---------------------------------------------------------------------------
 
-@benchmark("upload", "program upload and verify, instructions/s: tmclsh.program vs raw pyserial")
+@benchmark("upload", ".upload + verify of 2000 instructions vs the same 4000 raw transactions")
 def bench_upload(args: argparse.Namespace) -> dict:
-    """Instructions per second stored (132, one frame each answered with status 101, 133)
-    and verified (134 read-back) by ``tmclsh.program.upload``, beside the raw floor: the same
-    frames written and their 9-byte replies read with bare pyserial, against the same
-    pty-served simulator, in the same run (rounds alternate raw and tmclsh).
-    """
+    """Seconds to store (132, one frame each answered with status 101, 133) and verify (134
+    read-back) a program with ``tmclsh.program.upload``, beside the raw floor: the same frames
+    written and their 9-byte replies read with bare pyserial, against the same pty-served
+    simulator, in the same run (rounds alternate raw and tmclsh)."""
     import serial
 
     from tmclsh import asm, program
@@ -363,7 +473,7 @@ def bench_upload(args: argparse.Namespace) -> dict:
     from tmclsh.transport import open_serial
 
     module = load(args.module)
-    n = min(args.count, module.program_memory)
+    n = min(2000, module.program_memory)
     source = "".join(f"    SGP {i % 56}, 2, {i}\n" for i in range(n - 1)) + "    STOP\n"
     prog = asm.assemble(source, module, "<bench>")
     frames = [Request(1, ins.opcode, ins.type, ins.motor, ins.value).to_bytes()
@@ -371,11 +481,11 @@ def bench_upload(args: argparse.Namespace) -> dict:
     start = Request(1, Control.START_DOWNLOAD, 0, 0, 0).to_bytes()
     quit_ = Request(1, Control.QUIT_DOWNLOAD).to_bytes()
     reads = [Request(1, Control.READ_MEMORY, 0, 0, a).to_bytes() for a in range(n)]
-    times: dict[str, list[float]] = {"raw_upload": [], "raw_verify": [], "upload": [],
+    parts: dict[str, list[float]] = {"raw_upload": [], "raw_verify": [], "upload": [],
                                      "verify": []}
 
-    def raw_round(path: str) -> None:
-        ser = serial.serial_for_url(path, baudrate=9600, timeout=1.0)
+    def raw_round(path: str) -> float:
+        ser = serial.serial_for_url(path, baudrate=BAUD, timeout=1.0)
         try:
             def rt(frame: bytes) -> bytes:
                 ser.write(frame)
@@ -387,52 +497,115 @@ def bench_upload(args: argparse.Namespace) -> dict:
             for f in frames:
                 reply = rt(f)
             rt(quit_)
-            times["raw_upload"].append(time.perf_counter() - t0)
+            t1 = time.perf_counter()
             assert reply[2] == 101, reply  # status: loaded
-            t0 = time.perf_counter()
             got = [rt(f) for f in reads]
-            times["raw_verify"].append(time.perf_counter() - t0)
+            t2 = time.perf_counter()
             stored = [Instruction.from_bytes(r[1:8]) for r in got]
             assert program.same_image(stored, prog.instructions)
         finally:
             ser.close()
+        parts["raw_upload"].append(t1 - t0)
+        parts["raw_verify"].append(t2 - t1)
+        return t2 - t0
 
-    def client_round(path: str) -> None:
-        client = Client(open_serial(path), module=args.module, timeout=1.0)
+    def client_round(path: str) -> float:
+        client = Client(open_serial(path, BAUD), module=args.module, timeout=1.0)
         try:
+            t0 = time.perf_counter()
             result = program.upload(client, prog)
+            took = time.perf_counter() - t0
             assert result.verified, result
-            times["upload"].append(result.upload_seconds)
-            times["verify"].append(result.verify_seconds)
             assert client.stats["timeouts"] == 0, client.stats
         finally:
             client.close()
+        parts["upload"].append(result.upload_seconds)
+        parts["verify"].append(result.verify_seconds)
+        return took
 
     with SimProcess(args.module) as sim:
         say(f"upload: {args.rounds} round(s) of {n} instructions on {sim.path}")
-        for rnd in range(args.rounds):
-            order = (raw_round, client_round) if rnd % 2 == 0 else (client_round, raw_round)
-            for fn in order:
-                fn(sim.path)
+        best = alternate(args.rounds, {"raw": lambda: raw_round(sim.path),
+                                       "upload": lambda: client_round(sim.path)}, args.verbose)
+    ratio = best["upload"] / best["raw"]
+    low = {k: min(v) for k, v in parts.items()}
+    say(f"  raw {2 * n + 2} transactions {best['raw']:.3f} s, upload + verify "
+        f"{best['upload']:.3f} s: {ratio:.2f}x (upload {low['upload'] / low['raw_upload']:.2f}x, "
+        f"verify {low['verify'] / low['raw_verify']:.2f}x)")
+    result = {"benchmark": "upload", "instructions": n, "raw_s": round(best["raw"], 3),
+              "upload_s": round(best["upload"], 3),
+              "upload_ratio": round(low["upload"] / low["raw_upload"], 3),
+              "verify_ratio": round(low["verify"] / low["raw_verify"], 3)}
+    return row(result, f".upload + verify of {n} instructions", ratio, "x raw", 1.1)
 
-    med = {k: statistics.median(v) for k, v in times.items()}
-    per_s = {k: round(_per_second(v, n)) for k, v in med.items()}
-    result = {
-        "benchmark": "upload",
-        "instructions": n,
-        "rounds": args.rounds,
-        "upload_per_s": per_s["upload"],
-        "verify_per_s": per_s["verify"],
-        "raw_upload_per_s": per_s["raw_upload"],
-        "raw_verify_per_s": per_s["raw_verify"],
-        "upload_overhead_pct": round((med["upload"] / med["raw_upload"] - 1) * 100, 1),
-        "verify_overhead_pct": round((med["verify"] / med["raw_verify"] - 1) * 100, 1),
-    }
-    say(f"  upload (132, frames, 133): {per_s['upload']:>6} instructions/s   raw floor "
-        f"{per_s['raw_upload']:>6}/s   ({result['upload_overhead_pct']:+.1f} %)")
-    say(f"  verify (134 read-back)   : {per_s['verify']:>6} instructions/s   raw floor "
-        f"{per_s['raw_verify']:>6}/s   ({result['verify_overhead_pct']:+.1f} %)")
-    return result
+
+# -- scan -------------------------------------------------------------------------------------
+
+@benchmark("scan", "tmclsh scan of addresses 1..255 with one module on the pty (seconds)")
+def bench_scan(args: argparse.Namespace) -> dict:
+    with SimProcess(args.module) as sim:
+        argv = tmclsh_cmd("scan", "--port", sim.path, "--baud", str(BAUD), "--from", "1",
+                          "--to", "255")
+        t0 = time.perf_counter()
+        proc = subprocess.run(argv, capture_output=True, text=True, env=tree_env(args),
+                              cwd=args.state_dir, timeout=600)
+        took = time.perf_counter() - t0
+    found = [line for line in proc.stdout.splitlines() if line.startswith("address")]
+    say(f"scan: {took:.2f} s, found {len(found)} module(s)")
+    return row({"benchmark": "scan", "found": len(found)}, "scan of addresses 1..255", took,
+               "s", 5.0)
+
+
+# -- watch polling ----------------------------------------------------------------------------
+
+WATCH_EXPRESSIONS = "pos=GAP 1, 0; speed=GAP 3, 0; in0=GIO 0, 0; volts=GIO 8, 1 / 10"
+
+
+@benchmark("watch", "samples/s of a 4-expression .watch vs the raw pyserial round-trip floor")
+def bench_watch(args: argparse.Namespace) -> dict:
+    """Samples per second a ``.watch`` of four expressions (four distinct reads) sustains,
+    beside the raw floor (one sample is four round trips). No target in the issue's table;
+    reported as time per sample over four raw round trips."""
+    import io
+
+    from tmclsh.client import Client
+    from tmclsh.shell import watch
+    from tmclsh.shell.render import Output
+    from tmclsh.shell.session import Session
+    from tmclsh.transport import open_serial
+
+    count = args.count // 4 or 1
+    frame = gap_frame()
+    clock = time.perf_counter
+
+    def run_watch(path: str) -> float:
+        client = Client(open_serial(path, BAUD), module=args.module, timeout=1.0)
+        try:
+            session = Session(client, Output(json_mode=True))
+            items = watch.parse_items(session, WATCH_EXPRESSIONS)
+            stamps: list[float] = []
+            with open(os.devnull, "w") as sink:
+                def emit(obj: dict) -> None:
+                    sink.write(json.dumps(obj) + "\n")
+                    stamps.append(clock())
+
+                watch.run_watch(session, items, interval=0, count=count + 1, live=False,
+                                keys=watch.Keys(io.StringIO()), emit=emit)
+        finally:
+            client.close()
+        return statistics.median(b - a for a, b in zip(stamps, stamps[1:])) * 1e6
+
+    with SimProcess(args.module) as sim:
+        say(f"watch: {args.rounds} round(s) of {count} samples of '{WATCH_EXPRESSIONS}'")
+        best = alternate(args.rounds, {
+            "raw4": lambda: 4 * statistics.median(raw_latencies(sim.path, frame, 100, count * 4))
+            * 1e6,
+            "watch": lambda: run_watch(sim.path)}, args.verbose)
+    ratio = best["watch"] / best["raw4"]
+    say(f"  four raw round trips {best['raw4']:.1f} us, one sample {best['watch']:.1f} us: "
+        f"{ratio:.2f}x")
+    return {"benchmark": "watch", "floor_us": round(best["raw4"], 1),
+            "sample_us": round(best["watch"], 1), "ratio": round(ratio, 3)}
 
 
 @benchmark("scan", "tmclsh scan of addresses 1..255, one module, 115200 baud (target <= 5 s)")
@@ -560,13 +733,28 @@ def bench_save(args: argparse.Namespace) -> dict:
 
 # -- entry point ------------------------------------------------------------------------------
 
+def print_table(results: list[dict], tree: Path) -> None:
+    rows = [r for r in results if "row" in r]
+    if not rows:
+        return
+    width = max(len(r["row"]) for r in rows)
+    print(f"\n{'path (' + str(tree) + ')':<{width}}  {'measured':>10}  {'target':>8}  unit")
+    for r in rows:
+        target = "-" if r["target"] == float("inf") else f"<= {r['target']:g}"
+        mark = "" if r["target"] == float("inf") else ("  ok" if r["ok"] else "  MISSED")
+        note = f"  ({r['note']})" if r.get("note") else ""
+        print(f"{r['row']:<{width}}  {r['value']:>10.3f}  {target:>8}  {r['unit']}{mark}{note}")
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("names", nargs="*", metavar="NAME", help="benchmarks to run (default: all)")
-    p.add_argument("--count", type=int, default=5000, help="iterations per round (default 5000)")
+    p.add_argument("--count", type=int, default=2000, help="round trips per round (default 2000)")
     p.add_argument("--rounds", type=int, default=5, help="rounds per benchmark (default 5)")
     p.add_argument("--module", default="TMCM-1311", help="simulated module (default TMCM-1311)")
+    p.add_argument("--tree", type=Path, default=ROOT,
+                   help="the tmclsh checkout to measure (default: this one)")
     p.add_argument("-v", "--verbose", action="store_true", help="per-round figures")
     p.add_argument("--json", action="store_true", help="one JSON object per benchmark on stdout")
     p.add_argument("--list", action="store_true", help="list the benchmarks and exit")
@@ -580,14 +768,23 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"unknown benchmark(s) {', '.join(unknown)}; known: {', '.join(BENCHMARKS)}")
     if args.count < 1 or args.rounds < 1:
         p.error("--count and --rounds must be at least 1")
-    for name in args.names or list(BENCHMARKS):
-        fn, _ = BENCHMARKS[name]
-        result = fn(args)
-        if args.json:
-            print(json.dumps(result), flush=True)
-        else:
-            print(f"{name}: " + ", ".join(f"{k}={v}" for k, v in result.items() if k != "benchmark"),
-                  flush=True)
+    args.tree = args.tree.resolve()
+    sys.path.insert(0, str(args.tree))
+    import compileall
+
+    # as installed: byte-compiled (a checkout run with PYTHONDONTWRITEBYTECODE never is)
+    compileall.compile_dir(str(args.tree / "tmclsh"), quiet=1)
+    results = []
+    with tempfile.TemporaryDirectory(prefix="tmclsh-bench-") as state:
+        args.state_dir = state
+        for name in args.names or list(BENCHMARKS):
+            fn, _ = BENCHMARKS[name]
+            result = fn(args)
+            results.append(result)
+            if args.json:
+                print(json.dumps(result), flush=True)
+    if not args.json:
+        print_table(results, args.tree)
     return 0
 
 

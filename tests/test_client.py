@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from tmclsh.client import Client, idempotent
 from tmclsh.errors import AsmError, StatusError, TmclTimeoutError, ValidationError
-from tmclsh.protocol import Control, Instruction, Reply, Request, Status
+from tmclsh.protocol import Control, Instruction, Reply, ReplyKind, Request, Status
 from tmclsh.transport import open_serial
 
 GAP, SAP, GIO, MVP, SGP, GGP, MST = 6, 5, 15, 4, 9, 10, 3
@@ -272,6 +272,15 @@ def test_frame_is_address_instruction_checksum(address, opcode, type_, motor, va
 def test_fast_reply_is_reply_from_bytes(host, module, status, opcode, value):
     raw = Reply(host, module, status, opcode, value).to_bytes()
     assert Reply.from_frame(raw) == Reply.from_bytes(raw)
+
+
+@given(st.integers(0, 255), st.binary(min_size=7, max_size=7), st.integers(0, 255))
+def test_fast_memory_reply_is_reply_from_bytes(host, stored, module):
+    body = bytes((host,)) + stored
+    raw = body + bytes((sum(body) & 0xFF,))
+    fast = Reply.from_memory_frame(raw, module, 134)
+    assert fast == Reply.from_bytes(raw, ReplyKind.MEMORY, module=module, opcode=134)
+    assert fast.stored == Instruction.from_bytes(stored)
 
 
 def test_timeouts_must_be_positive(client):

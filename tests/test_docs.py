@@ -109,9 +109,8 @@ def test_a_new_option_and_subcommand_appear(monkeypatch):
 
 
 def test_a_new_shell_command_appears(monkeypatch):
-    commands.load_all()
     monkeypatch.setitem(commands.REGISTRY, ".frob", commands.Command(
-        ".frob", lambda s, a: None, ".frob [N]", "frobnicate N times", aliases=(".fr",),
+        ".frob", "frob", ".frob [N]", "frobnicate N times", aliases=(".fr",),
         category="testing", details="First paragraph.\n\nSecond  paragraph."))
     page = docs.manpage()
     assert ".SS Testing\n.TP\n\\fB.frob\\fR [N]\nFrobnicate N times.\nAlso .fr.\n" in page

@@ -215,6 +215,7 @@ def slow_command():
 
     yield started
     commands.REGISTRY.pop(".test-slow", None)
+    commands.HANDLERS.pop(".test-slow", None)
 
 
 def test_ctrl_c_while_a_command_runs(repl, slow_command):

@@ -76,6 +76,7 @@ _CAN_REPLY_LEN = 7
 # After bytes that were no frame, how long a silent line is given to bring the rest of the
 # reply before the client calls it corrupted (instead of waiting out the whole timeout).
 _QUIET_AFTER_GARBAGE = 0.05
+ENCODE_CACHE = 512  # checked lines kept per client (prepare)
 # Download mode cannot use a marker: wait until the line has been quiet this long.
 _DRAIN_QUIET = 0.03
 _LOADED = int(Status.LOADED)
@@ -199,6 +200,9 @@ class Client:
         # one-line notices about what the client did on its own (ended download mode); the
         # shell points it at its output, else they are logged
         self.on_notice: Callable[[str], None] | None = None
+        # checked lines: line -> (Encoded, Request), for (module, binary mode); see prepare()
+        self._encoded: dict[str, tuple[asm.Encoded, Request]] = {}
+        self._encoded_for: tuple[Module | None, bool] = (None, False)
         # run by close() while the link is still open (the ASCII link restores the mode the
         # module was found in)
         self.close_hooks: list[Callable[[], None]] = []
@@ -592,6 +596,15 @@ class Client:
                 if self._tracers:
                     self._trace("rx", head, reply)
                 return reply
+            if (len(head) == _FRAME and kind == _MEMORY and head[0] == self.host_address
+                    and sum(head[:8]) & 0xFF == head[8]
+                    and not (head[2] == _EVENT and head[3] == _TARGET_REACHED)):
+                # a 134 read-back (upload's verify), taken as _take takes it from a line that
+                # was just absorbed
+                reply = Reply.from_memory_frame(head, req.address, req.opcode)
+                if self._tracers:
+                    self._trace("rx", head, reply)
+                return reply
             buf += head
             wait = deadline - time.monotonic()
         else:
@@ -670,7 +683,7 @@ class Client:
             self._rx_event(head, Reply.from_frame(head))
             return _SKIPPED
         if kind == _MEMORY:
-            reply = Reply.from_bytes(head, kind, module=req.address, opcode=req.opcode)
+            reply = Reply.from_memory_frame(head, req.address, req.opcode)
         elif (head[1] != req.address or opcode != req.opcode
               or (kind == _VERSION and status == _OK)):
             # (a normal frame answering 136 type 0 can only carry an error status)
@@ -925,20 +938,44 @@ class Client:
 
     def encode(self, line: str) -> asm.Encoded:
         """Parse and check one TMCL line against the module (nothing is sent)."""
-        from . import asm
+        return self.prepare(line)[0]
 
-        mod = self.require_module()
-        parsed = asm.parse_line(line)
-        if parsed.mnemonic is None:
-            raise ValidationError(f"no command in {line!r}")
-        return asm.encode(parsed, mod, direct=True, ascii=self.mode == "ascii")
+    def prepare(self, line: str) -> tuple[asm.Encoded, Request]:
+        """The checked instruction of one TMCL line and its request to this address.
+
+        A script or a watch repeats its lines: the result of a line that passed the checks is
+        kept (ENCODE_CACHE lines, the oldest dropped first) for the module and mode it was
+        checked against; another module or mode starts the cache afresh. Lines that fail are
+        checked again every time. ``${...}`` is expanded by the shell before it gets here."""
+        mod = self.module if self.module is not None else self.require_module()
+        ascii_mode = self.ascii_link is not None
+        cache = self._encoded
+        if mod is not self._encoded_for[0] or ascii_mode is not self._encoded_for[1]:
+            cache.clear()
+            self._encoded_for = (mod, ascii_mode)
+        hit = cache.get(line)
+        if hit is not None:
+            enc, req = hit
+            if req.address == self.address:
+                return hit
+        else:
+            from . import asm
+
+            parsed = asm.parse_line(line)
+            if parsed.mnemonic is None:
+                raise ValidationError(f"no command in {line!r}")
+            enc = asm.encode(parsed, mod, direct=True, ascii=ascii_mode)
+            if len(cache) >= ENCODE_CACHE:
+                del cache[next(iter(cache))]
+        ins = enc.instruction
+        hit = (enc, Request.make(self.address, ins.opcode, ins.type, ins.motor, ins.value))
+        cache[line] = hit
+        return hit
 
     def execute(self, line: str, *, check: bool = True, timeout: float | None = None) -> Result:
         """Parse, check, send one TMCL line (``"GAP 1, 0"``); StatusError on an error status."""
-        enc = self.encode(line)
-        ins = enc.instruction
-        reply = self.request(Request(self.address, ins.opcode, ins.type, ins.motor, ins.value),
-                             timeout=timeout)
+        enc, req = self.prepare(line)
+        reply = self.request(req, timeout=timeout)
         if check and reply is not None and not status_ok(reply.status):
             raise StatusError(reply.status, reply)
         return Result(line, enc, reply)

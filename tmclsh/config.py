@@ -17,7 +17,6 @@ type are errors that name the file, the key and what is allowed.
 from __future__ import annotations
 
 import os
-import tomllib
 from dataclasses import dataclass, field
 from functools import cache
 from importlib import resources
@@ -105,7 +104,9 @@ def default_config_text() -> str:
 
 @cache
 def _default_settings() -> dict:
-    return dict(tomllib.loads(default_config_text())["settings"])
+    from .datafiles import load_toml
+
+    return dict(load_toml(__package__, "default.toml")["settings"])
 
 
 def default_settings() -> dict:
@@ -159,6 +160,8 @@ def _unknown(where: str, what: str, bad: set, known: tuple[str, ...]) -> Validat
 
 def parse_config(text: str, path: Path) -> Config:
     """Parse and check the text of a config file (``path`` is only for messages)."""
+    import tomllib  # here: without a config file a start-up does not load it
+
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

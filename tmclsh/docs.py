@@ -190,7 +190,6 @@ def can_interfaces() -> list[str]:
 def shell_commands() -> list:
     from .shell import commands
 
-    commands.load_all()
     return commands.all_commands()
 
 
@@ -853,6 +852,10 @@ The source of each program uploaded with {_b(".upload")}, keyed by a hash of its
 that {_b(".dump")} can show the original labels and comments while the module's memory holds
 exactly that image (default {_b("~/.cache/tmclsh/programs/")}; the user cache directory of
 the platform elsewhere). Safe to delete.
+.TP
+{_i("$XDG_CACHE_HOME")}{_b("/tmclsh/data/")}
+The instruction set and module tables as parsed at the first start (default
+{_b("~/.cache/tmclsh/data/")}); kept under each data file's content hash, safe to delete.
 .TP
 {_i("prefix")}{_b("/share/bash-completion/completions/tmclsh")}
 .TQ

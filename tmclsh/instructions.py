@@ -6,12 +6,11 @@ completer and simulator alike, so that adding a command or a symbolic type is a 
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass, field
 from enum import IntEnum
 from functools import cache
-from importlib import resources
 
+from .datafiles import load_toml
 from .protocol import Control
 
 
@@ -123,8 +122,7 @@ def family() -> frozenset[str]:
 
 
 def _load() -> dict:
-    text = resources.files(__package__).joinpath("instructions.toml").read_text("utf-8")
-    return tomllib.loads(text)
+    return load_toml(__package__, "instructions.toml")
 
 
 @cache

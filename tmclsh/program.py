@@ -223,7 +223,11 @@ def _ok(reply, what: str, expect: Iterable[int] = (Status.OK,)):
 
 def _send(client, opcode: int, type_: int = 0, motor: int = 0, value: int = 0, *,
           timeout: float | None = None, retries: int | None = None):
-    return client.request(Request(client.address, opcode, type_, motor, value & 0xFFFFFFFF),
+    # an upload is thousands of these: Request.make checks plain in-range numbers without
+    # the constructor's per-field calls (anything else still goes through the constructor);
+    # the value is taken as 32 bits either way, signed as Request holds it
+    value = ((value & 0xFFFFFFFF) ^ 0x80000000) - 0x80000000
+    return client.request(Request.make(client.address, opcode, type_, motor, value),
                           timeout=timeout, retries=retries)
 
 

@@ -254,6 +254,27 @@ class Reply:
         _set(r, "stored", None)
         return r
 
+    @classmethod
+    def from_memory_frame(cls, frame: bytes, module: int, opcode: int) -> Reply:
+        """A 134 read-back from nine bytes whose checksum the caller has verified (the same
+        reply as ``from_bytes(frame, ReplyKind.MEMORY, module, opcode)``; upload verifies one
+        per instruction)."""
+        host, op, type_, motor, value = _SERIAL_HEAD.unpack_from(frame)
+        stored = _new(Instruction)
+        _set(stored, "opcode", op)
+        _set(stored, "type", type_)
+        _set(stored, "motor", motor)
+        _set(stored, "value", value)
+        r = _new(cls)
+        _set(r, "host", host)
+        _set(r, "module", module)
+        _set(r, "status", int(Status.OK))
+        _set(r, "opcode", opcode)
+        _set(r, "value", value)
+        _set(r, "version", None)
+        _set(r, "stored", stored)
+        return r
+
     @property
     def ok(self) -> bool:
         return status_ok(self.status)

@@ -9,12 +9,12 @@ from __future__ import annotations
 
 import difflib
 import re
-import tomllib
 from dataclasses import dataclass, field
 from functools import cache, cached_property
 from importlib import resources
 from pathlib import Path
 
+from ..datafiles import load_toml
 from ..errors import RangeError, ValidationError
 from ..instructions import (GENERIC, InstructionSpec, all_instructions, controls, family,
                             use_commands_of)
@@ -435,7 +435,7 @@ def _built_in_names() -> tuple[str, ...]:
     names = []
     for entry in files.iterdir():
         if entry.name.endswith(".toml"):
-            names.append(tomllib.loads(entry.read_text("utf-8"))["module"]["name"])
+            names.append(load_toml(__package__, entry.name)["module"]["name"])
     return tuple(sorted(names))
 
 
@@ -471,7 +471,7 @@ def _load(file_name: str) -> Module | None:
     entry = resources.files(__package__).joinpath(file_name)
     if not entry.is_file():
         return None
-    return Module(tomllib.loads(entry.read_text("utf-8")))
+    return Module(load_toml(__package__, file_name))
 
 
 def by_firmware_id(firmware_id: int) -> Module | None:

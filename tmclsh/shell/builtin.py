@@ -97,17 +97,7 @@ def complete_module(session: Session | None, text: str) -> list[Candidate]:
 
 # -- .help -------------------------------------------------------------------------------
 
-@command(".help", ".help [--source] [COMMAND|MNEMONIC|NUMBER|PARAMETER]",
-         "show help: all commands, one command, a TMCL instruction, or a parameter",
-         complete=complete_help, bare=True,
-         details="`help SAP` explains an instruction; `help 140` shows axis parameter 140 (and "
-                 "global parameter 140 if there is one), like `.param 140`. `?` is the same "
-                 "as help (`? 140`). Lines: `;` separates commands (`help 4; help 5`) except "
-                 "after one that owns its line (.watch, .decode); `#` or `//` starts a comment "
-                 "to the end of the line. Questions are answered with y and Enter ([y/N]: "
-                 "Enter alone is no). --source also shows how an instruction or parameter "
-                 "was read from the module manuals (where they are unclear or disagree, and "
-                 "what tmclsh assumes), like .param --source.")
+@command(".help")
 @paged
 def cmd_help(session: Session, arg: str) -> None:
     arg = arg.strip()
@@ -196,16 +186,17 @@ def _help_overview(session: Session) -> None:
 def _unique_commands():
     """Commands in name order; entries sharing a handler (.quit/.exit) shown once, under the
     one registered first."""
-    from .commands import REGISTRY
+    return [c for c in all_commands() if not c.same_as]
 
-    primary: dict[object, object] = {}
-    for c in REGISTRY.values():  # registration order
-        primary.setdefault(c.handler, c)
-    return [c for c in all_commands() if primary[c.handler] is c]
+
+def _twins(c) -> list[str]:
+    """The other names of the same handler (``.exit`` for ``.quit`` and back)."""
+    key = c.same_as or c.name
+    return [o.name for o in all_commands() if (o.same_as or o.name) == key and o is not c]
 
 
 def _command_title(c) -> str:
-    twins = [o.name for o in all_commands() if o.handler is c.handler and o is not c]
+    twins = _twins(c)
     names = [c.syntax] + list(c.aliases) + twins
     return ", ".join(names)
 
@@ -222,8 +213,7 @@ def _help_command(session: Session, cmd) -> None:
     out.print(_indented(cmd.help), soft_wrap=False)
     if cmd.details:
         out.print(_indented(_paragraphs(cmd.details)), soft_wrap=False)
-    extra = list(cmd.aliases) + [o.name for o in all_commands()
-                                 if o.handler is cmd.handler and o is not cmd]
+    extra = list(cmd.aliases) + _twins(cmd)
     if cmd.bare:
         extra.append(cmd.name[1:])
     if extra:
@@ -379,19 +369,13 @@ def _quit(session: Session, arg: str) -> None:
     raise QuitShell()
 
 
-command(".quit", ".quit", "leave the shell (also Ctrl-D)", bare=True)(_quit)
-command(".exit", ".exit", "leave the shell (same as .quit)", bare=True)(_quit)
+command(".quit")(_quit)
+command(".exit")(_quit)
 
 
 # -- .param / .params --------------------------------------------------------------------
 
-@command(".param", ".param [--source] QUERY", "explain a parameter: number, name or part of "
-         "a name, with its current value", complete=complete_param, category="parameters",
-         details="QUERY may be a number (140), a name (MicrostepResolution), part of one "
-                 "(microstep) or `ap 140` / `gp 66 [bank]` to pick the kind. The current value "
-                 "is read from the module (GAP/GGP) when the parameter is readable. --source "
-                 "also shows how the entry was read from the module's manual (where the manual "
-                 "is unclear or wrong, and what tmclsh assumes).")
+@command(".param")
 @paged
 def cmd_param(session: Session, arg: str, from_help: bool = False) -> None:
     words = arg.split()
@@ -618,11 +602,7 @@ def _param_json(p: Parameter, current: list[tuple[str, str, int | None]] | None 
     return obj
 
 
-@command(".params", ".params [axis|global] [FILTER]",
-         "table of all parameters with their live values (one GAP/GGP each)",
-         complete=complete_params, category="parameters",
-         details="FILTER narrows the list by number or (part of a) name. On a multi-axis "
-                 "module each motor gets its own value column.")
+@command(".params")
 @paged
 def cmd_params(session: Session, arg: str) -> None:
     mod = session.module
@@ -784,10 +764,7 @@ def _build_param_table(params: list[Parameter], rows: list[dict[str, object]], t
 
 # -- trace and decode --------------------------------------------------------------------
 
-@command(".trace", ".trace [on|off]", "show every frame in hex, decoded, on stderr",
-         complete=[("on", "start tracing"), ("off", "stop tracing")], category="protocol",
-         details="Without an argument it toggles. Lines show time, direction (tx> / <rx), the "
-                 "bytes and what they mean. --trace does the same from the start.")
+@command(".trace")
 def cmd_trace(session: Session, arg: str) -> None:
     from .trace import disable_trace, enable_trace, trace_enabled
 
@@ -803,17 +780,7 @@ def cmd_trace(session: Session, arg: str) -> None:
         session.out.info("trace off")
 
 
-@command(".decode", ".decode [request|reply|memory|version] HEX",
-         "decode bytes pasted from elsewhere: request or reply, checksum, 134/136 layouts",
-         complete=[("request", "read the bytes as a request"),
-                   ("reply", "read the bytes as a reply"),
-                   ("memory", "a 134 (read program memory) reply"),
-                   ("version", "a 136 version string reply")],
-         category="protocol", owns_line=True,
-         details="HEX: `01 06 04 00 00 00 00 00 0b`, `$01 $06 ...`, `0x01,0x06,...` or "
-                 "`0106040000...`; several 9-byte frames at once are fine. Without a hint "
-                 "every plausible reading is shown. It takes the rest of its line (pasted "
-                 "bytes may be separated by ';').")
+@command(".decode")
 def cmd_decode(session: Session, arg: str) -> None:
     from rich.text import Text
 
@@ -839,13 +806,7 @@ def cmd_decode(session: Session, arg: str) -> None:
 
 # -- connection and module ---------------------------------------------------------------
 
-@command(".connect", ".connect [PORT | sim [MODULE] | can [IFACE:CHANNEL]]",
-         "reconnect, or switch to another port, simulator or CAN bus",
-         complete=complete_connect, category="connection",
-         details="Without an argument the current link is closed and opened again (after a "
-                 "cable was pulled). The module type is asked with 136 on a real link. "
-                 "'can' alone takes the bus from python-can's configuration, as --can does; "
-                 "the bit rate is --bitrate's.")
+@command(".connect")
 def cmd_connect(session: Session, arg: str) -> None:
     from .. import transport as tr
 
@@ -925,10 +886,7 @@ def complete_address(session: Session | None, text: str) -> list[Candidate]:
     return [Candidate(str(session.client.address), "the current address")]
 
 
-@command(".address", ".address [N]", "talk to the module with address N on the same bus",
-         complete=complete_address, category="connection",
-         details="The new address is checked with a 136 (version) request; if nothing answers, "
-                 "the old address stays. On CAN, N is the module's CAN id.")
+@command(".address")
 def cmd_address(session: Session, arg: str) -> None:
     client = session.client
     text = arg.strip()
@@ -962,10 +920,7 @@ def cmd_address(session: Session, arg: str) -> None:
                    + (f", firmware {version}" if version else ""))
 
 
-@command(".module", ".module [NAME]", "show the module type, or override it",
-         complete=complete_module, category="connection",
-         details="The type normally comes from the 136 version string. Overriding it changes "
-                 "which parameters, ranges and commands the shell checks against.")
+@command(".module")
 def cmd_module(session: Session, arg: str) -> None:
     from rich.table import Table
 
@@ -1005,8 +960,7 @@ def cmd_module(session: Session, arg: str) -> None:
     out.print(grid)
 
 
-@command(".version", ".version", "ask the module for its firmware version (command 136)",
-         category="connection")
+@command(".version")
 def cmd_version(session: Session, arg: str) -> None:
     client = session.client
     reply = client.request(Request(client.address, Control.GET_VERSION, 0, 0, 0))
@@ -1047,9 +1001,7 @@ def cmd_version(session: Session, arg: str) -> None:
 
 # -- motion ------------------------------------------------------------------------------
 
-@command(".stopall", ".stopall", "stop everything: the stored program (128) if it runs, then "
-         "every motor (MST), each read back until its speed is 0; Ctrl-C does the same",
-         category="motion")
+@command(".stopall")
 def cmd_stopall(session: Session, arg: str) -> None:
     if arg.strip():
         raise ValidationError(".stopall takes no arguments")

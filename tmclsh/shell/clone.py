@@ -178,7 +178,7 @@ class _Progress:
     def __init__(self, session: Session, what: str, total: int):
         out = session.out
         self.bar = None
-        if not out.json and out.console.is_terminal and total:
+        if not out.json and out.is_terminal and total:
             from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
             self.bar = Progress(TextColumn(what), BarColumn(), MofNCompleteColumn(),
@@ -316,19 +316,7 @@ def _program_text(session: Session) -> tuple[str, int]:
     return head + (asm.disassemble(image, module) if image else ""), len(image)
 
 
-@command(".save", ".save FILE [--program]",
-         "back up the module's configuration as a replayable script",
-         category=CATEGORY, complete=complete_file, details="""\
-Reads every readable axis parameter of every motor and the global parameters of every bank
-(one request each; the RAM-only user variables are a program's scratch space and are not
-read) and writes FILE: a header (module, firmware, address, connection, date),
-then one SAP/SGP line per writable configuration parameter with its number, unit and meaning
-as a comment. Read-only values and motion state (positions, speeds, counters, anything that
-starts a move) are written as comments and never restored. FILE is replaced only once it is
-complete. --program also reads the stored program back (binary mode) and writes it, as
-source, beside FILE with .program.tmcl in place of its suffix (backup.tmcl:
-backup.program.tmcl; put it back with .upload). JSON: {"saved": N,
-"file": FILE} (and "program": PATH, "instructions": N with --program).""")
+@command(".save")
 def cmd_save(session: Session, argtext: str) -> None:
     usage = ".save FILE [--program]"
     name, given = _args(argtext, usage, {"--program": "--program"})
@@ -564,16 +552,7 @@ class DiffFound(TmclError):
     """``.diff --exit-code``: the module differs from the file."""
 
 
-@command(".diff", ".diff FILE [--exit-code] [--force]",
-         "compare the module with a backup (or any script of SAP/SGP lines)",
-         category=CATEGORY, complete=complete_file, details="""\
-Reads FILE with the shell's own line parser (every SAP/SGP line is checked against the
-module's data first; other lines are ignored), reads each parameter it sets from the module
-(one request each) and shows only the ones that differ: name, number, motor or bank, saved
-value, live value and unit. Motion state lines are not compared. JSON: one {"name", "number",
-"motor"|"bank", "saved", "live"} object per difference, nothing for equal values. Exits 0
-either way; with --exit-code a difference is a failure (exit status 1). A backup of another
-module type is compared by parameter name only with --force.""")
+@command(".diff")
 def cmd_diff(session: Session, argtext: str) -> None:
     usage = ".diff FILE [--exit-code] [--force]"
     name, given = _args(argtext, usage, {"--exit-code": "--exit-code", "--force": "--force",
@@ -617,18 +596,7 @@ class Written:
         return obj
 
 
-@command(".restore", ".restore FILE [--yes] [--store] [--force]",
-         "write the parameters that differ from a backup back to the module",
-         category=CATEGORY, complete=complete_file, details="""\
-Compares like .diff, then writes only the parameters that differ (SAP/SGP), each checked
-against the module's data before anything is sent, and reads each one back to verify it.
-Asks first (--yes or -y skips the question; scripts need it). A value the module refuses is
-reported and the rest are still restored; the command then fails. --store also stores the
-written parameters in EEPROM (STAP/STGP) after asking. Address, baud rate and other link
-settings are written last and not read back (reconnect with the new settings). A backup of
-another module type is refused unless --force: then only parameters both modules have (by
-name) are restored, and the skipped ones are listed. Motion state is never written. JSON:
-{"file", "restored": [...], "failed": [...], "skipped": [...], "stored": N}.""")
+@command(".restore")
 def cmd_restore(session: Session, argtext: str) -> None:
     usage = ".restore FILE [--yes] [--store] [--force]"
     name, given = _args(argtext, usage, {"--yes": "--yes", "-y": "--yes", "--store": "--store",

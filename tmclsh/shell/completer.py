@@ -618,8 +618,8 @@ def complete_arg(session: Session | None, command: str, text: str) -> list[Candi
     cmd = commands.find(command)
     if cmd is None or cmd.complete is None:
         return []
-    source = cmd.complete
     try:
+        source = cmd.completion()
         items = source(session, text) if callable(source) else source
     except Exception:  # a feature's broken completion must not break typing
         return []

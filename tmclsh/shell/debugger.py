@@ -384,7 +384,7 @@ def _line(session: Session, text) -> None:
     """One line; on a terminal a long one (a source line's comment) ends in '…' instead of
     wrapping. Piped output keeps every character."""
     out = session.out
-    if out.console.is_terminal:
+    if out.is_terminal:
         out.print(text, soft_wrap=False, no_wrap=True, overflow="ellipsis")
     else:
         out.print(text)
@@ -394,7 +394,7 @@ def _line(session: Session, text) -> None:
 def _progress(session: Session) -> Iterator[program.Progress | None]:
     """A rich progress bar on a terminal; nothing under --json or when piped."""
     out = session.out
-    if out.json or not out.console.is_terminal:
+    if out.json or not out.is_terminal:
         yield None
         return
     from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
@@ -459,17 +459,7 @@ def complete_breakpoints(session: Session, text: str) -> list[str | tuple[str, s
 
 # -- upload and read-back ----------------------------------------------------------------
 
-@command(".upload", ".upload FILE [--at ADDR] [--yes] [--no-verify]",
-         "assemble FILE for this module, store it in program memory and verify it",
-         category=CATEGORY, complete=complete_file, details="""\
-Assembles FILE for the connected module (a .bin TMCL-IDE image or .hex text is taken as it
-is), then: 132 (start download at ADDR, default 0), one
-frame per instruction (each answered with status 101), 133 (quit download), and reads every
-instruction back with 134 to compare; the first difference is reported. Asks before
-overwriting the program unless --yes. A program larger than the memory is refused before
-anything is sent. If the upload is interrupted (Ctrl-C, timeout, corrupted reply, lost link),
-download mode is ended anyway and the message says which instructions are written.
-Under --json: {"uploaded": N, "verified": true|false}. Needs binary mode.""")
+@command(".upload")
 def cmd_upload(session: Session, argtext: str) -> None:
     pos, opts = _options(_words(argtext), {"--yes", "--no-verify"}, {"--at"})
     if len(pos) != 1:
@@ -565,18 +555,7 @@ def _original_source(session: Session, image: list[Instruction], start: int,
     return (text, kept) if program.same_image(again.instructions, image) else None
 
 
-@command(".dump", ".dump [[-o] FILE] [--at ADDR] [--count N]",
-         "read the stored program back (134) and show it as source, or write it to FILE",
-         aliases=(".disasm",), category=CATEGORY, complete=complete_file, details="""\
-Reads program memory with 134 from ADDR (default 0) up to the end marker (opcode 0, or an
-erased cell) or the end of memory, or exactly N instructions with --count. When tmclsh
-uploaded exactly these instructions from a file (.upload keeps each upload's source in the
-user's cache directory, keyed by a hash of the image), that source is shown, with its labels
-and comments; otherwise the memory is disassembled with generated labels (L0012 for a jump
-target at 12). With FILE the text is written there; it assembles back to the same image
-(.upload FILE --at ADDR); a FILE ending in .bin gets the TMCL-IDE binary image (8-byte
-records with checksums), .hex the hex text (-o FILE says the same as FILE). Needs binary
-mode.""")
+@command(".dump")
 def cmd_dump(session: Session, argtext: str) -> None:
     words = _words(argtext)
     if "-o" in words:  # `.dump -o FILE`, as asm -o
@@ -654,13 +633,7 @@ def cmd_dump(session: Session, argtext: str) -> None:
         session.out.print(text.rstrip("\n"), markup=False, highlight=False)
 
 
-@command(".source-map", ".source-map [FILE [--at ADDR] | --off]",
-         "use FILE as the source of the stored program (lines and labels in the debugger)",
-         category=CATEGORY, complete=complete_file, details="""\
-Assembles FILE and associates it with the program in the module's memory, so that locations
-are shown as file:line and .break accepts its labels and line numbers. The stored program is
-read back and compared; a difference is reported (the mapping is kept). Without FILE: show
-the current mapping; --off forgets it (locations are then disassembled from memory).""")
+@command(".source-map")
 def cmd_source_map(session: Session, argtext: str) -> None:
     pos, opts = _options(_words(argtext), {"--off"}, {"--at"})
     dbg = state(session)
@@ -701,11 +674,7 @@ def cmd_source_map(session: Session, argtext: str) -> None:
 
 # -- running -----------------------------------------------------------------------------
 
-@command(".run", ".run [LABEL|ADDR]", "run the stored program (from the current address, or "
-         "from LABEL/ADDR)", category=CATEGORY, complete=complete_location, details="""\
-129 type 0 continues from the current address; with LABEL or ADDR, 129 type 1 starts there.
-Runs at full speed: breakpoints are not honoured (use .continue, which steps). In ASCII mode
-this is the module's RUN command.""")
+@command(".run")
 def cmd_run(session: Session, argtext: str) -> None:
     _not_repeating(session)
     address = None
@@ -719,33 +688,26 @@ def cmd_run(session: Session, argtext: str) -> None:
     report(session, st, displays=False)
 
 
-@command(".stop", ".stop", "stop the stored program (128)", category=CATEGORY, details="""\
-128 stops the running or stepped program where it is; .status or .where shows where. In
-ASCII mode this is the module's STOP command.""")
+@command(".stop")
 def cmd_stop(session: Session, argtext: str) -> None:
     _not_repeating(session)
     program.stop(session.client)
     report(session, _read_status(session))
 
 
-@command(".reset", ".reset", "reset the stored program: program counter 0, stopped (131)",
-         category=CATEGORY)
+@command(".reset")
 def cmd_reset(session: Session, argtext: str) -> None:
     _not_repeating(session)
     program.reset(session.client)
     report(session, _read_status(session))
 
 
-@command(".status", ".status", "the program's state (stop|run|step|reset) and current line",
-         category=CATEGORY, details="""\
-135 (the application status) and GP 130 (the program counter), with the source line at the
-program counter. JSON: {"state": ..., "pc": ..., "file": ..., "line": ..., "text": ...}.""")
+@command(".status")
 def cmd_status(session: Session, argtext: str) -> None:
     report(session, _read_status(session), displays=False)
 
 
-@command(".where", ".where", "where the program is: address, source line, enclosing label",
-         category=CATEGORY)
+@command(".where")
 def cmd_where(session: Session, argtext: str) -> None:
     st = _read_status(session)
     report(session, st, displays=False)
@@ -756,12 +718,7 @@ def cmd_where(session: Session, argtext: str) -> None:
 
 # -- stepping ----------------------------------------------------------------------------
 
-@command(".step", ".step [N]", "execute the next N instructions (default 1) and show where",
-         category=CATEGORY, details="""\
-130 steps one instruction; after each, the program counter (GP 130), the line about to run
-next and the .display values are shown. An empty line repeats the step. Ctrl-C stops a long
-series. Where no instruction is stored (empty program memory, or past the program's end)
-it says so and sends nothing. Needs binary mode.""")
+@command(".step")
 def cmd_step(session: Session, argtext: str) -> None:
     n = int(limits.parse("count", argtext, ".step N")) if argtext.strip() else 1
     program.require_binary(session.client, "stepping (130)")
@@ -845,13 +802,7 @@ def _hit(session: Session, pc: int) -> str | None:
     return None
 
 
-@command(".continue", ".continue [MAXSTEPS]", "step until a breakpoint is reached",
-         aliases=(".cont",), category=CATEGORY, details="""\
-These firmwares have no breakpoint command, so .continue runs the program by stepping it
-(130) and reading the program counter (GP 130) after every instruction, stopping when it
-reaches a breakpoint, when the program stops by itself, after MAXSTEPS steps, or on Ctrl-C.
-That is two round trips per instruction: much slower than .run, and a WAIT takes its full
-time. With no breakpoints it is .run (129 type 0). Needs binary mode.""")
+@command(".continue")
 def cmd_continue(session: Session, argtext: str) -> None:
     dbg = state(session)
     limit = _number(argtext, "MAXSTEPS") if argtext.strip() else None
@@ -877,7 +828,7 @@ def cmd_continue(session: Session, argtext: str) -> None:
 
     began = time.monotonic()
     try:
-        if not session.out.json and session.out.console.is_terminal:
+        if not session.out.json and session.out.is_terminal:
             with session.out.console.status("stepping to a breakpoint (Ctrl-C stops)"):
                 info = program.continue_to(session.client, targets, max_steps=limit,
                                            on_step=counted, instruction_at=stored)
@@ -906,12 +857,7 @@ def cmd_continue(session: Session, argtext: str) -> None:
         session.out.info(f"  ({_plural(info.steps, 'step')} in {elapsed:.2f} s)")
 
 
-@command(".break", ".break [LABEL|LINE|FILE:LINE|@ADDR]",
-         "set a breakpoint (for .continue); without argument, list them",
-         category=CATEGORY, complete=complete_location, details="""\
-A bare number is a line of the source file when one is known (uploaded in this session or
-named with .source-map), else an address; @ADDR is always an address. Breakpoints are kept by
-tmclsh, not the module (it has no breakpoint command): only .continue stops at them.""")
+@command(".break")
 def cmd_break(session: Session, argtext: str) -> None:
     dbg = state(session)
     if not argtext.strip():
@@ -940,8 +886,7 @@ def cmd_break(session: Session, argtext: str) -> None:
         session.out.print(f"breakpoint {number} at @{address}  {w.place}  {w.text}".rstrip())
 
 
-@command(".delete", ".delete [N]", "delete breakpoint N (all without N)",
-         category=CATEGORY, complete=complete_breakpoints)
+@command(".delete")
 def cmd_delete(session: Session, argtext: str) -> None:
     dbg = state(session)
     if not argtext.strip():
@@ -959,11 +904,7 @@ def cmd_delete(session: Session, argtext: str) -> None:
 
 # -- looking at the program --------------------------------------------------------------
 
-@command(".list", ".list [LINE|LABEL|@ADDR]", "source around the current line (or around "
-         "LINE), with a marker", category=CATEGORY, complete=complete_location, details="""\
-'->' marks the line the program counter is at, 'B' a breakpoint; the program address of each
-line with an instruction is shown. Without a known source file the disassembly around the
-address is listed instead.""")
+@command(".list")
 @paged
 def cmd_list(session: Session, argtext: str) -> None:
     dbg = state(session)
@@ -1031,11 +972,7 @@ def _listing(session: Session, center: int, pc: int | None, breaks: set[int]) ->
     return rows
 
 
-@command(".display", ".display [EXPR]", "show EXPR (e.g. GGP 0, 2 or GAP 1, 0) at every stop; "
-         "without EXPR show all now", category=CATEGORY, details="""\
-Values are shown after each .step, .continue, .stop and .reset. EXPR is an expression of the
-scripting engine when it is loaded, else one TMCL line that reads a value (GAP, GGP, GIO ...);
-commands that change something are refused. Remove with .undisplay N.""")
+@command(".display")
 def cmd_display(session: Session, argtext: str) -> None:
     dbg = state(session)
     expr = argtext.strip()
@@ -1058,7 +995,7 @@ def cmd_display(session: Session, argtext: str) -> None:
         session.out.print(f"{number}: {expr} = {value}")
 
 
-@command(".undisplay", ".undisplay [N]", "remove display N (all without N)", category=CATEGORY)
+@command(".undisplay")
 def cmd_undisplay(session: Session, argtext: str) -> None:
     dbg = state(session)
     if not argtext.strip():
@@ -1070,10 +1007,7 @@ def cmd_undisplay(session: Session, argtext: str) -> None:
         raise ValidationError(f"no display {number}")
 
 
-@command(".vars", ".vars [N | FROM..TO | all]", "user variables (GGP n, 2): the non-zero ones, "
-         "or a range", category=CATEGORY, details="""\
-Without argument every user variable is read and the non-zero ones are shown; with N or
-FROM..TO those are shown whatever their value.""")
+@command(".vars")
 def cmd_vars(session: Session, argtext: str) -> None:
     module = session.module
     valid = program.user_variable_range(module)

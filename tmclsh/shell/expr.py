@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING, Protocol
 from .. import instructions as isa
 from .. import limits
 from ..errors import StatusError, TmclError, ValidationError
-from ..protocol import Request, status_ok, status_text
+from ..protocol import status_ok, status_text
 
 if TYPE_CHECKING:
     from ..asm import Encoded
@@ -591,18 +591,9 @@ class SessionContext:
 
 
 def encode_read(session: Session, text: str) -> Encoded:
-    """Check a read's TMCL text against the module (no bus I/O), cached per module."""
-    client = session.client
-    module = client.module.name if client.module is not None else ""
-    cache: dict = session.state.setdefault("expr.encoded", {})  # type: ignore[assignment]
-    key = (module, client.mode, text)
-    enc = cache.get(key)
-    if enc is None:
-        enc = client.encode(text)
-        if len(cache) > 4096:
-            cache.clear()
-        cache[key] = enc
-    return enc
+    """Check a read's TMCL text against the module (no bus I/O; the client keeps the result
+    for the module and mode, so a watch pays the parser once per expression)."""
+    return session.client.encode(text)
 
 
 def read_value(session: Session, text: str) -> Number:
@@ -611,10 +602,9 @@ def read_value(session: Session, text: str) -> Number:
     Goes straight to the client: a read inside an expression is counted as a command sent,
     but is not shown, recorded or added to the history (the line that holds it is).
     """
-    enc = encode_read(session, text)
-    ins = enc.instruction
     client = session.client
-    reply = client.request(Request(client.address, ins.opcode, ins.type, ins.motor, ins.value))
+    enc, req = client.prepare(text)
+    reply = client.request(req)
     session.stats.commands += 1
     if reply is None:
         raise ExprError(f"{text} gives no reply value")
@@ -644,11 +634,6 @@ def evaluate(session: Session, text: str, extra: Mapping[str, Number] | None = N
     """Parse and evaluate ``text`` (``${...}`` inside it substituted first)."""
     expression = parse(session.expand(text))
     return expression.evaluate(SessionContext(session, extra or {}))
-
-
-def install(session: Session) -> None:
-    """Make ``${expression}`` work in every line of this session."""
-    session.state["evaluate"] = evaluate
 
 
 # -- option splitting for dot-commands ------------------------------------------------------

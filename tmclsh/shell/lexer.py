@@ -44,7 +44,14 @@ _TOKEN = re.compile(r"""
   | (?P<other>.)
 """, re.VERBOSE)
 
-_BARE = ("help", "quit", "exit")
+
+
+@cache
+def _bare() -> frozenset[str]:
+    """Shell words accepted without the dot (help, quit, exit), from the command table."""
+    from . import commands
+
+    return frozenset(commands.bare_words())
 
 
 @cache
@@ -151,7 +158,7 @@ class TmclLexer(Lexer):
             elif i == command_at:
                 if _is_mnemonic(tok):
                     yield at, Keyword, tok
-                elif tok.lower() in _BARE:
+                elif tok.lower() in _bare():
                     yield at, Keyword.Pseudo, tok
                 else:
                     yield at, Name, tok

@@ -34,6 +34,8 @@ def _scan(text: str):
 
 def comment_at(text: str) -> int | None:
     """Where a ``//`` or ``#`` comment starts in ``text`` (None if it has none)."""
+    if "/" not in text and "#" not in text:
+        return None  # most lines of a script: nothing to scan for (a scan is per character)
     for i, ch, quoted in _scan(text):
         if quoted:
             continue
@@ -56,6 +58,8 @@ def split_line(text: str, owns_line: Callable[[str], bool]) -> list[str]:
     ``owns_line(line)`` tells whether a line starts with a command that takes the rest of
     the line, ``;`` included."""
     rest = strip_comment(text)
+    if ";" not in rest:
+        return [rest] if rest else []  # what the loop below gives, without its scan
     out: list[str] = []
     while rest:
         if owns_line(rest):

@@ -179,9 +179,7 @@ def read_csv(path: Path) -> Log:
 PLOT_OPTIONS = {"height": True, "width": True, "only": True}
 
 
-@command(".plot", ".plot [CSV] [--only NAME,...] [--height N] [--width N]",
-         "chart a CSV log (from .watch --csv) or the last watch in the terminal",
-         category="watch", complete=["--only", "--height", "--width"])
+@command(".plot")
 def cmd_plot(session: Session, args: str) -> None:
     rest, opts = expr.split_options(args, PLOT_OPTIONS)
     width = expr.option_int(opts, "width", max(20, min(100, session.out.console.width - 14)),

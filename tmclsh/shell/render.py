@@ -12,6 +12,10 @@ database. For people a reply reads as a sentence with its status in words and co
     inputs = 5  IN_0=1 IN_1=0 IN_2=1 IN_3=0 IN_4=0 IN_5=0 IN_6=0 IN_7=0
 
 For programs (``--json``) each result is the object DESIGN.md specifies, keys in its order.
+
+rich is imported only when a terminal shows the text: in a pipe or a file (``-c``, ``-f``,
+scripts) results and messages are written as plain lines, the same characters without
+colour, and a start-up does not pay for rich.
 """
 
 from __future__ import annotations
@@ -37,6 +41,78 @@ from .style import rich_theme
 # spaces at the end of a line (before any closing colour codes): rich pads table cells and
 # wrapped prose to the column width, which leaves trailing blanks in pipes and copied text
 _TRAILING_BLANKS = re.compile(r"[ \t]+((?:\x1b\[[0-9;]*m)*)$", re.M)
+
+
+def is_terminal(stream) -> bool:
+    """Whether rich would treat ``stream`` as a terminal (the same environment rules)."""
+    tty_compatible = os.environ.get("TTY_COMPATIBLE", "")
+    if tty_compatible in ("0", "1"):
+        return tty_compatible == "1"
+    force_color = os.environ.get("FORCE_COLOR")
+    if force_color is not None:
+        return force_color != ""
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):
+        return False
+
+
+class Styled:
+    """Text whose pieces carry style names: what the renderers build. It becomes rich Text
+    only when rich prints it (``__rich__``); ``plain`` is the text without styles."""
+
+    __slots__ = ("parts",)
+
+    def __init__(self, text: str = "", style: str = ""):
+        self.parts: list[tuple[str, str]] = [(text, style)] if text else []
+
+    def append(self, text: str, style: str | None = None) -> Styled:
+        if text:
+            self.parts.append((text, style or ""))
+        return self
+
+    def append_text(self, other: Styled) -> Styled:
+        self.parts.extend(other.parts)
+        return self
+
+    def rstrip(self) -> None:
+        while self.parts:
+            text, style = self.parts[-1]
+            text = text.rstrip()
+            if text:
+                self.parts[-1] = (text, style)
+                return
+            self.parts.pop()
+
+    @property
+    def plain(self) -> str:
+        return "".join([text for text, _ in self.parts])
+
+    def __str__(self) -> str:
+        return self.plain
+
+    def __rich__(self):
+        from rich.text import Text
+
+        out = Text()
+        for text, style in self.parts:
+            out.append(text, style=style or None)
+        return out
+
+
+_CONTROL = dict.fromkeys((7, 8, 11, 12, 13))  # bell, backspace, vertical tab, form feed, CR
+
+
+def _write_plain(stream, text: str) -> None:
+    """A line as the trimmed rich console writes it to a pipe: trailing blanks removed, and
+    flushed at once (as rich does), so stdout and stderr keep their order in one file."""
+    if not text.isprintable():
+        text = text.translate(_CONTROL).expandtabs(8)  # as rich writes them
+        text = "\n".join(line.rstrip(" ") for line in text.split("\n"))
+    else:
+        text = text.rstrip(" \t")
+    stream.write(text + "\n")
+    stream.flush()
 
 
 def _console(stderr: bool = False, color: str = "auto"):
@@ -76,13 +152,61 @@ class Output:
 
     def __init__(self, json_mode: bool = False, color: str = "auto"):
         self.json = json_mode
-        self.console = _console(color=color)
+        self._color = color
         self._paging = False  # inside paged(): a nested one adds nothing
-        self.err = _console(stderr=True, color=color)
         # whether results come from the built-in simulator (the session sets it): every
         # JSON object then says so, so no program takes them for a module's
         self.simulated: Callable[[], bool] = lambda: False
         self.started = time.monotonic()  # "t" of event objects counts from here
+        self._console = None
+        self._err = None
+        self._terminal: dict[int, tuple[object, bool]] = {}  # is_terminal, by stream
+
+    # the rich consoles, made when first needed (a test may put its own in place)
+    @property
+    def console(self):
+        if self._console is None:
+            self._console = _console(color=self._color)
+        return self._console
+
+    @console.setter
+    def console(self, value) -> None:
+        self._console = value
+
+    @property
+    def err(self):
+        if self._err is None:
+            self._err = _console(stderr=True, color=self._color)
+        return self._err
+
+    @err.setter
+    def err(self, value) -> None:
+        self._err = value
+
+    @property
+    def is_terminal(self) -> bool:
+        """Whether results go to a terminal (colour, live views, progress bars)."""
+        if self._console is not None or self._color == "always":
+            return self.console.is_terminal
+        return self._is_terminal(sys.stdout)
+
+    def _is_terminal(self, stream) -> bool:
+        """is_terminal(stream), asked once per stream (isatty is a system call per line)."""
+        known = self._terminal.get(id(stream))
+        if known is None or known[0] is not stream:
+            known = self._terminal[id(stream)] = (stream, is_terminal(stream))
+        return known[1]
+
+    def _plain(self, stderr: bool = False):
+        """The stream to write plain text to, or None when rich must write (a terminal, colour
+        asked for in a pipe, or a console put in place)."""
+        if self._color == "always":
+            return None
+        if stderr:
+            stream = sys.stderr
+            return stream if self._err is None and not self._is_terminal(stream) else None
+        stream = sys.stdout
+        return stream if self._console is None and not self._is_terminal(stream) else None
 
     # -- JSON ---------------------------------------------------------------------------
     def emit(self, obj: dict[str, Any]) -> None:
@@ -94,37 +218,45 @@ class Output:
 
     # -- people -------------------------------------------------------------------------
     def print(self, *items: Any, **kw: Any) -> None:
-        if not self.json:
-            self.console.print(*items, **kw)
+        if self.json:
+            return
+        # plain strings (no markup: the console reads none), not wrapped (soft_wrap=False
+        # wraps at the width even in a pipe)
+        stream = self._plain() if kw.get("markup", False) is False and kw.get("soft_wrap", True) \
+            else None
+        if stream is not None and all(isinstance(i, str) for i in items) \
+                and set(kw) <= {"markup", "style", "soft_wrap"}:
+            _write_plain(stream, " ".join(items))  # the text as rich would write it
+            return
+        self.console.print(*items, **kw)
 
     def info(self, text: str) -> None:
         """A status line for people (stderr under --json, so stdout stays parseable)."""
-        if self.json:
-            _message(self.err, text, "tmcl.note")
-        else:
-            _message(self.console, text, "tmcl.note")
+        self._message(text, "tmcl.note", stderr=self.json)
 
     def ok(self, text: str) -> None:
         """A confirmation that something was done (``motors 0, 1 stopped``)."""
-        if self.json:
-            _message(self.err, text, "")
-        else:
-            _message(self.console, text, "tmcl.ok")
+        self._message(text, "" if self.json else "tmcl.ok", stderr=self.json)
 
     def warn(self, text: str) -> None:
-        _message(self.err, text, "tmcl.warn")
+        self._message(text, "tmcl.warn", stderr=True)
 
     def error(self, line: str | None, message: str) -> None:
         if self.json:
             self.emit({"line": line, "error": message})
         else:
-            _message(self.err, f"error: {message}", "tmcl.error")
+            self._message(f"error: {message}", "tmcl.error", stderr=True)
 
     def result(self, result: Result, module: Module | None) -> None:
         if self.json:
             self.emit(result_json(result))
+            return
+        text = render_result(result, module)
+        stream = self._plain()
+        if stream is None:
+            self.console.print(text)
         else:
-            self.console.print(render_result(result, module))
+            _write_plain(stream, text.plain)
 
     @contextmanager
     def paged(self, enabled: bool = True) -> Iterator[None]:
@@ -159,8 +291,21 @@ class Output:
             t = (time.monotonic() if at is None else at) - self.started
             self.emit({"event": int(Control.TARGET_REACHED_EVENT), "motors": event_motors(reply),
                        "t": round(t, 4)})
-        else:
+            return
+        stream = self._plain()
+        if stream is None:
             self.console.print(render_event(reply), style="tmcl.event", markup=False)
+        else:
+            _write_plain(stream, render_event(reply))
+
+    def _message(self, text: str, style: str, stderr: bool) -> None:
+        """One message line: on a terminal wrapped between words (not cut mid-word by the
+        terminal), in a pipe or a file one line as it is."""
+        stream = self._plain(stderr)
+        if stream is None:
+            _message(self.err if stderr else self.console, text, style)
+        else:
+            _write_plain(stream, text)
 
 
 def _rows(text: str, width: int) -> int:
@@ -210,8 +355,6 @@ def paged(handler: Callable[[Any, str], None]) -> Callable[[Any, str], None]:
 
 
 def _message(console, text: str, style: str) -> None:
-    """One message line: on a terminal wrapped between words (not cut mid-word by the
-    terminal), in a pipe or a file one line as it is."""
     console.print(text, style=style, markup=False, soft_wrap=not console.is_terminal)
 
 
@@ -267,13 +410,11 @@ _DONE = {
 }
 
 
-def render_result(result: Result, module: Module | None):
-    from rich.text import Text
-
+def render_result(result: Result, module: Module | None) -> Styled:
     reply = result.reply
     enc = result.encoded
     ins = enc.instruction
-    out = Text()
+    out = Styled()
     if reply is None:
         out.append("sent (this command has no reply)", style="tmcl.note")
         return out
@@ -420,11 +561,9 @@ def _bits_summary(on: list[int]) -> str:
     return f"bit{'s' if len(on) > 1 else ''} {', '.join(map(str, on))} set"
 
 
-def render_bits(value: int, param: Parameter, only_set: bool = False):
+def render_bits(value: int, param: Parameter, only_set: bool = False) -> Styled:
     """One line per documented bit: ``  bit  0  target reached``."""
-    from rich.text import Text
-
-    text = Text()
+    text = Styled()
     for bit, meaning in sorted(param.bits.items()):
         on = bool(value >> bit & 1)
         if only_set and not on:

@@ -251,6 +251,7 @@ class Parser:
         cmd = commands.find(word)
         if cmd is None:
             raise self.fail(number, f"unknown shell command {word!r}; type .help for the list")
+        cmd.load()  # its feature module, which may add its check to CHECKS (.watch does)
         check = CHECKS.get(cmd.name)
         if check is not None:
             check(self.session, args)
@@ -519,7 +520,7 @@ def count_steps(nodes: Iterable[Node]) -> tuple[int, bool]:
 
 def _progress(session: Session, name: str, nodes: list[Node]):
     """A rich progress bar for long scripts on a terminal (None otherwise)."""
-    if session.out.json or not session.out.console.is_terminal:
+    if session.out.json or not session.out.is_terminal:
         return None
     total, views = count_steps(nodes)
     if total < PROGRESS_MIN_STEPS or views:
@@ -687,20 +688,12 @@ def _open_block(session: Session, word: str, args: str) -> None:
         session.out.info("  (collecting lines until .end)")
 
 
-@command(".repeat", ".repeat COUNT [as NAME]", "repeat the following lines until .end",
-         category="script",
-         details="Runs the lines up to the matching .end COUNT times (an expression). With "
-                 "'as NAME' the variable NAME counts 0..COUNT-1 (like ports and motors). "
-                 "Blocks nest. COUNT is 0..1000000.\n"
-                 "  .repeat 3 as i\n  MVP REL, 0, 1000\n  .wait GAP 8, 0 == 1\n  .end")
+@command(".repeat")
 def cmd_repeat(session: Session, args: str) -> None:
     _open_block(session, ".repeat", args)
 
 
-@command(".if", ".if EXPR", "run the following lines (until .elif/.else/.end) if EXPR is true",
-         category="script",
-         details="  .if GIO 0, 0 == 1\n  .echo input 0 is high\n  .else\n  .echo input 0 "
-                 "is low\n  .end")
+@command(".if")
 def cmd_if(session: Session, args: str) -> None:
     _open_block(session, ".if", args)
 
@@ -711,11 +704,10 @@ def _outside_block(word: str) -> Callable[[Session, str], None]:
     return handler
 
 
-command(".elif", ".elif EXPR", "inside .if: the next condition", category="script")(
+command(".elif")(
     _outside_block(".elif"))
-command(".else", ".else", "inside .if: lines run when no condition was true",
-        category="script")(_outside_block(".else"))
-command(".end", ".end", "close a .repeat or .if block", category="script")(
+command(".else")(_outside_block(".else"))
+command(".end")(
     _outside_block(".end"))
 
 
@@ -729,21 +721,14 @@ def set_onerror(session: Session, args: str, node: Node | None = None) -> None:
         session.state["script.onerror"] = (node or Node("<input>", 0, args), args)
 
 
-@command(".onerror", ".onerror LINE | .onerror off",
-         "in a script: a line to run if the script stops at an error", category="script",
-         details="  .onerror MST 0\nMakes a failed script leave the motor stopped. It runs "
-                 "once, when an error stops the script (not with --keep-going), and is "
-                 "forgotten when the script ends.")
+@command(".onerror")
 def cmd_onerror(session: Session, args: str) -> None:
     if session.state.get("script.depth", 0) == 0:
         raise ValidationError(".onerror works inside scripts (-f, .source)")
     set_onerror(session, args)
 
 
-@command(".source", ".source FILE", "run a script file in this session",
-         category="script",
-         details="Lines of the file run as if typed; errors stop it with FILE:LINE. Inside a "
-                 "script the path is relative to that script's folder.")
+@command(".source")
 def cmd_source(session: Session, args: str) -> None:
     if not args:
         raise ValidationError(".source needs a file name")
@@ -754,11 +739,7 @@ def cmd_source(session: Session, args: str) -> None:
         raise err
 
 
-@command(".let", ".let NAME = EXPR", "set a variable (use it as ${NAME} or in expressions)",
-         category="script",
-         details="EXPR is arithmetic, comparisons, and/or/not over numbers, variables and "
-                 "module reads:\n  .let speed = 1000\n  .let p = GAP 1, 0\n"
-                 "  SAP 4, 0, ${speed * 2}\n.let alone lists the variables.")
+@command(".let")
 def cmd_let(session: Session, args: str) -> None:
     if not args:
         _show_variables(session)
@@ -805,10 +786,7 @@ def _side(node: expr.Node, ctx: expr.SessionContext) -> str:
     return node.tmcl(ctx) if isinstance(node, expr.Read) else node.text
 
 
-@command(".expect", ".expect EXPR", "check a condition; the script fails if it is false",
-         category="script",
-         details="  .expect GAP 1, 0 == 5000\n  .expect abs(GAP 1, 0 - ${target}) <= 10\n"
-                 "A failure says what was expected and what was read.")
+@command(".expect")
 def cmd_expect(session: Session, args: str) -> None:
     if not args:
         raise ValidationError(".expect needs a condition: .expect GAP 1, 0 == 5000")
@@ -828,13 +806,7 @@ def cmd_expect(session: Session, args: str) -> None:
 WAIT_OPTIONS = {"timeout": True, "interval": True}
 
 
-@command(".wait", ".wait EXPR [--timeout S] [--interval S]",
-         "poll until a condition holds (default timeout 30 s, interval 0.05 s)",
-         category="script", complete=["--timeout", "--interval"],
-         details="  .wait GAP 8, 0 == 1 --timeout 10\n  .wait RFS STATUS, 0 == 0\n"
-                 "--timeout none waits forever; otherwise at most a day (86400 s); "
-                 "--interval 0.001..86400 s. A timeout is an error that shows the last "
-                 "value read.")
+@command(".wait")
 def cmd_wait(session: Session, args: str) -> None:
     rest, opts = expr.split_options(args, WAIT_OPTIONS)
     timeout = expr.option_float(opts, "timeout", WAIT_TIMEOUT, allow_none=True,
@@ -864,8 +836,7 @@ def cmd_wait(session: Session, args: str) -> None:
                                f"({seen})") from None
 
 
-@command(".sleep", ".sleep SECONDS", "pause up to a day (seconds may be a fraction or an "
-         "expression)", category="script")
+@command(".sleep")
 def cmd_sleep(session: Session, args: str) -> None:
     if not args:
         raise ValidationError(".sleep needs seconds: .sleep 0.5")
@@ -906,10 +877,7 @@ def _unquote(text: str) -> str:
     return text
 
 
-@command(".echo", ".echo TEXT [> FILE | >> FILE]", "print a line (${...} expanded), or write it "
-         "to a file", category="script",
-         details="  .echo position is ${GAP 1, 0}\n  .echo SAP 4, 0, ${GAP 4, 0} >> restore.tmcl\n"
-                 "'>' replaces the file, '>>' appends; quote text that holds '>'.")
+@command(".echo")
 def cmd_echo(session: Session, args: str) -> None:
     text, mode, target = _split_redirect(args)
     line = _unquote(session.expand(text))
@@ -998,12 +966,7 @@ def _is_read(session: Session, line: str) -> bool:
             and r.encoded.spec.reads)
 
 
-@command(".record", ".record FILE | .record off", "record what you type to a script file",
-         category="script", complete=["off"],
-         details="Every line typed from now on is written to FILE (results as // comments); "
-                 "replay it with tmclsh -f FILE. '.record off' stops; '.record' shows the state. "
-                 "FILE is replaced when the recording ends ('.record off' or leaving the "
-                 "shell); if it cannot be written, the old FILE stays as it was.")
+@command(".record")
 def cmd_record(session: Session, args: str) -> None:
     current: Recorder | None = session.state.get("record")  # type: ignore[assignment]
     if not args:
@@ -1035,8 +998,7 @@ def cmd_record(session: Session, args: str) -> None:
     session.out.info(f"recording to {path} (.record off to stop)")
 
 
-@command(".history", ".history [N]", "show the lines of this session (the last N)",
-         category="script")
+@command(".history")
 def cmd_history(session: Session, args: str) -> None:
     lines = session.history[:-1] if session.history[-1:] and \
         _word(session.history[-1])[0] == ".history" else list(session.history)

@@ -17,10 +17,8 @@ from .. import asm
 from ..client import Client, Result
 from ..errors import StatusError, TmclError, TmclTimeoutError, TransportError, ValidationError
 from ..modules import Module
-from ..protocol import Request, status_ok
+from ..protocol import status_ok
 from . import commands
-from .expr import format_number
-from .expr import install as install_expressions
 from .lines import split_text, strip_comment
 from .render import Output
 
@@ -84,8 +82,7 @@ class Session:
         # the debugger's stepping end with a TimeLimitError at the deadline.
         self.time_limit: float | None = None
         self._deadline: float | None = None
-        commands.load_all()
-        install_expressions(self)  # ${expression} in any line
+        self.state["evaluate"] = _evaluate  # ${expression} in any line
 
     def close(self) -> bool:
         """End the session: run the closers; a failing one is reported, the rest still run.
@@ -144,6 +141,7 @@ class Session:
         """Replace ``${name}`` (or ``${expression}``) by its value."""
         if "${" not in line:
             return line
+        from .expr import format_number
 
         def sub(m: re.Match) -> str:
             inner = m.group(1).strip()
@@ -233,11 +231,9 @@ class Session:
 
     def run_tmcl(self, text: str, *, show: bool = True) -> Result:
         expanded = self.expand(text)
-        enc = self.client.encode(expanded)
+        enc, req = self.client.prepare(expanded)
         self._confirm_persistent(enc)
-        ins = enc.instruction
-        reply = self.client.request(Request(self.client.address, ins.opcode, ins.type,
-                                            ins.motor, ins.value))
+        reply = self.client.request(req)
         result = Result(text, enc, reply)
         if reply is not None:
             self._answered[self.client.replies] = (text, self.location)
@@ -272,6 +268,13 @@ class Session:
             fn(line, outcome)
 
 
+def _evaluate(session: Session, text: str) -> int | float:
+    """The expression engine, imported the first time a line holds ``${...}``."""
+    from .expr import evaluate
+
+    return evaluate(session, text)
+
+
 def owns_line(text: str) -> bool:
     """Whether ``text`` starts with a command that takes the rest of its line, ';' included."""
     words = text.split(None, 1)
@@ -280,5 +283,6 @@ def owns_line(text: str) -> bool:
 
 
 def _is_bare_command(text: str) -> bool:
-    word = text.split(None, 1)[0] if text.split() else ""
-    return commands.find(word) is not None and not word.startswith(".")
+    parts = text.split(None, 1)
+    word = parts[0] if parts else ""
+    return not word.startswith(".") and commands.find(word) is not None

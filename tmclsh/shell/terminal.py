@@ -912,20 +912,7 @@ def _complete_ascii(session: Session, text: str) -> list[tuple[str, str]]:
             ("--bin", "send BIN when leaving"), ("--no-bin", "stay in ASCII mode when leaving")]
 
 
-@command(".ascii", ".ascii [--raw] [--echo] [--bin|--no-bin]",
-         "serial terminal on the module's ASCII mode (Ctrl-] returns)",
-         complete=_complete_ascii, category="ascii",
-         details="Enters ASCII mode (command 139) if the module is not in it yet. Lines are "
-                 "edited locally and sent whole with the address character added; --raw sends "
-                 "every key as typed, so the module's own echo and backspace handling show. "
-                 "Replies are shown with the status decoded. Ctrl-] or .quit leaves; leaving "
-                 "asks whether to send BIN (back to binary mode); --bin/--no-bin answer in "
-                 "advance. BIN typed in the terminal is noticed: the module talks binary "
-                 "again and the terminal returns to the shell.\n"
-                 "Ctrl-T opens a menu, as in tio: e local echo on/off, h hex view of what "
-                 "arrives, t timestamps, f log the session to a file (f again stops), u send "
-                 "a file line by line (each reply waited for), ? the menu; Ctrl-T Ctrl-T "
-                 "sends Ctrl-T in --raw.")
+@command(".ascii")
 def cmd_ascii(session: Session, argtext: str) -> None:
     opts = parse_options(argtext)
     client = session.client
@@ -1001,11 +988,7 @@ def _complete_mode(session: Session, text: str) -> list[tuple[str, str]]:
             ("--keep", "leave the module in this mode when tmclsh exits")]
 
 
-@command(".mode", ".mode [ascii|binary] [--keep]", "show or switch the link: binary frames or "
-         "the module's ASCII mode", complete=_complete_mode, category="ascii",
-         details="ascii enters ASCII mode (command 139) unless the module is in it already; "
-                 "binary sends BIN. On exit tmclsh leaves the module in the mode it found it "
-                 "in, unless --keep was given with the last switch.")
+@command(".mode")
 def cmd_mode(session: Session, argtext: str) -> None:
     words = argtext.split()
     keep = "--keep" in words
@@ -1054,13 +1037,7 @@ def _complete_config(session: Session, text: str) -> list[tuple[str, str]]:
             ("echo=none", "no echo, reply only (10)")]
 
 
-@command(".ascii-config", ".ascii-config [startup=ascii|binary] [echo=char|line|none]",
-         "show or set the ASCII interface configuration (GP 67)", complete=_complete_config,
-         category="ascii",
-         details="Reads GP 67 and writes it back with the named bits changed (other bits kept). "
-                 "GP 67 is one of the bank-0 parameters 64..128 that SGP writes to EEPROM "
-                 "directly (manual §10.1), so the change is permanent and asks first (--yes). "
-                 "The start-up mode applies from the next power-up.")
+@command(".ascii-config")
 def cmd_ascii_config(session: Session, argtext: str) -> None:
     changes: dict[str, str] = {}
     for word in argtext.split():

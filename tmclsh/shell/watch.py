@@ -474,7 +474,7 @@ def run_watch(session: Session, items: Sequence[Item], *, interval: float = DEFA
     Ctrl-C; show a live table (``live``) or emit one JSON object per sample."""
     out = session.out
     if live is None:
-        live = not out.json and out.console.is_terminal
+        live = not out.json and out.is_terminal
     w = _Watch(session, items, interval, count, until, emit or out.emit)
     sink = _Csv(csv_path, [i.name for i in items]) if csv_path is not None else None
     w.sink = sink
@@ -651,23 +651,7 @@ class _Watch:
                                        markup=False)
 
 
-@command(".watch", ".watch [NAME=]EXPR; ... [--interval S] [--count N] [--until EXPR] "
-         "[--csv FILE]",
-         "poll values live: value, min, max, rate, recent history", category="watch",
-         complete=["--interval", "--count", "--until", "--csv"], owns_line=True,
-         details="  .watch pos=GAP 1, 0; speed=GAP 3, 0; in0=GIO 0, 0\n"
-                 "It takes the rest of its line (';' separates its expressions): put other "
-                 "commands on lines of their own.\n"
-                 "  .watch rev=GAP 1, 0 / 51200 --until \"rev >= 2\" --csv run.csv\n"
-                 "Keys: s or space stops everything (the stored program if it runs, then MST "
-                 "to every motor, speeds read back) and keeps watching; Ctrl-C does the same "
-                 "and ends the watch; q (or Esc) ends the watch quietly, motors keep running. "
-                 "A lost link shows as \"link lost\"; the watch reconnects and samples on "
-                 "once the link is back. Under --json or in a pipe, each sample "
-                 "is a JSON object {\"t\": s, \"values\": {...}}. With no expressions: the "
-                 "position and speed of each motor. .plot draws the last watch. "
-                 "--interval is 0..86400 s, --count 1..1000000; the CSV file is put "
-                 "in place when the watch ends.")
+@command(".watch")
 def cmd_watch(session: Session, args: str) -> None:
     items, interval, count, until, csv_path = parse_args(session, args)
     result = run_watch(session, items, interval=interval, count=count, until=until,
@@ -692,4 +676,4 @@ def cmd_watch(session: Session, args: str) -> None:
 
 def out_is_pipe(session: Session) -> bool:
     """Samples went to stdout as JSON: keep status text on stderr."""
-    return session.out.json or not session.out.console.is_terminal
+    return session.out.json or not session.out.is_terminal
