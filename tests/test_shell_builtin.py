@@ -344,3 +344,21 @@ def test_module_refusal_is_shown_with_status_in_words(session, capsys):
         session.run_line("6 250, 0, 0")  # raw GAP of a parameter the module does not have
     out = capsys.readouterr().out
     assert "wrong type" in out or "invalid" in out
+
+
+# -- mistyped shell commands -------------------------------------------------------------
+
+@pytest.mark.parametrize("typed, near", [
+    (".halp", ".help"), (".wach", ".watch"), (".stpo", ".stop"), (".PARMS", ".params")])
+def test_mistyped_shell_command_names_the_close_ones_and_sends_nothing(session, typed, near):
+    frames = Frames(session.client)
+    with pytest.raises(ValidationError, match=rf"unknown shell command '{typed}'; did you mean "
+                                              rf"[^?]*{near}\b"):
+        session.run_line(typed)
+    assert frames.tx == []
+
+
+def test_shell_command_far_from_any_gets_no_guess(session):
+    with pytest.raises(ValidationError) as err:
+        session.run_line(".xyzzy")
+    assert "did you mean" not in str(err.value) and ".help" in str(err.value)

@@ -119,7 +119,9 @@ def cmd_help(session: Session, arg: str) -> None:
     if cmd is not None:
         return _help_command(session, cmd)
     if word.startswith("."):
-        raise ValidationError(f"unknown shell command {word!r}; .help lists them")
+        from .session import unknown_command
+
+        raise ValidationError(unknown_command(word))
     spec = isa.by_mnemonic(word)
     if spec is not None:
         return _help_instruction(session, spec, source=source)

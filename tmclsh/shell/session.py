@@ -7,6 +7,7 @@ checked against the module's database before anything is sent.
 
 from __future__ import annotations
 
+import difflib
 import re
 import sys
 import time
@@ -26,6 +27,15 @@ from .render import Output
 
 _VAR = re.compile(r"\$\{([^}]*)\}")
 
+
+
+def unknown_command(word: str) -> str:
+    """The error for a mistyped dot-command, naming the commands it is close to (as a
+    mistyped mnemonic gets)."""
+    names = [name for cmd in commands.all_commands() for name in cmd.names()]
+    close = difflib.get_close_matches(word.lower(), names, n=3, cutoff=0.6)
+    near = f"did you mean {', '.join(close)}? " if close else ""
+    return f"unknown shell command {word!r}; {near}type .help for the list"
 
 class Abort(TmclError):
     """The user declined a confirmation; nothing was sent."""
@@ -186,7 +196,7 @@ class Session:
         if word.startswith(".") or _is_bare_command(text):
             cmd = commands.find(word)
             if cmd is None:
-                raise ValidationError(f"unknown shell command {word!r}; type .help for the list")
+                raise ValidationError(unknown_command(word))
             cmd.handler(self, text[len(word):].strip())
             self._record(text, "")
             return None
