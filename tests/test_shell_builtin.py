@@ -317,8 +317,11 @@ def test_bad_input_is_one_clear_error_and_nothing_is_sent(session, line, message
 def test_eeprom_writes_are_refused_in_scripts_without_yes(session):
     frames = Frames(session.client)
     for line in ("STAP 4, 0", "STGP SerialAddress, 0", "SGP 66, 0, 1", "137 0, 0, 1234"):
-        with pytest.raises(Abort, match="--yes"):
+        with pytest.raises(Abort, match="--yes") as info:
             session.run_line(line)
+        # said as what was not done: no question that nobody can answer
+        assert str(info.value).startswith("not done without confirmation: ")
+        assert "?" not in str(info.value) and "continue" not in str(info.value)
     assert frames.tx == []
 
 

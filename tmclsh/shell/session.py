@@ -29,6 +29,12 @@ _VAR = re.compile(r"\$\{([^}]*)\}")
 
 
 
+def _as_statement(question: str) -> str:
+    """``store X in the EEPROM?`` -> ``store X in the EEPROM``: where nobody can answer, the
+    question is said as what was not done."""
+    return question.strip().removesuffix("?").removesuffix("; continue").strip()
+
+
 def unknown_command(word: str) -> str:
     """The error for a mistyped dot-command, naming the commands it is close to (as a
     mistyped mnemonic gets)."""
@@ -128,7 +134,8 @@ class Session:
             if self.ask(question):
                 return
             raise Abort("cancelled; nothing was sent")
-        raise Abort(f"{question} -- refused without confirmation; pass --yes to allow it")
+        raise Abort(f"not done without confirmation: {_as_statement(question)}; pass --yes "
+                    "to allow it")
 
     # -- variables ----------------------------------------------------------------------
     def expand(self, line: str) -> str:
@@ -230,7 +237,7 @@ class Session:
             self.confirm(f"store {what} permanently in the module's EEPROM?")
         elif spec is not None and spec.mnemonic == "SGP" and p is not None and p.storable \
                 and p.bank == 0:
-            self.confirm(f"SGP {p.name} is written to the module's EEPROM; continue?")
+            self.confirm(f"SGP {p.name} writes the module's EEPROM; continue?")
         elif spec is None and ins.opcode == 137:
             self.confirm("restore FACTORY DEFAULTS (all settings and the stored program are lost)?")
 
