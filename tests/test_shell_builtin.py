@@ -365,3 +365,20 @@ def test_shell_command_far_from_any_gets_no_guess(session):
     with pytest.raises(ValidationError) as err:
         session.run_line(".xyzzy")
     assert "did you mean" not in str(err.value) and ".help" in str(err.value)
+
+
+@pytest.mark.parametrize("line", [".param nonsense", ".params nonsense", ".params axis nonsense"])
+def test_a_near_miss_is_offered_not_shown_as_the_match(session, line):
+    """difflib finds Vsense for 'nonsense'; a table titled "matching 'nonsense'" or Vsense's
+    help as the answer would mislead. Nothing is read from the module either."""
+    frames = Frames(session.client)
+    with pytest.raises(ValidationError, match=r"no parameter matches 'nonsense' on the "
+                                              r"TMCM-1311; did you mean Vsense\?"):
+        session.run_line(line)
+    assert frames.tx == []
+
+
+def test_params_filter_that_is_part_of_names_still_lists_them(session, capsys):
+    session.run_line(".params axis speed")
+    out = capsys.readouterr().out
+    assert "matching 'speed'" in out and "MaxPositioningSpeed" in out and "Vsense" not in out

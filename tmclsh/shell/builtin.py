@@ -423,11 +423,11 @@ def cmd_param(session: Session, arg: str, from_help: bool = False) -> None:
     exact = [p for p in found if p.name.lower() == query.lower()]
     if exact:
         found = exact
-    if from_help and found and not any(_contains(p, query) for p in found):
-        # `help foo` must not answer with MaxFollowingError (f..o..o) as if that were it
-        names = ", ".join(p.name for p in found[:3])
-        raise ValidationError(f"no help topic or parameter matches {query!r} on the "
-                              f"{mod.name}; did you mean {names}? (.help lists the commands)")
+    if found and (not any(_contains(p, query) for p in found) if from_help
+                  else _near_misses_only(found, query)):
+        # `help foo` or `.param foo` must not answer with MaxFollowingError (f..o..o) as if
+        # that were it
+        raise _only_guesses(mod, query, found, from_help)
     if not found:
         what = "help topic or parameter" if from_help else "parameter"
         raise ValidationError(f"no {what} matches {query!r} on the {mod.name}"
@@ -438,6 +438,25 @@ def cmd_param(session: Session, arg: str, from_help: bool = False) -> None:
     _param_table(session, found, title=f"{len(found)} parameters match {query!r}", read=False)
     if not session.out.json:
         session.out.info("(.param NAME for one of them)")
+
+
+def _only_guesses(mod: Module, query: str, found: list[Parameter],
+                  from_help: bool) -> ValidationError:
+    """No parameter has ``query`` in its name, only near misses: say so and name them."""
+    names = ", ".join(p.name for p in found[:3])
+    if not re.sub(r"[^a-z0-9]", "", query.lower()):  # `help [/]`: everything is as near
+        names = ""
+    what, where = (("help topic or parameter", ".help lists the commands") if from_help
+                   else ("parameter", ".params lists them all"))
+    guess = f"did you mean {names}? ({where})" if names else where
+    return ValidationError(f"no {what} matches {query!r} on the {mod.name}; {guess}")
+
+
+def _near_misses_only(found: list[Parameter], query: str) -> bool:
+    """Whether the search found only near misses (a query of no letters or digits, such as
+    ``[/]``, matches everything, as an empty one does)."""
+    return bool(re.sub(r"[^a-z0-9]", "", query.lower())) and not any(
+        _contains(p, query) for p in found)
 
 
 def _contains(p: Parameter, query: str) -> bool:
@@ -636,6 +655,10 @@ def cmd_params(session: Session, arg: str) -> None:
         kinds = [kind_words[words[0].lower()]]
         words = words[1:]
     query = " ".join(words)
+    if query and not query.isdigit():
+        found = [p for kind in kinds for p in mod.search(query, kind)]
+        if found and _near_misses_only(found, query):
+            raise _only_guesses(mod, query, found, False)  # not a table titled "matching"
     shown = 0
     for kind in kinds:
         pool = mod.axis_params if kind == "axis" else mod.global_params
