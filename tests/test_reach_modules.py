@@ -228,3 +228,21 @@ def test_unknown_command_in_generic_mode_points_to_numbers(module_1161, config_h
     r = run_tmclsh("--port", module_1161.url, "-c", "XYZZY 1, 2", env=_env(config_home))
     assert r.returncode == 1 and "by number" in r.stderr
     assert module_1161.commands() == [136, 10]  # 136 and GGP 129 at connect; nothing for the line
+
+
+def test_forced_generic_on_a_documented_module_does_not_say_it_has_no_data(config_home,
+                                                                           run_tmclsh):
+    """`-m generic` on a TMCM-1311 (a module with data): the notice and the refusal of a name
+    say that generic mode was chosen, and how to get the names back, not that the data is
+    missing."""
+    m = TcpModule(version="1311V111")
+    try:
+        r = run_tmclsh("--port", m.url, "-m", "generic", "-c", "GAP ActualPosition, 0",
+                       env=_env(config_home))
+    finally:
+        m.close()
+    assert r.returncode == 1, r.stderr
+    assert "no parameter data" not in r.stderr and "has no parameter data" not in r.stderr
+    assert r.stderr.count("generic mode (-m generic)") == 2, r.stderr
+    assert "leave -m generic out to use the TMCM-1311's parameter data" in r.stderr
+    assert [g[0] for g in m.got] == [136, 10]  # the name was refused before anything was sent
