@@ -246,3 +246,15 @@ def test_forced_generic_on_a_documented_module_does_not_say_it_has_no_data(confi
     assert r.stderr.count("generic mode (-m generic)") == 2, r.stderr
     assert "leave -m generic out to use the TMCM-1311's parameter data" in r.stderr
     assert [g[0] for g in m.got] == [136, 10]  # the name was refused before anything was sent
+
+
+def test_a_module_file_without_end_is_refused_unread(config_home, tmp_path, run_tmclsh):
+    """`modules check /dev/zero` (or --module-file) grew until a MemoryError traceback."""
+    huge = tmp_path / "huge.toml"
+    with open(huge, "wb") as fh:
+        fh.truncate(17 * 1024 * 1024)  # sparse: no disk used
+    r = run_tmclsh("modules", "check", str(huge), env=_env(config_home))
+    assert r.returncode == 1 and "Traceback" not in r.stderr
+    assert r.stderr.strip() == f"tmclsh: {huge}: module file larger than 16 MiB; not read"
+    r = run_tmclsh("modules", "check", str(tmp_path / "none.toml"), env=_env(config_home))
+    assert r.stderr.strip() == f"tmclsh: cannot read {tmp_path / 'none.toml'}: no such file"

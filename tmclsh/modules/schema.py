@@ -215,10 +215,12 @@ def _entry(entry: object, keys: dict[str, tuple[str, bool]], table: str, index: 
 
 def read(path: Path) -> dict:
     """Read and check one module file (ModuleFileError for any problem, with file and line)."""
+    from ..files import FileError, read_bytes
+
     try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ModuleFileError(f"{path}: cannot read: {exc.strerror or exc}") from None
+        text = read_bytes(path, what="module file").decode("utf-8")  # bounded: /dev/zero
+    except FileError as exc:
+        raise ModuleFileError(str(exc)) from None
     except UnicodeDecodeError:
         raise ModuleFileError(f"{path}:1: not a text file (UTF-8)") from None
     return parse(text, str(path))
