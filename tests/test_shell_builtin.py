@@ -382,3 +382,15 @@ def test_params_filter_that_is_part_of_names_still_lists_them(session, capsys):
     session.run_line(".params axis speed")
     out = capsys.readouterr().out
     assert "matching 'speed'" in out and "MaxPositioningSpeed" in out and "Vsense" not in out
+
+
+def test_help_for_a_number_nothing_answers_to_is_an_error():
+    """`help 140` on the TMCM-1640 (no AP 140, no command 140) printed a note and passed."""
+    s = make_session("TMCM-1640")
+    try:
+        with pytest.raises(ValidationError, match=r"^the TMCM-1640 has no parameter 140, and no "
+                                                  r"command has that number"):
+            s.run_line("help 140")
+        s.run_line("help 136")  # no parameter, but a command: explained, not an error
+    finally:
+        s.client.close()

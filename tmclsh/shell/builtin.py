@@ -350,15 +350,18 @@ def _field_help(spec: isa.InstructionSpec, fld: str, mod: Module | None) -> str:
 def _help_number(session: Session, number: int, source: bool = False) -> None:
     mod = session.module
     found = _params_by_number(mod, number)
+    spec = isa.by_opcode(number)
+    ctl = isa.control(number)
     if found:
         _show_params(session, found, numbered=number, source=source)
     elif mod.generic:
         session.out.info(f"no parameter data for the {mod.type_name}: GAP {number}, 0 or "
                          f"GGP {number}, 0 reads it; a module file (--module-file) names it")
+    elif spec is None and ctl is None:  # nothing at all answers to it: an error, as a name is
+        raise ValidationError(f"the {mod.name} has no parameter {number}, and no command has "
+                              "that number (.params lists the parameters)")
     else:
         session.out.info(f"the {mod.name} has no parameter {number}")
-    spec = isa.by_opcode(number)
-    ctl = isa.control(number)
     if not session.out.json:
         if spec is not None:
             session.out.info(f"(command {number} is {spec.mnemonic}: help {spec.mnemonic})")
