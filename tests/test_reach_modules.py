@@ -258,3 +258,13 @@ def test_a_module_file_without_end_is_refused_unread(config_home, tmp_path, run_
     assert r.stderr.strip() == f"tmclsh: {huge}: module file larger than 16 MiB; not read"
     r = run_tmclsh("modules", "check", str(tmp_path / "none.toml"), env=_env(config_home))
     assert r.stderr.strip() == f"tmclsh: cannot read {tmp_path / 'none.toml'}: no such file"
+
+
+def test_params_in_generic_mode_says_there_is_no_list(module_1161, config_home, run_tmclsh):
+    """Was "no axis or global parameter of the TMCM-1161 matches ''"."""
+    r = run_tmclsh("--port", module_1161.url, "-c", ".params", env=_env(config_home))
+    assert r.returncode == 1
+    assert ("error: TMCM-1161 (no parameter data: numbers only): there is no list of its "
+            "parameters; read one by number") in r.stderr
+    assert "matches ''" not in r.stderr
+    assert [g[0] for g in module_1161.got] == [136, 10]  # nothing read for it

@@ -355,8 +355,9 @@ def _help_number(session: Session, number: int, source: bool = False) -> None:
     if found:
         _show_params(session, found, numbered=number, source=source)
     elif mod.generic:
-        session.out.info(f"no parameter data for the {mod.type_name}: GAP {number}, 0 or "
-                         f"GGP {number}, 0 reads it; a module file (--module-file) names it")
+        session.out.info(f"{mod.label}: GAP {number}, 0 or GGP {number}, 0 reads it; "
+                         + ("without -m generic, help names it" if getattr(mod, "forced", False)
+                            else "a module file (--module-file) names it"))
     elif spec is None and ctl is None:  # nothing at all answers to it: an error, as a name is
         raise ValidationError(f"the {mod.name} has no parameter {number}, and no command has "
                               "that number (.params lists the parameters)")
@@ -650,6 +651,9 @@ def _param_json(p: Parameter, current: list[tuple[str, str, int | None]] | None 
 @paged
 def cmd_params(session: Session, arg: str) -> None:
     mod = session.module
+    if mod.generic:  # no list of parameters to go through
+        raise ValidationError(f"{mod.label}: there is no list of its parameters; read one by "
+                              "number (GAP 4, 0 or GGP 66, 0)")
     words = arg.split()
     kinds = ["axis", "global"]
     kind_words = {"axis": "axis", "ax": "axis", "ap": "axis", "global": "global",
