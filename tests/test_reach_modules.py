@@ -268,3 +268,13 @@ def test_params_in_generic_mode_says_there_is_no_list(module_1161, config_home, 
             "parameters; read one by number") in r.stderr
     assert "matches ''" not in r.stderr
     assert [g[0] for g in module_1161.got] == [136, 10]  # nothing read for it
+
+
+def test_a_key_outside_any_table_is_not_called_a_table():
+    from tmclsh.modules.schema import ModuleFileError, parse
+
+    with pytest.raises(ModuleFileError, match=r"^mine.toml:1: name = \.\.\. outside any table "
+                                              r"\(module keys go under \[module\]\)"):
+        parse('name = "TMCM-1161"\n', "mine.toml")
+    with pytest.raises(ModuleFileError, match=r"^mine.toml:1: unknown table \[foo\]"):
+        parse("[foo]\nx = 1\n", "mine.toml")

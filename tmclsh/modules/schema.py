@@ -149,7 +149,10 @@ def check(data: dict, lines: _Lines, path: str) -> None:
 
     unknown = sorted(set(data) - {"module", *TABLES})
     if unknown:
-        raise fail(unknown[0], 0, None, f"unknown table [{unknown[0]}]; a module file has "
+        first = unknown[0]
+        what = f"unknown table [{first}]" if isinstance(data[first], (dict, list)) \
+            else f"{first} = ... outside any table (module keys go under [module])"
+        raise fail(first, 0, None, f"{what}; a module file has "
                    "[module], [[axis]], [[global]] and [[io]]")
     if not isinstance(data.get("module"), dict):
         raise fail("", 0, None, "no [module] table (name, motors, program_memory, "
