@@ -82,9 +82,9 @@ complete -c tmclsh -n '__fish_seen_subcommand_from disasm' -F
 
 # tmclsh sim
 complete -c tmclsh -n '__fish_seen_subcommand_from sim' -s h -l help -d 'show this help message and exit'
-complete -c tmclsh -n '__fish_seen_subcommand_from sim' -s m -l module -x -a '(__tmclsh_modules)' -d ''
+complete -c tmclsh -n '__fish_seen_subcommand_from sim' -s m -l module -x -a '(__tmclsh_modules)' -d 'module to simulate (default TMCM-1311; \'tmclsh modules\' lists them)'
 complete -c tmclsh -n '__fish_seen_subcommand_from sim' -l address -x -d 'module address (default 1)'
-complete -c tmclsh -n '__fish_seen_subcommand_from sim' -l host-address -x -d ''
+complete -c tmclsh -n '__fish_seen_subcommand_from sim' -l host-address -x -d 'address its replies are sent to (default 2)'
 complete -c tmclsh -n '__fish_seen_subcommand_from sim' -l pty -d 'serve on a pseudo-terminal (path on the first line; Linux and macOS only: use --tcp on Windows)'
 complete -c tmclsh -n '__fish_seen_subcommand_from sim' -l tcp -x -d 'serve on TCP, for socket:// URLs'
 complete -c tmclsh -n '__fish_seen_subcommand_from sim' -l can -x -a '(__tmclsh_can)' -d 'serve on a python-can bus, IFACE:CHANNEL as the client reads it (socketcan:vcan0 to test on Linux; python-can\'s virtual interface cannot be reached from another process)'

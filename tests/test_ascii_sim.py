@@ -313,3 +313,51 @@ def test_cli_ascii_on_a_module_in_ascii_mode(make_pty_sim, run_tmclsh):
     assert sim.ascii_active  # found in ASCII mode: left there
     res = run_tmclsh("--port", path, "--ascii", "-c", "135 0, 0, 0")
     assert res.returncode != 0 and ".mode binary" in res.stderr
+
+
+class _LosesProbes(SimTransport):
+    """The link loses the first ``n`` ASCII mode probes sent after a 139 (a bad RS485 line):
+    the module enters ASCII mode but tmclsh does not hear it say so."""
+
+    def __init__(self, sim: Simulator, n: int):
+        super().__init__("TMCM-1311", 1, simulator=sim)
+        self.lose, self.after_139 = n, False
+
+    def write(self, data: bytes) -> None:
+        if len(data) == 9 and data[1] == Control.ENTER_ASCII:
+            self.after_139 = True
+        elif self.after_139 and self.lose and b"GGP" in data:
+            self.lose -= 1
+            return
+        super().write(data)
+
+
+def _lossy(n: int) -> tuple[Simulator, Client]:
+    sim = Simulator("TMCM-1311", 1)
+    client = Client(_LosesProbes(sim, n), module="TMCM-1311", timeout=TIMEOUT, retries=0)
+    return sim, client
+
+
+def test_attach_asks_again_when_the_probe_after_139_is_lost():
+    sim, client = _lossy(1)
+    try:
+        link = AsciiLink.attach(client)
+        assert sim.ascii_active and client.ascii_link is link
+        assert client.request(Request(1, GAP, 1, 0, 0)).status == Status.OK
+    finally:
+        client.close()
+        sim.close()
+
+
+def test_attach_that_fails_after_139_leaves_the_module_in_binary_mode():
+    """The module did enter ASCII mode; nothing proves it. It must not stay there while the
+    shell goes on in binary frames (every later command would go unanswered)."""
+    sim, client = _lossy(99)
+    try:
+        with pytest.raises(Exception, match="did not answer in ASCII mode"):
+            AsciiLink.attach(client)
+        assert client.ascii_link is None and not sim.ascii_active
+        assert client.request(Request(1, GAP, 1, 0, 0)).status == Status.OK
+    finally:
+        client.close()
+        sim.close()

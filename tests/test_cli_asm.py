@@ -80,6 +80,14 @@ def test_error_has_location_and_no_output_file(tmp_path: Path) -> None:
     assert not list(tmp_path.glob("*.tmp"))
 
 
+def test_missing_source_names_the_file_once(tmp_path: Path) -> None:
+    """Was "x.tmc: cannot read x.tmc: no such file" (also in .upload)."""
+    src = tmp_path / "pingpong.tmc"
+    r = tmclsh("asm", str(src))
+    assert r.returncode == 1
+    assert r.stderr.strip() == f"tmclsh: cannot read {src}: no such file"
+
+
 def test_module_option_checks_against_that_module(tmp_path: Path) -> None:
     src = tmp_path / "three.tmc"
     src.write_text("MVP ABS, 2, 1000\n")  # motor 2 exists only on the TMCM-351

@@ -378,7 +378,8 @@ def test_save_write_failure_is_one_line(pty_client, tmp_path):
     sim, client = pty_client("TMCM-1640")
     s = shell(client)
     missing = tmp_path / "no" / "such" / "b.tmcl"
-    with pytest.raises(CloneError, match=rf"cannot write {re.escape(str(missing))}: No such file"):
+    with pytest.raises(TmclError, match=rf"cannot write {re.escape(str(missing))}: no such "
+                                        rf"folder {re.escape(str(missing.parent))}$"):
         s.run_line(f".save {missing}")
     # an existing backup is not half-overwritten when the save fails part-way
     good = tmp_path / "b.tmcl"
@@ -390,6 +391,32 @@ def test_save_write_failure_is_one_line(pty_client, tmp_path):
         s.run_line(f".save {good}")
     assert good.read_text(encoding="utf-8") == "old\n"
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+def test_save_to_a_pipe_writes_into_it_and_leaves_it_a_pipe(pty_client, tmp_path):
+    """A device or FIFO is written as it is: renaming a temporary file over it replaced the
+    device node itself (``.save /dev/full`` as root left a regular file at /dev/full)."""
+    _, client = pty_client("TMCM-1640")
+    fifo = tmp_path / "backup.fifo"
+    os.mkfifo(fifo)
+    got: list[bytes] = []
+    reader = threading.Thread(target=lambda: got.append(fifo.read_bytes()), daemon=True)
+    reader.start()
+    shell(client).run_line(f".save {fifo}")
+    reader.join(5)
+    assert fifo.is_fifo()
+    assert got and got[0].startswith(b"// tmclsh configuration backup of a TMCM-1640")
+    assert [p.name for p in tmp_path.iterdir()] == ["backup.fifo"]  # no temporary left
+
+
+def test_diff_of_a_file_without_end_is_refused_unread(pty_client, tmp_path):
+    _, client = pty_client("TMCM-1640")
+    huge = tmp_path / "huge.tmcl"
+    with open(huge, "wb") as fh:
+        fh.truncate(17 * 1024 * 1024)  # sparse: no disk used
+    for line in (f".diff {huge}", f".restore {huge} --yes"):
+        with pytest.raises(CloneError, match=r"huge.tmcl: backup larger than 16 MiB; not read"):
+            shell(client, yes=True).run_line(line)
 
 
 def test_save_program(pty_client, tmp_path, capsys):

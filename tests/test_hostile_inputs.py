@@ -61,7 +61,7 @@ LINES = [
     (".help [/]", 1, "'[/]'"),
     # files that cannot be written
     (".record /dev/full\nGAP 1, 0", 1, "cannot write /dev/full: No space left on device"),
-    (".record /nonexistent/dir/x.tmcl", 1, "cannot write /nonexistent/dir/x.tmcl: No such file"),
+    (".record /nonexistent/dir/x.tmcl", 1, "cannot write /nonexistent/dir/x.tmcl: no such folder /nonexistent/dir"),
     (".watch GAP 1, 0 --count 1 --csv /dev/full", 1, "cannot write /dev/full"),
     (".watch GAP 1, 0 --count 1 --csv /nonexistent/x.csv", 1, "cannot write /nonexistent/x.csv"),
     (".echo hi > /dev/full", 1, "cannot write /dev/full"),

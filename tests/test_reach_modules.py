@@ -228,3 +228,53 @@ def test_unknown_command_in_generic_mode_points_to_numbers(module_1161, config_h
     r = run_tmclsh("--port", module_1161.url, "-c", "XYZZY 1, 2", env=_env(config_home))
     assert r.returncode == 1 and "by number" in r.stderr
     assert module_1161.commands() == [136, 10]  # 136 and GGP 129 at connect; nothing for the line
+
+
+def test_forced_generic_on_a_documented_module_does_not_say_it_has_no_data(config_home,
+                                                                           run_tmclsh):
+    """`-m generic` on a TMCM-1311 (a module with data): the notice and the refusal of a name
+    say that generic mode was chosen, and how to get the names back, not that the data is
+    missing."""
+    m = TcpModule(version="1311V111")
+    try:
+        r = run_tmclsh("--port", m.url, "-m", "generic", "-c", "GAP ActualPosition, 0",
+                       env=_env(config_home))
+    finally:
+        m.close()
+    assert r.returncode == 1, r.stderr
+    assert "no parameter data" not in r.stderr and "has no parameter data" not in r.stderr
+    assert r.stderr.count("generic mode (-m generic)") == 2, r.stderr
+    assert "leave -m generic out to use the TMCM-1311's parameter data" in r.stderr
+    assert [g[0] for g in m.got] == [136, 10]  # the name was refused before anything was sent
+
+
+def test_a_module_file_without_end_is_refused_unread(config_home, tmp_path, run_tmclsh):
+    """`modules check /dev/zero` (or --module-file) grew until a MemoryError traceback."""
+    huge = tmp_path / "huge.toml"
+    with open(huge, "wb") as fh:
+        fh.truncate(17 * 1024 * 1024)  # sparse: no disk used
+    r = run_tmclsh("modules", "check", str(huge), env=_env(config_home))
+    assert r.returncode == 1 and "Traceback" not in r.stderr
+    assert r.stderr.strip() == f"tmclsh: {huge}: module file larger than 16 MiB; not read"
+    r = run_tmclsh("modules", "check", str(tmp_path / "none.toml"), env=_env(config_home))
+    assert r.stderr.strip() == f"tmclsh: cannot read {tmp_path / 'none.toml'}: no such file"
+
+
+def test_params_in_generic_mode_says_there_is_no_list(module_1161, config_home, run_tmclsh):
+    """Was "no axis or global parameter of the TMCM-1161 matches ''"."""
+    r = run_tmclsh("--port", module_1161.url, "-c", ".params", env=_env(config_home))
+    assert r.returncode == 1
+    assert ("error: TMCM-1161 (no parameter data: numbers only): there is no list of its "
+            "parameters; read one by number") in r.stderr
+    assert "matches ''" not in r.stderr
+    assert [g[0] for g in module_1161.got] == [136, 10]  # nothing read for it
+
+
+def test_a_key_outside_any_table_is_not_called_a_table():
+    from tmclsh.modules.schema import ModuleFileError, parse
+
+    with pytest.raises(ModuleFileError, match=r"^mine.toml:1: name = \.\.\. outside any table "
+                                              r"\(module keys go under \[module\]\)"):
+        parse('name = "TMCM-1161"\n', "mine.toml")
+    with pytest.raises(ModuleFileError, match=r"^mine.toml:1: unknown table \[foo\]"):
+        parse("[foo]\nx = 1\n", "mine.toml")

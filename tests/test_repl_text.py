@@ -209,6 +209,19 @@ def test_watch_error_caused_by_a_semicolon_shows_how_to_split(run_tmclsh):
     assert "  .watch GAP 1, 0\n" in out.stderr and "  MST 0" in out.stderr
 
 
+@pytest.mark.parametrize("options", ["--count 2", "--count 2 --csv {csv}"])
+def test_semicolon_after_the_watch_options_shows_how_to_split(run_tmclsh, tmp_path, options):
+    """Was "--count: must be a whole number ..., got '2;'", or a CSV file named 'x.csv;'
+    and 'GAP 3, 0' taken into the watched expression."""
+    csv = tmp_path / "x.csv"
+    opts = options.format(csv=csv)
+    out = run_tmclsh("--sim", "TMCM-1311", "-c", f".watch pos=GAP 1, 0 {opts}; GAP 3, 0")
+    assert out.returncode == 1
+    assert "'GAP 3, 0' after ';' follows the watch's options" in out.stderr
+    assert f"  .watch pos=GAP 1, 0 {opts}\n  GAP 3, 0" in out.stderr
+    assert out.stdout == "" and [p for p in tmp_path.iterdir() if p.name != "cache"] == []  # nothing watched or written
+
+
 @pytest.mark.parametrize("how", ["-c", "-f"])
 def test_hash_comment_ends_a_line_like_slashes(run_tmclsh, tmp_path, how):
     text = "GAP 1, 0 # where it is; not a command\n.let a = 3 # three\n.echo ${a} // done\n" \

@@ -95,3 +95,18 @@ def test_dumb_terminal_and_no_color(terminal):
     screen = t.wait("MaxPositioningSpeed = ")
     assert "GAP MaxPositioningSpeed, 0" in screen
     t.quit()
+
+
+def test_a_second_tab_keeps_the_only_completion(term):
+    """SAP offers only writable parameters: 'SAP MaxPos' has one match. A second Tab (as in
+    bash) put back 'SAP MaxPos'; it must keep the completion and close the menu."""
+    term.start("--sim")
+    term.wait("trace off")
+    term.type("SAP MaxPos")
+    term.keys("Tab")
+    term.wait("TMCM-1311:1> SAP MaxPositioningSpeed")
+    term.keys("Tab")  # the second
+    term.type(", 0, 1000")
+    term.keys("Enter")
+    screen = term.wait("ok: MaxPositioningSpeed set to 1000 pps")
+    assert "TMCM-1311:1> SAP MaxPositioningSpeed, 0, 1000" in screen

@@ -317,8 +317,11 @@ def test_bad_input_is_one_clear_error_and_nothing_is_sent(session, line, message
 def test_eeprom_writes_are_refused_in_scripts_without_yes(session):
     frames = Frames(session.client)
     for line in ("STAP 4, 0", "STGP SerialAddress, 0", "SGP 66, 0, 1", "137 0, 0, 1234"):
-        with pytest.raises(Abort, match="--yes"):
+        with pytest.raises(Abort, match="--yes") as info:
             session.run_line(line)
+        # said as what was not done: no question that nobody can answer
+        assert str(info.value).startswith("not done without confirmation: ")
+        assert "?" not in str(info.value) and "continue" not in str(info.value)
     assert frames.tx == []
 
 
@@ -344,3 +347,50 @@ def test_module_refusal_is_shown_with_status_in_words(session, capsys):
         session.run_line("6 250, 0, 0")  # raw GAP of a parameter the module does not have
     out = capsys.readouterr().out
     assert "wrong type" in out or "invalid" in out
+
+
+# -- mistyped shell commands -------------------------------------------------------------
+
+@pytest.mark.parametrize("typed, near", [
+    (".halp", ".help"), (".wach", ".watch"), (".stpo", ".stop"), (".PARMS", ".params")])
+def test_mistyped_shell_command_names_the_close_ones_and_sends_nothing(session, typed, near):
+    frames = Frames(session.client)
+    with pytest.raises(ValidationError, match=rf"unknown shell command '{typed}'; did you mean "
+                                              rf"[^?]*{near}\b"):
+        session.run_line(typed)
+    assert frames.tx == []
+
+
+def test_shell_command_far_from_any_gets_no_guess(session):
+    with pytest.raises(ValidationError) as err:
+        session.run_line(".xyzzy")
+    assert "did you mean" not in str(err.value) and ".help" in str(err.value)
+
+
+@pytest.mark.parametrize("line", [".param nonsense", ".params nonsense", ".params axis nonsense"])
+def test_a_near_miss_is_offered_not_shown_as_the_match(session, line):
+    """difflib finds Vsense for 'nonsense'; a table titled "matching 'nonsense'" or Vsense's
+    help as the answer would mislead. Nothing is read from the module either."""
+    frames = Frames(session.client)
+    with pytest.raises(ValidationError, match=r"no parameter matches 'nonsense' on the "
+                                              r"TMCM-1311; did you mean Vsense\?"):
+        session.run_line(line)
+    assert frames.tx == []
+
+
+def test_params_filter_that_is_part_of_names_still_lists_them(session, capsys):
+    session.run_line(".params axis speed")
+    out = capsys.readouterr().out
+    assert "matching 'speed'" in out and "MaxPositioningSpeed" in out and "Vsense" not in out
+
+
+def test_help_for_a_number_nothing_answers_to_is_an_error():
+    """`help 140` on the TMCM-1640 (no AP 140, no command 140) printed a note and passed."""
+    s = make_session("TMCM-1640")
+    try:
+        with pytest.raises(ValidationError, match=r"^the TMCM-1640 has no parameter 140, and no "
+                                                  r"command has that number"):
+            s.run_line("help 140")
+        s.run_line("help 136")  # no parameter, but a command: explained, not an error
+    finally:
+        s.client.close()

@@ -52,6 +52,17 @@ def test_file_lines_skip_blanks_and_comments(tmp_path):
         tt.file_lines(str(tmp_path / "missing.tmcl"))
 
 
+def test_file_to_send_is_read_bounded(tmp_path):
+    """Ctrl-T u with /dev/zero (or a huge file) grew the terminal until the machine gave out."""
+    huge = tmp_path / "huge.txt"
+    with open(huge, "wb") as fh:
+        fh.truncate(17 * 1024 * 1024)  # sparse: no disk used
+    with pytest.raises(ValidationError, match=r"huge.txt: file larger than 16 MiB; not read"):
+        tt.file_lines(str(huge))
+    with pytest.raises(ValidationError, match="it is a directory"):
+        tt.file_lines(str(tmp_path))
+
+
 @pytest.mark.parametrize("line, address, expected", [
     (b"ABIN", 1, True), (b"abin", 1, True), (b"A BIN", 1, True), (b"BBIN", 2, True),
     (b"BBIN", 1, False),  # another module's BIN

@@ -560,12 +560,22 @@ class AsciiLink:
                         raise ValidationError(f"the {client.module.name} has no ASCII mode")  # type: ignore[union-attr]
                     sent_139 = True  # from here the module may be in ASCII mode
                     cls._enter(client)
-                    try:
-                        probe = probe_ascii(client, timeout)
-                    except TmclTimeoutError:
-                        probe = Probe(Mode.BINARY)
+                    probe = None
+                    for _ in range(2):  # a probe or its answer lost on a bad line: ask again
+                        try:
+                            probe = probe_ascii(client, timeout)
+                            break
+                        except TmclTimeoutError:
+                            continue
+                    if probe is None:
+                        # silence proves nothing: the module may be in ASCII mode, and the
+                        # shell goes on in binary frames, so the except below sends BIN
+                        raise TransportError(
+                            f"the module at address {client.address} did not answer in ASCII "
+                            "mode after command 139 (enter ASCII mode); sent BIN so that it "
+                            "stays in binary mode")
                     if probe.mode != Mode.ASCII:
-                        sent_139 = False  # it did not take: nothing to undo
+                        sent_139 = False  # binary frames came back: it did not take
                         client.resync_next()
                         raise TransportError(f"the module at address {client.address} did not "
                                              "enter ASCII mode after command 139")

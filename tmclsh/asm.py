@@ -851,7 +851,9 @@ def assemble_file(path: str | Path, module: Module, origin: int = 0) -> Program:
     try:
         text = decode(read_bytes(p, MAX_SOURCE, "program"), str(p), "program")
     except FileError as exc:
-        raise AsmError(str(exc), file=str(p)) from None
+        err = AsmError(str(exc))  # the message names the file already: not twice
+        err.file = str(p)
+        raise err from None
     if text.count("\n") > MAX_LINES:
         raise AsmError(f"{p}: program longer than {MAX_LINES:,} lines; not read")
     return Assembler(module, origin).assemble(text, str(p), p.parent)

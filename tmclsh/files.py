@@ -174,6 +174,9 @@ class AtomicWriter:
             raise self._error(exc) from None
 
     def _error(self, exc: BaseException) -> FileError:
+        folder = self.path.parent
+        if isinstance(exc, FileNotFoundError) and not folder.exists():
+            return FileError(f"cannot write {self.path}: no such folder {folder}")
         return FileError(f"cannot write {self.path}: {_reason(exc)}")
 
     def _remove(self) -> None:

@@ -154,9 +154,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"address of the first instruction (default 0; {_range('origin')})")
 
     s = sub.add_parser("sim", help="serve a simulated module on a pty, TCP or CAN")
-    s.add_argument("-m", "--module", metavar="NAME", default="TMCM-1311")
+    s.add_argument("-m", "--module", metavar="NAME", default="TMCM-1311",
+                   help="module to simulate (default TMCM-1311; 'tmclsh modules' lists them)")
     s.add_argument("--address", type=_address, default=1, metavar="N", help="module address (default 1)")
-    s.add_argument("--host-address", type=_address, default=2, metavar="N")
+    s.add_argument("--host-address", type=_address, default=2, metavar="N",
+                   help="address its replies are sent to (default 2)")
     how = s.add_mutually_exclusive_group(required=True)
     how.add_argument("--pty", action="store_true",
                      help="serve on a pseudo-terminal (path on the first line; Linux and "

@@ -312,11 +312,22 @@ class GenericModule(Module):
         use_commands_of(self.name, GENERIC)
 
     @property
+    def forced(self) -> bool:
+        """``-m generic`` on a module tmclsh has data for: the data is there, just not used."""
+        return self.name.endswith(" (generic)")
+
+    @property
     def label(self) -> str:
+        if self.forced:
+            return f"{self.type_name} (generic mode: numbers only)"
         return f"{self.type_name} (no parameter data: numbers only)"
 
-    NOTICE = ("no parameter data for this module: commands go by number; ranges, read-only "
-              "parameters and motor numbers are not checked")
+    @property
+    def NOTICE(self) -> str:  # noqa: N802  (read once at the start of a session)
+        why = ("generic mode (-m generic), its parameter data not used" if self.forced
+               else "no parameter data for this module")
+        return (f"{why}: commands go by number; ranges, read-only parameters and motor numbers "
+                "are not checked")
 
     def check_motor(self, motor: int) -> None:
         if not 0 <= motor <= 255:
@@ -339,9 +350,15 @@ class GenericModule(Module):
                 raise ValidationError(f"{key} does not fit the type byte (0..255)")
             return Parameter(kind, key, f"{'AP' if kind == 'axis' else 'GP'} {key}",
                              "", "", "RWE", bank=bank or 0)
+        example = 'GAP 1, 0' if kind == 'axis' else 'GGP 66, 0'
+        if self.forced:
+            raise ValidationError(
+                f"generic mode (-m generic) knows no parameter names, so {key!r} means nothing "
+                f"here: give the {kind} parameter by number (e.g. {example}), or leave "
+                f"-m generic out to use the {self.type_name}'s parameter data")
         raise ValidationError(
             f"{self.type_name} has no parameter data, so {key!r} means nothing here: give the "
-            f"{kind} parameter by number (e.g. {'GAP 1, 0' if kind == 'axis' else 'GGP 66, 0'}),"
+            f"{kind} parameter by number (e.g. {example}),"
             " or describe the module in a module file (--module-file)")
 
 

@@ -149,7 +149,10 @@ def check(data: dict, lines: _Lines, path: str) -> None:
 
     unknown = sorted(set(data) - {"module", *TABLES})
     if unknown:
-        raise fail(unknown[0], 0, None, f"unknown table [{unknown[0]}]; a module file has "
+        first = unknown[0]
+        what = f"unknown table [{first}]" if isinstance(data[first], (dict, list)) \
+            else f"{first} = ... outside any table (module keys go under [module])"
+        raise fail(first, 0, None, f"{what}; a module file has "
                    "[module], [[axis]], [[global]] and [[io]]")
     if not isinstance(data.get("module"), dict):
         raise fail("", 0, None, "no [module] table (name, motors, program_memory, "
@@ -215,10 +218,12 @@ def _entry(entry: object, keys: dict[str, tuple[str, bool]], table: str, index: 
 
 def read(path: Path) -> dict:
     """Read and check one module file (ModuleFileError for any problem, with file and line)."""
+    from ..files import FileError, read_bytes
+
     try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ModuleFileError(f"{path}: cannot read: {exc.strerror or exc}") from None
+        text = read_bytes(path, what="module file").decode("utf-8")  # bounded: /dev/zero
+    except FileError as exc:
+        raise ModuleFileError(str(exc)) from None
     except UnicodeDecodeError:
         raise ModuleFileError(f"{path}:1: not a text file (UTF-8)") from None
     return parse(text, str(path))

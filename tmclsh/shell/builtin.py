@@ -109,7 +109,9 @@ def cmd_help(session: Session, arg: str) -> None:
     if cmd is not None:
         return _help_command(session, cmd)
     if word.startswith("."):
-        raise ValidationError(f"unknown shell command {word!r}; .help lists them")
+        from .session import unknown_command
+
+        raise ValidationError(unknown_command(word))
     spec = isa.by_mnemonic(word)
     if spec is not None:
         return _help_instruction(session, spec, source=source)
@@ -338,15 +340,19 @@ def _field_help(spec: isa.InstructionSpec, fld: str, mod: Module | None) -> str:
 def _help_number(session: Session, number: int, source: bool = False) -> None:
     mod = session.module
     found = _params_by_number(mod, number)
+    spec = isa.by_opcode(number)
+    ctl = isa.control(number)
     if found:
         _show_params(session, found, numbered=number, source=source)
     elif mod.generic:
-        session.out.info(f"no parameter data for the {mod.type_name}: GAP {number}, 0 or "
-                         f"GGP {number}, 0 reads it; a module file (--module-file) names it")
+        session.out.info(f"{mod.label}: GAP {number}, 0 or GGP {number}, 0 reads it; "
+                         + ("without -m generic, help names it" if getattr(mod, "forced", False)
+                            else "a module file (--module-file) names it"))
+    elif spec is None and ctl is None:  # nothing at all answers to it: an error, as a name is
+        raise ValidationError(f"the {mod.name} has no parameter {number}, and no command has "
+                              "that number (.params lists the parameters)")
     else:
         session.out.info(f"the {mod.name} has no parameter {number}")
-    spec = isa.by_opcode(number)
-    ctl = isa.control(number)
     if not session.out.json:
         if spec is not None:
             session.out.info(f"(command {number} is {spec.mnemonic}: help {spec.mnemonic})")
@@ -405,11 +411,11 @@ def cmd_param(session: Session, arg: str, from_help: bool = False) -> None:
     exact = [p for p in found if p.name.lower() == query.lower()]
     if exact:
         found = exact
-    if from_help and found and not any(_contains(p, query) for p in found):
-        # `help foo` must not answer with MaxFollowingError (f..o..o) as if that were it
-        names = ", ".join(p.name for p in found[:3])
-        raise ValidationError(f"no help topic or parameter matches {query!r} on the "
-                              f"{mod.name}; did you mean {names}? (.help lists the commands)")
+    if found and (not any(_contains(p, query) for p in found) if from_help
+                  else _near_misses_only(found, query)):
+        # `help foo` or `.param foo` must not answer with MaxFollowingError (f..o..o) as if
+        # that were it
+        raise _only_guesses(mod, query, found, from_help)
     if not found:
         what = "help topic or parameter" if from_help else "parameter"
         raise ValidationError(f"no {what} matches {query!r} on the {mod.name}"
@@ -420,6 +426,25 @@ def cmd_param(session: Session, arg: str, from_help: bool = False) -> None:
     _param_table(session, found, title=f"{len(found)} parameters match {query!r}", read=False)
     if not session.out.json:
         session.out.info("(.param NAME for one of them)")
+
+
+def _only_guesses(mod: Module, query: str, found: list[Parameter],
+                  from_help: bool) -> ValidationError:
+    """No parameter has ``query`` in its name, only near misses: say so and name them."""
+    names = ", ".join(p.name for p in found[:3])
+    if not re.sub(r"[^a-z0-9]", "", query.lower()):  # `help [/]`: everything is as near
+        names = ""
+    what, where = (("help topic or parameter", ".help lists the commands") if from_help
+                   else ("parameter", ".params lists them all"))
+    guess = f"did you mean {names}? ({where})" if names else where
+    return ValidationError(f"no {what} matches {query!r} on the {mod.name}; {guess}")
+
+
+def _near_misses_only(found: list[Parameter], query: str) -> bool:
+    """Whether the search found only near misses (a query of no letters or digits, such as
+    ``[/]``, matches everything, as an empty one does)."""
+    return bool(re.sub(r"[^a-z0-9]", "", query.lower())) and not any(
+        _contains(p, query) for p in found)
 
 
 def _contains(p: Parameter, query: str) -> bool:
@@ -606,6 +631,9 @@ def _param_json(p: Parameter, current: list[tuple[str, str, int | None]] | None 
 @paged
 def cmd_params(session: Session, arg: str) -> None:
     mod = session.module
+    if mod.generic:  # no list of parameters to go through
+        raise ValidationError(f"{mod.label}: there is no list of its parameters; read one by "
+                              "number (GAP 4, 0 or GGP 66, 0)")
     words = arg.split()
     kinds = ["axis", "global"]
     kind_words = {"axis": "axis", "ax": "axis", "ap": "axis", "global": "global",
@@ -614,6 +642,10 @@ def cmd_params(session: Session, arg: str) -> None:
         kinds = [kind_words[words[0].lower()]]
         words = words[1:]
     query = " ".join(words)
+    if query and not query.isdigit():
+        found = [p for kind in kinds for p in mod.search(query, kind)]
+        if found and _near_misses_only(found, query):
+            raise _only_guesses(mod, query, found, False)  # not a table titled "matching"
     shown = 0
     for kind in kinds:
         pool = mod.axis_params if kind == "axis" else mod.global_params

@@ -17,7 +17,6 @@ from __future__ import annotations
 import os
 import re
 import shlex
-import tempfile
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -200,25 +199,12 @@ class _Progress:
 
 def write_atomically(path: Path, text: str) -> None:
     """Write ``text`` to a temporary file beside ``path`` and rename it over ``path``, so a
-    failed or interrupted save never leaves half a backup in place of a whole one."""
-    tmp = None
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp",
-                                   dir=str(path.parent) if str(path.parent) else ".")
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-        tmp = None
-    except OSError as exc:
-        raise CloneError(f"cannot write {path}: {exc.strerror or exc}") from None
-    finally:
-        if tmp is not None:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
+    failed or interrupted save never leaves half a backup in place of a whole one. A device
+    or pipe (``/dev/null``) is written as it is, never replaced by a file."""
+    from .. import files
+
+    with files.atomic_writer(path, newline="\n") as fh:
+        fh.write(text)
 
 
 def _firmware(session: Session) -> str:
@@ -400,14 +386,14 @@ def read_backup(session: Session, path: Path, *, force: bool) -> Backup:
     """Parse and check every SAP/SGP line of ``path`` against the live module (nothing is
     sent). A line the module's data refuses is an error at FILE:LINE."""
     live = session.module
+    from .. import files
+
     try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise CloneError(f"cannot read {path}: no such file") from None
+        text = files.read_bytes(path, what="backup").decode("utf-8")  # bounded: /dev/zero
+    except files.FileError as exc:
+        raise CloneError(str(exc)) from None
     except UnicodeDecodeError:
         raise CloneError(f"cannot read {path}: not a text file (UTF-8)") from None
-    except OSError as exc:
-        raise CloneError(f"cannot read {path}: {exc.strerror or exc}") from None
     lines = text.splitlines()
     head = _header(lines)
     backup = Backup(path, head.get("module"), head.get("program"))

@@ -53,7 +53,14 @@ def tmcl_bindings(session: Session) -> KeyBindings:
 
     @kb.add("tab", filter=has_completions)
     def _next(event) -> None:
-        event.current_buffer.complete_next()
+        buf = event.current_buffer
+        state = buf.complete_state
+        if state is not None and len(state.completions) == 1 and state.complete_index == 0:
+            # the only match is in: another Tab (a bash habit) keeps it, where cycling on
+            # would put back the text as typed
+            buf.complete_state = None
+            return
+        buf.complete_next()
 
     @kb.add("escape", filter=has_completions, eager=True)
     def _cancel(event) -> None:

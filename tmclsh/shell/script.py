@@ -36,7 +36,7 @@ from . import commands, expr
 from .commands import command
 from .lines import split_line
 from .lines import strip_comment as _strip_comment
-from .session import QuitShell, owns_line
+from .session import QuitShell, owns_line, unknown_command
 
 if TYPE_CHECKING:
     from .session import Session
@@ -250,7 +250,7 @@ class Parser:
             return self.include(number, text, args, len(open_))
         cmd = commands.find(word)
         if cmd is None:
-            raise self.fail(number, f"unknown shell command {word!r}; type .help for the list")
+            raise self.fail(number, unknown_command(word))
         cmd.load()  # its feature module, which may add its check to CHECKS (.watch does)
         check = CHECKS.get(cmd.name)
         if check is not None:

@@ -7,6 +7,7 @@ checked against the module's database before anything is sent.
 
 from __future__ import annotations
 
+import difflib
 import re
 import sys
 import time
@@ -24,6 +25,21 @@ from .render import Output
 
 _VAR = re.compile(r"\$\{([^}]*)\}")
 
+
+
+def _as_statement(question: str) -> str:
+    """``store X in the EEPROM?`` -> ``store X in the EEPROM``: where nobody can answer, the
+    question is said as what was not done."""
+    return question.strip().removesuffix("?").removesuffix("; continue").strip()
+
+
+def unknown_command(word: str) -> str:
+    """The error for a mistyped dot-command, naming the commands it is close to (as a
+    mistyped mnemonic gets)."""
+    names = [name for cmd in commands.all_commands() for name in cmd.names()]
+    close = difflib.get_close_matches(word.lower(), names, n=3, cutoff=0.6)
+    near = f"did you mean {', '.join(close)}? " if close else ""
+    return f"unknown shell command {word!r}; {near}type .help for the list"
 
 class Abort(TmclError):
     """The user declined a confirmation; nothing was sent."""
@@ -134,7 +150,8 @@ class Session:
             if self.ask(question):
                 return
             raise Abort("cancelled; nothing was sent")
-        raise Abort(f"{question} -- refused without confirmation; pass --yes to allow it")
+        raise Abort(f"not done without confirmation: {_as_statement(question)}; pass --yes "
+                    "to allow it")
 
     # -- variables ----------------------------------------------------------------------
     def expand(self, line: str) -> str:
@@ -223,7 +240,7 @@ class Session:
         if word.startswith(".") or _is_bare_command(text):
             cmd = commands.find(word)
             if cmd is None:
-                raise ValidationError(f"unknown shell command {word!r}; type .help for the list")
+                raise ValidationError(unknown_command(word))
             cmd.handler(self, text[len(word):].strip())
             self._record(text, "")
             return None
@@ -259,7 +276,7 @@ class Session:
             self.confirm(f"store {what} permanently in the module's EEPROM?")
         elif spec is not None and spec.mnemonic == "SGP" and p is not None and p.storable \
                 and p.bank == 0:
-            self.confirm(f"SGP {p.name} is written to the module's EEPROM; continue?")
+            self.confirm(f"SGP {p.name} writes the module's EEPROM; continue?")
         elif spec is None and ins.opcode == 137:
             self.confirm("restore FACTORY DEFAULTS (all settings and the stored program are lost)?")
 

@@ -175,12 +175,14 @@ def file_lines(name: str) -> list[str]:
     path = Path(name.strip()).expanduser()
     if not name.strip():
         raise ValidationError("no file name given; nothing sent")
+    from .. import files
+
+    if not path.exists():
+        raise ValidationError(f"no such file: {path}")
     try:
-        text = path.read_text(encoding="utf-8", errors="replace")
-    except FileNotFoundError:
-        raise ValidationError(f"no such file: {path}") from None
-    except OSError as exc:
-        raise ValidationError(f"cannot read {path}: {exc.strerror or exc}") from None
+        text = files.read_bytes(path, what="file").decode("utf-8", errors="replace")  # bounded
+    except files.FileError as exc:
+        raise ValidationError(str(exc)) from None
     out = []
     for line in text.splitlines():
         stripped = line.strip()

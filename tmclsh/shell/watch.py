@@ -410,6 +410,7 @@ def parse_args(session: Session, args: str, *, names: bool = True):
     ``names=False`` (a script's check before it runs) skips checking that ``--until`` names
     only watched values or variables: variables set earlier in the script do not exist yet.
     """
+    _refuse_line_after_options(args)
     rest, opts = expr.split_options(args, WATCH_OPTIONS)
     interval = expr.option_float(opts, "interval", DEFAULT_INTERVAL, limit="watch_interval")
     count = expr.option_int(opts, "count", None, minimum=1)
@@ -426,6 +427,31 @@ def parse_args(session: Session, args: str, *, names: bool = True):
         expr.validate(session, until)
     csv_path = Path(str(opts["csv"])).expanduser() if "csv" in opts else None
     return items, interval, count, until, csv_path
+
+
+def _refuse_line_after_options(args: str) -> None:
+    """A ';' after the options cannot separate expressions (they come first): it was meant
+    to start the next command, which .watch would otherwise take into an option's value
+    (``--count 2;``) or its expressions."""
+    import re
+
+    first = re.search(r"(?:^|\s)--(?:" + "|".join(WATCH_OPTIONS) + r")\b", args)
+    if first is None:
+        return
+    quote = None
+    for i in range(first.start(), len(args)):
+        ch = args[i]
+        if quote:
+            quote = None if ch == quote else quote
+        elif ch in "\"'":
+            quote = ch
+        elif ch == ";":
+            before, after = args[:i].strip(), args[i + 1:].strip()
+            raise ValidationError(
+                f"{after!r} after ';' follows the watch's options; .watch takes the rest of "
+                f"its line, ';' separating its expressions (before the options). To run "
+                f"{after!r} after the watch, put it on a line of its own:\n  .watch {before}"
+                f"\n  {after}")
 
 
 def _check(session: Session, args: str) -> None:
