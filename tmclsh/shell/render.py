@@ -24,6 +24,7 @@ import json
 import os
 import re
 import sys
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from functools import wraps
@@ -101,16 +102,25 @@ class Styled:
 _CONTROL = dict.fromkeys((7, 8, 11, 12, 13))  # bell, backspace, vertical tab, form feed, CR
 
 
-def _write_plain(stream, text: str) -> None:
-    """A line as the trimmed rich console writes it to a pipe: trailing blanks removed, and
-    flushed at once (as rich does), so stdout and stderr keep their order in one file."""
+def _plain_line(text: str) -> str:
+    """A line as the trimmed rich console writes it to a pipe: trailing blanks removed."""
     if not text.isprintable():
         text = text.translate(_CONTROL).expandtabs(8)  # as rich writes them
         text = "\n".join(line.rstrip(" ") for line in text.split("\n"))
     else:
         text = text.rstrip(" \t")
-    stream.write(text + "\n")
+    return text + "\n"
+
+
+def _write_plain(stream, text: str) -> None:
+    """A line written as rich writes it to a pipe, and flushed at once (as rich does), so
+    stdout and stderr keep their order in one file."""
+    stream.write(_plain_line(text))
     stream.flush()
+
+
+HOLD_SECONDS = 0.05  # Output.hold: results wait at most this long for the next flush
+MEMO_LINES = 4096  # Output.result: formatted lines kept
 
 
 def _console(stderr: bool = False, color: str = "auto"):
@@ -152,6 +162,13 @@ class Output:
         self._console = None
         self._err = None
         self._terminal: dict[int, tuple[object, bool]] = {}  # is_terminal, by stream
+        # hold: results to a pipe or a file are not flushed line by line but every
+        # HOLD_SECONDS, and before anything goes to stderr or a command runs (a script
+        # file's run sets it; see flush). A flush per line is a system call per line.
+        self.hold = False
+        self._held = None  # the stream holding unflushed results
+        self._held_at = 0.0
+        self._memo: dict[tuple, tuple] = {}  # see result
 
     # the rich consoles, made when first needed (a test may put its own in place)
     @property
@@ -164,8 +181,32 @@ class Output:
     def console(self, value) -> None:
         self._console = value
 
+    def flush(self) -> None:
+        """Write out the results held back (see ``hold``)."""
+        stream, self._held = self._held, None
+        if stream is not None:
+            stream.flush()
+
+    def _write(self, stream, line: str, hold: bool = True) -> None:
+        """One finished line to stdout: flushed now, or held (see ``hold``)."""
+        if self._held is not None and self._held is not stream:
+            self.flush()
+        stream.write(line)
+        if not (hold and self.hold):
+            self._held = None
+            stream.flush()
+        elif self._held is None:
+            self._held, self._held_at = stream, time.monotonic()
+        elif time.monotonic() - self._held_at >= HOLD_SECONDS:
+            self.flush()
+
+    def _write_json(self, line: str) -> None:
+        stream = sys.stdout
+        self._write(stream, line, not self._is_terminal(stream))
+
     @property
     def err(self):
+        self.flush()  # stdout held back goes out before what goes to stderr
         if self._err is None:
             self._err = _console(stderr=True, color=self._color)
         return self._err
@@ -201,8 +242,7 @@ class Output:
 
     # -- JSON ---------------------------------------------------------------------------
     def emit(self, obj: dict[str, Any]) -> None:
-        sys.stdout.write(json.dumps(obj, ensure_ascii=False) + "\n")
-        sys.stdout.flush()
+        self._write_json(json.dumps(obj, ensure_ascii=False) + "\n")
 
     # -- people -------------------------------------------------------------------------
     def print(self, *items: Any, **kw: Any) -> None:
@@ -236,15 +276,40 @@ class Output:
             self._message(f"error: {message}", "tmcl.error", stderr=True)
 
     def result(self, result: Result, module: Module | None) -> None:
-        if self.json:
-            self.emit(result_json(result))
-            return
-        text = render_result(result, module)
-        stream = self._plain()
-        if stream is None:
-            self.console.print(text)
+        # A result's line (text or JSON) depends on the line, its instruction, the module and
+        # these reply fields only (a raw command number's, a version's or a read-back's
+        # reply says more): each line made is kept, so a script repeating its lines formats
+        # each once. Whatever else result_json or render_result come to read goes into the key.
+        json_mode = self.json
+        stream = sys.stdout if json_mode else self._plain()
+        reply = result.reply
+        enc = result.encoded
+        key = None
+        if stream is not None and reply is not None and reply.version is None \
+                and reply.stored is None and enc.spec is not None:
+            key = (json_mode, result.line, id(enc), id(module), reply.status, reply.value,
+                   reply.opcode)
+            hit = self._memo.get(key)
+            if hit is not None and hit[0] is enc and hit[1] is module:
+                if json_mode:
+                    self._write_json(hit[2])
+                else:
+                    self._write(stream, hit[2])
+                return
+        if json_mode:
+            line = json.dumps(result_json(result), ensure_ascii=False) + "\n"
+            self._write_json(line)
         else:
-            _write_plain(stream, text.plain)
+            text = render_result(result, module)
+            if stream is None:
+                self.console.print(text)
+                return
+            line = _plain_line(text.plain)
+            self._write(stream, line)
+        if key is not None:
+            if len(self._memo) >= MEMO_LINES:
+                self._memo.clear()
+            self._memo[key] = (enc, module, line)
 
     @contextmanager
     def paged(self, enabled: bool = True) -> Iterator[None]:
@@ -287,6 +352,8 @@ class Output:
     def _message(self, text: str, style: str, stderr: bool) -> None:
         """One message line: on a terminal wrapped between words (not cut mid-word by the
         terminal), in a pipe or a file one line as it is."""
+        if stderr:
+            self.flush()
         stream = self._plain(stderr)
         if stream is None:
             _message(self.err if stderr else self.console, text, style)
