@@ -169,6 +169,7 @@ class Parser:
         self.stack = stack + (file,)
         self.precheck = True
         self.outer_blocks = 0  # blocks open around the .source that includes this file
+        self.seen: dict[str, str | None] = {}  # TMCL lines checked: Step.plain of each
 
     def fail(self, line: int, message: str, kind: str = SYNTAX) -> ScriptSyntaxError:
         return ScriptSyntaxError(self.file, line, message, kind)
@@ -205,12 +206,19 @@ class Parser:
     def _line(self, number: int, text: str, open_: list[tuple[Node, list[Node]]]) -> Node | None:
         file = self.file
         if not text.startswith("."):
+            # a line seen before passed the same checks (parsing sends nothing, so the
+            # module and mode cannot change between); a long script repeats its lines
+            seen = self.seen.get(text, False)
+            if seen is not False:
+                return Step(file, number, text, seen)
             word = text.split(None, 1)[0]
             if commands.find(word) is not None:  # bare help/quit
+                self.seen[text] = None
                 return Step(file, number, text)
             if self.precheck and "${" not in text:
                 self.session.client.encode(text)
-            return Step(file, number, text, _plain_tmcl(text))
+            plain = self.seen[text] = _plain_tmcl(text)
+            return Step(file, number, text, plain)
         word, args = _word(text)
         if word in (".repeat", ".if") and len(open_) + self.outer_blocks >= MAX_BLOCK_DEPTH:
             raise self.fail(number, f"blocks nested more than {MAX_BLOCK_DEPTH} deep")
