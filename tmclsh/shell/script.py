@@ -311,7 +311,11 @@ def read_lines(path: Path, fail: Callable[[str, str], Exception]) -> list[str]:
     """A script's lines: at most ``files.MAX_FILE`` bytes, ``files.MAX_LINES`` lines and
     ``files.MAX_LINE`` characters a line (``/dev/zero`` is refused, not read to the end);
     ``fail(message, kind)`` makes the error when it cannot be read."""
-    if not path.exists():
+    try:
+        exists = path.exists()
+    except OSError as exc:  # a name the system refuses (too long)
+        raise fail(f"cannot read {path}: {exc.strerror or exc}", UNREADABLE) from None
+    if not exists:
         raise fail(f"no such file: {path}", NO_FILE)
     try:
         lines = files.read_lines(path, "script")
