@@ -162,17 +162,19 @@ class Output:
         self._console = None
         self._err = None
         self._terminal: dict[int, tuple[object, bool]] = {}  # is_terminal, by stream
-        # hold: results to a pipe or a file are not flushed line by line but every
-        # HOLD_SECONDS, and before anything goes to stderr or a command runs (a script
-        # file's run sets it; see flush). A flush per line is a system call per line.
+        # hold: results to a pipe or a file are not written line by line but every
+        # HOLD_SECONDS, and before anything else is written or a command runs (a script
+        # file's run sets it; see flush). A line written is a system call per line.
         self.hold = False
-        self._held = None  # the stream holding unflushed results
+        self._held = None  # the stream the held lines go to
+        self._held_lines: list[str] = []
         self._held_at = 0.0
         self._memo: dict[tuple, tuple] = {}  # see result
 
     # the rich consoles, made when first needed (a test may put its own in place)
     @property
     def console(self):
+        self.flush()  # results held back go out before what rich writes
         if self._console is None:
             self._console = _console(color=self._color)
         return self._console
@@ -185,17 +187,24 @@ class Output:
         """Write out the results held back (see ``hold``)."""
         stream, self._held = self._held, None
         if stream is not None:
+            lines = self._held_lines
+            text = "".join(lines)
+            lines.clear()
+            stream.write(text)
             stream.flush()
 
     def _write(self, stream, line: str, hold: bool = True) -> None:
-        """One finished line to stdout: flushed now, or held (see ``hold``)."""
-        if self._held is not None and self._held is not stream:
+        """One finished line to stdout: written now, or held (see ``hold``)."""
+        held = self._held
+        if held is not stream and held is not None:
             self.flush()
-        stream.write(line)
+            held = None
         if not (hold and self.hold):
-            self._held = None
+            stream.write(line)
             stream.flush()
-        elif self._held is None:
+            return
+        self._held_lines.append(line)
+        if held is None:
             self._held, self._held_at = stream, time.monotonic()
         elif time.monotonic() - self._held_at >= HOLD_SECONDS:
             self.flush()
@@ -254,6 +263,7 @@ class Output:
             else None
         if stream is not None and all(isinstance(i, str) for i in items) \
                 and set(kw) <= {"markup", "style", "soft_wrap"}:
+            self.flush()
             _write_plain(stream, " ".join(items))  # the text as rich would write it
             return
         self.console.print(*items, **kw)
@@ -347,13 +357,13 @@ class Output:
         if stream is None:
             self.console.print(render_event(reply), style="tmcl.event", markup=False)
         else:
+            self.flush()
             _write_plain(stream, render_event(reply))
 
     def _message(self, text: str, style: str, stderr: bool) -> None:
         """One message line: on a terminal wrapped between words (not cut mid-word by the
         terminal), in a pipe or a file one line as it is."""
-        if stderr:
-            self.flush()
+        self.flush()
         stream = self._plain(stderr)
         if stream is None:
             _message(self.err if stderr else self.console, text, style)
