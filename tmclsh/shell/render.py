@@ -291,7 +291,10 @@ class Output:
         # reply says more): each line made is kept, so a script repeating its lines formats
         # each once. Whatever else result_json or render_result come to read goes into the key.
         json_mode = self.json
-        stream = sys.stdout if json_mode else self._plain()
+        stream = sys.stdout
+        if not json_mode and (self._console is not None or self._color == "always"
+                              or self._is_terminal(stream)):
+            stream = None  # rich writes (as _plain says, inline: once per line)
         reply = result.reply
         enc = result.encoded
         key = None
