@@ -221,6 +221,11 @@ def _ok(reply, what: str, expect: Iterable[int] = (Status.OK,)):
     return reply
 
 
+# a plain int: Request.make takes its fast path only for plain ints (Control is an IntEnum),
+# and a verify sends this once per instruction
+_READ_MEMORY = int(Control.READ_MEMORY)
+
+
 def _send(client, opcode: int, type_: int = 0, motor: int = 0, value: int = 0, *,
           timeout: float | None = None, retries: int | None = None):
     # an upload is thousands of these: Request.make checks plain in-range numbers without
@@ -332,7 +337,7 @@ def end_download(client, *, timeout: float | None = None) -> None:
 def read_instruction(client, address: int, *, timeout: float | None = None) -> Instruction:
     """The instruction stored at ``address`` (134)."""
     require_binary(client, "reading program memory (134)")
-    reply = _send(client, Control.READ_MEMORY, 0, 0, address, timeout=timeout)
+    reply = _send(client, _READ_MEMORY, 0, 0, address, timeout=timeout)
     if reply is None or reply.stored is None:
         raise TmclError(f"no program-memory reply for address {address}")
     return reply.stored

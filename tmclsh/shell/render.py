@@ -103,16 +103,25 @@ class Styled:
 _CONTROL = dict.fromkeys((7, 8, 11, 12, 13))  # bell, backspace, vertical tab, form feed, CR
 
 
-def _write_plain(stream, text: str) -> None:
-    """A line as the trimmed rich console writes it to a pipe: trailing blanks removed, and
-    flushed at once (as rich does), so stdout and stderr keep their order in one file."""
+def _plain_line(text: str) -> str:
+    """A line as the trimmed rich console writes it to a pipe: trailing blanks removed."""
     if not text.isprintable():
         text = text.translate(_CONTROL).expandtabs(8)  # as rich writes them
         text = "\n".join(line.rstrip(" ") for line in text.split("\n"))
     else:
         text = text.rstrip(" \t")
-    stream.write(text + "\n")
+    return text + "\n"
+
+
+def _write_plain(stream, text: str) -> None:
+    """A line written as rich writes it to a pipe, and flushed at once (as rich does), so
+    stdout and stderr keep their order in one file."""
+    stream.write(_plain_line(text))
     stream.flush()
+
+
+HOLD_SECONDS = 0.05  # Output.hold: results wait at most this long for the next flush
+MEMO_LINES = 4096  # Output.result: formatted lines kept
 
 
 def _console(stderr: bool = False, color: str = "auto"):
@@ -144,7 +153,9 @@ def _console(stderr: bool = False, color: str = "auto"):
                           markup=False, **kw)
 
 
-_EMIT_LOCK = threading.Lock()
+# events come from the event poller's thread (--json runs): every write and flush of stdout
+# lines takes this lock, so lines stay whole and held results go out before a later event
+_EMIT_LOCK = threading.RLock()
 
 
 class Output:
@@ -161,10 +172,19 @@ class Output:
         self._console = None
         self._err = None
         self._terminal: dict[int, tuple[object, bool]] = {}  # is_terminal, by stream
+        # hold: results to a pipe or a file are not written line by line but every
+        # HOLD_SECONDS, and before anything else is written or a command runs (a script
+        # file's run sets it; see flush). A line written is a system call per line.
+        self.hold = False
+        self._held = None  # the stream the held lines go to
+        self._held_lines: list[str] = []
+        self._held_at = 0.0
+        self._memo: dict[tuple, tuple] = {}  # see result
 
     # the rich consoles, made when first needed (a test may put its own in place)
     @property
     def console(self):
+        self.flush()  # results held back go out before what rich writes
         if self._console is None:
             self._console = _console(color=self._color)
         return self._console
@@ -173,8 +193,43 @@ class Output:
     def console(self, value) -> None:
         self._console = value
 
+    def flush(self) -> None:
+        """Write out the results held back (see ``hold``)."""
+        if self._held is None:
+            return
+        with _EMIT_LOCK:
+            stream, self._held = self._held, None
+            if stream is not None:
+                lines = self._held_lines
+                text = "".join(lines)
+                lines.clear()
+                stream.write(text)
+                stream.flush()
+
+    def _write(self, stream, line: str, hold: bool = True) -> None:
+        """One finished line to stdout: written now, or held (see ``hold``)."""
+        with _EMIT_LOCK:
+            held = self._held
+            if held is not stream and held is not None:
+                self.flush()
+                held = None
+            if not (hold and self.hold):
+                stream.write(line)
+                stream.flush()
+                return
+            self._held_lines.append(line)
+            if held is None:
+                self._held, self._held_at = stream, time.monotonic()
+            elif time.monotonic() - self._held_at >= HOLD_SECONDS:
+                self.flush()
+
+    def _write_json(self, line: str) -> None:
+        stream = sys.stdout
+        self._write(stream, line, not self._is_terminal(stream))
+
     @property
     def err(self):
+        self.flush()  # stdout held back goes out before what goes to stderr
         if self._err is None:
             self._err = _console(stderr=True, color=self._color)
         return self._err
@@ -212,9 +267,7 @@ class Output:
     def emit(self, obj: dict[str, Any]) -> None:
         if self.simulated():
             obj = {**obj, "simulated": True}
-        with _EMIT_LOCK:  # events come from the event poller's thread: whole lines only
-            sys.stdout.write(json.dumps(obj, ensure_ascii=False) + "\n")
-            sys.stdout.flush()
+        self._write_json(json.dumps(obj, ensure_ascii=False) + "\n")
 
     # -- people -------------------------------------------------------------------------
     def print(self, *items: Any, **kw: Any) -> None:
@@ -226,6 +279,7 @@ class Output:
             else None
         if stream is not None and all(isinstance(i, str) for i in items) \
                 and set(kw) <= {"markup", "style", "soft_wrap"}:
+            self.flush()
             _write_plain(stream, " ".join(items))  # the text as rich would write it
             return
         self.console.print(*items, **kw)
@@ -248,15 +302,46 @@ class Output:
             self._message(f"error: {message}", "tmcl.error", stderr=True)
 
     def result(self, result: Result, module: Module | None) -> None:
-        if self.json:
-            self.emit(result_json(result))
-            return
-        text = render_result(result, module)
-        stream = self._plain()
-        if stream is None:
-            self.console.print(text)
+        # A result's line (text or JSON) depends on the line, its instruction, the module and
+        # these reply fields only (a raw command number's, a version's or a read-back's
+        # reply says more): each line made is kept, so a script repeating its lines formats
+        # each once. Whatever else result_json or render_result come to read goes into the key.
+        json_mode = self.json
+        stream = sys.stdout
+        if not json_mode and (self._console is not None or self._color == "always"
+                              or self._is_terminal(stream)):
+            stream = None  # rich writes (as _plain says, inline: once per line)
+        reply = result.reply
+        enc = result.encoded
+        key = None
+        if stream is not None and reply is not None and reply.version is None \
+                and reply.stored is None and enc.spec is not None:
+            key = (json_mode, result.line, id(enc), id(module), reply.status, reply.value,
+                   reply.opcode, self.simulated())
+            hit = self._memo.get(key)
+            if hit is not None and hit[0] is enc and hit[1] is module:
+                if json_mode:
+                    self._write_json(hit[2])
+                else:
+                    self._write(stream, hit[2])
+                return
+        if json_mode:
+            obj = result_json(result)
+            if self.simulated():
+                obj["simulated"] = True
+            line = json.dumps(obj, ensure_ascii=False) + "\n"
+            self._write_json(line)
         else:
-            _write_plain(stream, text.plain)
+            text = render_result(result, module)
+            if stream is None:
+                self.console.print(text)
+                return
+            line = _plain_line(text.plain)
+            self._write(stream, line)
+        if key is not None:
+            if len(self._memo) >= MEMO_LINES:
+                self._memo.clear()
+            self._memo[key] = (enc, module, line)
 
     @contextmanager
     def paged(self, enabled: bool = True) -> Iterator[None]:
@@ -296,11 +381,13 @@ class Output:
         if stream is None:
             self.console.print(render_event(reply), style="tmcl.event", markup=False)
         else:
+            self.flush()
             _write_plain(stream, render_event(reply))
 
     def _message(self, text: str, style: str, stderr: bool) -> None:
         """One message line: on a terminal wrapped between words (not cut mid-word by the
         terminal), in a pipe or a file one line as it is."""
+        self.flush()
         stream = self._plain(stderr)
         if stream is None:
             _message(self.err if stderr else self.console, text, style)

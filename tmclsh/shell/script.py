@@ -100,7 +100,10 @@ class Node:
 
 @dataclass
 class Step(Node):
-    """One line, run through ``Session.run_line``."""
+    """One line, run through ``Session.run_line``; or, for a plain TMCL line (``plain``: its
+    text without the comment; no ``${...}``, not a command), through ``Session.run_plain``."""
+
+    plain: str | None = None
 
 
 @dataclass
@@ -166,6 +169,7 @@ class Parser:
         self.stack = stack + (file,)
         self.precheck = True
         self.outer_blocks = 0  # blocks open around the .source that includes this file
+        self.seen: dict[str, str | None] = {}  # TMCL lines checked: Step.plain of each
 
     def fail(self, line: int, message: str, kind: str = SYNTAX) -> ScriptSyntaxError:
         return ScriptSyntaxError(self.file, line, message, kind)
@@ -202,12 +206,19 @@ class Parser:
     def _line(self, number: int, text: str, open_: list[tuple[Node, list[Node]]]) -> Node | None:
         file = self.file
         if not text.startswith("."):
+            # a line seen before passed the same checks (parsing sends nothing, so the
+            # module and mode cannot change between); a long script repeats its lines
+            seen = self.seen.get(text, False)
+            if seen is not False:
+                return Step(file, number, text, seen)
             word = text.split(None, 1)[0]
             if commands.find(word) is not None:  # bare help/quit
+                self.seen[text] = None
                 return Step(file, number, text)
             if self.precheck and "${" not in text:
                 self.session.client.encode(text)
-            return Step(file, number, text)
+            plain = self.seen[text] = _plain_tmcl(text)
+            return Step(file, number, text, plain)
         word, args = _word(text)
         if word in (".repeat", ".if") and len(open_) + self.outer_blocks >= MAX_BLOCK_DEPTH:
             raise self.fail(number, f"blocks nested more than {MAX_BLOCK_DEPTH} deep")
@@ -278,6 +289,17 @@ class Parser:
         return Include(self.file, number, text, str(path), body)
 
 
+def _plain_tmcl(text: str) -> str | None:
+    """The line ``Session.run_line`` would send as it is (see ``Step.plain``), else None."""
+    plain = _strip_comment(text)
+    if not plain or "${" in plain:
+        return None
+    word = plain.split(None, 1)[0]
+    if word.startswith(".") or commands.find(word) is not None:
+        return None
+    return plain
+
+
 def resolve(name: str, base: Path | None) -> Path:
     path = Path(name.strip().strip("\"'")).expanduser()
     if not path.is_absolute() and base is not None:
@@ -289,7 +311,11 @@ def read_lines(path: Path, fail: Callable[[str, str], Exception]) -> list[str]:
     """A script's lines: at most ``files.MAX_FILE`` bytes, ``files.MAX_LINES`` lines and
     ``files.MAX_LINE`` characters a line (``/dev/zero`` is refused, not read to the end);
     ``fail(message, kind)`` makes the error when it cannot be read."""
-    if not path.exists():
+    try:
+        exists = path.exists()
+    except OSError as exc:  # a name the system refuses (too long)
+        raise fail(f"cannot read {path}: {exc.strerror or exc}", UNREADABLE) from None
+    if not exists:
         raise fail(f"no such file: {path}", NO_FILE)
     try:
         lines = files.read_lines(path, "script")
@@ -401,15 +427,32 @@ class Runner:
         self.on_step = on_step
 
     def run(self, nodes: Iterable[Node]) -> None:
-        depth = self.session.state.get("script.depth", 0)
-        self.session.state["script.depth"] = depth + 1  # type: ignore[operator]
-        saved = self.session.location
+        session = self.session
+        state = session.state
+        depth = state.get("script.depth", 0)
+        state["script.depth"] = depth + 1  # type: ignore[operator]
+        saved = session.location
         try:
             for node in nodes:
-                self.node(node)
+                # the fast path: a plain TMCL line, what most of a long script is (see step)
+                plain = node.plain if type(node) is Step else None  # type: ignore[attr-defined]
+                if plain is None or session.time_limit is not None or "capture" in state:
+                    session.out.flush()  # a command may wait, ask or read: show what was held
+                    self.node(node)
+                    continue
+                session.location = (node.file, node.line)
+                try:
+                    session.run_plain(plain)
+                except TmclError as exc:  # as guard
+                    self.failed = True
+                    report(session, node, exc)
+                    if not session.keep_going:
+                        raise _Stop() from exc
+                if self.on_step is not None:
+                    self.on_step()
         finally:
-            self.session.state["script.depth"] = depth
-            self.session.location = saved
+            state["script.depth"] = depth
+            session.location = saved
 
     def node(self, node: Node) -> None:
         if isinstance(node, Step):
@@ -557,7 +600,15 @@ def run_file(session: Session, path: str) -> int:
             nodes = list(Parser(session, path, file.resolve().parent).nodes(lines))
             bar = _progress(session, path, nodes)
             if bar is None:
-                _run_nodes(runner, nodes)
+                # results are written in batches, not flushed line by line (see Output.hold);
+                # not for stdin, whose writer may wait for each result before the next line
+                held = session.out.hold
+                session.out.hold = True
+                try:
+                    _run_nodes(runner, nodes)
+                finally:
+                    session.out.hold = held
+                    session.out.flush()
             else:
                 progress, runner.on_step = bar
                 with progress:
