@@ -287,3 +287,14 @@ def test_can_spec_errors():
         open_can("can0")
     with pytest.raises(TransportError, match="cannot open CAN"):
         open_can("nosuchinterface:x")
+
+
+def test_a_lost_port_names_the_failure_once():
+    """pyserial's own text often starts with "read failed:"; the message must not say it twice."""
+    from tmclsh.transport.serial import SerialTransport
+
+    t = SerialTransport("loop://")
+    err = t._lost("read", OSError("read failed: device reports readiness to read but returned no data"))
+    assert str(err).count("read failed") == 1, err
+    err = t._lost("write", OSError("[Errno 5] Input/output error"))
+    assert "write failed: [Errno 5]" in str(err), err

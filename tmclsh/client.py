@@ -555,8 +555,9 @@ class Client:
                 self._recent.append(got)
         except (TmclTimeoutError, ChecksumError) as exc:
             self._mark_stale(marker, kind)
-            raise type(exc)(f"address {address} stopped answering: {exc} (asked to check "
-                            "the line after an earlier failure)") from exc
+            raise type(exc)(f"address {address} stopped answering: after a reply that went "
+                            "wrong, its version (136) was asked to be sure which reply is "
+                            f"which, and this failed too: {exc}") from exc
         except BaseException:
             self._mark_stale(marker, kind)
             raise

@@ -93,8 +93,11 @@ class SerialTransport(StreamTransport):
 
     def _lost(self, what: str, exc: Exception) -> TransportError:
         self.close()
+        reason = str(exc)
+        if not reason.lower().startswith(what):  # pyserial often says "read failed: ..." itself
+            reason = f"{what} failed: {reason}"
         return TransportError(
-            f"lost {self.url} ({what} failed: {exc}); the port is gone (module unplugged "
+            f"lost {self.url} ({reason}); the port is gone (module unplugged "
             "or powered off?). Reconnect once it is back.")
 
     def write(self, data: bytes) -> None:
