@@ -57,6 +57,12 @@ def one_line(stderr: str) -> str:
     return lines[0]
 
 
+def likely_causes(err: str) -> tuple[str, list[str], list[str]]:
+    """A "nobody answered" message: its first line, the names of the likely causes, their lines."""
+    first, *causes = err.strip().splitlines()
+    return first, [c.split(":")[0].strip() for c in causes], causes
+
+
 # -- 1. no silent simulation -------------------------------------------------------------------
 
 @pytest.mark.parametrize("args, stdin", [
@@ -231,11 +237,11 @@ def test_nothing_answering_says_what_was_tried_and_what_to_try(run_tmclsh, respo
     p = run_tmclsh("--port", module.path, "--timeout", "0.1", "-c", "GAP 1, 0")
     assert p.returncode == 3 and p.stdout == ""
     err = p.stderr
-    first, *causes = err.strip().splitlines()
+    first, names, causes = likely_causes(err)
     assert first == (f"tmclsh: no module answered at address 1 on {module.path} @ 9600: asked "
                      "for its version (136) twice and tried its ASCII mode, waiting up to "
                      "0.1 s each. Likely causes, most likely first:")
-    assert [c.split(":")[0].strip() for c in causes] == [
+    assert names == [
         "- baud rate", "- address", "- a slow link", "- the port"]
     assert ("GP 65 allows 14400, 19200, 28800, 38400, 57600, 76800, 115200, 230400, 250000, "
             "500000, 1000000") in causes[0]
@@ -388,11 +394,11 @@ def test_nothing_answering_on_can_names_bit_rate_and_ids(monkeypatch, capsys):
                    "-c", "GAP 1, 0"])
     err = capsys.readouterr().err
     assert rc == 3
-    first, *causes = err.strip().splitlines()
+    first, names, _ = likely_causes(err)
     assert first == (f"tmclsh: no module answered on CAN virtual:{channel}: asked for its version "
                      "(136) on CAN id 1, listening on reply id 2, 2 times, 0.05 s each. Likely "
                      "causes, most likely first:")
-    assert [c.split(":")[0].strip() for c in causes] == [
+    assert names == [
         "- bit rate", "- CAN ids", "- a slow bus", "- wiring"]
 
 
