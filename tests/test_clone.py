@@ -10,11 +10,7 @@ host, module, status, command, value, checksum) and a dictionary of values.
 from __future__ import annotations
 
 import json
-import os
 import re
-import struct
-import threading
-import tty
 from pathlib import Path
 
 import pytest
@@ -28,6 +24,8 @@ from tmclsh.shell.render import Output
 from tmclsh.shell.session import Abort, Session
 from tmclsh.sim import Simulator
 from tmclsh.transport import open_serial
+
+from responder import PtyModule
 
 LINE = re.compile(r"^(SAP|SGP) (\w+), (\d+), (-?\d+)", re.M)
 
@@ -148,61 +146,12 @@ def test_state_is_a_comment_and_never_restored(pty_client, tmp_path, capsys):
 
 # -- an independent responder: partial restore when it refuses one value ---------------------
 
-class Responder:
-    """A module that stores SAP/SGP values and answers GAP/GGP, from the manual's frame layout
-    only; ``refuse`` holds (command, type, motor) it answers with status 4 (invalid value)."""
-
-    def __init__(self, address: int = 1, host: int = 2):
-        self.address, self.host = address, host
-        self.values: dict[tuple[int, int, int], int] = {}  # (type, motor, is_global) -> value
-        self.refuse: set[tuple[int, int, int]] = set()
-        self.frames: list[bytes] = []
-        self.master, slave = os.openpty()
-        tty.setraw(slave)
-        self.path = os.ttyname(slave)
-        self._slave = slave
-        self._stop = False
-        self.thread = threading.Thread(target=self.run, daemon=True)
-        self.thread.start()
-
-    def run(self) -> None:
-        buf = b""
-        while not self._stop:
-            try:
-                data = os.read(self.master, 64)
-            except OSError:
-                return
-            buf += data
-            while len(buf) >= 9:
-                frame, buf = buf[:9], buf[9:]
-                self.frames.append(frame)
-                os.write(self.master, self.answer(frame))
-
-    def answer(self, frame: bytes) -> bytes:
-        addr, cmd, typ, motor, value = struct.unpack(">BBBBi", frame[:8])
-        status, out = 100, value
-        if sum(frame[:8]) & 0xFF != frame[8]:
-            status = 1  # wrong checksum
-        elif (cmd, typ, motor) in self.refuse:
-            status = 4
-        elif cmd in (5, 9):  # SAP, SGP
-            self.values[(typ, motor, cmd == 9)] = value
-        elif cmd in (6, 10):  # GAP, GGP
-            out = self.values.get((typ, motor, cmd == 10), 0)
-        elif cmd not in (7, 11):  # STAP/STGP answer ok; anything else is not known here
-            status = 2
-        head = struct.pack(">BBBBi", self.host, self.address, status, cmd, out)
-        return head + bytes([sum(head) & 0xFF])
-
-    def close(self) -> None:
-        self._stop = True
-        os.close(self._slave)
-        os.close(self.master)
-
-
 @pytest.fixture
 def responder():
-    r = Responder()
+    """A module that stores SAP/SGP values and answers GAP/GGP (tests/responder.py), from the
+    manual's frame layout only; ``refuse`` holds (command, type, motor) it answers with
+    status 4 (invalid value)."""
+    r = PtyModule()
     yield r
     r.close()
 
@@ -235,7 +184,7 @@ def test_restore_onto_independent_responder_with_one_refusal(pty_client, respond
             got = responder.values[(number, index, kind == "global")]
             assert got == (17 if (kind, number, index) == ("axis", 6, 0) else value)
         # the fewest writes: one SAP/SGP per difference, nothing for equal values
-        writes = [f for f in responder.frames if f[1] in (5, 9)]
+        writes = [f for f in responder.log if f[1] in (5, 9)]
         assert sorted((f[1], f[2], f[3]) for f in writes) == [(5, 4, 0), (5, 6, 0), (9, 12, 2)]
     finally:
         other.close()
@@ -525,5 +474,5 @@ def test_save_from_independent_responder(responder, tmp_path):
     want = {(("global" if g else "axis"), n, i): v for (n, i, g), v in responder.values.items()}
     want[("axis", 26, 0)] = 4294967295
     assert got == want
-    assert {f[1] for f in responder.frames} == {6, 10}
-    assert len(responder.frames) == len(list(readable_slots(mod)))
+    assert {f[1] for f in responder.log} == {6, 10}
+    assert len(responder.log) == len(list(readable_slots(mod)))

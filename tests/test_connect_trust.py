@@ -7,18 +7,15 @@ The modules here are small responders written from the manuals' byte tables (TMC
 bytes; a reply is host, module, status, command, value, checksum; 136 type 0 is answered by
 the host address and eight ASCII characters; §4.4 ASCII mode: ``<address char><command> CR``
 answered by ``<host char><module char> <status> <value> CR``), served on a pty, independent
-of the project's simulator.
+of the project's simulator: tests/responder.py's ``Responder``, each variation a subclass.
 """
 
 from __future__ import annotations
 
 import os
-import select
-import struct
 import termios
 import threading
 import time
-import tty
 
 import pytest
 from serial.tools import list_ports
@@ -29,111 +26,16 @@ from tmclsh.client import Client
 from tmclsh.errors import DownloadModeError
 from tmclsh.protocol import Request
 from tmclsh.transport import open_serial
+
+from responder import DownloadModeModule, Responder
 from tmux import needs_tmux
 
-HOST, ADDRESS = 2, 1
-OK, LOADED, INVALID_COMMAND = 100, 101, 2
+OK, INVALID_COMMAND = 100, 2
 GET_VERSION, ENTER_ASCII, QUIT_DOWNLOAD, START_DOWNLOAD = 136, 139, 133, 132
-GAP, GGP = 6, 10
+GAP = 6
 # the client's own machinery (a 136 sent to line the replies up again); "end marker" and the
 # debugger's "->" marker are words the user knows
 INTERNAL_WORDS = ("resynchron", "resync", "136 marker", "marker (136)", "marker request")
-
-
-def frame(host: int, module: int, status: int, command: int, value: int) -> bytes:
-    body = bytes([host, module, status, command]) + struct.pack(">i", value)
-    return body + bytes([sum(body) & 0xFF])
-
-
-def version_reply(text: str) -> bytes:
-    return bytes([HOST]) + text.encode()
-
-
-def valid_request(raw: bytes) -> bool:
-    return len(raw) == 9 and sum(raw[:8]) & 0xFF == raw[8]
-
-
-class Responder:
-    """A module on a pty: ``answer(request_bytes) -> reply bytes or None`` for binary frames,
-    ``line(text) -> reply text or None`` for ASCII lines while ``ascii`` is set.
-    ``speed``: answer only while the port is set to this termios speed (a module at another
-    baud rate hears noise and says nothing)."""
-
-    def __init__(self, *, ascii: bool = False, speed: int | None = None, delay: float = 0.0):
-        self.master, slave = os.openpty()
-        tty.setraw(slave)
-        self.path = os.ttyname(slave)
-        self._slave = slave
-        self.ascii = ascii
-        self.speed = speed
-        self.delay = delay
-        self.log: list[bytes] = []
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
-        self._thread.start()
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(2)
-        os.close(self.master)
-        os.close(self._slave)
-
-    def send(self, data: bytes) -> None:
-        if self.delay:
-            time.sleep(self.delay)
-        os.write(self.master, data)
-
-    def _run(self) -> None:
-        buf = b""
-        while not self._stop.is_set():
-            ready, _, _ = select.select([self.master], [], [], 0.02)
-            if not ready:
-                continue
-            try:
-                data = os.read(self.master, 1024)
-            except OSError:
-                return
-            if self.speed is not None and termios.tcgetattr(self.master)[4] != self.speed:
-                continue  # framing errors at the wrong rate: nothing the module understands
-            buf += data
-            while buf:
-                if self.ascii:
-                    if b"\r" not in buf:
-                        break
-                    text, _, buf = buf.partition(b"\r")
-                    self.log.append(text)
-                    reply = self.line(text.decode("latin-1"))
-                    if reply is not None:
-                        self.send(reply.encode() + b"\r")
-                    continue
-                if len(buf) < 9:
-                    break
-                if not valid_request(buf[:9]):
-                    buf = buf[1:]  # no frame starts here
-                    continue
-                raw, buf = buf[:9], buf[9:]
-                self.log.append(raw)
-                reply = self.answer(raw)
-                if reply is not None:
-                    self.send(reply)
-
-    # a plain binary TMCM-1311 at address 1
-    version = "1311V111"
-
-    addresses = frozenset({ADDRESS})
-
-    def answer(self, raw: bytes) -> bytes | None:
-        addr, cmd, typ = raw[0], raw[1], raw[2]
-        if addr not in self.addresses:
-            return None
-        if cmd == GET_VERSION and typ == 0:
-            return version_reply(self.version)
-        if cmd == GET_VERSION:
-            return frame(HOST, addr, OK, cmd, (int(self.version[:4]) << 16) | 0x0101)
-        return frame(HOST, addr, OK, cmd, 0)
-
-    def line(self, text: str) -> str | None:
-        return None
 
 
 @pytest.fixture
@@ -153,6 +55,12 @@ def one_line(stderr: str) -> str:
     lines = stderr.strip().splitlines()
     assert len(lines) == 1, stderr
     return lines[0]
+
+
+def likely_causes(err: str) -> tuple[str, list[str], list[str]]:
+    """A "nobody answered" message: its first line, the names of the likely causes, their lines."""
+    first, *causes = err.strip().splitlines()
+    return first, [c.split(":")[0].strip() for c in causes], causes
 
 
 # -- 1. no silent simulation -------------------------------------------------------------------
@@ -215,27 +123,6 @@ def test_a_person_at_the_prompt_still_gets_the_simulator_labelled(terminal):
 
 
 # -- 3. mode and type checked ------------------------------------------------------------------
-
-class DownloadModeModule(Responder):
-    """Left in download mode (tmclsh was killed mid-upload): every command but the control
-    commands is stored and answered with status 101, until 133."""
-
-    downloading = True
-
-    def answer(self, raw: bytes) -> bytes | None:
-        cmd = raw[1]
-        if cmd == QUIT_DOWNLOAD:
-            self.downloading = False
-            return frame(HOST, ADDRESS, OK, cmd, 0)
-        if cmd == START_DOWNLOAD:
-            self.downloading = True
-            return frame(HOST, ADDRESS, OK, cmd, 0)
-        if self.downloading and cmd < 128:
-            return frame(HOST, ADDRESS, LOADED, cmd, struct.unpack(">i", raw[4:8])[0])
-        if cmd == GAP:
-            return frame(HOST, ADDRESS, OK, cmd, -5000)
-        return super().answer(raw)
-
 
 def test_a_module_left_in_download_mode_is_brought_out_at_connect(run_tmclsh, responders):
     module = responders(DownloadModeModule)
@@ -350,11 +237,11 @@ def test_nothing_answering_says_what_was_tried_and_what_to_try(run_tmclsh, respo
     p = run_tmclsh("--port", module.path, "--timeout", "0.1", "-c", "GAP 1, 0")
     assert p.returncode == 3 and p.stdout == ""
     err = p.stderr
-    first, *causes = err.strip().splitlines()
+    first, names, causes = likely_causes(err)
     assert first == (f"tmclsh: no module answered at address 1 on {module.path} @ 9600: asked "
                      "for its version (136) twice and tried its ASCII mode, waiting up to "
                      "0.1 s each. Likely causes, most likely first:")
-    assert [c.split(":")[0].strip() for c in causes] == [
+    assert names == [
         "- baud rate", "- address", "- a slow link", "- the port"]
     assert ("GP 65 allows 14400, 19200, 28800, 38400, 57600, 76800, 115200, 230400, 250000, "
             "500000, 1000000") in causes[0]
@@ -412,7 +299,7 @@ class Bus(Responder):
             return None
         if raw[0] == 7 and raw[1] == GET_VERSION and raw[2] == 1:
             # slow to answer, on its own time (the others answer meanwhile)
-            threading.Timer(0.04, os.write, (self.master, reply)).start()
+            threading.Timer(0.04, self.write, (reply,)).start()
             return None
         if raw[0] == 9 and not self.garbled:
             self.garbled = True
@@ -507,11 +394,11 @@ def test_nothing_answering_on_can_names_bit_rate_and_ids(monkeypatch, capsys):
                    "-c", "GAP 1, 0"])
     err = capsys.readouterr().err
     assert rc == 3
-    first, *causes = err.strip().splitlines()
+    first, names, _ = likely_causes(err)
     assert first == (f"tmclsh: no module answered on CAN virtual:{channel}: asked for its version "
                      "(136) on CAN id 1, listening on reply id 2, 2 times, 0.05 s each. Likely "
                      "causes, most likely first:")
-    assert [c.split(":")[0].strip() for c in causes] == [
+    assert names == [
         "- bit rate", "- CAN ids", "- a slow bus", "- wiring"]
 
 

@@ -116,18 +116,28 @@ def test_live_watch_table_says_link_lost():
     assert "error" not in text
 
 
+def lost_after(server, url: str, first: str, then: str) -> tuple[Client, Session]:
+    """A session whose link is lost: ``first`` answered, the cable pulled, ``then`` failed."""
+    client = Client(open_serial(url), module="TMCM-1311", timeout=0.3)
+    session = Session(client, Output())
+    try:
+        client.execute(first)
+        server.drop_client()
+        with pytest.raises(Exception):
+            client.execute(then)
+        assert not client.connected
+    except BaseException:
+        client.close()
+        raise
+    return client, session
+
+
 def test_the_first_command_after_a_watch_reconnects(tcp_sim):
     from tmclsh.shell.app import run_one
 
     _, server, url = tcp_sim
-    client = Client(open_serial(url), module="TMCM-1311", timeout=0.3)
-    session = Session(client, Output())
+    client, session = lost_after(server, url, "GAP 4, 0", "GAP 4, 0")  # what a watch met
     try:
-        client.execute("GAP 4, 0")
-        server.drop_client()
-        with pytest.raises(Exception):
-            client.execute("GAP 4, 0")  # what a watch met: the link is gone
-        assert not client.connected
         assert run_one(session, "SGP 0, 2, 42")
         assert client.connected and client.value("GGP 0, 2") == 42
     finally:
@@ -136,14 +146,8 @@ def test_the_first_command_after_a_watch_reconnects(tcp_sim):
 
 def test_stopall_after_a_lost_link_brings_it_back_and_stops(tcp_sim, capsys):
     sim, server, url = tcp_sim
-    client = Client(open_serial(url), module="TMCM-1311", timeout=0.3)
-    session = Session(client, Output())
+    client, session = lost_after(server, url, "ROR 0, 30000", "GAP 1, 0")
     try:
-        client.execute("ROR 0, 30000")
-        server.drop_client()
-        with pytest.raises(Exception):
-            client.execute("GAP 1, 0")
-        assert not client.connected
         session.run_line(".stopall")
         out = capsys.readouterr().out
         assert f"reconnected to {url}" in out and "stopped motor 0 (MST; speed reads 0)" in out

@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import json
 import re
-import socket
-import threading
 
 import pytest
 from hypothesis import given
@@ -17,6 +15,8 @@ from tmclsh.errors import TmclError
 from tmclsh.shell.lines import split_line, strip_comment
 from tmclsh.shell.render import Output
 from tmclsh.shell.session import Session
+
+from responder import Responder, reply, version_reply
 
 
 @pytest.fixture(autouse=True)
@@ -110,53 +110,29 @@ def test_1311_encoder_mode_takes_bit_combinations_and_ap198_sets_bit_2():
 
 # -- .version against a responder written from the TMCM-1311 manual's byte tables ---------------
 
-def _reply(opcode: int, value: int) -> bytes:
-    """"Please use the normal reply format": host 2, module 1, status 100, opcode, value BE."""
-    body = bytes((2, 1, 100, opcode)) + (value & 0xFFFFFFFF).to_bytes(4, "big")
-    return body + bytes((sum(body) & 0xFF,))
+class _Versioned(Responder):
+    """A TCP module (tests/responder.py): 136 type 0 answers '1311V111' (host address + 8
+    characters, no checksum), 136 type 1 answers ``binary``; anything else status 100,
+    value 0 ("please use the normal reply format": host 2, module 1)."""
 
+    def __init__(self, binary: int):
+        self.binary = binary
+        super().__init__(tcp=True)
 
-def _responder(binary_value: int) -> tuple[int, threading.Thread]:
-    """A TCP module: 136 type 0 answers '1311V111' (host address + 8 characters, no checksum),
-    136 type 1 answers ``binary_value``; anything else status 100, value 0."""
-    server = socket.create_server(("127.0.0.1", 0))
-    server.settimeout(10)
-
-    def serve() -> None:
-        with server:
-            conn, _ = server.accept()
-            with conn:
-                conn.settimeout(10)
-                buf = b""
-                while True:
-                    try:
-                        data = conn.recv(64)
-                    except OSError:
-                        return
-                    if not data:
-                        return
-                    buf += data
-                    while len(buf) >= 9:
-                        frame, buf = buf[:9], buf[9:]
-                        if frame[1] == 136 and frame[2] == 0:
-                            conn.sendall(b"\x02" + b"1311V111")
-                        elif frame[1] == 136:
-                            conn.sendall(_reply(136, binary_value))
-                        else:
-                            conn.sendall(_reply(frame[1], 0))
-
-    thread = threading.Thread(target=serve, daemon=True)
-    thread.start()
-    return server.getsockname()[1], thread
+    def answer(self, raw: bytes) -> bytes | None:
+        if raw[1] == 136 and raw[2] == 0:
+            return version_reply("1311V111")
+        return reply(raw[1], self.binary if raw[1] == 136 else 0)
 
 
 @pytest.mark.parametrize("binary, agrees", [(0x051F6F00, True), (0x051F7000, False)])
 def test_version_shows_the_binary_bytes_and_checks_them_against_the_string(
         run_tmclsh, binary, agrees):
-    port, thread = _responder(binary)
-    out = run_tmclsh("--port", f"socket://127.0.0.1:{port}", "-m", "TMCM-1311", "-c",
-                     ".version", timeout=30)
-    thread.join(5)
+    module = _Versioned(binary)
+    try:
+        out = run_tmclsh("--port", module.url, "-m", "TMCM-1311", "-c", ".version", timeout=30)
+    finally:
+        module.close()
     text = out.stdout + out.stderr
     lines = [line for line in text.splitlines() if line.strip()]
     first = next(line for line in lines if line.startswith("firmware"))

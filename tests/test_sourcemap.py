@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import os
-import threading
 
 import pytest
 
@@ -19,6 +18,8 @@ from tmclsh.shell.render import Output
 from tmclsh.shell.session import Session
 from tmclsh.sim import Simulator
 from tmclsh.transport.sim import SimTransport
+
+from responder import Responder, reply
 
 M1311 = load("TMCM-1311")
 
@@ -152,45 +153,16 @@ def test_dump_json_names_the_upload(sim, tmp_path, capsys):
 
 # -- .step on empty memory, against a module written from the manual's byte tables -------------
 
-class EmptyModule:
-    """A TMCM-1311 that has never stored a program, from the manual's frame layout: 9-byte
-    requests (address, command, type, motor, value big-endian, checksum), 9-byte replies
-    (host 2, module 1, status, command, value, checksum). 134 answers an all-zero stored
-    instruction, GGP 130 (the program counter) 0, 135 (status) 0 = stopped. It records the
-    commands it got."""
+class EmptyModule(Responder):
+    """A TMCM-1311 that has never stored a program (tests/responder.py: the manual's frame
+    layout only): 134 answers an all-zero stored instruction, GGP 130 (the program counter) 0,
+    135 (status) 0 = stopped, every other command status 100, value 0."""
 
-    def __init__(self):
-        import tty
-
-        self.master, self.slave = os.openpty()
-        tty.setraw(self.slave)
-        self.path = os.ttyname(self.slave)
-        self.got: list[int] = []
-        self._stop = False
-        self._thread = threading.Thread(target=self._serve, daemon=True)
-        self._thread.start()
-
-    def _serve(self) -> None:
-        buf = b""
-        while not self._stop:
-            try:
-                buf += os.read(self.master, 64)
-            except OSError:
-                return
-            while len(buf) >= 9:
-                frame, buf = buf[:9], buf[9:]
-                cmd = frame[1]
-                self.got.append(cmd)
-                if cmd == 134:  # the stored instruction in place of module, status, command
-                    body = bytes([2, 0, 0, 0]) + (0).to_bytes(4, "big")
-                else:  # every value the debugger asks for (pc, state) is 0 here
-                    body = bytes([2, 1, 100, cmd]) + (0).to_bytes(4, "big")
-                os.write(self.master, body + bytes([sum(body) & 0xFF]))
-
-    def close(self) -> None:
-        self._stop = True
-        os.close(self.slave)
-        os.close(self.master)
+    def answer(self, raw: bytes) -> bytes | None:
+        if raw[1] == 134:  # the stored instruction in place of module, status, command
+            body = bytes([2, 0, 0, 0]) + (0).to_bytes(4, "big")
+            return body + bytes([sum(body) & 0xFF])
+        return reply(raw[1], 0)  # every value the debugger asks for (pc, state) is 0 here
 
 
 def test_step_on_empty_memory_says_so_and_sends_no_step():
@@ -202,8 +174,8 @@ def test_step_on_empty_memory_says_so_and_sends_no_step():
         s = Session(client, Output(), yes=True)
         with pytest.raises(TmclError, match=r"program memory of the TMCM-1311 is empty"):
             s.run_line(".step")
-        assert 130 not in module.got  # nothing stepped
-        assert 134 in module.got  # it looked at the memory
+        assert 130 not in module.commands()  # nothing stepped
+        assert 134 in module.commands()  # it looked at the memory
         assert "repeat_on_empty" not in s.state  # an empty line will not try again
     finally:
         client.close()

@@ -6,22 +6,20 @@ written here from the manual's byte tables whose motor ignores MST.
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
-import threading
 import time
 
 import pytest
 
 from tmclsh import asm, program
 from tmclsh.client import Client
-from tmclsh.protocol import checksum
 from tmclsh.shell.render import Output
 from tmclsh.shell.session import Session
 from tmclsh.transport import open_serial
 
 from conftest import ROOT, tmclsh_env
+from responder import Responder, fields, reply, version_reply
 
 # a stored program that keeps the motor turning: MST alone is undone a moment later
 KEEPS_TURNING = "Loop:\n    ROR 0, 20000\n    WAIT TICKS, 0, 2\n    JA Loop\n"
@@ -91,66 +89,27 @@ def test_stopall_json_gives_the_report(pty_module, capsys):
 
 # -- an independent module whose motor ignores MST ---------------------------------------------
 
-class StubbornModule:
-    """TMCM-1311 at address 1 on a pty, from the manual's byte tables: 9-byte frames (address,
-    command, type, motor, value big-endian, checksum = sum of the 8 bytes), replies (host 2,
-    address, status 100, command, value, checksum); 136 type 0 with its version string (host
-    address and 8 characters). It answers 135 (application status) with 0 (stopped), MST
-    with 100 and does nothing, GAP 3 (actual speed) with 1000, always."""
+class StubbornModule(Responder):
+    """TMCM-1311 at address 1 on a pty (tests/responder.py: the manual's byte tables only),
+    136 type 0 with its version string. It answers 135 (application status) with 0
+    (stopped), GGP 129 with 0 (not in download mode), MST with 100 and does nothing, GAP 3
+    (actual speed) with 1000, always; any other command status 100 with the value it got."""
 
     SPEED = 1000
 
-    def __init__(self) -> None:
-        self.master, slave = os.openpty()
-        import tty
-
-        tty.setraw(slave)
-        self.path = os.ttyname(slave)
-        self._slave = slave
-        self.seen: list[tuple[int, int, int]] = []
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
-        self._thread.start()
-
-    def _reply(self, cmd: int, value: int) -> bytes:
-        body = bytes([2, 1, 100, cmd]) + (value & 0xFFFFFFFF).to_bytes(4, "big")
-        return body + bytes([checksum(body)])
-
-    def _run(self) -> None:
-        import select
-
-        buf = b""
-        while not self._stop.is_set():
-            ready, _, _ = select.select([self.master], [], [], 0.05)
-            if not ready:
-                continue
-            try:
-                buf += os.read(self.master, 64)
-            except OSError:
-                return
-            while len(buf) >= 9:
-                frame, buf = buf[:9], buf[9:]
-                if sum(frame[:8]) & 0xFF != frame[8] or frame[0] != 1:
-                    continue
-                cmd, typ, motor = frame[1], frame[2], frame[3]
-                self.seen.append((cmd, typ, motor))
-                value = int.from_bytes(frame[4:8], "big")
-                if cmd == 136 and typ == 0:  # the version string: host address, 8 characters
-                    os.write(self.master, bytes([2]) + b"1311V111")
-                    continue
-                if cmd == 10 and typ == 129:  # GGP 129: not in download mode
-                    value = 0
-                elif cmd == 135:
-                    value = 0
-                elif cmd == 6 and typ == 3:
-                    value = self.SPEED
-                os.write(self.master, self._reply(cmd, value))
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(1)
-        os.close(self.master)
-        os.close(self._slave)
+    def answer(self, raw: bytes) -> bytes | None:
+        addr, cmd, typ, _, value = fields(raw)
+        if addr != 1:
+            return None
+        if cmd == 136 and typ == 0:  # the version string: host address, 8 characters
+            return version_reply("1311V111")
+        if cmd == 10 and typ == 129:  # GGP 129: not in download mode
+            value = 0
+        elif cmd == 135:
+            value = 0
+        elif cmd == 6 and typ == 3:
+            value = self.SPEED
+        return reply(cmd, value)
 
 
 @pytest.fixture
@@ -167,7 +126,7 @@ def test_a_motor_that_keeps_turning_is_named(stubborn):
     assert "motor 0 did NOT stop: it still turns at speed 1000 after MST" in p.stderr
     assert "stopped motor" not in p.stdout + p.stderr
     assert p.returncode == 1
-    cmds = [c for c, _, _ in stubborn.seen]
+    cmds = stubborn.commands()
     cmds = cmds[cmds.index(135):]  # after what the connection asks (136, GGP 129)
     assert cmds[:2] == [135, 3] and cmds.count(6) >= 2  # status, MST, speed read back (again)
 

@@ -38,6 +38,20 @@ def pane(terminal, tmp_path):
     return start
 
 
+def raw_terminal(pane, path: str, options: str = "") -> Terminal:
+    """``.ascii --raw OPTIONS`` in a pane, once it says how to get back."""
+    p = pane("--port", path, "-c", f".ascii --raw {options}".rstrip())
+    p.wait("Ctrl-]: back to the shell")
+    return p
+
+
+def menu(p: Terminal, key: str, shown: str) -> str:
+    """Pick ``key`` from the Ctrl-T menu and wait until ``shown`` is on the screen."""
+    p.hex("14")  # Ctrl-T
+    p.keys(key)
+    return p.wait(shown)
+
+
 def test_line_mode(served, pane):
     sim, path = served
     p = pane("--port", path, "-c", ".ascii")
@@ -65,8 +79,7 @@ def test_line_mode(served, pane):
 
 def test_raw_mode_backspace(served, pane):
     sim, path = served
-    p = pane("--port", path, "-c", ".ascii --raw --no-bin")
-    p.wait("Ctrl-]: back to the shell")
+    p = raw_terminal(pane, path, "--no-bin")
     p.keys("ASAP 1, 0, 7", "Enter")
     p.wait("ASAP 1, 0, 7\nBA 100 7   ok, value 7")
     p.keys("AGAX", "BSpace", "P 1, 0", "Enter")  # the module erases the X itself
@@ -112,8 +125,7 @@ def test_quit_typed_in_the_terminal_leaves_it(served, pane):
 
 def test_raw_mode_quit(served, pane):
     sim, path = served
-    p = pane("--port", path, "-c", ".ascii --raw --no-bin")
-    p.wait("Ctrl-]: back to the shell")
+    p = raw_terminal(pane, path, "--no-bin")
     p.keys(".quit", "Enter")
     p.wait("EXIT=0")
     assert "module stays in ASCII mode" in p.screen()
@@ -122,8 +134,7 @@ def test_raw_mode_quit(served, pane):
 
 def test_raw_mode_bin(served, pane):
     sim, path = served
-    p = pane("--port", path, "-c", ".ascii --raw")
-    p.wait("Ctrl-]: back to the shell")
+    p = raw_terminal(pane, path)
     p.keys("ABIN", "Enter")
     p.wait("--- module left ASCII mode (BIN): back to the shell on the binary link")
     p.wait("EXIT=0")
@@ -148,47 +159,31 @@ def test_the_ctrl_t_menu(served, pane, tmp_path):
     p.wait("Ctrl-T: e echo [off] · h hex [off] · t time [off] · f log [off] · u send file")
     p.keys("?")
     p.wait("f  log the session to a file (again: stop logging) [off]")
-    p.hex("14")
-    p.keys("t")
-    p.wait("--- timestamps on")
+    menu(p, "t", "--- timestamps on")
     p.keys("GAP 1, 0", "Enter")
     screen = p.wait("BA 100 0   ok, value 0")
     assert re.search(r"\[\d\d:\d\d:\d\d\.\d{3}\] BA 100 0   ok, value 0", screen)
-    p.hex("14")
-    p.keys("t")
-    p.wait("--- timestamps off")
-    p.hex("14")
-    p.keys("h")
-    p.wait("--- hex view on")
+    menu(p, "t", "--- timestamps off")
+    menu(p, "h", "--- hex view on")
     p.keys("GAP 1, 0", "Enter")
     p.wait_for(lambda s: "42 41 20 31 30 30 20 30 0d" in hex_seen(s),
                what="the reply's bytes not shown")  # BA 100 0 CR, in however many reads
-    p.hex("14")
-    p.keys("h")
-    p.wait("--- hex view off")
-    p.hex("14")
-    p.keys("f")
-    p.wait("log the session to file:")
+    menu(p, "h", "--- hex view off")
+    menu(p, "f", "log the session to file:")
     p.type(str(log))
     p.keys("Enter")
     p.wait(f"--- logging the session to {log}")
-    p.hex("14")
-    p.keys("u")
-    p.wait("send the lines of file:")
+    menu(p, "u", "send the lines of file:")
     p.type(str(lines))
     p.keys("Enter")
     p.wait("--- sent 2 of 2 lines")
     screen = p.screen()
     assert "BA 100 777   ok, value 777" in screen
     assert screen.count("BA 100 777") == 2  # SAP and GAP, each answered
-    p.hex("14")
-    p.keys("e")
-    p.wait("--- local echo on")
+    menu(p, "e", "--- local echo on")
     p.keys("GAP 4, 0", "Enter")
     p.wait("AGAP 4, 0")  # the line as sent
-    p.hex("14")
-    p.keys("f")
-    p.wait(f"--- log closed: {log}")
+    menu(p, "f", f"--- log closed: {log}")
     p.hex("14")  # the menu, then Enter: Enter does its job and the menu is gone
     p.keys("Enter")
     p.keys("SAP 4, 0, 4321", "Enter")  # typed as a line, S not taken for the menu
