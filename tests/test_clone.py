@@ -10,7 +10,9 @@ host, module, status, command, value, checksum) and a dictionary of values.
 from __future__ import annotations
 
 import json
+import os
 import re
+import threading
 from pathlib import Path
 
 import pytest

@@ -3,6 +3,8 @@ terminal (tmux), answering from a responder written from the manual."""
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from responder import TcpModule
@@ -30,7 +32,9 @@ def test_banner_toolbar_and_numbers_at_the_prompt(terminal, module_1161, tmp_pat
     term.keys("Enter")
     term.type("GAP 4, 0")
     term.keys("Enter")
-    term.wait("1500")
+    # the reply line itself (the typed SAP line holds "1500" too): GAP 4 has been answered
+    term.wait_for(re.compile(r"(?m)^1500\s*$"))
+    assert module_1161.got[-1] == (6, 4, 0, 0)
     term.type("GAP MaxPositioningSpeed, 0")
     term.keys("Enter")
     term.wait("by number")

@@ -6,6 +6,7 @@ Heavy modules (prompt_toolkit, rich, python-can) are imported only by the paths 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 from .options import (EXIT_CONNECT, EXIT_ERROR, EXIT_OK, EXIT_USAGE,  # noqa: F401
