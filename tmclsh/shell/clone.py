@@ -538,16 +538,23 @@ class DiffFound(TmclError):
     """``.diff --exit-code``: the module differs from the file."""
 
 
-@command(".diff")
-def cmd_diff(session: Session, argtext: str) -> None:
-    usage = ".diff FILE [--exit-code] [--force]"
-    name, given = _args(argtext, usage, {"--exit-code": "--exit-code", "--force": "--force",
-                                         "-f": "--force"})
-    live = session.module
+def _against_backup(session: Session, argtext: str, usage: str, flags: dict[str, str]):
+    """What .diff and .restore both start with: the backup read and checked, the live values
+    compared with it, and the notes on what was not compared. -> (backup, diffs, flags given)"""
+    name, given = _args(argtext, usage, flags)
     backup = read_backup(session, _file(session, name), force="--force" in given)
     diffs = compare(session, backup)
+    _notes(session, backup, session.module)
+    return backup, diffs, given
+
+
+@command(".diff")
+def cmd_diff(session: Session, argtext: str) -> None:
+    backup, diffs, given = _against_backup(
+        session, argtext, ".diff FILE [--exit-code] [--force]",
+        {"--exit-code": "--exit-code", "--force": "--force", "-f": "--force"})
+    live = session.module
     out = session.out
-    _notes(session, backup, live)
     if out.json:
         for d in diffs:
             out.emit(d.to_json())
@@ -584,15 +591,13 @@ class Written:
 
 @command(".restore")
 def cmd_restore(session: Session, argtext: str) -> None:
-    usage = ".restore FILE [--yes] [--store] [--force]"
-    name, given = _args(argtext, usage, {"--yes": "--yes", "-y": "--yes", "--store": "--store",
-                                         "--force": "--force", "-f": "--force"})
+    backup, diffs, given = _against_backup(
+        session, argtext, ".restore FILE [--yes] [--store] [--force]",
+        {"--yes": "--yes", "-y": "--yes", "--store": "--store", "--force": "--force",
+         "-f": "--force"})
     live = session.module
     c = session.client
-    backup = read_backup(session, _file(session, name), force="--force" in given)
-    diffs = compare(session, backup)
     out = session.out
-    _notes(session, backup, live)
     if backup.program:
         out.info(f"{backup.path.name} names a stored program ({backup.program}); .restore "
                  f"does not upload it (use .upload {backup.program})")
