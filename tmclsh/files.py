@@ -219,17 +219,17 @@ class AtomicWriter:
                 os.chmod(self.tmp, 0o666 & ~_umask())
             os.replace(self.tmp, self.path)
         except (OSError, ValueError) as exc:
-            try:
-                self.fh.close()
-            except (OSError, ValueError):
-                pass
-            self._remove()
+            self._discard()
             raise self._error(exc) from None
 
     def abort(self) -> None:
         if self.closed:
             return
         self.closed = True
+        self._discard()
+
+    def _discard(self) -> None:
+        """Close without caring how, and remove the temporary file: the target stays as it was."""
         try:
             self.fh.close()
         except (OSError, ValueError):
