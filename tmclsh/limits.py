@@ -80,7 +80,7 @@ LIMITS: dict[str, Limit] = {
     "reply_id": Limit(int, 0, 2047,
                  what="module's CAN reply id (--reply-id, TMCLSH_REPLY_ID, reply_id)"),
     "bitrate": Limit(int, 10_000, 1_000_000,
-                 what="CAN bit rate, bit/s"),
+                 what="CAN bit rate in bit/s (--bitrate, bitrate in a profile)"),
     # shell settings (config file [settings])
     "history_size": Limit(int, 0, 1_000_000,
                  what="lines of history kept (history_size in [settings])"),
