@@ -51,24 +51,28 @@ def complete_help(session: Session | None, text: str) -> list[Candidate]:
     return out
 
 
-def complete_param(session: Session | None, text: str) -> list[Candidate]:
+def _param_candidates(session: Session | None) -> list[Candidate]:
     mod = _module(session)
     if mod is None:
         return []
-    extra = [] if "--source" in text.split() else [
-        Candidate("--source", "also how the entry was read from the manual")]
     return [Candidate(p.name, param_meta(p), also=(p.manual_name,))
-            for p in mod.axis_params + mod.global_params] + extra
+            for p in mod.axis_params + mod.global_params]
+
+
+def complete_param(session: Session | None, text: str) -> list[Candidate]:
+    found = _param_candidates(session)
+    if not found or "--source" in text.split():
+        return found
+    return found + [Candidate("--source", "also how the entry was read from the manual")]
 
 
 def complete_params(session: Session | None, text: str) -> list[Candidate]:
     words = text.split()
     if len(words) == 0 or (len(words) == 1 and not text.endswith(" ")):
         return [Candidate("axis", "axis parameters (SAP/GAP)"),
-                Candidate("global", "global parameters (SGP/GGP)")] + [
-            c for c in complete_param(session, text) if c.text != "--source"]
+                Candidate("global", "global parameters (SGP/GGP)")] + _param_candidates(session)
     kind = words[0].lower()
-    return [c for c in complete_param(session, text) if c.text != "--source"
+    return [c for c in _param_candidates(session)
             if kind not in ("axis", "global") or c.meta.startswith("AP" if kind == "axis" else "GP")]
 
 
