@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 from .client import Client
 from .errors import ChecksumError, DownloadModeError, TmclError, TmclTimeoutError
-from .protocol import SERIAL_FRAME_LEN, Control, Request
+from .protocol import SERIAL_FRAME_LEN, Control, Request, checksum
 from .transport.base import CanTransport, StreamTransport, Transport
 
 BITS_PER_BYTE = 10  # 8N1: a start bit, eight data bits, a stop bit
@@ -83,9 +83,9 @@ def _late_answerer(raw: bytes, host: int) -> int | None:
     to a presence probe (a damaged reply that still starts with our host address most likely
     names its sender next: worth a second look)."""
     if len(raw) == SERIAL_FRAME_LEN and raw[0] == host and raw[3] == Control.GET_VERSION \
-            and sum(raw[:8]) & 0xFF == raw[8]:
+            and checksum(raw[:8]) == raw[8]:
         return raw[1]
-    if 2 <= len(raw) <= 2 * SERIAL_FRAME_LEN and raw[0] == host and sum(raw[:8]) & 0xFF != \
+    if 2 <= len(raw) <= 2 * SERIAL_FRAME_LEN and raw[0] == host and checksum(raw[:8]) != \
             (raw[8] if len(raw) > 8 else -1):
         return raw[1]
     return None
