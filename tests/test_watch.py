@@ -134,6 +134,17 @@ def test_parse_items(session):
         watch.parse_items(session, "x=GAP 99, 0")  # refused before anything is polled
 
 
+def test_a_semicolon_after_the_options_is_found_as_the_shell_finds_it():
+    """The ';' that would end the line is found by the shell's own splitter (lines.py): inside
+    quotes it is part of a value, and an apostrophe inside a word opens no quote."""
+    watch._refuse_line_after_options('pos=GAP 1, 0 --until "pos; 1" --count 2')  # quoted: a value
+    watch._refuse_line_after_options("a=GAP 1, 0; b=GAP 3, 0 --count 2")  # before the options
+    with pytest.raises(ValidationError, match="'GAP 3, 0' after ';' follows the watch's options"):
+        watch._refuse_line_after_options("pos=GAP 1, 0 --csv don't.csv; GAP 3, 0")
+    with pytest.raises(ValidationError, match="'GAP 3, 0' after ';'"):
+        watch._refuse_line_after_options("pos=GAP 1, 0 --until 'pos > 1'; GAP 3, 0")
+
+
 # -- polling against the simulator -------------------------------------------------------------
 
 def test_json_samples(session, capsys):

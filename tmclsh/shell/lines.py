@@ -46,6 +46,11 @@ def comment_at(text: str) -> int | None:
     return None
 
 
+def separators(text: str):
+    """Where ``text`` has a ``;`` outside quotes, in order (the places a line may be cut)."""
+    return (i for i, ch, quoted in _scan(text) if ch == ";" and not quoted)
+
+
 def strip_comment(text: str) -> str:
     """``text`` without its comment, stripped."""
     at = comment_at(text)
@@ -65,7 +70,7 @@ def split_line(text: str, owns_line: Callable[[str], bool]) -> list[str]:
         if owns_line(rest):
             out.append(rest)
             break
-        cut = next((i for i, ch, quoted in _scan(rest) if ch == ";" and not quoted), None)
+        cut = next(separators(rest), None)
         head, rest = (rest, "") if cut is None else (rest[:cut], rest[cut + 1:])
         if head.strip():
             out.append(head.strip())

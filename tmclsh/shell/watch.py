@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING, TextIO
 
 from .. import files
 from ..errors import TmclError, TransportError, ValidationError
-from . import expr, plot, script
+from . import expr, lines, plot, script
 from .commands import command
 
 if TYPE_CHECKING:
@@ -438,20 +438,14 @@ def _refuse_line_after_options(args: str) -> None:
     first = re.search(r"(?:^|\s)--(?:" + "|".join(WATCH_OPTIONS) + r")\b", args)
     if first is None:
         return
-    quote = None
-    for i in range(first.start(), len(args)):
-        ch = args[i]
-        if quote:
-            quote = None if ch == quote else quote
-        elif ch in "\"'":
-            quote = ch
-        elif ch == ";":
-            before, after = args[:i].strip(), args[i + 1:].strip()
-            raise ValidationError(
-                f"{after!r} after ';' follows the watch's options; .watch takes the rest of "
-                f"its line, ';' separating its expressions (before the options). To run "
-                f"{after!r} after the watch, put it on a line of its own:\n  .watch {before}"
-                f"\n  {after}")
+    cut = next((i for i in lines.separators(args) if i > first.start()), None)
+    if cut is not None:
+        before, after = args[:cut].strip(), args[cut + 1:].strip()
+        raise ValidationError(
+            f"{after!r} after ';' follows the watch's options; .watch takes the rest of "
+            f"its line, ';' separating its expressions (before the options). To run "
+            f"{after!r} after the watch, put it on a line of its own:\n  .watch {before}"
+            f"\n  {after}")
 
 
 def _check(session: Session, args: str) -> None:
