@@ -35,9 +35,6 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-_LINK_LOST = "link_lost"
-
-
 # -- parts -------------------------------------------------------------------------------
 
 def history_path():
@@ -339,7 +336,7 @@ def run_one(session: Session, line: str) -> bool:
     from .main import report_error
 
     # a lost link (also one a .watch met) is brought back before the next TMCL line
-    lost = session.state.get(_LINK_LOST) or not session.client.connected
+    lost = session.link_lost or not session.client.connected
     if lost and _is_tmcl(line):
         if not _try_reconnect(session):
             return True
@@ -355,7 +352,7 @@ def run_one(session: Session, line: str) -> bool:
     except TransportError as exc:
         report_error(session, line, exc)
         if _is_tmcl(line) or not session.client.connected:  # (a failed .connect PORT
-            session.state[_LINK_LOST] = True                  # leaves the old link alone)
+            session.link_lost = True                          # leaves the old link alone)
             session.out.info("the link is down: the next command tries to reconnect "
                              "(or .connect [PORT])")
     except TmclError as exc:
@@ -380,18 +377,11 @@ _NO_RECONNECT = frozenset({".connect", ".quit", ".exit", "quit", "exit", ".help"
 
 
 def _try_reconnect(session: Session, quiet: bool = False) -> bool:
-    client = session.client
-    try:
-        client.reconnect()
-    except TmclError as exc:
-        if not quiet:
-            session.out.error(None, f"still disconnected ({exc}); nothing was sent. "
-                                    ".connect [PORT] to switch")
-        return False
-    except OSError as exc:
-        if not quiet:
-            session.out.error(None, f"still disconnected ({exc}); nothing was sent")
-        return False
-    session.state.pop(_LINK_LOST, None)
-    session.out.ok(f"reconnected to {client.describe()}")
-    return True
+    why = session.reconnect()
+    if why is None:
+        session.out.ok(f"reconnected to {session.client.describe()}")
+        return True
+    if not quiet:
+        switch = ". .connect [PORT] to switch" if isinstance(why, TmclError) else ""
+        session.out.error(None, f"still disconnected ({why}); nothing was sent{switch}")
+    return False

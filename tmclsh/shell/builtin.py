@@ -850,6 +850,7 @@ def cmd_connect(session: Session, arg: str) -> None:
     words = arg.split()
     if not words:
         client.reconnect()
+        session.link_lost = False
         if client.module is None:
             client.identify()
         _refresh_program_state(session)
@@ -872,6 +873,7 @@ def cmd_connect(session: Session, arg: str) -> None:
         transport = tr.open_serial(words[0], settings.get("baud") or 9600)
         new = {"port": words[0]}
     switch_transport(client, transport, module)
+    session.link_lost = False
     for key in ("port", "can", "sim"):
         settings.pop(key, None)
     settings.update(new)
@@ -1056,11 +1058,10 @@ def stop_all(session: Session, why: str = ""):
 
     client = session.client
     prefix = f"{why}: " if why else ""
-    if not client.connected:
-        try:  # the link was lost: the stop is worth one attempt to bring it back
-            client.reconnect()
-        except (TmclError, OSError) as exc:
-            session.out.warn(f"{prefix}not connected ({exc}); nothing could be stopped")
+    if not client.connected:  # the link was lost: the stop is worth one attempt to bring it back
+        why = session.reconnect()
+        if why is not None:
+            session.out.warn(f"{prefix}not connected ({why}); nothing could be stopped")
             return None
         session.out.info(f"reconnected to {client.describe()}")
     try:

@@ -99,6 +99,9 @@ class Session:
         self.time_limit: float | None = None
         self._deadline: float | None = None
         self.state["evaluate"] = _evaluate  # ${expression} in any line
+        # the REPL saw the link fail (a TransportError): its next line reconnects first.
+        # Cleared by every reconnect that succeeds (reconnect below, .connect)
+        self.link_lost = False
 
     def close(self) -> bool:
         """End the session: run the closers; a failing one is reported, the rest still run.
@@ -126,17 +129,27 @@ class Session:
             sys.stdout.flush()
         self.interrupted_line_ended = True
 
+    def reconnect(self) -> TmclError | OSError | None:
+        """One attempt to bring the link back (``client.reconnect``): None when it is back
+        (``link_lost`` cleared), else the error that says why not. The REPL, a watch,
+        ``.stopall`` and ``--keep-going`` scripts all come back this way and say it in their
+        own words."""
+        try:
+            self.client.reconnect()
+        except (TmclError, OSError) as exc:
+            return exc
+        self.link_lost = False
+        return None
+
     def ensure_link(self) -> None:
         """After a lost link (-c/-f with --keep-going): reconnect before the next line runs;
         TransportError, and the line is not run, if the link cannot be brought back."""
-        c = self.client
-        if c.connected:
+        if self.client.connected:
             return
-        try:
-            c.reconnect()
-        except (TmclError, OSError) as exc:
-            raise TransportError(f"still disconnected ({exc}); the line was not run") from None
-        self.out.info(f"reconnected to {c.describe()}")
+        why = self.reconnect()
+        if why is not None:
+            raise TransportError(f"still disconnected ({why}); the line was not run")
+        self.out.info(f"reconnected to {self.client.describe()}")
 
     # -- confirmation -------------------------------------------------------------------
     def confirm(self, question: str) -> None:

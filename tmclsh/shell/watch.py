@@ -609,10 +609,7 @@ class _Watch:
 
     def _reconnect(self) -> bool:
         """One attempt to bring the lost link back; True when it is."""
-        client = self.session.client
-        try:
-            client.reconnect()
-        except (TmclError, OSError):
+        if self.session.reconnect() is not None:
             return False
         lost, self.state.lost = self.state.lost, None
         self.state.note = (f"link back at {time.monotonic() - self.start:.1f} s "
