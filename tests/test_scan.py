@@ -74,6 +74,34 @@ def test_scan_over_python_can_virtual(monkeypatch, capsys):
     assert "scanning CAN ids 1..4" in err
 
 
+def test_the_wait_the_reported_baud_and_baud_auto_ask_one_question(pty_sim):
+    """scan.line_baud says whether a link has a baud rate; the first pass's wait adds wire
+    time exactly when it has one, and ``--baud auto`` refuses exactly the links without."""
+    from tmclsh import scan
+    from tmclsh.transport import open_sim
+    from tmclsh.transport.base import CanTransport
+    from tmclsh.transport.serial import SerialTransport
+
+    class Can(CanTransport):
+        open = close = send = recv = lambda *a: None
+        is_open = True
+
+    _, pty_path = pty_sim
+    sim = open_sim("TMCM-1311")
+    try:
+        links = {"pty": SerialTransport(pty_path, 19200), "rs485": SerialTransport("/dev/ttyUSB7"),
+                 "tcp": SerialTransport("socket://127.0.0.1:1"), "sim": sim, "can": Can("x:y")}
+        bauds = {k: scan.line_baud(t) for k, t in links.items()}
+        waits = {k: scan.address_timeout(t) for k, t in links.items()}
+    finally:
+        sim.close()
+    assert bauds == {"pty": 19200, "rs485": 9600, "tcp": None, "sim": None, "can": None}
+    assert waits["pty"] == pytest.approx(scan.wire_time(19200) + scan.MARGIN_LOCAL)
+    assert waits["rs485"] == pytest.approx(scan.wire_time(9600) + scan.MARGIN_RS485)
+    assert (waits["tcp"], waits["sim"], waits["can"]) == (
+        scan.MARGIN_USB * 2, scan.MARGIN_LOCAL, scan.CAN_TIMEOUT)
+
+
 def test_scan_rejects_an_empty_range(run_tmclsh):
     p = run_tmclsh("scan", "--sim", "--from", "5", "--to", "2")
     assert p.returncode == 1 and "above" in p.stderr

@@ -90,7 +90,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
     from .client import Client
     from .connection import baud_rates, connection_settings, open_transport
     from .errors import ConnectError, TransportError, ValidationError
-    from .scan import address_timeout, scan
+    from .scan import address_timeout, line_baud, scan
 
     if args.first > args.last:
         raise ValidationError(f"--from {args.first} is above --to {args.last}")
@@ -108,8 +108,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
     ids = "CAN ids" if client.is_can else "addresses"
     rates: list[int | None] = [None]
     if auto:
-        if client.is_can or not hasattr(transport, "set_baudrate") or transport.simulated \
-                or "://" in getattr(transport, "url", "://"):
+        if line_baud(transport) is None:
             raise ValidationError("--baud auto needs a serial port (a CAN bus, a simulator or "
                                   "a socket:// URL has no baud rate)")
         rates = list(baud_rates())

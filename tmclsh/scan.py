@@ -64,17 +64,28 @@ def _is_pty(url: str) -> bool:
         return False
 
 
+def line_baud(transport: Transport) -> int | None:
+    """The baud rate the link's bytes travel at, or None when it has none: a serial port or a
+    pty has one; a CAN bus, the simulator and a URL (socket://, rfc2217://: a network hop
+    between us and any serial line) do not. Only a byte stream has a baud rate (and
+    ``set_baudrate``). The first pass's wait, ``Found.baud`` and ``scan --baud auto`` all
+    ask this."""
+    if isinstance(transport, StreamTransport) and not transport.simulated \
+            and "://" not in transport.url:
+        return getattr(transport, "baudrate", None)
+    return None
+
+
 def address_timeout(transport: Transport, *, usb: bool = False) -> float:
     """How long to wait for each address in the first pass (see the module docstring)."""
     if isinstance(transport, CanTransport):
         return CAN_TIMEOUT
     if transport.simulated:
         return MARGIN_LOCAL
-    url = getattr(transport, "url", "")
-    if "://" in url:
+    baud = line_baud(transport)
+    if baud is None:
         return MARGIN_USB * 2  # socket://, rfc2217://: no baud rate, a network hop
-    baud = getattr(transport, "baudrate", 9600)
-    margin = MARGIN_LOCAL if _is_pty(url) else MARGIN_USB if usb else MARGIN_RS485
+    margin = MARGIN_LOCAL if _is_pty(transport.url) else MARGIN_USB if usb else MARGIN_RS485
     return wire_time(baud) + margin
 
 
@@ -104,14 +115,7 @@ def _identify(client: Client, addr: int, binary, timeout: float) -> Found:
     mod = from_version_string(version) if version else None
     if mod is None and binary.status == 100:
         mod = by_firmware_id((binary.value >> 16) & 0xFFFF)
-    return Found(addr, mod.name if mod else None, version, _baud(client.transport))
-
-
-def _baud(t: Transport) -> int | None:
-    """The line's baud rate, if it has one (a pty or serial port; not CAN, TCP, simulator)."""
-    if isinstance(t, StreamTransport) and not t.simulated and "://" not in getattr(t, "url", ""):
-        return getattr(t, "baudrate", None)
-    return None
+    return Found(addr, mod.name if mod else None, version, line_baud(client.transport))
 
 
 def _probe(client: Client, addr: int, timeout: float, retries: int):
