@@ -394,3 +394,26 @@ def test_help_for_a_number_nothing_answers_to_is_an_error():
         s.run_line("help 136")  # no parameter, but a command: explained, not an error
     finally:
         s.client.close()
+
+
+def _takes_nothing():
+    from tmclsh.shell import commands
+
+    return [c.name for c in commands.REGISTRY.values() if c.syntax == c.name]
+
+
+@pytest.mark.parametrize("name", _takes_nothing())
+def test_words_after_a_command_that_takes_none_are_a_usage_error(session, name):
+    """`.stopall extra words` (and `.reset now`, `.quit please`) was run with the words
+    ignored: now one line says so and nothing is sent."""
+    frames = Frames(session.client)
+    with pytest.raises(ValidationError) as err:
+        session.run_line(f"{name} extra words")
+    assert str(err.value) == f"{name} takes no arguments (got 'extra words')"
+    assert frames.tx == []
+
+
+def test_stopall_with_words_is_one_line_and_sends_nothing(run_tmclsh):
+    p = run_tmclsh("--sim", "TMCM-1311", "-c", ".stopall extra words")
+    assert p.returncode == 1 and p.stdout == ""
+    assert p.stderr == "error: .stopall takes no arguments (got 'extra words')\n"

@@ -1041,8 +1041,6 @@ def cmd_version(session: Session, arg: str) -> None:
 
 @command(".stopall")
 def cmd_stopall(session: Session, arg: str) -> None:
-    if arg.strip():
-        raise ValidationError(".stopall takes no arguments")
     report = stop_all(session)
     if report is not None and not report.ok:
         err = TmclError("not everything stopped (see above)")

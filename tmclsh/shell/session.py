@@ -254,7 +254,10 @@ class Session:
             cmd = commands.find(word)
             if cmd is None:
                 raise ValidationError(unknown_command(word))
-            cmd.handler(self, text[len(word):].strip())
+            args = text[len(word):].strip()
+            if args and cmd.syntax == cmd.name:  # `.stopall now`: a usage error, nothing sent
+                raise ValidationError(f"{cmd.name} takes no arguments (got {args!r})")
+            cmd.handler(self, args)
             self._record(text, "")
             return None
         return self.run_tmcl(text)
