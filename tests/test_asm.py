@@ -343,6 +343,17 @@ def test_read_image_errors() -> None:
     assert asm.read_image(b"") == []
 
 
+@pytest.mark.parametrize("text", [b"SAP 4, 0, 1000\n", b"MVP ABS, 0, 100\n",  # 15 and 16 bytes
+                                  "// Geschwindigkeit \u00e4ndern\nSTOP\n".encode()])
+def test_text_given_as_an_image_is_called_text(text) -> None:
+    """Was "a binary image is 8-byte records; this one has 15 bytes" (or, for 16 bytes, a
+    checksum error about a "damaged" image)."""
+    with pytest.raises(AsmError, match=r"this is text \(line 1: .*\), not a program image: a "
+                                       r"TMCL-IDE binary image \(8-byte records\) or the --hex "
+                                       r"text form .* `tmclsh asm FILE` makes an image of it"):
+        asm.read_image(text)
+
+
 def test_disassemble_generates_labels() -> None:
     program = asm.assemble(SOURCE, M1311)
     text = asm.disassemble(program.instructions, M1311)

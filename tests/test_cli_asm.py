@@ -69,6 +69,15 @@ def test_hex_image_disassembles(program: Path, tmp_path: Path) -> None:
     assert r.returncode == 0 and "WAIT POS, 0, 0" in r.stdout
 
 
+def test_disasm_of_source_says_it_is_text_and_names_asm(program: Path) -> None:
+    r = tmclsh("disasm", str(program))
+    assert r.returncode == 1 and r.stdout == ""
+    assert r.stderr == (f"tmclsh: {program}: this is text (line 1: '// move between two "
+                        "positions'), not a program image: a TMCL-IDE binary image (8-byte "
+                        "records) or the --hex text form (7 hex bytes a line); if it is TMCL "
+                        "source, `tmclsh asm FILE` makes an image of it\n")
+
+
 def test_error_has_location_and_no_output_file(tmp_path: Path) -> None:
     src = tmp_path / "bad.tmc"
     src.write_text("SAP 4, 0, 1000\nSAP 140, 0, 9\n")

@@ -922,6 +922,19 @@ def is_image_file(path: str | Path, data: bytes | None = None) -> bool:
     return False
 
 
+def _as_text(data: bytes) -> str | None:
+    """``data`` as text if it is text: UTF-8, printable but for line ends and tabs, and not
+    blank. An image is not (a NUL byte in nearly every record: motor 0, a value's high
+    bytes)."""
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError:
+        return None
+    if not text.strip() or not all(ch.isprintable() or ch in "\t\n\r\f\v" for ch in text):
+        return None
+    return text
+
+
 def read_image(data: bytes) -> list[Instruction]:
     """Instructions from a TMCL-IDE binary image or the ``--hex`` text form.
 
@@ -943,6 +956,14 @@ def read_image(data: bytes) -> list[Instruction]:
                 raise AsmError(f"expected {INSTRUCTION_LEN} hex bytes, found {len(parts)}", no, 1)
             out.append(Instruction.from_bytes(bytes(int(x, 16) for x in parts)))
         return out
+    source = _as_text(data)
+    if source is not None:
+        no, first = next((n, line.strip()) for n, line in enumerate(source.splitlines(), 1)
+                         if line.strip())
+        raise AsmError(f"this is text (line {no}: {first[:40]!r}), not a program image: a "
+                       f"TMCL-IDE binary image ({IMAGE_RECORD_LEN}-byte records) or the --hex "
+                       f"text form ({INSTRUCTION_LEN} hex bytes a line); if it is TMCL source, "
+                       "`tmclsh asm FILE` makes an image of it")
     if len(data) % IMAGE_RECORD_LEN:
         hint = (" (7-byte records without checksums are not a TMCL-IDE image; convert them "
                 "with the --hex text form)") if len(data) % INSTRUCTION_LEN == 0 else ""
