@@ -14,6 +14,8 @@ import pytest
 from conftest import tmclsh_env
 from responder import CanModule
 from tmclsh import cli
+from tmclsh.sim import Simulator
+from tmclsh.sim.serve import serve_can
 
 
 @pytest.fixture
@@ -161,3 +163,24 @@ def test_help_offers_what_works_across_processes(run_tmclsh):
     sim_help = " ".join(run_tmclsh("sim", "--help").stdout.split())
     assert "virtual" in sim_help and "another process" in sim_help
     assert "Windows" in sim_help
+
+
+@pytest.mark.parametrize("argv", [["--can", "scan"], ["scan", "--can"]])
+def test_can_alone_before_or_after_scan_scans_the_configured_bus(monkeypatch, tmp_path,
+                                                                  capsys, argv):
+    """`tmclsh --can scan` took `scan` for the CAN spec (a usage error, no scan)."""
+    _isolate(monkeypatch, tmp_path)
+    monkeypatch.setenv("CAN_INTERFACE", "virtual")
+    monkeypatch.setenv("CAN_CHANNEL", "reach-scan")
+    sim = Simulator("TMCM-1311", 1)
+    server = serve_can(sim, "virtual", "reach-scan")
+    try:
+        rc = cli.main([*argv, "--to", "2", "--json"])
+    finally:
+        server.close()
+        sim.close()
+    out, err = capsys.readouterr()
+    assert rc == 0, err
+    assert [json.loads(line) for line in out.splitlines()] == [
+        {"address": 1, "module": "TMCM-1311", "version": "1311V111"}]
+    assert "scanning CAN ids 1..2 on CAN virtual:reach-scan" in err

@@ -102,6 +102,26 @@ def test_the_wait_the_reported_baud_and_baud_auto_ask_one_question(pty_sim):
         scan.MARGIN_USB * 2, scan.MARGIN_LOCAL, scan.CAN_TIMEOUT)
 
 
+@pytest.mark.parametrize("argv", [["--sim", "TMCM-351", "scan"], ["--sim", "scan"],
+                                  ["--json", "--sim", "TMCM-351", "scan"]])
+def test_connection_options_before_scan_reach_it(run_tmclsh, argv):
+    """The scan subcommand's own copies of the options, not given, reset those given before
+    it: `tmclsh --sim TMCM-351 scan` looked for an attached module (exit 3)."""
+    p = run_tmclsh(*argv, "--to", "2")
+    assert p.returncode == 0, p.stderr
+    module = "TMCM-351" if "TMCM-351" in argv else "TMCM-1311"
+    if "--json" in argv:
+        assert json.loads(p.stdout)["module"] == module
+    else:
+        assert p.stdout.split()[:3] == ["address", "1", module]
+
+
+def test_two_links_named_around_scan_are_a_usage_error(run_tmclsh):
+    p = run_tmclsh("--sim", "scan", "--port", "/dev/null")
+    assert p.returncode == 2 and p.stdout == ""
+    assert p.stderr == "tmclsh: --port and --sim both name the link; give one of them\n"
+
+
 def test_scan_rejects_an_empty_range(run_tmclsh):
     p = run_tmclsh("scan", "--sim", "--from", "5", "--to", "2")
     assert p.returncode == 1 and "above" in p.stderr

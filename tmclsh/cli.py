@@ -10,7 +10,7 @@ import os
 import sys
 
 from .options import (EXIT_CONNECT, EXIT_ERROR, EXIT_OK, EXIT_USAGE,  # noqa: F401
-                      SUBCOMMANDS, build_parser)
+                      SUBCOMMANDS, build_parser, parse_args)
 
 
 # -- subcommands -------------------------------------------------------------------------
@@ -283,7 +283,7 @@ def _user_modules(args: argparse.Namespace) -> None:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parse_args(parser, argv)
     debug = getattr(args, "debug", False)
     from .errors import TmclError, UsageError
 

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 from .canspec import FROM_PYTHON_CAN, parse_can
 from .client import Client
 from .errors import (ChecksumError, ConnectError, DownloadModeError, NoAnswerError,
-                     StatusError, TmclTimeoutError, ValidationError)
+                     StatusError, TmclTimeoutError, UsageError, ValidationError)
 from .transport.base import StreamTransport, Transport
 
 if TYPE_CHECKING:
@@ -39,6 +39,9 @@ def connection_settings(args: argparse.Namespace) -> dict:
     cli = {k: getattr(args, k, None) for k in
            ("port", "baud", "can", "bitrate", "sim", "can_id", "reply_id", "module", "address",
             "host_address", "ascii", "timeout", "retries", "profile")}
+    given = [f"--{k}" for k in ("port", "can", "sim") if cli[k] is not None]
+    if len(given) > 1:  # one before a subcommand, one after it (argparse sees two parsers)
+        raise UsageError(f"{given[0]} and {given[1]} both name the link; give one of them")
     settings = resolve(cli, load_config())
     if settings.get("can") and settings["can"] != FROM_PYTHON_CAN:
         parse_can(settings["can"])  # a malformed --can is a usage error, before opening anything

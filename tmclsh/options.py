@@ -8,6 +8,7 @@ can drift from the other. It imports nothing heavy.
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
 
 from . import __version__, limits
 from .canspec import FROM_PYTHON_CAN
@@ -56,7 +57,11 @@ def _baud_or_auto(text: str) -> int | str:
     return "auto" if text.strip().lower() == "auto" else _baud(text)
 
 
-def add_connection(p: argparse.ArgumentParser, *, auto_baud: bool = False) -> None:
+def add_connection(p: argparse.ArgumentParser, *, auto_baud: bool = False,
+                   nested: bool = False) -> None:
+    """The connection options; ``nested`` (a subcommand's copy): an option not given leaves
+    what was given before the subcommand (``tmclsh --can scan``) instead of resetting it."""
+    first = len(p._actions)
     g = p.add_argument_group("connection (default: the one attached Trinamic USB module; "
                              "else --sim at the prompt, exit 3 elsewhere)")
     x = g.add_mutually_exclusive_group()
@@ -88,6 +93,9 @@ def add_connection(p: argparse.ArgumentParser, *, auto_baud: bool = False) -> No
     g.add_argument("--reply-id", type=setting("reply_id"), metavar="N",
                    help=f"module's CAN reply id (GP 70, default 2; {_range('reply_id')})")
     g.add_argument("--profile", metavar="NAME", help="connection profile from the config file")
+    if nested:
+        for action in p._actions[first:]:
+            action.default = argparse.SUPPRESS
 
 
 def add_options(p: argparse.ArgumentParser) -> None:
@@ -193,12 +201,27 @@ def build_parser() -> argparse.ArgumentParser:
                     help="one JSON object per module")
 
     sc = sub.add_parser("scan", help="find modules on a bus (address, type, firmware)")
-    add_connection(sc, auto_baud=True)
+    add_connection(sc, auto_baud=True, nested=True)
     sc.add_argument("--from", dest="first", type=_address, default=1, metavar="N")
     sc.add_argument("--to", dest="last", type=_address, default=255, metavar="N")
     sc.add_argument("--timeout", type=setting("scan_timeout"), metavar="S",
                     help="per-address timeout (default: from the link, the wire time of a "
                          f"request and its reply at the baud rate plus a margin; "
                          f"{_range('scan_timeout')})")
-    sc.add_argument("--json", action="store_true")
+    sc.add_argument("--json", action="store_true", default=argparse.SUPPRESS)
     return p
+
+
+def parse_args(parser: argparse.ArgumentParser, argv: Sequence[str]) -> argparse.Namespace:
+    """``parser.parse_args``, except that an option whose value is optional (``--can``,
+    ``--sim``) right before a subcommand's name takes no value: ``tmclsh --can scan`` scans
+    python-can's configured bus (no CAN spec or module is called ``scan``)."""
+    optional = {s: a.const for a in parser._actions if a.nargs == argparse.OPTIONAL
+                for s in a.option_strings if a.const is not None}
+    argv = list(argv)
+    for i, word in enumerate(argv[:-1]):
+        if word == "--":
+            break
+        if word in optional and argv[i + 1] in SUBCOMMANDS:
+            argv[i] = f"{word}={optional[word]}"
+    return parser.parse_args(argv)
