@@ -39,6 +39,24 @@ def test_connect_defaults_to_the_simulator_and_checks_its_arguments():
         tmclsh.connect(port="loop://", sim="TMCM-1311")
 
 
+@pytest.mark.parametrize("kw, message", [
+    ({"timeout": float("nan")}, "timeout: must be a number of seconds from 0.001 to 60, got nan"),
+    ({"timeout": float("inf")}, "timeout: must be a number of seconds from 0.001 to 60, got inf"),
+    ({"retries": -1}, "retries: must be a whole number from 0 to 10, got -1"),
+    ({"address": 256}, "address: must be a whole number from 0 to 255, got 256"),
+    ({"baud": 12345}, "baud: must be one of 9600, "),
+    ({"port": "loop://", "can_id": 4096}, "can_id: must be a whole number from 0 to 2047"),
+])
+def test_connect_refuses_a_setting_as_the_command_line_does(kw, message):
+    """Was a bare ValueError from the client (nan), or no error at all (inf: a wait forever)."""
+    from tmclsh.limits import SettingError
+
+    with pytest.raises(SettingError) as exc:
+        tmclsh.connect(**kw)
+    assert str(exc.value).startswith(message)
+    assert isinstance(exc.value, ValidationError) and isinstance(exc.value, ValueError)
+
+
 def test_connect_checks_the_module_given(pty_sim):
     sim, path = pty_sim
     with tmclsh.connect(port=path, module="TMCM-1311", timeout=0.5) as c:

@@ -131,12 +131,20 @@ def connect(port: str | None = None, *, baud: int = 9600, can: str | None = None
     built-in simulated TMCM-1311.
 
     The module type is asked with 136; a ``module`` that contradicts the answer is a
-    ``ConnectError``.
+    ``ConnectError``. A number outside its range (``limits.LIMITS``, as for the command line:
+    ``timeout`` 0.001..60 s, ``retries`` 0..10, ...) is a ``SettingError`` (a
+    ``ValidationError``, also a ``ValueError``) before anything is opened.
     """
+    from . import limits
     from . import transport as tr
 
     if sum(x is not None for x in (port, can, sim)) > 1:
         raise ValidationError("give only one of port, can and sim")
+    for key, value in (("baud", baud), ("address", address), ("host_address", host_address),
+                       ("timeout", timeout), ("retries", retries), ("can_id", can_id),
+                       ("reply_id", reply_id), ("bitrate", bitrate)):
+        if value is not None:
+            limits.check(key, value, key)
     if port is not None:
         t: Transport = tr.open_serial(port, baud)
     elif can is not None:
