@@ -27,6 +27,21 @@ def test_read_errors_name_the_path_and_the_reason(tmp_path):
     assert issubclass(files.FileError, TmclError)
 
 
+def test_read_tail_gives_the_last_whole_lines_and_refuses_what_is_no_file(tmp_path):
+    path = tmp_path / "log"
+    path.write_bytes(b"first line\nsecond\nthird\n")
+    assert files.read_tail(path, 100) == b"first line\nsecond\nthird\n"
+    assert files.read_tail(path, 13) == b"second\nthird\n"  # exactly at a line's start
+    assert files.read_tail(path, 12) == b"third\n"  # 'econd' cut: dropped
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)  # opening it would wait for a writer
+    for what in (fifo, "/dev/zero", tmp_path):
+        with pytest.raises(files.FileError, match="not a regular file"):
+            files.read_tail(what, 100, "history")
+    with pytest.raises(files.FileError, match="no such file"):
+        files.read_tail(tmp_path / "none", 100)
+
+
 def test_read_lines_limits_the_line_count(tmp_path):
     p = tmp_path / "s.tmcl"
     p.write_text("GAP 1, 0\n" * 11)

@@ -45,12 +45,14 @@ class Repl:
         self.session, self.inp, self.screen = session, inp, screen
         self.mark = 0
         self.result: list[object] = []
+        self.file_history = False  # True: the history file in XDG_STATE_HOME, as a user's
         self.thread = threading.Thread(target=self._run, daemon=True)
 
     def _run(self):
         try:
             with create_app_session(input=self.inp, output=PlainTextOutput(self.screen)):
-                self.ps = app.build_prompt_session(self.session, history=InMemoryHistory())
+                kw = {} if self.file_history else {"history": InMemoryHistory()}
+                self.ps = app.build_prompt_session(self.session, **kw)
                 self.result.append(app.run_repl(self.session, self.ps))
         except BaseException as exc:  # surfaced by the test
             self.result.append(exc)
@@ -338,6 +340,56 @@ def test_history_is_trimmed_to_history_size(tmp_path, monkeypatch):
     kept = list(app.make_history(size=3).load_history_strings())
     assert kept == ["GAP 9, 0", "GAP 8, 0", "GAP 7, 0"]
     assert isinstance(app.make_history(size=0), InMemoryHistory)  # history_size = 0
+
+
+def _history_file(tmp_path, monkeypatch, data: bytes):
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
+    path = tmp_path / "state" / "tmclsh" / "history"
+    path.parent.mkdir(parents=True)
+    path.write_bytes(data)
+    return path
+
+
+MIB = 1024 * 1024
+
+
+@pytest.mark.parametrize("kind", ["20 MB of entries", "20 MB of NUL bytes", "one 20 MB entry"])
+def test_the_repl_starts_whatever_the_history_file_holds(repl, tmp_path, monkeypatch, kind):
+    """prompt_toolkit's FileHistory read the whole file, twice (trim, then load), and kept
+    any entry however long; now the newest 4 MiB are read and the file is cut down."""
+    entry = b"\n# 2026-12-01 10:00:00\n+GAP 1, 0\n"
+    data = {"20 MB of entries": entry * (20 * MIB // len(entry)) + b"\n# last\n+GAP 4, 0\n",
+            "20 MB of NUL bytes": bytes(20 * MIB),
+            "one 20 MB entry": b"+" + b"x" * (20 * MIB) + b"\n"}[kind]
+    path = _history_file(tmp_path, monkeypatch, data)
+    repl.file_history = True
+    repl.start()
+    assert list(repl.ps.history.load_history_strings())[:1] == (
+        ["GAP 4, 0"] if kind.endswith("entries") else [])
+    repl.line("GAP 4, 0", "MaxPositioningSpeed = ")
+    assert repl.quit() == 0
+    assert path.stat().st_size < 100_000  # trimmed to history_size (1000) entries
+    assert path.read_text().endswith("+GAP 4, 0\n")
+
+
+def test_a_history_that_is_no_regular_file_is_kept_in_memory(tmp_path, monkeypatch, caplog):
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path))
+    (tmp_path / "tmclsh").mkdir()
+    (tmp_path / "tmclsh" / "history").symlink_to("/dev/zero")  # endless: never read
+    assert isinstance(app.make_history(size=1000), InMemoryHistory)
+    assert "history is not a regular file" in caplog.text
+
+
+def test_history_entries_of_a_cut_file_start_at_a_whole_entry(tmp_path, monkeypatch):
+    """Only the file's last HISTORY_BYTES are read: a line cut there is dropped, an entry
+    longer than a script line is dropped, bytes that are not UTF-8 are replaced."""
+    monkeypatch.setattr(app, "HISTORY_BYTES", 40)
+    path = tmp_path / "history"
+    path.write_bytes(b"+" + b"y" * 30 + b"\n+GAP 1, 0\n\n# t\n+SAP 4, 0, \xff\n")
+    assert app.history_entries(path) == ["SAP 4, 0, \ufffd", "GAP 1, 0"]
+    monkeypatch.setattr(app, "HISTORY_BYTES", 1000)
+    path.write_bytes(b"+" + b"z" * 70_000 + b"\n\n+GAP 1, 0\n")
+    assert app.history_entries(path) == ["GAP 1, 0"]
 
 
 def test_vi_mode_from_the_config_file(tmp_path, monkeypatch):

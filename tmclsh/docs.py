@@ -845,7 +845,9 @@ Module files of your own (see MODULE FILES), in the same config directory.
 .TP
 {_i("$XDG_STATE_HOME")}{_b("/tmclsh/history")}
 Command history of the interactive prompt (default {_b("~/.local/state/tmclsh/history")}; the
-platform's state directory elsewhere).
+platform's state directory elsewhere), cut to {_b("history_size")} entries at each start; only
+its newest few MiB are read, and anything but a regular file is left alone (the history is
+then kept in memory).
 .TP
 {_i("$XDG_CACHE_HOME")}{_b("/tmclsh/programs/")}
 The source of each program uploaded with {_b(".upload")}, keyed by a hash of its image, so

@@ -8,6 +8,7 @@ failed write never leaves a half-written file where a good one was. Failures are
 
     data = read_bytes(path, limit=MAX_FILE, what="image")
     lines = read_lines(path, what="script")            # <= MAX_LINES lines
+    newest = read_tail(path, limit)                    # the last whole lines in limit bytes
     write_file(path, text)                             # all or nothing
     with atomic_writer(path) as fh:                    # streaming, replaced on close
         fh.write(...)
@@ -82,6 +83,32 @@ def read_bytes(path: str | os.PathLike, limit: int = MAX_FILE, what: str = "file
         raise FileError(f"cannot read {name}: no such file") from None
     except (OSError, ValueError) as exc:  # ValueError: a NUL in the name
         raise FileError(f"cannot read {name}: {_reason(exc)}") from None
+
+
+def read_tail(path: str | os.PathLike, limit: int = MAX_FILE, what: str = "file") -> bytes:
+    """The whole lines in the last ``limit`` bytes of the regular file ``path`` (all of it if
+    shorter): the newest part of a log or a history. A line cut by the limit is dropped.
+    Anything but a regular file (a FIFO, ``/dev/zero``, a directory) is a ``FileError``."""
+    import stat
+
+    name = str(path)
+    try:
+        if not stat.S_ISREG(os.stat(name).st_mode):
+            raise FileError(f"cannot read {name}: the {what} is not a regular file")
+        with open(name, "rb") as fh:
+            size = os.fstat(fh.fileno()).st_size
+            if size <= limit:
+                return fh.read(limit)
+            fh.seek(size - limit - 1)  # the byte before: a newline there means a whole line
+            data = fh.read(limit + 1)
+    except FileError:
+        raise
+    except FileNotFoundError:
+        raise FileError(f"cannot read {name}: no such file") from None
+    except (OSError, ValueError) as exc:
+        raise FileError(f"cannot read {name}: {_reason(exc)}") from None
+    cut = data.find(b"\n")
+    return data[cut + 1:] if cut >= 0 else b""
 
 
 def decode(data: bytes, name: str, what: str = "file") -> str:

@@ -18,6 +18,7 @@ Behaviour worth knowing:
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import sys
@@ -54,10 +55,15 @@ def repl_settings() -> dict:
         return {}
 
 
+# a history file is read no further back than this, and an entry longer than a script's line
+# is dropped: a huge, binary or endless file (a symlink to /dev/zero) must not hold up the start
+HISTORY_BYTES = 4 * 1024 * 1024
+
+
 def make_history(size: int | None = None):
     """Persistent history in the XDG state dir, trimmed to the last ``size`` lines (the
-    ``history_size`` setting); in memory if that cannot be written or ``size`` is 0."""
-    from prompt_toolkit.history import FileHistory, InMemoryHistory
+    ``history_size`` setting); in memory if that cannot be read or written, or ``size`` is 0."""
+    from prompt_toolkit.history import InMemoryHistory
 
     if size == 0:
         return InMemoryHistory()
@@ -65,25 +71,65 @@ def make_history(size: int | None = None):
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         path.touch(exist_ok=True)
-        if size is not None:
-            _trim_history(path, size)
-        return FileHistory(str(path))
-    except OSError as exc:
+        entries = history_entries(path)  # refuses anything but a regular file
+        if size is not None and (len(entries) > size
+                                 or path.stat().st_size > HISTORY_BYTES):
+            _rewrite_history(path, entries[:size])
+        return _bounded_history_class()(str(path))
+    except OSError as exc:  # files.FileError too
         log.warning("history not saved: %s", exc)
         return InMemoryHistory()
 
 
-def _trim_history(path, size: int) -> None:
+def history_entries(path) -> list[str]:
+    """The entries of a history file in prompt_toolkit's ``FileHistory`` format (an entry is
+    its run of ``+`` lines), newest first, from its last ``HISTORY_BYTES`` only; an entry
+    longer than ``files.MAX_LINE`` is dropped, bytes that are not UTF-8 are replaced."""
+    from .. import files
+
+    data = files.read_tail(path, HISTORY_BYTES, "history")
+    entries: list[str] = []
+    lines: list[bytes] = []
+    for line in data.split(b"\n") + [b""]:
+        if line.startswith(b"+"):
+            lines.append(line[1:])
+            continue
+        if lines:
+            entry = b"\n".join(lines)
+            if len(entry) <= files.MAX_LINE:
+                entries.append(entry.decode("utf-8", errors="replace"))
+            lines = []
+    entries.reverse()
+    return entries
+
+
+@functools.cache
+def _bounded_history_class():
     from prompt_toolkit.history import FileHistory
 
-    lines = list(FileHistory(str(path)).load_history_strings())  # newest first
-    if len(lines) <= size:
-        return
+    class BoundedFileHistory(FileHistory):
+        """``FileHistory`` that reads its file with ``history_entries`` (bounded)."""
+
+        def load_history_strings(self):
+            try:
+                return history_entries(self.filename)
+            except OSError as exc:
+                log.warning("history not read: %s", exc)
+                return []
+
+    return BoundedFileHistory
+
+
+def _rewrite_history(path, entries: list[str]) -> None:
+    """The history file replaced by ``entries`` (newest first), as FileHistory writes them."""
+    from prompt_toolkit.history import FileHistory
+
     tmp = path.with_name(path.name + ".tmp")
     tmp.unlink(missing_ok=True)
     keep = FileHistory(str(tmp))
-    for line in reversed(lines[:size]):
+    for line in reversed(entries):
         keep.store_string(line)
+    tmp.touch()  # no entries: an empty file
     os.replace(tmp, path)
 
 
