@@ -156,57 +156,53 @@ def test_stopall_after_a_lost_link_brings_it_back_and_stops(tcp_sim, capsys):
         client.close()
 
 
-def lose_in_the_repl(server, session) -> None:
-    """The cable pulled under a REPL line: the line fails and the REPL marks the link lost."""
+@pytest.fixture
+def lost_in_the_repl(tcp_sim):
+    """A session whose cable was pulled under a REPL line: the line failed and the REPL
+    marked the link lost. Yields (client, session, url)."""
     from tmclsh.shell.app import run_one
 
-    server.drop_client()
-    assert run_one(session, "GAP 4, 0")
-    assert session.link_lost and not session.client.connected
+    _, server, url = tcp_sim
+    client = Client(open_serial(url), module="TMCM-1311", timeout=0.3)
+    session = Session(client, Output())
+    try:
+        client.execute("GAP 4, 0")
+        server.drop_client()
+        assert run_one(session, "GAP 4, 0")
+        assert session.link_lost and not client.connected
+        yield client, session, url
+    finally:
+        client.close()
 
 
 @pytest.mark.parametrize("how", ["watch", ".connect"])
-def test_a_link_brought_back_elsewhere_is_not_reconnected_again(tcp_sim, capsys, how):
+def test_a_link_brought_back_elsewhere_is_not_reconnected_again(lost_in_the_repl, capsys, how):
     """A watch (or .connect) that brought the lost link back clears the REPL's mark: the next
     line runs on that link, with no second reconnect and no second "reconnected to"."""
     from tmclsh.shell.app import run_one
 
-    _, server, url = tcp_sim
-    client = Client(open_serial(url), module="TMCM-1311", timeout=0.3)
-    session = Session(client, Output())
-    try:
-        client.execute("GAP 4, 0")
-        lose_in_the_repl(server, session)
-        if how == "watch":
-            items = watch.parse_items(session, "v=GGP 0, 2")
-            watch.run_watch(session, items, interval=0.05, count=2, live=False,
-                            emit=lambda obj: None)
-        else:
-            assert run_one(session, ".connect")
-        assert not session.link_lost
-        reconnects = client.stats["reconnects"]
-        capsys.readouterr()
-        assert run_one(session, "GAP 4, 0")
-        out = capsys.readouterr().out
-        assert "MaxPositioningSpeed = " in out and "reconnected" not in out
-        assert client.stats["reconnects"] == reconnects
-    finally:
-        client.close()
+    client, session, _ = lost_in_the_repl
+    if how == "watch":
+        items = watch.parse_items(session, "v=GGP 0, 2")
+        watch.run_watch(session, items, interval=0.05, count=2, live=False,
+                        emit=lambda obj: None)
+    else:
+        assert run_one(session, ".connect")
+    assert not session.link_lost
+    reconnects = client.stats["reconnects"]
+    capsys.readouterr()
+    assert run_one(session, "GAP 4, 0")
+    out = capsys.readouterr().out
+    assert "MaxPositioningSpeed = " in out and "reconnected" not in out
+    assert client.stats["reconnects"] == reconnects
 
 
-def test_the_repl_reconnects_once_and_clears_its_mark(tcp_sim, capsys):
+def test_the_repl_reconnects_once_and_clears_its_mark(lost_in_the_repl, capsys):
     from tmclsh.shell.app import run_one
 
-    _, server, url = tcp_sim
-    client = Client(open_serial(url), module="TMCM-1311", timeout=0.3)
-    session = Session(client, Output())
-    try:
-        client.execute("GAP 4, 0")
-        lose_in_the_repl(server, session)
-        capsys.readouterr()
-        assert run_one(session, "GAP 4, 0") and run_one(session, "GAP 4, 0")
-        out = capsys.readouterr().out
-        assert out.count(f"reconnected to {url}") == 1 and out.count("MaxPositioningSpeed") == 2
-        assert not session.link_lost and client.stats["reconnects"] == 1
-    finally:
-        client.close()
+    client, session, url = lost_in_the_repl
+    capsys.readouterr()
+    assert run_one(session, "GAP 4, 0") and run_one(session, "GAP 4, 0")
+    out = capsys.readouterr().out
+    assert out.count(f"reconnected to {url}") == 1 and out.count("MaxPositioningSpeed") == 2
+    assert not session.link_lost and client.stats["reconnects"] == 1
