@@ -206,3 +206,17 @@ def test_the_repl_reconnects_once_and_clears_its_mark(lost_in_the_repl, capsys):
     out = capsys.readouterr().out
     assert out.count(f"reconnected to {url}") == 1 and out.count("MaxPositioningSpeed") == 2
     assert not session.link_lost and client.stats["reconnects"] == 1
+
+
+def test_ctrl_c_after_a_lost_link_reconnects_and_says_why_it_stopped(tcp_sim, capsys):
+    from tmclsh.shell.builtin import stop_all
+
+    sim, server, url = tcp_sim
+    client, session = lost_after(server, url, "ROR 0, 30000", "GAP 1, 0")
+    try:
+        assert stop_all(session, "interrupted").ok
+        out = capsys.readouterr().out
+        assert f"reconnected to {url}" in out
+        assert "interrupted: stopped motor 0 (MST; speed reads 0)" in out
+    finally:
+        client.close()

@@ -1057,9 +1057,9 @@ def stop_all(session: Session, why: str = ""):
     client = session.client
     prefix = f"{why}: " if why else ""
     if not client.connected:  # the link was lost: the stop is worth one attempt to bring it back
-        why = session.reconnect()
-        if why is not None:
-            session.out.warn(f"{prefix}not connected ({why}); nothing could be stopped")
+        failed = session.reconnect()
+        if failed is not None:
+            session.out.warn(f"{prefix}not connected ({failed}); nothing could be stopped")
             return None
         session.out.info(f"reconnected to {client.describe()}")
     try:
