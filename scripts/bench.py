@@ -19,13 +19,14 @@ rows (script, script-json) therefore run many short blocks, alternating: raw, pa
 ratio is the path block's figure over the mean of those two raw blocks' floors, and the row's
 figure is the median of the pair ratios (stderr shows their middle half and range; the JSON
 has ``ratio_q1``/``ratio_q3``/``ratio_min``/``ratio_max``). A client block is ``--count``/10
-GAP round trips, timed one by one (its figure: the median). A script block is one run of a
-(2 x ``--count``)-line script and one of a 1-line script, in alternating order, in separate
-``tmclsh -f`` processes: (long - short) / (lines - 1) is the time per line, start-up
-subtracted with a run measured right beside it; the script rows stop adding pairs after
-35 s unless ``--pairs`` is given. Their raw blocks measure two floors: the issue's GAP
-round trip (the table's) and the script's own frames in its order (GAP 1 / GAP 4 / SAP 4 /
-GIO 0, each costing the simulator differently). CPU per round trip (per script line) is
+GAP round trips, timed one by one (its figure: the median), 20 x ``--rounds`` pairs. A script
+block is one run of a (2 x ``--count``)-line script and one of a 1-line script, in
+alternating order, in separate ``tmclsh -f`` processes: (long - short) / (lines - 1) is the
+time per line, start-up subtracted with a run measured right beside it; 4 x ``--rounds``
+pairs, fewer once 35 s have passed (unless ``--pairs`` is given). Their raw blocks measure
+two floors: the issue's GAP round trip (the table's) and the script's own frames in its
+order (GAP 1 / GAP 4 / SAP 4 / GIO 0, each costing the simulator differently); a line's time
+is a mean, so the mean GAP round trip is shown too. CPU per round trip (per script line) is
 reported beside the wall clock the same way, pair by pair: a loaded machine adds waiting
 to the wall clock far more than CPU time. The other rows alternate whole rounds and take the
 best round's figure (other work on the machine only ever adds time); start-up rows are the
@@ -209,6 +210,11 @@ def bracket(pairs: int, raw_block: Callable[[int], Block], path_block: Callable[
     return raws, paths
 
 
+def load_note() -> str:
+    """How busy the machine is (other work stretches every wall-clock figure here)."""
+    return f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs"
+
+
 def _figures(block: Block) -> str:
     return " ".join(f"{k} {v:.4g}" for k, v in block.items())
 
@@ -343,7 +349,7 @@ def _client_rows(args: argparse.Namespace, which: str) -> dict:
 
     with SimProcess(args.module) as sim, RawPort(sim.path) as raw:
         say(f"{which}: {pairs} pairs of blocks of {block} GAP round trips (raw, {which}, "
-            f"raw, ...) on {sim.path}")
+            f"raw, ...) on {sim.path}; {load_note()}")
         run, close = open_path(sim.path)
         try:
             raw.round_trips([frame], warm)
@@ -361,7 +367,8 @@ def _client_rows(args: argparse.Namespace, which: str) -> dict:
         f"{show_spread(cpu_ratios, pairs)}")
     result = {"benchmark": which, "pairs": pairs, "block": block, "floor_us": round(floor, 1),
               "us": round(us, 1), **rounded(ratios), "floor_cpu_us": round(cpu_raw, 1),
-              "cpu_us": round(cpu_path, 1), **rounded(cpu_ratios, "cpu_")}
+              "cpu_us": round(cpu_path, 1), **rounded(cpu_ratios, "cpu_"),
+              "load": round(os.getloadavg()[0], 2)}
     del result["ratio"]  # the row's value
     names = {"request": ("Client.request(Request)", 1.15),
              "execute": ('Client.execute("GAP 1, 0")', 1.25),
@@ -468,7 +475,8 @@ def _script_row(args: argparse.Namespace, json_mode: bool) -> dict:
 
     with SimProcess(args.module) as sim, RawPort(sim.path) as raw:
         say(f"script{' --json' if json_mode else ''}: {pairs} pairs (raw, a {n}-line and a "
-            f"1-line script, raw, ...; raw blocks of {block} round trips) on {sim.path}")
+            f"1-line script, raw, ...; raw blocks of {block} round trips) on {sim.path}; "
+            f"{load_note()}")
         run(sim.path, short_script)  # warm the caches
         raw.round_trips(gap + script_frames, 100)
         raws, paths = bracket(pairs, raw_block, path_block, args.verbose,
@@ -497,7 +505,7 @@ def _script_row(args: argparse.Namespace, json_mode: bool) -> dict:
               "floor_mean_us": round(floor_mean, 1), **rounded(mean_ratios, "mean_"),
               "script_floor_us": round(floor_script, 1), **rounded(script_ratios, "script_floor_"),
               "floor_cpu_us": round(cpu_raw, 1), "cpu_us_per_line": round(cpu_line, 1),
-              **rounded(cpu_ratios, "cpu_")}
+              **rounded(cpu_ratios, "cpu_"), "load": round(os.getloadavg()[0], 2)}
     del result["ratio"]  # the row's value
     name = "tmclsh -f script --json, per line" if json_mode else "tmclsh -f script, per line"
     return row(result, name, ratios["ratio"], "x floor", 1.3)
@@ -925,11 +933,13 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("names", nargs="*", metavar="NAME", help="benchmarks to run (default: all)")
-    p.add_argument("--count", type=int, default=2000, help="round trips per round (default 2000)")
+    p.add_argument("--count", type=int, default=2000, help="round trips per round (default 2000; a tenth of "
+                   "that per block in the client rows, twice that many lines in the script rows)")
     p.add_argument("--rounds", type=int, default=5, help="rounds per benchmark (default 5)")
     p.add_argument("--pairs", type=int, default=0,
                    help="raw/path block pairs of the client and script rows (default: "
-                        "6x --rounds for the client rows, 4x for the script rows)")
+                        "20x --rounds for the client rows; 4x for the script rows, fewer once "
+                        "35 s have passed)")
     p.add_argument("--module", default="TMCM-1311", help="simulated module (default TMCM-1311)")
     p.add_argument("--tree", type=Path, default=ROOT,
                    help="the tmclsh checkout to measure (default: this one)")
