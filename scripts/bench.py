@@ -933,8 +933,9 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("names", nargs="*", metavar="NAME", help="benchmarks to run (default: all)")
-    p.add_argument("--count", type=int, default=2000, help="round trips per round (default 2000; a tenth of "
-                   "that per block in the client rows, twice that many lines in the script rows)")
+    p.add_argument("--count", type=int, default=2000,
+                   help="round trips per round (default 2000; a tenth of that per block in the "
+                        "client rows, twice that many lines in the script rows)")
     p.add_argument("--rounds", type=int, default=5, help="rounds per benchmark (default 5)")
     p.add_argument("--pairs", type=int, default=0,
                    help="raw/path block pairs of the client and script rows (default: "
