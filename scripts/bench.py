@@ -448,7 +448,7 @@ def _script_row(args: argparse.Namespace, json_mode: bool) -> dict:
     def raw_block(i: int) -> Block:
         """The GAP floor (median and mean round trip, CPU per round trip) and the script's
         frames (median time of one pass over the four, per round trip), in alternating order."""
-        fig: Block = {}
+        fig: Block = dict.fromkeys(("us", "mean_us", "script_us", "cpu_us"), 0.0)  # -v's order
         for part in (("gap", "script") if i % 2 == 0 else ("script", "gap")):
             if part == "gap":
                 c0 = cpu()
