@@ -4,14 +4,33 @@
     python scripts/bench.py                 # every row, then the table against the targets
     python scripts/bench.py request execute # some rows
     python scripts/bench.py --count 500 --rounds 2   # a quick run
+    python scripts/bench.py script -v       # each pair's figures
     python scripts/bench.py --tree ../main  # measure another checkout (before/after)
     python scripts/bench.py --list
 
 The floor is raw pyserial: write a 9-byte GAP, read the 9-byte reply, against the same
 simulator served on a pty (``tmclsh sim --pty`` in its own process, always from this checkout,
-so two trees are measured against the same module). Rounds alternate floor and path, so both
-see the same machine load; the figures are the best round's medians (other work on the machine
-only ever adds time). Start-up rows are the fastest of several runs.
+so two trees are measured against the same module).
+
+This machine's round trip drifts by half within a second, so a floor and a path measured
+seconds apart do not compare. The client rows (request, execute, pytrinamic) and the script
+rows (script, script-json) therefore run many short blocks, alternating: raw, path, raw, path,
+..., raw. Each path block and the two raw blocks either side of it make a pair; the pair's
+ratio is the path block's figure over the mean of those two raw blocks' floors, and the row's
+figure is the median of the pair ratios (stderr shows their middle half and range; the JSON
+has ``ratio_q1``/``ratio_q3``/``ratio_min``/``ratio_max``). A client block is ``--count``/10
+GAP round trips, timed one by one (its figure: the median), 20 x ``--rounds`` pairs. A script
+block is one run of a (2 x ``--count``)-line script and one of a 1-line script, in
+alternating order, in separate ``tmclsh -f`` processes: (long - short) / (lines - 1) is the
+time per line, start-up subtracted with a run measured right beside it; 4 x ``--rounds``
+pairs, fewer once 35 s have passed (unless ``--pairs`` is given). Their raw blocks measure
+two floors: the issue's GAP round trip (the table's) and the script's own frames in its
+order (GAP 1 / GAP 4 / SAP 4 / GIO 0, each costing the simulator differently); a line's time
+is a mean, so the mean GAP round trip is shown too. CPU per round trip (per script line) is
+reported beside the wall clock the same way, pair by pair: a loaded machine adds waiting
+to the wall clock far more than CPU time. The other rows alternate whole rounds and take the
+best round's figure (other work on the machine only ever adds time); start-up rows are the
+fastest of several runs.
 
 Each benchmark is registered with ``@benchmark(name, help)``, gets the parsed arguments and
 returns a dict; rows with a target carry ``row``, ``value``, ``unit``, ``target`` and ``ok``,
@@ -25,6 +44,7 @@ import argparse
 import json
 import os
 import statistics
+import struct
 import subprocess
 import sys
 import tempfile
@@ -106,34 +126,124 @@ def _per_second(seconds: float, count: int) -> float:
     return count / seconds if seconds > 0 else float("inf")
 
 
-def gap_frame() -> bytes:
-    """GAP 1, 0 to address 1, built here (not by the measured tree)."""
-    body = bytes((1, 6, 1, 0, 0, 0, 0, 0))
+def tmcl_frame(opcode: int, type_: int, motor: int, value: int, address: int = 1) -> bytes:
+    """A 9-byte TMCL request, built here (not by the measured tree): address, opcode, type,
+    motor/bank, value (big-endian, signed), checksum (the sum of the eight bytes)."""
+    body = struct.pack(">BBBBi", address, opcode, type_, motor, value)
     return body + bytes((sum(body) & 0xFF,))
+
+
+def gap_frame() -> bytes:
+    """GAP 1, 0 to address 1: the floor's frame."""
+    return tmcl_frame(6, 1, 0, 0)
 
 
 def raw_latencies(path: str, frame: bytes, warm: int, count: int) -> list[float]:
     """Seconds per raw pyserial round trip (write ``frame``, read the 9-byte reply), after
     ``warm`` untimed ones: the floor every path is compared with."""
-    import serial
+    with RawPort(path) as raw:
+        raw.round_trips([frame], warm)
+        return raw.round_trips([frame], count)
 
-    clock = time.perf_counter
-    ser = serial.serial_for_url(path, baudrate=BAUD, timeout=1.0)
-    try:
-        for _ in range(warm):
-            ser.write(frame)
-            ser.read(9)
+
+class RawPort:
+    """Bare pyserial on the simulator's pty, open for a whole row. It takes no lock, so the
+    measured path (a client, a tmclsh process) opens the same pty between raw blocks; nothing
+    reads this descriptor then, so no reply goes astray."""
+
+    def __init__(self, path: str):
+        import serial
+
+        self.ser = serial.serial_for_url(path, baudrate=BAUD, timeout=1.0)
+
+    def round_trips(self, frames: list[bytes], count: int) -> list[float]:
+        """``count`` passes over ``frames`` (write one, read its 9-byte reply, the next...):
+        seconds per round trip of each pass."""
+        clock = time.perf_counter
+        write, read = self.ser.write, self.ser.read
+        per = len(frames)
         out = []
+        reply = b"x" * 9
         for _ in range(count):
             t0 = clock()
-            ser.write(frame)
-            reply = ser.read(9)
-            out.append(clock() - t0)
-    finally:
-        ser.close()
-    if len(reply) != 9:
-        raise RuntimeError(f"raw read timed out (got {reply!r})")
-    return out
+            for frame in frames:
+                write(frame)
+                reply = read(9)
+            out.append((clock() - t0) / per)
+        if len(reply) != 9:
+            raise RuntimeError(f"raw read timed out (got {reply!r})")
+        return out
+
+    def close(self) -> None:
+        self.ser.close()
+
+    def __enter__(self) -> RawPort:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+Block = dict[str, float]
+
+
+def bracket(pairs: int, raw_block: Callable[[int], Block], path_block: Callable[[int], Block],
+            verbose: bool, budget: float = float("inf"),
+            least: int = 1) -> tuple[list[Block], list[Block]]:
+    """Short blocks, alternating: raw, path, raw, path, ..., raw, so every path block has a raw
+    block measured right before and right after it (this machine's round trip drifts by half
+    within seconds: a floor and a path measured seconds apart do not compare). Each block
+    returns its figures by name; returns the raw blocks and the path blocks (one fewer) in
+    order: ``pairs`` of them, or fewer (but ``least``) once ``budget`` seconds have passed."""
+    start = time.perf_counter()
+    raws = [raw_block(0)]
+    paths: list[Block] = []
+    for i in range(pairs):
+        paths.append(path_block(i))
+        raws.append(raw_block(i + 1))
+        if verbose:
+            say(f"  pair {i + 1:>2}: raw {_figures(raws[-2])} | path {_figures(paths[-1])} | "
+                f"raw {_figures(raws[-1])}")
+        if i + 1 >= least and time.perf_counter() - start > budget:
+            say(f"  (stopped after {i + 1} of {pairs} pairs: the {budget:g} s budget is spent)")
+            break
+    return raws, paths
+
+
+def load_note() -> str:
+    """How busy the machine is (other work stretches every wall-clock figure here)."""
+    return f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs"
+
+
+def _figures(block: Block) -> str:
+    return " ".join(f"{k} {v:.4g}" for k, v in block.items())
+
+
+def pair_ratios(raws: list[Block], paths: list[Block], key: str, floor: str) -> list[float]:
+    """Each path block's ``key`` over the mean ``floor`` of the raw blocks either side."""
+    return [p[key] / ((a[floor] + b[floor]) / 2) for p, a, b in zip(paths, raws, raws[1:])]
+
+
+def spread(ratios: list[float]) -> dict[str, float]:
+    """The median of the pair ratios (the row's figure), their middle half and their range."""
+    q1, _, q3 = (statistics.quantiles(ratios, n=4, method="inclusive") if len(ratios) > 1
+                 else [ratios[0]] * 3)
+    return {"ratio": statistics.median(ratios), "ratio_q1": q1, "ratio_q3": q3,
+            "ratio_min": min(ratios), "ratio_max": max(ratios)}
+
+
+def show_spread(s: dict[str, float], pairs: int) -> str:
+    return (f"{s['ratio']:.2f}x (median of {pairs} pair ratios; middle half "
+            f"{s['ratio_q1']:.2f}..{s['ratio_q3']:.2f}, all {s['ratio_min']:.2f}.."
+            f"{s['ratio_max']:.2f})")
+
+
+def rounded(s: dict[str, float], prefix: str = "") -> dict[str, float]:
+    return {prefix + k: round(v, 3) for k, v in s.items()}
+
+
+def median_of(blocks: list[Block], key: str) -> float:
+    return statistics.median(b[key] for b in blocks)
 
 
 def row(result: dict, name: str, value: float, unit: str, target: float, note: str = "") -> dict:
@@ -141,9 +251,6 @@ def row(result: dict, name: str, value: float, unit: str, target: float, note: s
     result.update(row=name, value=round(value, 3), unit=unit, target=target,
                   ok=bool(value <= target), note=note)
     return result
-
-
-CPU: dict[str, float] = {}  # the last alternate(): least CPU seconds of one run, by name
 
 
 def _cpu_seconds() -> float:
@@ -158,9 +265,8 @@ def _cpu_seconds() -> float:
 
 def alternate(rounds: int, runs: dict[str, Callable[[], float]], verbose: bool) -> dict[str, float]:
     """Run each of ``runs`` once per round, in alternating order; each returns its figure for
-    the round (lower is better). Returns the best round's figure for each, and leaves the
-    least CPU time one run of each took in ``CPU`` (a loaded machine adds waiting to the wall
-    clock far more than CPU time: the CPU figures say what the code itself costs)."""
+    the round (lower is better). Returns the best round's figure for each (``-v`` shows each
+    run's CPU time too)."""
     figures: dict[str, list[float]] = {name: [] for name in runs}
     cpu: dict[str, list[float]] = {name: [] for name in runs}
     for rnd in range(rounds):
@@ -172,92 +278,102 @@ def alternate(rounds: int, runs: dict[str, Callable[[], float]], verbose: bool) 
             if verbose:
                 say(f"  round {rnd + 1} {name:<10}: {figures[name][-1]:.2f}  "
                     f"(cpu {cpu[name][-1]:.3f} s)")
-    CPU.clear()
-    CPU.update({name: min(v) for name, v in cpu.items()})
     return {name: min(v) for name, v in figures.items()}
 
 
 # -- in-process round trips -------------------------------------------------------------------
 
 def _client_rows(args: argparse.Namespace, which: str) -> dict:
+    """One GAP round trip of ``which`` (a client method, PyTrinamic) beside the raw floor, in
+    short alternating blocks (``bracket``): the figure is the median of the per-pair ratios
+    (each path block's median over the mean of the raw blocks' medians either side)."""
     from tmclsh.client import Client
     from tmclsh.protocol import Request
     from tmclsh.transport import open_serial
 
-    count = args.count
-    warm = min(200, count)
+    block = max(50, args.count // 10)
+    pairs = args.pairs or 20 * args.rounds
+    warm = 200
     frame = gap_frame()
-    clock = time.perf_counter
+    clock, cpu = time.perf_counter, time.process_time
 
-    def make_client(path: str) -> Client:
-        return Client(open_serial(path, BAUD), module=args.module, timeout=1.0)
+    def figures(lat: list[float], c0: float) -> Block:
+        return {"us": statistics.median(lat) * 1e6, "cpu_us": (cpu() - c0) / block * 1e6}
 
-    def run_request(path: str) -> float:
-        client = make_client(path)
+    def open_path(path: str) -> tuple[Callable[[int], Block], Callable[[], None]]:
+        """A block of the path's GAP round trips (the same loops as the raw one's: one call
+        timed each), and its close."""
+        if which == "pytrinamic":
+            from pytrinamic.connections.serial_tmcl_interface import SerialTmclInterface
+
+            iface = SerialTmclInterface(path, datarate=BAUD, timeout_s=1)
+
+            def run_pytrinamic(count: int) -> Block:
+                c0, lat = cpu(), []
+                for _ in range(count):
+                    t0 = clock()
+                    iface.get_axis_parameter(1, 0)
+                    lat.append(clock() - t0)
+                return figures(lat, c0)
+            return run_pytrinamic, iface.close
+
+        client = Client(open_serial(path, BAUD), module=args.module, timeout=1.0)
         req = Request(1, 6, 1, 0, 0)
-        try:
-            for _ in range(warm):
-                client.request(req)
-            lat = []
+
+        def run_request(count: int) -> Block:
+            c0, lat = cpu(), []
             for _ in range(count):
                 t0 = clock()
                 r = client.request(req)
                 lat.append(clock() - t0)
             assert r is not None and r.opcode == 6 and r.ok, r
-            assert client.stats["timeouts"] == 0, client.stats
-        finally:
-            client.close()
-        return statistics.median(lat) * 1e6
+            return figures(lat, c0)
 
-    def run_execute(path: str) -> float:
-        client = make_client(path)
-        try:
-            for _ in range(warm):
-                client.execute("GAP 1, 0")
-            lat = []
+        def run_execute(count: int) -> Block:
+            c0, lat = cpu(), []
             for _ in range(count):
                 t0 = clock()
                 r = client.execute("GAP 1, 0")
                 lat.append(clock() - t0)
-            assert r.ok and client.stats["timeouts"] == 0, client.stats
-        finally:
+            assert r.ok, r
+            return figures(lat, c0)
+
+        def close() -> None:
+            assert client.stats["timeouts"] == 0, client.stats
             client.close()
-        return statistics.median(lat) * 1e6
+        return (run_request if which == "request" else run_execute), close
 
-    def run_pytrinamic(path: str) -> float:
-        from pytrinamic.connections.serial_tmcl_interface import SerialTmclInterface
+    def raw_block(_: int) -> Block:
+        c0 = cpu()
+        return figures(raw.round_trips([frame], block), c0)
 
-        iface = SerialTmclInterface(path, datarate=BAUD, timeout_s=1)
+    with SimProcess(args.module) as sim, RawPort(sim.path) as raw:
+        say(f"{which}: {pairs} pairs of blocks of {block} GAP round trips (raw, {which}, "
+            f"raw, ...) on {sim.path}; {load_note()}")
+        run, close = open_path(sim.path)
         try:
-            for _ in range(warm):
-                iface.get_axis_parameter(1, 0)
-            lat = []
-            for _ in range(count):
-                t0 = clock()
-                iface.get_axis_parameter(1, 0)
-                lat.append(clock() - t0)
+            raw.round_trips([frame], warm)
+            run(warm)
+            raws, paths = bracket(pairs, raw_block, lambda _: run(block), args.verbose)
         finally:
-            iface.close()
-        return statistics.median(lat) * 1e6
-
-    path_fn = {"request": run_request, "execute": run_execute, "pytrinamic": run_pytrinamic}[which]
-    with SimProcess(args.module) as sim:
-        say(f"{which}: {args.rounds} round(s) of {count} GAP round trips on {sim.path}")
-        best = alternate(args.rounds, {
-            "raw": lambda: statistics.median(raw_latencies(sim.path, frame, warm, count)) * 1e6,
-            which: lambda: path_fn(sim.path)}, args.verbose)
-    ratio = best[which] / best["raw"]
-    ops = warm + count
-    cpu_raw, cpu_path = CPU["raw"] / ops * 1e6, CPU[which] / ops * 1e6
-    say(f"  raw pyserial {best['raw']:.1f} us, {which} {best[which]:.1f} us: {ratio:.2f}x "
-        f"(CPU per round trip: raw {cpu_raw:.1f} us, {which} {cpu_path:.1f} us)")
-    result = {"benchmark": which, "floor_us": round(best["raw"], 1),
-              "us": round(best[which], 1), "floor_cpu_us": round(cpu_raw, 1),
-              "cpu_us": round(cpu_path, 1)}
+            close()
+    ratios = spread(pair_ratios(raws, paths, "us", "us"))
+    cpu_ratios = spread(pair_ratios(raws, paths, "cpu_us", "cpu_us"))
+    floor, us = median_of(raws, "us"), median_of(paths, "us")
+    cpu_raw, cpu_path = median_of(raws, "cpu_us"), median_of(paths, "cpu_us")
+    say(f"  raw pyserial {floor:.1f} us, {which} {us:.1f} us (medians of the blocks): "
+        f"{show_spread(ratios, pairs)}")
+    say(f"  CPU per round trip: raw {cpu_raw:.1f} us, {which} {cpu_path:.1f} us: "
+        f"{show_spread(cpu_ratios, pairs)}")
+    result = {"benchmark": which, "pairs": pairs, "block": block, "floor_us": round(floor, 1),
+              "us": round(us, 1), **rounded(ratios), "floor_cpu_us": round(cpu_raw, 1),
+              "cpu_us": round(cpu_path, 1), **rounded(cpu_ratios, "cpu_"),
+              "load": round(os.getloadavg()[0], 2)}
+    del result["ratio"]  # the row's value
     names = {"request": ("Client.request(Request)", 1.15),
              "execute": ('Client.execute("GAP 1, 0")', 1.25),
              "pytrinamic": ("PyTrinamic get_axis_parameter (for comparison)", float("inf"))}
-    return row(result, names[which][0], ratio, "x floor", names[which][1])
+    return row(result, names[which][0], ratios["ratio"], "x floor", names[which][1])
 
 
 @benchmark("request", "Client.request(Request) round trip vs raw pyserial")
@@ -277,67 +393,122 @@ def bench_pytrinamic(args: argparse.Namespace) -> dict:
 
 # -- scripts ---------------------------------------------------------------------------------
 
+SCRIPT_BUDGET = 35.0  # seconds: a loaded machine ends a script row's pairs early (--pairs: never)
+SCRIPT_LINES = (  # the script rows' lines, in order, and the frames they send (built here)
+    ("GAP 1, 0", tmcl_frame(6, 1, 0, 0)),
+    ("GAP 4, 0", tmcl_frame(6, 4, 0, 0)),
+    ("SAP 4, 0, 1000", tmcl_frame(5, 4, 0, 1000)),
+    ("GIO 0, 0", tmcl_frame(15, 0, 0, 0)),
+)
+
+
 def _script_row(args: argparse.Namespace, json_mode: bool) -> dict:
     """Per line of ``tmclsh -f``: (time of an N-line script - time of a 1-line script) / (N-1),
-    output to a pipe read by the benchmark, beside the raw round trip."""
-    n = max(args.count, 200)
-    lines = ["GAP 1, 0", "GAP 4, 0", "SAP 4, 0, 1000", "GIO 0, 0"]
+    output to a file, beside the raw round trip. A pair is the two runs (in alternating order)
+    with a raw block right before and right after; the figure is the median of the per-pair
+    ratios. The raw blocks measure the issue's floor (GAP 1, 0) and, as a second floor, the
+    script's own frames in its order (the simulator's cost differs per command)."""
+    import resource
+
+    n = max(200, 2 * args.count)
+    pairs = args.pairs or 4 * args.rounds
+    block = max(50, args.count // 2)
     tmp = Path(args.state_dir)
     long_script = tmp / "long.tmcl"
-    long_script.write_text("".join(lines[i % len(lines)] + "\n" for i in range(n)))
+    long_script.write_text("".join(SCRIPT_LINES[i % len(SCRIPT_LINES)][0] + "\n"
+                                   for i in range(n)))
     short_script = tmp / "short.tmcl"
-    short_script.write_text(lines[0] + "\n")
-    frame = gap_frame()
-
+    short_script.write_text(SCRIPT_LINES[0][0] + "\n")
+    gap = [gap_frame()]
+    script_frames = [frame for _, frame in SCRIPT_LINES]
     out_file = tmp / "script.out"
+    clock, cpu = time.perf_counter, time.process_time
 
-    def run(path: str, script: Path) -> float:
+    def children_cpu() -> float:
+        kids = resource.getrusage(resource.RUSAGE_CHILDREN)  # ended children: the tmclsh run
+        return kids.ru_utime + kids.ru_stime
+
+    def run(path: str, script: Path) -> tuple[float, float]:
+        """Wall and CPU seconds of one ``tmclsh -f`` process."""
         argv = tmclsh_cmd("--port", path, "-m", args.module, *(["--json"] if json_mode else []),
                           "-f", str(script))
         with open(out_file, "w") as out:  # a file: no reader process woken per line
-            t0 = time.perf_counter()
+            c0 = children_cpu()
+            t0 = clock()
             proc = subprocess.run(argv, stdout=out, stderr=subprocess.PIPE, text=True,
                                   env=tree_env(args), cwd=args.state_dir, timeout=300)
-            took = time.perf_counter() - t0
+            took = clock() - t0
+            used = children_cpu() - c0
         text = out_file.read_text()
         results = text.count("\n") - (0 if json_mode else 1)  # text: a summary line
         if proc.returncode != 0 or results != (n if script is long_script else 1):
             raise RuntimeError(f"script run failed: {proc.stderr[-500:]}")
-        return took
+        return took, used
 
-    raw_means: list[float] = []
+    def raw_block(i: int) -> Block:
+        """The GAP floor (median and mean round trip, CPU per round trip) and the script's
+        frames (median time of one pass over the four, per round trip), in alternating order."""
+        fig: Block = dict.fromkeys(("us", "mean_us", "script_us", "cpu_us"), 0.0)  # -v's order
+        for part in (("gap", "script") if i % 2 == 0 else ("script", "gap")):
+            if part == "gap":
+                c0 = cpu()
+                lat = raw.round_trips(gap, block)
+                fig["cpu_us"] = (cpu() - c0) / block * 1e6
+                fig["us"] = statistics.median(lat) * 1e6
+                fig["mean_us"] = statistics.fmean(lat) * 1e6  # a run's time per line is a mean
+            else:
+                lat = raw.round_trips(script_frames, block // len(script_frames))
+                fig["script_us"] = statistics.median(lat) * 1e6
+        return fig
 
-    def raw(path: str) -> float:
-        lat = raw_latencies(path, frame, 100, n)
-        raw_means.append(statistics.fmean(lat) * 1e6)  # what a run's time per line compares with
-        return statistics.median(lat) * 1e6
+    def path_block(i: int) -> Block:
+        """A short and a long run (short first in even pairs, long first in odd ones: the
+        start-up each pays is subtracted from a run measured beside it)."""
+        runs = {}
+        for script in ((short_script, long_script) if i % 2 == 0
+                       else (long_script, short_script)):
+            runs[script] = run(sim.path, script)
+        (long_s, long_cpu), (short_s, short_cpu) = runs[long_script], runs[short_script]
+        return {"us": (long_s - short_s) / (n - 1) * 1e6,
+                "cpu_us": (long_cpu - short_cpu) / (n - 1) * 1e6,
+                "long_s": long_s, "short_s": short_s}
 
-    with SimProcess(args.module) as sim:
-        say(f"script{' --json' if json_mode else ''}: {args.rounds} round(s) of a {n}-line "
-            f"script on {sim.path}")
+    with SimProcess(args.module) as sim, RawPort(sim.path) as raw:
+        say(f"script{' --json' if json_mode else ''}: {pairs} pairs (raw, a {n}-line and a "
+            f"1-line script, raw, ...; raw blocks of {block} round trips) on {sim.path}; "
+            f"{load_note()}")
         run(sim.path, short_script)  # warm the caches
-        # the fastest long run less the fastest short run: start-up noise cancels best that way
-        best = alternate(args.rounds, {
-            "raw": lambda: raw(sim.path),
-            "long": lambda: run(sim.path, long_script),
-            "short": lambda: run(sim.path, short_script)}, args.verbose)
-    best["script"] = (best["long"] - best["short"]) / (n - 1) * 1e6
-    ratio = best["script"] / best["raw"]
-    cpu_raw = CPU["raw"] / (n + 100) * 1e6
-    cpu_line = (CPU["long"] - CPU["short"]) / (n - 1) * 1e6
-    say(f"  raw pyserial {best['raw']:.1f} us, per script line {best['script']:.1f} us: "
-        f"{ratio:.2f}x (CPU: raw {cpu_raw:.1f} us per round trip, tmclsh {cpu_line:.1f} us "
-        "per line)")
+        raw.round_trips(gap + script_frames, 100)
+        raws, paths = bracket(pairs, raw_block, path_block, args.verbose,
+                              budget=SCRIPT_BUDGET if not args.pairs else float("inf"),
+                              least=min(pairs, 8))
+    pairs = len(paths)
+    ratios = spread(pair_ratios(raws, paths, "us", "us"))
+    mean_ratios = spread(pair_ratios(raws, paths, "us", "mean_us"))
+    script_ratios = spread(pair_ratios(raws, paths, "us", "script_us"))
+    cpu_ratios = spread(pair_ratios(raws, paths, "cpu_us", "cpu_us"))
+    floor, per_line = median_of(raws, "us"), median_of(paths, "us")
+    floor_mean, floor_script = median_of(raws, "mean_us"), median_of(raws, "script_us")
+    cpu_raw, cpu_line = median_of(raws, "cpu_us"), median_of(paths, "cpu_us")
+    say(f"  raw pyserial GAP {floor:.1f} us, per script line {per_line:.1f} us (medians of the "
+        f"blocks): {show_spread(ratios, pairs)}")
     # the floor is a median round trip, a script line a whole run's mean (its waits on a
     # loaded machine included): the mean of the raw round trips, for a like-for-like look
-    say(f"  raw pyserial mean {min(raw_means):.1f} us: {best['script'] / min(raw_means):.2f}x "
-        "that")
+    say(f"  raw pyserial GAP mean {floor_mean:.1f} us: {show_spread(mean_ratios, pairs)}")
+    say(f"  raw pyserial, the script's own frames ({' / '.join(t for t, _ in SCRIPT_LINES)}) "
+        f"{floor_script:.1f} us per round trip: {show_spread(script_ratios, pairs)}")
+    say(f"  CPU: raw {cpu_raw:.1f} us per round trip, tmclsh {cpu_line:.1f} us per line: "
+        f"{show_spread(cpu_ratios, pairs)}")
     result = {"benchmark": "script-json" if json_mode else "script", "lines": n,
-              "floor_us": round(best["raw"], 1), "us_per_line": round(best["script"], 1),
-              "floor_mean_us": round(min(raw_means), 1),
-              "floor_cpu_us": round(cpu_raw, 1), "cpu_us_per_line": round(cpu_line, 1)}
+              "pairs": pairs, "block": block,
+              "floor_us": round(floor, 1), "us_per_line": round(per_line, 1), **rounded(ratios),
+              "floor_mean_us": round(floor_mean, 1), **rounded(mean_ratios, "mean_"),
+              "script_floor_us": round(floor_script, 1), **rounded(script_ratios, "script_floor_"),
+              "floor_cpu_us": round(cpu_raw, 1), "cpu_us_per_line": round(cpu_line, 1),
+              **rounded(cpu_ratios, "cpu_"), "load": round(os.getloadavg()[0], 2)}
+    del result["ratio"]  # the row's value
     name = "tmclsh -f script --json, per line" if json_mode else "tmclsh -f script, per line"
-    return row(result, name, ratio, "x floor", 1.3)
+    return row(result, name, ratios["ratio"], "x floor", 1.3)
 
 
 @benchmark("script", "tmclsh -f SCRIPT per line (text output to a file) vs raw pyserial")
@@ -762,8 +933,14 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("names", nargs="*", metavar="NAME", help="benchmarks to run (default: all)")
-    p.add_argument("--count", type=int, default=2000, help="round trips per round (default 2000)")
+    p.add_argument("--count", type=int, default=2000,
+                   help="round trips per round (default 2000; a tenth of that per block in the "
+                        "client rows, twice that many lines in the script rows)")
     p.add_argument("--rounds", type=int, default=5, help="rounds per benchmark (default 5)")
+    p.add_argument("--pairs", type=int, default=0,
+                   help="raw/path block pairs of the client and script rows (default: "
+                        "20x --rounds for the client rows; 4x for the script rows, fewer once "
+                        "35 s have passed)")
     p.add_argument("--module", default="TMCM-1311", help="simulated module (default TMCM-1311)")
     p.add_argument("--tree", type=Path, default=ROOT,
                    help="the tmclsh checkout to measure (default: this one)")
@@ -778,8 +955,8 @@ def main(argv: list[str] | None = None) -> int:
     unknown = [n for n in args.names if n not in BENCHMARKS]
     if unknown:
         p.error(f"unknown benchmark(s) {', '.join(unknown)}; known: {', '.join(BENCHMARKS)}")
-    if args.count < 1 or args.rounds < 1:
-        p.error("--count and --rounds must be at least 1")
+    if args.count < 1 or args.rounds < 1 or args.pairs < 0:
+        p.error("--count and --rounds must be at least 1, --pairs at least 0")
     args.tree = args.tree.resolve()
     sys.path.insert(0, str(args.tree))
     import compileall

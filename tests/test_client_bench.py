@@ -3,6 +3,7 @@ benchmarks are measurements, not tests)."""
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import subprocess
 import sys
@@ -10,20 +11,56 @@ import sys
 from conftest import ROOT, tmclsh_env
 
 
-def test_client_benchmarks_run():
-    p = subprocess.run([sys.executable, str(ROOT / "scripts" / "bench.py"), "request", "execute",
-                        "--count", "50", "--rounds", "2", "--json"],
+def run_bench(*argv: str) -> tuple[list[dict], str]:
+    p = subprocess.run([sys.executable, str(ROOT / "scripts" / "bench.py"), *argv, "--json"],
                        capture_output=True, text=True, env=tmclsh_env(), cwd=str(ROOT),
                        timeout=120)
     assert p.returncode == 0, p.stderr
-    results = [json.loads(line) for line in p.stdout.splitlines()]
+    return [json.loads(line) for line in p.stdout.splitlines()], p.stderr
+
+
+def check_pairs(result: dict, pairs: int, *prefixes: str) -> None:
+    """The row's value is the median of its pair ratios: inside their spread, for each ratio."""
+    assert result["pairs"] == pairs
+    assert result["ratio_min"] <= result["ratio_q1"] <= result["value"] <= result["ratio_q3"] \
+        <= result["ratio_max"]
+    for prefix in prefixes:
+        assert result[prefix + "ratio_min"] <= result[prefix + "ratio"] \
+            <= result[prefix + "ratio_max"], prefix
+
+
+def test_client_benchmarks_run():
+    results, stderr = run_bench("request", "execute", "--count", "50", "--rounds", "2",
+                                "--pairs", "4")
     assert [r["benchmark"] for r in results] == ["request", "execute"]
     for result in results:
-        for key in ("floor_us", "us", "value", "target"):
+        for key in ("floor_us", "us", "value", "target", "floor_cpu_us", "cpu_us"):
             assert isinstance(result[key], (int, float)) and result[key] > 0, key
-        assert abs(result["value"] - result["us"] / result["floor_us"]) < 0.01
+        check_pairs(result, 4, "cpu_")
         assert result["row"].startswith("Client.") and isinstance(result["ok"], bool)
-    assert "raw pyserial" in p.stderr
+    assert "raw pyserial" in stderr and "median of 4 pair ratios" in stderr
+
+
+def test_script_benchmark_has_both_floors():
+    (result,), stderr = run_bench("script", "--count", "50", "--rounds", "1", "--pairs", "2")
+    assert result["benchmark"] == "script" and result["lines"] == 200
+    for key in ("floor_us", "script_floor_us", "floor_mean_us", "floor_cpu_us"):
+        assert result[key] > 0, key
+    # (a 200-line script's time per line is mostly start-up noise: any sign, not checked)
+    assert isinstance(result["us_per_line"], float) and isinstance(result["cpu_us_per_line"], float)
+    check_pairs(result, 2, "script_floor_", "mean_", "cpu_")
+    assert "the script's own frames" in stderr and "CPU: raw" in stderr
+
+
+def test_script_floor_frames_are_what_the_script_lines_send(fast_client):
+    from tmclsh.protocol import Request
+
+    spec = importlib.util.spec_from_file_location("bench", ROOT / "scripts" / "bench.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    for line, frame in bench.SCRIPT_LINES:
+        ins = fast_client.encode(line).instruction
+        assert Request(1, ins.opcode, ins.type, ins.motor, ins.value).to_bytes() == frame, line
 
 
 def test_benchmarks_are_listed_and_unknown_names_refused():
