@@ -81,6 +81,7 @@ ENCODE_CACHE = 512  # checked lines kept per client (prepare)
 _DRAIN_QUIET = 0.03
 _LOADED = int(Status.LOADED)
 _WRONG_CHECKSUM = int(Status.WRONG_CHECKSUM)
+_SEEN_REPLIES = 512  # distinct reply frames kept as Reply objects
 # GP 129 "download mode" (all three manuals): read to find out whether the module executes
 # commands; in download mode the read itself is stored (answered with status 101) instead
 _GP_DOWNLOAD_MODE = 129
@@ -194,6 +195,7 @@ class Client:
         self.replies = 0  # replies returned so far (Suspect.seq numbers them)
         self._last: tuple[Request, Reply] | None = None
         self._recent: deque[Reply] = deque(maxlen=4)  # replies taken lately, markers too
+        self._seen_replies: dict[bytes, Reply] = {}  # frame -> Reply, see _exchange_stream
         # replies returned earlier that may have answered another request (take_suspects
         # empties it; a runner asks whether it is empty after every line)
         self.suspects: deque[Suspect] = deque(maxlen=64)
@@ -617,7 +619,16 @@ class Client:
             if (len(head) == _FRAME and kind == _NORMAL and head[1] == req.address
                     and head[3] == req.opcode and head[0] == self.host_address
                     and sum(head[:8]) & 0xFF == head[8] and head[2] in _REPLY_STATUSES):
-                reply = Reply.from_frame(head)
+                # the same nine bytes are the same (immutable) reply: a script repeating its
+                # lines mostly gets answers it has had before
+                seen = self._seen_replies
+                reply = seen.get(head) if head.__class__ is bytes else None
+                if reply is None:
+                    reply = Reply.from_frame(head)
+                    if head.__class__ is bytes:
+                        if len(seen) >= _SEEN_REPLIES:
+                            seen.clear()
+                        seen[head] = reply
                 if self._tracers:
                     self._trace("rx", head, reply)
                 return reply
