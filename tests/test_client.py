@@ -212,6 +212,31 @@ def test_tracer_sees_every_frame(pty_client):
     assert len(seen) == n
 
 
+def test_a_sent_only_tracer_is_told_each_request_before_it_goes_and_nothing_else(pty_client):
+    c = pty_client
+    sent, everything = [], []
+
+    def watch(d, raw, dec):
+        # told before the write: the module has not answered yet
+        sent.append((d, bytes(raw), dec, c.stats["sent"]))
+
+    remove = c.add_tracer(watch, sent_only=True)
+    assert c.tracing
+    c.send(GAP, 1, 0)
+    c.sim.faults.garbage = b"\x55\xaa"  # a drop, which only a full tracer hears of
+    c.send(SAP, 4, 0, 100)
+    assert [(d, raw, n) for d, raw, _, n in sent] == [
+        ("tx", Request(1, GAP, 1, 0).to_bytes(), 0), ("tx", Request(1, SAP, 4, 0, 100).to_bytes(), 1)]
+    assert [dec for _, _, dec, _ in sent] == [Request(1, GAP, 1, 0), Request(1, SAP, 4, 0, 100)]
+    # beside a full tracer: both, each as it asked
+    c.add_tracer(lambda d, raw, dec: everything.append(d))
+    c.send(GAP, 1, 0)
+    assert len(sent) == 3 and everything == ["tx", "rx"]
+    remove()
+    c.send(GAP, 1, 0)
+    assert len(sent) == 3
+
+
 # -- idempotence and helpers ---------------------------------------------------------------------
 
 def test_idempotent_commands():

@@ -113,3 +113,24 @@ def test_results_reach_a_pipe_before_a_command_waits(tmp_path):
     finally:
         proc.kill()
         proc.wait()
+
+
+def test_a_line_met_again_is_the_same_step_and_a_block_still_gets_its_own(fast_client):
+    """Parser.nodes takes a physical line it has met as a plain line whole; inside a block
+    the same text still belongs to the block, and a command or two lines on one are never
+    taken that way."""
+    session = Session(fast_client, Output())
+    lines = ["GAP 1, 0", "GAP 1, 0  # again", "GAP 1, 0", ".repeat 2", "GAP 1, 0", ".end",
+             "GAP 1, 0", "GAP 1, 0; GAP 4, 0", "GAP 1, 0; GAP 4, 0", ".echo x", ".echo x",
+             "GAP 1, 0"]
+    nodes = list(script.Parser(session, "s.tmcl", None).nodes(lines))
+    shape = [(type(n).__name__, n.line, n.text, getattr(n, "plain", None)) for n in nodes]
+    assert shape == [
+        ("Step", 1, "GAP 1, 0", "GAP 1, 0"), ("Step", 2, "GAP 1, 0", "GAP 1, 0"),
+        ("Step", 3, "GAP 1, 0", "GAP 1, 0"), ("Repeat", 4, ".repeat 2", None),
+        ("Step", 7, "GAP 1, 0", "GAP 1, 0"),
+        ("Step", 8, "GAP 1, 0", "GAP 1, 0"), ("Step", 8, "GAP 4, 0", "GAP 4, 0"),
+        ("Step", 9, "GAP 1, 0", "GAP 1, 0"), ("Step", 9, "GAP 4, 0", "GAP 4, 0"),
+        ("Step", 10, ".echo x", None), ("Step", 11, ".echo x", None),
+        ("Step", 12, "GAP 1, 0", "GAP 1, 0")]
+    assert [(n.line, n.text) for n in nodes[3].body] == [(5, "GAP 1, 0")]

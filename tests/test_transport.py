@@ -298,3 +298,109 @@ def test_a_lost_port_names_the_failure_once():
     assert str(err).count("read failed") == 1, err
     err = t._lost("write", OSError("[Errno 5] Input/output error"))
     assert "write failed: [Errno 5]" in str(err), err
+
+
+# -- transact: the request path's write-and-read in one call -------------------------------------
+
+class _PtyResponder:
+    """The other end of a pty, answering each 9-byte frame as ``answer(frame)`` says: a list of
+    (delay seconds, bytes) pieces. Written here from the manual's reply layout (host, module,
+    status 100, opcode, value, sum), not with tmclsh's code."""
+
+    def __init__(self, answer):
+        import os
+        import tty
+
+        self.answer = answer
+        self.master, self._slave = os.openpty()
+        tty.setraw(self._slave)
+        self.path = os.ttyname(self._slave)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        import os
+        import select
+
+        buf = b""
+        while not self._stop.is_set():
+            if not select.select([self.master], [], [], 0.05)[0]:
+                continue
+            try:
+                buf += os.read(self.master, 64)
+            except OSError:
+                return
+            while len(buf) >= 9:
+                frame, buf = buf[:9], buf[9:]
+                for delay, piece in self.answer(frame):
+                    time.sleep(delay)
+                    os.write(self.master, piece)
+
+    def close(self) -> None:
+        import os
+
+        self._stop.set()
+        self._thread.join(1)
+        os.close(self.master)
+        os.close(self._slave)
+
+
+def _reply_to(frame: bytes, value: int = 1234) -> bytes:
+    body = bytes((2, frame[0], 100, frame[1])) + value.to_bytes(4, "big")
+    return body + bytes((sum(body) & 0xFF,))
+
+
+@pytest.mark.parametrize("pieces", [
+    lambda f: [(0, _reply_to(f))],  # whole, the common case
+    lambda f: [(0, _reply_to(f)[:3]), (0.03, _reply_to(f)[3:])],  # the rest comes later
+    lambda f: [(0, _reply_to(f)[:1]), (0.02, _reply_to(f)[1:5]), (0.02, _reply_to(f)[5:])],
+], ids=["whole", "two pieces", "three pieces"])
+def test_transact_returns_the_whole_answer_however_it_comes(pieces):
+    responder = _PtyResponder(pieces)
+    t = open_serial(responder.path, 115200)
+    try:
+        assert t._fd is not None  # the descriptor path, not pyserial's read
+        got = t.transact(GAP1, 9, 1.0)
+        assert got == _reply_to(GAP1)
+        # and through the client: the value the responder gave
+        c = Client(t, module="TMCM-1311")
+        assert c.request(Request(1, GAP, 1, 0)).value == 1234
+    finally:
+        t.close()
+        responder.close()
+
+
+def test_transact_keeps_the_timeout_and_says_what_came():
+    responder = _PtyResponder(lambda f: [(0, _reply_to(f)[:4])])  # a reply cut short
+    t = open_serial(responder.path, 115200)
+    try:
+        t0 = time.monotonic()
+        assert t.transact(GAP1, 9, 0.2) == _reply_to(GAP1)[:4]  # what came, at the deadline
+        assert 0.18 <= time.monotonic() - t0 < 1.0
+        silent = _PtyResponder(lambda f: [])
+        s = open_serial(silent.path, 115200)
+        try:
+            t0 = time.monotonic()
+            assert s.transact(GAP1, 9, 0.15) == b""
+            assert 0.14 <= time.monotonic() - t0 < 1.0
+        finally:
+            s.close()
+            silent.close()
+    finally:
+        t.close()
+        responder.close()
+
+
+def test_the_same_answer_twice_is_the_same_reply_and_another_is_another():
+    values = iter([7, 7, -5])
+    responder = _PtyResponder(lambda f: [(0, _reply_to(f, next(values) & 0xFFFFFFFF))])
+    t = open_serial(responder.path, 115200)
+    try:
+        c = Client(t, module="TMCM-1311")
+        got = [c.request(Request(1, GAP, 1, 0)) for _ in range(3)]
+        assert [r.value for r in got] == [7, 7, -5]
+        assert got[0] == got[1] and got[1] != got[2]
+    finally:
+        t.close()
+        responder.close()

@@ -80,6 +80,8 @@ ENCODE_CACHE = 512  # checked lines kept per client (prepare)
 # Download mode cannot use a marker: wait until the line has been quiet this long.
 _DRAIN_QUIET = 0.03
 _LOADED = int(Status.LOADED)
+_WRONG_CHECKSUM = int(Status.WRONG_CHECKSUM)
+_SEEN_REPLIES = 512  # distinct reply frames kept as Reply objects
 # GP 129 "download mode" (all three manuals): read to find out whether the module executes
 # commands; in download mode the read itself is stored (answered with status 101) instead
 _GP_DOWNLOAD_MODE = 129
@@ -193,7 +195,10 @@ class Client:
         self.replies = 0  # replies returned so far (Suspect.seq numbers them)
         self._last: tuple[Request, Reply] | None = None
         self._recent: deque[Reply] = deque(maxlen=4)  # replies taken lately, markers too
-        self._suspects: deque[Suspect] = deque(maxlen=64)
+        self._seen_replies: dict[bytes, Reply] = {}  # frame -> Reply, see _exchange_stream
+        # replies returned earlier that may have answered another request (take_suspects
+        # empties it; a runner asks whether it is empty after every line)
+        self.suspects: deque[Suspect] = deque(maxlen=64)
         # set by reconnect(): before the next command, check the module is not in download
         # mode (a link lost mid-upload leaves it there)
         self._check_download = False
@@ -208,6 +213,7 @@ class Client:
         self.close_hooks: list[Callable[[], None]] = []
         self._listeners: list[Listener] = []
         self._tracers: list[Tracer] = []
+        self._sent_tracers: list[Tracer] = []  # add_tracer(sent_only=True)
         self._poller: threading.Thread | None = None
         self._poller_stop = threading.Event()
         self.stats = {"sent": 0, "timeouts": 0, "checksum_errors": 0, "resyncs": 0,
@@ -224,13 +230,23 @@ class Client:
         self._listeners.append(fn)
         return lambda: self._listeners.remove(fn) if fn in self._listeners else None
 
-    def add_tracer(self, fn: Tracer) -> Callable[[], None]:
+    def add_tracer(self, fn: Tracer, *, sent_only: bool = False) -> Callable[[], None]:
         """Call ``fn(direction, raw, decoded)`` for every frame: "tx", "rx", "drop" or "note".
 
         Tracers run inside the transaction: they must be quick and must not use the client.
+        ``sent_only``: only "tx", each request just before it goes out; a tracer that only
+        watches what is sent then leaves the receive path as fast as with no tracer at all.
         """
-        self._tracers.append(fn)
-        return lambda: self._tracers.remove(fn) if fn in self._tracers else None
+        tracers = self._sent_tracers if sent_only else self._tracers
+        tracers.append(fn)
+        return lambda: tracers.remove(fn) if fn in tracers else None
+
+    def _tell_sent(self, raw: bytes, req: object) -> None:
+        for fn in list(self._sent_tracers):
+            try:
+                fn("tx", raw, req)
+            except Exception:  # a broken tracer must not break the link
+                log.exception("tracer failed")
 
     def _trace(self, direction: str, raw: bytes, decoded: object) -> None:
         for fn in list(self._tracers):
@@ -381,12 +397,15 @@ class Client:
             try:
                 if self._bound is not self.transport:  # (replaced by .connect)
                     self._bind(self.transport)
-                if self._pending is None or self._buf or self._pending():
+                pending = self._pending
+                if pending is None or self._buf or pending():
                     self._flush_input()  # (one cheap check when nothing waits)
-                if self._dirty:
+                if (self._stale or self._stale_versions or self._stale_opaque
+                        or self._drained) and self._dirty:  # (the property, spelt out first)
                     self._sync_before(req, kind, timeout)
                 sent = True
-                reply = self._exchange(req, kind, timeout)
+                reply = (self._exchange(req, kind, timeout) if pending is None
+                         else self._exchange_stream(req, kind, timeout))
             except TmclTimeoutError as exc:
                 self.stats["timeouts"] += 1
                 failure: Exception = exc
@@ -399,7 +418,7 @@ class Client:
                     self._mark_stale(req, kind)
                 raise
             else:
-                if (reply is not None and reply.status == Status.WRONG_CHECKSUM
+                if (reply is not None and reply.status == _WRONG_CHECKSUM
                         and not self.downloading and attempt <= retries):
                     # the module got a damaged frame and executed nothing: safe to send again
                     self.stats["retries"] += 1
@@ -479,7 +498,7 @@ class Client:
         self._last = None  # reported once
         self.stats["suspect"] += 1
         raw = b"" if extra is None else extra.to_can() if self.is_can else extra.to_bytes()
-        self._suspects.append(Suspect(last[0], last[1], self.replies, raw))
+        self.suspects.append(Suspect(last[0], last[1], self.replies, raw))
         if self._tracers:
             self._trace("note", b"", f"the reply to {_name(last[0])} may have been another "
                                      "request's: a reply came that nothing was waiting for")
@@ -488,8 +507,8 @@ class Client:
         """Replies returned earlier that may have answered another request (oldest first);
         each is reported once."""
         out = []
-        while self._suspects:
-            out.append(self._suspects.popleft())
+        while self.suspects:
+            out.append(self.suspects.popleft())
         return out
 
     def _bind(self, transport: Transport) -> None:
@@ -578,22 +597,38 @@ class Client:
             # these layouts take any well-formed frame: clear out what is already here
             self._absorb()
         raw = req.to_bytes()
-        t.write(raw)
-        self.stats["sent"] += 1
-        if self._tracers:
-            self._trace("tx", raw, req)
-        if kind == _NONE:
-            return None
-        deadline = time.monotonic() + timeout
+        if self._sent_tracers:
+            self._tell_sent(raw, req)
         buf = self._buf
+        deadline = time.monotonic() + timeout
+        if buf or kind == _NONE or self._tracers:
+            t.write(raw)
+            self.stats["sent"] += 1
+            if self._tracers:
+                self._trace("tx", raw, req)  # (when it goes: the trace shows the time)
+            if kind == _NONE:
+                return None
+            # the first read uses the client's timeout, so a pyserial URL port is not
+            # reconfigured
+            head = b"" if buf else t.read(_FRAME, timeout)
+        else:
+            self.stats["sent"] += 1
+            head = t.transact(raw, _FRAME, timeout)
         if not buf:
-            # the common case first: nine bytes that are the reply (the first read uses the
-            # client's timeout, so a pyserial URL port is not reconfigured)
-            head = t.read(_FRAME, timeout)
+            # the common case first: nine bytes that are the reply
             if (len(head) == _FRAME and kind == _NORMAL and head[1] == req.address
                     and head[3] == req.opcode and head[0] == self.host_address
                     and sum(head[:8]) & 0xFF == head[8] and head[2] in _REPLY_STATUSES):
-                reply = Reply.from_frame(head)
+                # the same nine bytes are the same (immutable) reply: a script repeating its
+                # lines mostly gets answers it has had before
+                seen = self._seen_replies
+                reply = seen.get(head) if head.__class__ is bytes else None
+                if reply is None:
+                    reply = Reply.from_frame(head)
+                    if head.__class__ is bytes:
+                        if len(seen) >= _SEEN_REPLIES:
+                            seen.clear()
+                        seen[head] = reply
                 if self._tracers:
                     self._trace("rx", head, reply)
                 return reply
@@ -811,6 +846,8 @@ class Client:
         if kind != _NORMAL:
             self._absorb_can()
         data = req.to_can()
+        if self._sent_tracers:
+            self._tell_sent(data, req)
         t.send(self.can_id, data)
         self.stats["sent"] += 1
         if self._tracers:
@@ -1047,10 +1084,12 @@ class Client:
 
     @property
     def tracing(self) -> bool:
-        return bool(self._tracers)
+        return bool(self._tracers or self._sent_tracers)
 
     def trace(self, direction: str, raw: bytes, decoded: object) -> None:
         """Report a frame to the tracers ("tx", "rx", "drop" or "note")."""
+        if direction == "tx" and self._sent_tracers:
+            self._tell_sent(raw, decoded)
         if self._tracers:
             self._trace(direction, raw, decoded)
 

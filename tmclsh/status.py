@@ -43,5 +43,8 @@ def status_text(status: int) -> str:
         return f"unknown status {status}"
 
 
+OK_STATUSES = frozenset({int(Status.OK), int(Status.LOADED), int(Status.EVENT)})
+
+
 def status_ok(status: int) -> bool:
-    return status in (Status.OK, Status.LOADED, Status.EVENT)
+    return status in OK_STATUSES

@@ -308,22 +308,20 @@ class Output:
         # each once. Whatever else result_json or render_result come to read goes into the key.
         json_mode = self.json
         stream = sys.stdout
-        if not json_mode and (self._console is not None or self._color == "always"
-                              or self._is_terminal(stream)):
+        terminal = self._is_terminal(stream)
+        if not json_mode and (terminal or self._console is not None or self._color == "always"):
             stream = None  # rich writes (as _plain says, inline: once per line)
         reply = result.reply
         enc = result.encoded
         key = None
         if stream is not None and reply is not None and reply.version is None \
                 and reply.stored is None and enc.spec is not None:
-            key = (json_mode, result.line, id(enc), id(module), reply.status, reply.value,
-                   reply.opcode, self.simulated())
+            key = (result.line, reply.value, reply.status, reply.opcode)
             hit = self._memo.get(key)
-            if hit is not None and hit[0] is enc and hit[1] is module:
-                if json_mode:
-                    self._write_json(hit[2])
-                else:
-                    self._write(stream, hit[2])
+            simulated = self.simulated()
+            if hit is not None and hit[0] is enc and hit[1] is module and hit[2] is json_mode \
+                    and hit[3] is simulated:
+                self._write(stream, hit[4], not (json_mode and terminal))
                 return
         if json_mode:
             obj = result_json(result)
@@ -341,7 +339,7 @@ class Output:
         if key is not None:
             if len(self._memo) >= MEMO_LINES:
                 self._memo.clear()
-            self._memo[key] = (enc, module, line)
+            self._memo[key] = (enc, module, json_mode, simulated, line)
 
     @contextmanager
     def paged(self, enabled: bool = True) -> Iterator[None]:

@@ -158,6 +158,9 @@ def parse_condition(word: str, args: str) -> expr.Expression:
 MAX_BLOCK_DEPTH = 32  # .repeat/.if blocks inside one another
 
 
+_AGAIN_LINES = 4096  # distinct plain lines Parser.nodes keeps (a file is bounded, stdin not)
+
+
 class Parser:
     """Lines in, nodes out; a node is yielded as soon as it is complete (for stdin)."""
 
@@ -177,8 +180,22 @@ class Parser:
     def nodes(self, lines: Iterable[str]) -> Iterator[Node]:
         open_: list[tuple[Node, list[Node]]] = []  # open blocks and the body being filled
         held = 0  # lines inside open blocks: a block without .end on stdin is bounded too
+        # a physical line met before that was one plain TMCL line, and what it was: what a
+        # long script mostly is, taken without splitting and checking it again
+        again: dict[str, tuple[str, str]] = {}
+        file = self.file
         for number, raw in enumerate(lines, 1):
-            for text in split_line(raw, owns_line):  # `GAP 1, 0; GAP 2, 0` is two lines
+            if not open_:
+                hit = again.get(raw)
+                if hit is not None:
+                    yield Step(file, number, hit[0], hit[1])
+                    continue
+            texts = split_line(raw, owns_line)  # `GAP 1, 0; GAP 2, 0` is two lines
+            if len(texts) == 1 and not open_ and self.seen.get(texts[0]):
+                if len(again) >= _AGAIN_LINES:
+                    again.clear()
+                again[raw] = (texts[0], self.seen[texts[0]])  # type: ignore[assignment]
+            for text in texts:
                 held = held + 1 if open_ else 0
                 if held > files.MAX_LINES:
                     raise self.fail(open_[-1][0].line, f"{_word(open_[-1][0].text)[0]} has no "
@@ -211,6 +228,8 @@ class Parser:
             seen = self.seen.get(text, False)
             if seen is not False:
                 return Step(file, number, text, seen)
+            if len(self.seen) >= _AGAIN_LINES:
+                self.seen.clear()  # (stdin may bring any number of distinct lines)
             word = text.split(None, 1)[0]
             if commands.find(word) is not None:  # bare help/quit
                 self.seen[text] = None

@@ -18,12 +18,13 @@ from .. import asm
 from ..client import Client, Result
 from ..errors import StatusError, TmclError, TmclTimeoutError, TransportError, ValidationError
 from ..modules import Module
-from ..protocol import status_ok
+from ..status import OK_STATUSES
 from . import commands
 from .lines import split_text, strip_comment
 from .render import Output
 
 _VAR = re.compile(r"\$\{([^}]*)\}")
+ANSWERED = 64  # recent replies whose line a later suspect report can name
 
 
 
@@ -91,7 +92,8 @@ class Session:
         self.interrupted_line_ended = True
         # which line each recent reply answered (Client.replies -> line, FILE:LINE), so a
         # reply found suspect later can be named
-        self._answered: dict[int, tuple[str, tuple[str, int] | None]] = {}
+        # (a ring: the reply numbered n is at n % ANSWERED, with its number)
+        self._answered: list[tuple[int, str, tuple[str, int] | None] | None] = [None] * ANSWERED
         self.out.simulated = lambda: bool(getattr(self.client.transport, "simulated", False))
         # seconds one line (with the script or block it starts) may take; None: no limit.
         # For programs that embed the shell and for tests: .sleep, .wait, .watch, blocks and
@@ -235,7 +237,8 @@ class Session:
         a result is never silently kept when the link shows it may be wrong."""
         take = getattr(self.client, "take_suspects", None)
         for s in take() if callable(take) else ():
-            line, where = self._answered.get(s.seq, (None, None))
+            known = self._answered[s.seq % ANSWERED]
+            line, where = known[1:] if known is not None and known[0] == s.seq else (None, None)
             self.stats.suspects += 1
             what = f"the answer to {line!r}" if line else "an earlier answer"
             if where is not None:
@@ -267,8 +270,9 @@ class Session:
         ``${...}``, not a command, no block collecting and no time limit (the script runner
         checks those). The layers between are left out, not the checks, counts or hooks: a
         script pays this per line."""
+        client = self.client
         try:
-            if not self.client.connected:
+            if not client.transport.is_open:  # (client.connected, one call fewer)
                 self.ensure_link()  # the link was lost on an earlier line (--keep-going)
             return self.run_tmcl(text)
         except TmclError as exc:
@@ -278,7 +282,8 @@ class Session:
                 self._record(text, f"error: {exc}")
             raise
         finally:
-            self.report_suspects()
+            if getattr(client, "suspects", True):  # (a client without the list: ask it)
+                self.report_suspects()
 
     def run_tmcl(self, text: str, *, show: bool = True) -> Result:
         client = self.client
@@ -289,14 +294,13 @@ class Session:
         reply = client.request(req)
         result = Result(text, enc, reply)
         if reply is not None:
-            self._answered[self.client.replies] = (text, self.location)
-            if len(self._answered) > 64:
-                del self._answered[next(iter(self._answered))]
+            seq = client.replies
+            self._answered[seq % ANSWERED] = (seq, text, self.location)
         self.last_result = result
         self.stats.commands += 1
         if show:
             self.out.result(result, client.module)
-        if reply is not None and not status_ok(reply.status):
+        if reply is not None and reply.status not in OK_STATUSES:
             self._record(text, f"error: status {reply.status}")
             err = StatusError(reply.status, reply)
             err.shown = show  # type: ignore[attr-defined]  # the result line already said it

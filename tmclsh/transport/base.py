@@ -60,6 +60,12 @@ class StreamTransport(Transport):
     def pending(self) -> int:
         """Bytes that can be read now without waiting."""
 
+    def transact(self, data: bytes, size: int, timeout: float | None) -> bytes:
+        """``write(data)``, then ``read(size, timeout)``: the request path's common case in
+        one call, so a transport can do it in fewer steps (the serial port's own descriptor)."""
+        self.write(data)
+        return self.read(size, timeout)
+
     def read_available(self) -> bytes:
         n = self.pending()
         return self.read(n, 0) if n else b""

@@ -133,6 +133,41 @@ class SerialTransport(StreamTransport):
         except (pyserial.SerialException, OSError) as exc:
             raise self._lost("read", exc) from exc
 
+    def transact(self, data: bytes, size: int, timeout: float | None) -> bytes:
+        fd = self._fd
+        if fd is None:
+            return super().transact(data, size, timeout)
+        try:
+            n = os.write(fd, data)
+        except BlockingIOError:
+            n = 0
+        except OSError as exc:
+            raise self._lost("write", exc) from exc
+        if n != len(data):
+            self.write(data[n:])
+        # the reply mostly comes whole: one wait, one read; anything else as read() does it
+        start = time.monotonic()
+        try:
+            ready = select.select((fd,), (), (), timeout)[0]
+        except (OSError, ValueError) as exc:
+            raise self._lost("read", exc) from exc
+        if not ready:
+            return b""  # timed out
+        try:
+            data = os.read(fd, size)
+        except BlockingIOError:
+            data = bytes()  # (select saw it readable and something else took it: wait on)
+        except OSError as exc:
+            raise self._lost("read", exc) from exc
+        else:
+            if not data:
+                raise self._lost("read", OSError("device reports readiness to read but "
+                                                 "returned no data"))
+        if len(data) >= size:
+            return data
+        left = None if timeout is None else max(0.0, timeout - (time.monotonic() - start))
+        return data + self._read_fd(fd, size - len(data), left)
+
     def _read_fd(self, fd: int, size: int, timeout: float | None) -> bytes:
         """pyserial's POSIX ``read`` with the same meaning of ``timeout``."""
         deadline = None if timeout is None else time.monotonic() + timeout
