@@ -44,7 +44,7 @@ import time
 from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 from . import instructions as isa
 from .errors import (ChecksumError, DownloadModeError, StatusError, TmclTimeoutError,
@@ -122,9 +122,9 @@ class Suspect:
     extra: bytes  # the reply that came when none was outstanding (b"": damaged bytes)
 
 
-@dataclass(frozen=True)
-class Result:
-    """A typed line and what the module answered (reply is None for 137)."""
+class Result(NamedTuple):
+    """A typed line and what the module answered (reply is None for 137). A named tuple: a
+    script makes one a line, and a frozen dataclass costs several times as much to make."""
 
     line: str
     encoded: asm.Encoded

@@ -172,6 +172,7 @@ class Output:
         self._console = None
         self._err = None
         self._terminal: dict[int, tuple[object, bool]] = {}  # is_terminal, by stream
+        self._stdout_terminal: tuple[object, bool] = (None, False)  # see result
         # hold: results to a pipe or a file are not written line by line but every
         # HOLD_SECONDS, and before anything else is written or a command runs (a script
         # file's run sets it; see flush). A line written is a system call per line.
@@ -308,7 +309,12 @@ class Output:
         # each once. Whatever else result_json or render_result come to read goes into the key.
         json_mode = self.json
         stream = sys.stdout
-        terminal = self._is_terminal(stream)
+        known = self._stdout_terminal  # (_is_terminal, for the stream asked last)
+        if known[0] is stream:
+            terminal = known[1]
+        else:
+            terminal = self._is_terminal(stream)
+            self._stdout_terminal = (stream, terminal)
         if not json_mode and (terminal or self._console is not None or self._color == "always"):
             stream = None  # rich writes (as _plain says, inline: once per line)
         reply = result.reply
