@@ -468,13 +468,17 @@ class Client:
     def _unsolicited(self, extra: Reply | None) -> None:
         """A reply came when none was outstanding: a duplicate, or the real answer to the
         last request, which then took another one. The line is dirty (the next request
-        resynchronises) and, unless ``extra`` is a copy of a reply taken lately (the last
-        request's: the value shown is the one it carries anyway; or a marker's), the last
-        request's reply is suspect."""
+        resynchronises) and, unless ``extra`` is a copy of the last request's reply (the
+        value shown is the one it carries anyway) or of a marker's, the last request's reply
+        is suspect. A copy of an older request's reply proves nothing: it may as well be the
+        last request's own answer, displaced by a late copy of the one before (GAP 3 of three
+        motors: 5000, 0, then a copy of the 0 taken for the third while its 5000 comes late)."""
         self.stats["unsolicited"] += 1
         self._stale_opaque = True
         last = self._last
-        if last is None or extra in self._recent:
+        if last is None or extra == last[1] or (
+                extra is not None and extra.opcode == Control.GET_VERSION
+                and extra in self._recent):
             return
         self._last = None  # reported once
         self.stats["suspect"] += 1
@@ -483,6 +487,10 @@ class Client:
         if self._tracers:
             self._trace("note", b"", f"the reply to {_name(last[0])} may have been another "
                                      "request's: a reply came that nothing was waiting for")
+
+    def suspect_seqs(self) -> set[int]:
+        """The ``seq`` of every suspect not yet taken (``take_suspects`` still reports them)."""
+        return {s.seq for s in self._suspects}
 
     def take_suspects(self) -> list[Suspect]:
         """Replies returned earlier that may have answered another request (oldest first);

@@ -727,6 +727,32 @@ def stop_everything(client, *, settle: float = SETTLE,
             report.unknown[m] = str(exc)
     number = _speed_parameter(client)
     deadline = time.monotonic() + settle
+    zero_at: dict[int, int] = {}  # motor -> Client.replies when its speed read 0
+    doubtful: list[int] = []
+    for _ in range(_CONFIRM_ROUNDS):
+        _settle(client, report, pending, zero_at, number, t, deadline, sleep)
+        doubtful = _doubtful(client, zero_at, t)
+        if not doubtful:
+            break
+        for m in doubtful:  # read again: that 0 may have been another motor's
+            report.stopped.remove(m)
+            del zero_at[m]
+        pending = doubtful
+    else:
+        for m in doubtful:
+            report.unknown[m] = ("its speed read 0, but that answer may have been another "
+                                 "request's (the line brought a reply nothing was waiting for)")
+    report.stopped.sort()
+    return report
+
+
+_CONFIRM_ROUNDS = 3
+
+
+def _settle(client, report: StopReport, pending: list[int], zero_at: dict[int, int],
+            number: int, t: float, deadline: float, sleep: Callable[[float], None]) -> None:
+    """Read each pending motor's speed until it is 0 or the deadline has passed (at least
+    once): 0 moves it to ``report.stopped`` (``zero_at``: which reply said so)."""
     while pending:
         for m in list(pending):
             try:
@@ -738,6 +764,7 @@ def stop_everything(client, *, settle: float = SETTLE,
                 continue
             if v == 0:
                 report.stopped.append(m)
+                zero_at[m] = client.replies
                 report.turning.pop(m, None)
                 pending.remove(m)
             else:
@@ -745,5 +772,18 @@ def stop_everything(client, *, settle: float = SETTLE,
         if not pending or time.monotonic() >= deadline:
             break
         sleep(0.05)
-    report.stopped.sort()
-    return report
+
+
+def _doubtful(client, zero_at: dict[int, int], t: float) -> list[int]:
+    """Motors whose 0 may have been another request's answer (a late copy of the reply
+    before it, taken for this one; the client finds that out when the real answer comes
+    while nothing waits for it, so one more exchange, 136 type 1, gives it the chance)."""
+    seqs = getattr(client, "suspect_seqs", None)
+    if not zero_at or client.mode == "ascii" or not callable(seqs):
+        return []
+    try:
+        _send(client, Control.GET_VERSION, 1, timeout=t)
+    except TmclError:
+        pass  # what it could find is found by the reads' own flushes as well
+    found = seqs()
+    return sorted(m for m, seq in zero_at.items() if seq in found)
