@@ -104,3 +104,60 @@ def test_stop_never_says_stopped_when_the_copy_equals_an_older_answer(axes):
     assert 2 not in report.stopped, report
     assert report.turning.get(0) == 5000
     assert report.turning.get(2) == 5000 or 2 in report.unknown, report
+
+
+class LosesQuitDownload(Module):
+    """Download mode as the manual has it (132 starts it; every command but the control
+    commands is then stored and answered with status 101; 133 ends it), on a line that
+    damages the first ``lost`` 133 frames on their way to the module (it never hears them)."""
+
+    def __init__(self, lost: int = 2, **kw):
+        super().__init__(version="1311V111", **kw)
+        self.downloading = False
+        self.lost = lost
+        self.stored: list[tuple[int, int, int, int]] = []
+
+    def respond(self, command, type_, motor, value):
+        if command == 132:
+            self.downloading = True
+            return OK, 0
+        if command == 133:
+            self.downloading = False
+            return OK, 0
+        if self.downloading and command < 128:
+            self.stored.append((command, type_, motor, value))
+            return 101, value
+        if command == 10 and type_ == 129:  # GGP 129: download mode
+            return OK, int(self.downloading)
+        return super().respond(command, type_, motor, value)
+
+    def answer(self, raw):
+        if raw[1] == 133 and self.lost:
+            self.lost -= 1
+            return None  # damaged on the way: the module heard nothing
+        return super().answer(raw)
+
+
+def test_an_upload_whose_133_got_lost_does_not_leave_the_module_in_download_mode():
+    """Both 133 at the end of an upload are lost: the upload says download mode could not
+    be ended. The next command must not be stored in program memory: the client ends
+    download mode first (with a notice), then the command runs."""
+    from tmclsh.protocol import Instruction
+
+    m = LosesQuitDownload()
+    c = Client(open_serial(m.path), module="TMCM-1311", timeout=0.2, retries=1)
+    notices = []
+    c.on_notice = notices.append
+    try:
+        m.values[(1, 0, False)] = -5000
+        with pytest.raises(program.UploadError) as err:
+            program.upload(c, [Instruction(1, 0, 0, 100)], verify=False)
+        assert not err.value.download_ended
+        assert m.downloading
+        assert c.value("GAP 1, 0") == -5000
+        assert not m.downloading
+        assert (6, 1, 0, 0) not in m.stored
+        assert notices and "download mode" in notices[0]
+    finally:
+        c.close()
+        m.close()

@@ -369,6 +369,12 @@ class Client:
                     "incomplete")
         return True
 
+    def check_download_next(self) -> None:
+        """Download mode may not have ended (a 133 went unanswered, or was interrupted):
+        before the next command, ask the module and end it if need be (as after a
+        reconnect), so that command is executed, not stored."""
+        self._check_download = True
+
     def _request(self, req: Request, timeout: float, retries: int) -> Reply | None:
         if not self.transport.is_open:
             raise TransportError(f"{self.transport.describe()} is not connected "

@@ -170,7 +170,8 @@ class UploadError(TmclError):
             ended = "download mode ended"
         else:
             ended = (f"could not end download mode ({self.end_error}): the module may still "
-                     "store every command it receives; reconnect or power-cycle it")
+                     "store every command it receives; the next command asks and ends it "
+                     "first (else power-cycle the module)")
         return (f"upload failed: {self.reason}; {self.memory_text()}; {ended}. "
                 "Upload again to store the whole program")
 
@@ -274,6 +275,8 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
     finally:
         ended, end_error = _quit_download(client, timeout)
         client.downloading = False
+        if not ended:
+            client.check_download_next()  # the next command ends it first, not stored
     upload_seconds = time.monotonic() - began
     if failure is not None:
         interrupted = isinstance(failure, KeyboardInterrupt)
@@ -328,10 +331,14 @@ def end_download(client, *, timeout: float | None = None) -> None:
     """133 on its own: end a download mode left behind (e.g. by a link lost mid-upload)."""
     require_binary(client, "quit download (133)")
     client.downloading = True  # until it is answered, the module may store what it gets
+    ended = False
     try:
         _ok(_send(client, Control.QUIT_DOWNLOAD, timeout=timeout), "quit download (133)")
+        ended = True
     finally:
         client.downloading = False
+        if not ended:
+            client.check_download_next()
 
 
 def read_instruction(client, address: int, *, timeout: float | None = None) -> Instruction:
