@@ -161,3 +161,25 @@ def test_an_upload_whose_133_got_lost_does_not_leave_the_module_in_download_mode
     finally:
         c.close()
         m.close()
+
+
+def test_connect_with_an_unknown_module_closes_the_port():
+    """tmclsh.connect(port=..., module=<no such type>) fails before any byte is sent; the
+    port it opened must be closed then, not left to the garbage collector (a serial port
+    left open is busy for the next attempt; here: the module's TCP line stays taken)."""
+    import tmclsh
+    from tmclsh.errors import TmclError
+
+    from responder import TcpModule
+
+    m = TcpModule(version="1311V111")
+    try:
+        with pytest.raises(TmclError) as err:
+            tmclsh.connect(port=m.url, module="TMCM-9999", timeout=0.3)
+        # the failed attempt's traceback keeps its frames (and whatever they opened) alive
+        assert err.value.__traceback__ is not None
+        c = tmclsh.connect(port=m.url, timeout=0.3)  # the one line is free again
+        assert c.module.name == "TMCM-1311"
+        c.close()
+    finally:
+        m.close()

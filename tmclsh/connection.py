@@ -142,8 +142,12 @@ def connect(port: str | None = None, *, baud: int = 9600, can: str | None = None
         name = sim or module or "TMCM-1311"
         t = tr.open_sim(name, address, host_address=host_address)
         module = module or name
-    client = Client(t, address=address, host_address=host_address, module=module,
-                    timeout=timeout, retries=retries, can_id=can_id, reply_id=reply_id)
+    try:
+        client = Client(t, address=address, host_address=host_address, module=module,
+                        timeout=timeout, retries=retries, can_id=can_id, reply_id=reply_id)
+    except BaseException:  # (an unknown module, a bad timeout): the port is not kept open
+        t.close()
+        raise
     return start(client, ascii=ascii)
 
 
