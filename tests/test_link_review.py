@@ -219,3 +219,50 @@ def test_connect_elsewhere_leaves_the_old_module_in_the_mode_it_was_found(make_p
 def test_connect_elsewhere_does_not_put_the_new_module_into_ascii_mode(make_pty_sim):
     _, sim_b = _ascii_then_connect(make_pty_sim, a_starts_in_ascii=True)
     assert not sim_b.ascii_active
+
+
+def _ctrl_c_on(opcodes: set[int], times: int = 1):
+    """A tracer that raises KeyboardInterrupt right after a frame with one of ``opcodes``
+    went out (Ctrl-C while its reply is on its way), ``times`` times."""
+    left = [times]
+
+    def tracer(direction, raw, decoded):
+        if direction == "tx" and raw[1] in opcodes and left[0]:
+            left[0] -= 1
+            raise KeyboardInterrupt
+
+    return tracer
+
+
+def test_ctrl_c_while_a_reply_is_on_its_way_does_not_shift_the_answers():
+    m = Module(version="1311V111")
+    m.values.update({(1, 0, False): 111, (4, 0, False): 444})
+    c = Client(open_serial(m.path), module="TMCM-1311", timeout=0.3)
+    try:
+        c.add_tracer(_ctrl_c_on({6}))
+        with pytest.raises(KeyboardInterrupt):
+            c.value("GAP 1, 0")
+        assert c.value("GAP 4, 0") == 444
+        assert c.value("GAP 1, 0") == 111
+    finally:
+        c.close()
+        m.close()
+
+
+def test_ctrl_c_twice_in_an_upload_does_not_leave_download_mode_behind():
+    """Ctrl-C mid-upload, and again while its 133 (which the line lost) is waited for."""
+    from tmclsh.protocol import Instruction
+
+    m = LosesQuitDownload(lost=1)
+    m.values[(1, 0, False)] = 77
+    c = Client(open_serial(m.path), module="TMCM-1311", timeout=0.3)
+    c.on_notice = lambda text: None
+    try:
+        c.add_tracer(_ctrl_c_on({1, 133}, times=2))  # the 2nd ROR frame, then the 133
+        with pytest.raises(program.UploadError) as err:
+            program.upload(c, [Instruction(1, 0, 0, 100)] * 3, verify=False)
+        assert err.value.interrupted and not err.value.download_ended and m.downloading
+        assert c.value("GAP 1, 0") == 77 and not m.downloading
+    finally:
+        c.close()
+        m.close()
