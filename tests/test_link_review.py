@@ -266,3 +266,48 @@ def test_ctrl_c_twice_in_an_upload_does_not_leave_download_mode_behind():
     finally:
         c.close()
         m.close()
+
+
+class LosesMoveReplies(Module):
+    """Executes MVP REL (adds to its position, AP 1) but the line loses its reply; a
+    resynchronisation (136) is answered unless ``mute``."""
+
+    mute = False
+
+    def answer(self, raw):
+        _, cmd, typ, motor, value = fields(raw)
+        if self.mute:
+            return None
+        if cmd == 4 and typ == 1:
+            self.got.append((cmd, typ, motor, value))
+            key = (1, motor, False)
+            self.values[key] = self.values.get(key, 0) + value
+            return None
+        return super().answer(raw)
+
+
+def test_an_unanswered_relative_move_says_it_may_have_been_executed():
+    """MVP REL is never sent twice by tmclsh; the error must not read as "nothing happened"
+    (a technician would type it again and the motor would move twice as far)."""
+    from tmclsh.errors import TmclTimeoutError
+    from tmclsh.shell.render import Output
+    from tmclsh.shell.session import Session
+
+    m = LosesMoveReplies(version="1311V111")
+    c = Client(open_serial(m.path), module="TMCM-1311", timeout=0.2, retries=2)
+    try:
+        s = Session(c, Output())
+        with pytest.raises(TmclTimeoutError) as err:
+            s.run_line("MVP REL, 0, 1000")
+        assert m.values[(1, 0, False)] == 1000  # it moved, once
+        assert [g[0] for g in m.got].count(4) == 1
+        assert "may have" in str(err.value) and "again" in str(err.value)
+        # when the line check before it fails, the move was not sent at all: say so
+        m.mute = True
+        with pytest.raises(TmclTimeoutError) as err:
+            s.run_line("MVP REL, 0, 1000")
+        assert [g[0] for g in m.got].count(4) == 1
+        assert "not sent" in str(err.value), str(err.value)
+    finally:
+        c.close()
+        m.close()

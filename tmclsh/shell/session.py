@@ -15,8 +15,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from .. import asm
-from ..client import Client, Result
-from ..errors import StatusError, TmclError, TmclTimeoutError, TransportError, ValidationError
+from ..client import Client, Result, _name, idempotent
+from ..errors import (ChecksumError, StatusError, TmclError, TmclTimeoutError, TransportError,
+                      ValidationError)
 from ..modules import Module
 from ..protocol import status_ok
 from . import commands
@@ -270,7 +271,14 @@ class Session:
         spec = enc.spec
         if spec is None or spec.persists or spec.mnemonic == "SGP":  # may ask first
             self._confirm_persistent(enc)
-        reply = client.request(req)
+        stats = client.stats
+        before = stats["sent"] - stats["resyncs"]  # (each line check sends one 136)
+        try:
+            reply = client.request(req)
+        except (TmclTimeoutError, ChecksumError) as exc:
+            if idempotent(req) or isinstance(exc, TimeLimitError):
+                raise
+            raise _unsure(client, req, exc, stats["sent"] - stats["resyncs"] > before) from exc
         result = Result(text, enc, reply)
         if reply is not None:
             self._answered[self.client.replies] = (text, self.location)
@@ -304,6 +312,21 @@ class Session:
     def _record(self, line: str, outcome: str) -> None:
         for fn in list(self.recorders):
             fn(line, outcome)
+
+
+def _unsure(client: Client, req, exc: TmclError, sent: bool) -> TmclError:
+    """A command that is never repeated by itself (MVP REL, RFS START, CALC, ...) got no
+    usable answer: say whether the module may have executed it, so it is not typed again
+    blindly (a relative move would go twice as far)."""
+    name = _name(req)
+    if sent or client.mode == "ascii":
+        more = (f"{name} is not sent again by itself: the module may have executed it; "
+                "check (for example GAP ActualPosition) before sending it again")
+    else:
+        more = f"{name} was not sent"
+    err = type(exc)(f"{exc}; {more}")
+    err.__dict__.update(exc.__dict__)
+    return err
 
 
 def _evaluate(session: Session, text: str) -> int | float:
