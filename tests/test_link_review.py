@@ -311,3 +311,49 @@ def test_an_unanswered_relative_move_says_it_may_have_been_executed():
     finally:
         c.close()
         m.close()
+
+
+class Announces(Module):
+    """Sends two 138 "target reached" messages (motor masks 1, then 2) ahead of the reply to
+    every GAP."""
+
+    def answer(self, raw):
+        out = super().answer(raw)
+        if raw[1] == 6 and out is not None:
+            from responder import reply as frame
+
+            out = frame(138, 1, 128) + frame(138, 2, 128) + out
+        return out
+
+
+def test_events_reach_listeners_in_order_with_the_poller_running():
+    """The request's own delivery and the event poller's must not overtake each other: a
+    listener that is slow with the first event (a terminal that blocks for a moment) must
+    still see the second one after it, with its own arrival time."""
+    import threading
+    import time
+
+    m = Announces(version="1311V111")
+    c = Client(open_serial(m.path), module="TMCM-1311", timeout=0.3)
+    seen: list[tuple[int, float]] = []
+    first = threading.Event()
+
+    def listener(reply):
+        t = c.event_time
+        if not first.is_set():
+            first.set()
+            time.sleep(0.3)
+        seen.append((reply.value, t))
+
+    try:
+        c.add_listener(listener)
+        c.start_event_poller(interval=0.01)
+        c.value("GAP 1, 0")
+        deadline = time.monotonic() + 2
+        while len(seen) < 2 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert [v for v, _ in seen] == [1, 2]
+        assert seen[0][1] <= seen[1][1]
+    finally:
+        c.close()
+        m.close()

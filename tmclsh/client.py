@@ -185,6 +185,7 @@ class Client:
         self._pending: Callable[[], int] | None = None
         self._bind(transport)
         self._events: deque[tuple[Reply, float]] = deque()  # with when each arrived
+        self._delivering = threading.RLock()  # held while events go to the listeners
         # when the event being delivered arrived (time.monotonic()), for listeners that
         # put a time on it
         self.event_time = 0.0
@@ -240,16 +241,29 @@ class Client:
                 log.exception("tracer failed")
 
     def _deliver_events(self) -> None:
-        while True:
-            try:
-                reply, self.event_time = self._events.popleft()
-            except IndexError:
+        # One deliverer at a time (the request's thread or the event poller's), so events
+        # reach listeners in the order they came, each with its own event_time. The poller
+        # leaves its events to a request's thread that is delivering; a request's thread
+        # waits for the poller's turn to end (so the events that came before its reply are
+        # out before its result), though never for long: a poller's listener may itself be
+        # waiting for the link. A listener that sends a command delivers inline (re-entrant).
+        poller = threading.current_thread() is self._poller
+        while self._events:
+            if not self._delivering.acquire(blocking=not poller, timeout=-1 if poller else 1.0):
                 return
-            for fn in list(self._listeners):
-                try:
-                    fn(reply)
-                except Exception:
-                    log.exception("listener failed")
+            try:
+                while True:
+                    try:
+                        reply, self.event_time = self._events.popleft()
+                    except IndexError:
+                        break
+                    for fn in list(self._listeners):
+                        try:
+                            fn(reply)
+                        except Exception:
+                            log.exception("listener failed")
+            finally:
+                self._delivering.release()
 
     # -- properties ---------------------------------------------------------------------
     @property
