@@ -357,3 +357,50 @@ def test_events_reach_listeners_in_order_with_the_poller_running():
     finally:
         c.close()
         m.close()
+
+
+@pytest.mark.xfail(strict=True, reason="Client.reconnect() keeps client.module: after the "
+                   "port came back with another module on it (USB unplugged, the next module "
+                   "plugged in), lines are checked against the old module's parameter table")
+def test_reconnect_to_another_module_on_the_same_port_is_noticed():
+    """A bench with several modules tested in turn on one USB port: unplug the TMCM-1311,
+    plug in a TMCM-1640, the shell reconnects. Checking SAP lines against the 1311's data
+    now would send the 1311's parameter numbers to a 1640."""
+    from tmclsh.errors import TmclError
+
+    from responder import TcpModule
+
+    m = TcpModule(version="1311V111")
+    c = Client(open_serial(m.url), timeout=0.3)
+    try:
+        assert c.require_module().name == "TMCM-1311"
+        m.version = "1640V140"  # another module on the same line...
+        c.reconnect()  # ...after the link was lost and came back
+        try:
+            c.value("GAP 1, 0")
+        except TmclError:
+            return  # refused, saying why: fine
+        assert c.module.name == "TMCM-1640"
+    finally:
+        c.close()
+        m.close()
+
+
+@pytest.mark.xfail(strict=True, reason="shell/builtin.py .connect PORT does not bring the "
+                   "module up through connection.start: a module in ASCII mode is 'not "
+                   "identified' (a timeout) instead of recognised, and -m is not checked")
+def test_connect_to_a_module_in_ascii_mode_recognises_it(make_pty_sim, capsys):
+    from tmclsh.shell.render import Output
+    from tmclsh.shell.session import Session
+
+    _, path_a = make_pty_sim()
+    _, path_b = make_pty_sim(ascii_startup=True)
+    c = Client(open_serial(path_a), module="TMCM-1311", timeout=0.3)
+    try:
+        s = Session(c, Output())
+        s.run_line(f".connect {path_b}")
+        said = capsys.readouterr()
+        assert "ASCII mode" in said.out + said.err
+        assert c.value("GAP 1, 0") == 0
+    finally:
+        c.close()
