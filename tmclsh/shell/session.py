@@ -271,14 +271,14 @@ class Session:
         spec = enc.spec
         if spec is None or spec.persists or spec.mnemonic == "SGP":  # may ask first
             self._confirm_persistent(enc)
-        stats = client.stats
-        before = stats["sent"] - stats["resyncs"]  # (each line check sends one 136)
+        before = _frames_sent(client)
         try:
             reply = client.request(req)
         except (TmclTimeoutError, ChecksumError) as exc:
             if idempotent(req) or isinstance(exc, TimeLimitError):
                 raise
-            raise _unsure(client, req, exc, stats["sent"] - stats["resyncs"] > before) from exc
+            sent = _frames_sent(client) > before
+            raise _unsure(client, req, exc, sent) from exc
         result = Result(text, enc, reply)
         if reply is not None:
             self._answered[self.client.replies] = (text, self.location)
@@ -312,6 +312,12 @@ class Session:
     def _record(self, line: str, outcome: str) -> None:
         for fn in list(self.recorders):
             fn(line, outcome)
+
+
+def _frames_sent(client: Client) -> int:
+    """Frames sent so far, the client's own line checks (one 136 each) left out."""
+    stats = client.stats
+    return stats["sent"] - stats["resyncs"]
 
 
 def _unsure(client: Client, req, exc: TmclError, sent: bool) -> TmclError:
