@@ -404,3 +404,27 @@ def test_connect_to_a_module_in_ascii_mode_recognises_it(make_pty_sim, capsys):
         assert c.value("GAP 1, 0") == 0
     finally:
         c.close()
+
+
+def test_a_failure_while_closing_is_one_line_not_a_traceback():
+    """Client.close runs the close hooks (the ASCII link restores the mode it found the
+    module in) and logs what fails; with no logging set up, Python prints a logged
+    exception's traceback on stderr. What fails at exit is said in one line."""
+    import subprocess
+    import sys
+
+    from conftest import ROOT, tmclsh_env
+
+    code = (
+        "import tmclsh\n"
+        "from tmclsh.errors import StatusError\n"
+        "c = tmclsh.connect(sim='TMCM-1311')\n"
+        "def restore():\n"
+        "    raise StatusError(2, None, 'the module refused to enter ASCII mode (139)')\n"
+        "c.close_hooks.append(restore)\n"
+        "c.close()\n")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       timeout=30, env=tmclsh_env(), cwd=str(ROOT))
+    assert p.returncode == 0, p.stderr
+    assert "Traceback" not in p.stderr, p.stderr
+    assert "refused to enter ASCII mode" in p.stderr

@@ -237,8 +237,8 @@ class Client:
         for fn in list(self._tracers):
             try:
                 fn(direction, raw, decoded)
-            except Exception:  # a broken tracer must not break the link
-                log.exception("tracer failed")
+            except Exception as exc:  # a broken tracer must not break the link
+                _failed("a tracer", exc)
 
     def _deliver_events(self) -> None:
         # One deliverer at a time (the request's thread or the event poller's), so events
@@ -260,8 +260,8 @@ class Client:
                     for fn in list(self._listeners):
                         try:
                             fn(reply)
-                        except Exception:
-                            log.exception("listener failed")
+                        except Exception as exc:
+                            _failed("a listener", exc)
             finally:
                 self._delivering.release()
 
@@ -931,8 +931,8 @@ class Client:
                     self.poll()
                 except TransportError:
                     pass  # the next command reports the lost link
-                except Exception:
-                    log.exception("event poll failed")
+                except Exception as exc:
+                    _failed("looking for events", exc)
 
         self._poller = threading.Thread(target=run, name="tmclsh-events", daemon=True)
         self._poller.start()
@@ -1114,13 +1114,13 @@ class Client:
             for hook in hooks:
                 try:
                     hook()
-                except Exception:
-                    log.exception("close hook failed")
+                except Exception as exc:
+                    _failed("closing", exc)
             if self.ascii_link is not None:
                 try:
                     self.ascii_link.close()
-                except Exception:
-                    log.exception("leaving ASCII mode failed")
+                except Exception as exc:
+                    _failed("leaving ASCII mode", exc)
             self.transport.close()
 
     def __enter__(self) -> Client:
@@ -1128,6 +1128,14 @@ class Client:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _failed(what: str, exc: Exception) -> None:
+    """Something the client runs on the side failed: one line (with no logging set up,
+    Python would print a logged exception's traceback to the user); the traceback is
+    logged at debug level for whoever set logging up."""
+    log.warning("%s failed: %s", what, exc)
+    log.debug("%s failed", what, exc_info=exc)
 
 
 def _printable(data: bytes, start: int) -> bool:
