@@ -428,3 +428,36 @@ def test_a_failure_while_closing_is_one_line_not_a_traceback():
     assert p.returncode == 0, p.stderr
     assert "Traceback" not in p.stderr, p.stderr
     assert "refused to enter ASCII mode" in p.stderr
+
+
+class ThreeAxesNoData(Axes):
+    """A three-axis module of a type tmclsh has no data for (generic mode): MST and GAP to
+    a motor it does not have are refused with status 4 (invalid value)."""
+
+    def __init__(self, **kw):
+        super().__init__(**kw)
+        self.version = "6110V130"
+
+    def respond(self, command, type_, motor, value):
+        if command in (3, 6) and motor > 2:
+            self.got.append((command, type_, motor, value))
+            return 4, value
+        return super().respond(command, type_, motor, value)
+
+
+def test_stop_in_generic_mode_stops_every_motor_the_module_has():
+    """No data says how many motors a TMCM-6110 has; ROR 2 is sent all the same (motor
+    numbers are not checked in generic mode). Ctrl-C must stop motor 2 too, and the quit
+    question must see it turn."""
+    m = ThreeAxesNoData()
+    c = Client(open_serial(m.path), timeout=0.3)
+    try:
+        assert c.require_module().generic
+        m.speeds(0, 0, 4000)
+        assert program.activity(c).turning == {2: 4000}
+        report = program.stop_everything(c, settle=0.3)
+        assert report.stopped == [0, 1, 2] and report.ok, report
+        assert (3, 0, 2, 0) in m.got
+    finally:
+        c.close()
+        m.close()

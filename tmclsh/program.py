@@ -644,9 +644,24 @@ class Activity:
         return " and ".join([", ".join(parts[:-1]), parts[-1]] if len(parts) > 2 else parts)
 
 
+# generic mode (a type without data): how many motors is not known, so every motor number
+# up to the most axes a TMCL module has (TMCM-6110, TMCM-6214) is tried, until one is refused
+_GENERIC_MOTORS = 6
+
+
 def _motors(client) -> range:
     mod = client.module
+    if mod is not None and getattr(mod, "generic", False):
+        return range(_GENERIC_MOTORS)
     return range(mod.motors if mod is not None else 1)
+
+
+def _no_such_motor(client, motor: int, exc: TmclError) -> bool:
+    """In generic mode, a refusal (status) for a motor after 0: the module has no such motor,
+    nor any after it."""
+    mod = client.module
+    return (motor > 0 and isinstance(exc, StatusError) and mod is not None
+            and getattr(mod, "generic", False))
 
 
 def _speed_parameter(client) -> int:
@@ -694,7 +709,9 @@ def activity(client, *, timeout: float | None = None) -> Activity:
     for m in _motors(client):
         try:
             v = _speed(client, m, number, t, retries=0)
-        except TmclError:
+        except TmclError as exc:
+            if _no_such_motor(client, m, exc):
+                break
             continue
         if v:
             act.turning[m] = v
@@ -731,6 +748,8 @@ def stop_everything(client, *, settle: float = SETTLE,
             _ok(_send(client, _MST, 0, m, timeout=t), f"MST {m}")
             pending.append(m)
         except TmclError as exc:
+            if _no_such_motor(client, m, exc):
+                break
             report.unknown[m] = str(exc)
     number = _speed_parameter(client)
     deadline = time.monotonic() + settle
