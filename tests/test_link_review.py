@@ -461,3 +461,43 @@ def test_stop_in_generic_mode_stops_every_motor_the_module_has():
     finally:
         c.close()
         m.close()
+
+
+class DamagedEchoThenPause(Module):
+    """An RS485 adapter that echoes each request, damaged (one byte flipped), and a module
+    set to wait ``pause`` s before it answers (GP 75, telegram pause time: 0..255 ms)."""
+
+    pause = 0.3
+
+    def answer(self, raw):
+        out = super().answer(raw)
+        if out is None:
+            return None
+        import time
+
+        echo = bytearray(raw)
+        echo[4] ^= 0x10
+        self.write(bytes(echo))
+        time.sleep(self.pause)
+        return out
+
+
+@pytest.mark.xfail(strict=True, reason="Client._exchange_stream: after bytes that are no "
+                   "frame it waits only _QUIET_AFTER_GARBAGE (50 ms) for more, so a reply "
+                   "behind a damaged 9-byte echo and a telegram pause > 50 ms is called "
+                   "'corrupted reply' though it arrives intact within the timeout")
+def test_a_damaged_echo_and_a_slow_module_are_no_corrupted_reply():
+    from tmclsh.errors import ChecksumError
+
+    m = DamagedEchoThenPause(version="1311V111")
+    m.values[(1, 0, False)] = 4242
+    c = Client(open_serial(m.path), module="TMCM-1311", timeout=1.0, retries=0)
+    try:
+        try:
+            value = c.value("GAP 1, 0")
+        except ChecksumError as exc:
+            pytest.fail(f"an intact reply within the timeout was called corrupted: {exc}")
+        assert value == 4242
+    finally:
+        c.close()
+        m.close()
