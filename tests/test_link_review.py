@@ -46,6 +46,8 @@ class Axes(Module):
             return OK, 0
         return super().respond(command, type_, motor, value)
 
+    gap = 0.0  # s between the copy and the real answer (the copy's own wire time)
+
     def answer(self, raw):
         out = super().answer(raw)
         copy, self._copy = self._copy, b""
@@ -53,6 +55,12 @@ class Axes(Module):
         if out is not None and (cmd, typ, motor) in self.dup_late:
             self.dup_late.discard((cmd, typ, motor))
             self._copy = out
+        if copy and self.gap and out is not None:
+            import time
+
+            self.write(copy)
+            time.sleep(self.gap)
+            return out
         return copy + out if out is not None else None
 
 
@@ -498,6 +506,35 @@ def test_a_damaged_echo_and_a_slow_module_are_no_corrupted_reply():
         except ChecksumError as exc:
             pytest.fail(f"an intact reply within the timeout was called corrupted: {exc}")
         assert value == 4242
+    finally:
+        c.close()
+        m.close()
+
+
+@pytest.mark.parametrize("json_mode", [False, True])
+def test_a_run_whose_last_answer_was_displaced_fails(json_mode, capsys, tmp_path):
+    """-c "SGP 0, 2, 111; SGP 0, 2, 222": the second line takes a late copy of the first
+    one's reply (111); its own answer (222) comes as the run ends, over a 9600 baud line. That
+    is found, said, and the run exits 1 (a CI job must not pass on a value that may be
+    another request's)."""
+    import argparse
+
+    from tmclsh.shell.main import _run_unattended
+    from tmclsh.shell.render import Output
+    from tmclsh.shell.session import Session
+
+    m = Axes()
+    m.dup_late.add((9, 0, 2))
+    m.gap = 0.012  # nine bytes at 9600 baud, and a little
+    c = Client(open_serial(m.path), module="TMCM-351", timeout=0.3)
+    try:
+        s = Session(c, Output(json_mode=json_mode))
+        args = argparse.Namespace(command="SGP 0, 2, 111; SGP 0, 2, 222", script=None,
+                                  json=json_mode)
+        status = _run_unattended(args, s)
+        said = capsys.readouterr()
+        assert "may have been meant for another request" in said.out + said.err
+        assert status == 1
     finally:
         c.close()
         m.close()

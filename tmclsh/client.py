@@ -919,6 +919,32 @@ class Client:
             if self._events:
                 self._deliver_events()
 
+    def confirm_last(self) -> None:
+        """At the end of a run: was the last reply the answer to its request? A late copy of
+        the reply before it (same address and command) would have been taken for it; its
+        real answer then comes right behind, when nothing waits for it, and makes the last
+        reply a suspect (``take_suspects``). So the line is watched until it has been quiet
+        for two frames' wire time (nothing is sent); otherwise, or on the simulator, what is
+        already waiting is taken in."""
+        with self._lock:
+            t = self.transport
+            if self.ascii_link is not None or not t.is_open:
+                return
+            recent = self._recent
+            same = len(recent) >= 2 and (recent[-1].module, recent[-1].opcode) == (
+                recent[-2].module, recent[-2].opcode)
+            baud = getattr(t, "baudrate", None)
+            if not same or t.simulated or not isinstance(t, StreamTransport):
+                quiet = 0.0
+            else:
+                frame = 10 * _FRAME / baud if isinstance(baud, (int, float)) and baud else 0.01
+                quiet = 2 * frame + 0.005
+            end = time.monotonic() + max(0.5, 10 * quiet)
+            while self._absorb(quiet) and quiet and time.monotonic() < end:
+                pass
+        if self._events:
+            self._deliver_events()
+
     def start_event_poller(self, interval: float = 0.05) -> None:
         """Deliver 138 events while no command is running, from a background thread."""
         if self._poller is not None:

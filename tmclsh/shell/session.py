@@ -236,6 +236,14 @@ class Session:
             else:
                 self.out.warn(f"warning: {text}")
 
+    def confirm_answers(self) -> None:
+        """At the end of a run (-c, -f): give the last answer the chance to show it was
+        another request's (``Client.confirm_last``), then report the suspects."""
+        confirm = getattr(self.client, "confirm_last", None)
+        if callable(confirm) and self.client.connected:
+            confirm()
+        self.report_suspects()
+
     def _dispatch(self, text: str) -> Result | None:
         word = text.split(None, 1)[0]
         if word.startswith(".") or _is_bare_command(text):
