@@ -538,3 +538,20 @@ def test_a_run_whose_last_answer_was_displaced_fails(json_mode, capsys, tmp_path
     finally:
         c.close()
         m.close()
+
+
+@pytest.mark.parametrize("module", [None, "TMCM-1311"])
+def test_a_module_answering_another_host_address_is_named_with_or_without_m(module):
+    """GP 76 (the host address the module answers to) set to 3: the mode probe finds that
+    out and says --host-address 3. With -m the same, not "it answered 136 (version None)"."""
+    from tmclsh.connection import open_client
+    from tmclsh.errors import TmclError
+
+    m = Module(version="1311V111", host=3)
+    try:
+        with pytest.raises(TmclError) as err:
+            open_client({"port": m.path, "module": module, "timeout": 0.2},
+                        notice=lambda text: None)
+        assert "--host-address 3" in str(err.value), str(err.value)
+    finally:
+        m.close()
