@@ -510,7 +510,8 @@ class Client:
 
     def suspect_seqs(self) -> set[int]:
         """The ``seq`` of every suspect not yet taken (``take_suspects`` still reports them)."""
-        return {s.seq for s in self._suspects}
+        with self._lock:  # (the event poller may add one meanwhile)
+            return {s.seq for s in self._suspects}
 
     def take_suspects(self) -> list[Suspect]:
         """Replies returned earlier that may have answered another request (oldest first);
