@@ -558,3 +558,24 @@ def test_a_module_answering_another_host_address_is_named_with_or_without_m(modu
         assert "--host-address 3" in str(err.value), str(err.value)
     finally:
         m.close()
+
+
+def test_a_raw_139_line_does_not_strand_the_module_in_ascii_mode(make_pty_sim):
+    """'139 0, 0, 0' typed as a line would switch the module's command line to ASCII while
+    tmclsh goes on talking binary to it (every later line: "stopped answering"), and leave
+    it in ASCII mode after exit. It is refused, pointing to .mode ascii."""
+    from tmclsh.errors import TmclError
+    from tmclsh.shell.render import Output
+    from tmclsh.shell.session import Session
+
+    sim, path = make_pty_sim()
+    c = Client(open_serial(path), module="TMCM-1311", timeout=0.3)
+    try:
+        s = Session(c, Output())
+        with pytest.raises(TmclError) as err:
+            s.run_line("139 0, 0, 0")
+        assert ".mode ascii" in str(err.value)
+        assert not sim.ascii_active
+        assert c.value("GAP 1, 0") == 0
+    finally:
+        c.close()

@@ -25,6 +25,7 @@ from .lines import split_text, strip_comment
 from .render import Output
 
 _VAR = re.compile(r"\$\{([^}]*)\}")
+_ENTER_ASCII = 139  # (Control.ENTER_ASCII)
 
 
 
@@ -278,6 +279,12 @@ class Session:
         enc, req = client.prepare(self.expand(text) if "${" in text else text)
         spec = enc.spec
         if spec is None or spec.persists or spec.mnemonic == "SGP":  # may ask first
+            if enc.instruction.opcode == _ENTER_ASCII:
+                raise ValidationError(
+                    "139 (enter ASCII mode) is not sent as a line: the module would stop "
+                    "listening to the binary commands tmclsh sends, and stay in ASCII mode "
+                    "after it exits; .mode ascii switches to it (tmclsh then talks ASCII "
+                    "and switches back at exit)")
             self._confirm_persistent(enc)
         before = _frames_sent(client)
         try:
