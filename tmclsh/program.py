@@ -725,8 +725,10 @@ def stop_everything(client, *, settle: float = SETTLE,
     A stored program that runs would drive the motors again right after MST, so it is
     stopped first (128; the state is read with 135, and 128 is sent anyway when that read
     fails); then MST to every motor; then each motor's actual speed is read back until it
-    is 0 (a motor ramps down) or ``settle`` seconds have passed. Never raises a TmclError:
-    everything that went wrong is in the report.
+    is 0 (a motor ramps down) or ``settle`` seconds have passed. A 0 that may have been
+    another request's answer (the line brought a late copy of the reply before it) is read
+    again, and is "unknown" if it stays in doubt. Never raises a TmclError: everything that
+    went wrong is in the report.
     """
     report = StopReport()
     t = min(client.timeout, 0.5)
