@@ -579,3 +579,41 @@ def test_a_raw_139_line_does_not_strand_the_module_in_ascii_mode(make_pty_sim):
         assert c.value("GAP 1, 0") == 0
     finally:
         c.close()
+
+
+class RandomLateCopies(Axes):
+    """Axes whose every GAP reply is, with probability ``p``, sent once more ahead of the
+    next answer (``rng``: a seeded random.Random)."""
+
+    p = 0.3
+
+    def answer(self, raw):
+        out = super().answer(raw)
+        if out is not None and raw[1] == 6 and not self._copy and self.rng.random() < self.p:
+            self._copy = out[-9:]
+        return out
+
+
+def test_stop_never_says_stopped_for_a_turning_motor_under_late_copies():
+    """80 stops of three motors (speeds and which of them ignore MST drawn at random) on a
+    line that delays a copy of 3 in 10 speed readings: no motor is ever called stopped whose
+    speed is not 0 (before this review: 17 of these 80 stops said so)."""
+    import random
+
+    rng = random.Random(7)
+    m = RandomLateCopies()
+    m.rng = rng
+    c = Client(open_serial(m.path), module="TMCM-351", timeout=0.2)
+    try:
+        lies = []
+        for i in range(80):
+            m.speeds(*(rng.choice([0, 0, 1000, 5000]) for _ in range(3)))
+            m.ignores_mst = {k for k in range(3) if rng.random() < 0.5}
+            report = program.stop_everything(c, settle=0.05, sleep=lambda s: None)
+            lies += [(i, mo) for mo in report.stopped if m.values[(SPEED, mo, False)]]
+            c.take_suspects()
+        assert not lies
+        assert c.stats["suspect"] > 20  # the fault did its part
+    finally:
+        c.close()
+        m.close()
