@@ -286,7 +286,8 @@ class Session:
                     "after it exits; .mode ascii switches to it (tmclsh then talks ASCII "
                     "and switches back at exit)")
             self._confirm_persistent(enc)
-        before = _frames_sent(client)
+        stats = client.stats  # (frames sent, the client's own line checks left out)
+        before = stats["sent"] - stats["resyncs"]
         try:
             reply = client.request(req)
         except (TmclTimeoutError, ChecksumError) as exc:
