@@ -187,6 +187,7 @@ class Client:
         self._pending: Callable[[], int] | None = None
         self._bind(transport)
         self._events: deque[tuple[Reply, float]] = deque()  # with when each arrived
+        self._delivering = threading.RLock()  # held while events go to the listeners
         # when the event being delivered arrived (time.monotonic()), for listeners that
         # put a time on it
         self.event_time = 0.0
@@ -252,20 +253,33 @@ class Client:
         for fn in list(self._tracers):
             try:
                 fn(direction, raw, decoded)
-            except Exception:  # a broken tracer must not break the link
-                log.exception("tracer failed")
+            except Exception as exc:  # a broken tracer must not break the link
+                _failed("a tracer", exc)
 
     def _deliver_events(self) -> None:
-        while True:
-            try:
-                reply, self.event_time = self._events.popleft()
-            except IndexError:
+        # One deliverer at a time (the request's thread or the event poller's), so events
+        # reach listeners in the order they came, each with its own event_time. The poller
+        # leaves its events to a request's thread that is delivering; a request's thread
+        # waits for the poller's turn to end (so the events that came before its reply are
+        # out before its result), though never for long: a poller's listener may itself be
+        # waiting for the link. A listener that sends a command delivers inline (re-entrant).
+        poller = threading.current_thread() is self._poller
+        while self._events:
+            if not self._delivering.acquire(blocking=not poller, timeout=-1 if poller else 1.0):
                 return
-            for fn in list(self._listeners):
-                try:
-                    fn(reply)
-                except Exception:
-                    log.exception("listener failed")
+            try:
+                while True:
+                    try:
+                        reply, self.event_time = self._events.popleft()
+                    except IndexError:
+                        break
+                    for fn in list(self._listeners):
+                        try:
+                            fn(reply)
+                        except Exception as exc:
+                            _failed("a listener", exc)
+            finally:
+                self._delivering.release()
 
     # -- properties ---------------------------------------------------------------------
     @property
@@ -385,6 +399,12 @@ class Client:
                     "incomplete")
         return True
 
+    def check_download_next(self) -> None:
+        """Download mode may not have ended (a 133 went unanswered, or was interrupted):
+        before the next command, ask the module and end it if need be (as after a
+        reconnect), so that command is executed, not stored."""
+        self._check_download = True
+
     def _request(self, req: Request, timeout: float, retries: int) -> Reply | None:
         if not self.transport.is_open:
             raise TransportError(f"{self.transport.describe()} is not connected "
@@ -487,13 +507,17 @@ class Client:
     def _unsolicited(self, extra: Reply | None) -> None:
         """A reply came when none was outstanding: a duplicate, or the real answer to the
         last request, which then took another one. The line is dirty (the next request
-        resynchronises) and, unless ``extra`` is a copy of a reply taken lately (the last
-        request's: the value shown is the one it carries anyway; or a marker's), the last
-        request's reply is suspect."""
+        resynchronises) and, unless ``extra`` is a copy of the last request's reply (the
+        value shown is the one it carries anyway) or of a marker's, the last request's reply
+        is suspect. A copy of an older request's reply proves nothing: it may as well be the
+        last request's own answer, displaced by a late copy of the one before (GAP 3 of three
+        motors: 5000, 0, then a copy of the 0 taken for the third while its 5000 comes late)."""
         self.stats["unsolicited"] += 1
         self._stale_opaque = True
         last = self._last
-        if last is None or extra in self._recent:
+        if last is None or extra == last[1] or (
+                extra is not None and extra.opcode == Control.GET_VERSION
+                and extra in self._recent):
             return
         self._last = None  # reported once
         self.stats["suspect"] += 1
@@ -502,6 +526,11 @@ class Client:
         if self._tracers:
             self._trace("note", b"", f"the reply to {_name(last[0])} may have been another "
                                      "request's: a reply came that nothing was waiting for")
+
+    def suspect_seqs(self) -> set[int]:
+        """The ``seq`` of every suspect not yet taken (``take_suspects`` still reports them)."""
+        with self._lock:  # (the event poller may add one meanwhile)
+            return {s.seq for s in self.suspects}
 
     def take_suspects(self) -> list[Suspect]:
         """Replies returned earlier that may have answered another request (oldest first);
@@ -928,6 +957,32 @@ class Client:
             if self._events:
                 self._deliver_events()
 
+    def confirm_last(self) -> None:
+        """At the end of a run: was the last reply the answer to its request? A late copy of
+        the reply before it (same address and command) would have been taken for it; its
+        real answer then comes right behind, when nothing waits for it, and makes the last
+        reply a suspect (``take_suspects``). So the line is watched until it has been quiet
+        for two frames' wire time (nothing is sent); otherwise, or on the simulator, what is
+        already waiting is taken in."""
+        with self._lock:
+            t = self.transport
+            if self.ascii_link is not None or not t.is_open:
+                return
+            recent = self._recent
+            same = len(recent) >= 2 and (recent[-1].module, recent[-1].opcode) == (
+                recent[-2].module, recent[-2].opcode)
+            baud = getattr(t, "baudrate", None)
+            if not same or t.simulated or not isinstance(t, StreamTransport):
+                quiet = 0.0
+            else:
+                frame = 10 * _FRAME / baud if isinstance(baud, (int, float)) and baud else 0.01
+                quiet = 2 * frame + 0.005
+            end = time.monotonic() + max(0.5, 10 * quiet)
+            while self._absorb(quiet) and quiet and time.monotonic() < end:
+                pass
+        if self._events:
+            self._deliver_events()
+
     def start_event_poller(self, interval: float = 0.05) -> None:
         """Deliver 138 events while no command is running, from a background thread."""
         if self._poller is not None:
@@ -940,8 +995,8 @@ class Client:
                     self.poll()
                 except TransportError:
                     pass  # the next command reports the lost link
-                except Exception:
-                    log.exception("event poll failed")
+                except Exception as exc:
+                    _failed("looking for events", exc)
 
         self._poller = threading.Thread(target=run, name="tmclsh-events", daemon=True)
         self._poller.start()
@@ -1125,13 +1180,13 @@ class Client:
             for hook in hooks:
                 try:
                     hook()
-                except Exception:
-                    log.exception("close hook failed")
+                except Exception as exc:
+                    _failed("closing", exc)
             if self.ascii_link is not None:
                 try:
                     self.ascii_link.close()
-                except Exception:
-                    log.exception("leaving ASCII mode failed")
+                except Exception as exc:
+                    _failed("leaving ASCII mode", exc)
             self.transport.close()
 
     def __enter__(self) -> Client:
@@ -1139,6 +1194,14 @@ class Client:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _failed(what: str, exc: Exception) -> None:
+    """Something the client runs on the side failed: one line (with no logging set up,
+    Python would print a logged exception's traceback to the user); the traceback is
+    logged at debug level for whoever set logging up."""
+    log.warning("%s failed: %s", what, exc)
+    log.debug("%s failed", what, exc_info=exc)
 
 
 def _printable(data: bytes, start: int) -> bool:

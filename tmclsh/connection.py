@@ -153,8 +153,12 @@ def connect(port: str | None = None, *, baud: int = 9600, can: str | None = None
         name = sim or module or "TMCM-1311"
         t = tr.open_sim(name, address, host_address=host_address)
         module = module or name
-    client = Client(t, address=address, host_address=host_address, module=module,
-                    timeout=timeout, retries=retries, can_id=can_id, reply_id=reply_id)
+    try:
+        client = Client(t, address=address, host_address=host_address, module=module,
+                        timeout=timeout, retries=retries, can_id=can_id, reply_id=reply_id)
+    except BaseException:  # (an unknown module, a bad timeout): the port is not kept open
+        t.close()
+        raise
     return start(client, ascii=ascii)
 
 
@@ -206,19 +210,20 @@ def _bring_up(client: Client, expected: Module | None) -> None:
 
     client.module = None
     try:
-        try:
-            # once: if this goes unanswered, the mode probe below is the second try (and
-            # tells a module in ASCII mode from a silent line)
-            reply = client.request(Request(client.address, Control.GET_VERSION, 0, 0, 0),
-                                   retries=0)
-        except DownloadModeError:
-            # a firmware that stores even 136 while downloading: end download mode first
-            client.leave_download_mode()
-            reply = None
-        except (TmclTimeoutError, ChecksumError) as exc:
-            if not _answers_after_all(client, expected, exc):
-                return  # found in ASCII mode, and attached
-            reply = None
+        # once: if this goes unanswered, the mode probe below is the second try (and
+        # tells a module in ASCII mode from a silent line)
+        reply = client.request(Request(client.address, Control.GET_VERSION, 0, 0, 0),
+                               retries=0)
+    except DownloadModeError:
+        # a firmware that stores even 136 while downloading: end download mode first
+        client.leave_download_mode()
+        reply = None
+    except (TmclTimeoutError, ChecksumError) as exc:
+        # (a ValidationError from the probe, such as another host address, is the answer)
+        if not _answers_after_all(client, expected, exc):
+            return  # found in ASCII mode, and attached
+        reply = None
+    try:
         if reply is not None and reply.version is not None:
             _adopt_version(client, reply.version)
         else:

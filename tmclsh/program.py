@@ -170,7 +170,8 @@ class UploadError(TmclError):
             ended = "download mode ended"
         else:
             ended = (f"could not end download mode ({self.end_error}): the module may still "
-                     "store every command it receives; reconnect or power-cycle it")
+                     "store every command it receives; the next command asks and ends it "
+                     "first (else power-cycle the module)")
         return (f"upload failed: {self.reason}; {self.memory_text()}; {ended}. "
                 "Upload again to store the whole program")
 
@@ -274,6 +275,8 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
     finally:
         ended, end_error = _quit_download(client, timeout)
         client.downloading = False
+        if not ended:
+            client.check_download_next()  # the next command ends it first, not stored
     upload_seconds = time.monotonic() - began
     if failure is not None:
         interrupted = isinstance(failure, KeyboardInterrupt)
@@ -328,10 +331,14 @@ def end_download(client, *, timeout: float | None = None) -> None:
     """133 on its own: end a download mode left behind (e.g. by a link lost mid-upload)."""
     require_binary(client, "quit download (133)")
     client.downloading = True  # until it is answered, the module may store what it gets
+    ended = False
     try:
         _ok(_send(client, Control.QUIT_DOWNLOAD, timeout=timeout), "quit download (133)")
+        ended = True
     finally:
         client.downloading = False
+        if not ended:
+            client.check_download_next()
 
 
 def read_instruction(client, address: int, *, timeout: float | None = None) -> Instruction:
@@ -637,9 +644,24 @@ class Activity:
         return " and ".join([", ".join(parts[:-1]), parts[-1]] if len(parts) > 2 else parts)
 
 
+# generic mode (a type without data): how many motors is not known, so every motor number
+# up to the most axes a TMCL module has (TMCM-6110, TMCM-6214) is tried, until one is refused
+_GENERIC_MOTORS = 6
+
+
 def _motors(client) -> range:
     mod = client.module
+    if mod is not None and getattr(mod, "generic", False):
+        return range(_GENERIC_MOTORS)
     return range(mod.motors if mod is not None else 1)
+
+
+def _no_such_motor(client, motor: int, exc: TmclError) -> bool:
+    """In generic mode, a refusal (status) for a motor after 0: the module has no such motor,
+    nor any after it."""
+    mod = client.module
+    return (motor > 0 and isinstance(exc, StatusError) and mod is not None
+            and getattr(mod, "generic", False))
 
 
 def _speed_parameter(client) -> int:
@@ -687,7 +709,9 @@ def activity(client, *, timeout: float | None = None) -> Activity:
     for m in _motors(client):
         try:
             v = _speed(client, m, number, t, retries=0)
-        except TmclError:
+        except TmclError as exc:
+            if _no_such_motor(client, m, exc):
+                break
             continue
         if v:
             act.turning[m] = v
@@ -701,8 +725,10 @@ def stop_everything(client, *, settle: float = SETTLE,
     A stored program that runs would drive the motors again right after MST, so it is
     stopped first (128; the state is read with 135, and 128 is sent anyway when that read
     fails); then MST to every motor; then each motor's actual speed is read back until it
-    is 0 (a motor ramps down) or ``settle`` seconds have passed. Never raises a TmclError:
-    everything that went wrong is in the report.
+    is 0 (a motor ramps down) or ``settle`` seconds have passed. A 0 that may have been
+    another request's answer (the line brought a late copy of the reply before it) is read
+    again, and is "unknown" if it stays in doubt. Never raises a TmclError: everything that
+    went wrong is in the report.
     """
     report = StopReport()
     t = min(client.timeout, 0.5)
@@ -724,9 +750,37 @@ def stop_everything(client, *, settle: float = SETTLE,
             _ok(_send(client, _MST, 0, m, timeout=t), f"MST {m}")
             pending.append(m)
         except TmclError as exc:
+            if _no_such_motor(client, m, exc):
+                break
             report.unknown[m] = str(exc)
     number = _speed_parameter(client)
     deadline = time.monotonic() + settle
+    zero_at: dict[int, int] = {}  # motor -> Client.replies when its speed read 0
+    doubtful: list[int] = []
+    for _ in range(_CONFIRM_ROUNDS):
+        _settle(client, report, pending, zero_at, number, t, deadline, sleep)
+        doubtful = _doubtful(client, zero_at, t)
+        if not doubtful:
+            break
+        for m in doubtful:  # read again: that 0 may have been another motor's
+            report.stopped.remove(m)
+            del zero_at[m]
+        pending = doubtful
+    else:
+        for m in doubtful:
+            report.unknown[m] = ("its speed read 0, but that answer may have been another "
+                                 "request's (the line brought a reply nothing was waiting for)")
+    report.stopped.sort()
+    return report
+
+
+_CONFIRM_ROUNDS = 3
+
+
+def _settle(client, report: StopReport, pending: list[int], zero_at: dict[int, int],
+            number: int, t: float, deadline: float, sleep: Callable[[float], None]) -> None:
+    """Read each pending motor's speed until it is 0 or the deadline has passed (at least
+    once): 0 moves it to ``report.stopped`` (``zero_at``: which reply said so)."""
     while pending:
         for m in list(pending):
             try:
@@ -738,6 +792,7 @@ def stop_everything(client, *, settle: float = SETTLE,
                 continue
             if v == 0:
                 report.stopped.append(m)
+                zero_at[m] = client.replies
                 report.turning.pop(m, None)
                 pending.remove(m)
             else:
@@ -745,5 +800,18 @@ def stop_everything(client, *, settle: float = SETTLE,
         if not pending or time.monotonic() >= deadline:
             break
         sleep(0.05)
-    report.stopped.sort()
-    return report
+
+
+def _doubtful(client, zero_at: dict[int, int], t: float) -> list[int]:
+    """Motors whose 0 may have been another request's answer (a late copy of the reply
+    before it, taken for this one; the client finds that out when the real answer comes
+    while nothing waits for it, so one more exchange, 136 type 1, gives it the chance)."""
+    seqs = getattr(client, "suspect_seqs", None)
+    if not zero_at or client.mode == "ascii" or not callable(seqs):
+        return []
+    try:
+        _send(client, Control.GET_VERSION, 1, timeout=t)
+    except TmclError:
+        pass  # what it could find is found by the reads' own flushes as well
+    found = seqs()
+    return sorted(m for m, seq in zero_at.items() if seq in found)

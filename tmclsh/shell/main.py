@@ -158,6 +158,7 @@ def _run_unattended(args: argparse.Namespace, session: Session) -> int:
         unlisten = client.add_listener(lambda reply: out.event(reply, client.event_time))
         client.start_event_poller()  # an event shows when it comes, not at the next line
     finished = False
+    suspects = session.stats.suspects
     try:
         if args.command is not None:
             status = run_lines(session, session.split(args.command))
@@ -173,16 +174,15 @@ def _run_unattended(args: argparse.Namespace, session: Session) -> int:
         unlisten()
         if started() and finished:  # else nothing this run sent can have started anything
             _note_left_running(session)
+    if status == EXIT_OK and session.stats.suspects > suspects:
+        status = EXIT_ERROR  # (an answer found suspect as the run ended is no pass either)
     return status
 
 
 def _last_events(session: Session) -> None:
     """Events that came after the last reply are results of the run as well."""
-    client = session.client
     try:
-        if client.connected and client.mode == "binary":
-            client.poll()
-        session.report_suspects()
+        session.confirm_answers()  # (the last answer may show only now to be another's)
     except (TmclError, OSError):
         pass
 

@@ -637,7 +637,7 @@ def run_file(session: Session, path: str) -> int:
         status, kind = EXIT_SYNTAX, exc.kind
     finally:
         session.location = None
-    session.report_suspects()
+    session.confirm_answers()  # (the last answer may show only now to be another's)
     if status == EXIT_OK and (runner.failed or session.stats.suspects > before.suspects):
         status = EXIT_FAILED  # a result that may be another request's is no pass
     summary(session, name, before, time.monotonic() - start, status, kind)

@@ -15,8 +15,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from .. import asm
-from ..client import Client, Result
-from ..errors import StatusError, TmclError, TmclTimeoutError, TransportError, ValidationError
+from ..client import Client, Result, _name, idempotent
+from ..errors import (ChecksumError, StatusError, TmclError, TmclTimeoutError, TransportError,
+                      ValidationError)
 from ..modules import Module
 from ..status import OK_STATUSES
 from . import commands
@@ -25,6 +26,7 @@ from .render import Output
 
 _VAR = re.compile(r"\$\{([^}]*)\}")
 ANSWERED = 64  # recent replies whose line a later suspect report can name
+_ENTER_ASCII = 139  # (Control.ENTER_ASCII)
 
 
 
@@ -251,6 +253,17 @@ class Session:
             else:
                 self.out.warn(f"warning: {text}")
 
+    def confirm_answers(self) -> None:
+        """At the end of a run (-c, -f): give the last answer the chance to show it was
+        another request's (``Client.confirm_last``), then report the suspects."""
+        confirm = getattr(self.client, "confirm_last", None)
+        if callable(confirm) and self.client.connected:
+            try:
+                confirm()
+            except TransportError:
+                pass  # the link went: the next command, if any, says so
+        self.report_suspects()
+
     def _dispatch(self, text: str) -> Result | None:
         word = text.split(None, 1)[0]
         if word.startswith(".") or _is_bare_command(text):
@@ -290,8 +303,22 @@ class Session:
         enc, req = client.prepare(self.expand(text) if "${" in text else text)
         spec = enc.spec
         if spec is None or spec.persists or spec.mnemonic == "SGP":  # may ask first
+            if enc.instruction.opcode == _ENTER_ASCII:
+                raise ValidationError(
+                    "139 (enter ASCII mode) is not sent as a line: the module would stop "
+                    "listening to the binary commands tmclsh sends, and stay in ASCII mode "
+                    "after it exits; .mode ascii switches to it (tmclsh then talks ASCII "
+                    "and switches back at exit)")
             self._confirm_persistent(enc)
-        reply = client.request(req)
+        stats = client.stats  # (frames sent, the client's own line checks left out)
+        before = stats["sent"] - stats["resyncs"]
+        try:
+            reply = client.request(req)
+        except (TmclTimeoutError, ChecksumError) as exc:
+            if idempotent(req) or isinstance(exc, TimeLimitError):
+                raise
+            sent = _frames_sent(client) > before
+            raise _unsure(client, req, exc, sent) from exc
         result = Result(text, enc, reply)
         if reply is not None:
             seq = client.replies
@@ -324,6 +351,27 @@ class Session:
     def _record(self, line: str, outcome: str) -> None:
         for fn in list(self.recorders):
             fn(line, outcome)
+
+
+def _frames_sent(client: Client) -> int:
+    """Frames sent so far, the client's own line checks (one 136 each) left out."""
+    stats = client.stats
+    return stats["sent"] - stats["resyncs"]
+
+
+def _unsure(client: Client, req, exc: TmclError, sent: bool) -> TmclError:
+    """A command that is never repeated by itself (MVP REL, RFS START, CALC, ...) got no
+    usable answer: say whether the module may have executed it, so it is not typed again
+    blindly (a relative move would go twice as far)."""
+    name = _name(req)
+    if sent or client.mode == "ascii":
+        more = (f"{name} is not sent again by itself: the module may have executed it; "
+                "check (for example GAP ActualPosition) before sending it again")
+    else:
+        more = f"{name} was not sent"
+    err = type(exc)(f"{exc}; {more}")
+    err.__dict__.update(exc.__dict__)
+    return err
 
 
 def _evaluate(session: Session, text: str) -> int | float:
