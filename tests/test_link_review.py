@@ -193,7 +193,7 @@ def test_connect_with_an_unknown_module_closes_the_port():
         m.close()
 
 
-# -- .connect while the link is in ASCII mode (shell/builtin.py switch_transport) -----------
+# -- .connect while the link is in ASCII mode (Client.switch_transport) -------------------
 
 def _ascii_then_connect(make_pty_sim, *, a_starts_in_ascii: bool):
     from tmclsh.connection import open_client
@@ -214,14 +214,8 @@ def _ascii_then_connect(make_pty_sim, *, a_starts_in_ascii: bool):
 
 
 @pytest.mark.parametrize("a_starts_in_ascii", [
-    pytest.param(False, id="old-module-left-in-ascii", marks=pytest.mark.xfail(
-        strict=True, reason="shell/builtin.py switch_transport sets ascii_link = None and "
-        "closes the old port without running the client's close hooks: the old module, put "
-        "into ASCII mode by tmclsh (--ascii), is left in it")),
-    pytest.param(True, id="new-module-put-in-ascii", marks=pytest.mark.xfail(
-        strict=True, reason="the old ASCII link's close hook stays in client.close_hooks "
-        "after .connect and runs at exit on the NEW port: a module found in ASCII mode is "
-        "'restored' by sending 139 to the new module")),
+    pytest.param(False, id="old-module-left-in-ascii"),
+    pytest.param(True, id="new-module-put-in-ascii"),
 ])
 def test_connect_elsewhere_leaves_both_modules_in_their_own_mode(make_pty_sim,
                                                                   a_starts_in_ascii):
@@ -230,6 +224,50 @@ def test_connect_elsewhere_leaves_both_modules_in_their_own_mode(make_pty_sim,
     sim_a, sim_b = _ascii_then_connect(make_pty_sim, a_starts_in_ascii=a_starts_in_ascii)
     assert sim_a.ascii_active == a_starts_in_ascii
     assert not sim_b.ascii_active
+
+
+def test_ascii_mode_on_the_module_connected_to_is_its_own(make_pty_sim):
+    """A found in ASCII mode, .connect B, .mode ascii on B, exit: B is put back in binary
+    mode (the mode it was found in), not in A's."""
+    from tmclsh.connection import open_client
+    from tmclsh.shell.render import Output
+    from tmclsh.shell.session import Session
+
+    sim_a, path_a = make_pty_sim(ascii_startup=True)
+    sim_b, path_b = make_pty_sim()
+    c = open_client({"port": path_a, "timeout": 0.3}, notice=lambda text: None)
+    assert c.mode == "ascii"
+    s = Session(c, Output())
+    s.run_line(f".connect {path_b}")
+    s.run_line(".mode ascii")
+    assert sim_b.ascii_active and c.value("GAP 1, 0") == 0
+    c.close()
+    assert not sim_b.ascii_active and sim_a.ascii_active
+
+
+def test_connect_to_a_silent_port_keeps_the_link_and_says_what_was_tried(capsys):
+    """Nobody answers on the port .connect names: said as at the command line (what was
+    tried, the likely causes); the shell stays on that port (``.connect`` tries again)."""
+    import os
+
+    from tmclsh.shell.render import Output
+    from tmclsh.shell.session import Session
+
+    master, slave = os.openpty()
+    m = Module(version="1311V111")
+    c = Client(open_serial(m.path), module="TMCM-1311", timeout=0.2, retries=0)
+    try:
+        s = Session(c, Output())
+        s.run_line(f".connect {os.ttyname(slave)}")
+        said = capsys.readouterr()
+        assert "no module answered at address 1" in said.out + said.err
+        assert "Likely causes" in said.out + said.err
+        assert c.connected and c.module is None
+    finally:
+        c.close()
+        m.close()
+        os.close(master)
+        os.close(slave)
 
 
 def _ctrl_c_on(opcodes: set[int], times: int = 1):
@@ -370,9 +408,6 @@ def test_events_reach_listeners_in_order_with_the_poller_running():
         m.close()
 
 
-@pytest.mark.xfail(strict=True, reason="Client.reconnect() keeps client.module: after the "
-                   "port came back with another module on it (USB unplugged, the next module "
-                   "plugged in), lines are checked against the old module's parameter table")
 def test_reconnect_to_another_module_on_the_same_port_is_noticed():
     """A bench with several modules tested in turn on one USB port: unplug the TMCM-1311,
     plug in a TMCM-1640, the shell reconnects. Checking SAP lines against the 1311's data
@@ -397,9 +432,40 @@ def test_reconnect_to_another_module_on_the_same_port_is_noticed():
         m.close()
 
 
-@pytest.mark.xfail(strict=True, reason="shell/builtin.py .connect PORT does not bring the "
-                   "module up through connection.start: a module in ASCII mode is 'not "
-                   "identified' (a timeout) instead of recognised, and -m is not checked")
+@pytest.mark.parametrize("version", ["1640V140", "1311V112"])
+def test_after_a_reconnect_the_first_line_is_checked_against_the_module_there(version, capsys):
+    """Another type after the reconnect: said (on the shell's output), the line checked
+    against the old type's data is not sent, the next one is checked against the new type.
+    The same type (another firmware version): nothing said, the line runs."""
+    from tmclsh.errors import ValidationError
+    from tmclsh.shell.render import Output
+    from tmclsh.shell.session import Session
+
+    from responder import TcpModule
+
+    m = TcpModule(version="1311V111")
+    c = Client(open_serial(m.url), timeout=0.3)
+    try:
+        s = Session(c, Output())
+        s.run_line("GAP 1, 0")
+        m.version = version
+        c.reconnect()
+        m.got.clear()
+        if version.startswith("1640"):
+            with pytest.raises(ValidationError, match="GAP was not sent"):
+                s.run_line("GAP 1, 0")
+            assert 6 not in m.commands()
+            said = capsys.readouterr()
+            assert "TMCM-1640" in said.out + said.err and "TMCM-1311" in said.out + said.err
+            assert c.module.name == "TMCM-1640"
+        s.run_line("GAP 1, 0")
+        assert m.commands().count(6) == 1 and m.commands().count(136) == 1
+        assert c.version == version
+    finally:
+        c.close()
+        m.close()
+
+
 def test_connect_to_a_module_in_ascii_mode_recognises_it(make_pty_sim, capsys):
     from tmclsh.shell.render import Output
     from tmclsh.shell.session import Session

@@ -662,11 +662,14 @@ class AsciiLink:
 
     def close(self) -> None:
         """Leave the module in the mode it was found in (or ``on_exit``). Called by
-        ``Client.close``; safe to call more than once."""
+        ``Client.close`` (and when ``.connect`` leaves the link); safe to call more than
+        once. The client is done with this module: a later ``attach`` makes a new link."""
         if self._closed:
             return
         self._closed = True
         client = self.client
+        if _LINKS.get(client) is self:
+            del _LINKS[client]
         if not client.transport.is_open:
             return
         try:

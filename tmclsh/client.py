@@ -203,6 +203,9 @@ class Client:
         # set by reconnect(): before the next command, check the module is not in download
         # mode (a link lost mid-upload leaves it there)
         self._check_download = False
+        # set by reconnect() too: with that check, ask 136 (another module may have been
+        # plugged into the same port meanwhile)
+        self._check_module = False
         # one-line notices about what the client did on its own (ended download mode); the
         # shell points it at its output, else they are logged
         self.on_notice: Callable[[str], None] | None = None
@@ -343,12 +346,7 @@ class Client:
         try:
             with self._lock:
                 if self._check_download and not self.downloading and self.ascii_link is None:
-                    self._check_download = False
-                    try:
-                        self.leave_download_mode()
-                    except BaseException:
-                        self._check_download = True
-                        raise
+                    self._after_reconnect(req)
                 if self.ascii_link is not None:
                     reply = self.ascii_link.transact(req, timeout)
                 else:
@@ -364,6 +362,54 @@ class Client:
         finally:
             if self._events:
                 self._deliver_events()
+
+    def _after_reconnect(self, req: Request) -> None:
+        """Before the first command after a reconnect (or a 133 that may have been lost):
+        end download mode if the module is in it; after a reconnect also ask 136, and if
+        another module type answers now, take its data (a ``ValidationError`` for ``req``,
+        not sent, when it is a command checked against the old module's data)."""
+        self._check_download = False
+        old = self.module
+        try:
+            self.leave_download_mode()
+            changed = self._check_module and self._module_changed()
+        except BaseException:
+            self._check_download = True
+            raise
+        self._check_module = False
+        if changed and old is not None and req.opcode < _FIRST_CONTROL:
+            now = self.module.name if self.module is not None else "module of another type"
+            raise ValidationError(
+                f"{_name(req)} was not sent: it was checked against the {old.name}'s data "
+                f"(the module at address {self.address} is a {now} now); give it again")
+
+    def _module_changed(self) -> bool:
+        """Ask 136: True (with a notice) if another module type answers than the one whose
+        data the client uses, which it then takes (None if the type is not known)."""
+        old = self.module
+        if old is None:  # asked when needed
+            return False
+        reply = self.request(Request(self.address, Control.GET_VERSION, 0, 0, 0))
+        version = reply.version if reply is not None else None
+        before = self.version
+        if version is None or version == before:
+            return False
+        self.version = version
+        if old.generic and (before is None or from_version_string(before) is not None):
+            if before is None:  # (numbers only, the type never asked)
+                return False
+            new: Module | None = generic_for(version)  # -m generic: numbers only, as asked
+        else:
+            new = from_version_string(version) or generic_for(version)
+        if new is not None and new.name == old.name:
+            return False
+        self.module = new
+        what = (f"a {new.name}" if new is not None else
+                "a type tmclsh does not know (give it with .module or --module)")
+        self.notice(f"another module answers at address {self.address} on {self.describe()} "
+                    f"since the link came back: {what}, version {version} (it was a "
+                    f"{old.name}); lines are checked against its data from now on")
+        return True
 
     def notice(self, text: str) -> None:
         """Tell the user about something the client did on its own."""
@@ -1110,7 +1156,9 @@ class Client:
         """Close and reopen the transport (after the port was lost, e.g. USB unplugged).
 
         ``wait``: keep trying for that many seconds while the port is not back yet. Raises
-        ``TransportError`` if it cannot be opened.
+        ``TransportError`` if it cannot be opened. Before the next command the module is
+        asked whether it is in download mode (ended if so) and what it is (136): another
+        module type on the port is taken, with a notice (see ``_after_reconnect``).
         """
         with self._lock:
             self.transport.close()
@@ -1127,6 +1175,7 @@ class Client:
             self._dirty = False
             self._last = None  # whatever comes now says nothing about answers before
             self._check_download = True
+            self._check_module = True
             self.stats["reconnects"] += 1
             if self._tracers:
                 self._trace("note", b"", f"reconnected to {self.describe()}")
@@ -1176,18 +1225,43 @@ class Client:
         transport. Safe to call more than once."""
         self.stop_event_poller()
         with self._lock:
-            hooks, self.close_hooks = self.close_hooks, []
-            for hook in hooks:
-                try:
-                    hook()
-                except Exception as exc:
-                    _failed("closing", exc)
-            if self.ascii_link is not None:
-                try:
-                    self.ascii_link.close()
-                except Exception as exc:
-                    _failed("leaving ASCII mode", exc)
+            self._leave_link()
             self.transport.close()
+
+    def _leave_link(self) -> None:
+        """Run the close hooks, leave ASCII mode if entered: the module is left as it was
+        found, while the link is still open."""
+        hooks, self.close_hooks = self.close_hooks, []
+        for hook in hooks:
+            try:
+                hook()
+            except Exception as exc:
+                _failed("closing", exc)
+        if self.ascii_link is not None:
+            try:
+                self.ascii_link.close()
+            except Exception as exc:
+                _failed("leaving ASCII mode", exc)
+
+    def switch_transport(self, transport: Transport, module: Module | str | None = None) -> None:
+        """Go on on another link (the shell's ``.connect``): the old one is left as ``close``
+        leaves it (the close hooks run, the module is left in the mode it was found in, the
+        port is closed); nothing of it is carried over. The new link starts in binary mode
+        with ``module`` (None: not known yet); listeners, tracers and the event poller stay.
+        Bring the module up with ``connection.start`` (136, download mode, ASCII mode)."""
+        mod = load_module(module) if isinstance(module, str) else module
+        with self._lock:
+            self._leave_link()
+            try:
+                self.transport.close()
+            except Exception:  # the old link may already be gone; that is why we switch
+                pass
+            self.ascii_link = None
+            self.transport = transport
+            self.module = mod
+            self.version = None
+            self.reconnect()  # clears buffers and stale-reply bookkeeping, reopens the link
+            self._check_download = self._check_module = False  # (what start does first)
 
     def __enter__(self) -> Client:
         return self

@@ -175,16 +175,22 @@ def start(client: Client, *, ascii: bool = False) -> Client:
 
     On any failure the client is closed, so a half-opened port is never left behind.
     """
-    expected = client.module
     try:
-        if ascii:
-            _attach_ascii(client, expected)
-        else:
-            _bring_up(client, expected)
+        bring_up(client, ascii=ascii)
     except BaseException:
         client.close()
         raise
     return client
+
+
+def bring_up(client: Client, *, ascii: bool = False) -> None:
+    """What ``start`` does, leaving the client open when it fails (the shell's ``.connect``
+    after ``Client.switch_transport``: the link stays, its module unknown)."""
+    expected = client.module
+    if ascii:
+        _attach_ascii(client, expected)
+    else:
+        _bring_up(client, expected)
 
 
 def _attach_ascii(client: Client, expected: Module | None, found=None) -> None:

@@ -845,6 +845,8 @@ def cmd_decode(session: Session, arg: str) -> None:
 @command(".connect")
 def cmd_connect(session: Session, arg: str) -> None:
     from .. import transport as tr
+    from ..connection import bring_up
+    from ..errors import ConnectError
 
     client = session.client
     words = arg.split()
@@ -872,14 +874,19 @@ def cmd_connect(session: Session, arg: str) -> None:
     else:
         transport = tr.open_serial(words[0], settings.get("baud") or 9600)
         new = {"port": words[0]}
-    switch_transport(client, transport, module)
+    # the old module is left in the mode it was found in; the new one is brought up as at
+    # the command line (136, -m checked, download mode ended, ASCII mode recognised)
+    client.switch_transport(transport, module)
     session.link_lost = False
     for key in ("port", "can", "sim"):
         settings.pop(key, None)
     settings.update(new)
     try:
-        if client.module is None:
-            client.identify()
+        bring_up(client)
+    except ConnectError as exc:  # says what was tried and what to try next
+        _refresh_program_state(session)
+        session.out.warn(f"connected to {client.describe()}, but {exc}")
+        return
     except TmclError as exc:
         _refresh_program_state(session)
         session.out.warn(f"connected to {client.describe()}, but no module identified at "
@@ -894,21 +901,6 @@ def _refresh_program_state(session: Session) -> None:
     from .debugger import refresh_program_state
 
     refresh_program_state(session)
-
-
-def switch_transport(client, transport, module: str | None) -> None:
-    """Put ``transport`` under the same Client (listeners, tracers and the event poller stay
-    attached); the module type is ``module`` or, when None, asked later with 136."""
-    old = client.transport
-    try:
-        old.close()
-    except Exception:  # the old link may already be gone; that is why we switch
-        pass
-    client.ascii_link = None  # the new module starts in binary mode
-    client.transport = transport
-    client.module = load(module) if module else None
-    client.version = None
-    client.reconnect()  # clears buffers and stale-reply bookkeeping, reopens the new link
 
 
 def _where(session: Session) -> str:

@@ -71,6 +71,8 @@ class Session:
                  yes: bool = False, keep_going: bool = False, settings: dict | None = None):
         self.client = client
         self.out = output or Output()
+        if client.on_notice is None:  # what the client does on its own, said on the output
+            client.on_notice = self.out.warn
         self.interactive = interactive
         self.yes = yes
         self.keep_going = keep_going
