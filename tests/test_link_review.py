@@ -559,10 +559,6 @@ class DamagedEchoThenPause(Module):
         return out
 
 
-@pytest.mark.xfail(strict=True, reason="Client._exchange_stream: after bytes that are no "
-                   "frame it waits only _QUIET_AFTER_GARBAGE (50 ms) for more, so a reply "
-                   "behind a damaged 9-byte echo and a telegram pause > 50 ms is called "
-                   "'corrupted reply' though it arrives intact within the timeout")
 def test_a_damaged_echo_and_a_slow_module_are_no_corrupted_reply():
     from tmclsh.errors import ChecksumError
 

@@ -735,13 +735,18 @@ class Client:
                     return got  # type: ignore[return-value]
             if wait <= 0:
                 break
-            if garbled:
+            # a damaged reply to us (it began with our address) and then silence: no need to
+            # wait any longer. Other bytes that are no frame (an RS485 adapter's damaged echo
+            # of the request, noise) say nothing about when the reply comes: a module may
+            # wait up to 255 ms (GP 75) before it answers.
+            damaged_reply = garbled and junk[:1] == bytes((self.host_address,))
+            if damaged_reply:
                 wait = min(wait, _QUIET_AFTER_GARBAGE)
             chunk = t.read(_FRAME - len(buf), wait)
             if chunk:
                 buf += chunk
-            elif garbled:
-                break  # a damaged frame and then silence: no need to wait any longer
+            elif damaged_reply:
+                break
             wait = deadline - time.monotonic()
         # what is left can never complete a frame: the rest of a damaged or truncated reply
         junk += buf
