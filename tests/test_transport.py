@@ -404,3 +404,46 @@ def test_the_same_answer_twice_is_the_same_reply_and_another_is_another():
     finally:
         t.close()
         responder.close()
+
+
+def test_transact_when_the_output_is_full_writes_the_rest_and_still_reads_the_answer():
+    """The port's output buffer full (the other end reads nothing for a while): os.write takes
+    part of the frame or none of it (BlockingIOError); the rest goes out as write() sends it,
+    and the answer is read as usual once the other end catches up."""
+    import os
+    import select
+    import tty
+
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    path = os.ttyname(slave)
+    t = open_serial(path, 115200)
+    heard = bytearray()
+
+    def late_reader():
+        time.sleep(0.3)  # the port's output stays full until then
+        while GAP1 not in heard:
+            if select.select([master], [], [], 2.0)[0]:
+                heard.extend(os.read(master, 65536))
+            else:
+                return
+        os.write(master, _reply_to(GAP1, 77))
+
+    try:
+        filled = 0
+        while True:  # fill the output with noise the other end will skip
+            try:
+                filled += os.write(t._fd, bytes(512))
+            except BlockingIOError:
+                break
+        reader = threading.Thread(target=late_reader, daemon=True)
+        reader.start()
+        assert filled > 0
+        got = t.transact(GAP1, 9, 2.0)
+        reader.join(3)
+        assert got == _reply_to(GAP1, 77)
+        assert heard.endswith(GAP1)
+    finally:
+        t.close()
+        os.close(master)
+        os.close(slave)
