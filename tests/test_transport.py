@@ -447,3 +447,27 @@ def test_transact_when_the_output_is_full_writes_the_rest_and_still_reads_the_an
         t.close()
         os.close(master)
         os.close(slave)
+
+
+def test_transact_without_a_descriptor_goes_through_pyserial(pty_sim, monkeypatch):
+    """Windows (no descriptor to select on) and URL handlers: transact is pyserial's write and
+    read, with the read timeout set once, not per request."""
+    sim, path = pty_sim
+    t = open_serial(path, 115200)
+    try:
+        t._fd = None  # as on Windows
+        sets = []
+        ser_type = type(t._ser)
+        real = ser_type.timeout
+
+        def spy(self, value):
+            sets.append(value)
+            real.fset(self, value)
+
+        monkeypatch.setattr(ser_type, "timeout", property(real.fget, spy))
+        c = Client(t, module="TMCM-1311", timeout=0.5)
+        assert [c.request(Request(1, GAP, 1, 0)).status for _ in range(5)] == [Status.OK] * 5
+        assert sets == [0.5]  # once, for the first read; the rest ask with the same timeout
+        assert t.transact(GAP1, 9, 0.5)[:4] == bytes((2, 1, 100, GAP))
+    finally:
+        t.close()
