@@ -823,7 +823,8 @@ class AsciiLink:
         return self._special("STOP", Control.STOP_APPLICATION, timeout)
 
     def _special(self, word: str, opcode: int, timeout: float | None) -> Reply:
-        reply = self.command(word, timeout, opcode=opcode)
+        reply = self.command(word, timeout, opcode=opcode,
+                             request=Request(self.client.address, opcode, 0, 0, 0))
         if not status_ok(reply.status):
             raise StatusError(reply.status, reply, f"{word}: module answered status "
                                                    f"{reply.status}: {reply.status_text}")
