@@ -290,3 +290,20 @@ def test_transact_and_write_then_read_see_a_bad_line_alike(make_pty_sim, seed):
     traced = _outcomes(make_pty_sim, True, seed)
     assert any(len(o) == 2 for o in fast)  # the line did misbehave
     assert fast == traced
+
+
+def test_a_late_copy_of_the_version_string_is_no_corrupted_reply(pty_client):
+    """A copy of the version string (136 type 0) that comes while the next request waits is
+    a duplicate, as it is when it is waiting before a request: it was taken for a damaged
+    reply to us, so a module that answers after a pause longer than the 50 ms allowed after
+    a damaged reply (GP 75, up to 255 ms) got 'corrupted reply' though its answer came whole
+    within the timeout."""
+    c, sim = pty_client, pty_client.sim
+    sim.faults.dup_late_next = 1  # the copy follows once the next request has arrived
+    assert c.request(Request(1, Control.GET_VERSION, 0, 0, 0)).version
+    sim.faults.delay = 0.12  # the GAP's answer comes 120 ms after its request (timeout 0.2)
+    sim.set_input(ANALOG, AIN0, 555)
+    r = c.request(Request(1, GIO, AIN0, ANALOG), retries=0)
+    assert r.value == 555 and c.stats["checksum_errors"] == 0
+    sim.faults.delay = 0.0
+    in_step(c)

@@ -721,7 +721,9 @@ class Client:
             return reply
         if sum(head[:8]) & 0xFF != head[8] or (
                 head[0] == host and kind != _MEMORY and head[2] not in _STATUSES):
-            if self._late_version(head):
+            if self._late_version(head) or self._version_copy(head):
+                # (a copy is no damaged reply either: the answer may still come, after a
+                # module's pause before replying)
                 del buf[:_FRAME]
                 return _SKIPPED
             # no frame starts here (the decoder's rule: a checksum, and a TMCL status byte
