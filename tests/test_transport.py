@@ -281,6 +281,22 @@ def test_can_ids(can_sim):
         c.close()
 
 
+def test_can_sent_only_tracer_is_told_each_request(can_sim):
+    """On CAN too a tracer that only watches what is sent gets every request (the end-of-run
+    note about motors left turning), and is not told the replies."""
+    sim, channel = can_sim
+    c = tmclsh.connect(can=f"virtual:{channel}", timeout=0.5)
+    try:
+        sent = []
+        c.add_tracer(lambda d, raw, dec: sent.append((d, bytes(raw), dec)), sent_only=True)
+        c.execute("ROR 0, 500")
+        c.send(GAP, 1, 0)
+        ror, gap = Request(1, 1, 0, 0, 500), Request(1, GAP, 1, 0)
+        assert sent == [("tx", ror.to_can(), ror), ("tx", gap.to_can(), gap)]
+    finally:
+        c.close()
+
+
 def test_can_spec_errors():
     assert parse_can("slcan:/dev/ttyACM0") == ("slcan", "/dev/ttyACM0")
     with pytest.raises(ValidationError, match="IFACE:CHANNEL"):
