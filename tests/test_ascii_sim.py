@@ -165,6 +165,22 @@ def test_run_and_stop(make):
     assert sim.program_state == 0
 
 
+def test_a_sent_only_tracer_is_told_the_request_each_ascii_line_carries(make):
+    """ASCII lines go out as text; a tracer that watches what is sent (the end-of-run note
+    about motors left running) is told the request, RUN and STOP included."""
+    sim, client = make()
+    _upload(client, "Loop: SAP 4, 0, 1000\n WAIT TICKS, 0, 1\n JA Loop\n")
+    link = AsciiLink.attach(client)
+    sent = []
+    client.add_tracer(lambda d, raw, dec: sent.append((d, dec)), sent_only=True)
+    client.execute("ROR 0, 500")
+    link.run()
+    link.stop_program()
+    assert sent == [("tx", Request(1, 1, 0, 0, 500)),
+                    ("tx", Request(1, Control.RUN_APPLICATION, 0, 0, 0)),
+                    ("tx", Request(1, Control.STOP_APPLICATION, 0, 0, 0))]
+
+
 def test_refused_139_is_named(make):
     sim, client = make()
     client.downloading = True

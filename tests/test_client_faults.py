@@ -242,3 +242,68 @@ def test_event_survives_faults_on_other_replies(pty_client):
     assert c.stats["checksum_errors"] == 1
     assert values == sorted(values)
     in_step(c)
+
+
+# -- the request path's two ways: transact (no tracer) and write-then-read (a full tracer) --------
+
+def _outcomes(make_pty_sim, trace: bool, seed: int) -> list:
+    import random
+
+    from tmclsh.client import Client
+    from tmclsh.errors import TmclError
+    from tmclsh.transport import open_serial
+
+    sim, path = make_pty_sim()
+    sim.faults.rng = random.Random(seed)
+    # faults whose order on the line does not depend on timing: the same seed gives the
+    # same bytes whatever the client's speed
+    sim.faults.rates = {"drop": 0.04, "corrupt": 0.04, "truncate": 0.04, "garbage": 0.04,
+                        "dup-late": 0.06}
+    c = Client(open_serial(path), module="TMCM-1311", timeout=0.1, retries=1)
+    if trace:
+        c.add_tracer(lambda d, raw, dec: None)
+    lines = random.Random(seed + 1)
+    got: list = []
+    try:
+        for _ in range(120):
+            k = lines.randrange(3)
+            req = (Request(1, SAP, 4, 0, lines.randrange(1, 2000)) if k == 0
+                   else Request(1, GAP, lines.choice([4, 5]), 0) if k == 1
+                   else Request(1, GGP, 0, 2))
+            try:
+                r = c.request(req)
+                got.append((req.opcode, r.status, r.value))
+            except TmclError as exc:
+                got.append((req.opcode, type(exc).__name__))
+            got.extend(("suspect", s.seq, s.reply.value) for s in c.take_suspects())
+    finally:
+        c.close()
+    return got
+
+
+@pytest.mark.parametrize("seed", [11, 12])
+def test_transact_and_write_then_read_see_a_bad_line_alike(make_pty_sim, seed):
+    """With no full tracer a request goes out and its answer comes in through one
+    ``transact``; with one, through ``write`` and ``read``. On the same misbehaving line
+    (seeded) both give the same values, errors and suspects."""
+    fast = _outcomes(make_pty_sim, False, seed)
+    traced = _outcomes(make_pty_sim, True, seed)
+    assert any(len(o) == 2 for o in fast)  # the line did misbehave
+    assert fast == traced
+
+
+def test_a_late_copy_of_the_version_string_is_no_corrupted_reply(pty_client):
+    """A copy of the version string (136 type 0) that comes while the next request waits is
+    a duplicate, as it is when it is waiting before a request: it was taken for a damaged
+    reply to us, so a module that answers after a pause longer than the 50 ms allowed after
+    a damaged reply (GP 75, up to 255 ms) got 'corrupted reply' though its answer came whole
+    within the timeout."""
+    c, sim = pty_client, pty_client.sim
+    sim.faults.dup_late_next = 1  # the copy follows once the next request has arrived
+    assert c.request(Request(1, Control.GET_VERSION, 0, 0, 0)).version
+    sim.faults.delay = 0.12  # the GAP's answer comes 120 ms after its request (timeout 0.2)
+    sim.set_input(ANALOG, AIN0, 555)
+    r = c.request(Request(1, GIO, AIN0, ANALOG), retries=0)
+    assert r.value == 555 and c.stats["checksum_errors"] == 0
+    sim.faults.delay = 0.0
+    in_step(c)

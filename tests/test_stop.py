@@ -170,6 +170,16 @@ def test_a_script_that_leaves_a_motor_turning_says_so(run_tmclsh):
     assert "note:" not in quiet.stderr
 
 
+def test_a_script_in_ascii_mode_that_leaves_a_motor_turning_says_so_too(run_tmclsh):
+    """The sent-only tracer that notices a start was told ASCII lines as text (not the
+    request), so in ASCII mode a motor left turning went unmentioned."""
+    p = run_tmclsh("--sim", "--ascii", "-c", "ROR 0, 30000\n.sleep 0.2")
+    assert p.returncode == 0, p.stderr
+    assert "note: motor 0 turns (speed" in p.stderr and "left running" in p.stderr
+    quiet = run_tmclsh("--sim", "--ascii", "-c", "GAP 1, 0")
+    assert "note:" not in quiet.stderr
+
+
 def test_ctrl_c_in_a_script_stops_the_program(tmp_path):
     """SIGINT while -f runs: the stored program is stopped, then the motor, read back."""
     from tmclsh.sim import Simulator

@@ -281,6 +281,22 @@ def test_can_ids(can_sim):
         c.close()
 
 
+def test_can_sent_only_tracer_is_told_each_request(can_sim):
+    """On CAN too a tracer that only watches what is sent gets every request (the end-of-run
+    note about motors left turning), and is not told the replies."""
+    sim, channel = can_sim
+    c = tmclsh.connect(can=f"virtual:{channel}", timeout=0.5)
+    try:
+        sent = []
+        c.add_tracer(lambda d, raw, dec: sent.append((d, bytes(raw), dec)), sent_only=True)
+        c.execute("ROR 0, 500")
+        c.send(GAP, 1, 0)
+        ror, gap = Request(1, 1, 0, 0, 500), Request(1, GAP, 1, 0)
+        assert sent == [("tx", ror.to_can(), ror), ("tx", gap.to_can(), gap)]
+    finally:
+        c.close()
+
+
 def test_can_spec_errors():
     assert parse_can("slcan:/dev/ttyACM0") == ("slcan", "/dev/ttyACM0")
     with pytest.raises(ValidationError, match="IFACE:CHANNEL"):
@@ -404,3 +420,70 @@ def test_the_same_answer_twice_is_the_same_reply_and_another_is_another():
     finally:
         t.close()
         responder.close()
+
+
+def test_transact_when_the_output_is_full_writes_the_rest_and_still_reads_the_answer():
+    """The port's output buffer full (the other end reads nothing for a while): os.write takes
+    part of the frame or none of it (BlockingIOError); the rest goes out as write() sends it,
+    and the answer is read as usual once the other end catches up."""
+    import os
+    import select
+    import tty
+
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    path = os.ttyname(slave)
+    t = open_serial(path, 115200)
+    heard = bytearray()
+
+    def late_reader():
+        time.sleep(0.3)  # the port's output stays full until then
+        while GAP1 not in heard:
+            if select.select([master], [], [], 2.0)[0]:
+                heard.extend(os.read(master, 65536))
+            else:
+                return
+        os.write(master, _reply_to(GAP1, 77))
+
+    try:
+        filled = 0
+        while True:  # fill the output with noise the other end will skip
+            try:
+                filled += os.write(t._fd, bytes(512))
+            except BlockingIOError:
+                break
+        reader = threading.Thread(target=late_reader, daemon=True)
+        reader.start()
+        assert filled > 0
+        got = t.transact(GAP1, 9, 2.0)
+        reader.join(3)
+        assert got == _reply_to(GAP1, 77)
+        assert heard.endswith(GAP1)
+    finally:
+        t.close()
+        os.close(master)
+        os.close(slave)
+
+
+def test_transact_without_a_descriptor_goes_through_pyserial(pty_sim, monkeypatch):
+    """Windows (no descriptor to select on) and URL handlers: transact is pyserial's write and
+    read, with the read timeout set once, not per request."""
+    sim, path = pty_sim
+    t = open_serial(path, 115200)
+    try:
+        t._fd = None  # as on Windows
+        sets = []
+        ser_type = type(t._ser)
+        real = ser_type.timeout
+
+        def spy(self, value):
+            sets.append(value)
+            real.fset(self, value)
+
+        monkeypatch.setattr(ser_type, "timeout", property(real.fget, spy))
+        c = Client(t, module="TMCM-1311", timeout=0.5)
+        assert [c.request(Request(1, GAP, 1, 0)).status for _ in range(5)] == [Status.OK] * 5
+        assert sets == [0.5]  # once, for the first read; the rest ask with the same timeout
+        assert t.transact(GAP1, 9, 0.5)[:4] == bytes((2, 1, 100, GAP))
+    finally:
+        t.close()

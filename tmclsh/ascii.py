@@ -697,7 +697,8 @@ class AsciiLink:
         last: TmclTimeoutError | None = None
         for attempt in range(tries):
             try:
-                return self.command(text, timeout, opcode=req.opcode, address=req.address)
+                return self.command(text, timeout, opcode=req.opcode, address=req.address,
+                                    request=req)
             except TmclTimeoutError as exc:
                 last = exc
                 if attempt + 1 < tries:
@@ -708,9 +709,10 @@ class AsciiLink:
         raise last
 
     def command(self, text: str, timeout: float | None = None, *, opcode: int = 0,
-                address: int | None = None) -> Reply:
+                address: int | None = None, request: Request | None = None) -> Reply:
         """Send one command line (``"GAP 1, 0"``, ``"RUN"``; the address character is added)
-        and return the reply; echo is skipped, other modules' and stale lines dropped."""
+        and return the reply; echo is skipped, other modules' and stale lines dropped.
+        ``request``: the binary request the line stands for (told to sent-only tracers)."""
         client = self.client
         timeout = client.timeout if timeout is None else timeout
         address = client.address if address is None else address
@@ -722,7 +724,7 @@ class AsciiLink:
             self.stats["sent"] += 1
             client.stats["sent"] += 1
             if client.tracing:
-                client.trace("tx", line, line.decode("latin-1").rstrip())
+                client.trace("tx", line, line.decode("latin-1").rstrip(), request=request)
             try:
                 return self._await(t, line, opcode, address, timeout)
             except BaseException:
@@ -824,7 +826,8 @@ class AsciiLink:
         return self._special("STOP", Control.STOP_APPLICATION, timeout)
 
     def _special(self, word: str, opcode: int, timeout: float | None) -> Reply:
-        reply = self.command(word, timeout, opcode=opcode)
+        reply = self.command(word, timeout, opcode=opcode,
+                             request=Request(self.client.address, opcode, 0, 0, 0))
         if not status_ok(reply.status):
             raise StatusError(reply.status, reply, f"{word}: module answered status "
                                                    f"{reply.status}: {reply.status_text}")

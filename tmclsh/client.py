@@ -772,7 +772,9 @@ class Client:
             return reply
         if sum(head[:8]) & 0xFF != head[8] or (
                 head[0] == host and kind != _MEMORY and head[2] not in _STATUSES):
-            if self._late_version(head):
+            if self._late_version(head) or self._version_copy(head):
+                # (a copy is no damaged reply either: the answer may still come, after a
+                # module's pause before replying)
                 del buf[:_FRAME]
                 return _SKIPPED
             # no frame starts here (the decoder's rule: a checksum, and a TMCL status byte
@@ -1195,10 +1197,13 @@ class Client:
     def tracing(self) -> bool:
         return bool(self._tracers or self._sent_tracers)
 
-    def trace(self, direction: str, raw: bytes, decoded: object) -> None:
-        """Report a frame to the tracers ("tx", "rx", "drop" or "note")."""
+    def trace(self, direction: str, raw: bytes, decoded: object, *,
+              request: Request | None = None) -> None:
+        """Report a frame to the tracers ("tx", "rx", "drop" or "note"). ``request``: the
+        request a "tx" line carries (an ASCII line's decoded is its text), for the tracers
+        that only watch what is sent (``add_tracer(sent_only=True)`` is told requests)."""
         if direction == "tx" and self._sent_tracers:
-            self._tell_sent(raw, decoded)
+            self._tell_sent(raw, decoded if request is None else request)
         if self._tracers:
             self._trace(direction, raw, decoded)
 
