@@ -679,3 +679,28 @@ def test_stop_never_says_stopped_for_a_turning_motor_under_late_copies():
     finally:
         c.close()
         m.close()
+
+
+def test_the_end_of_a_run_watches_the_line_once_for_the_same_last_answer(pty_client):
+    """-f confirms its last answer before the summary and the run's end asks again: the
+    second time, with no reply since, only what is already waiting is taken in."""
+    c = pty_client
+    c.send(6, 1, 0)
+    c.send(6, 1, 0)  # the last two replies: the same command, so the line is watched
+    waits = []
+    absorb = c._absorb
+
+    def spy(timeout=0.0):
+        waits.append(timeout)
+        return absorb(timeout)
+
+    c._absorb = spy
+    c.confirm_last()
+    first, waits[:] = list(waits), []
+    c.confirm_last()
+    assert first and first[0] > 0, first
+    assert waits and all(w == 0 for w in waits), waits
+    c.send(6, 1, 0)  # a new answer is watched for again
+    waits.clear()
+    c.confirm_last()
+    assert waits[0] > 0

@@ -206,6 +206,7 @@ class Client:
         # set by reconnect() too: with that check, ask 136 (another module may have been
         # plugged into the same port meanwhile)
         self._check_module = False
+        self._confirmed = -1  # Client.replies when confirm_last last watched the line
         # one-line notices about what the client did on its own (ended download mode); the
         # shell points it at its output, else they are logged
         self.on_notice: Callable[[str], None] | None = None
@@ -1025,7 +1026,8 @@ class Client:
             same = len(recent) >= 2 and (recent[-1].module, recent[-1].opcode) == (
                 recent[-2].module, recent[-2].opcode)
             baud = getattr(t, "baudrate", None)
-            if not same or t.simulated or not isinstance(t, StreamTransport):
+            if (not same or t.simulated or not isinstance(t, StreamTransport)
+                    or self._confirmed == self.replies):  # (this reply was watched for already)
                 quiet = 0.0
             else:
                 frame = 10 * _FRAME / baud if isinstance(baud, (int, float)) and baud else 0.01
@@ -1033,6 +1035,7 @@ class Client:
             end = time.monotonic() + max(0.5, 10 * quiet)
             while self._absorb(quiet) and quiet and time.monotonic() < end:
                 pass
+            self._confirmed = self.replies
         if self._events:
             self._deliver_events()
 
