@@ -106,3 +106,29 @@ def test_rich_writes_when_a_console_is_put_in_place(pipes):
     assert out.getvalue() == ""
     assert "\x1b[" in o.console.file.getvalue()
     assert o.is_terminal
+
+
+def test_a_result_line_kept_for_one_stream_is_not_written_to_another(monkeypatch):
+    """The memo of result lines goes by stream, mode and console: a line made for a pipe is
+    not sent to the stream put in its place, nor kept as text once JSON is asked for."""
+    out = Output()
+    r = result("GAP 1, 0", value=-5000)
+    first, second = Pipe(), Pipe()
+    monkeypatch.setattr(sys, "stdout", first)
+    out.result(r, M)
+    out.result(r, M)
+    monkeypatch.setattr(sys, "stdout", second)
+    out.result(r, M)
+    out.json = True
+    out.result(r, M)
+    assert first.getvalue().splitlines() == ["ActualPosition = -5000 µsteps"] * 2
+    text, obj = second.getvalue().splitlines()
+    assert text == "ActualPosition = -5000 µsteps" and obj.startswith("{")
+    from rich.console import Console
+
+    console = Console(file=io.StringIO(), width=100)  # a console put in place: rich writes
+    out.json = False
+    out.console = console
+    out.result(r, M)
+    assert console.file.getvalue().strip() == "ActualPosition = -5000 µsteps"
+    assert second.getvalue().count("\n") == 2
