@@ -132,3 +132,17 @@ def test_a_result_line_kept_for_one_stream_is_not_written_to_another(monkeypatch
     out.result(r, M)
     assert console.file.getvalue().strip() == "ActualPosition = -5000 µsteps"
     assert second.getvalue().count("\n") == 2
+    # stdout becomes a terminal: the line made for a pipe is not written there plainly,
+    # rich writes it (a console made for the terminal)
+    out = Output()
+    monkeypatch.setattr(sys, "stdout", Pipe())
+    out.result(r, M)
+    terminal = Tty()
+    monkeypatch.setattr(sys, "stdout", terminal)
+    out.result(r, M)
+    assert out._console is not None and "ActualPosition" in terminal.getvalue()
+
+
+class Tty(io.StringIO):
+    def isatty(self) -> bool:
+        return True
