@@ -310,15 +310,15 @@ class Output:
         json_mode = self.json
         stream = sys.stdout
         reply = result.reply
+        key = None
         if reply is not None:
-            # a line made before, for the same stream, mode and module: the memo's own
-            # checks, in as few steps as a script line can afford
-            hit = self._memo.get((result.line, reply.value, reply.status, reply.opcode))
+            key = (result.line, reply.value, reply.status, reply.opcode)
+            hit = self._memo.get(key)
             if (hit is not None and hit[5] is stream and hit[0] is result.encoded
                     and hit[1] is module and hit[2] is json_mode and hit[3] is self.simulated()
-                    and self._console is None and reply.version is None
+                    and (json_mode or self._console is None) and reply.version is None
                     and reply.stored is None):
-                self._write(stream, hit[4], hit[6])
+                self._write(stream, hit[4], hit[6])  # (a line made for this same stream)
                 return
         known = self._stdout_terminal  # (_is_terminal, for the stream asked last)
         if known[0] is stream:
@@ -328,18 +328,10 @@ class Output:
             self._stdout_terminal = (stream, terminal)
         if not json_mode and (terminal or self._console is not None or self._color == "always"):
             stream = None  # rich writes (as _plain says, inline: once per line)
-        reply = result.reply
         enc = result.encoded
-        key = None
-        if stream is not None and reply is not None and reply.version is None \
-                and reply.stored is None and enc.spec is not None:
-            key = (result.line, reply.value, reply.status, reply.opcode)
-            hit = self._memo.get(key)
-            simulated = self.simulated()
-            if hit is not None and hit[0] is enc and hit[1] is module and hit[2] is json_mode \
-                    and hit[3] is simulated:
-                self._write(stream, hit[4], not (json_mode and terminal))
-                return
+        if stream is None or reply is None or reply.version is not None \
+                or reply.stored is not None or enc.spec is None:
+            key = None  # not kept: rich writes it, or the reply says more than the key
         if json_mode:
             obj = result_json(result)
             if self.simulated():
@@ -357,7 +349,7 @@ class Output:
             if len(self._memo) >= MEMO_LINES:
                 self._memo.clear()
             # (the stream and whether to hold its lines, as _write was told above)
-            self._memo[key] = (enc, module, json_mode, simulated, line, sys.stdout,
+            self._memo[key] = (enc, module, json_mode, self.simulated(), line, stream,
                                not (json_mode and terminal))
 
     @contextmanager

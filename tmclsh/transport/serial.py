@@ -154,19 +154,19 @@ class SerialTransport(StreamTransport):
         if not ready:
             return b""  # timed out
         try:
-            data = os.read(fd, size)
+            got = os.read(fd, size)
         except BlockingIOError:
-            data = bytes()  # (select saw it readable and something else took it: wait on)
+            got = bytes()  # (select saw it readable and something else took it: wait on)
         except OSError as exc:
             raise self._lost("read", exc) from exc
         else:
-            if not data:
+            if not got:
                 raise self._lost("read", OSError("device reports readiness to read but "
                                                  "returned no data"))
-        if len(data) >= size:
-            return data
+        if len(got) >= size:
+            return got
         left = None if timeout is None else max(0.0, timeout - (time.monotonic() - start))
-        return data + self._read_fd(fd, size - len(data), left)
+        return got + self._read_fd(fd, size - len(got), left)
 
     def _read_fd(self, fd: int, size: int, timeout: float | None) -> bytes:
         """pyserial's POSIX ``read`` with the same meaning of ``timeout``."""
