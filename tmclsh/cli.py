@@ -100,8 +100,8 @@ def cmd_scan(args: argparse.Namespace) -> int:
     settings = connection_settings(args)
     try:
         transport = open_transport(settings)
-    except TransportError as exc:  # a port that cannot be opened: nothing to scan (exit 3)
-        raise ConnectError(str(exc)) from exc
+    except (TransportError, ValidationError) as exc:  # a port that cannot be opened, a
+        raise ConnectError(str(exc)) from exc  # CAN configuration naming none: exit 3 as -c
     client = Client(transport, address=args.first, host_address=settings["host_address"],
                     timeout=1.0, retries=0, can_id=settings.get("can_id"),
                     reply_id=settings.get("reply_id"))
