@@ -40,6 +40,9 @@ def cmd_disasm(args: argparse.Namespace) -> int:
 
     module = load(args.module)
     image = read_image_instructions(args.file, module)  # bounded by its program memory
+    if not image:  # (was an empty line on stdout and nothing said)
+        print(f"{args.file}: an empty image: no instructions", file=sys.stderr)
+        return EXIT_OK
     sys.stdout.write(disassemble(image, module, origin=args.at))
     return EXIT_OK
 
