@@ -227,7 +227,13 @@ def _bring_up(client: Client, expected: Module | None) -> None:
         if reply is not None and reply.version is not None:
             _adopt_version(client, _confirmed_version(client, reply.version))
         else:
-            client.identify()
+            try:
+                client.identify()
+            except ValidationError:  # a version string naming no type: damaged?
+                if client.version is None:
+                    raise
+            if client.version is not None:
+                _adopt_version(client, _confirmed_version(client, client.version))
     except ValidationError:
         if expected is None:  # a version string naming no module we know
             raise
