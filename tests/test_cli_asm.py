@@ -69,6 +69,15 @@ def test_hex_image_disassembles(program: Path, tmp_path: Path) -> None:
     assert r.returncode == 0 and "WAIT POS, 0, 0" in r.stdout
 
 
+@pytest.mark.parametrize("name", ["empty.bin", "empty.hex"])
+def test_disasm_of_an_empty_image_says_so(name: str, tmp_path: Path) -> None:
+    image = tmp_path / name
+    image.write_bytes(b"")
+    r = tmclsh("disasm", str(image))
+    assert r.returncode == 0 and r.stdout == ""
+    assert r.stderr == f"{image}: an empty image: no instructions\n"
+
+
 def test_disasm_of_source_says_it_is_text_and_names_asm(program: Path) -> None:
     r = tmclsh("disasm", str(program))
     assert r.returncode == 1 and r.stdout == ""

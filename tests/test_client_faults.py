@@ -307,3 +307,19 @@ def test_a_late_copy_of_the_version_string_is_no_corrupted_reply(pty_client):
     assert r.value == 555 and c.stats["checksum_errors"] == 0
     sim.faults.delay = 0.0
     in_step(c)
+
+
+def test_a_lost_line_check_before_a_move_is_asked_again_not_the_move(pty_client):
+    """The line is checked (136) before an MVP after a failure; that check's reply lost once
+    is no reason to fail the MVP, which was not sent: the check is made again, the MVP sent
+    once (was: 'address 1 stopped answering ...; MVP was not sent' at 5 % lost replies)."""
+    c, sim = pty_client, pty_client.sim
+    target = c.request(Request(1, GAP, 0, 0)).value  # TargetPosition
+    sim.faults.drop_next = 1
+    with pytest.raises(TmclTimeoutError):
+        c.request(Request(1, MVP, 1, 0, 10))  # executed, its reply lost: in doubt now
+    sim.faults.drop_next = 1  # the check's reply is lost too
+    reply = c.request(Request(1, MVP, 1, 0, 10))  # MVP REL, 0, 10
+    assert c.stats["resyncs"] == 2
+    assert reply is not None and reply.status == Status.OK
+    assert c.request(Request(1, GAP, 0, 0)).value == target + 20  # moved once each, no more

@@ -185,6 +185,50 @@ def test_a_contradicting_module_option_is_an_error_naming_both(run_tmclsh, respo
     assert p.returncode == 0 and "TMCM-351" not in p.stderr
 
 
+class FlippedVersionOnce(Responder):
+    """A bit flipped on the line in the first version string (it has no checksum)."""
+
+    flipped = "1711V111"  # '3' (0x33) with bit 2 flipped is '7'
+    lost_first = False  # the first string lost as well (the mode probe, then 136 again)
+
+    def answer(self, raw: bytes) -> bytes | None:
+        if raw[1] == GET_VERSION and raw[2] == 0 and self.lost_first:
+            self.lost_first = False
+            return None
+        if raw[1] == GET_VERSION and raw[2] == 0 and self.flipped:
+            got = self.version
+            self.version, self.flipped = self.flipped, ""
+            try:
+                return super().answer(raw)
+            finally:
+                self.version = got
+        return super().answer(raw)
+
+
+@pytest.mark.parametrize("flipped, lost_first", [("1711V111", False), ("1311v111", False),
+                                                 ("13!1V111", True)])
+def test_a_version_string_damaged_on_the_line_is_asked_again(run_tmclsh, responders, flipped,
+                                                             lost_first):
+    """136 type 0 has no checksum: a string naming no known module is checked against the
+    checksummed 136 type 1 and asked again (was: TMCM-1711 in generic mode, or 'unknown
+    module type ... give it with --module', exit 3)."""
+    module = responders(FlippedVersionOnce)
+    module.flipped, module.lost_first = flipped, lost_first
+    p = run_tmclsh("--port", module.path, "-c", "GAP ActualPosition, 0")
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.strip() == "ActualPosition = 0 µsteps" and p.stderr == ""
+
+
+def test_a_module_without_data_keeps_its_string(run_tmclsh, responders):
+    class Tmcm1161(Responder):
+        version = "1161V130"
+
+    module = responders(Tmcm1161)
+    p = run_tmclsh("--port", module.path, "-c", "GAP 1, 0")
+    assert p.returncode == 0 and "TMCM-1161" in p.stderr  # generic mode, said so
+    assert [raw[2] for raw in module.log if raw[1] == GET_VERSION][:2] == [0, 1]
+
+
 class AsciiStartupModule(Responder):
     """GP 67 = 0x21: starts in ASCII mode (bit 0), no echo (bits 5/4 = 10). Binary frames are
     just characters of a line here. BIN switches to binary mode, 139 back."""

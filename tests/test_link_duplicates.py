@@ -139,6 +139,30 @@ def test_a_suspect_answer_is_reported_in_json_and_fails_the_run(pty_sim, tmp_pat
     assert p.returncode == 1
 
 
+def test_a_suspect_answer_to_a_check_names_its_line(pty_sim, tmp_path):
+    """The displaced answer was read by a .expect (not a TMCL line): the warning names that
+    line and where it is, not 'an earlier answer'."""
+    sim, path = pty_sim
+    script = tmp_path / "s.tmcl"
+    script.write_text("SGP 0, 2, 11\nSGP 1, 2, 22\nGGP 0, 2\n.expect GGP 1, 2 == 22\n"
+                      "GGP 0, 2\n")
+    send, seen = sim._send_reply, []
+
+    def sending(channel, module, op, ans):  # the script's GGP 0, 2 (after connect's GGP 129)
+        seen.append(op)
+        if seen.count(10) == 2 and op == 10:
+            sim.faults.dup_late_next = 1  # its reply (11) comes again after the next request
+        send(channel, module, op, ans)
+
+    sim._send_reply = sending
+    p = subprocess.run([sys.executable, "-m", "tmclsh", "--port", path, "-m", "TMCM-1311",
+                        "--keep-going", "-f", str(script)], capture_output=True, text=True,
+                       timeout=30, env=tmclsh_env(), cwd=str(ROOT))
+    (warning,) = [x for x in p.stderr.splitlines() if "another request" in x]
+    assert "the answer to '.expect GGP 1, 2 == 22' (" in warning and ":4)" in warning, p.stderr
+    assert p.returncode == 1
+
+
 # -- tmclsh sim --faults -------------------------------------------------------------------------
 
 def test_parse_rates():

@@ -102,6 +102,14 @@ def test_can_alone_without_configuration_says_what_to_set(monkeypatch, tmp_path,
     assert rc == 3 and "CAN_INTERFACE" in err and "names no interface" in err
 
 
+def test_can_alone_without_configuration_scan_exits_as_c_does(monkeypatch, tmp_path, capsys):
+    _isolate(monkeypatch, tmp_path)
+    monkeypatch.setenv("HOME", str(tmp_path))
+    rc = cli.main(["--can", "scan"])
+    err = capsys.readouterr().err
+    assert rc == 3 and "names no interface" in err  # was 1: 'a command failed'
+
+
 def test_channel_with_colons_on_the_command_line(monkeypatch, tmp_path, capsys):
     _isolate(monkeypatch, tmp_path)
     m = _module("bench:1")

@@ -60,9 +60,10 @@ def test_unknown_type_runs_in_generic_mode_by_number(module_1161, config_home, r
     assert r.returncode == 0, r.stderr
     rows = [json.loads(x) for x in r.stdout.splitlines()]
     assert [row["reply"] for row in rows if row["op"] in (6, 10)] == [1234, 5]
-    # the module got exactly these frames, after the 136 that named it
-    assert module_1161.got == [(136, 0, 0, 0), (10, 129, 0, 0), (5, 4, 0, 1234), (6, 4, 0, 0), (9, 77, 0, 5),
-                               (10, 77, 0, 0)]
+    # the module got exactly these frames, after the 136 that named it (its string names no
+    # type with data, so it is checked against 136 type 1, which has a checksum)
+    assert module_1161.got == [(136, 0, 0, 0), (136, 1, 0, 0), (10, 129, 0, 0), (5, 4, 0, 1234),
+                               (6, 4, 0, 0), (9, 77, 0, 5), (10, 77, 0, 0)]
     # told once that checks needing data are skipped
     assert r.stderr.count("no parameter data") == 1
     assert "TMCM-1161" in r.stderr
@@ -79,7 +80,7 @@ def test_generic_mode_refuses_names_and_what_does_not_fit_a_byte(module_1161, co
         assert r.returncode == 1, (line, r.stderr)
         assert words in r.stderr, (line, r.stderr)
         assert "Traceback" not in r.stderr
-        assert module_1161.got[len(before):] == [(136, 0, 0, 0), (10, 129, 0, 0)], line  # nothing else sent
+        assert module_1161.got[len(before):] == [(136, 0, 0, 0), (136, 1, 0, 0), (10, 129, 0, 0)], line  # nothing else sent
 
 
 def test_motor_numbers_are_bytes_not_the_data_files(module_1161, config_home, run_tmclsh):
@@ -227,7 +228,7 @@ def test_unknown_command_in_generic_mode_points_to_numbers(module_1161, config_h
                                                           run_tmclsh):
     r = run_tmclsh("--port", module_1161.url, "-c", "XYZZY 1, 2", env=_env(config_home))
     assert r.returncode == 1 and "by number" in r.stderr
-    assert module_1161.commands() == [136, 10]  # 136 and GGP 129 at connect; nothing for the line
+    assert module_1161.commands() == [136, 136, 10]  # 136 (string, type 1), GGP 129 at connect
 
 
 def test_forced_generic_on_a_documented_module_does_not_say_it_has_no_data(config_home,
@@ -267,7 +268,7 @@ def test_params_in_generic_mode_says_there_is_no_list(module_1161, config_home, 
     assert ("error: TMCM-1161 (no parameter data: numbers only): there is no list of its "
             "parameters; read one by number") in r.stderr
     assert "matches ''" not in r.stderr
-    assert [g[0] for g in module_1161.got] == [136, 10]  # nothing read for it
+    assert [g[0] for g in module_1161.got] == [136, 136, 10]  # nothing read for it
 
 
 def test_a_key_outside_any_table_is_not_called_a_table():

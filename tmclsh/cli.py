@@ -40,6 +40,9 @@ def cmd_disasm(args: argparse.Namespace) -> int:
 
     module = load(args.module)
     image = read_image_instructions(args.file, module)  # bounded by its program memory
+    if not image:  # (was an empty line on stdout and nothing said)
+        print(f"{args.file}: an empty image: no instructions", file=sys.stderr)
+        return EXIT_OK
     sys.stdout.write(disassemble(image, module, origin=args.at))
     return EXIT_OK
 
@@ -100,8 +103,8 @@ def cmd_scan(args: argparse.Namespace) -> int:
     settings = connection_settings(args)
     try:
         transport = open_transport(settings)
-    except TransportError as exc:  # a port that cannot be opened: nothing to scan (exit 3)
-        raise ConnectError(str(exc)) from exc
+    except (TransportError, ValidationError) as exc:  # a port that cannot be opened, a
+        raise ConnectError(str(exc)) from exc  # CAN configuration naming none: exit 3 as -c
     client = Client(transport, address=args.first, host_address=settings["host_address"],
                     timeout=1.0, retries=0, can_id=settings.get("can_id"),
                     reply_id=settings.get("reply_id"))

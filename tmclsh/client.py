@@ -499,7 +499,8 @@ class Client:
                 return reply
             if sent:
                 self._mark_stale(req, kind)
-            tries = 1 + (retries if idempotent(req, self.downloading) else 0)
+            # a failed line check sent nothing of ``req``: asking again is safe for any command
+            tries = 1 + (retries if not sent or idempotent(req, self.downloading) else 0)
             if attempt >= tries:
                 if tries > 1:
                     raise type(failure)(f"{failure} (after {tries} attempts)") from failure

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 from .canspec import FROM_PYTHON_CAN, parse_can
 from .client import Client
 from .errors import (ChecksumError, ConnectError, DownloadModeError, NoAnswerError,
-                     StatusError, TmclTimeoutError, UsageError, ValidationError)
+                     StatusError, TmclError, TmclTimeoutError, UsageError, ValidationError)
 from .transport.base import StreamTransport, Transport
 
 if TYPE_CHECKING:
@@ -231,9 +231,15 @@ def _bring_up(client: Client, expected: Module | None) -> None:
         reply = None
     try:
         if reply is not None and reply.version is not None:
-            _adopt_version(client, reply.version)
+            _adopt_version(client, _confirmed_version(client, reply.version))
         else:
-            client.identify()
+            try:
+                client.identify()
+            except ValidationError:  # a version string naming no type: damaged?
+                if client.version is None:
+                    raise
+            if client.version is not None:
+                _adopt_version(client, _confirmed_version(client, client.version))
     except ValidationError:
         if expected is None:  # a version string naming no module we know
             raise
@@ -248,6 +254,36 @@ def _bring_up(client: Client, expected: Module | None) -> None:
                 client, exc, what=f"it answered 136 (version {client.version}), but not GGP "
                 f"129 (download mode), asked {tries} time{'s' if tries > 1 else ''}, "
                 f"waiting {client.timeout:g} s each")) from exc
+
+
+def _confirmed_version(client: Client, version: str) -> str:
+    """The 136 type 0 string carries no checksum: one naming no module tmclsh has data for
+    (a bit flipped on the line makes '1311V111' '1311v111' or '1711V111') is checked against
+    136 type 1, which has one (the type number in its upper 16 bits); while the two disagree
+    on a type tmclsh knows, the string is asked again (1 + retries times at most)."""
+    from .modules import by_firmware_id, from_version_string
+    from .protocol import Control, Request
+
+    if from_version_string(version) is not None:
+        return version  # the usual case: nothing more is sent
+    try:
+        ident = client.request(Request(client.address, Control.GET_VERSION, 1, 0, 0))
+    except TmclError:
+        return version
+    firmware = (ident.value >> 16) & 0xFFFF if ident is not None and ident.status == 100 else 0
+    known = by_firmware_id(firmware) if firmware else None
+    if known is None:
+        return version  # a type without data (TMCM-1161): the string stands
+    for _ in range(1 + client.retries):
+        try:
+            again = client.request(Request(client.address, Control.GET_VERSION, 0, 0, 0))
+        except (TmclTimeoutError, ChecksumError):
+            continue
+        named = from_version_string(again.version) if again is not None and \
+            again.version is not None else None
+        if named is not None and named.name == known.name:
+            return again.version
+    return version
 
 
 def _adopt_version(client: Client, version: str) -> None:

@@ -225,6 +225,7 @@ class Session:
         capture = self.state.get("capture")  # a block (.repeat/.if) collecting its lines
         if callable(capture) and capture(self, text):
             return None
+        first = getattr(self.client, "replies", 0)
         try:
             result = self._dispatch(text)
         except TmclError as exc:
@@ -233,8 +234,19 @@ class Session:
             self._record(text, f"error: {exc}")
             raise
         finally:
+            self._note_answered(first, text)
             self.report_suspects()
         return result
+
+    def _note_answered(self, first: int, text: str) -> None:
+        """The replies after ``first`` that no TMCL line claimed (a .wait's or .expect's
+        reads, ``${...}``) answered ``text``: a suspect among them names it."""
+        last = getattr(self.client, "replies", 0)
+        ring, where = self._answered, self.location
+        for seq in range(max(first + 1, last - ANSWERED + 1), last + 1):
+            known = ring[seq % ANSWERED]
+            if known is None or known[0] != seq:
+                ring[seq % ANSWERED] = (seq, text, where)
 
     def report_suspects(self) -> None:
         """Say which earlier answers may have been another request's (Client.take_suspects):
