@@ -704,3 +704,44 @@ def test_the_end_of_a_run_watches_the_line_once_for_the_same_last_answer(pty_cli
     waits.clear()
     c.confirm_last()
     assert waits[0] > 0
+
+
+class DamagedReplyThenEvent(Module):
+    """The first GAP is answered with two bytes of noise and a damaged reply; the 138 event of
+    a move that ends comes 0.1 s later (within the request's timeout); then all is well."""
+
+    damaged = False
+
+    def answer(self, raw):
+        import time
+
+        from responder import reply
+
+        addr, cmd, typ, motor, value = fields(raw)
+        if cmd == 6 and not self.damaged:
+            self.damaged = True
+            bad = bytearray(reply(6, 1234, module=self.address, host=self.host))
+            bad[6] ^= 0x40  # a value byte flipped: the checksum no longer adds up
+            self.write(b"\x13\x37" + bytes(bad))
+            time.sleep(0.1)
+            self.write(reply(138, 1, status=128, module=self.address, host=self.host))
+            return None
+        return super().answer(raw)
+
+
+def test_a_damaged_reply_then_an_event_loses_neither_the_event_nor_the_answer():
+    """The damaged reply cuts the wait short (it is no echo of the request): the event behind
+    it is taken whole before the request is sent again, not cut in two at a deadline."""
+    m = DamagedReplyThenEvent(version="1311V111")
+    m.values[(1, 0, False)] = 4242
+    c = Client(open_serial(m.path), module="TMCM-1311", timeout=0.3, retries=2)
+    events = []
+    c.add_listener(events.append)
+    try:
+        assert c.value("GAP 1, 0") == 4242
+        assert c.stats["checksum_errors"] == 1
+        c.value("GAP 1, 0")
+        assert len(events) == 1 and events[0].status == 128, c.stats
+    finally:
+        c.close()
+        m.close()

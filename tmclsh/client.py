@@ -744,11 +744,11 @@ class Client:
                     return got  # type: ignore[return-value]
             if wait <= 0:
                 break
-            # a damaged reply to us (it began with our address) and then silence: no need to
-            # wait any longer. Other bytes that are no frame (an RS485 adapter's damaged echo
-            # of the request, noise) say nothing about when the reply comes: a module may
-            # wait up to 255 ms (GP 75) before it answers.
-            damaged_reply = garbled and junk[:1] == bytes((self.host_address,))
+            # bytes that are no frame and then silence: a damaged reply, no need to wait any
+            # longer (the answer may come behind it as well: an event, say). But an RS485
+            # adapter's echo of the request, one byte damaged, says nothing about when the
+            # reply comes: a module may wait up to 255 ms (GP 75) before it answers.
+            damaged_reply = garbled and not _echo_of(req.to_bytes(), bytes(junk[:_FRAME] + buf))
             if damaged_reply:
                 wait = min(wait, _QUIET_AFTER_GARBAGE)
             chunk = t.read(_FRAME - len(buf), wait)
@@ -1297,6 +1297,12 @@ def _failed(what: str, exc: Exception) -> None:
     logged at debug level for whoever set logging up."""
     log.warning("%s failed: %s", what, exc)
     log.debug("%s failed", what, exc_info=exc)
+
+
+def _echo_of(raw: bytes, seen: bytes) -> bool:
+    """Are the first nine bytes of ``seen`` the request ``raw`` itself, one byte damaged at
+    most (what an RS485 adapter that hears its own transmission gives back)?"""
+    return len(seen) >= _FRAME and sum(a != b for a, b in zip(raw, seen)) <= 1
 
 
 def _printable(data: bytes, start: int) -> bool:
