@@ -467,12 +467,14 @@ class Client:
                 pending = self._pending
                 if pending is None or self._buf or pending():
                     self._flush_input()  # (one cheap check when nothing waits)
+                synced = False
                 if (self._stale or self._stale_versions or self._stale_opaque
                         or self._drained) and self._dirty:  # (the property, spelt out first)
-                    self._sync_before(req, kind, timeout)
+                    synced = self._sync_before(req, kind, timeout)
                 sent = True
+                # (the line was found clear just now, unless a resynchronisation ran since)
                 reply = (self._exchange(req, kind, timeout) if pending is None
-                         else self._exchange_stream(req, kind, timeout))
+                         else self._exchange_stream(req, kind, timeout, absorb=synced))
             except TmclTimeoutError as exc:
                 self.stats["timeouts"] += 1
                 failure: Exception = exc
@@ -603,11 +605,13 @@ class Client:
             self._flushing = False
         self.stats["flushed"] += self.stats["discarded"] - before
 
-    def _sync_before(self, req: Request, kind: ReplyKind, timeout: float) -> None:
-        """Resynchronise if a late reply could be taken for ``req``'s."""
+    def _sync_before(self, req: Request, kind: ReplyKind, timeout: float) -> bool:
+        """Resynchronise if a late reply could be taken for ``req``'s (True if it did)."""
         if (self._stale_opaque or kind != _NORMAL or (req.address, req.opcode) in self._stale
                 or (self._drained and not self.downloading)):
             self._resync(req.address, timeout)
+            return True
+        return False
 
     def _marker(self, address: int) -> tuple[Request, ReplyKind] | None:
         """A harmless request whose reply cannot be taken for a late one: 136 type 1 (a
@@ -668,9 +672,10 @@ class Client:
         return self._exchange_can(req, kind, timeout)
 
     # -- serial framing -----------------------------------------------------------------
-    def _exchange_stream(self, req: Request, kind: ReplyKind, timeout: float) -> Reply | None:
+    def _exchange_stream(self, req: Request, kind: ReplyKind, timeout: float,
+                         absorb: bool = True) -> Reply | None:
         t: StreamTransport = self.transport  # type: ignore[assignment]
-        if kind != _NORMAL:
+        if kind != _NORMAL and absorb:
             # these layouts take any well-formed frame: clear out what is already here
             self._absorb()
         raw = req.to_bytes()
