@@ -137,14 +137,7 @@ class SerialTransport(StreamTransport):
         fd = self._fd
         if fd is None:
             return super().transact(data, size, timeout)
-        try:
-            n = os.write(fd, data)
-        except BlockingIOError:
-            n = 0
-        except OSError as exc:
-            raise self._lost("write", exc) from exc
-        if n != len(data):
-            self.write(data[n:])
+        self.write(data)
         # the reply mostly comes whole: one wait, one read; anything else as read() does it
         start = time.monotonic()
         try:
