@@ -745,3 +745,27 @@ def test_a_damaged_reply_then_an_event_loses_neither_the_event_nor_the_answer():
     finally:
         c.close()
         m.close()
+
+
+@pytest.mark.parametrize("sent_only", [False, True])
+def test_a_tracer_that_fails_is_one_line_not_a_traceback(sent_only):
+    """A broken tracer, full or send-only, does not break the link nor print a traceback."""
+    import subprocess
+    import sys
+
+    from conftest import ROOT, tmclsh_env
+
+    code = (
+        "import tmclsh\n"
+        "c = tmclsh.connect(sim='TMCM-1311')\n"
+        "def broken(direction, raw, decoded):\n"
+        "    raise RuntimeError('the tracer broke')\n"
+        f"c.add_tracer(broken, sent_only={sent_only})\n"
+        "print(c.value('GAP 4, 0'))\n"
+        "c.close()\n")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       timeout=30, env=tmclsh_env(), cwd=str(ROOT))
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.strip().lstrip("-").isdigit(), p.stdout
+    assert "Traceback" not in p.stderr, p.stderr
+    assert "the tracer broke" in p.stderr

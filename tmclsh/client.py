@@ -246,19 +246,8 @@ class Client:
         tracers.append(fn)
         return lambda: tracers.remove(fn) if fn in tracers else None
 
-    def _tell_sent(self, raw: bytes, req: object) -> None:
-        for fn in list(self._sent_tracers):
-            try:
-                fn("tx", raw, req)
-            except Exception:  # a broken tracer must not break the link
-                log.exception("tracer failed")
-
     def _trace(self, direction: str, raw: bytes, decoded: object) -> None:
-        for fn in list(self._tracers):
-            try:
-                fn(direction, raw, decoded)
-            except Exception as exc:  # a broken tracer must not break the link
-                _failed("a tracer", exc)
+        _tell(self._tracers, direction, raw, decoded)
 
     def _deliver_events(self) -> None:
         # One deliverer at a time (the request's thread or the event poller's), so events
@@ -680,7 +669,7 @@ class Client:
             self._absorb()
         raw = req.to_bytes()
         if self._sent_tracers:
-            self._tell_sent(raw, req)
+            _tell(self._sent_tracers, "tx", raw, req)
         buf = self._buf
         deadline = time.monotonic() + timeout
         if buf or kind == _NONE or self._tracers:
@@ -696,28 +685,26 @@ class Client:
         else:
             self.stats["sent"] += 1
             head = t.transact(raw, _FRAME, timeout)
-            if kind == _NORMAL and head.__class__ is bytes:
-                # nine bytes met before as a valid reply (see below): the checks left are
-                # the ones that depend on the request
-                reply = self._seen_replies.get(head)
-                if (reply is not None and reply.module == req.address
-                        and reply.opcode == req.opcode and reply.host == self.host_address):
-                    return reply
         if not buf:
-            # the common case first: nine bytes that are the reply
+            # the common case first: nine bytes that are the reply. The same nine bytes are
+            # the same (immutable) reply, and a script repeating its lines mostly gets
+            # answers it has had before: one met before passed the checks that do not depend
+            # on the request (the sum, the status) and is taken with the others.
+            seen = self._seen_replies
+            reply = seen.get(head) if kind == _NORMAL and head.__class__ is bytes else None
+            if (reply is not None and reply.module == req.address
+                    and reply.opcode == req.opcode and reply.host == self.host_address):
+                if self._tracers:
+                    self._trace("rx", head, reply)
+                return reply
             if (len(head) == _FRAME and kind == _NORMAL and head[1] == req.address
                     and head[3] == req.opcode and head[0] == self.host_address
                     and sum(head[:8]) & 0xFF == head[8] and head[2] in _REPLY_STATUSES):
-                # the same nine bytes are the same (immutable) reply: a script repeating its
-                # lines mostly gets answers it has had before
-                seen = self._seen_replies
-                reply = seen.get(head) if head.__class__ is bytes else None
-                if reply is None:
-                    reply = Reply.from_frame(head)
-                    if head.__class__ is bytes:
-                        if len(seen) >= _SEEN_REPLIES:
-                            seen.clear()
-                        seen[head] = reply
+                reply = Reply.from_frame(head)
+                if head.__class__ is bytes:
+                    if len(seen) >= _SEEN_REPLIES:
+                        seen.clear()
+                    seen[head] = reply
                 if self._tracers:
                     self._trace("rx", head, reply)
                 return reply
@@ -753,7 +740,7 @@ class Client:
             # longer (the answer may come behind it as well: an event, say). But an RS485
             # adapter's echo of the request, one byte damaged, says nothing about when the
             # reply comes: a module may wait up to 255 ms (GP 75) before it answers.
-            damaged_reply = garbled and not _echo_of(req.to_bytes(), bytes(junk[:_FRAME] + buf))
+            damaged_reply = garbled and not _echo_of(raw, bytes(junk[:_FRAME] + buf))
             if damaged_reply:
                 wait = min(wait, _QUIET_AFTER_GARBAGE)
             chunk = t.read(_FRAME - len(buf), wait)
@@ -943,7 +930,7 @@ class Client:
             self._absorb_can()
         data = req.to_can()
         if self._sent_tracers:
-            self._tell_sent(data, req)
+            _tell(self._sent_tracers, "tx", data, req)
         t.send(self.can_id, data)
         self.stats["sent"] += 1
         if self._tracers:
@@ -1219,7 +1206,7 @@ class Client:
         request a "tx" line carries (an ASCII line's decoded is its text), for the tracers
         that only watch what is sent (``add_tracer(sent_only=True)`` is told requests)."""
         if direction == "tx" and self._sent_tracers:
-            self._tell_sent(raw, decoded if request is None else request)
+            _tell(self._sent_tracers, "tx", raw, decoded if request is None else request)
         if self._tracers:
             self._trace(direction, raw, decoded)
 
@@ -1294,6 +1281,14 @@ class Client:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _tell(tracers: list[Tracer], direction: str, raw: bytes, decoded: object) -> None:
+    for fn in list(tracers):
+        try:
+            fn(direction, raw, decoded)
+        except Exception as exc:  # a broken tracer must not break the link
+            _failed("a tracer", exc)
 
 
 def _failed(what: str, exc: Exception) -> None:
