@@ -324,8 +324,7 @@ class Session:
                     "after it exits; .mode ascii switches to it (tmclsh then talks ASCII "
                     "and switches back at exit)")
             self._confirm_persistent(enc)
-        stats = client.stats  # (frames sent, the client's own line checks left out)
-        before = stats["sent"] - stats["resyncs"]
+        before = _frames_sent(client)
         try:
             reply = client.request(req)
         except (TmclTimeoutError, ChecksumError) as exc:
