@@ -851,8 +851,9 @@ def cmd_connect(session: Session, arg: str) -> None:
     client = session.client
     words = arg.split()
     if not words:
-        client.reconnect()
-        session.link_lost = False
+        why = session.reconnect()
+        if why is not None:
+            raise why
         if client.module is None:
             client.identify()
         _refresh_program_state(session)
