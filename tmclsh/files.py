@@ -77,12 +77,17 @@ def read_bytes(path: str | os.PathLike, limit: int = MAX_FILE, what: str = "file
             raise FileError(f"cannot read {name}: it is a directory")
         with open(p, "rb") as fh:
             return read_stream(fh, limit, name, what)
-    except FileError:
-        raise
-    except FileNotFoundError:
-        raise FileError(f"cannot read {name}: no such file") from None
-    except (OSError, ValueError) as exc:  # ValueError: a NUL in the name
-        raise FileError(f"cannot read {name}: {_reason(exc)}") from None
+    except (OSError, ValueError) as exc:
+        raise _unreadable(name, exc) from None
+
+
+def _unreadable(name: str, exc: OSError | ValueError) -> FileError:
+    """The error for a file that could not be read (a ValueError: a NUL in the name)."""
+    if isinstance(exc, FileError):
+        return exc
+    if isinstance(exc, FileNotFoundError):
+        return FileError(f"cannot read {name}: no such file")
+    return FileError(f"cannot read {name}: {_reason(exc)}")
 
 
 def read_tail(path: str | os.PathLike, limit: int = MAX_FILE, what: str = "file") -> bytes:
@@ -101,12 +106,8 @@ def read_tail(path: str | os.PathLike, limit: int = MAX_FILE, what: str = "file"
                 return fh.read(limit)
             fh.seek(size - limit - 1)  # the byte before: a newline there means a whole line
             data = fh.read(limit + 1)
-    except FileError:
-        raise
-    except FileNotFoundError:
-        raise FileError(f"cannot read {name}: no such file") from None
     except (OSError, ValueError) as exc:
-        raise FileError(f"cannot read {name}: {_reason(exc)}") from None
+        raise _unreadable(name, exc) from None
     cut = data.find(b"\n")
     return data[cut + 1:] if cut >= 0 else b""
 
