@@ -237,6 +237,29 @@ def test_a_sent_only_tracer_is_told_each_request_before_it_goes_and_nothing_else
     assert len(sent) == 3
 
 
+def test_a_sent_only_tracer_given_opcodes_is_called_for_those_commands_only(pty_client):
+    c = pty_client
+    starts, every = [], []
+    remove_starts = c.add_tracer(lambda d, raw, dec: starts.append(dec.opcode), sent_only=True,
+                                 opcodes={SAP, MVP})
+    c.send(GAP, 1, 0)
+    c.send(SAP, 4, 0, 100)
+    assert starts == [SAP]  # GAP never reached it
+    # beside a tracer that wants everything, it may be told of more (a tracer checks)
+    remove_every = c.add_tracer(lambda d, raw, dec: every.append(dec.opcode), sent_only=True)
+    c.send(GAP, 1, 0)
+    assert every == [GAP] and starts == [SAP, GAP]
+    remove_every()  # and once that one is gone, its filter is back
+    c.send(GAP, 1, 0)
+    c.send(MVP, 0, 0, 0)
+    assert every == [GAP] and starts == [SAP, GAP, MVP]
+    remove_starts()
+    c.send(SAP, 4, 0, 100)
+    assert starts == [SAP, GAP, MVP] and not c.tracing
+    with pytest.raises(ValueError):
+        c.add_tracer(lambda *a: None, opcodes={GAP})  # a filter for what is sent only
+
+
 # -- idempotence and helpers ---------------------------------------------------------------------
 
 def test_idempotent_commands():

@@ -162,8 +162,9 @@ def test_leaving_while_a_motor_turns_asks(pty_module, capsys):
     assert "leaving: stopped motor 0 (MST; speed reads 0)" in capsys.readouterr().out
 
 
-def test_a_script_that_leaves_a_motor_turning_says_so(run_tmclsh):
-    p = run_tmclsh("--sim", "-c", "ROR 0, 30000\n.sleep 0.2")
+@pytest.mark.parametrize("start", ["ROR 0, 30000", "SAP 2, 0, 30000"])  # (velocity mode)
+def test_a_script_that_leaves_a_motor_turning_says_so(run_tmclsh, start):
+    p = run_tmclsh("--sim", "-c", f"{start}\n.sleep 0.2")
     assert p.returncode == 0
     assert "note: motor 0 turns (speed" in p.stderr and "left running" in p.stderr
     quiet = run_tmclsh("--sim", "-c", "GAP 1, 0")

@@ -42,7 +42,7 @@ import logging
 import threading
 import time
 from collections import Counter, deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, NamedTuple
 
@@ -82,6 +82,7 @@ _DRAIN_QUIET = 0.03
 _LOADED = int(Status.LOADED)
 _WRONG_CHECKSUM = int(Status.WRONG_CHECKSUM)
 _SEEN_REPLIES = 512  # distinct reply frames kept as Reply objects
+_ALL_OPCODES = frozenset(range(256))  # a sent-only tracer that watches every command
 # GP 129 "download mode" (all three manuals): read to find out whether the module executes
 # commands; in download mode the read itself is stored (answered with status 101) instead
 _GP_DOWNLOAD_MODE = 129
@@ -219,6 +220,10 @@ class Client:
         self._listeners: list[Listener] = []
         self._tracers: list[Tracer] = []
         self._sent_tracers: list[Tracer] = []  # add_tracer(sent_only=True)
+        # the commands some sent-only tracer asked for (all when one asked for every one): a
+        # script's per-line check costs a set lookup, not a call, for the lines none wants
+        self._sent_wanted: frozenset[int] = frozenset()
+        self._sent_filters: dict[Tracer, frozenset[int]] = {}  # each one's opcodes
         self._poller: threading.Thread | None = None
         self._poller_stop = threading.Event()
         self.stats = {"sent": 0, "timeouts": 0, "checksum_errors": 0, "resyncs": 0,
@@ -235,16 +240,32 @@ class Client:
         self._listeners.append(fn)
         return lambda: self._listeners.remove(fn) if fn in self._listeners else None
 
-    def add_tracer(self, fn: Tracer, *, sent_only: bool = False) -> Callable[[], None]:
+    def add_tracer(self, fn: Tracer, *, sent_only: bool = False,
+                   opcodes: Iterable[int] | None = None) -> Callable[[], None]:
         """Call ``fn(direction, raw, decoded)`` for every frame: "tx", "rx", "drop" or "note".
 
         Tracers run inside the transaction: they must be quick and must not use the client.
         ``sent_only``: only "tx", each request just before it goes out; a tracer that only
         watches what is sent then leaves the receive path as fast as with no tracer at all.
+        ``opcodes`` (with ``sent_only``): only requests of these command numbers are needed,
+        so the others skip the call (the tracer may still be told of others: it checks).
         """
+        if opcodes is not None and not sent_only:
+            raise ValueError("opcodes= filters a sent_only tracer")
         tracers = self._sent_tracers if sent_only else self._tracers
         tracers.append(fn)
-        return lambda: tracers.remove(fn) if fn in tracers else None
+        filters = self._sent_filters
+        if sent_only:
+            filters[fn] = frozenset(opcodes) if opcodes is not None else _ALL_OPCODES
+            self._sent_wanted = frozenset().union(*filters.values())
+
+        def remove() -> None:
+            if fn in tracers:
+                tracers.remove(fn)
+                if sent_only and fn not in tracers:
+                    del filters[fn]
+                    self._sent_wanted = frozenset().union(*filters.values())
+        return remove
 
     def _trace(self, direction: str, raw: bytes, decoded: object) -> None:
         _tell(self._tracers, direction, raw, decoded)
@@ -668,7 +689,7 @@ class Client:
             # these layouts take any well-formed frame: clear out what is already here
             self._absorb()
         raw = req.to_bytes()
-        if self._sent_tracers:
+        if self._sent_tracers and req.opcode in self._sent_wanted:
             _tell(self._sent_tracers, "tx", raw, req)
         buf = self._buf
         deadline = time.monotonic() + timeout
@@ -929,7 +950,7 @@ class Client:
         if kind != _NORMAL:
             self._absorb_can()
         data = req.to_can()
-        if self._sent_tracers:
+        if self._sent_tracers and req.opcode in self._sent_wanted:
             _tell(self._sent_tracers, "tx", data, req)
         t.send(self.can_id, data)
         self.stats["sent"] += 1
@@ -1206,7 +1227,9 @@ class Client:
         request a "tx" line carries (an ASCII line's decoded is its text), for the tracers
         that only watch what is sent (``add_tracer(sent_only=True)`` is told requests)."""
         if direction == "tx" and self._sent_tracers:
-            _tell(self._sent_tracers, "tx", raw, decoded if request is None else request)
+            sent = decoded if request is None else request
+            if not isinstance(sent, Request) or sent.opcode in self._sent_wanted:
+                _tell(self._sent_tracers, "tx", raw, sent)
         if self._tracers:
             self._trace(direction, raw, decoded)
 

@@ -205,7 +205,7 @@ def _watch_for_starts(client):
                 or (decoded.opcode == _SAP and decoded.type == _TARGET_SPEED)):
             sent.append(True)
 
-    remove = client.add_tracer(tracer, sent_only=True)
+    remove = client.add_tracer(tracer, sent_only=True, opcodes=_STARTS | {_SAP})
 
     def started() -> bool:
         remove()
