@@ -402,9 +402,9 @@ SCRIPT_LINES = (  # the script rows' lines, in order, and the frames they send (
 )
 # The like-for-like floor of a script line: a raw pyserial *process* that sends the script's
 # frames in order and writes each reply (hex) to stdout, timed as tmclsh -f is (whole process,
-# a 1-frame run subtracted). A fresh process's round trips measure slower here than the
-# long-lived benchmark's own (1.2-1.4x the in-process median on this VM, for the same frames
-# and the same pyserial calls): a tmclsh process pays that too, and it is no cost of tmclsh.
+# a 1-frame run subtracted). Timed so, a raw process's round trip measures 1.1-1.4x the
+# long-lived benchmark's median one on this VM (same frames, same pyserial calls): a tmclsh
+# process pays that too, and it is no cost of tmclsh.
 RAW_SCRIPT = """\
 import sys, serial
 port, count = sys.argv[1], int(sys.argv[2])
