@@ -20,13 +20,17 @@ ratio is the path block's figure over the mean of those two raw blocks' floors, 
 figure is the median of the pair ratios (stderr shows their middle half and range; the JSON
 has ``ratio_q1``/``ratio_q3``/``ratio_min``/``ratio_max``). A client block is ``--count``/10
 GAP round trips, timed one by one (its figure: the median), 20 x ``--rounds`` pairs. A script
-block is one run of a (2 x ``--count``)-line script and one of a 1-line script, in
-alternating order, in separate ``tmclsh -f`` processes: (long - short) / (lines - 1) is the
-time per line, start-up subtracted with a run measured right beside it; 4 x ``--rounds``
-pairs, fewer once 35 s have passed (unless ``--pairs`` is given). Their raw blocks measure
-two floors: the issue's GAP round trip (the table's) and the script's own frames in its
-order (GAP 1 / GAP 4 / SAP 4 / GIO 0, each costing the simulator differently); a line's time
-is a mean, so the mean GAP round trip is shown too. CPU per round trip (per script line) is
+block is one run of a (2 x ``--count``)-line script and one of a 1-line script, in separate
+``tmclsh -f`` processes, and the same two of a raw pyserial script process (``RAW_SCRIPT``:
+the script's frames in order, each reply written out), in an order that turns round every
+block: (long - short) / (lines - 1) is the time per line of each, start-up subtracted with a
+run measured right beside it, and the table's figure is tmclsh's over the raw script's, block
+by block; 4 x ``--rounds`` pairs, fewer once 35 s have passed (unless ``--pairs`` is given).
+A process's time per round trip measured so is 1.1-1.4x the long-lived benchmark's own median
+one on this VM, for the same pyserial calls: the raw blocks between measure the in-process
+floors for comparison, the issue's GAP round trip (the row's note), its mean (a line's time is
+a mean) and the script's own frames in its order (GAP 1 / GAP 4 / SAP 4 / GIO 0, each costing
+the simulator differently). CPU per round trip (per script line) is
 reported beside the wall clock the same way, pair by pair: a loaded machine adds waiting
 to the wall clock far more than CPU time. The other rows alternate whole rounds and take the
 best round's figure (other work on the machine only ever adds time); start-up rows are the
