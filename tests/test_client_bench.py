@@ -41,15 +41,17 @@ def test_client_benchmarks_run():
     assert "raw pyserial" in stderr and "median of 4 pair ratios" in stderr
 
 
-def test_script_benchmark_has_both_floors():
+def test_script_benchmark_has_its_floors():
     (result,), stderr = run_bench("script", "--count", "50", "--rounds", "1", "--pairs", "2")
     assert result["benchmark"] == "script" and result["lines"] == 200
-    for key in ("floor_us", "script_floor_us", "floor_mean_us", "floor_cpu_us"):
+    for key in ("raw_script_us", "raw_script_cpu_us", "floor_us", "script_floor_us",
+                "floor_mean_us", "floor_cpu_us"):
         assert result[key] > 0, key
     # (a 200-line script's time per line is mostly start-up noise: any sign, not checked)
     assert isinstance(result["us_per_line"], float) and isinstance(result["cpu_us_per_line"], float)
-    check_pairs(result, 2, "script_floor_", "mean_", "cpu_")
-    assert "the script's own frames" in stderr and "CPU: raw" in stderr
+    check_pairs(result, 2, "gap_", "script_floor_", "mean_", "cpu_", "gap_cpu_")
+    assert result["unit"] == "x raw script" and "in-process GAP median" in result["note"]
+    assert "raw pyserial script process" in stderr and "the script's own frames" in stderr
 
 
 def test_script_floor_frames_are_what_the_script_lines_send(fast_client):
