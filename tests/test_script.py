@@ -282,6 +282,24 @@ def test_json_errors_are_objects_and_the_summary_goes_to_stderr(json_session, tm
     assert "j.tmcl: 2 commands sent" in cap.err
 
 
+def test_json_syntax_errors_name_the_line_refused(json_session, tmp_path, capsys):
+    """A script refused before the run says which line, as a run-time error does (it said
+    "line": null); a file that cannot be read at all blames no line."""
+    inner = write(tmp_path, "inner.tmcl", "GAP 1, 0\nGAP 999, 0\n")
+    cases = {"GAP 1, 0\nSAP 4, 0\n": "SAP 4, 0",
+             "GAP 1, 0\n.repeat 2\nGAP 4, 0\n": ".repeat 2",
+             ".frob\n": ".frob",
+             f".source {inner}\n": "GAP 999, 0"}
+    for i, (text, refused) in enumerate(cases.items()):
+        path = write(tmp_path, f"s{i}.tmcl", text)
+        assert run(json_session, path) == 2
+        (obj,) = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+        assert obj["line"] == refused and "error" in obj, text
+    assert run(json_session, str(tmp_path / "missing.tmcl")) == 2
+    (obj,) = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert obj["line"] is None and "missing.tmcl" in obj["error"]
+
+
 def test_stdin_runs_blocks_as_they_complete(session, monkeypatch, capsys):
     monkeypatch.setattr(sys, "stdin", io.StringIO(".repeat 2 as i\n.echo ${i}\n.end\n"
                                                   "GAP 4, 0\n.expect 1 == 0\n.echo no\n"))

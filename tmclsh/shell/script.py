@@ -75,8 +75,10 @@ class CheckFailed(TmclError):
 
 
 class ScriptSyntaxError(ScriptError):
-    def __init__(self, file: str, line: int, message: str, kind: str = SYNTAX):
+    def __init__(self, file: str, line: int, message: str, kind: str = SYNTAX,
+                 text: str | None = None):
         self.file, self.line, self.message = file, line, message
+        self.text = text  # the line refused (--json's "line"), when one line is to blame
         super().__init__(f"{file}:{line}: {message}", kind)
 
 
@@ -174,8 +176,9 @@ class Parser:
         self.outer_blocks = 0  # blocks open around the .source that includes this file
         self.seen: dict[str, str | None] = {}  # TMCL lines checked: Step.plain of each
 
-    def fail(self, line: int, message: str, kind: str = SYNTAX) -> ScriptSyntaxError:
-        return ScriptSyntaxError(self.file, line, message, kind)
+    def fail(self, line: int, message: str, kind: str = SYNTAX,
+             text: str | None = None) -> ScriptSyntaxError:
+        return ScriptSyntaxError(self.file, line, message, kind, text)
 
     def nodes(self, lines: Iterable[str]) -> Iterator[Node]:
         open_: list[tuple[Node, list[Node]]] = []  # open blocks and the body being filled
@@ -209,16 +212,19 @@ class Parser:
                     yield node
         if open_:
             node = open_[-1][0]
-            raise self.fail(node.line, f"{_word(node.text)[0]} has no matching .end")
+            raise self.fail(node.line, f"{_word(node.text)[0]} has no matching .end",
+                            text=node.text)
 
     def line(self, number: int, text: str, open_: list[tuple[Node, list[Node]]]) -> Node | None:
         """Parse one line into a complete node, or None while a block is still open."""
         try:
             return self._line(number, text, open_)
-        except ScriptSyntaxError:
+        except ScriptSyntaxError as exc:
+            if exc.text is None and exc.file == self.file:  # (an included file's says its own)
+                exc.text = text
             raise
         except TmclError as exc:
-            raise self.fail(number, str(exc), error_kind(exc)) from None
+            raise self.fail(number, str(exc), error_kind(exc), text) from None
 
     def _line(self, number: int, text: str, open_: list[tuple[Node, list[Node]]]) -> Node | None:
         file = self.file
@@ -665,7 +671,8 @@ def _stdin_lines() -> Iterator[str]:
 
 def _report_plain(session: Session, exc: TmclError) -> None:
     if session.out.json:
-        session.out.emit({"line": None, "error": str(exc)})
+        # (the line refused; null when no one line is to blame: an unreadable file)
+        session.out.emit({"line": getattr(exc, "text", None), "error": str(exc)})
     else:
         session.out.err.print(str(exc), style="tmcl.error", markup=False)
 
