@@ -516,3 +516,13 @@ def test_shell_ctrl_c_during_continue(client, sim, timer_file, capsys):
     assert "interrupted after 11 steps" in out.out + out.err
     assert "step @" in out.out
     assert program.status(client).state == "step"
+
+
+def test_stop_with_no_program_says_so_rather_than_showing_zeros(client, capsys):
+    """Memory never written reads 0 0, 0, 0: no command, so no disassembly of one."""
+    Session(client, Output(), yes=True).run_line(".stop")
+    out = capsys.readouterr().out
+    assert out.startswith("stop @0") and "the end of the stored program" in out
+    assert "0, 0, 0" not in out
+    (obj,) = run_json(json_session(client), capsys, ".status")
+    assert obj["state"] == "stop" and obj["pc"] == 0 and obj["end"] is True and "text" not in obj

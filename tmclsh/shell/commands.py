@@ -408,7 +408,7 @@ COMMANDS: tuple[Command, ...] = (
             details=('135 (the application status) and GP 130 (the program counter), with '
                      'the source line at the\n'
                      'program counter. JSON: {"state": ..., "pc": ..., "file": ..., "line": '
-                     '..., "text": ...}.')),
+                     '..., "text": ...}; "end": true\nwhere no instruction is stored.')),
     Command('.where', 'debugger', '.where',
             'where the program is: address, source line, enclosing label',
             category='program'),

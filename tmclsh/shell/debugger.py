@@ -71,6 +71,7 @@ class Where:
     line: int | None = None
     text: str = ""
     label: str | None = None
+    end: bool = False  # no instruction stored here (the end of the program, or none at all)
 
     @property
     def place(self) -> str:
@@ -85,6 +86,8 @@ class Where:
             obj["line"] = self.line
         if self.text:
             obj["text"] = self.text
+        if self.end:
+            obj["end"] = True
         return obj
 
 
@@ -234,6 +237,8 @@ def where(session: Session, pc: int) -> Where:
         ins = None
     if ins is None:
         return Where(pc)
+    if program.is_end_marker(ins):  # (memory never written reads 0 0, 0, 0: no command)
+        return Where(pc, end=True)
     text, _comment = asm.disassemble_instruction(ins, session.module)
     return Where(pc, text=text)
 
@@ -375,6 +380,8 @@ def report(session: Session, st: AppStatus, *, prefix: str = "", extra: dict | N
         t.append(f"  {w.place}", style="tmcl.note")
     if w.text:
         t.append(f"  {w.text}")
+    elif w.end:
+        t.append("  (no instruction here: the end of the stored program)", style="tmcl.note")
     _line(session, t)
     for d, v in values:
         out.print(Text.assemble(f"  {d.number}: ", (d.expr, "tmcl.name"), " = ", (v, "tmcl.value")))
