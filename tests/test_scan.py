@@ -49,6 +49,9 @@ def test_scan_finding_nothing_fails(rs485_line, run_tmclsh):
     assert p.returncode == 3 and p.stdout == ""
     assert f"nothing answered; tried addresses 4..6 on {path} @ 9600 (20 ms each)" in p.stderr
     assert "--baud auto" in p.stderr
+    # the timeout given before the subcommand is the same option, not lost
+    p = run_tmclsh("--timeout", "0.03", "scan", "--port", path, "--from", "4", "--to", "5")
+    assert p.returncode == 3 and "(30 ms each)" in p.stderr, p.stderr
 
 
 def test_scan_over_python_can_virtual(monkeypatch, capsys):

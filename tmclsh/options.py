@@ -204,7 +204,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_connection(sc, auto_baud=True, nested=True)
     sc.add_argument("--from", dest="first", type=_address, default=1, metavar="N")
     sc.add_argument("--to", dest="last", type=_address, default=255, metavar="N")
+    # (SUPPRESS: ``tmclsh --timeout S scan`` keeps the S given before the subcommand)
     sc.add_argument("--timeout", type=setting("scan_timeout"), metavar="S",
+                    default=argparse.SUPPRESS,
                     help="per-address timeout (default: from the link, the wire time of a "
                          f"request and its reply at the baud rate plus a margin; "
                          f"{_range('scan_timeout')})")
