@@ -468,6 +468,7 @@ class Client:
                                  "(the link was closed or lost; reconnect first)")
         kind = _NORMAL if req.opcode < _FIRST_CONTROL else req.reply_kind
         attempt = 0
+        went = False  # req itself went out, in some attempt
         while True:
             attempt += 1
             sent = False  # a failed resynchronisation sends nothing (its marker is counted)
@@ -481,7 +482,7 @@ class Client:
                 if (self._stale or self._stale_versions or self._stale_opaque
                         or self._drained) and self._dirty:  # (the property, spelt out first)
                     synced = self._sync_before(req, kind, timeout)
-                sent = True
+                sent = went = True
                 # (the line was found clear just now, unless a resynchronisation ran since)
                 reply = (self._exchange(req, kind, timeout) if pending is None
                          else self._exchange_stream(req, kind, timeout, absorb=synced))
@@ -515,7 +516,12 @@ class Client:
             tries = 1 + (retries if not sent or idempotent(req, self.downloading) else 0)
             if attempt >= tries:
                 if tries > 1:
-                    raise type(failure)(f"{failure} (after {tries} attempts)") from failure
+                    again = type(failure)(f"{failure} (after {tries} attempts)")
+                    again.__cause__ = failure  # (raise ... from failure)
+                    failure = again
+                # whether the module may have got it (the shell says so of a command it
+                # does not repeat by itself: MVP REL, ...)
+                failure.sent = went  # type: ignore[attr-defined]
                 raise failure
             self.stats["retries"] += 1
             if self._tracers:

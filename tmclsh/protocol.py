@@ -18,7 +18,7 @@ Three replies break the pattern and are modelled here so no caller re-invents th
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import IntEnum
 
 from .errors import ChecksumError, FrameError
@@ -146,6 +146,8 @@ class Request:
     type: int = 0
     motor: int = 0
     value: int = 0
+    # the nine bytes, made when first sent: a script or watch sends the same request again
+    _frame: bytes | None = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         _check_byte("address", self.address)
@@ -180,13 +182,19 @@ class Request:
             _set(req, "type", type)
             _set(req, "motor", motor)
             _set(req, "value", value)
+            _set(req, "_frame", None)
             return req
         return cls(address, opcode, type, motor, value)
 
     def to_bytes(self) -> bytes:
         """Serial framing: address, instruction, checksum."""
-        body = _SERIAL_HEAD.pack(self.address, self.opcode, self.type, self.motor, self.value)
-        return body + bytes((sum(body) & 0xFF,))
+        frame = self._frame
+        if frame is None:
+            body = _SERIAL_HEAD.pack(self.address, self.opcode, self.type, self.motor,
+                                     self.value)
+            frame = body + bytes((sum(body) & 0xFF,))
+            _set(self, "_frame", frame)
+        return frame
 
     def to_can(self) -> bytes:
         """CAN data field: the instruction alone (the id addresses the module)."""

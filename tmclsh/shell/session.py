@@ -324,14 +324,13 @@ class Session:
                     "after it exits; .mode ascii switches to it (tmclsh then talks ASCII "
                     "and switches back at exit)")
             self._confirm_persistent(enc)
-        before = _frames_sent(client)
         try:
             reply = client.request(req)
         except (TmclTimeoutError, ChecksumError) as exc:
             if idempotent(req) or isinstance(exc, TimeLimitError):
                 raise
-            sent = _frames_sent(client) > before
-            raise _unsure(client, req, exc, sent) from exc
+            # (the client says whether the frame went out; if it cannot tell, it may have)
+            raise _unsure(client, req, exc, getattr(exc, "sent", True)) from exc
         result = Result(text, enc, reply)
         if reply is not None:
             seq = client.replies
@@ -364,12 +363,6 @@ class Session:
     def _record(self, line: str, outcome: str) -> None:
         for fn in list(self.recorders):
             fn(line, outcome)
-
-
-def _frames_sent(client: Client) -> int:
-    """Frames sent so far, the client's own line checks (one 136 each) left out."""
-    stats = client.stats
-    return stats["sent"] - stats["resyncs"]
 
 
 def _unsure(client: Client, req, exc: TmclError, sent: bool) -> TmclError:

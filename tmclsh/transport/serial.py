@@ -84,7 +84,9 @@ class SerialTransport(StreamTransport):
 
     @property
     def is_open(self) -> bool:
-        return self._ser is not None and self._ser.is_open
+        # (a descriptor is kept only while the port is open: close() drops it; asked twice
+        # per script line, so pyserial's own property is left for the other ports)
+        return self._fd is not None or (self._ser is not None and self._ser.is_open)
 
     def _port(self) -> pyserial.SerialBase:
         if self._ser is None:
