@@ -148,6 +148,23 @@ def test_status_101_outside_an_upload_is_an_error_not_a_value(run_tmclsh, respon
     assert p.returncode == 0 and '"reply": -5000' in p.stdout
 
 
+def test_a_132_line_left_unended_is_ended_when_tmclsh_exits(run_tmclsh, responders):
+    """A 132 typed (or in a script) with no 133 after it left the module storing every
+    command it got after tmclsh had gone (the next tmclsh ended it; another program would
+    not): the exit ends it, and says so."""
+    module = responders(DownloadModeModule)
+    module.downloading = False
+    p = run_tmclsh("--port", module.path, "-c", "132")
+    assert p.returncode == 0, p.stderr
+    assert not module.downloading and module.log[-1][1] == QUIT_DOWNLOAD
+    assert ("still in download mode (a 132 line with no 133 after it): ended it with 133"
+            in p.stderr)
+    before = len(module.log)
+    p = run_tmclsh("--port", module.path, "-c", "132\n133")  # ended by its own line
+    assert p.returncode == 0 and "download mode" not in p.stderr, p.stderr
+    assert [raw[1] for raw in module.log[before:]].count(QUIT_DOWNLOAD) == 1
+
+
 def test_the_first_command_after_a_reconnect_ends_download_mode(responders):
     module = responders(DownloadModeModule)
     module.downloading = False

@@ -86,6 +86,8 @@ _ALL_OPCODES = frozenset(range(256))  # a sent-only tracer that watches every co
 # GP 129 "download mode" (all three manuals): read to find out whether the module executes
 # commands; in download mode the read itself is stored (answered with status 101) instead
 _GP_DOWNLOAD_MODE = 129
+_START_DOWNLOAD = int(Control.START_DOWNLOAD)
+_QUIT_DOWNLOAD = int(Control.QUIT_DOWNLOAD)
 
 # Commands a retry may repeat without changing the outcome. Anything else (CALC, SAC, the
 # user functions, CCO (it captures a position that moves on), run/step/download, raw numbers
@@ -169,6 +171,9 @@ class Client:
         self.module: Module | None = load_module(module) if isinstance(module, str) else module
         self.version: str | None = None
         self.downloading = False  # set by tmclsh.program between 132 and 133
+        # a 132 was answered that no 133 has ended yet, outside tmclsh.program (a line typed
+        # or a script's): close() ends it, so the module is not left storing what it gets
+        self.left_downloading = False
         self.ascii_link = None  # set by tmclsh.ascii when the module is driven in ASCII mode
         self._lock = threading.RLock()
         self._buf = bytearray()
@@ -363,6 +368,11 @@ class Client:
                 else:
                     reply = self._request(req, timeout,
                                           self.retries if retries is None else retries)
+            if req.opcode >= _FIRST_CONTROL and reply is not None:
+                if req.opcode == _START_DOWNLOAD and reply.ok and not self.downloading:
+                    self.left_downloading = True
+                elif req.opcode == _QUIT_DOWNLOAD and reply.ok:
+                    self.left_downloading = False
             if reply is not None and reply.status == _LOADED and not self.downloading:
                 raise DownloadModeError(
                     _LOADED, reply,
@@ -1279,11 +1289,33 @@ class Client:
                 hook()
             except Exception as exc:
                 _failed("closing", exc)
+        if self.left_downloading and self.transport.is_open:
+            self._end_left_download()
         if self.ascii_link is not None:
             try:
                 self.ascii_link.close()
             except Exception as exc:
                 _failed("leaving ASCII mode", exc)
+
+    def _end_left_download(self) -> None:
+        """133 for a 132 that was sent and never ended (by a line, not an upload)."""
+        self.left_downloading = False
+        self.downloading = True  # (what 133 gets while the module stores commands)
+        try:
+            reply = self.request(Request(self.address, Control.QUIT_DOWNLOAD, 0, 0, 0))
+        except Exception as exc:
+            _failed("ending download mode (133)", exc)
+            return
+        finally:
+            self.downloading = False
+        if reply is not None and reply.ok:
+            self.notice(f"the module at address {self.address} was still in download mode "
+                        "(a 132 line with no 133 after it): ended it with 133; what was sent "
+                        "after the 132 is stored as its program")
+        else:
+            self.notice(f"the module at address {self.address} is in download mode (a 132 "
+                        "line) and did not leave it for 133 "
+                        f"(status {reply.status if reply is not None else 'none'})")
 
     def switch_transport(self, transport: Transport, module: Module | str | None = None) -> None:
         """Go on on another link (the shell's ``.connect``): the old one is left as ``close``
