@@ -220,3 +220,43 @@ def test_ctrl_c_after_a_lost_link_reconnects_and_says_why_it_stopped(tcp_sim, ca
         assert "interrupted: stopped motor 0 (MST; speed reads 0)" in out
     finally:
         client.close()
+
+
+def test_stopall_finds_the_link_lost_on_its_way_brings_it_back_and_stops(tcp_sim, capsys):
+    """The cable was pulled and put back while nothing was sent: the stop is the first to
+    find the link dead. It reconnects and stops (it said "stopping failed")."""
+    sim, server, url = tcp_sim
+    client = Client(open_serial(url), module="TMCM-1311", timeout=0.3)
+    session = Session(client, Output())
+    try:
+        client.execute("ROR 0, 30000")
+        server.drop_client()
+        time.sleep(0.1)
+        session.run_line(".stopall")
+        out = capsys.readouterr().out
+        assert f"reconnected to {url}" in out and "stopped motor 0 (MST; speed reads 0)" in out
+        assert sim.param("axis", 3, 0) == 0
+    finally:
+        client.close()
+
+
+def test_ctrl_c_in_a_script_after_the_link_was_lost_reconnects_and_stops(tcp_sim, tmp_path):
+    sim, server, url = tcp_sim
+    script = tmp_path / "turn.tmcl"
+    script.write_text("ROR 0, 30000\n.sleep 30\n")
+    p = subprocess.Popen([sys.executable, "-m", "tmclsh", "--port", url, "-m", "TMCM-1311",
+                          "-f", str(script)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True, env=tmclsh_env(), cwd=str(ROOT))
+    try:
+        hang_up_after(server, 0.3).join(25)
+        deadline = time.monotonic() + 10
+        while sim.param("axis", 3, 0) == 0 and time.monotonic() < deadline:
+            time.sleep(0.02)  # (the motor turns: the script is in its .sleep)
+        p.send_signal(2)
+        _, err = p.communicate(timeout=20)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 130, err
+    assert f"reconnected to {url}" in err and "stopped motor 0 (MST; speed reads 0)" in err, err
+    assert sim.param("axis", 3, 0) == 0

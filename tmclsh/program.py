@@ -613,16 +613,21 @@ class StopReport:
     stopped: list[int] = field(default_factory=list)
     turning: dict[int, int] = field(default_factory=dict)
     unknown: dict[int, str] = field(default_factory=dict)
+    reconnected: bool = False  # the link was lost and brought back for the stop
+    link_error: str | None = None  # the link was lost and could not be: nothing was sent
 
     @property
     def ok(self) -> bool:
-        return not self.turning and not self.unknown and self.program_error is None
+        return (not self.turning and not self.unknown and self.program_error is None
+                and self.link_error is None)
 
     def to_json(self) -> dict[str, object]:
         return {"program": self.program, "stopped": self.stopped,
                 "turning": {str(m): v for m, v in self.turning.items()},
                 "unknown": {str(m): v for m, v in self.unknown.items()},
-                **({"program_error": self.program_error} if self.program_error else {})}
+                **({"program_error": self.program_error} if self.program_error else {}),
+                **({"reconnected": True} if self.reconnected else {}),
+                **({"link_error": self.link_error} if self.link_error else {})}
 
 
 @dataclass
@@ -719,8 +724,33 @@ def activity(client, *, timeout: float | None = None) -> Activity:
 
 
 def stop_everything(client, *, settle: float = SETTLE,
-                    sleep: Callable[[float], None] = time.sleep) -> StopReport:
+                    sleep: Callable[[float], None] = time.sleep,
+                    reconnect: Callable[[], BaseException | None] | None = None) -> StopReport:
     """The safety stop behind Ctrl-C, ``.stopall`` and the watch's stop key.
+
+    ``reconnect`` (None when the link is back, else why not): a link that is lost before
+    the stop, or found lost on its way (a cable pulled and put back while a script waited),
+    is worth one attempt to bring it back, and then the whole stop again;
+    ``report.reconnected`` says it was, ``report.link_error`` why it could not be.
+    """
+    if reconnect is not None and not client.connected:
+        why = reconnect()
+        if why is not None:
+            return StopReport(link_error=str(why))
+        report = _stop_everything(client, settle, sleep)
+        report.reconnected = True
+        return report
+    report = _stop_everything(client, settle, sleep)
+    if reconnect is not None and not report.ok and not client.connected:
+        why = reconnect()
+        if why is None:
+            report = _stop_everything(client, settle, sleep)
+            report.reconnected = True
+    return report
+
+
+def _stop_everything(client, settle: float, sleep: Callable[[float], None]) -> StopReport:
+    """``stop_everything`` on the link as it is.
 
     A stored program that runs would drive the motors again right after MST, so it is
     stopped first (128; the state is read with 135, and 128 is sent anyway when that read

@@ -1049,17 +1049,18 @@ def stop_all(session: Session, why: str = ""):
 
     client = session.client
     prefix = f"{why}: " if why else ""
-    if not client.connected:  # the link was lost: the stop is worth one attempt to bring it back
-        failed = session.reconnect()
-        if failed is not None:
-            session.out.warn(f"{prefix}not connected ({failed}); nothing could be stopped")
-            return None
-        session.out.info(f"reconnected to {client.describe()}")
     try:
-        report = program.stop_everything(client)
+        # a link lost before or during the stop is worth one attempt to bring it back
+        report = program.stop_everything(client, reconnect=session.reconnect)
     except (TmclError, OSError) as exc:  # not expected (it reports instead), but a stop never raises
         session.out.warn(f"{prefix}stopping failed: {exc}")
         return None
+    if report.link_error is not None:
+        session.out.warn(f"{prefix}not connected ({report.link_error}); nothing could be "
+                         "stopped")
+        return None
+    if report.reconnected:
+        session.out.info(f"reconnected to {client.describe()}")
     if report.program is not None and report.program_error is None:
         session.state["program_state"] = "stop"  # the toolbar and prompt follow
     report_stop(session, report, why)

@@ -77,17 +77,28 @@ def _stop_on_interrupt(client) -> None:
     """Ctrl-C in -c/-f: stop everything (program.stop_everything) and say what reads back."""
     from ..program import stop_everything
 
-    if not client.connected:
-        print("interrupted; not connected, nothing could be stopped", file=sys.stderr)
-        return
+    def reconnect() -> BaseException | None:
+        try:
+            client.reconnect()
+        except (TmclError, OSError) as exc:
+            return exc
+        return None
+
     try:
-        report = stop_everything(client)
+        # a link lost before or during the stop is worth one attempt to bring it back
+        report = stop_everything(client, reconnect=reconnect)
     except KeyboardInterrupt:
         print("interrupted again: the motors may still turn", file=sys.stderr)
         return
     except (TmclError, OSError) as exc:
         print(f"interrupted; stopping failed: {exc}", file=sys.stderr)
         return
+    if report.link_error is not None:
+        print(f"interrupted; not connected ({report.link_error}); nothing could be stopped",
+              file=sys.stderr)
+        return
+    if report.reconnected:
+        print(f"reconnected to {client.describe()}", file=sys.stderr)
     from .builtin import describe_stop
 
     ok, warnings = describe_stop(report)
