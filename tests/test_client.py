@@ -165,6 +165,34 @@ def test_event_while_idle_goes_to_listeners_through_the_poller(pty_client):
     assert seen == [(1, 5000)]
 
 
+def test_a_poller_that_outlives_its_stop_still_ends_when_another_starts(pty_client):
+    """stop_event_poller waits a second; a poller stuck longer (a listener that blocked)
+    ran on beside the next one, both taking events from the line."""
+    c = pty_client
+    stuck = threading.Event()
+    calls = 0
+
+    def poll():
+        nonlocal calls
+        calls += 1
+        if calls == 1:
+            stuck.set()
+            time.sleep(1.5)  # longer than stop_event_poller waits
+        return 0
+
+    c.poll = poll  # type: ignore[method-assign]
+    c.start_event_poller(0.01)
+    assert stuck.wait(2)
+    c.stop_event_poller()  # gives up waiting after 1 s
+    c.start_event_poller(0.01)
+    try:
+        time.sleep(1.0)  # the stuck one has returned by now
+        alive = [t for t in threading.enumerate() if t.name == "tmclsh-events"]
+        assert len(alive) == 1
+    finally:
+        c.stop_event_poller()
+
+
 def test_poll_delivers_pending_events_and_unsubscribe_works(pty_client):
     c = pty_client
     events = []

@@ -1080,10 +1080,12 @@ class Client:
         """Deliver 138 events while no command is running, from a background thread."""
         if self._poller is not None:
             return
-        self._poller_stop.clear()
+        # each poller its own stop: one that outlived stop_event_poller's wait (a listener
+        # that blocked) still ends, instead of running on beside the next one
+        stop = self._poller_stop = threading.Event()
 
         def run() -> None:
-            while not self._poller_stop.wait(interval):
+            while not stop.wait(interval):
                 try:
                     self.poll()
                 except TransportError:
