@@ -220,3 +220,58 @@ def test_a_displaced_answer_that_arrives_damaged_still_casts_doubt(dup_client):
     assert c.request(Request(1, SGP, 0, 2, 23)).value == 23
     (s,) = c.take_suspects()
     assert s.request.value == 22 and s.reply.value == 21
+
+
+# -- upload's verify on a line that brings answers twice --------------------------------------
+
+def _late_copy_of_read(sim, nth: int) -> None:
+    """The reply to the ``nth`` 134 (program memory read) comes again, after the next
+    request: that read takes the copy, and its own answer comes while nothing waits."""
+    send, reads = sim._send_reply, []
+
+    def sending(channel, module, op, ans):
+        if op == 134:
+            reads.append(op)
+            if len(reads) == nth:
+                sim.faults.dup_late_next = 1
+        send(channel, module, op, ans)
+
+    sim._send_reply = sending
+
+
+def test_verify_does_not_take_a_copy_of_the_cell_before_for_a_match(pty_client):
+    """Cell 2 holds something else; the copy of cell 1's answer read as cell 2 matched what
+    was uploaded, and verify said identical."""
+    from tmclsh.program import verify_image
+    from tmclsh.protocol import Instruction
+
+    c = pty_client
+    same, other = Instruction(4, 0, 0, 1000), Instruction(4, 0, 0, 2000)
+    c.sim.load_program([same, same, other])
+    _late_copy_of_read(c.sim, 2)
+    mm = verify_image(c, [same, same, same])
+    assert mm is not None and (mm.address, mm.actual, mm.doubtful) == (2, other, False)
+
+
+def test_verify_does_not_call_a_copy_of_the_cell_before_a_difference(pty_client):
+    from tmclsh.program import verify_image
+    from tmclsh.protocol import Instruction
+
+    c = pty_client
+    prog = [Instruction(4, 0, 0, 1000), Instruction(4, 0, 0, 2000), Instruction(3, 0, 0, 0)]
+    c.sim.load_program(prog)
+    _late_copy_of_read(c.sim, 1)
+    assert verify_image(c, prog) is None
+
+
+def test_verify_on_a_line_that_keeps_doubling_answers_is_no_pass(pty_client):
+    """Every answer comes twice, the copy after the next request: a read-back cannot be told
+    apart from the frame before it, so nothing may pass as verified."""
+    from tmclsh.program import verify_image
+    from tmclsh.protocol import Instruction
+
+    c = pty_client
+    prog = [Instruction(4, 0, 0, 1000)] * 3
+    c.sim.load_program(prog)
+    c.sim.faults.rates = {"dup-late": 1.0}
+    assert verify_image(c, prog) is not None

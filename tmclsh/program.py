@@ -101,6 +101,9 @@ class Mismatch:
     address: int
     expected: Instruction
     actual: Instruction
+    # the read-back stayed in doubt (answers that may have been another request's, three
+    # rounds running): not shown to differ, not shown to be the same either
+    doubtful: bool = False
 
 
 @dataclass
@@ -385,15 +388,56 @@ def read_program(client, start: int = 0, count: int | None = None, *,
 def verify_image(client, instructions: Sequence[Instruction], start: int = 0, *,
                  progress: Progress | None = None, timeout: float | None = None
                  ) -> Mismatch | None:
-    """Read every instruction back and compare bytes; the first difference, or None."""
+    """Read every instruction back and compare bytes; the first difference, or None.
+
+    A 134 answer is any well-formed frame, so a copy of an earlier answer that a bad line
+    brings late reads as the cell's content: it may match where the cell differs, or differ
+    where it matches. The client finds such a read out when the cell's own answer comes
+    while nothing waits (a suspect); those cells are read again, ``_CONFIRM_ROUNDS`` times
+    at most. A cell still in doubt then is no pass (``Mismatch.doubtful``): verified means
+    certain."""
     total = len(instructions)
+    got: dict[int, Instruction] = {}
+    todo: Sequence[int] = range(total)
+    doubtful: set[int] = set()
+    for round_ in range(1 + _CONFIRM_ROUNDS):
+        read_at: dict[int, int] = {}  # Client.replies after the read -> the cell's index
+        for n, idx in enumerate(todo):
+            got[idx] = read_instruction(client, start + idx, timeout=timeout)
+            read_at[client.replies] = idx
+            if progress is not None and round_ == 0:
+                progress("verify", n + 1, total)
+        doubtful = _doubtful_reads(client, read_at, timeout)
+        if not doubtful:
+            break
+        todo = sorted(doubtful)
     for idx, want in enumerate(instructions):
-        got = read_instruction(client, start + idx, timeout=timeout)
-        if got.to_bytes() != want.to_bytes():
-            return Mismatch(start + idx, want, got)
-        if progress is not None:
-            progress("verify", idx + 1, total)
+        if idx in doubtful:
+            return Mismatch(start + idx, want, got[idx], doubtful=True)
+        if got[idx].to_bytes() != want.to_bytes():
+            # a difference is said only when a second read says the same (a copy of another
+            # frame that no suspect gave away would otherwise be named the cell's content)
+            again = read_instruction(client, start + idx, timeout=timeout)
+            unsure = bool(_doubtful_reads(client, {client.replies: idx}, timeout))
+            if again.to_bytes() == want.to_bytes() and not unsure:
+                continue
+            certain = again.to_bytes() == got[idx].to_bytes() and not unsure
+            return Mismatch(start + idx, want, again, doubtful=not certain)
     return None
+
+
+def _doubtful_reads(client, read_at: dict[int, int], timeout: float | None) -> set[int]:
+    """The cells (``read_at``'s values) whose answer may have been another request's. One
+    more exchange (136 type 1) first: the line's last answer may still be on its way."""
+    suspects = getattr(client, "suspects", None)
+    if suspects is None or not read_at:
+        return set()
+    try:
+        _send(client, Control.GET_VERSION, 1, timeout=timeout)
+    except TmclError:
+        pass  # what it could find is found by the reads' own flushes as well
+    with client.lock:  # (the event poller may add one meanwhile)
+        return {read_at[s.seq] for s in suspects if s.seq in read_at}
 
 
 def same_image(a: Sequence[Instruction], b: Sequence[Instruction]) -> bool:

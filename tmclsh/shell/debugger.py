@@ -512,8 +512,14 @@ def cmd_upload(session: Session, argtext: str) -> None:
         w = where(session, mm.address)
         expected, _ = asm.disassemble_instruction(mm.expected, module)
         actual, _ = asm.disassemble_instruction(mm.actual, module)
-        message = (f"verify failed at address {mm.address} ({w.place}): uploaded "
-                   f"'{expected}', the module holds '{actual}'")
+        if mm.doubtful:
+            message = (f"verify failed at address {mm.address} ({w.place}): its read-back "
+                       "stayed in doubt (the line brought answers nothing waited for, so a "
+                       "reply may have been another request's); upload again on a quieter "
+                       "line")
+        else:
+            message = (f"verify failed at address {mm.address} ({w.place}): uploaded "
+                       f"'{expected}', the module holds '{actual}'")
         if session.out.json:
             session.out.emit({**result.to_json(), "error": message})
         else:
