@@ -53,7 +53,7 @@ complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modu
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan' -l host-address -x -d 'host address (default 2; 0..255)'
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan' -l ascii -d 'talk to the module through its ASCII mode instead of binary frames'
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan' -l json -d 'one JSON object per result on stdout'
-complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan' -l trace -d 'every frame in hex, decoded, on stderr'
+complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan' -l trace -d 'every frame in hex, decoded, on stderr (the connect\'s own too)'
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan' -l timeout -x -d 'reply timeout in seconds (default 1; 0.001..60 s)'
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan' -l retries -x -d 'retries of idempotent commands (default 2; 0..10)'
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan' -l keep-going -d 'scripts: continue after an error'

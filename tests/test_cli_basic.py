@@ -47,23 +47,34 @@ def test_json_error_object_and_exit_status(tmp_path):
     assert len(objs) == 2  # a -c run stops at the first error
 
 
+def trace_and_rest(stderr: str) -> tuple[list[str], list[str]]:
+    """--trace's lines (a time, then tx>/<rx/!!/--) and the others."""
+    trace = [x for x in stderr.splitlines() if x[13:17] in ("tx> ", "<rx ", "!!  ", "--  ")]
+    return trace, [x for x in stderr.splitlines() if x not in trace]
+
+
 def test_trace_on_stderr_and_nothing_sent_for_bad_input(tmp_path):
     p = tmclsh("--sim", "-c", "GAP 4, 0", "--trace", tmp=tmp_path)
     assert p.returncode == 0
+    trace, _ = trace_and_rest(p.stderr)
+    # the connect's own frames come first: 136 (what module), GP 129 (download mode?)
+    assert "136 firmware version" in trace[0] and "version '1311V111'" in trace[1]
+    assert "DownloadMode" in trace[2]
     assert "tx> 01 06 04 00 00 00 00 00 0b  GAP 4, 0  // MaxPositioningSpeed" in p.stderr
     assert "<rx 02 01 64 06" in p.stderr
     assert "tx>" not in p.stdout and "MaxPositioningSpeed = " in p.stdout
     p = tmclsh("--sim", "-c", "SAP 140, 0, 99", "--trace", tmp=tmp_path)
     assert p.returncode == 1
-    assert "error: 99 is out of range" in p.stderr
-    assert "tx>" not in p.stderr
-    assert len(p.stderr.strip().splitlines()) == 1  # one clear line
+    trace, rest = trace_and_rest(p.stderr)
+    assert rest == ["error: 99 is out of range for AP 140 MicrostepResolution: allowed 0..8"]
+    assert not [x for x in trace if "SAP" in x]  # nothing of the line was sent
 
 
 def test_eeprom_write_needs_yes_in_scripts(tmp_path):
     p = tmclsh("--sim", "-c", "STAP MaxPositioningSpeed, 0", "--trace", tmp=tmp_path)
     assert p.returncode == 1
-    assert "--yes" in p.stderr and "tx>" not in p.stderr
+    trace, _ = trace_and_rest(p.stderr)
+    assert "--yes" in p.stderr and not [x for x in trace if "STAP" in x]
     p = tmclsh("--sim", "-c", "STAP MaxPositioningSpeed, 0", "--yes", tmp=tmp_path)
     assert p.returncode == 0, p.stderr
     assert "stored in EEPROM" in p.stdout

@@ -103,9 +103,13 @@ def open_transport(settings: dict, *, fallback: bool = False) -> Transport:
 
 
 def open_client(settings: dict, *, fallback: bool = False,
-                notice: Callable[[str], None] | None = None) -> Client:
+                notice: Callable[[str], None] | None = None,
+                tracer: Callable[[Client], Callable[[str, bytes, object], None]] | None = None
+                ) -> Client:
     """A client on ``open_transport(settings)``, in ASCII mode if asked, module identified
-    and out of download mode (see ``start``); ``notice`` gets what it did on its own."""
+    and out of download mode (see ``start``); ``notice`` gets what it did on its own;
+    ``tracer(client)`` makes a tracer (``Client.add_tracer``) for the frames of the connect
+    itself, and no more."""
     transport = open_transport(settings, fallback=fallback)
     module = settings.get("module") or settings.get("sim")
     try:
@@ -118,7 +122,12 @@ def open_client(settings: dict, *, fallback: bool = False,
         transport.close()
         raise
     client.on_notice = notice
-    return start(client, ascii=bool(settings.get("ascii")))
+    remove = client.add_tracer(tracer(client)) if tracer is not None else None
+    try:
+        return start(client, ascii=bool(settings.get("ascii")))
+    finally:
+        if remove is not None:
+            remove()
 
 
 def connect(port: str | None = None, *, baud: int = 9600, can: str | None = None,

@@ -113,7 +113,8 @@ def add_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--ascii", action="store_true", default=None,
                    help="talk to the module through its ASCII mode instead of binary frames")
     g.add_argument("--json", action="store_true", help="one JSON object per result on stdout")
-    g.add_argument("--trace", action="store_true", help="every frame in hex, decoded, on stderr")
+    g.add_argument("--trace", action="store_true",
+                   help="every frame in hex, decoded, on stderr (the connect's own too)")
     g.add_argument("--timeout", type=setting("timeout"), metavar="S",
                    help=f"reply timeout in seconds (default 1; {_range('timeout')})")
     g.add_argument("--retries", type=setting("retries"), metavar="N",

@@ -53,8 +53,12 @@ def run_shell(args: argparse.Namespace) -> int:
     settings = connection_settings(args)
     # only a person at the prompt may be given the simulator for want of a module: a run
     # nobody watches (-c, -f, piped input) fails instead (exit 3)
+    tracer = None
+    if args.trace:  # the connect's own frames too (136, the download mode check, ...)
+        from .trace import connect_tracer as tracer
     try:
-        client = open_client(settings, fallback=_interactive(args), notice=_notice)
+        client = open_client(settings, fallback=_interactive(args), notice=_notice,
+                             tracer=tracer)
     except TmclError as exc:
         print(f"tmclsh: {exc}", file=sys.stderr)
         return EXIT_CONNECT

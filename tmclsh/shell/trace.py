@@ -117,19 +117,35 @@ def format_frame(direction: str, raw: bytes, decoded: object, module: Module | N
     return line
 
 
+def connect_tracer(client) -> Tracer:
+    """``--trace`` for the connect's own frames, before there is a session: plain lines on
+    stderr, decoded for the module known so far (the 136 answer names it)."""
+    import sys
+
+    return Tracer(None, write=lambda line: print(line.plain, file=sys.stderr, flush=True),
+                  module=lambda: client.module)
+
+
 class Tracer:
     """A client tracer that prints each frame to stderr (through the session's Output)."""
 
-    def __init__(self, session: Session):
+    def __init__(self, session: Session | None, *, write=None, module=None):
         self.session = session
         self.last_request: Request | None = None
+        self._write = write  # (connect_tracer's: no session yet)
+        self._module = module
 
     def __call__(self, direction: str, raw: bytes, decoded: object) -> None:
         if direction == "tx" and isinstance(decoded, Request):
             self.last_request = decoded
-        line = format_frame(direction, raw, decoded, self.session.client.module,
+        session = self.session
+        module = session.client.module if session is not None else self._module()
+        line = format_frame(direction, raw, decoded, module,
                             self.last_request if direction == "rx" else None)
-        self.session.out.err.print(line, highlight=False, markup=False, soft_wrap=True)
+        if session is None:
+            self._write(line)
+        else:
+            session.out.err.print(line, highlight=False, markup=False, soft_wrap=True)
 
 
 def enable_trace(session: Session) -> None:
