@@ -300,8 +300,10 @@ def test_nothing_answering_says_what_was_tried_and_what_to_try(run_tmclsh, respo
     err = p.stderr
     first, names, causes = likely_causes(err)
     assert first == (f"tmclsh: no module answered at address 1 on {module.path} @ 9600: asked "
-                     "for its version (136) twice and tried its ASCII mode, waiting up to "
+                     "for its version (136) 3 times and tried its ASCII mode, waiting up to "
                      "0.1 s each. Likely causes, most likely first:")
+    # 1 + --retries (default 2) times, as said; the mode probe's 136 is one of them
+    assert [raw[1] for raw in module.log if raw[:1] == b"\x01"].count(136) == 3
     assert names == [
         "- baud rate", "- address", "- a slow link", "- the port"]
     assert ("GP 65 allows 14400, 19200, 28800, 38400, 57600, 76800, 115200, 230400, 250000, "
@@ -446,6 +448,16 @@ def test_garbled_replies_at_connect_point_at_the_baud_rate(run_tmclsh, responder
     assert cause.startswith("  - baud rate:")
 
 
+@pytest.mark.parametrize("retries, asked, said", [("0", 2, "twice"), ("4", 5, "5 times")])
+def test_connect_asks_as_often_as_retries_says(run_tmclsh, responders, retries, asked, said):
+    module = responders(Silent)
+    p = run_tmclsh("--port", module.path, "--timeout", "0.05", "--retries", retries,
+                   "-c", "GAP 1, 0")
+    assert p.returncode == 3
+    assert f"asked for its version (136) {said} and tried its ASCII mode" in p.stderr
+    assert [raw[1] for raw in module.log if raw[:1] == b"\x01"].count(136) == asked
+
+
 def test_nothing_answering_on_can_names_bit_rate_and_ids(monkeypatch, capsys):
     import uuid
 
@@ -457,7 +469,7 @@ def test_nothing_answering_on_can_names_bit_rate_and_ids(monkeypatch, capsys):
     assert rc == 3
     first, names, _ = likely_causes(err)
     assert first == (f"tmclsh: no module answered on CAN virtual:{channel}: asked for its version "
-                     "(136) on CAN id 1, listening on reply id 2, 2 times, 0.05 s each. Likely "
+                     "(136) on CAN id 1, listening on reply id 2, twice, 0.05 s each. Likely "
                      "causes, most likely first:")
     assert names == [
         "- bit rate", "- CAN ids", "- a slow bus", "- wiring"]

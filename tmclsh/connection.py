@@ -261,7 +261,7 @@ def _bring_up(client: Client, expected: Module | None) -> None:
             tries = 1 + client.retries
             raise NoAnswerError(no_answer_message(
                 client, exc, what=f"it answered 136 (version {client.version}), but not GGP "
-                f"129 (download mode), asked {tries} time{'s' if tries > 1 else ''}, "
+                f"129 (download mode), asked {_times(tries)}, "
                 f"waiting {client.timeout:g} s each")) from exc
 
 
@@ -324,8 +324,18 @@ def _answers_after_all(client: Client, expected: Module | None, exc: Exception) 
         raise NoAnswerError(no_answer_message(client, exc)) from exc
     try:
         probe = probe_mode(client)
-    except (TmclTimeoutError, ChecksumError):
-        raise NoAnswerError(no_answer_message(client, exc, ascii_tried=True)) from exc
+    except (TmclTimeoutError, ChecksumError) as silent:
+        # the probe's binary 136 was the first retry; --retries asks for the rest (a flaky
+        # RS485 line at 2 a.m. is worth them)
+        for _ in range(client.retries - 1):
+            try:
+                client.request(Request(client.address, Control.GET_VERSION, 0, 0, 0),
+                               retries=0)
+                return True
+            except (TmclTimeoutError, ChecksumError) as again:
+                silent = again
+        raise NoAnswerError(no_answer_message(client, silent if isinstance(
+            silent, ChecksumError) else exc, ascii_tried=True)) from exc
     if probe.mode == Mode.BINARY:
         return True
     client.forget_stale()  # a module in ASCII mode sends no late binary replies
@@ -384,6 +394,10 @@ def _is_usb_module(client: Client) -> bool:
         return False
 
 
+def _times(n: int) -> str:
+    return {1: "once", 2: "twice"}.get(n, f"{n} times")
+
+
 def no_answer_message(client: Client, exc: BaseException, *, ascii: bool = False,
                       ascii_tried: bool = False, what: str | None = None) -> str:
     """What was tried, in the user's words, then the likely causes, most likely first."""
@@ -394,7 +408,7 @@ def no_answer_message(client: Client, exc: BaseException, *, ascii: bool = False
     if client.is_can:
         return (
             f"no module answered on {where}: asked for its version (136) on CAN id "
-            f"{client.can_id}, listening on reply id {client.reply_id}, {tries} times, "
+            f"{client.can_id}, listening on reply id {client.reply_id}, {_times(tries)}, "
             f"{client.timeout:g} s each. Likely causes, most likely first:\n"
             "  - bit rate: every node on the bus must use the module's CAN bit rate "
             "(GP 69; factory setting 1000 kbit/s)\n"
@@ -413,11 +427,12 @@ def no_answer_message(client: Client, exc: BaseException, *, ascii: bool = False
         what = f"looked for it in ASCII mode, waiting {client.timeout:g} s"
     else:
         if ascii_tried:
-            what = ("asked for its version (136) twice and tried its ASCII mode, waiting up "
-                    f"to {client.timeout:g} s each")
+            asked = max(2, tries)  # (the mode probe asks 136 too)
+            what = (f"asked for its version (136) {_times(asked)} and tried its ASCII mode, "
+                    f"waiting up to {client.timeout:g} s each")
         else:
-            what = (f"asked for its version (136) {tries} time{'s' if tries > 1 else ''}, "
-                    f"waiting {client.timeout:g} s each")
+            what = (f"asked for its version (136) {_times(tries)}, waiting "
+                    f"{client.timeout:g} s each")
     lines = [f"{first}: {what}. Likely causes, most likely first:"]
     if not usb and not socket_url:
         baud = getattr(client.transport, "baudrate", 9600)
