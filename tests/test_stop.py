@@ -201,9 +201,12 @@ def test_ctrl_c_in_a_script_stops_the_program(tmp_path):
             time.sleep(0.05)
         time.sleep(0.3)
         p.send_signal(2)
-        _, err = p.communicate(timeout=20)
+        out, err = p.communicate(timeout=20)
         assert p.returncode == 130
         assert "stored program stopped; stopped motor 0 (MST; speed reads 0)" in err, err
+        # how far the script got, as a run that ends says it
+        assert out.splitlines()[-1].startswith(f"{script}: interrupted (Ctrl-C) at line 3 "
+                                               "after "), out
         assert sim.program_state == 0 and sim.param("axis", 3, 0) == 0
     finally:
         server.close()

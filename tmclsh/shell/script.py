@@ -450,6 +450,7 @@ class Runner:
         self.session = session
         self.failed = False
         self.on_step = on_step
+        self.interrupted_at: tuple[str, int] | None = None  # where Ctrl-C came (file, line)
 
     def run(self, nodes: Iterable[Node]) -> None:
         session = self.session
@@ -475,6 +476,10 @@ class Runner:
                         raise _Stop() from exc
                 if self.on_step is not None:
                     self.on_step()
+        except KeyboardInterrupt:
+            if self.interrupted_at is None:  # (the innermost: a .source's own line)
+                self.interrupted_at = session.location
+            raise
         finally:
             state["script.depth"] = depth
             session.location = saved
@@ -641,6 +646,16 @@ def run_file(session: Session, path: str) -> int:
     except ScriptError as exc:
         _report_plain(session, exc)
         status, kind = EXIT_SYNTAX, exc.kind
+    except KeyboardInterrupt:
+        # how far it got, before the Ctrl-C policy (stop everything) says what it stopped
+        where = runner.interrupted_at
+        try:
+            summary(session, name, before, time.monotonic() - start, EXIT_FAILED,
+                    interrupted=where[1] if where is not None else 0,
+                    in_file=where[0] if where is not None and where[0] != name else None)
+        except Exception:  # (a summary must not hide the interrupt)
+            pass
+        raise
     finally:
         session.location = None
     session.confirm_answers()  # (the last answer may show only now to be another's)
@@ -678,13 +693,24 @@ def _report_plain(session: Session, exc: TmclError) -> None:
 
 
 def summary(session: Session, name: str, before: Counts, elapsed: float, status: int,
-            kind: str = SYNTAX) -> None:
+            kind: str = SYNTAX, *, interrupted: int | None = None,
+            in_file: str | None = None) -> None:
+    """The last line of a script run; ``interrupted``: the line Ctrl-C came at (0: none),
+    ``in_file`` when that is in a file the script included."""
     now = _counts(session)
     sent = now.commands - before.commands
     passed, failed = now.passed - before.passed, now.failed - before.failed
     errors = now.errors - before.errors
     why = _KIND_TEXT.get(kind, kind)
-    if status == EXIT_SYNTAX and sent == 0:
+    if interrupted is not None:
+        at = f" at line {interrupted}" if interrupted else ""
+        if interrupted and in_file is not None:
+            at += f" of {in_file}"
+        text = (f"{name}: interrupted (Ctrl-C){at} after {sent} "
+                f"command{'s' if sent != 1 else ''} sent, {passed} check"
+                f"{'s' if passed != 1 else ''} passed, {failed} failed, {errors} "
+                f"error{'s' if errors != 1 else ''}, {elapsed:.2f} s")
+    elif status == EXIT_SYNTAX and sent == 0:
         text = f"{name}: not run ({why}; nothing was sent)"
     elif status == EXIT_SYNTAX:  # stdin runs each line as it arrives, up to the bad one
         text = (f"{name}: stopped ({why}) after {sent} "
