@@ -329,6 +329,16 @@ def test_cli_dash_reads_stdin(monkeypatch, capsys):
     assert [o["reply"] for o in objs][-1] == 1234
 
 
+def test_a_bad_line_from_stdin_after_lines_were_sent_is_exit_1(monkeypatch, capsys):
+    """Exit 2 says nothing was sent; stdin sends each line as it comes, so a bad one after
+    others is a failed run (as in -c)."""
+    monkeypatch.setattr(sys, "stdin", io.StringIO("SAP 4, 0, 1234\nSAP 4, 0\n"))
+    assert cli.main(["--sim", "-f", "-"]) == 1
+    assert "stopped (syntax error) after 1 command sent" in capsys.readouterr().out
+    monkeypatch.setattr(sys, "stdin", io.StringIO("SAP 4, 0\nGAP 4, 0\n"))
+    assert cli.main(["--sim", "-f", "-"]) == 2  # the first line: nothing sent
+
+
 # -- ${expression}, blocks and .source typed at the prompt (or in -c) ---------------------
 
 def test_dollar_expressions_in_any_line(session):

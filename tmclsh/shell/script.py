@@ -662,6 +662,10 @@ def run_file(session: Session, path: str) -> int:
     if status == EXIT_OK and (runner.failed or session.stats.suspects > before.suspects):
         status = EXIT_FAILED  # a result that may be another request's is no pass
     summary(session, name, before, time.monotonic() - start, status, kind)
+    if status == EXIT_SYNTAX and session.stats.commands > before.commands:
+        # stdin runs each line as it arrives: a bad line after others were sent is a run
+        # that failed (as in -c), not a script refused with nothing sent
+        status = EXIT_FAILED
     return status
 
 
