@@ -448,6 +448,24 @@ def test_garbled_replies_at_connect_point_at_the_baud_rate(run_tmclsh, responder
     assert cause.startswith("  - baud rate:")
 
 
+class AnswersOnly136(Responder):
+    def answer(self, raw: bytes) -> bytes | None:
+        return super().answer(raw) if raw[1] == 136 else None
+
+
+def test_a_module_that_answers_136_and_then_nothing_is_not_blamed_on_baud_or_address(
+        run_tmclsh, responders):
+    """Its version string came readable at this rate and address: baud rate, address and
+    ASCII mode are no likely cause; the line is."""
+    module = responders(AnswersOnly136)
+    p = run_tmclsh("--port", module.path, "--timeout", "0.05", "-c", "GAP 1, 0")
+    assert p.returncode == 3
+    first, names, _ = likely_causes(p.stderr)
+    assert first.startswith(f"tmclsh: the module at address 1 on {module.path} @ 9600 answered "
+                            "only in part: it answered 136 (version 1311V111), but not GGP 129")
+    assert names == ["- the line", "- a slow link"]
+
+
 @pytest.mark.parametrize("retries, asked, said", [("0", 2, "twice"), ("4", 5, "5 times")])
 def test_connect_asks_as_often_as_retries_says(run_tmclsh, responders, retries, asked, said):
     module = responders(Silent)

@@ -420,6 +420,8 @@ def no_answer_message(client: Client, exc: BaseException, *, ascii: bool = False
     usb = _is_usb_module(client)
     socket_url = "://" in url
     first = (f"replies came from {where} but were garbled (bad checksums)" if garbled else
+             f"the module at address {addr} on {where} answered only in part"
+             if client.version is not None and client.ascii_link is None else
              f"no module answered at address {addr} on {where}")
     if what is not None:
         pass
@@ -434,6 +436,13 @@ def no_answer_message(client: Client, exc: BaseException, *, ascii: bool = False
             what = (f"asked for its version (136) {_times(tries)}, waiting "
                     f"{client.timeout:g} s each")
     lines = [f"{first}: {what}. Likely causes, most likely first:"]
+    if client.version is not None and client.ascii_link is None:
+        # it answered 136 here, readable: the baud rate, the address and the mode are right
+        lines.append("  - the line: noise garbles or loses replies (RS485: termination "
+                     "at both ends, ground, cable length), or another device talks on the "
+                     "same bus")
+        lines.append(f"  - a slow link: --timeout {max(2 * client.timeout, 2):g}")
+        return "\n".join(lines)
     if not usb and not socket_url:
         baud = getattr(client.transport, "baudrate", 9600)
         others = ", ".join(str(r) for r in baud_rates() if r != baud)
