@@ -93,12 +93,17 @@ def test_the_wait_the_reported_baud_and_baud_auto_ask_one_question(pty_sim):
     sim = open_sim("TMCM-1311")
     try:
         links = {"pty": SerialTransport(pty_path, 19200), "rs485": SerialTransport("/dev/ttyUSB7"),
-                 "tcp": SerialTransport("socket://127.0.0.1:1"), "sim": sim, "can": Can("x:y")}
+                 "tcp": SerialTransport("socket://127.0.0.1:1"), "sim": sim, "can": Can("x:y"),
+                 # a serial port on a server: its baud rate is set through RFC 2217
+                 "rfc2217": SerialTransport("rfc2217://127.0.0.1:1", 9600)}
         bauds = {k: scan.line_baud(t) for k, t in links.items()}
         waits = {k: scan.address_timeout(t) for k, t in links.items()}
     finally:
         sim.close()
-    assert bauds == {"pty": 19200, "rs485": 9600, "tcp": None, "sim": None, "can": None}
+    assert bauds == {"pty": 19200, "rs485": 9600, "tcp": None, "sim": None, "can": None,
+                     "rfc2217": 9600}
+    assert waits["rfc2217"] == pytest.approx(scan.wire_time(9600) + scan.MARGIN_USB
+                                             + scan.MARGIN_RS485)
     assert waits["pty"] == pytest.approx(scan.wire_time(19200) + scan.MARGIN_LOCAL)
     assert waits["rs485"] == pytest.approx(scan.wire_time(9600) + scan.MARGIN_RS485)
     assert (waits["tcp"], waits["sim"], waits["can"]) == (

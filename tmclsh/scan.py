@@ -65,15 +65,20 @@ def _is_pty(url: str) -> bool:
 
 
 def line_baud(transport: Transport) -> int | None:
-    """The baud rate the link's bytes travel at, or None when it has none: a serial port or a
-    pty has one; a CAN bus, the simulator and a URL (socket://, rfc2217://: a network hop
-    between us and any serial line) do not. Only a byte stream has a baud rate (and
+    """The baud rate the link's bytes travel at, or None when it has none: a serial port, a
+    pty and an rfc2217:// port (a serial port on a server, its baud rate set through the
+    protocol) have one; a CAN bus, the simulator and other URLs (socket://: bytes over TCP
+    to whatever listens) do not. Only a byte stream has a baud rate (and
     ``set_baudrate``). The first pass's wait, ``Found.baud`` and ``scan --baud auto`` all
     ask this."""
-    if isinstance(transport, StreamTransport) and not transport.simulated \
-            and "://" not in transport.url:
+    if isinstance(transport, StreamTransport) and not transport.simulated and (
+            "://" not in transport.url or _is_rfc2217(transport.url)):
         return getattr(transport, "baudrate", None)
     return None
+
+
+def _is_rfc2217(url: str) -> bool:
+    return url.lower().startswith("rfc2217://")
 
 
 def address_timeout(transport: Transport, *, usb: bool = False) -> float:
@@ -84,7 +89,9 @@ def address_timeout(transport: Transport, *, usb: bool = False) -> float:
         return MARGIN_LOCAL
     baud = line_baud(transport)
     if baud is None:
-        return MARGIN_USB * 2  # socket://, rfc2217://: no baud rate, a network hop
+        return MARGIN_USB * 2  # socket://: no baud rate, a network hop
+    if _is_rfc2217(transport.url):  # the network hop, then the server's serial line
+        return wire_time(baud) + MARGIN_USB + MARGIN_RS485
     margin = MARGIN_LOCAL if _is_pty(transport.url) else MARGIN_USB if usb else MARGIN_RS485
     return wire_time(baud) + margin
 
