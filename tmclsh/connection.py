@@ -7,7 +7,6 @@ connection means the same wherever it is made. It sits above the client and the 
 
 from __future__ import annotations
 
-import sys
 from typing import TYPE_CHECKING
 
 from .canspec import FROM_PYTHON_CAN, parse_can
@@ -209,7 +208,7 @@ def _attach_ascii(client: Client, expected: Module | None, found=None) -> None:
     try:
         try:
             AsciiLink.attach(client, found=found)
-        except StatusError as exc:
+        except StatusError:
             # 139 refused: a module in download mode takes no control command but 132-136;
             # end download mode (with a notice), then try once more
             if client.ascii_link is not None or not client.leave_download_mode():
@@ -306,36 +305,42 @@ def _adopt_version(client: Client, version: str) -> None:
     client.module = mod
 
 
+def _ask_version(client: Client, times: int, failed: Exception) -> Exception | None:
+    """136 up to ``times`` more times: None once it is answered, else the last failure
+    (``failed``, the one before, when it is not asked again)."""
+    from .protocol import Control, Request
+
+    for _ in range(times):
+        try:
+            client.request(Request(client.address, Control.GET_VERSION, 0, 0, 0), retries=0)
+            return None
+        except (TmclTimeoutError, ChecksumError) as exc:
+            failed = exc
+    return failed
+
+
 def _answers_after_all(client: Client, expected: Module | None, exc: Exception) -> bool:
     """After an unanswered 136: True if a binary module is there after all (slow, or a reply
     lost); False if one in ASCII mode was found (and attached). Else a NoAnswerError."""
     from .ascii import Mode, probe_mode
-    from .protocol import Control, Request
 
     t = client.transport
     if not isinstance(t, StreamTransport) or t.simulated:
-        for _ in range(client.retries):  # CAN, simulator: the client's own retries
-            try:
-                client.request(Request(client.address, Control.GET_VERSION, 0, 0, 0),
-                               retries=0)
-                return True
-            except (TmclTimeoutError, ChecksumError) as again:
-                exc = again
-        raise NoAnswerError(no_answer_message(client, exc)) from exc
+        failed = _ask_version(client, client.retries, exc)  # CAN, simulator: its retries
+        if failed is None:
+            return True
+        raise NoAnswerError(no_answer_message(client, failed)) from exc
     try:
         probe = probe_mode(client)
     except (TmclTimeoutError, ChecksumError) as silent:
         # the probe's binary 136 was the first retry; --retries asks for the rest (a flaky
         # RS485 line at 2 a.m. is worth them)
-        for _ in range(client.retries - 1):
-            try:
-                client.request(Request(client.address, Control.GET_VERSION, 0, 0, 0),
-                               retries=0)
-                return True
-            except (TmclTimeoutError, ChecksumError) as again:
-                silent = again
-        raise NoAnswerError(no_answer_message(client, silent if isinstance(
-            silent, ChecksumError) else exc, ascii_tried=True)) from exc
+        failed = _ask_version(client, client.retries - 1, silent)
+        if failed is None:
+            return True
+        raise NoAnswerError(no_answer_message(
+            client, failed if isinstance(failed, ChecksumError) else exc,
+            ascii_tried=True)) from exc
     if probe.mode == Mode.BINARY:
         return True
     client.forget_stale()  # a module in ASCII mode sends no late binary replies
