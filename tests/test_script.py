@@ -89,6 +89,23 @@ def test_expect_passes_and_fails_with_expected_and_actual(session, tmp_path, cap
     assert "check.tmcl: 3 commands sent, 1 check passed, 1 failed, 0 errors" in cap.out
 
 
+def test_summary_counts_shell_commands_that_talked_to_the_module(session, tmp_path, capsys):
+    # ".run" and ".stop" drive the stored program without a TMCL line: a summary of
+    # "0 commands sent" would tell the reader the module was not touched
+    path = write(tmp_path, "prog.tmcl", """
+        .echo start
+        .run
+        .status
+        .stop
+        .let x = 1
+        """)
+    assert run(session, path) == 0
+    out = capsys.readouterr().out
+    assert ("prog.tmcl: 0 commands sent and 3 shell commands that talked to the module, "
+            "0 checks passed") in out, out
+    assert session.stats.commands == 0
+
+
 def test_expect_names_both_sides_when_the_right_one_is_computed(session, tmp_path, capsys):
     path = write(tmp_path, "sides.tmcl", """
         .let target = 100

@@ -438,11 +438,13 @@ class Counts:
     failed: int
     errors: int
     suspects: int = 0
+    shell: int = 0  # shell commands that sent frames of their own (Stats.shell_commands)
 
 
 def _counts(session: Session) -> Counts:
     s = session.stats
-    return Counts(s.commands, s.checks_passed, s.checks_failed, s.errors, s.suspects)
+    return Counts(s.commands, s.checks_passed, s.checks_failed, s.errors, s.suspects,
+                  s.shell_commands)
 
 
 class Runner:
@@ -662,7 +664,8 @@ def run_file(session: Session, path: str) -> int:
     if status == EXIT_OK and (runner.failed or session.stats.suspects > before.suspects):
         status = EXIT_FAILED  # a result that may be another request's is no pass
     summary(session, name, before, time.monotonic() - start, status, kind)
-    if status == EXIT_SYNTAX and session.stats.commands > before.commands:
+    if status == EXIT_SYNTAX and (session.stats.commands > before.commands
+                                  or session.stats.shell_commands > before.shell):
         # stdin runs each line as it arrives: a bad line after others were sent is a run
         # that failed (as in -c), not a script refused with nothing sent
         status = EXIT_FAILED
@@ -703,6 +706,9 @@ def summary(session: Session, name: str, before: Counts, elapsed: float, status:
     ``in_file`` when that is in a file the script included."""
     now = _counts(session)
     sent = now.commands - before.commands
+    shell = now.shell - before.shell
+    also = (f" and {shell} shell command{'s' if shell != 1 else ''} that talked to the module"
+            if shell else "")
     passed, failed = now.passed - before.passed, now.failed - before.failed
     errors = now.errors - before.errors
     why = _KIND_TEXT.get(kind, kind)
@@ -711,16 +717,16 @@ def summary(session: Session, name: str, before: Counts, elapsed: float, status:
         if interrupted and in_file is not None:
             at += f" of {in_file}"
         text = (f"{name}: interrupted (Ctrl-C){at} after {sent} "
-                f"command{'s' if sent != 1 else ''} sent, {passed} check"
+                f"command{'s' if sent != 1 else ''} sent{also}, {passed} check"
                 f"{'s' if passed != 1 else ''} passed, {failed} failed, {errors} "
                 f"error{'s' if errors != 1 else ''}, {elapsed:.2f} s")
-    elif status == EXIT_SYNTAX and sent == 0:
+    elif status == EXIT_SYNTAX and sent == 0 and not shell:
         text = f"{name}: not run ({why}; nothing was sent)"
     elif status == EXIT_SYNTAX:  # stdin runs each line as it arrives, up to the bad one
         text = (f"{name}: stopped ({why}) after {sent} "
-                f"command{'s' if sent != 1 else ''} sent, {elapsed:.2f} s")
+                f"command{'s' if sent != 1 else ''} sent{also}, {elapsed:.2f} s")
     else:
-        text = (f"{name}: {sent} command{'s' if sent != 1 else ''} sent, "
+        text = (f"{name}: {sent} command{'s' if sent != 1 else ''} sent{also}, "
                 f"{passed} check{'s' if passed != 1 else ''} passed, {failed} failed, "
                 f"{errors} error{'s' if errors != 1 else ''}, {elapsed:.2f} s")
         suspects = now.suspects - before.suspects

@@ -63,6 +63,9 @@ class Stats:
     checks_passed: int = 0
     checks_failed: int = 0
     suspects: int = 0  # results reported as possibly another request's answer
+    # shell commands that sent frames of their own (.upload, .run, .save, ...): not TMCL lines,
+    # but a summary saying "0 commands sent" after one would say the module was not touched
+    shell_commands: int = 0
     started: float = field(default_factory=time.monotonic)
 
 
@@ -287,7 +290,14 @@ class Session:
             args = text[len(word):].strip()
             if args and cmd.syntax == cmd.name:  # `.stopall now`: a usage error, nothing sent
                 raise ValidationError(f"{cmd.name} takes no arguments (got {args!r})")
-            cmd.handler(self, args)
+            stats = getattr(self.client, "stats", None)
+            frames, lines = (stats or {}).get("sent", 0), self.stats.commands
+            try:
+                cmd.handler(self, args)
+            finally:  # (counted when it failed half-way too: what went out went out)
+                if stats is not None and stats.get("sent", 0) > frames \
+                        and self.stats.commands == lines:
+                    self.stats.shell_commands += 1
             self._record(text, "")
             return None
         return self.run_tmcl(text)
