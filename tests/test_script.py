@@ -15,6 +15,7 @@ import pytest
 
 from tmclsh import cli
 from tmclsh.client import Client
+from tmclsh.errors import ValidationError
 from tmclsh.shell import script
 from tmclsh.shell.render import Output
 from tmclsh.shell.session import Session
@@ -104,6 +105,21 @@ def test_summary_counts_shell_commands_that_talked_to_the_module(session, tmp_pa
     assert ("prog.tmcl: 0 commands sent and 3 shell commands that talked to the module, "
             "0 checks passed") in out, out
     assert session.stats.commands == 0
+
+
+def test_an_unterminated_substitution_is_a_syntax_error(session, tmp_path, capsys):
+    # it was printed (or sent) as it stood, and the script passed
+    path = write(tmp_path, "unterm.tmcl", """
+        SAP 4, 0, 1000
+        .echo ${GAP 1, 0
+        """)
+    assert run(session, path) == script.EXIT_SYNTAX
+    cap = capsys.readouterr()
+    assert f"{path}:2: unterminated ${{...}}: a '}}' is missing" in cap.err
+    assert simulator(session).param("axis", 4) != 1000  # nothing was sent
+    with pytest.raises(ValidationError, match="unterminated"):
+        session.run_line(".echo a ${1} b ${2")
+    assert "a 1" not in capsys.readouterr().out
 
 
 def test_expect_names_both_sides_when_the_right_one_is_computed(session, tmp_path, capsys):

@@ -36,7 +36,7 @@ from . import commands, expr
 from .commands import command
 from .lines import split_line
 from .lines import strip_comment as _strip_comment
-from .session import QuitShell, owns_line, unknown_command
+from .session import QuitShell, check_substitutions, owns_line, unknown_command
 
 if TYPE_CHECKING:
     from .session import Session
@@ -228,6 +228,8 @@ class Parser:
 
     def _line(self, number: int, text: str, open_: list[tuple[Node, list[Node]]]) -> Node | None:
         file = self.file
+        if "${" in text:
+            check_substitutions(_strip_comment(text))
         if not text.startswith("."):
             # a line seen before passed the same checks (parsing sends nothing, so the
             # module and mode cannot change between); a long script repeats its lines

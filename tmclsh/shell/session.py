@@ -182,6 +182,8 @@ class Session:
             return line
         from .expr import format_number
 
+        check_substitutions(line)
+
         def sub(m: re.Match) -> str:
             inner = m.group(1).strip()
             if inner in self.variables:
@@ -402,6 +404,12 @@ def owns_line(text: str) -> bool:
     words = text.split(None, 1)
     cmd = commands.find(words[0]) if words else None
     return cmd is not None and cmd.owns_line
+
+
+def check_substitutions(text: str) -> None:
+    """A ``${`` with no ``}`` after it is an error: it was sent or printed as it stood."""
+    if "${" in _VAR.sub("", text):
+        raise ValidationError("unterminated ${...}: a '}' is missing")
 
 
 def _is_bare_command(text: str) -> bool:
