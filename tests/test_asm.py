@@ -128,7 +128,7 @@ def test_module_specific_commands_and_types() -> None:
 
 @pytest.mark.parametrize("text, module, message, col", [
     ("SAP 140, 0, 9", M1311, r"9 is out of range for AP 140 MicrostepResolution: allowed 0..8", 13),
-    ("SAP 4, 0, 4294967296", M1311, r"does not fit in 32 bits", 11),
+    ("SAP 4, 0, 4294967296", M1311, r"out of range for a TMCL operand: allowed -2147483648..4294967295", 11),
     ("ROR 0, 300000000", M1311, r"velocity 300000000 out of range -268435455..268435454", 8),
     ("ROL 0, -1", M351, r"velocity -1 out of range 0..2047", 8),
     ("MVP ABS, 0, 8388608", M351, r"position 8388608 out of range -8388608..8388607", 13),
@@ -153,6 +153,10 @@ def test_module_specific_commands_and_types() -> None:
     ("GAP 1, 3", M351, r"TMCM-351 has no motor 3: motors 0..2", 8),
     ("SAP 4, 0", M1311, r"SAP needs a value: SAP <parameter>, <motor>, <value>", 1),
     ("CALC", M1311, r"CALC needs its first operand", 1),
+    # three operands fill type, motor, value: where that moves one, the refusal says so
+    ("ROR 0, 1000, 5", M1311, r"no motor 1000: only motor 0 \(ROR takes ROR <motor>, "
+     r"<velocity>; three operands are read as <type>, <motor>, <value>\)$", 8),
+    ("GAP 1, 3, 5", M1311, r"no motor 3: only motor 0$", 8),
 ])
 def test_out_of_range_and_wrong_operands(text: str, module, message: str, col: int) -> None:
     err = error(f"// a program\n{text}\n", module)

@@ -367,7 +367,8 @@ def eval_constant(line: Line, symbols: Symbols) -> int:
 
 def _check_int32(value: int, line: Line, col: int) -> None:
     if not INT32_MIN <= value <= UINT32_MAX:
-        raise line.error(f"{value} does not fit in 32 bits", col, "range")
+        raise line.error(f"{value} is out of range for a TMCL operand: allowed "
+                         f"{INT32_MIN}..{UINT32_MAX} (32 bits)", col, "range")
 
 
 def _suggest(word: str, choices) -> str:
@@ -415,10 +416,14 @@ class _Encoder:
         self.line, self.spec, self.module, self.symbols, self.direct = line, spec, module, symbols, direct
         self.param: Parameter | None = None
         self.label: str | None = None
+        self.all_fields = False  # three operands for a command that names fewer
 
     def fail(self, msg: str, expr: Expr | None = None, kind: str = "check") -> AsmError:
         """A well-formed line this module refuses; ``kind="range"`` for a value out of range."""
         col = expr.col if expr is not None else self.line.mnemonic_col
+        if self.all_fields:  # `ROR 0, 1000, 5` refused for "motor 1000": say how it was read
+            msg += (f" ({self.spec.mnemonic} takes {self.spec.syntax}; three operands are "
+                    "read as <type>, <motor>, <value>)")
         return self.line.error(msg, col, kind)
 
     def number(self, expr: Expr, extra: dict[str, int] | None = None) -> int:
@@ -438,6 +443,8 @@ class _Encoder:
             given = dict(zip(spec.fields, ops))
         elif len(ops) == len(FIELDS):
             given = dict(zip(FIELDS, ops))  # `GAP 1, 0, 0`: don't-care fields written out
+            # (where that moves an operand to another field, a refusal says how it was read)
+            self.all_fields = tuple(spec.fields) != FIELDS[:len(spec.fields)]
         else:
             raise self.fail(f"too many operands: {spec.syntax} (or all three fields: "
                             f"{spec.mnemonic} <type>, <motor>, <value>)", ops[len(spec.fields)],
