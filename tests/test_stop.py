@@ -211,3 +211,26 @@ def test_ctrl_c_in_a_script_stops_the_program(tmp_path):
     finally:
         server.close()
         sim.close()
+
+
+def test_ascii_terminal_ctrl_c_stops_the_program_and_says_what_reads_back(pty_module):
+    """Ctrl-C in the .ascii terminal sent MST only and said "motors stopped: 0": the stored
+    program drove the motor again a moment later."""
+    from tmclsh.ascii import AsciiLink
+    from tmclsh.shell import terminal as tm
+
+    c, _ = pty_module
+    start_program(c)
+    link = AsciiLink.attach(c)
+    try:
+        notes: list[str] = []
+        term = tm.Terminal(Session(c, Output()), link, tm.TerminalOptions(), notes.append,
+                           tm.Painter(color=False))
+        term.stop_motors()
+        assert "".join(notes).strip() == ("--- stored program stopped; stopped motor 0 "
+                                          "(MST; speed reads 0)")
+        time.sleep(0.3)  # nothing drives it again
+        assert link.command("GAP 3, 0").value == 0
+    finally:
+        link.detach(send_bin=True)
+    assert program.status(c).state == "stop"

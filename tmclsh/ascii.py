@@ -866,15 +866,3 @@ class AsciiLink:
         leave = "BIN at exit" if self.active and self.on_exit == Mode.BINARY else \
             f"left in {self.on_exit.value} mode at exit"
         return f"ASCII mode, {self.echo.text} ({found}; {leave})"
-
-
-def stop_motors(link: AsciiLink, motors: int, timeout: float = 0.5) -> list[int]:
-    """MST every motor over the ASCII line (the Ctrl-C safety action)."""
-    stopped = []
-    for m in range(motors):
-        try:
-            link.command(f"MST {m}", timeout, opcode=int(isa.Opcode.MST))
-            stopped.append(m)
-        except (TmclTimeoutError, TransportError):
-            log.warning("MST %d failed", m)
-    return stopped

@@ -36,7 +36,7 @@ from .. import instructions as isa
 from ..ascii import (BS, CR, GP_ASCII_MODE, GP_BANK, ECHO_NAMES, AsciiLink, Echo, LineKind,
                      Mode, address_char, ascii_commands, classify_line, describe_gp67,
                      echo_mode, gp67_value, next_line, reply_part, reply_summary,
-                     starts_in_ascii, stop_motors)
+                     starts_in_ascii)
 from ..errors import StatusError, ValidationError
 from ..protocol import Reply, Request, status_ok
 from .commands import command
@@ -513,9 +513,23 @@ class Terminal:
         self.note("module left ASCII mode (BIN): back to the shell on the binary link")
 
     def stop_motors(self) -> None:
-        mod = self.session.client.module
-        stopped = stop_motors(self.link, mod.motors if mod else 1)
-        self.note(f"motors stopped: {', '.join(map(str, stopped)) or 'none answered'}")
+        """The shell's one stop (the stored program first: MST alone is undone by a program
+        that runs), said as the shell says it: only a motor whose speed reads 0 is stopped."""
+        from .. import program
+        from .builtin import describe_stop
+
+        try:
+            report = program.stop_everything(self.session.client)
+        except Exception as exc:  # the safety key never breaks the terminal
+            self.note(f"stopping failed: {exc}; the motors may still turn")
+            return
+        said, warnings = describe_stop(report)
+        if said is not None:
+            self.note(said)
+        for text in warnings:
+            self.note(text)
+        if said is None and not warnings:
+            self.note("nothing to stop: the module reports no motor")
 
     def banner(self) -> None:
         c = self.session.client
