@@ -37,14 +37,30 @@ def test_json_lines_are_the_design_contract(tmp_path):
 
 
 def test_json_error_object_and_exit_status(tmp_path):
-    p = tmclsh("--sim", "-c", "GAP 4, 0; SAP 140, 0, 99; GAP 1, 0", "--json", tmp=tmp_path)
+    # ${...} is checked when its line runs: an error in the middle of the run
+    p = tmclsh("--sim", "-c", "GAP 4, 0; SAP 140, 0, ${99}; GAP 1, 0", "--json", tmp=tmp_path)
     assert p.returncode == 1
     objs = [json.loads(line) for line in p.stdout.splitlines()]
     assert objs[0]["line"] == "GAP 4, 0" and objs[0]["status"] == 100
-    assert objs[1] == {"line": "SAP 140, 0, 99",
+    assert objs[1] == {"line": "SAP 140, 0, ${99}",
                        "error": "99 is out of range for AP 140 MicrostepResolution: "
                                 "allowed 0..8", "simulated": True}
     assert len(objs) == 2  # a -c run stops at the first error
+
+
+def test_c_lines_are_all_checked_before_the_first_is_sent(tmp_path):
+    # a typo at the end of a jig's -c line left the move of its first line running
+    p = tmclsh("--sim", "-c", "MVP ABS, 0, 100000; SPA 4, 0, 5", "--trace", tmp=tmp_path)
+    assert p.returncode == 2
+    trace, rest = trace_and_rest(p.stderr)
+    assert not [x for x in trace if "tx> " in x and "MVP" in x], trace
+    assert rest == ["error: unknown command 'SPA'; did you mean SGP, SAP, STOP? (nothing "
+                    "was sent: every line is checked first)"], rest
+    p = tmclsh("--sim", "--json", "-c", "GAP 1, 0; .nosuch; GAP 1, 0", tmp=tmp_path)
+    assert p.returncode == 2
+    assert [json.loads(x) for x in p.stdout.splitlines()] == [
+        {"line": ".nosuch", "error": "unknown shell command '.nosuch'; type .help for the list",
+         "simulated": True}]
 
 
 def trace_and_rest(stderr: str) -> tuple[list[str], list[str]]:
@@ -64,9 +80,10 @@ def test_trace_on_stderr_and_nothing_sent_for_bad_input(tmp_path):
     assert "<rx 02 01 64 06" in p.stderr
     assert "tx>" not in p.stdout and "MaxPositioningSpeed = " in p.stdout
     p = tmclsh("--sim", "-c", "SAP 140, 0, 99", "--trace", tmp=tmp_path)
-    assert p.returncode == 1
+    assert p.returncode == 2
     trace, rest = trace_and_rest(p.stderr)
-    assert rest == ["error: 99 is out of range for AP 140 MicrostepResolution: allowed 0..8"]
+    assert rest == ["error: 99 is out of range for AP 140 MicrostepResolution: allowed 0..8 "
+                    "(nothing was sent: every line is checked first)"]
     assert not [x for x in trace if "SAP" in x]  # nothing of the line was sent
 
 

@@ -36,7 +36,7 @@ def test_events_come_in_order_with_the_results_over_a_pty(pty_sim, tmp_path):
 
 
 def test_simulated_results_say_so(run_tmclsh, tmp_path):
-    p = run_tmclsh("--sim", "--json", "-c", "GAP 4, 0; SAP 140, 0, 99")
+    p = run_tmclsh("--sim", "--json", "-c", "GAP 4, 0; SAP 140, 0, ${99}")
     objs = objects(p.stdout)
     assert len(objs) == 2 and all(o["simulated"] is True for o in objs)
     assert "error" in objs[1]

@@ -77,7 +77,7 @@ def test_generic_mode_refuses_names_and_what_does_not_fit_a_byte(module_1161, co
                         ("RFS START, 0", "by number, 13")):
         before = list(module_1161.got)
         r = run_tmclsh("--port", module_1161.url, "-c", line, env=_env(config_home))
-        assert r.returncode == 1, (line, r.stderr)
+        assert r.returncode == 2, (line, r.stderr)  # refused before anything was sent
         assert words in r.stderr, (line, r.stderr)
         assert "Traceback" not in r.stderr
         assert module_1161.got[len(before):] == [(136, 0, 0, 0), (136, 1, 0, 0), (10, 129, 0, 0)], line  # nothing else sent
@@ -129,7 +129,7 @@ def test_user_module_file_is_found_and_checked_against(module_1161, config_home,
     sent = len(module_1161.got)
     bad = run_tmclsh("--port", module_1161.url, "-c", "SAP MaxPositioningSpeed, 0, 5000",
                      env=_env(config_home))
-    assert bad.returncode == 1 and "0..2047" in bad.stderr
+    assert bad.returncode == 2 and "0..2047" in bad.stderr
     assert module_1161.got[sent:] == [(136, 0, 0, 0), (10, 129, 0, 0)]  # the range came from the user's file
 
 
@@ -227,7 +227,7 @@ def test_version_string_must_be_what_136_answers(config_home, tmp_path, run_tmcl
 def test_unknown_command_in_generic_mode_points_to_numbers(module_1161, config_home,
                                                           run_tmclsh):
     r = run_tmclsh("--port", module_1161.url, "-c", "XYZZY 1, 2", env=_env(config_home))
-    assert r.returncode == 1 and "by number" in r.stderr
+    assert r.returncode == 2 and "by number" in r.stderr
     assert module_1161.commands() == [136, 136, 10]  # 136 (string, type 1), GGP 129 at connect
 
 
@@ -242,7 +242,7 @@ def test_forced_generic_on_a_documented_module_does_not_say_it_has_no_data(confi
                        env=_env(config_home))
     finally:
         m.close()
-    assert r.returncode == 1, r.stderr
+    assert r.returncode == 2, r.stderr
     assert "no parameter data" not in r.stderr and "has no parameter data" not in r.stderr
     assert r.stderr.count("generic mode (-m generic)") == 2, r.stderr
     assert "leave -m generic out to use the TMCM-1311's parameter data" in r.stderr

@@ -75,7 +75,7 @@ def test_sim_script_and_stdin_paths_import_nothing_heavy(tmp_path):
 def test_errors_in_a_pipe_are_plain_lines(make_pty_sim):
     _, path = make_pty_sim()
     proc, modules = loaded("--port", path, "-m", "TMCM-1311", "--keep-going", "-c",
-                           "GAP 1, 7\nGAP 1, 0")
+                           "GAP 1, ${7}\nGAP 1, 0")  # (checked as it runs: --keep-going)
     assert proc.returncode == 1
     assert "\x1b[" not in proc.stdout + proc.stderr
     assert proc.stderr.splitlines()[0].startswith("error: ") and "motor 7" in proc.stderr

@@ -9,7 +9,11 @@ from ..errors import TmclError
 from .render import Output
 from .session import QuitShell, Session
 
-EXIT_OK, EXIT_ERROR, EXIT_CONNECT = 0, 1, 3
+EXIT_OK, EXIT_ERROR, EXIT_SYNTAX, EXIT_CONNECT = 0, 1, 2, 3
+
+# after one of these, a TMCL line is checked when it runs: the module or mode it is checked
+# against may change (as in a script)
+_CHECK_STOPS_AT = {".connect", ".module", ".mode", ".ascii", ".address"}
 
 
 def banner(session: Session) -> str:
@@ -29,9 +33,45 @@ def report_error(session: Session, line: str | None, exc: BaseException) -> None
     session.out.error(line, f"{where}{exc}")
 
 
+def refused_line(session: Session, lines: list[str]) -> tuple[str, TmclError] | None:
+    """The first of ``lines`` the module would refuse, checked before any is sent (as a
+    script is): a typo in the last line of ``-c "MVP ...; SPA ..."`` must not leave the move
+    of the first one running. Lines with ``${...}`` are checked when they run."""
+    from ..errors import ValidationError
+    from . import commands
+    from .lines import strip_comment
+    from .session import unknown_command
+
+    for line in lines:
+        text = strip_comment(line)
+        if not text:
+            continue
+        word = text.split(None, 1)[0]
+        cmd = commands.find(word)
+        if word.startswith(".") or cmd is not None:
+            if cmd is None:
+                return line, ValidationError(unknown_command(word))
+            if cmd.name in _CHECK_STOPS_AT:
+                return None
+            continue
+        if "${" in text:
+            continue
+        try:
+            session.client.encode(text)
+        except TmclError as exc:
+            return line, exc
+    return None
+
+
 def run_lines(session: Session, lines: list[str]) -> int:
     failed = False
     suspects = session.stats.suspects
+    refused = refused_line(session, lines)
+    if refused is not None:
+        line, exc = refused
+        why = "" if session.out.json else " (nothing was sent: every line is checked first)"
+        session.out.error(line, f"{exc}{why}")
+        return EXIT_SYNTAX
     for line in lines:
         try:
             session.ensure_link()  # the link was lost on an earlier line (--keep-going)
