@@ -42,7 +42,7 @@ import logging
 import threading
 import time
 from collections import Counter, deque
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Container, Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, NamedTuple
 
@@ -608,12 +608,20 @@ class Client:
         with self._lock:  # (the event poller may add one meanwhile)
             return {s.seq for s in self.suspects}
 
-    def take_suspects(self) -> list[Suspect]:
+    def take_suspects(self, seqs: Container[int] | None = None) -> list[Suspect]:
         """Replies returned earlier that may have answered another request (oldest first);
-        each is reported once."""
+        each is reported once. ``seqs``: only those (a caller that read again, or marked the
+        values in doubt itself, takes its own; the rest stay to be reported)."""
         out = []
-        while self.suspects:
-            out.append(self.suspects.popleft())
+        if seqs is None:
+            while self.suspects:
+                out.append(self.suspects.popleft())
+            return out
+        with self._lock:  # (the event poller may add one meanwhile)
+            keep = [s for s in self.suspects if s.seq not in seqs]
+            out = [s for s in self.suspects if s.seq in seqs]
+            self.suspects.clear()
+            self.suspects.extend(keep)
         return out
 
     def _bind(self, transport: Transport) -> None:
