@@ -222,3 +222,14 @@ def test_wait_timing_out_on_an_answer_in_doubt_does_not_state_it(pty_sim, tmp_pa
     (line,) = [x for x in p.stderr.splitlines() if "timed out" in x]
     assert "(the answer to GAP 1, 0 is in doubt" in line and "777" not in line, p.stderr
     assert p.returncode == 1
+
+
+def test_watch_until_does_not_end_on_another_requests_answer(pty_sim):
+    """maxv takes the copy of pos's answer in sample 2: before, --until held on it and the
+    watch ended there, 'maxv == 5000000 became true'."""
+    sim, path = pty_sim
+    displace(sim, POS, lambda n: n == 2)
+    p = tmclsh(path, "--json", "-c", f'{SETUP}\n{WATCH} --until "maxv == 5000000"')
+    got = samples(p)
+    assert len(got) == 12 and "became true" not in p.stderr, p.stdout + p.stderr
+    assert all(s["values"]["maxv"] == MAXV for s in got)

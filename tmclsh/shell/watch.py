@@ -673,16 +673,11 @@ class _Watch:
                 continue
             reading = _Reading(self.session, self.items, time.monotonic() - self.start)
             if self.pending is not None:  # judged by this sample's requests
-                ended = self._deliver(self.pending, followed=True)
+                ended = self._deliver(self.pending, followed=True, until=False)
                 if ended is not None:
-                    return ended  # (the sample just read came after the end: not shown)
+                    return ended
             if reading.lost is not None:
-                self.state.lost = reading.lost
-                if self.view is not None:
-                    self.view.update(force=True)
-                else:
-                    self.session.out.err.print(f"watch: link lost: {reading.lost}; "
-                                               "reconnecting", style="tmcl.warn", markup=False)
+                self._lost(reading.lost)
                 continue
             if self.state.samples == 0 and len(reading.errors) == len(self.items):
                 # nothing readable at all: an error, not a watch of dashes
@@ -690,9 +685,12 @@ class _Watch:
             if doubt:  # what already waits, taken in (no exchange, no wait): the last
                 self.session.client.poll()  # read's own answer, if it was displaced
             reading.settle(confirm=False)  # in doubt already: read again within the sample
-            last = self.count is not None and self.state.samples + 1 >= self.count
+            # --until on the values as read: an answer found in doubt later can only make it
+            # false (not judged on), so a sample it does not end need not be judged now
+            held = self.until is not None and self._until(reading.sample())
+            last = held or self.count is not None and self.state.samples + 1 >= self.count
             if reading.judged or last or not doubt:
-                ended = self._deliver(reading, confirm=True)
+                ended = self._deliver(reading, confirm=True, until=held)
                 if ended is not None:
                     return ended
             else:
@@ -708,16 +706,22 @@ class _Watch:
                 return self._end(ended)
         return self._end("interrupt")
 
-    def _deliver(self, reading: _Reading, *, confirm: bool = False,
-                 followed: bool = False) -> str | None:
+    def _deliver(self, reading: _Reading, *, confirm: bool = False, followed: bool = False,
+                 until: bool = False) -> str | None:
         """Judge a sample's answers, then show, log and emit it; "count", "until" or "pipe"
         if the watch ends with it. ``followed``: requests have gone out since (the next
-        sample's): an answer found in doubt now is marked, not read again (too late)."""
+        sample's): an answer found in doubt now is marked, not read again (too late).
+        ``until``: whether --until held on the values as read (asked again if judging
+        changed them)."""
         self.pending = None
+        before = reading.reread
         reading.settle(confirm=confirm and self.state.lost is None, again=not followed,
                        followed=followed)
         sample = reading.sample()
         self.result.reread += reading.reread
+        if sample.lost is not None:  # (while reading an answer in doubt again)
+            self._lost(sample.lost)
+            return None
         for name in sample.suspect:
             self.result.doubtful[name] = self.result.doubtful.get(name, 0) + 1
         self.state.add(sample)
@@ -735,9 +739,19 @@ class _Watch:
                 return "pipe"
         if self.count is not None and self.state.samples >= self.count:
             return "count"
-        if self.until is not None and self._until(sample):
+        if until and (reading.reread != before or sample.suspect):
+            until = self._until(sample)
+        if until:
             return "until"
         return None
+
+    def _lost(self, reason: str) -> None:
+        self.state.lost = reason
+        if self.view is not None:
+            self.view.update(force=True)
+        else:
+            self.session.out.err.print(f"watch: link lost: {reason}; reconnecting",
+                                       style="tmcl.warn", markup=False)
 
     def _end(self, reason: str) -> str:
         stopped = False
@@ -746,7 +760,8 @@ class _Watch:
             stopped = True
         if self.pending is not None:  # shown too, judged first
             pending, self.pending = self.pending, None
-            if self._deliver(pending, confirm=not stopped, followed=stopped) == "pipe":
+            if self._deliver(pending, confirm=not stopped, followed=stopped,
+                             until=False) == "pipe":
                 return "pipe"
         return reason
 
