@@ -603,6 +603,16 @@ class Client:
             self._trace("note", b"", f"the reply to {_name(last[0])} may have been another "
                                      "request's: a reply came that nothing was waiting for")
 
+    def last_may_be_a_copy(self) -> bool:
+        """Whether the last reply taken could be a late copy of the one before it: only a
+        reply with the same module address and command is taken for an answer. When it
+        could not, no answer still to come can show it to be another request's (so there is
+        nothing for one more exchange to find out)."""
+        with self._lock:
+            recent = self._recent
+            return len(recent) >= 2 and (recent[-1].module, recent[-1].opcode) == (
+                recent[-2].module, recent[-2].opcode)
+
     def suspect_seqs(self) -> set[int]:
         """The ``seq`` of every suspect not yet taken (``take_suspects`` still reports them)."""
         with self._lock:  # (the event poller may add one meanwhile)

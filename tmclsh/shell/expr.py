@@ -631,19 +631,26 @@ def doubtful(session: Session, answered: Mapping[int, str], *, confirm: bool = T
              ) -> set[str]:
     """The reads (``answered``'s texts) whose answer may have been another request's: a late
     copy of the reply before it, taken for it; the client finds that out when the real
-    answer comes while nothing waits for it. ``confirm``: one more exchange first (136 type
-    1), so the line's last answer has arrived (the module answers in order)."""
+    answer comes while nothing waits for it. ``confirm``: what is waiting is taken in, and
+    one more exchange made (136 type 1) when the last answer may be such a copy, so the
+    line's last answer has arrived (the module answers in order)."""
     if not answered or not can_doubt(session):
         return set()
     client = session.client
-    if confirm and getattr(getattr(client, "transport", None), "simulated", False):
-        client.poll()  # in-process: whatever follows an answer is waiting already (as in
-        # Client.confirm_last), so what waits is taken in, and nothing is sent
-    elif confirm:
-        try:
-            client.request(Request(client.address, Control.GET_VERSION, 1, 0, 0))
-        except TmclError:
-            pass  # what it could find is found by the next request's flush as well
+    if confirm:
+        poll = getattr(client, "poll", None)
+        if callable(poll):
+            poll()  # what waits already is taken in (free: nothing is sent, nothing awaited)
+        copy = getattr(client, "last_may_be_a_copy", None)
+        simulated = getattr(getattr(client, "transport", None), "simulated", False)
+        # the exchange only if the last answer may be the reply before it, taken again; not
+        # on the simulator in process (whatever follows an answer is waiting already, as
+        # in Client.confirm_last)
+        if not simulated and (not callable(copy) or copy()):
+            try:
+                client.request(Request(client.address, Control.GET_VERSION, 1, 0, 0))
+            except TmclError:
+                pass  # what it could find is found by the next request's flush as well
     found = client.suspect_seqs()
     return {text for seq, text in answered.items() if seq in found}
 
