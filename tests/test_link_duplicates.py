@@ -139,12 +139,13 @@ def test_a_suspect_answer_is_reported_in_json_and_fails_the_run(pty_sim, tmp_pat
     assert p.returncode == 1
 
 
-def test_a_suspect_answer_to_a_check_names_its_line(pty_sim, tmp_path):
-    """The displaced answer was read by a .expect (not a TMCL line): the warning names that
-    line and where it is, not 'an earlier answer'."""
+def test_a_suspect_answer_to_a_shell_command_names_its_line(pty_sim, tmp_path):
+    """The displaced answer was read by a shell command (a ``${...}`` in .echo, not a TMCL
+    line): the warning names that line and where it is, not 'an earlier answer'. (A .expect
+    reads such an answer again itself: tests/test_answers_in_doubt.py.)"""
     sim, path = pty_sim
     script = tmp_path / "s.tmcl"
-    script.write_text("SGP 0, 2, 11\nSGP 1, 2, 22\nGGP 0, 2\n.expect GGP 1, 2 == 22\n"
+    script.write_text("SGP 0, 2, 11\nSGP 1, 2, 22\nGGP 0, 2\n.echo ${GGP 1, 2}\n"
                       "GGP 0, 2\n")
     send, seen = sim._send_reply, []
 
@@ -159,7 +160,7 @@ def test_a_suspect_answer_to_a_check_names_its_line(pty_sim, tmp_path):
                         "--keep-going", "-f", str(script)], capture_output=True, text=True,
                        timeout=30, env=tmclsh_env(), cwd=str(ROOT))
     (warning,) = [x for x in p.stderr.splitlines() if "another request" in x]
-    assert "the answer to '.expect GGP 1, 2 == 22' (" in warning and ":4)" in warning, p.stderr
+    assert "the answer to '.echo ${GGP 1, 2}' (" in warning and ":4)" in warning, p.stderr
     assert p.returncode == 1
 
 

@@ -85,8 +85,10 @@ def test_a_watch_says_link_lost_and_samples_again_once_it_is_back(tcp_sim, capsy
 
         def emit(obj):
             got.append((time.monotonic() - t0, obj))
-            if len(got) == 8:  # written while the watch runs: the samples after the link
-                client.execute("SGP 0, 2, 2")  # came back read the module again
+            # written while the watch runs (before the hang-up: a sample is emitted once the
+            # next one is read): the samples after the link came back read the module again
+            if len(got) == 7:
+                client.execute("SGP 0, 2, 2")
         result = watch.run_watch(session, items, interval=0.05, count=16, live=False,
                                  emit=emit)
     finally:

@@ -42,7 +42,7 @@ import logging
 import threading
 import time
 from collections import Counter, deque
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Container, Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, NamedTuple
 
@@ -603,17 +603,35 @@ class Client:
             self._trace("note", b"", f"the reply to {_name(last[0])} may have been another "
                                      "request's: a reply came that nothing was waiting for")
 
+    def last_may_be_a_copy(self) -> bool:
+        """Whether the last reply taken could be a late copy of the one before it: only a
+        reply with the same module address and command is taken for an answer. When it
+        could not, no answer still to come can show it to be another request's (so there is
+        nothing for one more exchange to find out)."""
+        with self._lock:
+            recent = self._recent
+            return len(recent) >= 2 and (recent[-1].module, recent[-1].opcode) == (
+                recent[-2].module, recent[-2].opcode)
+
     def suspect_seqs(self) -> set[int]:
         """The ``seq`` of every suspect not yet taken (``take_suspects`` still reports them)."""
         with self._lock:  # (the event poller may add one meanwhile)
             return {s.seq for s in self.suspects}
 
-    def take_suspects(self) -> list[Suspect]:
+    def take_suspects(self, seqs: Container[int] | None = None) -> list[Suspect]:
         """Replies returned earlier that may have answered another request (oldest first);
-        each is reported once."""
+        each is reported once. ``seqs``: only those (a caller that read again, or marked the
+        values in doubt itself, takes its own; the rest stay to be reported)."""
         out = []
-        while self.suspects:
-            out.append(self.suspects.popleft())
+        if seqs is None:
+            while self.suspects:
+                out.append(self.suspects.popleft())
+            return out
+        with self._lock:  # (the event poller may add one meanwhile)
+            keep = [s for s in self.suspects if s.seq not in seqs]
+            out = [s for s in self.suspects if s.seq in seqs]
+            self.suspects.clear()
+            self.suspects.extend(keep)
         return out
 
     def _bind(self, transport: Transport) -> None:

@@ -286,7 +286,10 @@ COMMANDS: tuple[Command, ...] = (
             category='script',
             details=('  .expect GAP 1, 0 == 5000\n'
                      '  .expect abs(GAP 1, 0 - ${target}) <= 10\n'
-                     'A failure says what was expected and what was read.')),
+                     'A failure says what was expected and what was read. An answer the '
+                     'line may have given another request (a reply came that nothing was '
+                     'waiting for) is read again; one still in doubt fails the check, said '
+                     'to be in doubt, its value not stated.')),
     Command('.wait', 'script', '.wait EXPR [--timeout S] [--interval S]',
             'poll until a condition holds (default timeout 30 s, interval 0.05 s)',
             complete=['--timeout', '--interval'], category='script',
@@ -294,7 +297,8 @@ COMMANDS: tuple[Command, ...] = (
                      '  .wait RFS STATUS, 0 == 0\n'
                      '--timeout none waits forever; otherwise at most a day (86400 s); '
                      '--interval 0.001..86400 s. A timeout is an error that shows the last '
-                     'value read.')),
+                     'value read (or says it was in doubt). A condition met on an answer '
+                     'that may have been another request\'s does not end the wait.')),
     Command('.sleep', 'script', '.sleep SECONDS',
             'pause up to a day (seconds may be a fraction or an expression)',
             category='script'),
@@ -332,7 +336,11 @@ COMMANDS: tuple[Command, ...] = (
                      'the same and ends the watch; q (or Esc) ends the watch quietly, motors '
                      'keep running. A lost link shows as "link lost"; the watch reconnects '
                      'and samples on once the link is back. Under --json or in a pipe, '
-                     'each sample is a JSON object {"t": s, "values": {...}}. With no '
+                     'each sample is a JSON object {"t": s, "values": {...}}. An answer the '
+                     'line may have given another request is read again within its sample, '
+                     'or shown as ? (CSV ?, JSON null and "suspect": [names]) and left out of '
+                     'min, max, rate and .plot; a sample is shown once its answers are '
+                     'judged, one sample late. With no '
                      'expressions: the position and speed of each motor. .plot draws the '
                      'last watch. --interval is 0..86400 s, --count 1..1000000; the CSV file '
                      'is put in place when the watch ends.')),

@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING, Protocol
 from .. import instructions as isa
 from .. import limits
 from ..errors import StatusError, TmclError, ValidationError
-from ..protocol import status_ok, status_text
+from ..protocol import Control, Request, status_ok, status_text
 
 if TYPE_CHECKING:
     from ..asm import Encoded
@@ -588,6 +588,82 @@ class SessionContext:
         if self.cache is not None:
             self.cache[text] = value
         return value
+
+
+CONFIRM_ROUNDS = 3  # reads again of an answer in doubt before it is said to be in doubt
+
+
+@dataclass
+class TrackedContext(SessionContext):
+    """A ``SessionContext`` that remembers which reply answered each read (``answered``:
+    ``Client.replies`` after it -> the read's text), so a read whose answer the client finds
+    suspect later (``Client.suspect_seqs``) can be named, read again or marked. ``used``:
+    the texts read (or taken from the cache) since it was last cleared."""
+
+    answered: dict[int, str] = field(default_factory=dict)
+    used: set[str] = field(default_factory=set)
+
+    def read(self, node: Read, text: str) -> Number:
+        self.used.add(text)
+        if self.cache is not None and text in self.cache:
+            return self.cache[text]
+        client = self.session.client
+        try:
+            value = read_value(self.session, text)
+        finally:
+            seq = getattr(client, "replies", None)
+            if isinstance(seq, int):
+                self.answered[seq] = text  # (an error reply is an answer too)
+        self.trace[text] = value
+        if self.cache is not None:
+            self.cache[text] = value
+        return value
+
+
+def can_doubt(session: Session) -> bool:
+    """Whether the client tells answers in doubt apart (``Client.suspect_seqs``)."""
+    client = session.client
+    return callable(getattr(client, "suspect_seqs", None)) and getattr(
+        client, "mode", None) != "ascii"
+
+
+def doubtful(session: Session, answered: Mapping[int, str], *, confirm: bool = True
+             ) -> set[str]:
+    """The reads (``answered``'s texts) whose answer may have been another request's: a late
+    copy of the reply before it, taken for it; the client finds that out when the real
+    answer comes while nothing waits for it. ``confirm``: what is waiting is taken in, and
+    one more exchange made (136 type 1) when the last answer may be such a copy, so the
+    line's last answer has arrived (the module answers in order)."""
+    if not answered or not can_doubt(session):
+        return set()
+    client = session.client
+    if confirm:
+        poll = getattr(client, "poll", None)
+        if callable(poll):
+            poll()  # what waits already is taken in (free: nothing is sent, nothing awaited)
+        copy = getattr(client, "last_may_be_a_copy", None)
+        simulated = getattr(getattr(client, "transport", None), "simulated", False)
+        # the exchange only if the last answer may be the reply before it, taken again; not
+        # on the simulator in process (whatever follows an answer is waiting already, as
+        # in Client.confirm_last)
+        if not simulated and (not callable(copy) or copy()):
+            try:
+                client.request(Request(client.address, Control.GET_VERSION, 1, 0, 0))
+            except TmclError:
+                pass  # what it could find is found by the next request's flush as well
+    found = client.suspect_seqs()
+    return {text for seq, text in answered.items() if seq in found}
+
+
+def settle_doubts(session: Session, answered: Mapping[int, str]) -> None:
+    """The suspects among ``answered`` were dealt with by their reader (read again, or
+    said to be in doubt): taken from the client, so they are not reported again."""
+    take = getattr(session.client, "take_suspects", None)
+    if callable(take) and answered:
+        try:
+            take(answered.keys())
+        except TypeError:  # (a client whose take_suspects takes everything)
+            pass
 
 
 def encode_read(session: Session, text: str) -> Encoded:

@@ -896,6 +896,51 @@ def check(expression: expr.Expression, ctx: expr.SessionContext) -> tuple[bool, 
     return bool(value), ", ".join(seen) or f"value {expr.format_number(value)}", ""
 
 
+@dataclass
+class Judged:
+    """A condition checked on certain answers (``judge``): ``doubt`` names the reads whose
+    answer stayed in doubt (the sides are then not to be stated as read)."""
+
+    ok: bool
+    left: str
+    right: str
+    doubt: list[str]
+    answered: dict[int, str]  # every reply the check took (Client.replies -> read)
+    tries: int = 1  # times the condition was evaluated
+
+    def seen(self) -> str:
+        return f"{self.left}{', ' + self.right if self.right else ''}"
+
+    def in_doubt(self) -> str:
+        reads = " and ".join(self.doubt)
+        times = f" (read {self.tries} times)" if self.tries > 1 else ""
+        return (f"the answer to {reads} is in doubt{times}: the line brought a reply nothing "
+                "was waiting for, so it may have been another request's")
+
+
+def judge(session: Session, expression: expr.Expression, *, again: bool = True,
+          confirm: bool = True) -> Judged:
+    """``check`` on answers known to be the module's own. On a line that brings a reply
+    twice, a read may take a copy of the reply before it (same command, same layout); the
+    client finds that out when the real answer comes while nothing waits for it, which one
+    more exchange (136 type 1, ``confirm``) gives the chance to. A read in doubt is read
+    again (the whole condition, ``expr.CONFIRM_ROUNDS`` times at most, if ``again``).
+    The suspects a check dealt with are taken from the client (not reported again)."""
+    answered: dict[int, str] = {}
+    tries = 0
+    for tries in range(1, 2 + (expr.CONFIRM_ROUNDS if again else 0)):
+        ctx = expr.TrackedContext(session)
+        try:
+            ok, left, right = check(expression, ctx)
+        finally:
+            answered.update(ctx.answered)
+        doubt = expr.doubtful(session, ctx.answered, confirm=confirm)
+        if not doubt:
+            break
+    expr.settle_doubts(session, answered)
+    return Judged(ok, left, right, sorted(doubt), answered, tries)
+
+
 def _side(node: expr.Node, ctx: expr.SessionContext) -> str:
     """A read by the TMCL it sent (``GIO 3, 2`` for ``GIO (port), 2``), else as written."""
     return node.tmcl(ctx) if isinstance(node, expr.Read) else node.text
@@ -906,16 +951,19 @@ def cmd_expect(session: Session, args: str) -> None:
     if not args:
         raise ValidationError(".expect needs a condition: .expect GAP 1, 0 == 5000")
     expression = expr.parse(session.expand(args))
-    ok, left, right = check(expression, expr.SessionContext(session))
-    if not ok:
+    judged = judge(session, expression)
+    if judged.doubt:  # judged on no certain value: neither a pass nor a stated value
         session.stats.checks_failed += 1
-        raise CheckFailed(f"expectation failed: {expression.text} "
-                          f"({left}{', ' + right if right else ''})")
+        raise CheckFailed(f"expectation in doubt: {expression.text} ({judged.in_doubt()})")
+    if not judged.ok:
+        session.stats.checks_failed += 1
+        raise CheckFailed(f"expectation failed: {expression.text} ({judged.seen()})")
     session.stats.checks_passed += 1
     if session.out.json:
         session.out.emit({"line": f".expect {args}", "check": expression.text, "passed": True})
     else:
-        session.out.print(f"passed: {expression.text} ({left})", style="tmcl.ok", markup=False)
+        session.out.print(f"passed: {expression.text} ({judged.left})", style="tmcl.ok",
+                          markup=False)
 
 
 WAIT_OPTIONS = {"timeout": True, "interval": True}
@@ -931,12 +979,18 @@ def cmd_wait(session: Session, args: str) -> None:
     if not rest:
         raise ValidationError(".wait needs a condition: .wait GAP 8, 0 == 1")
     expression = expr.parse(session.expand(rest))
-    last = ("", "")
+    last: Judged | None = None
 
     def holds() -> bool:
         nonlocal last
-        ok, *last = check(expression, expr.SessionContext(session))
-        return ok
+        before, last = last, judge(session, expression, again=False, confirm=False)
+        if before is not None:  # (judged by this poll's requests)
+            expr.settle_doubts(session, before.answered)
+        if not last.ok or last.doubt:
+            return False  # a "not yet" in doubt costs one more poll: a condition met is confirmed
+        last.doubt = sorted(expr.doubtful(session, last.answered, confirm=True))
+        expr.settle_doubts(session, last.answered)
+        return not last.doubt
 
     left = session.time_left()
     capped = left is not None and (timeout is None or timeout > left)
@@ -946,7 +1000,13 @@ def cmd_wait(session: Session, args: str) -> None:
         if capped:
             time.sleep(0.001)
             session.time_left()
-        seen = ", ".join(x for x in last if x)
+        seen = ""
+        if last is not None:
+            # the last answer judged, so it is not stated as read when it was in doubt
+            doubt = sorted(expr.doubtful(session, last.answered, confirm=True)) or last.doubt
+            expr.settle_doubts(session, last.answered)
+            last.doubt = doubt
+            seen = last.in_doubt() if doubt else last.seen()
         raise TmclTimeoutError(f"timed out after {timeout:g} s waiting for {expression.text} "
                                f"({seen})") from None
 

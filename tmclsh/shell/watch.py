@@ -9,6 +9,16 @@
   recent values, changed values highlighted. Under ``--json`` or when stdout is not a
   terminal: one JSON object per sample, ``{"t": seconds, "values": {name: number}}``
   (``null`` for a value whose read failed in that sample).
+* An answer in doubt is never shown as the module's value. On a line that brings a reply
+  twice, the copy may be taken for the next request's answer (same command, same layout);
+  the client finds that out when the real answer comes while nothing waits for it
+  (``Client.suspect_seqs``). A read found so during its sample (by a later read's request)
+  is read again at once, then one 136 type 1 exchange lets the line's last answer arrive;
+  the sample's last read is judged by the next sample's first request, so a sample is shown
+  one sample late (the last one after a 136 type 1 exchange). A value still in doubt is
+  shown as ``?`` (the CSV too; JSON: ``null`` and ``"suspect": [names]``) and is left out
+  of min, max, rate, the sparkline and ``.plot``. No exchange is added while nothing is in
+  doubt.
 * Keys (when stdin is a terminal; read through prompt_toolkit's input in raw mode, so the
   Windows console works as a POSIX terminal does; restored on exit): ``s`` or space stops
   everything (the stored program if it runs, MST to every motor, speeds read back: the
@@ -119,23 +129,93 @@ class Sample:
     values: dict[str, Number | None]
     errors: dict[str, str] = field(default_factory=dict)
     lost: str | None = None  # the link was lost during this sample: why
+    suspect: tuple[str, ...] = ()  # values whose answer may have been another request's
 
 
 def poll(session: Session, items: Sequence[Item], t: float) -> Sample:
     """One sample: every item evaluated once; a read failing shows as None plus its error.
-    A lost link ends the sample at once (``Sample.lost``)."""
-    ctx = expr.SessionContext(session, cache={})
-    values: dict[str, Number | None] = {}
-    errors: dict[str, str] = {}
-    for item in items:
+    A lost link ends the sample at once (``Sample.lost``). Its answers are judged on what the
+    client knows so far and then once more after a 136 type 1 exchange (see ``_Reading``)."""
+    reading = _Reading(session, items, t)
+    reading.settle(confirm=True)
+    return reading.sample()
+
+
+class _Reading:
+    """One sample's reads, with the reply that answered each (``expr.TrackedContext``), so
+    a read whose answer is found in doubt can be read again or marked."""
+
+    def __init__(self, session: Session, items: Sequence[Item], t: float):
+        self.session, self.items, self.t = session, items, t
+        self.ctx = expr.TrackedContext(session, cache={})
+        self.values: dict[str, Number | None] = {}
+        self.errors: dict[str, str] = {}
+        self.uses: dict[str, set[str]] = {}  # item name -> the reads it used
+        self.suspect: list[str] = []
+        self.reread = 0  # answers read again (found in doubt, then certain or not)
+        self.lost: str | None = None
+        self.judged = False  # every answer judged (a request has followed the last one)
+        for item in items:
+            if not self._evaluate(item):
+                break
+
+    def _evaluate(self, item: Item) -> bool:
+        """Evaluate one item; False if the link was lost (the sample ends)."""
+        ctx = self.ctx
+        ctx.used = set()
         try:
-            values[item.name] = item.expression.evaluate(ctx)
+            self.values[item.name] = item.expression.evaluate(ctx)
+            self.errors.pop(item.name, None)
         except TransportError as exc:
-            return Sample(t, {i.name: None for i in items}, {}, lost=str(exc))
+            self.lost = str(exc)
+            return False
         except TmclError as exc:
-            values[item.name] = None
-            errors[item.name] = str(exc)
-    return Sample(t, values, errors)
+            self.values[item.name] = None
+            self.errors[item.name] = str(exc)
+        finally:
+            self.uses[item.name] = ctx.used
+        return True
+
+    def settle(self, *, confirm: bool, again: bool = True, followed: bool = False) -> None:
+        """Judge the answers: ``confirm`` sends one 136 type 1 first, so the line's last
+        answer has arrived (without it, the last read stays unjudged unless a suspect was
+        found: reading again ends with that exchange). ``again``: read an answer in doubt
+        again (``expr.CONFIRM_ROUNDS`` times at most), else mark it at once (too late to be
+        this sample's value). ``followed``: a request has been sent since the last read
+        (the next sample's), so every answer can be judged without an exchange."""
+        if self.lost is not None or self.judged:
+            return
+        session, ctx = self.session, self.ctx
+        doubt = expr.doubtful(session, ctx.answered, confirm=confirm)
+        self.judged = confirm or followed or not expr.can_doubt(session)
+        rounds = 0
+        while doubt and again and rounds < expr.CONFIRM_ROUNDS:
+            rounds += 1
+            self.reread += len(doubt)
+            expr.settle_doubts(session, ctx.answered)
+            for seq in [q for q, text in ctx.answered.items() if text in doubt]:
+                del ctx.answered[seq]
+            for text in doubt:
+                assert ctx.cache is not None
+                ctx.cache.pop(text, None)
+            for item in self.items:
+                if self.uses.get(item.name, set()) & doubt and not self._evaluate(item):
+                    return
+            doubt = expr.doubtful(session, ctx.answered, confirm=True)
+            self.judged = True
+        if doubt:
+            names = [i.name for i in self.items if self.uses.get(i.name, set()) & doubt]
+            for name in names:
+                self.values[name] = None
+                self.errors.pop(name, None)
+            self.suspect += [n for n in names if n not in self.suspect]
+        if self.judged:
+            expr.settle_doubts(session, ctx.answered)
+
+    def sample(self) -> Sample:
+        if self.lost is not None:
+            return Sample(self.t, {i.name: None for i in self.items}, {}, lost=self.lost)
+        return Sample(self.t, dict(self.values), dict(self.errors), suspect=tuple(self.suspect))
 
 
 @dataclass(frozen=True)
@@ -148,6 +228,7 @@ class Series:
     rate: float | None  # units per second
     history: tuple[Number, ...]
     error: str | None = None
+    suspect: bool = False  # the last sample's answer was in doubt (shown as "?")
 
     @property
     def changed(self) -> bool:
@@ -165,6 +246,7 @@ class Snapshot:
     keys: bool = False
     failed_reads: int = 0
     lost: str | None = None
+    doubtful_reads: int = 0  # values in doubt (shown "?", not counted as failed)
 
 
 class WatchState:
@@ -178,6 +260,7 @@ class WatchState:
         self.keys = keys
         self.samples = 0
         self.failed_reads = 0
+        self.doubtful_reads = 0
         self.note = ""
         self.lost: str | None = None  # "link lost" reason while the link is down
         self.first_t: float | None = None
@@ -186,6 +269,7 @@ class WatchState:
         self.min: dict[str, Number | None] = {n: None for n in self.names}
         self.max: dict[str, Number | None] = {n: None for n in self.names}
         self.errors: dict[str, str | None] = {n: None for n in self.names}
+        self.suspect: dict[str, bool] = {n: False for n in self.names}
         self.recent: dict[str, deque[tuple[float, Number]]] = {
             n: deque(maxlen=max(SPARK_WIDTH, 512)) for n in self.names}
         self.log = plot.Log(list(self.names))
@@ -199,8 +283,12 @@ class WatchState:
         for n in self.names:
             v = sample.values.get(n)
             self.errors[n] = sample.errors.get(n)
-            if v is None:
-                self.failed_reads += 1
+            self.suspect[n] = n in sample.suspect
+            if v is None:  # (a value in doubt is no value: not in min, max, rate or history)
+                if self.suspect[n]:
+                    self.doubtful_reads += 1
+                else:
+                    self.failed_reads += 1
                 continue
             self.prev[n], self.last[n] = self.last[n], v
             self.min[n] = v if self.min[n] is None else min(self.min[n], v)  # type: ignore[type-var]
@@ -229,12 +317,13 @@ class WatchState:
         span = self.t - (self.first_t or 0.0)
         hz = (self.samples - 1) / span if span > 0 else 0.0
         series = tuple(
-            Series(n, self.last[n] if self.errors[n] is None else None, self.prev[n],
-                   self.min[n], self.max[n], self.rate(n),
-                   tuple(v for _, v in list(self.recent[n])[-SPARK_WIDTH:]), self.errors[n])
+            Series(n, self.last[n] if self.errors[n] is None and not self.suspect[n] else None,
+                   self.prev[n], self.min[n], self.max[n], self.rate(n),
+                   tuple(v for _, v in list(self.recent[n])[-SPARK_WIDTH:]), self.errors[n],
+                   self.suspect[n])
             for n in self.names)
         return Snapshot(series, self.t, self.samples, hz, self.interval, self.note, self.keys,
-                        self.failed_reads, self.lost)
+                        self.failed_reads, self.lost, self.doubtful_reads)
 
 
 # -- rendering (pure) ----------------------------------------------------------------------
@@ -249,6 +338,10 @@ def sparkline(values: Sequence[Number], width: int = SPARK_WIDTH) -> str:
         return _BLOCKS[3] * len(vals)
     top = len(_BLOCKS) - 1
     return "".join(_BLOCKS[round((v - lo) / (hi - lo) * top)] for v in vals)
+
+
+def _fmt_value(s: Series) -> str:
+    return "error" if s.error is not None else "?" if s.suspect else _fmt(s.value)
 
 
 def _fmt(value: Number | None) -> str:
@@ -277,7 +370,7 @@ def render(snapshot: Snapshot, width: int | None = None):
 
     spark = SPARK_WIDTH
     if width is not None:
-        cells = [(s.name, "error" if s.error is not None else _fmt(s.value), _fmt(s.minimum),
+        cells = [(s.name, _fmt_value(s), _fmt(s.minimum),
                   _fmt(s.maximum), _fmt_rate(s.rate)) for s in snapshot.series]
         heads = ("name", "value", "min", "max", "rate /s")
         used = sum(max([len(h)] + [len(c[i]) for c in cells]) + 3 for i, h in enumerate(heads))
@@ -292,6 +385,9 @@ def render(snapshot: Snapshot, width: int | None = None):
         caption_parts.append(snapshot.note)
     if snapshot.failed_reads:
         caption_parts.append(f"{snapshot.failed_reads} failed reads")
+    if snapshot.doubtful_reads:
+        caption_parts.append(f"{snapshot.doubtful_reads} answers in doubt (shown ?: the line "
+                             "brought a reply nothing was waiting for)")
     key_help = _KEY_HELP if width is None or width >= len(_KEY_HELP) else _KEY_HELP_SHORT
     caption_parts.append(key_help if snapshot.keys else _NO_KEYS_HELP)
     # one caption line per note, and wide enough that the key help never wraps
@@ -310,6 +406,8 @@ def render(snapshot: Snapshot, width: int | None = None):
             value = Text("link lost", style="tmcl.error")
         elif s.error is not None:
             value = Text("error", style="tmcl.error")
+        elif s.suspect:
+            value = Text("?", style="tmcl.warn")
         else:
             value = Text(_fmt(s.value), style="tmcl.changed" if s.changed else "tmcl.value")
         table.add_row(s.name, value, _fmt(s.minimum), _fmt(s.maximum), _fmt_rate(s.rate),
@@ -461,6 +559,8 @@ class WatchResult:
     elapsed: float
     reason: str  # count, until, key, interrupt, pipe
     stops: list = field(default_factory=list)  # program.StopReport of each stop, in order
+    reread: int = 0  # answers found in doubt within their sample and read again
+    doubtful: dict[str, int] = field(default_factory=dict)  # name -> samples it was in doubt
 
 
 class _Csv:
@@ -477,8 +577,8 @@ class _Csv:
     def write(self, sample: Sample) -> None:
         self.writer.writerow([datetime.now().isoformat(timespec="milliseconds"),
                               f"{sample.t:.4f}",
-                              *("" if sample.values.get(n) is None else sample.values[n]
-                                for n in self.names)])
+                              *("?" if n in sample.suspect else "" if sample.values.get(n) is None
+                                else sample.values[n] for n in self.names)])
         self.fh.flush()
 
     def close(self) -> None:
@@ -551,13 +651,19 @@ class _Watch:
         self.result = WatchResult(0, 0.0, "interrupt")
         self.sink: _Csv | None = None
         self.view: _Live | None = None
+        self.pending: _Reading | None = None  # read, shown once its last answer is judged
         self.keys = Keys()
         self.intr = _Interrupt()
         self.start = time.monotonic()
 
     def run(self) -> str:
-        """Returns why the watch ended: count, until, key, interrupt or pipe."""
+        """Returns why the watch ended: count, until, key, interrupt or pipe.
+
+        A sample is shown once its answers are judged (``_Reading.settle``): its last read
+        by the next sample's first request, so it is shown one sample late; one that ends
+        the watch after a 136 type 1 exchange."""
         next_at = self.start
+        doubt = expr.can_doubt(self.session)
         while not self.intr.requested:
             self.session.time_left()  # raises at the session's time limit, if it has one
             if self.state.lost is not None and not self._reconnect():
@@ -565,32 +671,30 @@ class _Watch:
                 if ended is not None:
                     return self._end(ended)
                 continue
-            sample = poll(self.session, self.items, time.monotonic() - self.start)
-            if sample.lost is not None:
-                self.state.lost = sample.lost
-                if self.view is not None:
-                    self.view.update(force=True)
-                else:
-                    self.session.out.err.print(f"watch: link lost: {sample.lost}; "
-                                               "reconnecting", style="tmcl.warn", markup=False)
+            reading = _Reading(self.session, self.items, time.monotonic() - self.start)
+            if self.pending is not None:  # judged by this sample's requests
+                ended = self._deliver(self.pending, followed=True, until=False)
+                if ended is not None:
+                    return ended
+            if reading.lost is not None:
+                self._lost(reading.lost)
                 continue
-            if self.state.samples == 0 and len(sample.errors) == len(self.items):
+            if self.state.samples == 0 and len(reading.errors) == len(self.items):
                 # nothing readable at all: an error, not a watch of dashes
-                raise TmclError(next(iter(sample.errors.values())))
-            self.state.add(sample)
-            if self.sink is not None:
-                self.sink.write(sample)
-            if self.view is not None:
-                self.view.update()
+                raise TmclError(next(iter(reading.errors.values())))
+            if doubt:  # what already waits, taken in (no exchange, no wait): the last
+                self.session.client.poll()  # read's own answer, if it was displaced
+            reading.settle(confirm=False)  # in doubt already: read again within the sample
+            # --until on the values as read: an answer found in doubt later can only make it
+            # false (not judged on), so a sample it does not end need not be judged now
+            held = self.until is not None and self._until(reading.sample())
+            last = held or self.count is not None and self.state.samples + 1 >= self.count
+            if reading.judged or last or not doubt:
+                ended = self._deliver(reading, confirm=True, until=held)
+                if ended is not None:
+                    return ended
             else:
-                try:
-                    self.emit({"t": round(sample.t, 4), "values": sample.values})
-                except BrokenPipeError:
-                    return "pipe"
-            if self.count is not None and self.state.samples >= self.count:
-                return "count"
-            if self.until is not None and self._until(sample):
-                return "until"
+                self.pending = reading
             # the next sample is due one interval after this one began; polling slower than
             # the interval starts the next at once, without a backlog of samples
             next_at = max(next_at + self.interval, time.monotonic())
@@ -602,9 +706,63 @@ class _Watch:
                 return self._end(ended)
         return self._end("interrupt")
 
+    def _deliver(self, reading: _Reading, *, confirm: bool = False, followed: bool = False,
+                 until: bool = False) -> str | None:
+        """Judge a sample's answers, then show, log and emit it; "count", "until" or "pipe"
+        if the watch ends with it. ``followed``: requests have gone out since (the next
+        sample's): an answer found in doubt now is marked, not read again (too late).
+        ``until``: whether --until held on the values as read (asked again if judging
+        changed them)."""
+        self.pending = None
+        before = reading.reread
+        reading.settle(confirm=confirm and self.state.lost is None, again=not followed,
+                       followed=followed)
+        sample = reading.sample()
+        self.result.reread += reading.reread
+        if sample.lost is not None:  # (while reading an answer in doubt again)
+            self._lost(sample.lost)
+            return None
+        for name in sample.suspect:
+            self.result.doubtful[name] = self.result.doubtful.get(name, 0) + 1
+        self.state.add(sample)
+        if self.sink is not None:
+            self.sink.write(sample)
+        if self.view is not None:
+            self.view.update()
+        else:
+            obj: dict[str, object] = {"t": round(sample.t, 4), "values": sample.values}
+            if sample.suspect:
+                obj["suspect"] = list(sample.suspect)
+            try:
+                self.emit(obj)
+            except BrokenPipeError:
+                return "pipe"
+        if self.count is not None and self.state.samples >= self.count:
+            return "count"
+        if until and (reading.reread != before or sample.suspect):
+            until = self._until(sample)
+        if until:
+            return "until"
+        return None
+
+    def _lost(self, reason: str) -> None:
+        self.state.lost = reason
+        if self.view is not None:
+            self.view.update(force=True)
+        else:
+            self.session.out.err.print(f"watch: link lost: {reason}; reconnecting",
+                                       style="tmcl.warn", markup=False)
+
     def _end(self, reason: str) -> str:
+        stopped = False
         if reason == "interrupt" and self.session.client.connected:
             self._stop_all()  # Ctrl-C is the safety key here too
+            stopped = True
+        if self.pending is not None:  # shown too, judged first
+            pending, self.pending = self.pending, None
+            if self._deliver(pending, confirm=not stopped, followed=stopped,
+                             until=False) == "pipe":
+                return "pipe"
         return reason
 
     def _reconnect(self) -> bool:
@@ -620,6 +778,8 @@ class _Watch:
         return True
 
     def _until(self, sample: Sample) -> bool:
+        if any(n in sample.suspect for n in self.until.names()):
+            return False  # (not judged on a value in doubt)
         values = {k: v for k, v in sample.values.items() if v is not None}
         try:
             return bool(self.until.evaluate(expr.SessionContext(self.session, extra=values)))
@@ -681,10 +841,25 @@ def cmd_watch(session: Session, args: str) -> None:
         text += f"; {until} became true"
     if csv_path is not None:
         text += f"; logged to {csv_path}"
+    if result.reread:
+        text += (f"; {result.reread} answer{'s' if result.reread != 1 else ''} in doubt "
+                 "read again")
     if out_is_pipe(session):
         session.out.err.print(text, style="tmcl.note", markup=False)
     else:
         session.out.info(text)
+    if result.doubtful:
+        # not shown as values, but the run is no clean pass either (as a suspect answer)
+        n = sum(result.doubtful.values())
+        session.stats.suspects += n
+        names = ", ".join(f"{k} {v}x" for k, v in result.doubtful.items())
+        warning = (f"watch: {n} value{'s' if n != 1 else ''} in doubt, shown as ? and left "
+                   f"out of min, max and rate ({names}): the line brought replies nothing "
+                   "was waiting for, so those answers may have been another request's")
+        if session.out.json:
+            session.out.emit({"watch": ".watch", "suspect": True, "warning": warning})
+        else:
+            session.out.warn(f"warning: {warning}")
     if result.stops and result.reason == "interrupt":  # Ctrl-C's stop, said below the table
         from .builtin import report_stop
 
