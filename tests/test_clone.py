@@ -218,7 +218,7 @@ def test_out_of_range_line_refused_at_its_line_before_sending(pty_client, tmp_pa
     s.run_line("SAP MaxCurrent, 0, 5")  # a real difference on an earlier line
     sim.received.clear()
     for cmd in (".restore", ".diff"):
-        with pytest.raises(AsmError) as exc:
+        with pytest.raises(CloneError) as exc:
             s.run_line(f"{cmd} {path} --yes" if cmd == ".restore" else f"{cmd} {path}")
         assert f"{path}:{n}:" in str(exc.value) and "out of range" in str(exc.value)
     assert bytes(sim.received) == b""
@@ -254,18 +254,85 @@ def test_other_module_refused_unless_force(pty_client, tmp_path, capsys):
 def test_any_script_of_sap_sgp_lines(pty_client, tmp_path, capsys):
     sim, client = pty_client("TMCM-1311")
     path = tmp_path / "hand.tmcl"
-    path.write_text("// set up the axis\n.let speed = 1\nMVP ABS, 0, 0\nSAP 4, 0, 2000\n"
-                    "SAP MaxCurrent, 0, 40  // run current\n6 140, 0, 0\nSGP 3, 2, 9\n",
-                    encoding="utf-8")
+    path.write_text("// set up the axis\n# a shell comment\n\n   \nSAP 4, 0, 2000\n"
+                    "SAP MaxCurrent, 0, 40  // run current\n5 140, 0, 5 # raw SAP\n"
+                    "SGP 3, 2, 1; SGP 3, 2, 9\n", encoding="utf-8")
     s = shell(client)
     s.run_line(f".diff {path}")
     out = capsys.readouterr().out
-    assert "3 of 3 parameters differ" in out and "MaxCurrent" in out
+    assert "4 of 4 parameters differ" in out and "MaxCurrent" in out
     s.run_line(f".restore {path} -y")
     capsys.readouterr()
     s.run_line(f".diff {path}")
     assert "no differences" in capsys.readouterr().out
     assert client.value("GAP 4, 0") == 2000 and client.value("GGP 3, 2") == 9
+
+
+NOT_A_BACKUP_LINE = [
+    ("SPA MaxPositioningSpeed, 0, 1234", "unknown command 'SPA'; did you mean"),
+    ("GARBAGE LINE", "unknown command 'GARBAGE'"),
+    ("MVP ABS, 0, 1000", "MVP is not SAP or SGP: a backup holds only SAP/SGP lines"),
+    ("6 140, 0, 0", "command 6 (GAP) is not SAP (5) or SGP (9)"),
+    (".let speed = 1", "shell command '.let'"),
+    ("SAP MaxCurrent, 0, ${speed}", "variable"),
+    ("loop: SAP MaxCurrent, 0, 1", "a label (loop:)"),
+    ("speed = 5", "a constant (speed = ...)"),
+    ("SAP MaxCurrent, 0, 999", "999 is out of range for AP 6 MaxCurrent: allowed 0..255"),
+    ("SAP MaxPossibleCurrent, 0, 5", "AP 15 MaxPossibleCurrent is read-only"),
+    ("5 15, 0, 5", "AP 15 MaxPossibleCurrent is read-only"),
+    ("SAP MaxCurrent, 1, 5", "TMCM-1311 has no motor 1: only motor 0"),
+    ("SAP 4, 0, 1000 ; SPA 4, 0, 1", "unknown command 'SPA'"),
+]
+
+
+@pytest.mark.parametrize("bad,message", NOT_A_BACKUP_LINE)
+def test_a_line_that_is_not_a_sap_sgp_line_the_module_accepts_is_refused(
+        pty_client, tmp_path, bad, message):
+    """A typo in a backup must not read as "matches": the whole file is checked before
+    anything is compared or sent, and the bad line is named as -f names it."""
+    sim, client = pty_client("TMCM-1311", target=Recording("TMCM-1311"))
+    s = shell(client, yes=True)
+    path = tmp_path / "b.tmcl"
+    path.write_text(f"// hand-written\nSAP MaxCurrent, 0, 40\n{bad}\nSAP 4, 0, 2000\n",
+                    encoding="utf-8")
+    sim.received.clear()
+    for cmd in (".diff", ".diff --exit-code", ".restore --yes"):
+        with pytest.raises(CloneError) as exc:
+            s.run_line(f"{cmd.split()[0]} {path} {' '.join(cmd.split()[1:])}")
+        assert str(exc.value).startswith(f"{path}:3: "), str(exc.value)
+        assert message in str(exc.value)
+    assert bytes(sim.received) == b""
+
+
+def test_cli_refuses_a_bad_backup_with_exit_status_2(tmp_path, run_tmclsh):
+    path = tmp_path / "t.tmcl"
+    path.write_text("SAP MaxCurrent, 0, 0\nSPA MaxPositioningSpeed, 0, 1234\n", encoding="utf-8")
+    for cmd in (f".diff --exit-code {path}", f".diff {path}", f".restore {path} --yes"):
+        r = run_tmclsh("--sim", "-c", cmd)
+        assert r.returncode == 2, (cmd, r.stdout, r.stderr)
+        assert f"{path}:2: unknown command 'SPA'" in r.stderr
+        assert "no differences" not in r.stdout and "restored" not in r.stdout
+    # -f says the same of the same file
+    r = run_tmclsh("--sim", "-f", str(path))
+    assert r.returncode == 2 and f"{path}:2: unknown command 'SPA'" in r.stderr
+    # after a line that was sent, the run failed (1), as -c says of any error
+    r = run_tmclsh("--sim", "-c", f"GAP 4, 0\n.diff {path}")
+    assert r.returncode == 1 and f"{path}:2: unknown command 'SPA'" in r.stderr
+
+
+@pytest.mark.parametrize("make,message", [
+    (lambda p: None, "no such file"),
+    (lambda p: p.write_bytes(bytes(range(256)) * 8), "not a text file"),
+    (lambda p: p.mkdir(), "it is a directory"),
+])
+def test_cli_unusable_backup_file_is_one_line(tmp_path, run_tmclsh, make, message):
+    path = tmp_path / "b.tmcl"
+    make(path)
+    for cmd in (f".diff {path}", f".restore {path} --yes"):
+        r = run_tmclsh("--sim", "-c", cmd)
+        assert r.returncode == 2, (r.stdout, r.stderr)
+        assert message in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+        assert "Traceback" not in r.stderr
 
 
 def test_cli_exit_code_json_and_replay(make_pty_sim, run_tmclsh, tmp_path):

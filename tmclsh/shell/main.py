@@ -9,7 +9,7 @@ from ..errors import TmclError
 from .render import Output
 from .session import QuitShell, Session
 
-EXIT_OK, EXIT_ERROR, EXIT_CONNECT = 0, 1, 3
+EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_CONNECT = 0, 1, 2, 3
 
 
 def banner(session: Session) -> str:
@@ -29,9 +29,17 @@ def report_error(session: Session, line: str | None, exc: BaseException) -> None
     session.out.error(line, f"{where}{exc}")
 
 
+def _sent(session: Session) -> int:
+    """Requests the client has sent so far."""
+    stats = getattr(session.client, "stats", None)
+    return stats.get("sent", 0) if isinstance(stats, dict) else 0
+
+
 def run_lines(session: Session, lines: list[str]) -> int:
     failed = False
+    refused = True  # every error so far was a file refused whole (exit_status 2)
     suspects = session.stats.suspects
+    sent = _sent(session)
     for line in lines:
         try:
             session.ensure_link()  # the link was lost on an earlier line (--keep-going)
@@ -40,9 +48,12 @@ def run_lines(session: Session, lines: list[str]) -> int:
             break
         except TmclError as exc:
             failed = True
+            refused = refused and getattr(exc, "exit_status", None) == EXIT_USAGE
             report_error(session, line, exc)
             if not session.keep_going:
                 break
+    if failed and refused and _sent(session) == sent:
+        return EXIT_USAGE  # a file refused before anything was sent, as -f says of a script
     return EXIT_ERROR if failed or session.stats.suspects > suspects else EXIT_OK
 
 
