@@ -234,8 +234,14 @@ def test_other_module_refused_unless_force(pty_client, tmp_path, capsys):
     s.run_line(f".save {path}")
     rec, c351 = pty_client("TMCM-351", target=Recording("TMCM-351"))
     t = shell(c351, json_mode=True)
-    with pytest.raises(CloneError, match="backup of a TMCM-1311.*--force"):
+    with pytest.raises(CloneError, match="backup of a TMCM-1311.*--force") as exc:
         t.run_line(f".restore {path} --yes")
+    assert f"restore by parameter name with .restore {path} --force" in str(exc.value)
+    # the hint names the command that was typed: a .diff is not told to restore
+    with pytest.raises(CloneError) as exc:
+        t.run_line(f".diff {path}")
+    assert f"compare by parameter name with .diff {path} --force" in str(exc.value)
+    assert "restore" not in str(exc.value)
     assert bytes(rec.received) == b""
     capsys.readouterr()
     t.run_line(f".restore {path} --yes --force")
@@ -266,6 +272,21 @@ def test_any_script_of_sap_sgp_lines(pty_client, tmp_path, capsys):
     s.run_line(f".diff {path}")
     assert "no differences" in capsys.readouterr().out
     assert client.value("GAP 4, 0") == 2000 and client.value("GGP 3, 2") == 9
+
+
+def test_counts_in_the_singular(pty_client, tmp_path, capsys):
+    sim, client = pty_client("TMCM-1311")
+    s = shell(client)
+    path = tmp_path / "one.tmcl"
+    path.write_text("SAP MaxCurrent, 0, 0\nSAP TargetPosition, 0, 5\n", encoding="utf-8")
+    s.run_line(f".diff {path}")
+    cap = capsys.readouterr()
+    assert "(1 parameter compared)" in cap.out and "1 state line in" in cap.out + cap.err
+    s.run_line("SAP MaxCurrent, 0, 4")
+    capsys.readouterr()
+    with pytest.raises(CloneError, match=r"^1 parameter differs from "):
+        s.run_line(f".diff {path} --exit-code")
+    assert "1 of 1 parameter differs" in capsys.readouterr().out
 
 
 NOT_A_BACKUP_LINE = [

@@ -328,7 +328,7 @@ def cmd_save(session: Session, argtext: str) -> None:
             obj.update({"program": str(prog_path), "instructions": instructions})
         out.emit(obj)
         return
-    out.ok(f"saved {saved} parameters of the {session.module.name} to {path}")
+    out.ok(f"saved {_count(saved)} of the {session.module.name} to {path}")
     if prog_path is not None:
         out.ok(f"saved the stored program ({instructions} instructions) to {prog_path}")
 
@@ -571,14 +571,15 @@ def compare(session: Session, backup: Backup) -> list[Difference]:
 def _notes(session: Session, backup: Backup, live: Module) -> None:
     out = session.out
     if backup.skipped:
-        out.info(f"{len(backup.skipped)} parameters of the {backup.module_name} backup skipped "
+        out.info(f"{_count(len(backup.skipped))} of the {backup.module_name} backup skipped "
                  f"on the {live.name}:")
         for what, why in backup.skipped:
             out.info(f"  {what}: {why}")
     if backup.state:
         names = ", ".join(s.name or s.label for s in backup.state[:6])
         more = "..." if len(backup.state) > 6 else ""
-        out.info(f"{len(backup.state)} state lines in {backup.path.name} not compared or "
+        n = len(backup.state)
+        out.info(f"{n} state line{'' if n == 1 else 's'} in {backup.path.name} not compared or "
                  f"restored ({names}{more})")
 
 
@@ -625,15 +626,17 @@ def cmd_diff(session: Session, argtext: str) -> None:
             out.emit(d.to_json())
     elif not diffs:
         out.ok(f"no differences: the {live.name} matches {backup.path.name} "
-               f"({len(backup.slots)} parameters compared)")
+               f"({_count(len(backup.slots))} compared)")
     else:
         rows = [[d.slot.name or "", d.slot.label, d.slot.where, str(d.slot.value), str(d.live),
                  d.slot.param.unit if d.slot.param else ""] for d in diffs]
-        _table(session, f"{len(diffs)} of {len(backup.slots)} parameters differ from "
+        _table(session, f"{len(diffs)} of {_count(len(backup.slots))} "
+                        f"{'differs' if len(backup.slots) == 1 else 'differ'} from "
                         f"{backup.path.name}", ["name", "number", "motor/bank", "saved", "live",
                                                 "unit"], rows)
     if diffs and "--exit-code" in given:
-        err = DiffFound(f"{len(diffs)} parameters differ from {backup.path}")
+        err = DiffFound(f"{_count(len(diffs))} {'differs' if len(diffs) == 1 else 'differ'} "
+                        f"from {backup.path}")
         err.shown = True  # type: ignore[attr-defined]  # the table (or the JSON) said it
         raise err
 
@@ -679,7 +682,8 @@ def cmd_restore(session: Session, argtext: str) -> None:
     question = (f"write {_count(len(diffs))} from {backup.path.name} to the {live.name} at "
                 f"address {c.address}?")
     if eeprom:
-        question += f" ({eeprom} global parameters of bank 0 are written straight to EEPROM)"
+        question += (f" ({eeprom} global parameter{'' if eeprom == 1 else 's'} of bank 0 "
+                     f"{'is' if eeprom == 1 else 'are'} written straight to EEPROM)")
     if not yes:
         session.confirm(question)
     # link settings last: after one of them the module may no longer hear this connection
@@ -720,7 +724,7 @@ def cmd_restore(session: Session, argtext: str) -> None:
                     and w not in link_changed]
         if storable:
             if not yes:
-                session.confirm(f"store {len(storable)} restored parameters permanently in "
+                session.confirm(f"store {_count(len(storable))} restored permanently in "
                                 "the module's EEPROM (STAP/STGP)?")
             for w in storable:
                 slot = w.diff.slot
