@@ -284,7 +284,7 @@ def test_counts_in_the_singular(pty_client, tmp_path, capsys):
     assert "(1 parameter compared)" in cap.out and "1 state line in" in cap.out + cap.err
     s.run_line("SAP MaxCurrent, 0, 4")
     capsys.readouterr()
-    with pytest.raises(CloneError, match=r"^1 parameter differs from "):
+    with pytest.raises(TmclError, match=r"^1 parameter differs from "):
         s.run_line(f".diff {path} --exit-code")
     assert "1 of 1 parameter differs" in capsys.readouterr().out
 
