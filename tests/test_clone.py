@@ -397,6 +397,55 @@ def _frames(data: bytes) -> list[bytes]:
     return [bytes(data[i:i + 9]) for i in range(0, len(data) - len(data) % 9, 9)]
 
 
+def test_save_over_an_existing_file_asks_at_the_prompt(pty_client, tmp_path, capsys):
+    """The golden backup of the old module must not go with one wrong Enter."""
+    sim, client = pty_client("TMCM-1311", target=Recording("TMCM-1311"))
+    path = tmp_path / "golden.tmcl"
+    path.write_text("// module: TMCM-1311\n// date: 2026-11-30 08:00:00 UTC\nSAP 4, 0, 7\n",
+                    encoding="utf-8")
+    golden = path.read_text(encoding="utf-8")
+    asked: list[str] = []
+    s = Session(client, Output(), interactive=True)
+    s.ask = lambda q: asked.append(q) or False
+    sim.received.clear()
+    with pytest.raises(Abort, match="cancelled"):
+        s.run_line(f".save {path}")
+    assert asked == [f"{path} (a backup of a TMCM-1311, 2026-11-30 08:00:00 UTC) exists; "
+                     "overwrite it?"]
+    assert path.read_text(encoding="utf-8") == golden
+    assert bytes(sim.received) == b""  # asked before anything was read
+    s.ask = lambda q: asked.append(q) or True
+    s.run_line(f".save {path}")
+    assert len(asked) == 2 and path.read_text(encoding="utf-8") != golden
+    asked.clear()
+    s.run_line(f".save {tmp_path / 'new.tmcl'}")  # a new file: nothing to ask
+    s.run_line(f".save {path} --yes")
+    assert asked == []
+
+
+def test_cli_save_over_an_existing_file_needs_yes(tmp_path, run_tmclsh):
+    path = tmp_path / "golden.tmcl"
+    path.write_text("// the old module\n", encoding="utf-8")
+    for args in (("-c", f".save {path}"), ("-c", f".save {path} --program")):
+        r = run_tmclsh("--sim", *args)
+        assert r.returncode == 1, r.stderr
+        assert len(r.stderr.strip().splitlines()) == 1 and "add --yes" in r.stderr, r.stderr
+        assert "another name" in r.stderr and path.read_text("utf-8") == "// the old module\n"
+    assert not (tmp_path / "golden.program.tmcl").exists()
+    r = run_tmclsh("--sim", "-c", f".save {path} -y")
+    assert r.returncode == 0 and "SAP MaxCurrent" in path.read_text("utf-8"), r.stderr
+    path.write_text("// the old module\n", encoding="utf-8")
+    r = run_tmclsh("--sim", "--yes", "-c", f".save {path}")
+    assert r.returncode == 0 and "SAP MaxCurrent" in path.read_text("utf-8"), r.stderr
+    # the program file beside it counts as well
+    r = run_tmclsh("--sim", "-c", f".save {tmp_path / 'other.tmcl'} --program")
+    assert r.returncode == 0, r.stderr
+    (tmp_path / "other.tmcl").unlink()
+    r = run_tmclsh("--sim", "-c", f".save {tmp_path / 'other.tmcl'} --program")
+    assert r.returncode == 1 and "other.program.tmcl exists" in r.stderr, r.stderr
+    assert not (tmp_path / "other.tmcl").exists()
+
+
 def test_store_after_restore(pty_client, tmp_path, capsys):
     sim, client = pty_client("TMCM-1311", target=Recording("TMCM-1311"))
     s = shell(client, json_mode=True, yes=True)

@@ -304,10 +304,43 @@ def _program_text(session: Session) -> tuple[str, int]:
     return head + (asm.disassemble(image, module) if image else ""), len(image)
 
 
+def _what_it_holds(path: Path) -> str:
+    """`` (a backup of a TMCM-1311, 2026-12-01 19:40:00 UTC)`` from a file's header, or ''."""
+    try:
+        with open(path, "rb") as fh:
+            head = _header(fh.read(4096).decode("utf-8", "replace").splitlines())
+    except OSError:
+        return ""
+    if "module" not in head:
+        return ""
+    when = f", {head['date']}" if head.get("date") else ""
+    return f" (a backup of a {head['module']}{when})"
+
+
+def _may_overwrite(session: Session, paths: list[Path | None], yes: bool) -> None:
+    """Ask before a file that exists is replaced (the old module's only backup may be in
+    it); where nobody can answer (-c, -f) it is refused unless --yes. Devices and pipes
+    are written into, not replaced, so they are not asked about."""
+    existing = [p for p in paths if p is not None and p.is_file()]
+    if not existing or yes or session.yes:
+        return
+    one = len(existing) == 1
+    names = " and ".join(f"{p}{_what_it_holds(p)}" for p in existing)
+    if session.ask is not None and session.interactive:
+        session.confirm(f"{names} {'exists' if one else 'exist'}; overwrite "
+                        f"{'it' if one else 'them'}?")
+        return
+    from .session import Abort
+
+    raise Abort(f"{names} {'exists' if one else 'exist'}; not overwritten: add --yes to "
+                f"replace {'it' if one else 'them'}, or save under another name")
+
+
 @command(".save")
 def cmd_save(session: Session, argtext: str) -> None:
-    usage = ".save FILE [--program]"
-    name, given = _args(argtext, usage, {"--program": "--program"})
+    usage = ".save FILE [--program] [--yes]"
+    name, given = _args(argtext, usage, {"--program": "--program", "--yes": "--yes",
+                                         "-y": "--yes"})
     path = Path(name).expanduser()
     if path.is_dir():
         raise CloneError(f"cannot write {path}: it is a directory")
@@ -315,6 +348,7 @@ def cmd_save(session: Session, argtext: str) -> None:
     if prog_path is not None and session.client.mode == "ascii":
         raise ValidationError("--program reads program memory (134), which needs binary mode "
                               "(.mode binary)")
+    _may_overwrite(session, [path, prog_path], "--yes" in given)  # before anything is read
     text, saved = save_lines(session, path, prog_path)
     instructions = None
     if prog_path is not None:
