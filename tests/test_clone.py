@@ -345,6 +345,10 @@ def test_cli_refuses_a_bad_backup_with_exit_status_2(tmp_path, run_tmclsh):
     (lambda p: None, "no such file"),
     (lambda p: p.write_bytes(bytes(range(256)) * 8), "not a text file"),
     (lambda p: p.mkdir(), "it is a directory"),
+    (lambda p: p.write_text("", encoding="utf-8"), "has no SAP/SGP lines"),
+    (lambda p: p.write_text("// only a comment\n\n", encoding="utf-8"), "has no SAP/SGP lines"),
+    (lambda p: p.write_text("SAP 4, 0, 1000\n" * 100_001, encoding="utf-8"),
+     "backup longer than 100,000 lines; not read"),
 ])
 def test_cli_unusable_backup_file_is_one_line(tmp_path, run_tmclsh, make, message):
     path = tmp_path / "b.tmcl"

@@ -821,7 +821,8 @@ Comments ({_b("//")}, {_b("#")}) and blank lines are all a file may hold besides
 line (a typo, another TMCL command, a shell command, a line with {_b("${...}")}, a label), a
 value out of range, a read\-only parameter or a motor the module lacks is an error naming
 {_i("FILE")}{_b(":")}{_i("LINE")}, as {_b("-f")} says it, and in {_b("-c")} the exit status is 2
-when nothing was sent. For a parameter set twice the last line counts. Parameters are compared by
+when nothing was sent; so is a file with no SAP/SGP line at all, or longer than a script
+may be. For a parameter set twice the last line counts. Parameters are compared by
 number and motor/bank; a backup of another module type is carried over by name with
 {_b("--force")} (parameters the module lacks, motors it does not have and values outside its
 ranges are skipped and listed). A module without parameter data compares by number.

@@ -491,6 +491,9 @@ def read_backup(session: Session, path: Path, *, force: bool, command: str) -> B
         raise BackupFileError(f"cannot read {path}: not a text file (UTF-8)",
                               "unreadable") from None
     lines = text.splitlines()
+    if len(lines) > files.MAX_LINES:  # as for a script: a limit, not minutes of parsing
+        raise BackupFileError(f"{path}: backup longer than {files.MAX_LINES:,} lines; not read",
+                              "unreadable")
     head = _header(lines)
     backup = Backup(path, head.get("module"), head.get("program"))
     source = _source_module(backup.module_name, live)
@@ -505,6 +508,10 @@ def read_backup(session: Session, path: Path, *, force: bool, command: str) -> B
     for number, raw in enumerate(lines, 1):
         for shell_line in split_line(raw, owns_line):  # comments off, `;` between lines
             _read_line(session, backup, path, number, shell_line, source, live, ascii_mode)
+    if not (backup.slots or backup.state or backup.skipped):
+        # an empty or truncated file must not read as "matches" either
+        raise BackupFileError(f"{path} has no SAP/SGP lines: nothing to compare or restore "
+                              "(a backup is written by .save)")
     return backup
 
 
