@@ -20,7 +20,7 @@ import pytest
 from tmclsh import modules
 from tmclsh.ascii import AsciiLink
 from tmclsh.client import Client
-from tmclsh.errors import AsmError, TmclError
+from tmclsh.errors import TmclError
 from tmclsh.shell.clone import CloneError, readable_slots
 from tmclsh.shell.render import Output
 from tmclsh.shell.session import Abort, Session

@@ -437,8 +437,7 @@ def _refuse(path: Path, number: int, message: str, kind: str = "syntax") -> Back
     return BackupFileError(f"{path}:{number}: {message}", kind)
 
 
-def _parse(session: Session, path: Path, number: int, text: str,
-           module: Module) -> asm.Line:
+def _parse(path: Path, number: int, text: str, module: Module) -> asm.Line:
     """One shell line of a backup as a SAP/SGP line, or the error that says what it is
     instead (an unknown command is named with the suggestions a typed line gets)."""
     if text.startswith("."):
@@ -517,7 +516,7 @@ def read_backup(session: Session, path: Path, *, force: bool, command: str) -> B
 
 def _read_line(session: Session, backup: Backup, path: Path, number: int, text: str,
                source: Module | None, live: Module, ascii_mode: bool) -> None:
-    line = _parse(session, path, number, text, source or live)
+    line = _parse(path, number, text, source or live)
     try:
         enc = asm.encode(line, source or live, direct=True, ascii=ascii_mode)
     except AsmError as exc:
