@@ -902,7 +902,7 @@ def bench_save(args: argparse.Namespace) -> dict:
             stdout, sys.stdout = sys.stdout, io.StringIO()
             try:
                 t0 = time.perf_counter()
-                session.run_line(f".save {target}")
+                session.run_line(f".save {target} --yes")  # the same file each round
                 times["save"].append(time.perf_counter() - t0)
             finally:
                 sys.stdout = stdout

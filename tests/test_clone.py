@@ -20,7 +20,7 @@ import pytest
 from tmclsh import modules
 from tmclsh.ascii import AsciiLink
 from tmclsh.client import Client
-from tmclsh.errors import AsmError, TmclError
+from tmclsh.errors import TmclError
 from tmclsh.shell.clone import CloneError, readable_slots
 from tmclsh.shell.render import Output
 from tmclsh.shell.session import Abort, Session
@@ -218,7 +218,7 @@ def test_out_of_range_line_refused_at_its_line_before_sending(pty_client, tmp_pa
     s.run_line("SAP MaxCurrent, 0, 5")  # a real difference on an earlier line
     sim.received.clear()
     for cmd in (".restore", ".diff"):
-        with pytest.raises(AsmError) as exc:
+        with pytest.raises(CloneError) as exc:
             s.run_line(f"{cmd} {path} --yes" if cmd == ".restore" else f"{cmd} {path}")
         assert f"{path}:{n}:" in str(exc.value) and "out of range" in str(exc.value)
     assert bytes(sim.received) == b""
@@ -234,8 +234,14 @@ def test_other_module_refused_unless_force(pty_client, tmp_path, capsys):
     s.run_line(f".save {path}")
     rec, c351 = pty_client("TMCM-351", target=Recording("TMCM-351"))
     t = shell(c351, json_mode=True)
-    with pytest.raises(CloneError, match="backup of a TMCM-1311.*--force"):
+    with pytest.raises(CloneError, match="backup of a TMCM-1311.*--force") as exc:
         t.run_line(f".restore {path} --yes")
+    assert f"restore by parameter name with .restore {path} --force" in str(exc.value)
+    # the hint names the command that was typed: a .diff is not told to restore
+    with pytest.raises(CloneError) as exc:
+        t.run_line(f".diff {path}")
+    assert f"compare by parameter name with .diff {path} --force" in str(exc.value)
+    assert "restore" not in str(exc.value)
     assert bytes(rec.received) == b""
     capsys.readouterr()
     t.run_line(f".restore {path} --yes --force")
@@ -254,18 +260,104 @@ def test_other_module_refused_unless_force(pty_client, tmp_path, capsys):
 def test_any_script_of_sap_sgp_lines(pty_client, tmp_path, capsys):
     sim, client = pty_client("TMCM-1311")
     path = tmp_path / "hand.tmcl"
-    path.write_text("// set up the axis\n.let speed = 1\nMVP ABS, 0, 0\nSAP 4, 0, 2000\n"
-                    "SAP MaxCurrent, 0, 40  // run current\n6 140, 0, 0\nSGP 3, 2, 9\n",
-                    encoding="utf-8")
+    path.write_text("// set up the axis\n# a shell comment\n\n   \nSAP 4, 0, 2000\n"
+                    "SAP MaxCurrent, 0, 40  // run current\n5 140, 0, 5 # raw SAP\n"
+                    "SGP 3, 2, 1; SGP 3, 2, 9\n", encoding="utf-8")
     s = shell(client)
     s.run_line(f".diff {path}")
     out = capsys.readouterr().out
-    assert "3 of 3 parameters differ" in out and "MaxCurrent" in out
+    assert "4 of 4 parameters differ" in out and "MaxCurrent" in out
     s.run_line(f".restore {path} -y")
     capsys.readouterr()
     s.run_line(f".diff {path}")
     assert "no differences" in capsys.readouterr().out
     assert client.value("GAP 4, 0") == 2000 and client.value("GGP 3, 2") == 9
+
+
+def test_counts_in_the_singular(pty_client, tmp_path, capsys):
+    sim, client = pty_client("TMCM-1311")
+    s = shell(client)
+    path = tmp_path / "one.tmcl"
+    path.write_text("SAP MaxCurrent, 0, 0\nSAP TargetPosition, 0, 5\n", encoding="utf-8")
+    s.run_line(f".diff {path}")
+    cap = capsys.readouterr()
+    assert "(1 parameter compared)" in cap.out and "1 state line in" in cap.out + cap.err
+    s.run_line("SAP MaxCurrent, 0, 4")
+    capsys.readouterr()
+    with pytest.raises(TmclError, match=r"^1 parameter differs from "):
+        s.run_line(f".diff {path} --exit-code")
+    assert "1 of 1 parameter differs" in capsys.readouterr().out
+
+
+NOT_A_BACKUP_LINE = [
+    ("SPA MaxPositioningSpeed, 0, 1234", "unknown command 'SPA'; did you mean"),
+    ("GARBAGE LINE", "unknown command 'GARBAGE'"),
+    ("MVP ABS, 0, 1000", "MVP is not SAP or SGP: a backup holds only SAP/SGP lines"),
+    ("6 140, 0, 0", "command 6 (GAP) is not SAP (5) or SGP (9)"),
+    (".let speed = 1", "shell command '.let'"),
+    ("SAP MaxCurrent, 0, ${speed}", "variable"),
+    ("loop: SAP MaxCurrent, 0, 1", "a label (loop:)"),
+    ("speed = 5", "a constant (speed = ...)"),
+    ("SAP MaxCurrent, 0, 999", "999 is out of range for AP 6 MaxCurrent: allowed 0..255"),
+    ("SAP MaxPossibleCurrent, 0, 5", "AP 15 MaxPossibleCurrent is read-only"),
+    ("5 15, 0, 5", "AP 15 MaxPossibleCurrent is read-only"),
+    ("SAP MaxCurrent, 1, 5", "TMCM-1311 has no motor 1: only motor 0"),
+    ("SAP 4, 0, 1000 ; SPA 4, 0, 1", "unknown command 'SPA'"),
+]
+
+
+@pytest.mark.parametrize("bad,message", NOT_A_BACKUP_LINE)
+def test_a_line_that_is_not_a_sap_sgp_line_the_module_accepts_is_refused(
+        pty_client, tmp_path, bad, message):
+    """A typo in a backup must not read as "matches": the whole file is checked before
+    anything is compared or sent, and the bad line is named as -f names it."""
+    sim, client = pty_client("TMCM-1311", target=Recording("TMCM-1311"))
+    s = shell(client, yes=True)
+    path = tmp_path / "b.tmcl"
+    path.write_text(f"// hand-written\nSAP MaxCurrent, 0, 40\n{bad}\nSAP 4, 0, 2000\n",
+                    encoding="utf-8")
+    sim.received.clear()
+    for cmd in (".diff", ".diff --exit-code", ".restore --yes"):
+        with pytest.raises(CloneError) as exc:
+            s.run_line(f"{cmd.split()[0]} {path} {' '.join(cmd.split()[1:])}")
+        assert str(exc.value).startswith(f"{path}:3: "), str(exc.value)
+        assert message in str(exc.value)
+    assert bytes(sim.received) == b""
+
+
+def test_cli_refuses_a_bad_backup_with_exit_status_2(tmp_path, run_tmclsh):
+    path = tmp_path / "t.tmcl"
+    path.write_text("SAP MaxCurrent, 0, 0\nSPA MaxPositioningSpeed, 0, 1234\n", encoding="utf-8")
+    for cmd in (f".diff --exit-code {path}", f".diff {path}", f".restore {path} --yes"):
+        r = run_tmclsh("--sim", "-c", cmd)
+        assert r.returncode == 2, (cmd, r.stdout, r.stderr)
+        assert f"{path}:2: unknown command 'SPA'" in r.stderr
+        assert "no differences" not in r.stdout and "restored" not in r.stdout
+    # -f says the same of the same file
+    r = run_tmclsh("--sim", "-f", str(path))
+    assert r.returncode == 2 and f"{path}:2: unknown command 'SPA'" in r.stderr
+    # after a line that was sent, the run failed (1), as -c says of any error
+    r = run_tmclsh("--sim", "-c", f"GAP 4, 0\n.diff {path}")
+    assert r.returncode == 1 and f"{path}:2: unknown command 'SPA'" in r.stderr
+
+
+@pytest.mark.parametrize("make,message", [
+    (lambda p: None, "no such file"),
+    (lambda p: p.write_bytes(bytes(range(256)) * 8), "not a text file"),
+    (lambda p: p.mkdir(), "it is a directory"),
+    (lambda p: p.write_text("", encoding="utf-8"), "has no SAP/SGP lines"),
+    (lambda p: p.write_text("// only a comment\n\n", encoding="utf-8"), "has no SAP/SGP lines"),
+    (lambda p: p.write_text("SAP 4, 0, 1000\n" * 100_001, encoding="utf-8"),
+     "backup longer than 100,000 lines; not read"),
+])
+def test_cli_unusable_backup_file_is_one_line(tmp_path, run_tmclsh, make, message):
+    path = tmp_path / "b.tmcl"
+    make(path)
+    for cmd in (f".diff {path}", f".restore {path} --yes"):
+        r = run_tmclsh("--sim", "-c", cmd)
+        assert r.returncode == 2, (r.stdout, r.stderr)
+        assert message in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+        assert "Traceback" not in r.stderr
 
 
 def test_cli_exit_code_json_and_replay(make_pty_sim, run_tmclsh, tmp_path):
@@ -307,6 +399,55 @@ def test_restore_asks_first(pty_client, tmp_path, capsys):
 
 def _frames(data: bytes) -> list[bytes]:
     return [bytes(data[i:i + 9]) for i in range(0, len(data) - len(data) % 9, 9)]
+
+
+def test_save_over_an_existing_file_asks_at_the_prompt(pty_client, tmp_path, capsys):
+    """The golden backup of the old module must not go with one wrong Enter."""
+    sim, client = pty_client("TMCM-1311", target=Recording("TMCM-1311"))
+    path = tmp_path / "golden.tmcl"
+    path.write_text("// module: TMCM-1311\n// date: 2026-11-30 08:00:00 UTC\nSAP 4, 0, 7\n",
+                    encoding="utf-8")
+    golden = path.read_text(encoding="utf-8")
+    asked: list[str] = []
+    s = Session(client, Output(), interactive=True)
+    s.ask = lambda q: asked.append(q) or False
+    sim.received.clear()
+    with pytest.raises(Abort, match="cancelled"):
+        s.run_line(f".save {path}")
+    assert asked == [f"{path} (a backup of a TMCM-1311, 2026-11-30 08:00:00 UTC) exists; "
+                     "overwrite it?"]
+    assert path.read_text(encoding="utf-8") == golden
+    assert bytes(sim.received) == b""  # asked before anything was read
+    s.ask = lambda q: asked.append(q) or True
+    s.run_line(f".save {path}")
+    assert len(asked) == 2 and path.read_text(encoding="utf-8") != golden
+    asked.clear()
+    s.run_line(f".save {tmp_path / 'new.tmcl'}")  # a new file: nothing to ask
+    s.run_line(f".save {path} --yes")
+    assert asked == []
+
+
+def test_cli_save_over_an_existing_file_needs_yes(tmp_path, run_tmclsh):
+    path = tmp_path / "golden.tmcl"
+    path.write_text("// the old module\n", encoding="utf-8")
+    for args in (("-c", f".save {path}"), ("-c", f".save {path} --program")):
+        r = run_tmclsh("--sim", *args)
+        assert r.returncode == 1, r.stderr
+        assert len(r.stderr.strip().splitlines()) == 1 and "add --yes" in r.stderr, r.stderr
+        assert "another name" in r.stderr and path.read_text("utf-8") == "// the old module\n"
+    assert not (tmp_path / "golden.program.tmcl").exists()
+    r = run_tmclsh("--sim", "-c", f".save {path} -y")
+    assert r.returncode == 0 and "SAP MaxCurrent" in path.read_text("utf-8"), r.stderr
+    path.write_text("// the old module\n", encoding="utf-8")
+    r = run_tmclsh("--sim", "--yes", "-c", f".save {path}")
+    assert r.returncode == 0 and "SAP MaxCurrent" in path.read_text("utf-8"), r.stderr
+    # the program file beside it counts as well
+    r = run_tmclsh("--sim", "-c", f".save {tmp_path / 'other.tmcl'} --program")
+    assert r.returncode == 0, r.stderr
+    (tmp_path / "other.tmcl").unlink()
+    r = run_tmclsh("--sim", "-c", f".save {tmp_path / 'other.tmcl'} --program")
+    assert r.returncode == 1 and "other.program.tmcl exists" in r.stderr, r.stderr
+    assert not (tmp_path / "other.tmcl").exists()
 
 
 def test_store_after_restore(pty_client, tmp_path, capsys):

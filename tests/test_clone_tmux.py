@@ -27,5 +27,9 @@ def test_save_diff_restore_at_the_prompt(terminal, tmp_path):
     t.line("y")
     t.wait("restored 1 parameter from axis1.tmcl")
     t.run(".diff axis1.tmcl", "no differences: the TMCM-1311 matches axis1.tmcl")
+    t.run(".save axis1.tmcl", "axis1.tmcl (a backup of a TMCM-1311, ")  # the golden one
+    t.wait("exists; overwrite it? [y/N]")
+    t.line("")  # Enter alone: no
+    t.wait("cancelled; nothing was sent")
     t.run(".help .restore", "--store")
     t.quit()

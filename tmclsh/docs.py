@@ -701,7 +701,8 @@ def _exit_status() -> list[str]:
                      "(each checked against the same LIMITS); or a script given with -f that "
                      "was not run (nothing was sent): it cannot be read, no such file, a "
                      "syntax error, a value out of range or another line the module would "
-                     "refuse."),
+                     "refuse; the same for the file of a .diff or .restore in -c (CONFIGURATION "
+                     "BACKUPS) when nothing else of the run was sent."),
         (EXIT_CONNECT, "No module to talk to: a run that is not interactive (-c, -f, standard "
                        "input not a terminal, scan) was given no connection and found no "
                        "module (--sim simulates one); two or more Trinamic USB modules are "
@@ -814,14 +815,21 @@ initialisation) are comments and are never written back. Parameters that change 
 module is reached (marked {_b("link")}: address, baud rate, CAN ids, interface) are restored
 last and not read back.
 .PP
-{_b(".diff")} and {_b(".restore")} accept any script: every {_b("SAP")}/{_b("SGP")} line (by
-name or number, or as raw command 5 or 9) is parsed and checked against the module's data as
-a typed command would be, before anything is sent, and an error names {_i("FILE")}{_b(":")}{_i("LINE")};
-comments, blank lines, shell commands, lines with {_b("${...}")} and other TMCL commands are
-ignored, and for a parameter set twice the last line counts. Parameters are compared by
+{_b(".diff")} and {_b(".restore")} accept any script of {_b("SAP")}/{_b("SGP")} lines (by
+name or number, or as raw command 5 or 9; several on a line split by {_b(";")} as in {_b("-f")}), checked
+whole against the module's data as typed commands would be, before anything is sent.
+Comments ({_b("//")}, {_b("#")}) and blank lines are all a file may hold besides: any other
+line (a typo, another TMCL command, a shell command, a line with {_b("${...}")}, a label), a
+value out of range, a read\-only parameter or a motor the module lacks is an error naming
+{_i("FILE")}{_b(":")}{_i("LINE")}, as {_b("-f")} says it, and in {_b("-c")} the exit status is 2
+when nothing was sent; so is a file with no SAP/SGP line at all, or longer than a script
+may be. For a parameter set twice the last line counts. Parameters are compared by
 number and motor/bank; a backup of another module type is carried over by name with
 {_b("--force")} (parameters the module lacks, motors it does not have and values outside its
 ranges are skipped and listed). A module without parameter data compares by number.
+.PP
+{_b(".save")} over a file that exists asks first (naming the module and date its header
+gives); in {_b("-c")} and {_b("-f")} it is refused unless {_b("--yes")}.
 .PP
 Replaying the file with {_b("tmclsh -f")} {_i("FILE")} {_b("--yes")} writes every line
 (global parameters of bank 0 go straight to EEPROM, hence {_b("--yes")}); {_b(".restore")}

@@ -25,10 +25,12 @@ from typing import TYPE_CHECKING
 
 from .. import asm
 from .. import modules as moddb
-from ..errors import TmclError, ValidationError
+from .. import instructions as isa
+from ..errors import AsmError, RangeError, TmclError, ValidationError
 from ..modules import Module, Parameter
 from ..protocol import Control, Request, status_ok, status_text
 from .commands import command
+from .lines import split_line
 
 if TYPE_CHECKING:
     from .session import Session
@@ -302,10 +304,43 @@ def _program_text(session: Session) -> tuple[str, int]:
     return head + (asm.disassemble(image, module) if image else ""), len(image)
 
 
+def _what_it_holds(path: Path) -> str:
+    """`` (a backup of a TMCM-1311, 2026-12-01 19:40:00 UTC)`` from a file's header, or ''."""
+    try:
+        with open(path, "rb") as fh:
+            head = _header(fh.read(4096).decode("utf-8", "replace").splitlines())
+    except OSError:
+        return ""
+    if "module" not in head:
+        return ""
+    when = f", {head['date']}" if head.get("date") else ""
+    return f" (a backup of a {head['module']}{when})"
+
+
+def _may_overwrite(session: Session, paths: list[Path | None], yes: bool) -> None:
+    """Ask before a file that exists is replaced (the old module's only backup may be in
+    it); where nobody can answer (-c, -f) it is refused unless --yes. Devices and pipes
+    are written into, not replaced, so they are not asked about."""
+    existing = [p for p in paths if p is not None and p.is_file()]
+    if not existing or yes or session.yes:
+        return
+    one = len(existing) == 1
+    names = " and ".join(f"{p}{_what_it_holds(p)}" for p in existing)
+    if session.ask is not None and session.interactive:
+        session.confirm(f"{names} {'exists' if one else 'exist'}; overwrite "
+                        f"{'it' if one else 'them'}?")
+        return
+    from .session import Abort
+
+    raise Abort(f"{names} {'exists' if one else 'exist'}; not overwritten: add --yes to "
+                f"replace {'it' if one else 'them'}, or save under another name")
+
+
 @command(".save")
 def cmd_save(session: Session, argtext: str) -> None:
-    usage = ".save FILE [--program]"
-    name, given = _args(argtext, usage, {"--program": "--program"})
+    usage = ".save FILE [--program] [--yes]"
+    name, given = _args(argtext, usage, {"--program": "--program", "--yes": "--yes",
+                                         "-y": "--yes"})
     path = Path(name).expanduser()
     if path.is_dir():
         raise CloneError(f"cannot write {path}: it is a directory")
@@ -313,6 +348,7 @@ def cmd_save(session: Session, argtext: str) -> None:
     if prog_path is not None and session.client.mode == "ascii":
         raise ValidationError("--program reads program memory (134), which needs binary mode "
                               "(.mode binary)")
+    _may_overwrite(session, [path, prog_path], "--yes" in given)  # before anything is read
     text, saved = save_lines(session, path, prog_path)
     instructions = None
     if prog_path is not None:
@@ -326,7 +362,7 @@ def cmd_save(session: Session, argtext: str) -> None:
             obj.update({"program": str(prog_path), "instructions": instructions})
         out.emit(obj)
         return
-    out.ok(f"saved {saved} parameters of the {session.module.name} to {path}")
+    out.ok(f"saved {_count(saved)} of the {session.module.name} to {path}")
     if prog_path is not None:
         out.ok(f"saved the stored program ({instructions} instructions) to {prog_path}")
 
@@ -341,7 +377,6 @@ class Backup:
     module_name: str | None = None  # from the header, when it names one
     program: str | None = None
     slots: dict[tuple[str, int, int], Slot] = field(default_factory=dict)
-    ignored: int = 0  # lines that are not SAP/SGP
     state: list[Slot] = field(default_factory=list)  # state lines a hand-written file sets
     skipped: list[tuple[str, str]] = field(default_factory=list)  # (what, why), across modules
 
@@ -382,73 +417,142 @@ def _counterpart(live: Module, p: Parameter, number: int, index: int) -> Paramet
                  and q.count == p.count), None)
 
 
-def read_backup(session: Session, path: Path, *, force: bool) -> Backup:
-    """Parse and check every SAP/SGP line of ``path`` against the live module (nothing is
-    sent). A line the module's data refuses is an error at FILE:LINE."""
+class BackupFileError(CloneError):
+    """A backup that cannot be used as a whole: unreadable, or a line that is not a SAP/SGP
+    line the module accepts. Raised before anything is sent; in -c, exit status 2 (as -f
+    gives for a script it refuses) when nothing else of the run was sent either."""
+
+    exit_status = 2  # EXIT_USAGE: nothing was sent
+
+    def __init__(self, message: str, kind: str = "syntax"):
+        self.kind = kind
+        super().__init__(message)
+
+
+ONLY = "a backup holds only SAP/SGP lines and comments"
+
+
+def _refuse(path: Path, number: int, message: str, kind: str = "syntax") -> BackupFileError:
+    """FILE:LINE: message, as -f says it of a script line."""
+    return BackupFileError(f"{path}:{number}: {message}", kind)
+
+
+def _parse(path: Path, number: int, text: str, module: Module) -> asm.Line:
+    """One shell line of a backup as a SAP/SGP line, or the error that says what it is
+    instead (an unknown command is named with the suggestions a typed line gets)."""
+    if text.startswith("."):
+        raise _refuse(path, number, f"shell command {text.split()[0]!r}: {ONLY}")
+    if "${" in text:
+        raise _refuse(path, number, f"{text!r} uses a ${{...}} variable, which .diff and "
+                                    f".restore do not expand: {ONLY}")
+    try:
+        line = asm.parse_line(text, number, str(path))
+    except AsmError as exc:
+        raise _refuse(path, number, exc.message, exc.kind) from None
+    what = None
+    if line.include is not None:
+        what = "#include"
+    elif line.constant is not None:
+        what = f"a constant ({line.constant} = ...)"
+    elif line.label is not None:
+        what = f"a label ({line.label}:)"
+    if what is not None:
+        raise _refuse(path, number, f"{what}: {ONLY}")
+    mn = line.mnemonic
+    if mn in ("SAP", "SGP", str(SAP), str(SGP)):
+        return line
+    if line.is_raw:
+        spec = isa.by_opcode(int(mn))
+        name = f" ({spec.mnemonic})" if spec is not None else ""
+        raise _refuse(path, number, f"command {mn}{name} is not SAP (5) or SGP (9): {ONLY}")
+    try:
+        asm.encode(line, module, direct=True)
+    except AsmError as exc:  # an unknown command: `unknown command 'SPA'; did you mean ...`
+        if isa.by_mnemonic(mn) is None:
+            raise _refuse(path, number, exc.message, exc.kind) from None
+    raise _refuse(path, number, f"{mn} is not SAP or SGP: {ONLY}")
+
+
+def read_backup(session: Session, path: Path, *, force: bool, command: str) -> Backup:
+    """Parse and check every line of ``path`` against the live module (nothing is sent).
+    Only comments, blank lines and SAP/SGP lines the module accepts may be in it: anything
+    else is an error at FILE:LINE, so a typo never reads as "matches". ``command`` (.diff,
+    .restore) is named in the hint for another module's backup."""
     live = session.module
     from .. import files
+    from .session import owns_line
 
     try:
         text = files.read_bytes(path, what="backup").decode("utf-8")  # bounded: /dev/zero
     except files.FileError as exc:
-        raise CloneError(str(exc)) from None
+        raise BackupFileError(str(exc), "unreadable") from None
     except UnicodeDecodeError:
-        raise CloneError(f"cannot read {path}: not a text file (UTF-8)") from None
+        raise BackupFileError(f"cannot read {path}: not a text file (UTF-8)",
+                              "unreadable") from None
     lines = text.splitlines()
+    if len(lines) > files.MAX_LINES:  # as for a script: a limit, not minutes of parsing
+        raise BackupFileError(f"{path}: backup longer than {files.MAX_LINES:,} lines; not read",
+                              "unreadable")
     head = _header(lines)
     backup = Backup(path, head.get("module"), head.get("program"))
     source = _source_module(backup.module_name, live)
     other = backup.module_name is not None and _norm(backup.module_name) != _norm(live.name)
     if other and not force and _has_data(live):
-        raise CloneError(f"{path} is a backup of a {backup.module_name}, this is a {live.name}; "
-                         "restore by parameter name with --force (parameters the "
-                         f"{live.name} does not have are skipped)")
+        verb = "compare" if command == ".diff" else "restore"
+        raise BackupFileError(
+            f"{path} is a backup of a {backup.module_name}, this is a {live.name}; {verb} by "
+            f"parameter name with {command} {path} --force (parameters the {live.name} does "
+            "not have are skipped)", "check")
     ascii_mode = session.client.mode == "ascii"
     for number, raw in enumerate(lines, 1):
-        s = raw.strip()
-        if not s or s.startswith("//") or s.startswith("#"):
-            continue
-        if s.startswith(".") or "${" in s:
-            backup.ignored += 1  # shell commands and variables: not configuration values
-            continue
-        line = asm.parse_line(raw, number, str(path))
-        if line.mnemonic is None:
-            continue  # a label or a constant
-        if line.mnemonic not in ("SAP", "SGP", str(SAP), str(SGP)):
-            backup.ignored += 1
-            continue
-        enc = asm.encode(line, source or live, direct=True, ascii=ascii_mode)
-        ins = enc.instruction
-        kind = "axis" if ins.opcode == SAP else "global"
-        p = enc.parameter
-        if p is not None and p.state:  # the file's own module says it is state
-            backup.state.append(Slot(kind, ins.type, ins.motor, ins.value, p, number))
-            continue
-        if source is not None and p is not None:
-            slot = _carry(backup, live, p, ins.type, ins.motor, ins.value, number)
-            if slot is None:
-                continue
-        else:
-            if p is None and line.is_raw and _has_data(live):
-                # `5 4, 0, 100`: sent as typed when replayed; checked here like a named line
-                p = live.axis(ins.type) if kind == "axis" else live.glob(ins.type, ins.motor)
-                if p is None:
-                    raise line.error(f"{live.name} has no {kind} parameter {ins.type}"
-                                     + (f" in bank {ins.motor}" if kind == "global" else ""))
-                try:
-                    if kind == "axis":
-                        live.check_motor(ins.motor)
-                    if not p.writable:
-                        raise ValidationError(f"{p.label} {p.name} is read-only")
-                    p.check(_shown(ins.value, p))
-                except ValidationError as exc:
-                    raise line.error(str(exc)) from None
-            slot = Slot(kind, ins.type, ins.motor, _shown(ins.value, p), p, number)
-        if slot.param is not None and slot.param.state:
-            backup.state.append(slot)
-            continue
-        backup.slots[slot.key] = slot  # a later line for the same parameter wins, as replayed
+        for shell_line in split_line(raw, owns_line):  # comments off, `;` between lines
+            _read_line(session, backup, path, number, shell_line, source, live, ascii_mode)
+    if not (backup.slots or backup.state or backup.skipped):
+        # an empty or truncated file must not read as "matches" either
+        raise BackupFileError(f"{path} has no SAP/SGP lines: nothing to compare or restore "
+                              "(a backup is written by .save)")
     return backup
+
+
+def _read_line(session: Session, backup: Backup, path: Path, number: int, text: str,
+               source: Module | None, live: Module, ascii_mode: bool) -> None:
+    line = _parse(path, number, text, source or live)
+    try:
+        enc = asm.encode(line, source or live, direct=True, ascii=ascii_mode)
+    except AsmError as exc:
+        raise _refuse(path, number, exc.message, exc.kind) from None
+    ins = enc.instruction
+    kind = "axis" if ins.opcode == SAP else "global"
+    p = enc.parameter
+    if p is not None and p.state:  # the file's own module says it is state
+        backup.state.append(Slot(kind, ins.type, ins.motor, ins.value, p, number))
+        return
+    if source is not None and p is not None:
+        slot = _carry(backup, live, p, ins.type, ins.motor, ins.value, number)
+        if slot is None:
+            return
+    else:
+        if p is None and line.is_raw and _has_data(live):
+            # `5 4, 0, 100`: sent as typed when replayed; checked here like a named line
+            p = live.axis(ins.type) if kind == "axis" else live.glob(ins.type, ins.motor)
+            if p is None:
+                raise _refuse(path, number, f"{live.name} has no {kind} parameter {ins.type}"
+                              + (f" in bank {ins.motor}" if kind == "global" else ""), "check")
+            try:
+                if kind == "axis":
+                    live.check_motor(ins.motor)
+                if not p.writable:
+                    raise ValidationError(f"{p.label} {p.name} is read-only")
+                p.check(_shown(ins.value, p))
+            except RangeError as exc:
+                raise _refuse(path, number, str(exc), "range") from None
+            except ValidationError as exc:
+                raise _refuse(path, number, str(exc), "check") from None
+        slot = Slot(kind, ins.type, ins.motor, _shown(ins.value, p), p, number)
+    if slot.param is not None and slot.param.state:
+        backup.state.append(slot)
+        return
+    backup.slots[slot.key] = slot  # a later line for the same parameter wins, as replayed
 
 
 def _carry(backup: Backup, live: Module, p: Parameter, number: int, index: int, value: int,
@@ -507,14 +611,15 @@ def compare(session: Session, backup: Backup) -> list[Difference]:
 def _notes(session: Session, backup: Backup, live: Module) -> None:
     out = session.out
     if backup.skipped:
-        out.info(f"{len(backup.skipped)} parameters of the {backup.module_name} backup skipped "
+        out.info(f"{_count(len(backup.skipped))} of the {backup.module_name} backup skipped "
                  f"on the {live.name}:")
         for what, why in backup.skipped:
             out.info(f"  {what}: {why}")
     if backup.state:
         names = ", ".join(s.name or s.label for s in backup.state[:6])
         more = "..." if len(backup.state) > 6 else ""
-        out.info(f"{len(backup.state)} state lines in {backup.path.name} not compared or "
+        n = len(backup.state)
+        out.info(f"{n} state line{'' if n == 1 else 's'} in {backup.path.name} not compared or "
                  f"restored ({names}{more})")
 
 
@@ -542,7 +647,8 @@ def _against_backup(session: Session, argtext: str, usage: str, flags: dict[str,
     """What .diff and .restore both start with: the backup read and checked, the live values
     compared with it, and the notes on what was not compared. -> (backup, diffs, flags given)"""
     name, given = _args(argtext, usage, flags)
-    backup = read_backup(session, _file(session, name), force="--force" in given)
+    backup = read_backup(session, _file(session, name), force="--force" in given,
+                         command=usage.split()[0])
     diffs = compare(session, backup)
     _notes(session, backup, session.module)
     return backup, diffs, given
@@ -560,15 +666,17 @@ def cmd_diff(session: Session, argtext: str) -> None:
             out.emit(d.to_json())
     elif not diffs:
         out.ok(f"no differences: the {live.name} matches {backup.path.name} "
-               f"({len(backup.slots)} parameters compared)")
+               f"({_count(len(backup.slots))} compared)")
     else:
         rows = [[d.slot.name or "", d.slot.label, d.slot.where, str(d.slot.value), str(d.live),
                  d.slot.param.unit if d.slot.param else ""] for d in diffs]
-        _table(session, f"{len(diffs)} of {len(backup.slots)} parameters differ from "
+        _table(session, f"{len(diffs)} of {_count(len(backup.slots))} "
+                        f"{'differs' if len(backup.slots) == 1 else 'differ'} from "
                         f"{backup.path.name}", ["name", "number", "motor/bank", "saved", "live",
                                                 "unit"], rows)
     if diffs and "--exit-code" in given:
-        err = DiffFound(f"{len(diffs)} parameters differ from {backup.path}")
+        err = DiffFound(f"{_count(len(diffs))} {'differs' if len(diffs) == 1 else 'differ'} "
+                        f"from {backup.path}")
         err.shown = True  # type: ignore[attr-defined]  # the table (or the JSON) said it
         raise err
 
@@ -614,7 +722,8 @@ def cmd_restore(session: Session, argtext: str) -> None:
     question = (f"write {_count(len(diffs))} from {backup.path.name} to the {live.name} at "
                 f"address {c.address}?")
     if eeprom:
-        question += f" ({eeprom} global parameters of bank 0 are written straight to EEPROM)"
+        question += (f" ({eeprom} global parameter{'' if eeprom == 1 else 's'} of bank 0 "
+                     f"{'is' if eeprom == 1 else 'are'} written straight to EEPROM)")
     if not yes:
         session.confirm(question)
     # link settings last: after one of them the module may no longer hear this connection
@@ -655,7 +764,7 @@ def cmd_restore(session: Session, argtext: str) -> None:
                     and w not in link_changed]
         if storable:
             if not yes:
-                session.confirm(f"store {len(storable)} restored parameters permanently in "
+                session.confirm(f"store {_count(len(storable))} restored permanently in "
                                 "the module's EEPROM (STAP/STGP)?")
             for w in storable:
                 slot = w.diff.slot

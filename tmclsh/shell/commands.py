@@ -508,7 +508,7 @@ COMMANDS: tuple[Command, ...] = (
                      'kept). GP 67 is one of the bank-0 parameters 64..128 that SGP writes '
                      'to EEPROM directly (manual §10.1), so the change is permanent and asks '
                      'first (--yes). The start-up mode applies from the next power-up.')),
-    Command('.save', 'clone', '.save FILE [--program]',
+    Command('.save', 'clone', '.save FILE [--program] [--yes]',
             "back up the module's configuration as a replayable script",
             complete='complete_file', category='configuration',
             details=('Reads every readable axis parameter of every motor and the global '
@@ -523,8 +523,10 @@ COMMANDS: tuple[Command, ...] = (
                      'counters, anything that\n'
                      'starts a move) are written as comments and never restored. FILE is '
                      'replaced only once it is\n'
-                     'complete. --program also reads the stored program back (binary mode) '
-                     'and writes it, as\n'
+                     'complete. A FILE that exists is not overwritten without asking '
+                     '(--yes or -y: overwrite;\n'
+                     'scripts need it). --program also reads the stored program back '
+                     '(binary mode) and writes it, as\n'
                      'source, beside FILE with .program.tmcl in place of its suffix '
                      '(backup.tmcl:\n'
                      'backup.program.tmcl; put it back with .upload). JSON: {"saved": N,\n'
@@ -532,13 +534,15 @@ COMMANDS: tuple[Command, ...] = (
     Command('.diff', 'clone', '.diff FILE [--exit-code] [--force]',
             'compare the module with a backup (or any script of SAP/SGP lines)',
             complete='complete_file', category='configuration',
-            details=("Reads FILE with the shell's own line parser (every SAP/SGP line is "
-                     'checked against the\n'
-                     "module's data first; other lines are ignored), reads each parameter it "
-                     'sets from the module\n'
-                     '(one request each) and shows only the ones that differ: name, number, '
-                     'motor or bank, saved\n'
-                     'value, live value and unit. Motion state lines are not compared. JSON: '
+            details=("Reads FILE with the shell's own line parser and checks it whole "
+                     'before anything is sent:\n'
+                     'comments and blank lines aside, every line must be a SAP/SGP line the '
+                     "module's data accepts\n"
+                     '(anything else is an error at FILE:LINE, exit status 2 in -c). Then it '
+                     'reads each parameter\n'
+                     'the file sets from the module (one request each) and shows only the '
+                     'ones that differ: name,\n'
+                     'number, motor or bank, saved value, live value and unit. Motion state lines are not compared. JSON: '
                      'one {"name", "number",\n'
                      '"motor"|"bank", "saved", "live"} object per difference, nothing for '
                      'equal values. Exits 0\n'

@@ -63,15 +63,23 @@ def refused_line(session: Session, lines: list[str]) -> tuple[str, TmclError] | 
     return None
 
 
+def _sent(session: Session) -> int:
+    """Requests the client has sent so far."""
+    stats = getattr(session.client, "stats", None)
+    return stats.get("sent", 0) if isinstance(stats, dict) else 0
+
+
 def run_lines(session: Session, lines: list[str]) -> int:
     failed = False
     suspects = session.stats.suspects
-    refused = refused_line(session, lines)
-    if refused is not None:
-        line, exc = refused
+    bad = refused_line(session, lines)
+    if bad is not None:
+        line, exc = bad
         why = "" if session.out.json else " (nothing was sent: every line is checked first)"
         session.out.error(line, f"{exc}{why}")
         return EXIT_SYNTAX
+    refused = True  # every error so far was a file refused whole (exit_status 2)
+    sent = _sent(session)
     for line in lines:
         try:
             session.ensure_link()  # the link was lost on an earlier line (--keep-going)
@@ -80,9 +88,12 @@ def run_lines(session: Session, lines: list[str]) -> int:
             break
         except TmclError as exc:
             failed = True
+            refused = refused and getattr(exc, "exit_status", None) == EXIT_SYNTAX
             report_error(session, line, exc)
             if not session.keep_going:
                 break
+    if failed and refused and _sent(session) == sent:
+        return EXIT_SYNTAX  # a file refused before anything was sent, as -f says of a script
     return EXIT_ERROR if failed or session.stats.suspects > suspects else EXIT_OK
 
 
