@@ -701,8 +701,9 @@ def _exit_status() -> list[str]:
                      "(each checked against the same LIMITS); or a script given with -f that "
                      "was not run (nothing was sent): it cannot be read, no such file, a "
                      "syntax error, a value out of range or another line the module would "
-                     "refuse; the same for the file of a .diff or .restore in -c (CONFIGURATION "
-                     "BACKUPS) when nothing else of the run was sent."),
+                     "refuse; the same for the lines of -c (each TMCL line is checked before "
+                     "the first is sent) and for the file of a .diff or .restore in -c "
+                     "(CONFIGURATION BACKUPS) when nothing else of the run was sent."),
         (EXIT_CONNECT, "No module to talk to: a run that is not interactive (-c, -f, standard "
                        "input not a terminal, scan) was given no connection and found no "
                        "module (--sim simulates one); two or more Trinamic USB modules are "
