@@ -53,7 +53,14 @@ def test_writes_say_what_was_done():
     assert text("MVP ABS, 0, 90000") == "ok: motor 0 moving to 90000 µsteps"
     assert text("MVP REL, 0, -10") == "ok: motor 0 moving by -10 µsteps"
     assert text("ROR 0, 500") == "ok: motor 0 rotating right at 500 pps"
-    assert text("MST 0") == "ok: motor 0 stopped"
+    # MST only sets the target speed to 0 (manual 5.7.3): the motor ramps down from there
+    assert text("MST 0") == "ok: motor 0 stopping (target speed 0; it ramps down)"
+    # ROL with a negative speed turns right; speed 0 stops
+    assert text("ROL 0, -1000") == "ok: motor 0 rotating right at 1000 pps (ROL with a " \
+                                   "negative speed)"
+    assert text("ROR 0, -7") == "ok: motor 0 rotating left at 7 pps (ROR with a negative speed)"
+    assert text("ROL 0, 5") == "ok: motor 0 rotating left at 5 pps"
+    assert text("ROR 0, 0") == "ok: motor 0 stopping (speed 0; it ramps down)"
     assert text("SIO 3, 2, 1") == "ok: OUT_3 set to 1"
 
 

@@ -234,3 +234,18 @@ def test_ascii_terminal_ctrl_c_stops_the_program_and_says_what_reads_back(pty_mo
     finally:
         link.detach(send_bin=True)
     assert program.status(c).state == "stop"
+
+
+def test_a_run_ending_on_mst_says_the_motor_slows_down_not_left_running(pty_sim, tmp_path):
+    """After MST the motor ramps down with nothing driving it: "left running (.stopall stops
+    everything)" sent a technician for a stop the module was already doing."""
+    _, path = pty_sim
+    r = subprocess.run([sys.executable, "-m", "tmclsh", "--port", path, "-m", "TMCM-1311",
+                        "-c", "SAP 5, 0, 2000; ROR 0, 50000; .sleep 0.5; MST 0"],
+                       capture_output=True, text=True, timeout=30, env=tmclsh_env(),
+                       cwd=str(tmp_path))
+    assert r.returncode == 0, r.stderr
+    assert "ok: motor 0 stopping (target speed 0; it ramps down)" in r.stdout
+    (note,) = [x for x in r.stderr.splitlines() if "note:" in x]
+    assert "motor 0 slows down (speed " in note and "target speed 0) as the run ends" in note
+    assert "left running" not in note

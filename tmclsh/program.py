@@ -680,14 +680,22 @@ class Activity:
 
     program_running: bool = False
     turning: dict[int, int] = field(default_factory=dict)
+    slowing: set[int] = field(default_factory=set)  # turning, its target speed read 0 (MST)
 
     @property
     def idle(self) -> bool:
         return not self.program_running and not self.turning
 
+    @property
+    def only_slowing(self) -> bool:
+        """Every motor that turns is ramping down to a target speed of 0, no program runs."""
+        return (bool(self.turning) and not self.program_running
+                and set(self.turning) <= self.slowing)
+
     def __str__(self) -> str:
         """``motor 0 turns (speed 2000) and the stored program runs``."""
-        parts = [f"motor {m} turns (speed {v})" for m, v in sorted(self.turning.items())]
+        parts = [f"motor {m} slows down (speed {v}, target speed 0)" if m in self.slowing
+                 else f"motor {m} turns (speed {v})" for m, v in sorted(self.turning.items())]
         if self.program_running:
             parts.append("the stored program runs")
         return " and ".join([", ".join(parts[:-1]), parts[-1]] if len(parts) > 2 else parts)
@@ -764,7 +772,23 @@ def activity(client, *, timeout: float | None = None) -> Activity:
             continue
         if v:
             act.turning[m] = v
+            target = _target_speed_parameter(client)
+            try:  # (after MST: the motor ramps down, nothing drives it any more)
+                if target is not None and _speed(client, m, target, t, retries=0) == 0:
+                    act.slowing.add(m)
+            except TmclError:
+                pass
     return act
+
+
+def _target_speed_parameter(client) -> int | None:
+    mod = client.module
+    if mod is None or getattr(mod, "generic", False):
+        return None
+    try:
+        return mod.lookup("axis", "TargetSpeed").number
+    except (ValidationError, KeyError):
+        return None
 
 
 def stop_everything(client, *, settle: float = SETTLE,

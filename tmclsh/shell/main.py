@@ -292,7 +292,9 @@ def _note_left_running(session: Session) -> None:
         act = activity(client)
     except (TmclError, OSError):
         return
-    if not act.idle:
+    if act.only_slowing:
+        print(f"tmclsh: note: {act} as the run ends", file=sys.stderr)
+    elif not act.idle:
         print(f"tmclsh: note: {act}; left running (.stopall stops everything)",
               file=sys.stderr)
 

@@ -496,9 +496,8 @@ def value_text(value: int, param: Parameter | None) -> str:
 
 # what a successful command without a read value did, in words
 _DONE = {
-    "ROR": "motor {motor} rotating right at {value} {velocity}",
-    "ROL": "motor {motor} rotating left at {value} {velocity}",
-    "MST": "motor {motor} stopped",
+    # MST sets the target speed to 0 (the manual): the motor ramps down, it has not stopped
+    "MST": "motor {motor} stopping (target speed 0; it ramps down)",
     "STAP": "{param} stored in EEPROM",
     "RSAP": "{param} restored from EEPROM",
     "STGP": "{param} stored in EEPROM",
@@ -573,11 +572,25 @@ def render_result(result: Result, module: Module | None) -> Styled:
                        f"(value {reply.value})")
         else:
             out.append(f": reference search {what.lower()} on motor {ins.motor}")
+    elif mnem in ("ROR", "ROL"):
+        out.append(": " + _rotate_text(mnem, ins.motor, ins.signed_value, velocity))
     elif mnem in _DONE:
         out.append(": " + _DONE[mnem].format(**fields).rstrip())
     elif reply.value:
         out.append(f", value {reply.value}")
     return out
+
+
+def _rotate_text(mnem: str, motor: int, value: int, unit: str) -> str:
+    """Which way the motor turns: ROL with a negative speed turns right (the module sets
+    the target speed to -value), and speed 0 stops it."""
+    if value == 0:
+        return f"motor {motor} stopping (speed 0; it ramps down)"
+    right = (value > 0) == (mnem == "ROR")
+    text = f"motor {motor} rotating {'right' if right else 'left'} at {abs(value)} {unit}"
+    if value < 0:
+        text = f"{text.rstrip()} ({mnem} with a negative speed)"
+    return text.rstrip()
 
 
 def _mvp_text(result: Result, module: Module | None) -> str:
