@@ -722,13 +722,19 @@ def _no_such_motor(client, motor: int, exc: TmclError) -> bool:
 
 
 def _speed_parameter(client) -> int:
+    number = _axis_parameter(client, "ActualSpeed")
+    return SPEED_PARAMETER if number is None else number
+
+
+def _axis_parameter(client, name: str) -> int | None:
+    """The number of the module's axis parameter ``name``; None without data on it."""
     mod = client.module
-    if mod is not None:
-        try:
-            return mod.lookup("axis", "ActualSpeed").number
-        except (ValidationError, KeyError):
-            pass
-    return SPEED_PARAMETER
+    if mod is None or getattr(mod, "generic", False):
+        return None
+    try:
+        return mod.lookup("axis", name).number
+    except (ValidationError, KeyError):
+        return None
 
 
 def _has(client, opcode: int) -> bool:
@@ -763,6 +769,7 @@ def activity(client, *, timeout: float | None = None) -> Activity:
     t = min(client.timeout, 0.5) if timeout is None else timeout
     act = Activity(bool(_program_running(client, t, retries=0)))
     number = _speed_parameter(client)
+    target = _axis_parameter(client, "TargetSpeed")
     for m in _motors(client):
         try:
             v = _speed(client, m, number, t, retries=0)
@@ -772,23 +779,12 @@ def activity(client, *, timeout: float | None = None) -> Activity:
             continue
         if v:
             act.turning[m] = v
-            target = _target_speed_parameter(client)
             try:  # (after MST: the motor ramps down, nothing drives it any more)
                 if target is not None and _speed(client, m, target, t, retries=0) == 0:
                     act.slowing.add(m)
             except TmclError:
                 pass
     return act
-
-
-def _target_speed_parameter(client) -> int | None:
-    mod = client.module
-    if mod is None or getattr(mod, "generic", False):
-        return None
-    try:
-        return mod.lookup("axis", "TargetSpeed").number
-    except (ValidationError, KeyError):
-        return None
 
 
 def stop_everything(client, *, settle: float = SETTLE,

@@ -7,13 +7,9 @@ import sys
 
 from ..errors import TmclError
 from .render import Output
-from .session import QuitShell, Session
+from .session import RECHECK_AFTER, QuitShell, Session, frames_sent
 
 EXIT_OK, EXIT_ERROR, EXIT_SYNTAX, EXIT_CONNECT = 0, 1, 2, 3
-
-# after one of these, a TMCL line is checked when it runs: the module or mode it is checked
-# against may change (as in a script)
-_CHECK_STOPS_AT = {".connect", ".module", ".mode", ".ascii", ".address"}
 
 
 def banner(session: Session) -> str:
@@ -51,7 +47,7 @@ def refused_line(session: Session, lines: list[str]) -> tuple[str, TmclError] | 
         if word.startswith(".") or cmd is not None:
             if cmd is None:
                 return line, ValidationError(unknown_command(word))
-            if cmd.name in _CHECK_STOPS_AT:
+            if cmd.name in RECHECK_AFTER:
                 return None
             continue
         if "${" in text:
@@ -61,12 +57,6 @@ def refused_line(session: Session, lines: list[str]) -> tuple[str, TmclError] | 
         except TmclError as exc:
             return line, exc
     return None
-
-
-def _sent(session: Session) -> int:
-    """Requests the client has sent so far."""
-    stats = getattr(session.client, "stats", None)
-    return stats.get("sent", 0) if isinstance(stats, dict) else 0
 
 
 def run_lines(session: Session, lines: list[str]) -> int:
@@ -79,7 +69,7 @@ def run_lines(session: Session, lines: list[str]) -> int:
         session.out.error(line, f"{exc}{why}")
         return EXIT_SYNTAX
     refused = True  # every error so far was a file refused whole (exit_status 2)
-    sent = _sent(session)
+    sent = frames_sent(session.client)
     for line in lines:
         try:
             session.ensure_link()  # the link was lost on an earlier line (--keep-going)
@@ -92,7 +82,7 @@ def run_lines(session: Session, lines: list[str]) -> int:
             report_error(session, line, exc)
             if not session.keep_going:
                 break
-    if failed and refused and _sent(session) == sent:
+    if failed and refused and frames_sent(session.client) == sent:
         return EXIT_SYNTAX  # a file refused before anything was sent, as -f says of a script
     return EXIT_ERROR if failed or session.stats.suspects > suspects else EXIT_OK
 

@@ -587,10 +587,9 @@ def _rotate_text(mnem: str, motor: int, value: int, unit: str) -> str:
     if value == 0:
         return f"motor {motor} stopping (speed 0; it ramps down)"
     right = (value > 0) == (mnem == "ROR")
-    text = f"motor {motor} rotating {'right' if right else 'left'} at {abs(value)} {unit}"
-    if value < 0:
-        text = f"{text.rstrip()} ({mnem} with a negative speed)"
-    return text.rstrip()
+    way = "right" if right else "left"
+    text = f"motor {motor} rotating {way} at {abs(value)} {unit}".rstrip()
+    return f"{text} ({mnem} with a negative speed)" if value < 0 else text
 
 
 def _mvp_text(result: Result, module: Module | None) -> str:

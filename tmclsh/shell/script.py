@@ -36,7 +36,8 @@ from . import commands, expr
 from .commands import command
 from .lines import split_line
 from .lines import strip_comment as _strip_comment
-from .session import QuitShell, check_substitutions, owns_line, unknown_command
+from .session import (RECHECK_AFTER, QuitShell, check_substitutions, owns_line,
+                      unknown_command)
 
 if TYPE_CHECKING:
     from .session import Session
@@ -46,9 +47,6 @@ STDIN = "<stdin>"
 WAIT_TIMEOUT = 30.0  # .wait default, seconds
 WAIT_INTERVAL = 0.05
 PROGRESS_MIN_STEPS = 20  # scripts with fewer steps run without a progress bar
-# After one of these, TMCL lines are checked when they run, not before: the module or the
-# mode they are checked against may change.
-_RECHECK_AFTER = {".connect", ".module", ".mode", ".ascii", ".address"}
 _VIEWS = {".watch", ".plot", ".history", ".help", ".record"}  # not replayed by .record
 
 
@@ -293,7 +291,7 @@ class Parser:
         check = CHECKS.get(cmd.name)
         if check is not None:
             check(self.session, args)
-        if cmd.name in _RECHECK_AFTER:
+        if cmd.name in RECHECK_AFTER:
             self.precheck = False
         return Step(file, number, text)
 

@@ -292,13 +292,11 @@ class Session:
             args = text[len(word):].strip()
             if args and cmd.syntax == cmd.name:  # `.stopall now`: a usage error, nothing sent
                 raise ValidationError(f"{cmd.name} takes no arguments (got {args!r})")
-            stats = getattr(self.client, "stats", None)
-            frames, lines = (stats or {}).get("sent", 0), self.stats.commands
+            frames, lines = frames_sent(self.client), self.stats.commands
             try:
                 cmd.handler(self, args)
             finally:  # (counted when it failed half-way too: what went out went out)
-                if stats is not None and stats.get("sent", 0) > frames \
-                        and self.stats.commands == lines:
+                if frames_sent(self.client) > frames and self.stats.commands == lines:
                     self.stats.shell_commands += 1
             self._record(text, "")
             return None
@@ -404,6 +402,17 @@ def owns_line(text: str) -> bool:
     words = text.split(None, 1)
     cmd = commands.find(words[0]) if words else None
     return cmd is not None and cmd.owns_line
+
+
+# after one of these, a TMCL line is checked when it runs, not before (a script's or -c's
+# check of the lines ahead): the module or mode it is checked against may change
+RECHECK_AFTER = frozenset({".connect", ".module", ".mode", ".ascii", ".address"})
+
+
+def frames_sent(client) -> int:
+    """Frames the client has sent so far (0 for a client that does not count them)."""
+    stats = getattr(client, "stats", None)
+    return stats.get("sent", 0) if isinstance(stats, dict) else 0
 
 
 def check_substitutions(text: str) -> None:
