@@ -291,9 +291,9 @@ def _client_rows(args: argparse.Namespace, which: str) -> dict:
     """One GAP round trip of ``which`` (a client method, PyTrinamic) beside the raw floor, in
     short alternating blocks (``bracket``): the figure is the median of the per-pair ratios
     (each path block's median over the mean of the raw blocks' medians either side)."""
-    from tmclsh.client import Client
-    from tmclsh.protocol import Request
-    from tmclsh.transport import open_serial
+    from tmclsh.client.core import Client
+    from tmclsh.tmcl.frames import Request
+    from tmclsh.link import open_serial
 
     block = max(50, args.count // 10)
     pairs = args.pairs or 20 * args.rounds
@@ -692,16 +692,17 @@ def bench_repl(args: argparse.Namespace) -> dict:
 @benchmark("upload", ".upload + verify of 2000 instructions vs the same 4000 raw transactions")
 def bench_upload(args: argparse.Namespace) -> dict:
     """Seconds to store (132, one frame each answered with status 101, 133) and verify (134
-    read-back) a program with ``tmclsh.program.upload``, beside the raw floor: the same frames
+    read-back) a program with ``tmclsh.ops.program.upload``, beside the raw floor: the same frames
     written and their 9-byte replies read with bare pyserial, against the same pty-served
     simulator, in the same run (rounds alternate raw and tmclsh)."""
     import serial
 
-    from tmclsh import asm, program
-    from tmclsh.client import Client
-    from tmclsh.modules import load
-    from tmclsh.protocol import Control, Instruction, Request
-    from tmclsh.transport import open_serial
+    from tmclsh.tmcl import asm
+    from tmclsh.ops import program
+    from tmclsh.client.core import Client
+    from tmclsh.tmcl.modules import load
+    from tmclsh.tmcl.frames import Control, Instruction, Request
+    from tmclsh.link import open_serial
 
     module = load(args.module)
     n = min(2000, module.program_memory)
@@ -784,11 +785,11 @@ def bench_watch(args: argparse.Namespace) -> dict:
     reported as time per sample over four raw round trips."""
     import io
 
-    from tmclsh.client import Client
+    from tmclsh.client.core import Client
     from tmclsh.shell import watch
     from tmclsh.shell.render import Output
     from tmclsh.shell.session import Session
-    from tmclsh.transport import open_serial
+    from tmclsh.link import open_serial
 
     count = args.count // 4 or 1
     frame = gap_frame()
@@ -867,13 +868,13 @@ def bench_save(args: argparse.Namespace) -> dict:
 
     import serial
 
-    from tmclsh.client import Client
-    from tmclsh.modules import load
-    from tmclsh.protocol import Request
+    from tmclsh.client.core import Client
+    from tmclsh.tmcl.modules import load
+    from tmclsh.tmcl.frames import Request
     from tmclsh.shell.clone import READ, readable_slots
     from tmclsh.shell.render import Output
     from tmclsh.shell.session import Session
-    from tmclsh.transport import open_serial
+    from tmclsh.link import open_serial
 
     module = load(args.module)
     frames = [Request(1, READ[kind], number, index, 0).to_bytes()

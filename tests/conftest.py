@@ -53,8 +53,8 @@ def run_tmclsh():
 
 @pytest.fixture
 def fast_client():
-    from tmclsh.client import Client
-    from tmclsh.transport import open_sim
+    from tmclsh.client.core import Client
+    from tmclsh.link import open_sim
 
     client = Client(open_sim("TMCM-1311", 1, speed=20), module="TMCM-1311", timeout=0.5,
                     retries=0)
@@ -109,8 +109,8 @@ def client():
 
 @pytest.fixture
 def pty_client(pty_sim):
-    from tmclsh.client import Client
-    from tmclsh.transport import open_serial
+    from tmclsh.client.core import Client
+    from tmclsh.link import open_serial
 
     sim, path = pty_sim
     c = Client(open_serial(path), module="TMCM-1311", timeout=0.2, retries=2)

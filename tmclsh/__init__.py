@@ -11,12 +11,12 @@ from typing import TYPE_CHECKING, Any
 __version__ = "0.1.0"
 
 if TYPE_CHECKING:
-    from .client import Client
+    from .client.core import Client
 
 
 def connect(*args: Any, **kwargs: Any) -> "Client":
-    """Open a client; see :func:`tmclsh.connection.connect` for the arguments."""
-    from .connection import connect as _connect
+    """Open a client; see :func:`tmclsh.client.connect.connect` for the arguments."""
+    from .client.connect import connect as _connect
 
     return _connect(*args, **kwargs)
 

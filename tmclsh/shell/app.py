@@ -26,7 +26,7 @@ from contextlib import nullcontext
 from typing import TYPE_CHECKING
 
 from .. import __version__
-from ..errors import TmclError, TransportError
+from ..base.errors import TmclError, TransportError
 from .session import Abort, QuitShell
 
 if TYPE_CHECKING:
@@ -39,7 +39,7 @@ log = logging.getLogger(__name__)
 # -- parts -------------------------------------------------------------------------------
 
 def history_path():
-    from ..config import state_dir
+    from ..base.config import state_dir
 
     return state_dir() / "history"
 
@@ -48,7 +48,7 @@ def repl_settings() -> dict:
     """The ``[settings]`` of the config file over the packaged defaults (``default.toml``):
     color, editing_mode, history_size. A broken file was reported at start-up already."""
     try:
-        from ..config import load_settings
+        from ..base.config import load_settings
 
         return load_settings()
     except (TmclError, OSError, ImportError):
@@ -85,7 +85,7 @@ def history_entries(path) -> list[str]:
     """The entries of a history file in prompt_toolkit's ``FileHistory`` format (an entry is
     its run of ``+`` lines), newest first, from its last ``HISTORY_BYTES`` only; an entry
     longer than ``files.MAX_LINE`` is dropped, bytes that are not UTF-8 are replaced."""
-    from .. import files
+    from ..base import files
 
     data = files.read_tail(path, HISTORY_BYTES, "history")
     entries: list[str] = []
@@ -241,7 +241,7 @@ LEAVE_OPTIONS = [("stop", "stop everything first, then leave"),
 def may_leave(session: Session) -> bool:
     """Leaving while a motor turns or the stored program runs: ask (stop first / leave
     running / cancel). True when the shell may end."""
-    from .. import program
+    from ..ops import program
     from .builtin import stop_all
 
     client = session.client

@@ -10,11 +10,11 @@ from __future__ import annotations
 import re
 from typing import TYPE_CHECKING
 
-from .. import instructions as isa
-from .. import limits
-from ..errors import StatusError, TmclError, TmclTimeoutError, TransportError, ValidationError
-from ..modules import Module, Parameter, available, from_version_string, load
-from ..protocol import Control, Request, status_ok
+from ..tmcl import instructions as isa
+from ..base import limits
+from ..base.errors import StatusError, TmclError, TmclTimeoutError, TransportError, ValidationError
+from ..tmcl.modules import Module, Parameter, available, from_version_string, load
+from ..tmcl.frames import Control, Request, status_ok
 from .commands import all_commands, command, find
 from .completer import Candidate, param_meta
 from .render import paged
@@ -844,9 +844,9 @@ def cmd_decode(session: Session, arg: str) -> None:
 
 @command(".connect")
 def cmd_connect(session: Session, arg: str) -> None:
-    from .. import transport as tr
-    from ..connection import bring_up
-    from ..errors import ConnectError
+    from .. import link as tr
+    from ..client.connect import bring_up
+    from ..base.errors import ConnectError
 
     client = session.client
     words = arg.split()
@@ -1045,7 +1045,7 @@ def stop_all(session: Session, why: str = ""):
     """Stop the program and the motors (``program.stop_everything``) and say what the module
     reports afterwards; the one stop behind Ctrl-C, ``.stopall`` and the watch's keys.
     Returns the report (None when not connected). Never raises a TmclError."""
-    from .. import program
+    from ..ops import program
 
     client = session.client
     prefix = f"{why}: " if why else ""

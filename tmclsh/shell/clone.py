@@ -23,12 +23,12 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .. import asm
-from .. import modules as moddb
-from .. import instructions as isa
-from ..errors import AsmError, RangeError, TmclError, ValidationError
-from ..modules import Module, Parameter
-from ..protocol import Control, Request, status_ok, status_text
+from ..tmcl import asm
+from ..tmcl import modules as moddb
+from ..tmcl import instructions as isa
+from ..base.errors import AsmError, RangeError, TmclError, ValidationError
+from ..tmcl.modules import Module, Parameter
+from ..tmcl.frames import Control, Request, status_ok, status_text
 from .commands import command
 from .lines import split_line
 
@@ -203,7 +203,7 @@ def write_atomically(path: Path, text: str) -> None:
     """Write ``text`` to a temporary file beside ``path`` and rename it over ``path``, so a
     failed or interrupted save never leaves half a backup in place of a whole one. A device
     or pipe (``/dev/null``) is written as it is, never replaced by a file."""
-    from .. import files
+    from ..base import files
 
     with files.atomic_writer(path, newline="\n") as fh:
         fh.write(text)
@@ -292,7 +292,7 @@ def _program_path(path: Path) -> Path:
 
 
 def _program_text(session: Session) -> tuple[str, int]:
-    from .. import program
+    from ..ops import program
 
     c = session.client
     module = session.module
@@ -479,7 +479,7 @@ def read_backup(session: Session, path: Path, *, force: bool, command: str) -> B
     else is an error at FILE:LINE, so a typo never reads as "matches". ``command`` (.diff,
     .restore) is named in the hint for another module's backup."""
     live = session.module
-    from .. import files
+    from ..base import files
     from .session import owns_line
 
     try:

@@ -16,8 +16,8 @@ from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, NamedTuple
 
-from .. import instructions as isa
-from ..modules import Module, Parameter
+from ..tmcl import instructions as isa
+from ..tmcl.modules import Module, Parameter
 from . import commands
 
 if TYPE_CHECKING:

@@ -1,6 +1,6 @@
 """The program on the module, from the shell: upload, read back, run, step, breakpoints.
 
-Dot-commands over :mod:`tmclsh.program` (which does the bus work and is usable without the
+Dot-commands over :mod:`tmclsh.ops.program` (which does the bus work and is usable without the
 shell). The debugger's state lives in ``session.state["debugger"]`` (a :class:`DebuggerState`);
 ``session.state["program_state"]`` holds a short text for the toolbar ("run", "stop",
 "step @12") and ``session.state["repeat_on_empty"]`` is set after ``.step`` so an empty line
@@ -27,10 +27,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Iterator
 
-from .. import asm, files, limits, program, sourcemap
-from ..errors import AsmError, TmclError, ValidationError
-from ..program import AppStatus, UploadError
-from ..protocol import Instruction
+from ..tmcl import asm, sourcemap
+from ..base import files, limits
+from ..ops import program
+from ..base.errors import AsmError, TmclError, ValidationError
+from ..ops.program import AppStatus, UploadError
+from ..tmcl.frames import Instruction
 from .commands import command
 from .render import paged, paging
 
@@ -795,7 +797,7 @@ def refresh_program_state(session: Session) -> None:
 
 
 def _stored(session: Session):
-    """``instruction_at`` for tmclsh.program: the cached stored instruction."""
+    """``instruction_at`` for tmclsh.ops.program: the cached stored instruction."""
     def at(address: int) -> Instruction:
         ins = _cached_instruction(session, address)
         if ins is None:  # pragma: no cover - binary mode is checked before stepping

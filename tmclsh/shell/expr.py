@@ -36,13 +36,13 @@ from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Protocol
 
-from .. import instructions as isa
-from .. import limits
-from ..errors import StatusError, TmclError, ValidationError
-from ..protocol import Control, Request, status_ok, status_text
+from ..tmcl import instructions as isa
+from ..base import limits
+from ..base.errors import StatusError, TmclError, ValidationError
+from ..tmcl.frames import Control, Request, status_ok, status_text
 
 if TYPE_CHECKING:
-    from ..asm import Encoded
+    from ..tmcl.asm import Encoded
     from .session import Session
 
 Number = int | float

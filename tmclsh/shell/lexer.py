@@ -27,8 +27,8 @@ from pygments.lexer import Lexer
 from pygments.token import (Comment, Error, Keyword, Name, Number, Operator, Punctuation, Text,
                             Whitespace)
 
-from .. import instructions as isa
-from ..modules import Module, available, load
+from ..tmcl import instructions as isa
+from ..tmcl.modules import Module, available, load
 
 _TOKEN = re.compile(r"""
     (?P<ws>[ \t\r\f\v]+)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..errors import TmclError
+from ..base.errors import TmclError
 from .render import Output
 from .session import RECHECK_AFTER, QuitShell, Session, frames_sent
 
@@ -33,7 +33,7 @@ def refused_line(session: Session, lines: list[str]) -> tuple[str, TmclError] | 
     """The first of ``lines`` the module would refuse, checked before any is sent (as a
     script is): a typo in the last line of ``-c "MVP ...; SPA ..."`` must not leave the move
     of the first one running. Lines with ``${...}`` are checked when they run."""
-    from ..errors import ValidationError
+    from ..base.errors import ValidationError
     from . import commands
     from .lines import strip_comment
     from .session import unknown_command
@@ -88,7 +88,7 @@ def run_lines(session: Session, lines: list[str]) -> int:
 
 
 def run_shell(args: argparse.Namespace) -> int:
-    from ..connection import connection_settings, open_client
+    from ..client.connect import connection_settings, open_client
 
     _exit_cleanly_on_signals()
     settings = connection_settings(args)
@@ -120,7 +120,7 @@ def run_shell(args: argparse.Namespace) -> int:
 
 def _stop_on_interrupt(client) -> None:
     """Ctrl-C in -c/-f: stop everything (program.stop_everything) and say what reads back."""
-    from ..program import stop_everything
+    from ..ops.program import stop_everything
 
     def reconnect() -> BaseException | None:
         try:
@@ -172,7 +172,7 @@ def _silence_stdout() -> None:
 
 
 def _run(args: argparse.Namespace, client, settings: dict) -> int:
-    from ..config import load_settings
+    from ..base.config import load_settings
 
     shell_settings = load_settings()
     out = Output(json_mode=bool(args.json), color=str(shell_settings.get("color", "auto")))
@@ -251,7 +251,7 @@ _SAP, _TARGET_SPEED = 5, 2
 
 def _watch_for_starts(client):
     """A tracer noting whether anything that starts motion was sent; returns the question."""
-    from ..protocol import Request
+    from ..tmcl.frames import Request
 
     sent = []
 
@@ -273,7 +273,7 @@ def _watch_for_starts(client):
 def _note_left_running(session: Session) -> None:
     """A script that ends while a motor turns or the program runs says so on stderr (it
     leaves them so: that may well be what it was for)."""
-    from ..program import activity
+    from ..ops.program import activity
 
     client = session.client
     if not client.connected:

@@ -14,8 +14,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .. import files
-from ..errors import ValidationError
+from ..base import files
+from ..base.errors import ValidationError
 from . import expr
 from .commands import command
 

@@ -31,10 +31,10 @@ from contextlib import contextmanager
 from functools import wraps
 from typing import Any
 
-from .. import instructions as isa
-from ..client import Result
-from ..modules import Module, Parameter
-from ..protocol import Control, Reply, Status, status_text
+from ..tmcl import instructions as isa
+from ..client.core import Result
+from ..tmcl.modules import Module, Parameter
+from ..tmcl.frames import Control, Reply, Status, status_text
 from .style import rich_theme
 
 

@@ -30,14 +30,13 @@ from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .. import files, limits
-from ..errors import AsmError, RangeError, TmclError, TmclTimeoutError, ValidationError
+from ..base import files, limits
+from ..base.errors import AsmError, RangeError, TmclError, TmclTimeoutError, ValidationError
 from . import commands, expr
 from .commands import command
 from .lines import split_line
 from .lines import strip_comment as _strip_comment
-from .session import (RECHECK_AFTER, QuitShell, check_substitutions, owns_line,
-                      unknown_command)
+from .session import RECHECK_AFTER, QuitShell, check_substitutions, owns_line, unknown_command
 
 if TYPE_CHECKING:
     from .session import Session

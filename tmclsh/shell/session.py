@@ -14,12 +14,11 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from .. import asm
-from ..client import Client, Result, _name, idempotent
-from ..errors import (ChecksumError, StatusError, TmclError, TmclTimeoutError, TransportError,
-                      ValidationError)
-from ..modules import Module
-from ..status import OK_STATUSES
+from ..tmcl import asm
+from ..client.core import Client, Result, _name, idempotent
+from ..base.errors import (ChecksumError, StatusError, TmclError, TmclTimeoutError, TransportError, ValidationError)
+from ..tmcl.modules import Module
+from ..tmcl.status import OK_STATUSES
 from . import commands
 from .lines import split_text, strip_comment
 from .render import Output

@@ -32,16 +32,12 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-from .. import instructions as isa
-from ..ascii import (BS, CR, GP_ASCII_MODE, GP_BANK, ECHO_NAMES, AsciiLink, Echo, LineKind,
-                     Mode, address_char, ascii_commands, classify_line, describe_gp67,
-                     echo_mode, gp67_value, next_line, reply_part, reply_summary,
-                     starts_in_ascii)
-from ..errors import StatusError, ValidationError
-from ..protocol import Reply, Request, status_ok
+from ..tmcl import instructions as isa
+from ..client.ascii import (BS, CR, GP_ASCII_MODE, GP_BANK, ECHO_NAMES, AsciiLink, Echo, LineKind, Mode, address_char, ascii_commands, classify_line, describe_gp67, echo_mode, gp67_value, next_line, reply_part, reply_summary, starts_in_ascii)
+from ..base.errors import StatusError, ValidationError
+from ..tmcl.frames import Reply, Request, status_ok
 from .commands import command
-from .termtools import (MENU_KEY, MenuState, SessionLog, Stamper, choose, file_lines, hex_hint,
-                        hex_lines, is_bin, is_quit, menu_hint, menu_text)
+from .termtools import (MENU_KEY, MenuState, SessionLog, Stamper, choose, file_lines, hex_hint, hex_lines, is_bin, is_quit, menu_hint, menu_text)
 
 if TYPE_CHECKING:
     from .session import Session
@@ -366,7 +362,7 @@ class Terminal:
             self._reader = None
 
     def _read_loop(self) -> None:
-        from ..errors import TransportError
+        from ..base.errors import TransportError
 
         while not self._stop.is_set():
             try:
@@ -498,8 +494,8 @@ class Terminal:
 
     def back_to_binary(self) -> None:
         """After the user's BIN: the link is binary frames again; tmclsh leaves it so."""
-        from ..errors import TmclError
-        from ..protocol import Control
+        from ..base.errors import TmclError
+        from ..tmcl.frames import Control
 
         client = self.session.client
         self.link.detach(send_bin=False)
@@ -515,7 +511,7 @@ class Terminal:
     def stop_motors(self) -> None:
         """The shell's one stop (the stored program first: MST alone is undone by a program
         that runs), said as the shell says it: only a motor whose speed reads 0 is stopped."""
-        from .. import program
+        from ..ops import program
         from .builtin import describe_stop
 
         try:
@@ -556,7 +552,7 @@ class _Leave(Exception):
 def _history():
     from prompt_toolkit.history import FileHistory, InMemoryHistory
 
-    from ..config import state_dir
+    from ..base.config import state_dir
 
     try:
         d = state_dir()
@@ -590,8 +586,7 @@ def ascii_completions(session: Session, text: str) -> list[AsciiCompletion]:
     """Completions for the terminal's line: the commands ASCII mode accepts, symbolic types,
     and parameters, motors and ports *by number* (the module's ASCII parser knows no names;
     typing a name finds its number)."""
-    from .completer import (AxisParam, Candidate, GlobalParam, Mnemonic, candidates,
-                            current_word, param_meta, ranked, suggest)
+    from .completer import (AxisParam, Candidate, GlobalParam, Mnemonic, candidates, current_word, param_meta, ranked, suggest)
 
     mod = session.client.module
     body = text

@@ -16,12 +16,11 @@ import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from .. import asm
-from .. import instructions as isa
-from ..errors import FrameError
-from ..modules import Module
-from ..protocol import (INSTRUCTION_LEN, SERIAL_FRAME_LEN, VERSION_STRING_LEN, Instruction,
-                        Reply, Request, Status, checksum, parse_hex, status_text, to_signed32)
+from ..tmcl import asm
+from ..tmcl import instructions as isa
+from ..base.errors import FrameError
+from ..tmcl.modules import Module
+from ..tmcl.frames import (INSTRUCTION_LEN, SERIAL_FRAME_LEN, VERSION_STRING_LEN, Instruction, Reply, Request, Status, checksum, parse_hex, status_text, to_signed32)
 
 if TYPE_CHECKING:
     from .session import Session

@@ -45,8 +45,8 @@ from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
-from .. import files
-from ..errors import TmclError, TransportError, ValidationError
+from ..base import files
+from ..base.errors import TmclError, TransportError, ValidationError
 from . import expr, lines, plot, script
 from .commands import command
 
@@ -808,7 +808,7 @@ class _Watch:
 
     def _stop_all(self) -> None:
         """The shell's one stop (program, motors, read back), said in the table's caption."""
-        from .. import program
+        from ..ops import program
         from .builtin import describe_stop
 
         if self.state.lost is not None:

@@ -15,9 +15,9 @@ import logging
 import math
 from collections.abc import Callable
 
-from .. import instructions as isa
-from ..modules import Module
-from ..protocol import Instruction, Status
+from ..tmcl import instructions as isa
+from ..tmcl.modules import Module
+from ..tmcl.frames import Instruction, Status
 from .model import AXIS, GLOBAL, Coordinates, IoState, Live, ParamStore
 from .motion import Axis, Limits, Mode, Units
 

@@ -21,14 +21,11 @@ from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
-from .. import instructions as isa
-from ..asm import Line, encode, parse_line
-from ..errors import AsmError
-from ..modules import Module, load
-from ..protocol import (
-    FACTORY_DEFAULT_KEY, SERIAL_FRAME_LEN, Control, Instruction, Reply, Request, Status,
-    checksum, to_signed32,
-)
+from ..tmcl import instructions as isa
+from ..tmcl.asm import Line, encode, parse_line
+from ..base.errors import AsmError
+from ..tmcl.modules import Module, load
+from ..tmcl.frames import (FACTORY_DEFAULT_KEY, SERIAL_FRAME_LEN, Control, Instruction, Reply, Request, Status, checksum, to_signed32)
 from .ascii import Echo, LineDiscipline, address_char, echo_mode, reply_line
 from .commands import Commands
 from .model import AXIS, EEPROM_MAGIC, GLOBAL, Coordinates, IoState, Live, ParamStore
@@ -164,7 +161,7 @@ class Simulator:
                  autostart: bool = True, speed: float = 1.0):
         self.module = load(module) if isinstance(module, str) else module
         if self.module.generic:  # a simulated module is its data: there is nothing to simulate
-            from ..errors import ValidationError
+            from ..base.errors import ValidationError
 
             raise ValidationError("the simulator needs a module's data; generic mode is for "
                                   "real modules tmclsh has no data for (simulate one of "

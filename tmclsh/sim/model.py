@@ -1,6 +1,6 @@
 """Parameter, EEPROM, coordinate and I/O state of one simulated module.
 
-Everything here is built from the module database (``tmclsh/modules/*.toml``): which
+Everything here is built from the module database (``tmclsh/tmcl/modules/*.toml``): which
 parameters exist, their ranges, access letters and start values. The model knows nothing of
 frames or time; it answers "may this be written / stored?" with TMCL status codes so the
 command layer can pass them straight into a reply.
@@ -16,8 +16,8 @@ import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from ..modules import IoPort, Module, Parameter
-from ..protocol import INT32_MAX, Status
+from ..tmcl.modules import IoPort, Module, Parameter
+from ..tmcl.frames import INT32_MAX, Status
 
 log = logging.getLogger(__name__)
 

@@ -18,7 +18,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import IntEnum
 
-from ..modules import Module
+from ..tmcl.modules import Module
 
 EPS_T = 1e-12  # seconds: shorter segments count as zero
 MAX_SEGMENTS = 64  # per advance() call; a safety net against zero-length loops

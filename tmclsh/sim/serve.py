@@ -280,8 +280,8 @@ def run(module: str, address: int, *, pty: bool = False, tcp: str | None = None,
     for bad arguments, 3 when the server cannot start (the port is taken, the CAN interface
     is missing, no pty on this system).
     """
-    from ..canspec import parse_can
-    from ..errors import ValidationError
+    from ..base.canspec import parse_can
+    from ..base.errors import ValidationError
 
     chosen = [x for x in (pty, tcp, can) if x]
     if len(chosen) != 1:

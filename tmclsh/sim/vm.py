@@ -18,8 +18,8 @@ from dataclasses import dataclass, field
 from enum import IntEnum
 from typing import Protocol
 
-from .. import instructions as isa
-from ..protocol import Instruction, Status, to_signed32
+from ..tmcl import instructions as isa
+from ..tmcl.frames import Instruction, Status, to_signed32
 
 log = logging.getLogger(__name__)
 

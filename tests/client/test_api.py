@@ -1,0 +1,119 @@
+"""The Python API: ``tmclsh.connect(...)`` and what ``import tmclsh`` costs."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+import tmclsh
+from tmclsh.base.errors import ConnectError, StatusError, TmclError, TmclTimeoutError, ValidationError
+from tmclsh.tmcl.frames import Status
+
+from conftest import ROOT, tmclsh_env
+
+HEAVY = ("prompt_toolkit", "rich", "can")
+
+
+def test_connect_to_a_port_send_and_execute(pty_sim):
+    sim, path = pty_sim
+    with tmclsh.connect(port=path, timeout=0.5) as c:
+        assert c.module.name == "TMCM-1311"  # asked with 136
+        r = c.send(5, 1, 0, 90000)  # SAP 1, 0, 90000
+        assert r.status == Status.OK and r.opcode == 5
+        assert c.send(6, 1, 0).value == 90000
+        res = c.execute("GAP 1, 0")
+        assert res.ok and res.value == 90000 and res.reply.opcode == 6
+        assert c.value("GAP ActualPosition, 0") == 90000
+        assert sim.param("axis", 1, 0) == 90000
+    assert not c.connected
+
+
+def test_connect_defaults_to_the_simulator_and_checks_its_arguments():
+    with tmclsh.connect() as c:
+        assert c.transport.simulated and c.module.name == "TMCM-1311"
+        assert c.execute("GAP 1, 0").value == 0
+    with pytest.raises(ValidationError, match="only one"):
+        tmclsh.connect(port="loop://", sim="TMCM-1311")
+
+
+@pytest.mark.parametrize("kw, message", [
+    ({"timeout": float("nan")}, "timeout: must be a number of seconds from 0.001 to 60, got nan"),
+    ({"timeout": float("inf")}, "timeout: must be a number of seconds from 0.001 to 60, got inf"),
+    ({"retries": -1}, "retries: must be a whole number from 0 to 10, got -1"),
+    ({"address": 256}, "address: must be a whole number from 0 to 255, got 256"),
+    ({"baud": 12345}, "baud: must be one of 9600, "),
+    ({"port": "loop://", "can_id": 4096}, "can_id: must be a whole number from 0 to 2047"),
+])
+def test_connect_refuses_a_setting_as_the_command_line_does(kw, message):
+    """Was a bare ValueError from the client (nan), or no error at all (inf: a wait forever)."""
+    from tmclsh.base.limits import SettingError
+
+    with pytest.raises(SettingError) as exc:
+        tmclsh.connect(**kw)
+    assert str(exc.value).startswith(message)
+    assert isinstance(exc.value, ValidationError) and isinstance(exc.value, ValueError)
+
+
+def test_connect_checks_the_module_given(pty_sim):
+    sim, path = pty_sim
+    with tmclsh.connect(port=path, module="TMCM-1311", timeout=0.5) as c:
+        assert c.version == "1311V111"  # asked (136), not assumed
+    with pytest.raises(ConnectError, match="-m TMCM-351 does not match.*is a TMCM-1311"):
+        tmclsh.connect(port=path, module="TMCM-351", timeout=0.5)
+
+
+def test_connect_to_nothing_fails_cleanly(tmp_path):
+    with pytest.raises(TmclError, match="no such port"):
+        tmclsh.connect(port=str(tmp_path / "ttyACM7"))
+    with pytest.raises(TmclTimeoutError, match="no module answered at address 1"):
+        tmclsh.connect(port="loop://", timeout=0.05, retries=0)  # nobody answers 136
+
+
+def test_errors_are_the_builtins_a_caller_expects(client):
+    client.address = 77  # nobody there
+    with pytest.raises(TimeoutError):
+        client.send(6, 1, 0, timeout=0.05)
+    client.address = 1
+    with pytest.raises(ValueError):
+        client.send(6, 1, 300)  # motor out of 0..255: refused before sending
+    client.execute("SGP 73, 0, 1234")  # lock the configuration EEPROM
+    with pytest.raises(StatusError) as exc:
+        client.execute("STAP 4, 0")
+    assert exc.value.status == Status.EEPROM_LOCKED and exc.value.reply.status == 5
+
+
+def _modules_after(code: str) -> dict:
+    out = subprocess.run(
+        [sys.executable, "-c", code + "\nimport sys, json\n"
+         "print(json.dumps(sorted(m for m in sys.modules)))"],
+        capture_output=True, text=True, env=tmclsh_env(), cwd=str(ROOT), timeout=30)
+    assert out.returncode == 0, out.stderr
+    return set(json.loads(out.stdout.splitlines()[-1]))
+
+
+@pytest.mark.parametrize("code", [
+    "import tmclsh",
+    "import tmclsh.cli.main",
+    "import tmclsh; c = tmclsh.connect(sim='TMCM-1311'); c.execute('GAP 1, 0'); c.close()",
+])
+def test_import_and_connect_stay_light(code):
+    loaded = _modules_after(code)
+    heavy = sorted(m for m in loaded if m.split(".")[0] in HEAVY)
+    assert heavy == [], f"{code!r} imported {heavy}"
+    if code == "import tmclsh":
+        assert not any(m.startswith(("tmclsh.", "serial")) for m in loaded)
+
+
+def test_import_time_of_the_cli_is_small():
+    """``python -X importtime -c "import tmclsh.cli.main"``: reported, loosely bounded."""
+    out = subprocess.run([sys.executable, "-X", "importtime", "-c", "import tmclsh.cli.main"],
+                         capture_output=True, text=True, env=tmclsh_env(), cwd=str(ROOT),
+                         timeout=30)
+    rows = [line.split("|") for line in out.stderr.splitlines() if line.startswith("import time:")]
+    cumulative = {r[2].strip(): int(r[1]) for r in rows[1:] if len(r) == 3}
+    assert "tmclsh.cli.main" in cumulative
+    # a few milliseconds on a quiet machine; the bound only catches a heavy import creeping in
+    assert cumulative["tmclsh.cli.main"] < 150_000, cumulative["tmclsh.cli.main"]

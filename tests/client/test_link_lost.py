@@ -1,0 +1,264 @@
+"""A lost link, handled where it is lost: a simulated module on TCP whose server hangs up on
+the client (a cable pulled) and keeps listening (plugged back in)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+
+from tmclsh.client.core import Client
+from tmclsh.shell import watch
+from tmclsh.shell.render import Output
+from tmclsh.shell.session import Session
+from tmclsh.sim import Simulator
+from tmclsh.sim.serve import serve_tcp
+from tmclsh.link import open_serial
+
+from conftest import ROOT, tmclsh_env
+
+
+@pytest.fixture
+def tcp_sim():
+    sim = Simulator("TMCM-1311")
+    server = serve_tcp(sim, "127.0.0.1", 0)
+    yield sim, server, f"socket://127.0.0.1:{server.address[1]}"
+    server.close()
+    sim.close()
+
+
+def hang_up_after(server, seconds: float) -> threading.Thread:
+    def run():
+        deadline = time.monotonic() + 20
+        while server._client is None and time.monotonic() < deadline:  # wait for the client
+            time.sleep(0.01)
+        time.sleep(seconds)
+        server.drop_client()
+
+    t = threading.Thread(target=run, daemon=True)
+    t.start()
+    return t
+
+
+def script_run(url: str, tmp_path, *extra: str) -> subprocess.CompletedProcess:
+    script = tmp_path / "s.tmcl"
+    script.write_text("GAP 4, 0\n.sleep 1.2\nGAP 4, 0\nGAP 4, 0\n")
+    return subprocess.run([sys.executable, "-m", "tmclsh", "--port", url, "-m", "TMCM-1311",
+                           "-f", str(script), *extra], capture_output=True, text=True,
+                          timeout=30, env=tmclsh_env(), cwd=str(ROOT))
+
+
+def test_a_script_fails_the_line_that_lost_the_link(tcp_sim, tmp_path):
+    _, server, url = tcp_sim
+    hang_up_after(server, 0.5)
+    p = script_run(url, tmp_path)
+    assert p.returncode == 1
+    assert f"s.tmcl:3: lost {url}" in p.stderr and "disconnected" in p.stderr
+    assert p.stdout.count("MaxPositioningSpeed = ") == 1  # the script stopped there
+
+
+def test_keep_going_reconnects_before_the_next_line(tcp_sim, tmp_path):
+    _, server, url = tcp_sim
+    hang_up_after(server, 0.5)
+    p = script_run(url, tmp_path, "--keep-going")
+    assert p.returncode == 1  # a line failed
+    assert f"s.tmcl:3: lost {url}" in p.stderr
+    out = p.stdout
+    assert f"reconnected to {url}" in out
+    assert out.index(f"reconnected to {url}") < out.rindex("MaxPositioningSpeed = 51200")
+    assert out.count("MaxPositioningSpeed = ") == 2
+
+
+def test_a_watch_says_link_lost_and_samples_again_once_it_is_back(tcp_sim, capsys):
+    sim, server, url = tcp_sim
+    client = Client(open_serial(url), module="TMCM-1311", timeout=0.3)
+    session = Session(client, Output(json_mode=True))
+    got = []
+    hang_up_after(server, 0.4)
+    try:
+        items = watch.parse_items(session, "v=GGP 0, 2")
+        client.execute("SGP 0, 2, 1")
+        t0 = time.monotonic()
+
+        def emit(obj):
+            got.append((time.monotonic() - t0, obj))
+            # written while the watch runs (before the hang-up: a sample is emitted once the
+            # next one is read): the samples after the link came back read the module again
+            if len(got) == 7:
+                client.execute("SGP 0, 2, 2")
+        result = watch.run_watch(session, items, interval=0.05, count=16, live=False,
+                                 emit=emit)
+    finally:
+        client.close()
+    err = capsys.readouterr().err
+    assert "watch: link lost: lost " + url in err
+    assert "watch: link back at" in err
+    assert result.samples == 16
+    values = [obj["values"]["v"] for _, obj in got]
+    assert None not in values  # a lost sample is not shown as a value
+    assert values[0] == 1 and values[-1] == 2
+    times = [t for t, _ in got]
+    assert max(b - a for a, b in zip(times, times[1:])) >= 0.3  # the gap while reconnecting
+
+
+def test_live_watch_table_says_link_lost():
+    from rich.console import Console
+
+    from tmclsh.shell.style import rich_theme
+
+    snap = watch.Snapshot((watch.Series("pos", None, None, None, None, None, ()),),
+                          lost="lost /dev/ttyACM0 (read failed)")
+    console = Console(width=100, record=True, theme=rich_theme())
+    console.print(watch.render(snap, 100))
+    text = console.export_text()
+    assert "link lost: lost /dev/ttyACM0 (read failed) (reconnecting...)" in text
+    assert "error" not in text
+
+
+def lost_after(server, url: str, first: str, then: str) -> tuple[Client, Session]:
+    """A session whose link is lost: ``first`` answered, the cable pulled, ``then`` failed."""
+    client = Client(open_serial(url), module="TMCM-1311", timeout=0.3)
+    session = Session(client, Output())
+    try:
+        client.execute(first)
+        server.drop_client()
+        with pytest.raises(Exception):
+            client.execute(then)
+        assert not client.connected
+    except BaseException:
+        client.close()
+        raise
+    return client, session
+
+
+def test_the_first_command_after_a_watch_reconnects(tcp_sim):
+    from tmclsh.shell.app import run_one
+
+    _, server, url = tcp_sim
+    client, session = lost_after(server, url, "GAP 4, 0", "GAP 4, 0")  # what a watch met
+    try:
+        assert run_one(session, "SGP 0, 2, 42")
+        assert client.connected and client.value("GGP 0, 2") == 42
+    finally:
+        client.close()
+
+
+def test_stopall_after_a_lost_link_brings_it_back_and_stops(tcp_sim, capsys):
+    sim, server, url = tcp_sim
+    client, session = lost_after(server, url, "ROR 0, 30000", "GAP 1, 0")
+    try:
+        session.run_line(".stopall")
+        out = capsys.readouterr().out
+        assert f"reconnected to {url}" in out and "stopped motor 0 (MST; speed reads 0)" in out
+        assert sim.param("axis", 3, 0) == 0
+    finally:
+        client.close()
+
+
+@pytest.fixture
+def lost_in_the_repl(tcp_sim):
+    """A session whose cable was pulled under a REPL line: the line failed and the REPL
+    marked the link lost. Yields (client, session, url)."""
+    from tmclsh.shell.app import run_one
+
+    _, server, url = tcp_sim
+    client = Client(open_serial(url), module="TMCM-1311", timeout=0.3)
+    session = Session(client, Output())
+    try:
+        client.execute("GAP 4, 0")
+        server.drop_client()
+        assert run_one(session, "GAP 4, 0")
+        assert session.link_lost and not client.connected
+        yield client, session, url
+    finally:
+        client.close()
+
+
+@pytest.mark.parametrize("how", ["watch", ".connect"])
+def test_a_link_brought_back_elsewhere_is_not_reconnected_again(lost_in_the_repl, capsys, how):
+    """A watch (or .connect) that brought the lost link back clears the REPL's mark: the next
+    line runs on that link, with no second reconnect and no second "reconnected to"."""
+    from tmclsh.shell.app import run_one
+
+    client, session, _ = lost_in_the_repl
+    if how == "watch":
+        items = watch.parse_items(session, "v=GGP 0, 2")
+        watch.run_watch(session, items, interval=0.05, count=2, live=False,
+                        emit=lambda obj: None)
+    else:
+        assert run_one(session, ".connect")
+    assert not session.link_lost
+    reconnects = client.stats["reconnects"]
+    capsys.readouterr()
+    assert run_one(session, "GAP 4, 0")
+    out = capsys.readouterr().out
+    assert "MaxPositioningSpeed = " in out and "reconnected" not in out
+    assert client.stats["reconnects"] == reconnects
+
+
+def test_the_repl_reconnects_once_and_clears_its_mark(lost_in_the_repl, capsys):
+    from tmclsh.shell.app import run_one
+
+    client, session, url = lost_in_the_repl
+    capsys.readouterr()
+    assert run_one(session, "GAP 4, 0") and run_one(session, "GAP 4, 0")
+    out = capsys.readouterr().out
+    assert out.count(f"reconnected to {url}") == 1 and out.count("MaxPositioningSpeed") == 2
+    assert not session.link_lost and client.stats["reconnects"] == 1
+
+
+def test_ctrl_c_after_a_lost_link_reconnects_and_says_why_it_stopped(tcp_sim, capsys):
+    from tmclsh.shell.builtin import stop_all
+
+    sim, server, url = tcp_sim
+    client, session = lost_after(server, url, "ROR 0, 30000", "GAP 1, 0")
+    try:
+        assert stop_all(session, "interrupted").ok
+        out = capsys.readouterr().out
+        assert f"reconnected to {url}" in out
+        assert "interrupted: stopped motor 0 (MST; speed reads 0)" in out
+    finally:
+        client.close()
+
+
+def test_stopall_finds_the_link_lost_on_its_way_brings_it_back_and_stops(tcp_sim, capsys):
+    """The cable was pulled and put back while nothing was sent: the stop is the first to
+    find the link dead. It reconnects and stops (it said "stopping failed")."""
+    sim, server, url = tcp_sim
+    client = Client(open_serial(url), module="TMCM-1311", timeout=0.3)
+    session = Session(client, Output())
+    try:
+        client.execute("ROR 0, 30000")
+        server.drop_client()
+        time.sleep(0.1)
+        session.run_line(".stopall")
+        out = capsys.readouterr().out
+        assert f"reconnected to {url}" in out and "stopped motor 0 (MST; speed reads 0)" in out
+        assert sim.param("axis", 3, 0) == 0
+    finally:
+        client.close()
+
+
+def test_ctrl_c_in_a_script_after_the_link_was_lost_reconnects_and_stops(tcp_sim, tmp_path):
+    sim, server, url = tcp_sim
+    script = tmp_path / "turn.tmcl"
+    script.write_text("ROR 0, 30000\n.sleep 30\n")
+    p = subprocess.Popen([sys.executable, "-m", "tmclsh", "--port", url, "-m", "TMCM-1311",
+                          "-f", str(script)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True, env=tmclsh_env(), cwd=str(ROOT))
+    try:
+        hang_up_after(server, 0.3).join(25)
+        deadline = time.monotonic() + 10
+        while sim.param("axis", 3, 0) == 0 and time.monotonic() < deadline:
+            time.sleep(0.02)  # (the motor turns: the script is in its .sleep)
+        p.send_signal(2)
+        _, err = p.communicate(timeout=20)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 130, err
+    assert f"reconnected to {url}" in err and "stopped motor 0 (MST; speed reads 0)" in err, err
+    assert sim.param("axis", 3, 0) == 0

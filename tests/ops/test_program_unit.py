@@ -1,0 +1,156 @@
+"""tmclsh.ops.program without a module: the checks that run before anything is sent.
+
+The client here sits on pyserial's ``loop://`` and must never send a byte (``stats["sent"]``).
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from tmclsh.tmcl import asm, modules
+from tmclsh.ops import program
+from tmclsh.client.core import Client
+from tmclsh.base.errors import ValidationError
+from tmclsh.ops.program import AppStatus, UploadError
+from tmclsh.tmcl.frames import Instruction
+from tmclsh.link import open_serial
+
+M1311 = modules.load("TMCM-1311")
+
+
+@pytest.fixture
+def idle_client():
+    c = Client(open_serial("loop://"), module="TMCM-1311", timeout=0.05, retries=0)
+    yield c
+    assert c.stats["sent"] == 0, "nothing may be sent by these checks"
+    c.close()
+
+
+def _err(acked, sent, total=10, start=0, ended=True, **kw) -> UploadError:
+    return UploadError("why", start=start, total=total, acked=acked, sent=sent,
+                       download_ended=ended, **kw)
+
+
+def test_memory_text_midway() -> None:
+    e = _err(42, 43, total=58)
+    assert e.memory_text() == ("instructions 0..41 written, 42 unknown (sent, not confirmed), "
+                               "43..57 unchanged (old contents)")
+    assert list(e.written) == list(range(42)) and list(e.unknown) == [42]
+    assert "download mode ended" in str(e) and "upload failed: why" in str(e)
+
+
+def test_memory_text_edges() -> None:
+    assert _err(0, 0).memory_text() == "nothing was written; the program memory is unchanged"
+    assert _err(0, 1).memory_text() == ("0 unknown (sent, not confirmed), "
+                                        "1..9 unchanged (old contents)")
+    assert _err(10, 10).memory_text() == "instructions 0..9 written"
+    assert _err(1, 1, total=3, start=100).memory_text() == \
+        "instructions 100 written, 101..102 unchanged (old contents)"
+
+
+def test_download_not_ended_is_said() -> None:
+    e = _err(3, 4, ended=False, end_error="no reply")
+    assert "could not end download mode (no reply)" in str(e)
+    assert "power-cycle" in str(e)
+
+
+def test_check_fits() -> None:
+    program.check_fits(M1311, 0, 2048)
+    program.check_fits(M1311, 2047, 1)
+    with pytest.raises(ValidationError, match="only 48 fit.*2048 instructions.*nothing was sent"):
+        program.check_fits(M1311, 2000, 49)
+    with pytest.raises(ValidationError, match="outside program memory 0..2047"):
+        program.check_fits(M1311, 2048, 1)
+
+
+def test_upload_refuses_oversize_before_sending(idle_client) -> None:
+    image = [Instruction(28)] * 2049
+    with pytest.raises(ValidationError, match="2049 instructions"):
+        program.upload(idle_client, image)
+    with pytest.raises(ValidationError, match="only 8 fit"):
+        program.upload(idle_client, [Instruction(28)] * 9, origin=2040)
+    with pytest.raises(ValidationError, match="no instructions"):
+        program.upload(idle_client, [])
+
+
+def test_ascii_mode_allows_only_run_and_stop(idle_client) -> None:
+    idle_client.ascii_link = object()  # an ASCII link that offers neither run() nor stop_program()
+    try:
+        for call in (lambda: program.step(idle_client), lambda: program.reset(idle_client),
+                     lambda: program.upload(idle_client, [Instruction(28)]),
+                     lambda: program.read_program(idle_client),
+                     lambda: program.continue_to(idle_client, {3})):
+            with pytest.raises(ValidationError, match="needs binary mode.*RUN and STOP"):
+                call()
+        with pytest.raises(ValidationError, match="offers no run"):
+            program.run(idle_client)
+        with pytest.raises(ValidationError, match="offers no stop_program"):
+            program.stop(idle_client)
+    finally:
+        idle_client.ascii_link = None
+
+
+def test_ascii_run_from_address_needs_binary(idle_client) -> None:
+    calls = []
+
+    class Link:  # the shape tmclsh.client.ascii offers: run() and stop_program()
+        def run(self, timeout=None):
+            calls.append(("RUN", timeout))
+
+        def stop_program(self, timeout=None):
+            calls.append(("STOP", timeout))
+
+    idle_client.ascii_link = Link()
+    try:
+        program.run(idle_client)
+        program.stop(idle_client)
+        with pytest.raises(ValidationError, match="from an address.*needs binary mode"):
+            program.run(idle_client, 5)
+        assert calls == [("RUN", None), ("STOP", None)]
+    finally:
+        idle_client.ascii_link = None
+
+
+def test_end_marker_and_image_compare() -> None:
+    assert program.is_end_marker(Instruction(0))
+    assert program.is_end_marker(Instruction.from_bytes(b"\xff" * 7))
+    assert not program.is_end_marker(Instruction(28))
+    # a negative value read back (signed) equals the same bytes uploaded (unsigned)
+    assert program.same_image([Instruction(4, 1, 0, 0xFFFFFFFF)], [Instruction(4, 1, 0, -1)])
+    assert not program.same_image([Instruction(28)], [])
+
+
+def test_status_json_and_names() -> None:
+    assert AppStatus("step", 12, 2).to_json() == {"state": "step", "pc": 12}
+    assert [program.state_name(i) for i in range(4)] == ["stop", "run", "step", "reset"]
+    assert program.state_name(9) == "unknown(9)"
+
+
+def test_user_variable_range() -> None:
+    assert program.user_variable_range(M1311) == range(0, 256)
+
+
+def test_upload_result_json() -> None:
+    r = program.UploadResult(0, 16, True)
+    assert r.to_json() == {"uploaded": 16, "verified": True}
+    r = program.UploadResult(0, 16, False, program.Mismatch(3, Instruction(28), Instruction(1)))
+    assert r.to_json() == {"uploaded": 16, "verified": False, "mismatch": 3}
+
+
+def test_demo_program_assembles_for_every_module() -> None:
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "scripts" / "programs" / "demo" / \
+        "demo-counter.tmc"
+    for name in modules.available():
+        prog = asm.assemble_file(path, modules.load(name))
+        assert prog.labels == {"Loop": 2, "Twice": 12}
+        text = asm.disassemble(prog.instructions, prog.module)
+        assert program.same_image(asm.assemble(text, prog.module).instructions,
+                                  prog.instructions)
+
+
+def test_program_with_jumps_must_be_assembled_where_it_goes(idle_client) -> None:
+    prog = asm.assemble("Here:\n    JA Here\n", M1311)
+    with pytest.raises(ValidationError, match="assembled for address 0.*wrong at 10"):
+        program.upload(idle_client, prog, 10)

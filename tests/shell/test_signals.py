@@ -1,0 +1,73 @@
+"""Killing the shell (SIGTERM, SIGHUP) never leaves the module in ASCII or download mode."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from conftest import ROOT, tmclsh_env
+from tmclsh.tmcl.frames import Request, Reply
+from tmclsh.sim import Simulator
+from tmclsh.sim.serve import serve_pty
+
+
+def start(path: str, *args: str) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "tmclsh", "--port", path, *args],
+                            cwd=str(ROOT), env=tmclsh_env(), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+
+
+def wait_for(pred, timeout: float = 10.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not pred():
+        assert time.monotonic() < deadline, "condition not met in time"
+        time.sleep(0.01)
+
+
+@pytest.fixture
+def served():
+    sim = Simulator("TMCM-1311")
+    server = serve_pty(sim)
+    yield sim, server.path
+    server.close()
+    sim.close()
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
+@pytest.mark.parametrize("delay", [0.0, 0.5])  # during the mode switch, and while idle
+def test_killed_in_ascii_mode_leaves_binary_mode(served, sig, delay):
+    sim, path = served
+    p = start(path, "--ascii", "-c", ".sleep 30")
+    wait_for(lambda: sim.ascii_active)
+    time.sleep(delay)
+    p.send_signal(sig)
+    assert p.wait(10) == 128 + sig
+    assert not sim.ascii_active
+
+
+def test_killed_during_upload_ends_download_mode(served, tmp_path):
+    sim, path = served
+    program = tmp_path / "long.tmc"
+    program.write_text("Loop:\n" + "    WAIT TICKS, 0, 1\n" * 200 + "    JA Loop\n")
+    sim.faults.delay = 0.01  # every reply 10 ms late: the upload takes a few seconds
+    p = start(path, "-c", f".upload {program} --yes")
+
+    def downloading() -> bool:
+        return sim.param("global", 129, 0) == 1
+
+    wait_for(downloading)
+    p.send_signal(signal.SIGTERM)
+    assert p.wait(10) == 128 + signal.SIGTERM
+    sim.faults.delay = 0.0
+    assert not downloading()
+    # and the module still answers normally, on the same line
+    import serial
+
+    with serial.Serial(path, timeout=2) as port:
+        port.reset_input_buffer()
+        port.write(Request(1, 6, 1, 0, 0).to_bytes())
+        assert Reply.from_bytes(port.read(9)).status == 100

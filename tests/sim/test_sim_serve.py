@@ -1,0 +1,182 @@
+"""The simulator served to clients tmclsh did not write: pyserial over a pty and over TCP,
+python-can on a virtual bus, pytrinamic over the pty, and the blocking ``run`` entry."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import serial
+
+from tmclsh.tmcl.frames import Reply, ReplyKind, Request, Status
+from tmclsh.sim import SimBus, Simulator
+from tmclsh.sim.serve import serve_can, serve_pty, serve_tcp
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture
+def sim():
+    s = Simulator("TMCM-1311")
+    yield s
+    s.close()
+
+
+def test_pty_with_pyserial(sim):
+    with serve_pty(sim) as server, serial.Serial(server.path, timeout=1) as port:
+        port.write(Request(1, 6, 4).to_bytes())
+        assert Reply.from_bytes(port.read(9)).value == 51200
+        port.write(Request(1, 136, 0).to_bytes())
+        assert port.read(9) == b"\x021311V111"
+        port.write(Request(1, 5, 4, 0, 1000).to_bytes())
+        assert Reply.from_bytes(port.read(9)).ok
+        start = time.perf_counter()
+        for _ in range(200):
+            port.write(Request(1, 6, 4).to_bytes())
+            assert len(port.read(9)) == 9
+        assert (time.perf_counter() - start) / 200 < 0.002  # no sleeps in the request path
+
+
+def test_pty_ascii_mode_and_back(sim):
+    with serve_pty(sim) as server, serial.Serial(server.path, timeout=1) as port:
+        port.write(Request(1, 139).to_bytes())
+        assert Reply.from_bytes(port.read(9)).ok
+        port.write(b"AGAP 4, 0\r")
+        assert port.read_until(b"51200\r") == b"AGAP 4, 0\rBA 100 51200\r"
+        port.write(b"ABIN\r")
+        assert port.read_until(b"BA 100 0\r").endswith(b"BA 100 0\r")
+        port.write(Request(1, 6, 4).to_bytes())
+        assert Reply.from_bytes(port.read(9)).value == 51200
+
+
+def test_pty_reopen(sim):
+    with serve_pty(sim) as server:
+        for _ in range(2):
+            with serial.Serial(server.path, timeout=1) as port:
+                port.write(Request(1, 6, 1).to_bytes())
+                assert Reply.from_bytes(port.read(9)).ok
+
+
+def test_pty_serves_a_bus():
+    bus = SimBus([Simulator("TMCM-1311", 1), Simulator("TMCM-351", 2)])
+    with bus, serve_pty(bus) as server, serial.Serial(server.path, timeout=1) as port:
+        port.write(Request(2, 136, 0).to_bytes())
+        assert port.read(9) == b"\x020351V103"
+        port.write(Request(1, 136, 0).to_bytes())
+        assert port.read(9) == b"\x021311V111"
+
+
+def test_tcp_with_socket_url(sim):
+    with serve_tcp(sim, "127.0.0.1", 0) as server:
+        host, port_no = server.address
+        assert port_no != 0
+        for _ in range(2):  # one client after the other
+            with serial.serial_for_url(f"socket://{host}:{port_no}", timeout=1) as port:
+                port.write(Request(1, 6, 4).to_bytes())
+                assert Reply.from_bytes(port.read(9)).value == 51200
+
+
+def test_can_virtual_bus(sim):
+    can = pytest.importorskip("can")
+    channel = f"sim-test-{os.getpid()}-{time.monotonic_ns()}"
+    with serve_can(sim, "virtual", channel):
+        bus = can.Bus(interface="virtual", channel=channel)
+        try:
+            bus.send(can.Message(arbitration_id=1, data=Request(1, 6, 4).to_can(),
+                                 is_extended_id=False))
+            msg = bus.recv(1)
+            assert msg.arbitration_id == 2
+            assert Reply.from_can(2, msg.data).value == 51200
+            bus.send(can.Message(arbitration_id=1, data=Request(1, 136, 0).to_can(),
+                                 is_extended_id=False))
+            msg = bus.recv(1)
+            assert Reply.from_can(2, msg.data, ReplyKind.VERSION_STRING).version == "1311V111"
+            bus.send(can.Message(arbitration_id=7, data=Request(1, 6, 4).to_can(),
+                                 is_extended_id=False))
+            assert bus.recv(0.05) is None
+            bus.send(can.Message(arbitration_id=1, data=Request(1, 4, 0, 0, 500).to_can(),
+                                 is_extended_id=False))
+            assert Reply.from_can(2, bus.recv(1).data).ok
+            bus.send(can.Message(arbitration_id=1, data=Request(1, 138).to_can(),
+                                 is_extended_id=False))
+            assert Reply.from_can(2, bus.recv(1).data).status == Status.OK
+            event = Reply.from_can(2, bus.recv(3).data)
+            assert (event.status, event.opcode) == (Status.EVENT, 138)
+        finally:
+            bus.shutdown()
+
+
+def test_pytrinamic_reads_and_writes_parameters(sim):
+    pytest.importorskip("pytrinamic")
+    from pytrinamic.connections import ConnectionManager
+
+    with serve_pty(sim) as server:
+        iface = ConnectionManager(
+            f"--interface serial_tmcl --port {server.path} --data-rate 9600").connect()
+        try:
+            assert iface.get_axis_parameter(4, 0) == 51200
+            iface.set_axis_parameter(4, 0, 1000)
+            assert iface.get_axis_parameter(4, 0) == 1000
+            assert sim.param("axis", 4) == 1000
+            iface.set_global_parameter(0, 2, -42)
+            assert iface.get_global_parameter(0, 2, signed=True) == -42
+            iface.set_digital_output(3)
+            assert iface.get_digital_output(3) == 1
+            sim.set_input(1, 0, 1234)
+            assert iface.get_analog_input(0) == 1234
+            assert iface.get_version_string() == "1311V111"
+            iface.set_axis_parameter(1, 0, -77)
+            assert iface.get_axis_parameter(1, 0, signed=True) == -77
+        finally:
+            iface.close()
+
+
+def test_run_entry_point_tcp_and_signal():
+    code = ("import logging, sys; logging.basicConfig(level=logging.WARNING);"
+            "from tmclsh.sim.serve import run;"
+            "sys.exit(run('TMCM-351', 2, tcp='127.0.0.1:0'))")
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE,
+                            stdin=subprocess.DEVNULL, cwd=ROOT, text=True)
+    try:
+        first = proc.stdout.readline().strip()
+        host, port_no = first.rsplit(":", 1)
+        with serial.serial_for_url(f"socket://{host}:{port_no}", timeout=2) as port:
+            port.write(Request(2, 136, 0).to_bytes())
+            assert port.read(9) == b"\x020351V103"
+        time.sleep(0.6)  # stdin is closed: the server must keep running
+        assert proc.poll() is None
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(5) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+
+
+def test_run_entry_point_pty():
+    code = "import sys; from tmclsh.sim.serve import run; sys.exit(run('TMCM-1311', 1, pty=True))"
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE,
+                            stdin=subprocess.DEVNULL, cwd=ROOT, text=True)
+    try:
+        path = proc.stdout.readline().strip()
+        with serial.Serial(path, timeout=2) as port:
+            port.write(Request(1, 6, 4).to_bytes())
+            assert Reply.from_bytes(port.read(9)).value == 51200
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(5) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+
+
+def test_run_rejects_bad_arguments():
+    from tmclsh.sim.serve import run
+
+    assert run("TMCM-1311", 1) == 2
+    assert run("TMCM-1311", 1, pty=True, tcp="x:1") == 2
+    assert run("TMCM-1311", 1, tcp="nonsense") == 2
+    assert run("TMCM-1311", 300, pty=True) == 2

@@ -1,0 +1,1440 @@
+"""The man page and the bash, zsh and fish completions, generated, never typed.
+
+Everything listed comes from where it is defined: options and subcommands from
+``options.build_parser()``, shell commands from the dot-command registry (``shell.commands``),
+TMCL instructions from ``instructions``, module names from ``modules.available()``, settings
+and profile keys from ``default.toml`` and ``config``, CAN interfaces from python-can's
+``can.interfaces.VALID_INTERFACES`` (imported here, at generation time only). The committed
+files are checked against this generator by the tests, so they cannot drift.
+
+    python -m tmclsh.cli.docs            regenerate man/tmclsh.1 and completions/* (scripts/gen-docs)
+    python -m tmclsh.cli.docs --check    exit 1 and name the stale files if any is out of date
+    python -m tmclsh.cli.docs man|bash|zsh|fish   print one of them
+
+Serial ports and profile names change on the user's machine, so the scripts look them up when
+completing: ports by globbing ``/dev/tty{USB,ACM}*`` and ``/dev/serial/by-id/*``, profiles by
+reading the ``[profiles.NAME]`` headers of the config file (no Python start-up per keystroke).
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import shlex
+import sys
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .. import __version__
+
+PROG = "tmclsh"
+SHELLS = ("bash", "zsh", "fish")
+# generated file (relative to the repository root) -> what makes it
+OUTPUTS = {
+    "man/tmclsh.1": "man",
+    "completions/tmclsh": "bash",
+    "completions/_tmclsh": "zsh",
+    "completions/tmclsh.fish": "fish",
+}
+# pyserial URL schemes offered where a port is expected
+URL_SCHEMES = ("socket://", "rfc2217://", "loop://", "spy://", "hwgrep://")
+PORT_GLOBS = ("/dev/ttyUSB*", "/dev/ttyACM*", "/dev/serial/by-id/*")
+# what to complete for an option's value, by the option's dest (or a positional's)
+VALUE_KINDS = {
+    "port": "ports", "can": "can", "sim": "modules", "module": "modules", "profile": "profiles",
+    "script": "files", "file": "files", "output": "files", "module_file": "files",
+}
+
+
+# -- the command line, read from the parser ------------------------------------------------
+
+@dataclass
+class Option:
+    flags: tuple[str, ...]
+    dest: str
+    help: str
+    metavar: str | None  # None: takes no value
+    optional: bool = False  # nargs='?': the value may be left out
+    choices: tuple[str, ...] | None = None
+    excludes: tuple[str, ...] = ()  # flags of the options in its mutually exclusive groups
+    kind: str | None = None  # ports | can | modules | profiles | files | choices | None
+
+    @property
+    def takes_value(self) -> bool:
+        return self.metavar is not None
+
+    @property
+    def long(self) -> str:
+        return next((f for f in self.flags if f.startswith("--")), self.flags[0])
+
+
+@dataclass
+class Positional:
+    name: str
+    dest: str
+    help: str
+    kind: str | None
+
+
+@dataclass
+class Group:
+    title: str
+    options: list[Option]
+    default: bool  # argparse's own options group (not one the program made)
+
+
+@dataclass
+class CommandLine:
+    name: str  # "" for the top level
+    help: str
+    groups: list[Group]
+    positionals: list[Positional]
+    required_choices: list[tuple[Option, ...]] = field(default_factory=list)
+
+    @property
+    def options(self) -> list[Option]:
+        return [o for g in self.groups for o in g.options]
+
+
+def _help(action: argparse.Action, prog: str) -> str:
+    text = action.help or ""
+    if "%" in text:
+        params = {k: v for k, v in vars(action).items() if v is not argparse.SUPPRESS}
+        params["prog"] = prog
+        text = text % params
+    return text
+
+
+def _metavar(action: argparse.Action) -> str:
+    if action.metavar is not None:
+        return str(action.metavar)
+    if action.choices is not None:
+        return "{" + ",".join(map(str, action.choices)) + "}"
+    return action.dest.upper()
+
+
+def _read(parser: argparse.ArgumentParser, name: str, help_text: str) -> CommandLine:
+    exclusive: dict[int, list[str]] = {}
+    required: list[list[argparse.Action]] = []
+    for mx in parser._mutually_exclusive_groups:
+        flags = [f for a in mx._group_actions for f in a.option_strings]
+        for a in mx._group_actions:
+            exclusive.setdefault(id(a), []).extend(f for f in flags if f not in a.option_strings)
+        if mx.required:
+            required.append(list(mx._group_actions))
+    made: dict[int, Option] = {}
+    groups, positionals = [], []
+    for group in parser._action_groups:
+        opts = []
+        for a in group._group_actions:
+            if a.help == argparse.SUPPRESS or isinstance(a, argparse._SubParsersAction):
+                continue
+            if not a.option_strings:
+                positionals.append(Positional(_metavar(a), a.dest, _help(a, parser.prog),
+                                              VALUE_KINDS.get(a.dest)))
+                continue
+            takes = a.nargs != 0 and not isinstance(
+                a, (argparse._StoreConstAction, argparse._HelpAction, argparse._VersionAction,
+                    argparse._CountAction))
+            choices = tuple(map(str, a.choices)) if a.choices is not None else None
+            kind = VALUE_KINDS.get(a.dest) if takes else None
+            if takes and kind is None and choices:
+                kind = "choices"
+            opt = Option(tuple(a.option_strings), a.dest, _help(a, parser.prog),
+                         _metavar(a) if takes else None, a.nargs == "?", choices,
+                         tuple(exclusive.get(id(a), ())), kind)
+            made[id(a)] = opt
+            opts.append(opt)
+        if opts:
+            default = group is parser._optionals
+            groups.append(Group(group.title or "options", opts, default))
+    req = [tuple(made[id(a)] for a in acts if id(a) in made) for acts in required]
+    groups.sort(key=lambda g: g.default)  # the program's own groups first, argparse's last
+    return CommandLine(name, help_text, groups, positionals, req)
+
+
+def describe(parser: argparse.ArgumentParser | None = None) -> tuple[CommandLine, list[CommandLine]]:
+    """The top-level command line and its subcommands, as plain data."""
+    if parser is None:
+        from .options import build_parser
+
+        parser = build_parser()
+    top = _read(parser, "", parser.description or "")
+    subs = []
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            helps = {c.dest: c.help or "" for c in action._choices_actions}
+            for name, sub in action.choices.items():
+                if helps.get(name) == argparse.SUPPRESS:
+                    continue
+                subs.append(_read(sub, name, helps.get(name, "")))
+    return top, subs
+
+
+# -- the rest of what is documented ----------------------------------------------------------
+
+def module_names() -> list[str]:
+    from ..tmcl.modules import built_in
+
+    return built_in()  # never the generating user's own module files
+
+
+def can_interfaces() -> list[str]:
+    """python-can's interface names (imported here only: generation time, never at start-up)."""
+    from can.interfaces import VALID_INTERFACES
+
+    return sorted(VALID_INTERFACES)
+
+
+def shell_commands() -> list:
+    from ..shell import commands
+
+    return commands.all_commands()
+
+
+def _default_toml() -> tuple[list[tuple[str, str, str]], dict[str, str]]:
+    """From default.toml: settings as (key, TOML value, comment) and profile-key descriptions."""
+    from ..base.config import CONNECTION_KEYS, default_config_text
+
+    settings: list[tuple[str, str, str]] = []
+    keys: dict[str, str] = {}
+    comment: list[str] = []
+    section = ""
+    for raw in default_config_text().splitlines():
+        line = raw.strip()
+        if line.startswith("[") and not line.startswith("#"):
+            section, comment = line, []
+        elif line.startswith("#"):
+            m = re.match(r"#\s{3}(\w+)\s{2,}(.+?)(?:\s{2,}(.*))?$", line)
+            if m and m.group(1) in CONNECTION_KEYS:
+                desc = m.group(2)
+                keys[m.group(1)] = desc + (f" (e.g. {m.group(3)})" if m.group(3) else "")
+            else:
+                comment.append(line.lstrip("#").strip())
+        elif "=" in line and section == "[settings]":
+            key, value = (s.strip() for s in line.split("=", 1))
+            settings.append((key, value, " ".join(comment)))
+            comment = []
+        elif not line:
+            comment = []
+    return settings, keys
+
+
+# -- roff -----------------------------------------------------------------------------------
+
+def _inline(text: str) -> str:
+    """Escape text for roff inside a line: backslashes and option hyphens."""
+    text = text.replace("\\", "\\e")
+    return re.sub(r"(?<![\w.])-", r"\\-", text)
+
+
+def _esc(text: str) -> str:
+    """Escape running text for roff; lines starting with a dot or quote are protected."""
+    return "\n".join("\\&" + ln if ln[:1] in (".", "'") else ln
+                     for ln in _inline(text).split("\n"))
+
+
+def _prose(text: str) -> str:
+    """Escape help text, setting `code spans` in bold."""
+    parts = text.split("`")
+    if len(parts) % 2 == 0:  # an unpaired backtick: leave them all as they are
+        return _esc(text)
+    out = "".join(_b(p) if i % 2 else _inline(p) for i, p in enumerate(parts))
+    return "\\&" + out if out[:1] in (".", "'") else out
+
+
+def _b(text: str) -> str:
+    return f"\\fB{_inline(text)}\\fR"
+
+
+def _i(text: str) -> str:
+    return f"\\fI{_inline(text)}\\fR"
+
+
+def _opt_tag(o: Option, all_flags: bool = True) -> str:
+    flags = ", ".join(_b(f) for f in (o.flags if all_flags else (o.long,)))
+    if o.metavar is None:
+        return flags
+    value = _i(o.metavar)
+    return f"{flags} [{value}]" if o.optional else f"{flags} {value}"
+
+
+def _opt_usage(o: Option) -> str:
+    flag = o.flags[0] if len(o.flags[0]) == 2 and len(o.flags) > 1 else o.long
+    if o.metavar is None:
+        return _b(flag)
+    value = f"[{_i(o.metavar)}]" if o.optional else _i(o.metavar)
+    return f"{_b(flag)} {value}"
+
+
+def _sentence(text: str) -> str:
+    text = text.strip()
+    if not text:
+        return text
+    first = text.split(None, 1)[0]
+    if not first.startswith(("python-", "pyserial")):  # names keep their case
+        text = text[0].upper() + text[1:]
+    return text if text.endswith((".", "!", "?")) else text + "."
+
+
+def _summarised(g: Group) -> bool:
+    """A subcommand's big option group of its own (the connection options) is named, not listed."""
+    return not g.default and len(g.options) > 4
+
+
+def _usage(cmd: CommandLine) -> str:
+    """One synopsis line of a subcommand."""
+    parts = [_b(f"{PROG} {cmd.name}".strip())]
+    parts += [_i(p.name) for p in cmd.positionals]
+    required = {id(o) for grp in cmd.required_choices for o in grp}
+    for g in cmd.groups:
+        if _summarised(g):
+            parts.append(f"[{_i(g.title.split()[0])}]")
+            continue
+        for o in g.options:
+            if o.dest == "help" or id(o) in required:
+                continue
+            parts.append(f"[{_opt_usage(o)}]")
+    for grp in cmd.required_choices:
+        parts.append("(" + " | ".join(_opt_usage(o) for o in grp) + ")")
+    return " ".join(parts)
+
+
+def _option_extra(o: Option) -> list[str]:
+    from ..base.config import CONNECTION_KEYS, ENVIRONMENT
+
+    extra = []
+    if o.kind == "modules":
+        extra.append("Modules: " + ", ".join(module_names()) + ".")
+    if o.choices and not all(c in o.help for c in o.choices):
+        extra.append("One of: " + ", ".join(o.choices) + ".")
+    env = [var for var, key in ENVIRONMENT.items() if key == o.dest]
+    if env:
+        extra.append(f"Environment: {', '.join(env)}.")
+    if o.dest in CONNECTION_KEYS and o.dest != "profile":
+        extra.append(f"Profile key: {o.dest}.")
+    if o.excludes:
+        extra.append("Excludes " + ", ".join(o.excludes) + ".")
+    return extra
+
+
+def _options_block(options: Iterable[Option], *, top: bool) -> list[str]:
+    out = []
+    for o in options:
+        out += [".TP", _opt_tag(o)]
+        if o.help:
+            out.append(_esc(_sentence(o.help)))
+        extra = _option_extra(o) if top else (
+            ["Modules: " + ", ".join(module_names()) + "."] if o.kind == "modules" else [])
+        if extra:
+            out.append(_esc(" ".join(extra)))
+    return out
+
+
+def _synopsis(top: CommandLine, subs: list[CommandLine]) -> list[str]:
+    lines: list[str] = []
+    conn = " ".join(f"[{_i(g.title.split()[0])}]" for g in top.groups if not g.default)
+
+    def line(text: str) -> None:
+        if lines:
+            lines.append(".br")
+        lines.append(text)
+
+    line(f"{_b(PROG)} {conn}")
+    for g in top.groups:
+        if not g.default:
+            continue
+        for o in g.options:
+            if o.dest in ("help", "version"):
+                continue
+            prefix = f" {conn}" if o.excludes else ""
+            line(f"{_b(PROG)}{prefix} {_opt_usage(o)}")
+    for s in subs:
+        line(_usage(s))
+    return lines
+
+
+_SUB_NOTES = {
+    "asm": "Source lines are TMCL as in the TMCL-IDE: labels (NAME:), constants "
+           "(#define NAME VALUE or NAME = VALUE), #include \"FILE\", comments after // or #. "
+           "Errors name FILE:LINE:COLUMN and no output file is written.",
+    "disasm": "FILE (or - for standard input) is a TMCL-IDE binary image or hex text as "
+              "written by asm --hex (see PROGRAM IMAGES).",
+    "modules": "Lists each module tmclsh has data for, with its version string and where the "
+               "data comes from: built in, or the path of a user's module file (see MODULE "
+               "FILES). Exit status 1 when a user's file cannot be used (each named on "
+               "standard error). modules check FILE validates one file: exit 0 and a summary "
+               "if tmclsh can use it, else 1 and one line naming the file, the line and what "
+               "is wrong.",
+    "sim": "The first line on standard output is the pseudo-terminal's path or the endpoint; "
+           "connect to it with --port PATH, --port socket://HOST:PORT or --can IFACE:CHANNEL. "
+           "Runs until interrupted. --pty needs Linux or macOS; --tcp and --can work on "
+           "Windows too. Exit status 2 for a malformed argument, 3 when the server cannot "
+           "start (address in use, no such CAN interface).",
+    "ports": "The USB ids are shown; ports whose vendor is Trinamic (0x2A3C) are marked TRINAMIC.",
+    "scan": "Sends command 136 (firmware version) to each address and prints those that answer, "
+            "then a summary on standard error; a progress bar while it runs on a terminal. The "
+            "wait per address comes from the link (the wire time of request and reply at the "
+            "baud rate, plus a margin); addresses that answered late or garbled are asked again, "
+            "slower. --baud auto scans at each baud rate global parameter 65 can select. Exit "
+            "status 3 when nothing answers.",
+}
+
+
+def _details(text: str) -> list[str]:
+    """A command's details: indented lines are examples (kept as typed), the rest paragraphs."""
+    out: list[str] = []
+    para: list[str] = []
+    example: list[str] = []
+
+    def flush() -> None:
+        if para:
+            out.extend([".IP", _prose(" ".join(" ".join(para).split()))])
+            para.clear()
+        if example:
+            out.extend([".IP", ".nf", *("\\&" + _inline(ln) for ln in example), ".fi"])
+            example.clear()
+
+    for line in text.strip("\n").splitlines():
+        if line.startswith((" ", "\t")) and line.strip():
+            if para:
+                flush()
+            example.append(line.strip())
+        elif not line.strip():
+            flush()
+        else:
+            if example:
+                flush()
+            para.append(line)
+    flush()
+    return out
+
+
+def _category_layout() -> tuple[tuple[str, ...], dict[str, str]]:
+    """The order and titles of the command categories, as ``.help`` shows them."""
+    try:
+        from ..shell import builtin
+    except ImportError:
+        return ("general",), {}
+    return (tuple(getattr(builtin, "CATEGORY_ORDER", ("general",))),
+            dict(getattr(builtin, "CATEGORY_TITLES", {})))
+
+
+def _shell_commands_section() -> list[str]:
+    cmds = shell_commands()
+    out = [".SH SHELL COMMANDS",
+           "Shell commands start with a dot and own the rest of their line. "
+           "Every one has help (" + _b(".help") + " " + _i("command") + ") and completion."]
+    if not cmds:
+        return out + [".PP", "(No shell commands are registered in this build.)"]
+    order, titles = _category_layout()
+    present = {c.category for c in cmds}
+    categories = [c for c in order if c in present] + sorted(present - set(order))
+    for cat in categories:
+        title = titles.get(cat, cat[:1].upper() + cat[1:])
+        out.append(f".SS {_esc(title)}")
+        for c in (c for c in cmds if c.category == cat):
+            syntax = c.syntax.strip()
+            rest = syntax[len(c.name):].strip() if syntax.lower().startswith(c.name) else syntax
+            out += [".TP", f"{_b(c.name)} {_inline(rest)}".rstrip(), _prose(_sentence(c.help))]
+            also = []
+            if c.aliases:
+                also.append("Also " + ", ".join(c.aliases) + ".")
+            if c.bare:
+                also.append(f"Also accepted without the dot ({c.name.lstrip('.')}).")
+            if also:
+                out.append(_esc(" ".join(also)))
+            if c.details:
+                out += _details(c.details)
+    return out
+
+
+def _instructions_section() -> list[str]:
+    from ..tmcl.instructions import all_instructions
+
+    names = module_names()
+    out = [".SH TMCL INSTRUCTIONS",
+           "The instructions the shell, the assembler and the simulator know (the opcode in "
+           "parentheses). Symbolic types are listed in the type slot; " + _i("parameter") +
+           " takes a number or a parameter name of the module (" + _b(".param") +
+           " lists them)."]
+    for s in all_instructions():
+        notes = []
+        if set(names) - set(s.modules):
+            notes.append("only on " + ", ".join(sorted(s.modules)))
+        if not s.direct:
+            notes.append("in programs only")
+        text = f"({s.opcode}) {_sentence(s.summary)}"
+        if notes:
+            text = text[:-1] + "; " + "; ".join(notes) + "."
+        out += [".TP", f"{_b(s.mnemonic)} {_esc(s.syntax[len(s.mnemonic):].strip())}".rstrip(),
+                _esc(text)]
+    return out
+
+
+_DESCRIPTION = f"""\
+.SH DESCRIPTION
+{_b(PROG)} is an interactive shell for Trinamic TMCL motor-control modules
+({{modules}}). At its prompt a TMCL command such as {_b("SAP 4, 0, 1000")} or
+{_b("GAP ActualPosition, 0")} is checked against the module's parameter database, sent, and
+the reply is decoded; shell commands (starting with a dot) show help, watch live values, run
+scripts, talk to the module's ASCII mode, and upload, run and single-step programs stored on the
+module. The same lines can be given with {_b("-c")} or replayed from a file with {_b("-f")}.
+.PP
+Without a connection option (or a profile or variable naming one) {_b(PROG)} uses the one
+attached Trinamic USB module if exactly one is found. With none attached, the interactive
+shell starts the built-in simulator of a TMCM-1311, labelled SIMULATED in the banner and the
+toolbar; runs nobody watches ({_b("-c")}, {_b("-f")}, standard input that is not a terminal,
+{_b("scan")}) never fall back to it: they exit with status 3 ({_b("--sim")} asks for the
+simulator). Two or more Trinamic USB modules attached without {_b("--port")} are named, and
+{_b(PROG)} exits with status 3, in every mode.
+.PP
+At connect the module is asked, not assumed: its type with command 136 (a contradicting
+{_b("-m")} is an error naming both types); a module found in download mode (an upload cut
+short) is brought out of it with 133, with a notice, as after a reconnect; a module that
+answers only in its ASCII mode is driven through it, with a notice. When nothing answers, the
+message says what was tried and the likely causes, most likely first.
+.PP
+Bad input never reaches the module: an unknown mnemonic, a wrong type, a value out of the
+parameter's range, a write to a read-only parameter or a motor the module does not have each
+gets a one-line error naming what is wrong and what is allowed, and nothing is sent. Writes to
+the EEPROM, restoring factory defaults and replacing the stored program ask first, unless
+{_b("--yes")} is given.
+"""
+
+_LANGUAGE = f"""\
+.SH SHELL LANGUAGE
+The interactive prompt, {_b("-c")} and {_b("-f")} share one language.
+.IP \\(bu 2
+A TMCL line as in the TMCL-IDE's direct mode: a mnemonic and up to three comma-separated
+operands, {_i("type")}, {_i("motor")} (or bank) and {_i("value")}, e.g.
+{_b("MVP ABS, 0, 90000")}, {_b("SAP 4, 0, 1000")}, {_b("GIO 0, 0")}.
+Mnemonics and names are case-insensitive.
+.IP \\(bu 2
+Numbers in decimal or hex ({_b("$1F")}, {_b("0x1F")}); symbolic types ({_b("ABS REL COORD")},
+{_b("START STOP STATUS")}, {_b("TICKS POS")}, ...); parameter names in the type slot
+({_b("GAP ActualPosition, 0")}). Any command number can be sent raw as well.
+.IP \\(bu 2
+Shell commands start with a dot ({_b(".help")}, {_b(".param")}, {_b(".watch")}, ...);
+{_b("help")}, {_b("?")} and {_b("quit")} also work bare ({_b("help")} or {_b("?")} alone is the
+overview).
+.IP \\(bu 2
+Lines are separated by newlines or {_b(";")}, at the prompt, with {_b("-c")} and in scripts:
+{_b("help 4; help 5")} is two lines, a {_b(";")} inside quotes ({_b('.echo "a;b"')}) is not a
+separator. Only a command that owns the rest of its line takes the {_b(";")}: {_b(".watch")}
+separates its expressions with it ({_b(".watch a=GAP 1, 0; b=GIO 0, 0")} is one command) and
+{_b(".decode")} its pasted bytes; put other commands after those on a new line.
+.IP \\(bu 2
+{_b("//")} and {_b("#")} start a comment that runs to the end of the line ({_b("#")} at the start of
+a word, outside quotes: {_b("GAP 1, 0 # where it is")}). Empty lines are ignored.
+.IP \\(bu 2
+Questions (EEPROM writes, factory reset, program download, leaving {_b(".ascii")}) are answered
+with a line: {_b("y")} and Enter agrees, Enter alone takes the default shown in capitals
+({_b("[y/N]")}), anything else is no. Outside the interactive prompt nothing is asked: such
+commands are refused unless {_b("--yes")} is given.
+.IP \\(bu 2
+Scripts stop at the first error, reported as {_i("FILE")}:{_i("LINE")}, unless
+{_b("--keep-going")} is given.
+.IP \\(bu 2
+With {_b("--json")} every result is one JSON object on a line of standard output, e.g.
+{_b('{"line": "GAP 1, 0", "op": 6, "type": 1, "motor": 0, "value": 0, "status": 100, "reply": -5000}')};
+an error gives {_b('{"line": ..., "error": "..."}')}.
+On the built-in simulator every object also has {_b('"simulated": true')} (and a script's
+summary line says SIMULATED). A 138 target-reached message is an object of its own, in order
+with the results: {_b('{"event": 138, "motors": [0], "t": 1.25}')} (seconds since the start).
+An answer that may have been another request's (a reply came later that no request was
+waiting for) is reported as {_b('{"line": ..., "suspect": true, "warning": "..."}')} and fails
+the run. Status messages go to standard error.
+.IP \\(bu 2
+Ctrl-C interrupts: everything is stopped (see {_b("Ctrl-C")} below) and, outside the
+interactive prompt, {_b(PROG)} exits with status 130. A script that ends while a motor turns
+or the stored program runs leaves them so, with a note on standard error.
+.IP \\(bu 2
+A lost link fails the line it was lost on, with the reason; with {_b("--keep-going")} the
+next line first reconnects.
+.SS Keys at the prompt
+.TP
+{_b("Tab")}
+Completes mnemonics, symbolic types, parameter names (with their number, range and unit) and
+shell commands with their arguments; inside expressions ({_b(".watch")} {_i("NAME")}{_b("=")},
+{_b(".wait")}, {_b(".expect")}, {_b(".if")}, {_b(".let")}, {_b(".display")}, {_b("${...}")}) the
+read commands with their parameters, motors and ports, variables and functions.
+Completion never asks the module.
+.TP
+{_b("Ctrl-C")}
+Stops everything and clears the line: the stored program if it runs (128; a running program
+would start the motors again), then MST to every motor, then each motor's actual speed read
+back until it is 0. Only motors that read 0 are called stopped; any other is named.
+.TP
+{_b("Ctrl-D")}
+Leaves the shell, like {_b(".quit")}. While a motor turns or the stored program runs, it
+asks first: stop everything first, leave it running, or cancel.
+.SS Keys in .watch
+.TP
+{_b("s")} or space
+Stops everything as Ctrl-C does and keeps watching.
+.TP
+{_b("Ctrl-C")}
+Stops everything and ends the watch.
+.TP
+{_b("q")} or Esc
+Ends the watch quietly; motors keep running.
+.PP
+A lost link shows as {_b("link lost:")} {_i("REASON")} in the table; the watch keeps trying to
+reconnect and samples again once the link is back.
+.TP
+{_b("Enter")} on an empty line
+Repeats the last {_b(".step")}.
+.PP
+Output longer than the terminal ({_b(".help")}, {_b(".params")}, {_b(".list")}, {_b(".dump")},
+a long {_b("help")}) is shown through {_b("$PAGER")} (default {_b("less")}; {_b("q")} leaves
+it), never in a pipe, with {_b("-c")} or {_b("-f")}; the {_b("pager")} setting turns it off.
+.SS Keys in the ASCII terminal (.ascii)
+.TP
+{_b("Ctrl-]")}, or {_b(".quit")} typed as a line
+Back to the shell (asks whether to send {_b("BIN")}). A {_b("BIN")} typed by the user is
+noticed: the module talks binary frames again and the terminal returns to the shell.
+.TP
+{_b("Ctrl-C")}
+Stops all motors (in {_b("--raw")}: first erases the line typed so far).
+.TP
+{_b("Ctrl-T")} then {_b("e")}, {_b("h")}, {_b("t")}, {_b("f")}, {_b("u")} or {_b("?")}
+The menu, as in tio: local echo on/off, hex view of what arrives on/off, timestamps on/off,
+log the session to a file ({_b("f")} again stops), send a file line by line (blank and comment
+lines left out, each reply waited for), this list. {_b("Ctrl-T Ctrl-T")} sends Ctrl-T in
+{_b("--raw")}.
+"""
+
+_EXAMPLES = f"""\
+.SH EXAMPLES
+Start the shell on the simulator, without hardware:
+.PP
+.RS 4
+.nf
+{_b("tmclsh --sim")}
+.fi
+.RE
+.PP
+Read the position of motor 0 of the module on a USB port, as JSON:
+.PP
+.RS 4
+.nf
+{_b('tmclsh --port /dev/ttyACM0 --json -c "GAP ActualPosition, 0"')}
+.fi
+.RE
+.PP
+Module 3 on an RS485 bus at 115200 baud; set the maximum speed and move:
+.PP
+.RS 4
+.nf
+{_b('tmclsh --port /dev/ttyUSB0 --baud 115200 -a 3 -c "SAP 4, 0, 1000; MVP REL, 0, 5000"')}
+.fi
+.RE
+.PP
+A module on a CAN bus, and a remote bench behind ser2net (RFC 2217):
+.PP
+.RS 4
+.nf
+{_b("tmclsh --can socketcan:can0 --can-id 1 --reply-id 2")}
+{_b("tmclsh --port rfc2217://bench.local:4001")}
+.fi
+.RE
+.PP
+Replay a setup script on the module of the profile {_i("bench")}, for CI:
+.PP
+.RS 4
+.nf
+{_b("tmclsh --profile bench --yes -f setup.tmcl")}
+.fi
+.RE
+.PP
+Assemble a program and look at the result; find the modules on a bus:
+.PP
+.RS 4
+.nf
+{_b("tmclsh asm blink.tmc --hex -o blink.hex")}
+{_b("tmclsh disasm blink.hex")}
+{_b("tmclsh scan --port /dev/ttyUSB0")}
+.fi
+.RE
+.PP
+Serve a simulated module on a pseudo-terminal and connect to it:
+.PP
+.RS 4
+.nf
+{_b("tmclsh sim --pty")}        (prints e.g. /dev/pts/5)
+{_b("tmclsh --port /dev/pts/5")}
+.fi
+.RE
+.PP
+Test your own code against a misbehaving module (the same seed, the same faults):
+.PP
+.RS 4
+.nf
+{_b("tmclsh sim --pty --faults drop=0.1,corrupt=0.05,delay=0.02,garbage=0.05,dup=0.05 --faults-seed 1")}
+.fi
+.RE
+.PP
+Load the completions into the running shell:
+.PP
+.RS 4
+.nf
+{_b("source <(tmclsh --completions bash)")}
+.fi
+.RE
+"""
+
+
+def _exit_status() -> list[str]:
+    from .options import EXIT_CONNECT, EXIT_ERROR, EXIT_OK, EXIT_USAGE
+
+    rows = [
+        (EXIT_OK, "Success."),
+        (EXIT_ERROR, "A TMCL or shell command failed (a rejected line, an error status from "
+                     "the module, a timeout), a script stopped at an error, asm or disasm "
+                     "failed, a file could not be written (the message names it and why), "
+                     "scan found no module, or a module file that cannot be used (tmclsh "
+                     "modules)."),
+        (EXIT_USAGE, "Usage: an unknown option or a bad option value (a malformed --can, an "
+                     "unknown --profile), a bad environment variable, profile or config file "
+                     "(each checked against the same LIMITS); or a script given with -f that "
+                     "was not run (nothing was sent): it cannot be read, no such file, a "
+                     "syntax error, a value out of range or another line the module would "
+                     "refuse; the same for the lines of -c (each TMCL line is checked before "
+                     "the first is sent) and for the file of a .diff or .restore in -c "
+                     "(CONFIGURATION BACKUPS) when nothing else of the run was sent."),
+        (EXIT_CONNECT, "No module to talk to: a run that is not interactive (-c, -f, standard "
+                       "input not a terminal, scan) was given no connection and found no "
+                       "module (--sim simulates one); two or more Trinamic USB modules are "
+                       "attached and no --port picks one; the port or CAN bus cannot be "
+                       "opened; nothing answers at connect (command 136) or scan finds no "
+                       "module; -m names another type than the module reports; or tmclsh "
+                       "sim cannot start its server."),
+        (130, "Interrupted with Ctrl-C (the program and the motors were stopped first)."),
+        (129, "Hung up (SIGHUP: the terminal or SSH session went away)."),
+        (143, "Terminated (SIGTERM). On both signals tmclsh still ends download mode and "
+              "leaves ASCII mode if it had entered it, before exiting."),
+    ]
+    out = [".SH EXIT STATUS"]
+    for code, text in rows:
+        out += [".TP", _b(str(code)), _esc(text)]
+    return out
+
+
+def _limits() -> list[str]:
+    from ..base.files import MAX_FILE, MAX_LINE, MAX_LINES, size_text
+    from ..base.limits import LIMITS
+    from ..shell.expr import MAX_DEPTH, MAX_LENGTH, MAX_LITERAL, MAX_OPERATORS
+
+    out = [".SH LIMITS",
+           "Every number a user sets is checked against one table, whether it comes from an "
+           "option, an environment variable, a profile or a shell command; a value outside "
+           "it is refused with one line naming the setting and the range, and nothing is "
+           "sent."]
+    for key, lim in LIMITS.items():
+        out += [".TP", _b(key), _esc(_sentence(f"{lim.describe()}: {lim.what}"))]
+    out += [".PP",
+            _esc(f"Files: scripts, sources, programs, CSV files and config files are read up "
+                 f"to {size_text(MAX_FILE)} ({MAX_LINES:,} lines for a script, "
+                 f"{MAX_LINE:,} characters a line, also for -f - which runs each line as it "
+                 "arrives); program images up to the module's program memory. Larger ones "
+                 f"are refused unread. Expressions: at most {MAX_LENGTH} characters, "
+                 f"{MAX_OPERATORS} operators and {MAX_DEPTH} levels of nesting; number "
+                 f"literals at most {MAX_LITERAL} digits. Every file "
+                 "tmclsh writes (asm -o, .record, .watch --csv, .dump, .echo >) is written "
+                 "beside its target and renamed over it when complete, so a failed write "
+                 "leaves the old file as it was.")]
+    return out
+
+
+def _configuration() -> list[str]:
+    from ..base.config import ENVIRONMENT, OTHER_ENVIRONMENT
+
+    settings, keys = _default_toml()
+    out = [".SH CONFIGURATION",
+           "The config file is TOML. Unknown tables, keys and profiles, and values of the "
+           "wrong type, are errors. Print the commented default with " +
+           _b("python3 -m tmclsh.base.config --default") + " and check your file with " +
+           _b("python3 -m tmclsh.base.config") + ".",
+           ".SS Settings",
+           "In the " + _b("[settings]") + " table:"]
+    for key, value, comment in settings:
+        out += [".TP", f"{_b(key)} = {_esc(value)}", _esc(_sentence(comment))]
+    out += [".SS Profiles",
+            "A table " + _b("[profiles.") + _i("NAME") + _b("]") + " per profile, selected with " +
+            _b("--profile") + " " + _i("NAME") + " or " + _b("TMCLSH_PROFILE") + ". "
+            "Command-line options win over environment variables, which win over the "
+            "profile, which wins over the built-in defaults. " + _b("port") + ", " +
+            _b("can") + " and " + _b("sim") + " exclude each other: the strongest source that "
+            "names one of them decides. Keys:"]
+    for key, desc in keys.items():
+        out += [".TP", _b(key), _esc(_sentence(desc))]
+    out += [".PP", "For example:", ".PP", ".RS 4", ".nf",
+            "[profiles.bench]", 'port = "/dev/ttyACM0"', "",
+            "[profiles.rs485]", 'port = "/dev/ttyUSB0"', "baud = 115200", "address = 3",
+            ".fi", ".RE"]
+    out += [".SH ENVIRONMENT"]
+    for var, key in ENVIRONMENT.items():
+        what = "the profile to use" if key == "profile" else keys.get(key, key)
+        out += [".TP", _b(var), _esc(_sentence(f"{what}; like --{key.replace('_', '-')}"
+                                               if key != "ascii" else
+                                               f"{what}; 1/true/yes or 0/false/no"))]
+    for var, text in OTHER_ENVIRONMENT.items():
+        out += [".TP", _b(var), _esc(_sentence(text))]
+    return out
+
+
+_BACKUPS = f"""\
+.SH CONFIGURATION BACKUPS
+{_b(".save")} {_i("FILE")} writes a module's configuration as a tmclsh script, so the same file
+is a backup, a record of what changed and a way to set up a replacement module:
+.PP
+.nf
+// tmclsh configuration backup of a TMCM\\-1311 (.save); ...
+// module: TMCM\\-1311
+// firmware: 1311V111
+// address: 1
+// connection: /dev/ttyACM0 at 9600 baud (binary)
+// date: 2026\\-12\\-01 19:40:00 UTC
+// program: backup.program.tmcl        (only with \\-\\-program)
+
+// \\-\\- axis parameters, motor 0
+// ActualPosition = 51200 µsteps (state, not restored; AP 1, µsteps: ...)
+SAP MaxPositioningSpeed, 0, 51200  // AP 4, pps: Speed limit for positioning ...
+// \\-\\- global parameters, bank 2
+SGP 0, 2, 0  // GP 0: UserVariable #0
+.fi
+.PP
+The {_b("// key: value")} lines of the header are read back by {_b(".diff")} and
+{_b(".restore")}: {_b("module")} decides whether the file is another module type's.
+Each {_b("SAP")}/{_b("SGP")} line is one writable configuration parameter of one motor or
+bank, by name (a run of user variables by number), with its number, unit and meaning after
+{_b("//")}. Read\\-only values and motion state (parameters marked {_b("state")} in the module
+data: target and actual position and speed, counters, writes that start a move or an
+initialisation) are comments and are never written back. Parameters that change how the
+module is reached (marked {_b("link")}: address, baud rate, CAN ids, interface) are restored
+last and not read back.
+.PP
+{_b(".diff")} and {_b(".restore")} accept any script of {_b("SAP")}/{_b("SGP")} lines (by
+name or number, or as raw command 5 or 9; several on a line split by {_b(";")} as in {_b("-f")}), checked
+whole against the module's data as typed commands would be, before anything is sent.
+Comments ({_b("//")}, {_b("#")}) and blank lines are all a file may hold besides: any other
+line (a typo, another TMCL command, a shell command, a line with {_b("${...}")}, a label), a
+value out of range, a read\\-only parameter or a motor the module lacks is an error naming
+{_i("FILE")}{_b(":")}{_i("LINE")}, as {_b("-f")} says it, and in {_b("-c")} the exit status is 2
+when nothing was sent; so is a file with no SAP/SGP line at all, or longer than a script
+may be. For a parameter set twice the last line counts. Parameters are compared by
+number and motor/bank; a backup of another module type is carried over by name with
+{_b("--force")} (parameters the module lacks, motors it does not have and values outside its
+ranges are skipped and listed). A module without parameter data compares by number.
+.PP
+{_b(".save")} over a file that exists asks first (naming the module and date its header
+gives); in {_b("-c")} and {_b("-f")} it is refused unless {_b("--yes")}.
+.PP
+Replaying the file with {_b("tmclsh -f")} {_i("FILE")} {_b("--yes")} writes every line
+(global parameters of bank 0 go straight to EEPROM, hence {_b("--yes")}); {_b(".restore")}
+writes only what differs. With {_b("--program")} the stored program is read back and written
+as source to {_i("FILE")}{_b(".program.tmcl")} (the suffix of {_i("FILE")} replaced), which
+{_b(".upload")} puts back; {_b(".restore")} does not upload it.
+"""
+
+
+_WINDOWS_CONFIG = "%LOCALAPPDATA%\\tmclsh"
+_FILES = f"""\
+.SH FILES
+.TP
+{_i("$XDG_CONFIG_HOME")}{_b("/tmclsh/config.toml")}
+The config file (default {_b("~/.config/tmclsh/config.toml")}; {_b("TMCLSH_CONFIG")} overrides).
+On macOS the directory is {_b("~/Library/Application Support/tmclsh")}, on Windows
+{_b(_WINDOWS_CONFIG)} (the platform's config directory).
+.TP
+{_i("$XDG_CONFIG_HOME")}{_b("/tmclsh/modules/*.toml")}
+Module files of your own (see MODULE FILES), in the same config directory.
+.TP
+{_i("$XDG_STATE_HOME")}{_b("/tmclsh/history")}
+Command history of the interactive prompt (default {_b("~/.local/state/tmclsh/history")}; the
+platform's state directory elsewhere), cut to {_b("history_size")} entries at each start; only
+its newest few MiB are read, and anything but a regular file is left alone (the history is
+then kept in memory).
+.TP
+{_i("$XDG_CACHE_HOME")}{_b("/tmclsh/programs/")}
+The source of each program uploaded with {_b(".upload")}, keyed by a hash of its image, so
+that {_b(".dump")} can show the original labels and comments while the module's memory holds
+exactly that image (default {_b("~/.cache/tmclsh/programs/")}; the user cache directory of
+the platform elsewhere). Safe to delete.
+.TP
+{_i("$XDG_CACHE_HOME")}{_b("/tmclsh/data/")}
+The instruction set and module tables as parsed at the first start (default
+{_b("~/.cache/tmclsh/data/")}); kept under each data file's content hash, safe to delete.
+.TP
+{_i("prefix")}{_b("/share/bash-completion/completions/tmclsh")}
+.TQ
+{_i("prefix")}{_b("/share/zsh/site-functions/_tmclsh")}
+.TQ
+{_i("prefix")}{_b("/share/fish/vendor_completions.d/tmclsh.fish")}
+The completions for bash, zsh and fish, installed with the package ({_i("prefix")} is the
+virtual environment or the installation prefix). Recent bash\\-completion versions find them
+next to the tmclsh they complete, fish when {_i("prefix")}{_b("/share")} is in
+{_b("XDG_DATA_DIRS")} (a system or user install). zsh finds them in a system prefix; for a
+virtual environment add {_b("fpath=(")}{_i("prefix")}{_b("/share/zsh/site-functions $fpath)")}
+to {_b("~/.zshrc")} before {_b("compinit")}, and for fish add
+{_b("set -p fish_complete_path")} {_i("prefix")}{_b("/share/fish/vendor_completions.d")}.
+Or load them from tmclsh itself: {_b("tmclsh --completions")} {_i("SHELL")}.
+.TP
+{_i("prefix")}{_b("/share/man/man1/tmclsh.1")}
+This manual. An editable install ({_b("pip install -e")}) installs no manual, so
+{_b("man tmclsh")} cannot find it: read it with {_b("tmclsh --man")}, or
+{_b("man ./man/tmclsh.1")} in the source tree.
+"""
+
+
+def _module_files() -> list[str]:
+    from ..tmcl.modules.schema import IO_KEYS, MEANINGS, MODULE_KEYS, PARAMETER_KEYS
+
+    out = [".SH MODULE FILES",
+           "A module tmclsh has no data for still works: when its 136 answer names another "
+           "type (" + _b("1161V130") + "), or with " + _b("-m generic") + ", the shell runs in "
+           "generic mode: banner and toolbar say " + _b("TMCM-1161 (no parameter data: "
+           "numbers only)") + ", commands go by number with the commands every documented "
+           "module has, types and motors are checked as bytes and values as 32 bits, names "
+           "of parameters are refused, and ranges, read-only parameters and motor numbers are "
+           "not checked (said once at the start).",
+           ".PP",
+           "To give tmclsh the data, write a module file: TOML in the same form as the "
+           "built-in ones, in the config directory's " + _b("modules/") + " (every " +
+           _b("*.toml") + " there is read) or named with " + _b("--module-file") + " " +
+           _i("PATH") + ". A module is matched by its " + _b("version_string") + ", then by " +
+           _b("firmware_id") + ", like the built-in ones. Each file is checked when it is "
+           "read; a mistake is one line naming the file and the line, and tmclsh goes on "
+           "without that file. Check one with " + _b("tmclsh modules check") + " " +
+           _i("FILE") + ". The tables and their keys (* required):"]
+    for title, keys, meaning in (("[module]", MODULE_KEYS, MEANINGS["module"]),
+                                 ("[[axis]] and [[global]], one per parameter", PARAMETER_KEYS,
+                                  MEANINGS["axis"]),
+                                 ("[[io]], one per I/O port", IO_KEYS, MEANINGS["io"])):
+        out += [".TP", _b(title),
+                _esc(", ".join(k + ("*" if req else "") for k, (_, req) in keys.items()) + ".")]
+        for key, text in meaning.items():
+            out += [".RS 4", ".TP", _b(key), _esc(_sentence(text)), ".RE"]
+    out += [".PP", "For example:", ".PP", ".RS 4", ".nf",
+            "[module]", 'name = "TMCM\\-1161"', "motors = 1", "program_memory = 2048",
+            "firmware_id = 1161", 'version_string = "1161V130"', 'commands_like = "TMCM\\-1311"',
+            "", "[[axis]]", "number = 4", 'name = "MaxPositioningSpeed"', 'access = "RWE"',
+            "min = 0", "max = 2047", ".fi", ".RE",
+            ".PP", "The full schema, with every optional key, is tmclsh/tmcl/modules/SCHEMA.md in "
+            "the source."]
+    return out
+
+
+_IMAGES = f"""\
+.SH PROGRAM IMAGES
+.TP
+{_b("Binary (.bin)")}
+The TMCL\\-IDE's image, as its assembler writes it and PyTrinamic's LoadTMCLBinary reads it:
+one 8\\-byte record per instruction: command, type, motor or bank, value (4 bytes, most
+significant first), then a checksum, the 8\\-bit sum of those seven bytes.
+{_b("asm")} writes it, {_b("disasm")}, {_b(".upload")} and {_b(".source-map")} read it, and
+{_b(".dump")} {_i("FILE")}{_b(".bin")} writes what the module holds. A record whose checksum is
+wrong is refused, naming the record and the checksum it should have; nothing is sent.
+.TP
+{_b("Hex text (.hex, asm --hex)")}
+One instruction per line: its seven bytes in hex, separated by spaces, no checksum
+({_b("05 04 00 00 00 03 e8")} is SAP 4, 0, 1000).
+"""
+
+
+def manpage(parser: argparse.ArgumentParser | None = None) -> str:
+    """The man page, tmclsh(1), in roff (man macros)."""
+    top, subs = describe(parser)
+    out = [
+        ".\\\" Generated by scripts/gen-docs (python -m tmclsh.cli.docs) from tmclsh's argument",
+        ".\\\" parser, its shell command registry and its data files. Do not edit.",
+        f'.TH TMCLSH 1 "" "tmclsh {__version__}" "User Commands"',
+        ".nh",
+        ".ad l",
+        ".SH NAME",
+        "tmclsh \\- interactive shell for Trinamic TMCL motor\\-control modules",
+        ".SH SYNOPSIS",
+        *_synopsis(top, subs),
+        _DESCRIPTION.replace("{modules}", ", ".join(module_names())).rstrip("\n"),
+        ".SH OPTIONS",
+    ]
+    for g in top.groups:
+        head, _, note = g.title.partition(" (")
+        if g.default and len(top.groups) > 1:
+            head = "other options"
+        out.append(f".SS {_esc(head[:1].upper() + head[1:])}")
+        if note:
+            out.append(_esc(_sentence(note.rstrip(")"))))
+        out += _options_block(g.options, top=True)
+    out.append(".SH SUBCOMMANDS")
+    for s in subs:
+        out += [f".SS {s.name}", _usage(s), ".PP", _esc(_sentence(s.help))]
+        if s.name in _SUB_NOTES:
+            out.append(_esc(_SUB_NOTES[s.name]))
+        for p in s.positionals:
+            if p.help:
+                out += [".TP", _i(p.name), _esc(_sentence(p.help))]
+        for g in s.groups:
+            if _summarised(g):
+                out += [".TP", _i(g.title.split()[0]),
+                        _esc(f"The {g.title.split()[0]} options of tmclsh itself: ") +
+                        ", ".join(_b(o.long) for o in g.options) + "."]
+            else:
+                out += _options_block((o for o in g.options if o.dest != "help"), top=False)
+    out.append(_LANGUAGE.rstrip("\n"))
+    out += _shell_commands_section()
+    out += _instructions_section()
+    out += _configuration()
+    out.append(_BACKUPS.rstrip("\n"))
+    out += _limits()
+    out.append(_FILES.rstrip("\n"))
+    out += _module_files()
+    out.append(_IMAGES.rstrip("\n"))
+    out += _exit_status()
+    out.append(_EXAMPLES.rstrip("\n"))
+    out += [".SH SEE ALSO",
+            "The TMCL firmware manual of your module; "
+            "pyserial's URL handlers (socket://, rfc2217://, spy://); python\\-can's interfaces."]
+    return "\n".join(line for line in out) + "\n"
+
+
+# -- completions --------------------------------------------------------------------------
+
+_HEADER = ("{c} {shell} completion for tmclsh. Generated by scripts/gen-docs (python -m tmclsh.cli.docs)\n"
+           "{c} from tmclsh's argument parser; do not edit. Also printed by: tmclsh --completions {shell}\n")
+
+_PROFILE_SED = r"""s/^[[:space:]]*\[[[:space:]]*profiles\.[[:space:]]*"\{0,1\}\([^]".[:space:]]*\)"\{0,1\}[[:space:]]*\].*/\1/p"""
+
+
+def _sq(text: str) -> str:
+    """Single-quote for POSIX shells."""
+    return shlex.quote(text)
+
+
+def bash_completion(parser: argparse.ArgumentParser | None = None) -> str:
+    top, subs = describe(parser)
+    sub_names = " ".join(s.name for s in subs)
+
+    def kinds(cmd: CommandLine) -> list[str]:
+        lines = []
+        for o in cmd.options:
+            if not o.takes_value:
+                continue
+            kind = o.kind or "value"
+            if kind == "choices":
+                kind = "choices:" + " ".join(o.choices or ())
+            if o.optional:
+                kind = "optional:" + kind
+            lines.append(f"            {'|'.join(o.flags)}) echo {_sq(kind)} ;;")
+        return lines
+
+    case_lines = []
+    for cmd in [top, *subs]:
+        case_lines.append(f"        {cmd.name or '-'})")
+        case_lines.append('            case $2 in')
+        case_lines += kinds(cmd)
+        case_lines.append("            *) echo none ;;")
+        case_lines.append("            esac ;;")
+    opt_lines = [f"        {cmd.name or '-'}) echo {_sq(' '.join(f for o in cmd.options for f in o.flags))} ;;"
+                 for cmd in [top, *subs]]
+    pos_lines = []
+    for cmd in subs:
+        if cmd.positionals:
+            pos_lines.append(f"        {cmd.name}) echo {cmd.positionals[0].kind or 'value'} ;;")
+    return _HEADER.format(c="#", shell="bash") + f"""\
+# Install: copy to ~/.local/share/bash-completion/completions/tmclsh, or: source <(tmclsh --completions bash)
+
+_tmclsh_ports() {{
+    local p
+    for p in {' '.join(PORT_GLOBS)}; do
+        [[ -e $p ]] && printf '%s\\n' "$p"
+    done
+    printf '%s\\n' {' '.join(URL_SCHEMES)}
+}}
+
+_tmclsh_profiles() {{
+    local f=${{TMCLSH_CONFIG:-${{XDG_CONFIG_HOME:-$HOME/.config}}/tmclsh/config.toml}}
+    [[ -r $f ]] && sed -n '{_PROFILE_SED}' "$f"
+}}
+
+_tmclsh_modules() {{
+    printf '%s\\n' {' '.join(module_names())}
+}}
+
+_tmclsh_can() {{
+    printf '%s:\\n' {' '.join(can_interfaces())}
+}}
+
+# what the value of option $2 of subcommand $1 ('-' = none) is: none, value, a kind
+# (ports, modules, can, profiles, files, choices:A B C), optionally prefixed by optional:
+_tmclsh_kind() {{
+    case $1 in
+{chr(10).join(case_lines)}
+    esac
+}}
+
+_tmclsh_options() {{
+    case $1 in
+{chr(10).join(opt_lines)}
+    esac
+}}
+
+_tmclsh_positional() {{
+    case $1 in
+{chr(10).join(pos_lines) if pos_lines else '        *) ;;'}
+    esac
+}}
+
+_tmclsh_values() {{  # candidates of kind $1
+    case $1 in
+        ports) _tmclsh_ports ;;
+        modules) _tmclsh_modules ;;
+        can) _tmclsh_can ;;
+        profiles) _tmclsh_profiles ;;
+        choices:*) printf '%s\\n' ${{1#choices:}} ;;
+    esac
+}}
+
+_tmclsh() {{
+    COMPREPLY=()
+    # Join the pieces bash split at ':' and '=' (when in COMP_WORDBREAKS), so
+    # --can socketcan:can0 and --port=/dev/ttyACM0 are one word each.
+    local brk=""
+    [[ $COMP_WORDBREAKS == *:* ]] && brk+=:
+    [[ $COMP_WORDBREAKS == *=* ]] && brk+==
+    local -a words=()
+    local i w n cword=0
+    for ((i = 0; i < ${{#COMP_WORDS[@]}}; i++)); do
+        w=${{COMP_WORDS[i]}}
+        n=${{#words[@]}}
+        if ((n > 1)) && [[ -n $brk && ( $w == [$brk]* || ${{words[n-1]}} == *[$brk] ) ]]; then
+            words[n-1]+=$w
+        else
+            words+=("$w")
+        fi
+        ((i == COMP_CWORD)) && cword=$((${{#words[@]}} - 1))
+    done
+    local cur=${{words[cword]}} keep=""
+    # readline replaces only what follows the word's last break: candidates must not repeat it
+    [[ -n $brk && $cur == *[$brk]* ]] && keep=${{cur%"${{cur##*[$brk]}}"}}
+
+    # the subcommand, skipping option values
+    local sub=- kind
+    for ((i = 1; i < cword; i++)); do
+        w=${{words[i]}}
+        case $w in
+            --*=*) ;;
+            -*)
+                kind=$(_tmclsh_kind - "$w")
+                case $kind in
+                    none) ;;
+                    optional:*) [[ ${{words[i+1]}} != -* && " {sub_names} " != *" ${{words[i+1]}} "* ]] && ((i++)) ;;
+                    *) ((i++)) ;;
+                esac ;;
+            *)
+                [[ " {sub_names} " == *" $w "* ]] && sub=$w
+                break ;;
+        esac
+    done
+
+    local opt="" value=$cur prefix=""
+    if [[ $cur == --*=* ]]; then
+        opt=${{cur%%=*}} value=${{cur#*=}} prefix=$opt=
+    elif ((cword > 1)) && [[ ${{words[cword-1]}} == -* && ${{words[cword-1]}} != *=* ]]; then
+        opt=${{words[cword-1]}}
+        kind=$(_tmclsh_kind "$sub" "$opt")
+        [[ $kind == optional:* && $cur == -* ]] && opt=""
+    fi
+    if [[ -n $opt ]]; then
+        kind=$(_tmclsh_kind "$sub" "$opt")
+        kind=${{kind#optional:}}
+        if [[ $kind != none ]]; then
+            if [[ $kind == files ]]; then
+                compopt -o filenames 2>/dev/null
+                mapfile -t COMPREPLY < <(compgen -f -- "$value")
+            elif [[ $kind == can && $value == *:* ]]; then
+                :  # the channel after IFACE: is the user's
+            else
+                mapfile -t COMPREPLY < <(compgen -W "$(_tmclsh_values "$kind")" -- "$value")
+            fi
+            [[ -n $prefix ]] && COMPREPLY=("${{COMPREPLY[@]/#/$prefix}}")
+            _tmclsh_trim "$keep"
+            return 0
+        fi
+    fi
+
+    if [[ $cur == -* ]]; then
+        mapfile -t COMPREPLY < <(compgen -W "$(_tmclsh_options "$sub")" -- "$cur")
+    elif [[ $sub == - ]]; then
+        mapfile -t COMPREPLY < <(compgen -W {_sq(sub_names)} -- "$cur")
+    elif [[ $(_tmclsh_positional "$sub") == files ]]; then
+        compopt -o filenames 2>/dev/null
+        mapfile -t COMPREPLY < <(compgen -f -- "$cur")
+    fi
+    _tmclsh_trim "$keep"
+    return 0
+}}
+
+# Drop what bash keeps of the word from the candidates; no space after 'x:', 'x//' or 'x='.
+_tmclsh_trim() {{
+    local keep=$1 i
+    if [[ -n $keep ]]; then
+        for i in "${{!COMPREPLY[@]}}"; do
+            COMPREPLY[i]=${{COMPREPLY[i]#"$keep"}}
+        done
+    fi
+    if ((${{#COMPREPLY[@]}} == 1)) && [[ ${{COMPREPLY[0]}} == *[:/=] ]]; then
+        compopt -o nospace 2>/dev/null
+    fi
+}}
+
+complete -F _tmclsh tmclsh
+"""
+
+
+def _zsh_desc(text: str) -> str:
+    text = text.replace("\\", "\\\\").replace("[", "\\[").replace("]", "\\]").replace(":", "\\:")
+    return text.replace("'", "'\\''")
+
+
+def _zsh_action(o: Option | Positional) -> str:
+    kind = o.kind
+    if kind == "files":
+        return "_files"
+    if kind in ("ports", "modules", "can", "profiles"):
+        return f"_tmclsh_{kind}"
+    if kind == "choices" and isinstance(o, Option):
+        return "(" + " ".join(o.choices or ()) + ")"
+    return " "
+
+
+def _zsh_specs(cmd: CommandLine) -> list[str]:
+    specs = []
+    for o in cmd.options:
+        excl = set(o.flags) | set(o.excludes)
+        if o.dest in ("help", "version"):
+            excl = {"- *"}
+        excl_text = "(" + " ".join(sorted(excl)) + ")"
+        desc = f"[{_zsh_desc(o.help)}]" if o.help else ""
+        arg = ""
+        if o.takes_value:
+            meta = _zsh_desc(o.metavar or "")
+            colon = "::" if o.optional else ":"
+            arg = f"{colon}{meta}:{_zsh_action(o)}"
+        names = []
+        for f in o.flags:
+            if o.takes_value:
+                names.append(f + ("+" if len(f) == 2 else "="))
+            else:
+                names.append(f)
+        if len(names) == 1:
+            specs.append(f"'{excl_text}{names[0]}{desc}{arg}'")
+        else:
+            specs.append(f"'{excl_text}'{{{','.join(names)}}}'{desc}{arg}'")
+    for n, p in enumerate(cmd.positionals, 1):
+        specs.append(f"'{n}:{_zsh_desc(p.name)}:{_zsh_action(p)}'")
+    return specs
+
+
+def zsh_completion(parser: argparse.ArgumentParser | None = None) -> str:
+    top, subs = describe(parser)
+    ind = " \\\n    "
+    top_specs = ind.join(["-S", *_zsh_specs(top), "'1: :->subcommand'", "'*:: :->args'"])
+    sub_list = "\n".join(f"        {_sq(s.name + ':' + s.help.replace(':', chr(92) + ':'))}" for s in subs)
+    sub_cases = []
+    for s in subs:
+        specs = (" \\\n                ").join(["-S", *_zsh_specs(s)])
+        sub_cases.append(f"            {s.name})\n                _arguments {specs} && ret=0 ;;")
+    return "#compdef tmclsh\n" + _HEADER.format(c="#", shell="zsh") + f"""\
+# Install: put it in a directory of $fpath (e.g. ~/.zfunc, with fpath=(~/.zfunc $fpath)
+# before compinit), or: source <(tmclsh --completions zsh) after compinit.
+
+_tmclsh_ports() {{
+    local -a ports
+    ports=( {' '.join(g.replace('*', '*(N)') for g in PORT_GLOBS)} )
+    _describe -t ports 'serial port' ports
+    compadd -S '' -- {' '.join(URL_SCHEMES)}
+}}
+
+_tmclsh_modules() {{
+    compadd -- {' '.join(module_names())}
+}}
+
+_tmclsh_can() {{
+    compadd -S : -- {' '.join(can_interfaces())}
+}}
+
+_tmclsh_profiles() {{
+    local f=${{TMCLSH_CONFIG:-${{XDG_CONFIG_HOME:-$HOME/.config}}/tmclsh/config.toml}}
+    [[ -r $f ]] || return 1
+    local -a names
+    names=( ${{(f)"$(sed -n '{_PROFILE_SED}' "$f")"}} )
+    compadd -a names
+}}
+
+_tmclsh() {{
+    local curcontext=$curcontext state state_descr line ret=1
+    typeset -A opt_args
+    _arguments -C {top_specs} && ret=0
+    case $state in
+        subcommand)
+            local -a subcommands=(
+{sub_list}
+            )
+            _describe -t subcommands 'tmclsh subcommand' subcommands && ret=0 ;;
+        args)
+            curcontext=${{curcontext%:*:*}}:tmclsh-$line[1]:
+            case $line[1] in
+{chr(10).join(sub_cases)}
+            esac ;;
+    esac
+    return ret
+}}
+
+if [[ $funcstack[1] == _tmclsh ]]; then
+    _tmclsh "$@"
+else
+    compdef _tmclsh tmclsh
+fi
+"""
+
+
+def _fish_q(text: str) -> str:
+    return "'" + text.replace("\\", "\\\\").replace("'", "\\'") + "'"
+
+
+def fish_completion(parser: argparse.ArgumentParser | None = None) -> str:
+    top, subs = describe(parser)
+    sub_names = " ".join(s.name for s in subs)
+    lines = [
+        "complete -c tmclsh -f",
+        "",
+        "# subcommands",
+    ]
+    for s in subs:
+        lines.append(f"complete -c tmclsh -n __fish_use_subcommand -a {s.name} -d {_fish_q(s.help)}")
+
+    def opt_line(cond: str, o: Option) -> str:
+        parts = ["complete -c tmclsh", f"-n {_fish_q(cond)}"]
+        for f in o.flags:
+            parts.append(f"-l {f[2:]}" if f.startswith("--") else f"-s {f[1:]}")
+        if o.takes_value:
+            kind = o.kind
+            if kind == "files":
+                parts.append("-r -F")
+            elif kind == "choices":
+                parts.append("-x -a " + _fish_q(" ".join(o.choices or ())))
+            elif kind in ("ports", "modules", "can", "profiles"):
+                parts.append(f"-x -a '(__tmclsh_{kind})'")
+            else:
+                parts.append("-x")
+        parts.append(f"-d {_fish_q(o.help)}")
+        return " ".join(parts)
+
+    lines += ["", "# options of tmclsh itself"]
+    for o in top.options:
+        lines.append(opt_line(f"not __fish_seen_subcommand_from {sub_names}", o))
+    for s in subs:
+        lines += ["", f"# tmclsh {s.name}"]
+        cond = f"__fish_seen_subcommand_from {s.name}"
+        for o in s.options:
+            lines.append(opt_line(cond, o))
+        if s.positionals and s.positionals[0].kind == "files":
+            lines.append(f"complete -c tmclsh -n {_fish_q(cond)} -F")
+    fish_profile_re = r'^\s*\[\s*profiles\.\s*"?([^\]".\s]+)"?\s*\].*$'
+    return _HEADER.format(c="#", shell="fish") + f"""\
+# Install: copy to ~/.config/fish/completions/tmclsh.fish, or: tmclsh --completions fish | source
+
+function __tmclsh_ports
+    for p in {' '.join(PORT_GLOBS)}
+        printf '%s\\tserial port\\n' $p
+    end
+    printf '%s\\tpyserial URL\\n' {' '.join(URL_SCHEMES)}
+end
+
+function __tmclsh_modules
+    printf '%s\\tmodule\\n' {' '.join(module_names())}
+end
+
+function __tmclsh_can
+    printf '%s:\\tpython-can interface\\n' {' '.join(can_interfaces())}
+end
+
+function __tmclsh_profiles
+    set -l f $TMCLSH_CONFIG
+    if test -z "$f"
+        set -l base $XDG_CONFIG_HOME
+        test -n "$base"; or set base $HOME/.config
+        set f $base/tmclsh/config.toml
+    end
+    test -r "$f"; or return 0
+    string replace -rf {_fish_q(fish_profile_re)} '$1\\tprofile' < $f
+end
+
+""" + "\n".join(lines) + "\n"
+
+
+def completion_script(shell: str, parser: argparse.ArgumentParser | None = None) -> str:
+    """The completion script for ``shell`` (bash, zsh or fish); ``tmclsh --completions SHELL``."""
+    makers: dict[str, Callable[[argparse.ArgumentParser | None], str]] = {
+        "bash": bash_completion, "zsh": zsh_completion, "fish": fish_completion}
+    if shell not in makers:
+        raise ValueError(f"no completion for {shell!r}; choose one of {', '.join(SHELLS)}")
+    return makers[shell](parser)
+
+
+def generate(what: str, parser: argparse.ArgumentParser | None = None) -> str:
+    """``man``, ``bash``, ``zsh`` or ``fish``."""
+    return manpage(parser) if what == "man" else completion_script(what, parser)
+
+
+def stale(root: Path) -> list[str]:
+    """The generated files under ``root`` that differ from what the generator makes now."""
+    return [rel for rel, what in OUTPUTS.items()
+            if not (root / rel).is_file()
+            or (root / rel).read_text(encoding="utf-8") != generate(what)]
+
+
+def write_all(root: Path) -> list[str]:
+    """Regenerate every file under ``root``; return the ones that changed."""
+    changed = []
+    for rel, what in OUTPUTS.items():
+        path = root / rel
+        text = generate(what)
+        if path.is_file() and path.read_text(encoding="utf-8") == text:
+            continue
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_text(text, encoding="utf-8")
+        tmp.replace(path)
+        changed.append(rel)
+    return changed
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m tmclsh.cli.docs",
+                                description="Generate tmclsh's man page and shell completions.")
+    p.add_argument("what", nargs="?", choices=("man", *SHELLS),
+                   help="print one file instead of writing them all")
+    p.add_argument("--root", type=Path, default=Path(__file__).resolve().parents[2],
+                   help="repository root to write to (default: the one holding this package)")
+    p.add_argument("--check", action="store_true",
+                   help="write nothing; exit 1 if a generated file is out of date")
+    args = p.parse_args(argv)
+    if args.what:
+        sys.stdout.write(generate(args.what))
+        return 0
+    if args.check:
+        bad = stale(args.root)
+        for rel in bad:
+            print(f"{rel} is out of date; run scripts/gen-docs", file=sys.stderr)
+        return 1 if bad else 0
+    for rel in write_all(args.root):
+        print(f"wrote {rel}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,332 @@
+"""The entry point: parse the command line (``options``), run a subcommand or the shell.
+
+Heavy modules (prompt_toolkit, rich, python-can) are imported only by the paths that use them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+from .options import (EXIT_CONNECT, EXIT_ERROR, EXIT_OK, EXIT_USAGE, SUBCOMMANDS, build_parser, parse_args)
+
+
+# -- subcommands -------------------------------------------------------------------------
+
+def cmd_asm(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from ..tmcl.asm import assemble_file
+    from ..tmcl.modules import load
+
+    prog = assemble_file(args.file, load(args.module), origin=args.at)
+    out = Path(args.output) if args.output else Path(args.file).with_suffix(".hex" if args.hex else ".bin")
+    data = prog.to_hex().encode() if args.hex else prog.to_binary()
+    if str(out) == "-":
+        sys.stdout.buffer.write(data)
+        return EXIT_OK
+    from ..base.files import write_file
+
+    write_file(out, data)  # all or nothing: a failed write leaves OUT as it was
+    print(f"{args.file}: {len(prog)} instructions for {prog.module.name} -> {out}", file=sys.stderr)
+    return EXIT_OK
+
+
+def cmd_disasm(args: argparse.Namespace) -> int:
+    from ..tmcl.asm import disassemble, read_image_instructions
+    from ..tmcl.modules import load
+
+    module = load(args.module)
+    image = read_image_instructions(args.file, module)  # bounded by its program memory
+    if not image:  # (was an empty line on stdout and nothing said)
+        print(f"{args.file}: an empty image: no instructions", file=sys.stderr)
+        return EXIT_OK
+    sys.stdout.write(disassemble(image, module, origin=args.at))
+    return EXIT_OK
+
+
+def cmd_sim(args: argparse.Namespace) -> int:
+    from ..sim.serve import run
+
+    return run(args.module, args.address, pty=args.pty, tcp=args.tcp, can=args.can,
+               host_address=args.host_address, bitrate=args.bitrate, faults=args.faults,
+               seed=args.faults_seed)
+
+
+def cmd_ports(args: argparse.Namespace) -> int:
+    """One line per serial port: device, USB vendor:product, description, serial number;
+    Trinamic devices first and marked."""
+    import json
+
+    from serial.tools import list_ports
+
+    from ..client.connect import TRINAMIC_VID
+
+    ports = sorted(list_ports.comports(), key=lambda p: (p.vid != TRINAMIC_VID, p.device))
+    as_json = bool(getattr(args, "json", False))
+    if not ports:
+        print("no serial ports found", file=sys.stderr)
+        return EXIT_OK
+    for p in ports:
+        trinamic = p.vid == TRINAMIC_VID
+        desc = p.description if p.description and p.description != "n/a" else ""
+        if as_json:
+            print(json.dumps({"device": p.device, "vid": p.vid, "pid": p.pid,
+                              "description": desc or None, "serial": p.serial_number,
+                              "trinamic": trinamic}))
+            continue
+        ids = f"{p.vid:04x}:{p.pid:04x}" if p.vid is not None else "-"
+        serial = f"  serial {p.serial_number}" if p.serial_number else ""
+        mark = "  [TRINAMIC]" if trinamic else ""
+        print(f"{p.device:<20} {ids:<10} {desc}{serial}{mark}".rstrip())
+    return EXIT_OK
+
+
+def cmd_scan(args: argparse.Namespace) -> int:
+    """Ask every address in --from..--to who is there (``tmclsh.ops.scan``); with ``--baud auto``
+    at each baud rate GP 65 can select. Rows on stdout as modules are found, progress (on a
+    terminal) and a summary on stderr."""
+    import json
+
+    from ..client.core import Client
+    from ..client.connect import baud_rates, connection_settings, open_transport
+    from ..base.errors import ConnectError, TransportError, ValidationError
+    from ..ops.scan import address_timeout, line_baud, scan
+
+    if args.first > args.last:
+        raise ValidationError(f"--from {args.first} is above --to {args.last}")
+    auto = args.baud == "auto"
+    if auto:
+        args.baud = None
+    settings = connection_settings(args)
+    try:
+        transport = open_transport(settings)
+    except (TransportError, ValidationError) as exc:  # a port that cannot be opened, a
+        raise ConnectError(str(exc)) from exc  # CAN configuration naming none: exit 3 as -c
+    client = Client(transport, address=args.first, host_address=settings["host_address"],
+                    timeout=1.0, retries=0, can_id=settings.get("can_id"),
+                    reply_id=settings.get("reply_id"))
+    ids = "CAN ids" if client.is_can else "addresses"
+    rates: list[int | None] = [None]
+    if auto:
+        if line_baud(transport) is None:
+            raise ValidationError("--baud auto needs a serial port (a CAN bus, a simulator or "
+                                  "a socket:// URL has no baud rate)")
+        rates = list(baud_rates())
+    addresses = range(args.first, args.last + 1)
+    found = []
+    tried = []
+    show_progress = not args.json and sys.stderr.isatty()
+    try:
+        for rate in rates:
+            if rate is not None:
+                transport.set_baudrate(rate)
+                client.forget_stale()  # nothing sent at another rate can still arrive
+            timeout = args.timeout or address_timeout(transport, usb=bool(
+                settings.get("port") and _is_usb(settings["port"])))
+            where = client.describe()
+            tried.append(f"{ids} {args.first}..{args.last} on {where} "
+                         f"({timeout * 1000:.0f} ms each)")
+            if not show_progress:
+                print(f"scanning {ids} {args.first}..{args.last} on {where}", file=sys.stderr)
+
+            def row(hit) -> None:
+                if args.json:
+                    print(json.dumps(hit.as_json() if auto else
+                                     {k: v for k, v in hit.as_json().items() if k != "baud"}),
+                          flush=True)
+                else:
+                    at = f"  {hit.baud} baud" if auto else ""
+                    print(f"address {hit.address:3d}  {hit.module or 'unknown module':<10}  "
+                          f"firmware {hit.version or '?'}{at}", flush=True)
+
+            if show_progress:
+                hits = _scan_with_progress(client, addresses, timeout,
+                                           f"{ids} {args.first}..{args.last} on {where}", row)
+            else:
+                shown: set[int] = set()
+
+                def as_found(addr: int, hit) -> None:
+                    if hit is not None:
+                        shown.add(addr)
+                        row(hit)
+
+                hits = scan(client, addresses, timeout=timeout, progress=as_found)
+                for hit in hits:
+                    if hit.address not in shown:  # found on the second, slower pass
+                        row(hit)
+            found += hits
+    finally:
+        client.close()
+    if not found:
+        print(f"nothing answered; tried {'; '.join(tried)}"
+              + ("" if auto or client.is_can else "; other baud rates: --baud auto"),
+              file=sys.stderr)
+        return EXIT_CONNECT
+    where = ", ".join(str(f.address) + (f" ({f.baud} baud)" if auto else "") for f in found)
+    n = len(found)
+    print(f"{n} module{'s' if n != 1 else ''} found at {where}", file=sys.stderr)
+    return EXIT_OK
+
+
+def _is_usb(port: str) -> bool:
+    from ..client.connect import trinamic_ports
+
+    return any(p.device == port for p in trinamic_ports())
+
+
+def _scan_with_progress(client, addresses: range, timeout: float, what: str, row) -> list:
+    """``scan`` under a rich progress bar (stderr is a terminal): addresses done and found so
+    far; rows appear above the bar as modules are found (those of the second, slower pass at
+    the end). The bar goes where the rows go when stdout is the terminal too."""
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
+
+    from ..ops.scan import scan
+
+    found: list[int] = []
+    shown: set[int] = set()
+    same_terminal = sys.stdout.isatty()
+    with Progress(TextColumn("scanning {task.description}"), BarColumn(),
+                  MofNCompleteColumn(), TextColumn("{task.fields[found]}"),
+                  console=Console(stderr=not same_terminal), transient=True,
+                  redirect_stdout=same_terminal, redirect_stderr=False) as bar:
+        task = bar.add_task(what, total=len(addresses), found="")
+
+        def progress(addr: int, hit) -> None:
+            if hit is not None:
+                found.append(addr)
+                shown.add(addr)
+                row(hit)
+            bar.update(task, advance=1, found=("found " + ", ".join(map(str, found)))
+                       if found else "")
+
+        hits = scan(client, addresses, timeout=timeout, progress=progress)
+    for hit in hits:
+        if hit.address not in shown:
+            row(hit)
+    return hits
+
+
+def cmd_modules(args: argparse.Namespace) -> int:
+    """The known modules and where each comes from, or (``check FILE``) one file validated."""
+    import json
+
+    from ..tmcl import modules
+
+    if args.action == "check" or args.file:
+        if not args.file:
+            print("tmclsh: modules check wants a FILE", file=sys.stderr)
+            return EXIT_USAGE
+        try:
+            mod = modules.read_file(args.file)
+        except modules.ModuleFileError as exc:
+            print(f"tmclsh: {exc}", file=sys.stderr)
+            return EXIT_ERROR
+        print(f"{args.file}: {mod.name} (firmware id {mod.firmware_id}, version "
+              f"{mod.version_string}): {len(mod.axis_params)} axis and {len(mod.global_params)} "
+              f"global parameters, {len(mod.io)} I/O ports, commands of "
+              f"{modules.commands_of(mod)}: OK")
+        return EXIT_OK
+    built = set(modules.built_in())
+    for mod in modules.catalogue():
+        source = mod.source
+        if source != modules.BUILT_IN and mod.name in built:
+            source += " (replaces the built-in)"
+        if getattr(args, "json", False):
+            print(json.dumps({"module": mod.name, "firmware_id": mod.firmware_id,
+                              "version_string": mod.version_string, "source": source}))
+        else:
+            print(f"{mod.name:<12} {mod.version_string:<10} {source}")
+    if not getattr(args, "json", False):
+        print(f"{'generic':<12} {'any':<10} built in: numbers only, for any other TMCL module")
+    for problem in modules.problems():
+        print(f"tmclsh: not loaded: {problem}", file=sys.stderr)
+    return EXIT_ERROR if modules.problems() else EXIT_OK
+
+
+# -- entry point -------------------------------------------------------------------------
+
+def show_manual(parser: argparse.ArgumentParser) -> int:
+    """The man page, generated now (so an editable install shows the current one): through
+    man(1) on a terminal where there is one, else the roff text."""
+    import shutil
+    import subprocess
+    import tempfile
+
+    from .docs import manpage
+
+    text = manpage(parser)
+    man = shutil.which("man")
+    if not sys.stdout.isatty() or man is None:
+        sys.stdout.write(text)
+        return EXIT_OK
+    with tempfile.TemporaryDirectory() as tmp:
+        page = os.path.join(tmp, "tmclsh.1")
+        with open(page, "w", encoding="utf-8") as f:
+            f.write(text)
+        return subprocess.call([man, page])  # a path with a slash: man reads that file
+
+
+def _user_modules(args: argparse.Namespace) -> None:
+    """Take in --module-file; a module file that cannot be used is one warning line and the
+    run goes on without it (``tmclsh modules`` reports them itself)."""
+    from ..tmcl import modules
+
+    for path in getattr(args, "module_file", None) or ():
+        modules.add_file(path)
+    if args.subcommand == "modules":
+        return
+    for problem in modules.problems():
+        print(f"tmclsh: warning: {problem}; going on without it", file=sys.stderr)
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    parser = build_parser()
+    args = parse_args(parser, argv)
+    debug = getattr(args, "debug", False)
+    from ..base.errors import TmclError, UsageError
+
+    try:
+        if getattr(args, "man", False):
+            return show_manual(parser)
+        if getattr(args, "completions", None):
+            from .docs import completion_script
+
+            sys.stdout.write(completion_script(args.completions, parser))
+            return EXIT_OK
+        _user_modules(args)
+        handler = {"asm": cmd_asm, "disasm": cmd_disasm, "sim": cmd_sim, "ports": cmd_ports,
+                   "scan": cmd_scan, "modules": cmd_modules}.get(args.subcommand or "")
+        if handler is not None:
+            return handler(args)
+        from ..shell.main import run_shell
+
+        return run_shell(args)
+    except KeyboardInterrupt:
+        return 130
+    except BrokenPipeError:  # `tmclsh modules | head`: the reader has gone; stop quietly
+        try:
+            sys.stdout = open(os.devnull, "w")
+        except OSError:
+            pass
+        return EXIT_ERROR
+    except UsageError as exc:
+        if debug:
+            raise
+        print(f"tmclsh: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except TmclError as exc:
+        if debug:
+            raise
+        print(f"tmclsh: {exc}", file=sys.stderr)
+        from ..base.errors import ConnectError
+
+        return EXIT_CONNECT if isinstance(exc, ConnectError) else EXIT_ERROR
+    except OSError as exc:
+        if debug:
+            raise
+        print(f"tmclsh: {exc}", file=sys.stderr)
+        return EXIT_ERROR

@@ -1,0 +1,231 @@
+"""The command-line contract as an argparse parser, and the exit statuses.
+
+``build_parser()`` is the single source of the command line: the entry point (``cli``) parses
+with it, and the man page and shell completions (``docs``) are generated from it, so neither
+can drift from the other. It imports nothing heavy.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+
+from .. import __version__
+from ..base import limits
+from ..base.canspec import FROM_PYTHON_CAN
+
+SUBCOMMANDS = ("asm", "disasm", "sim", "ports", "scan", "modules")
+EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_CONNECT = 0, 1, 2, 3
+
+
+def setting(key: str):
+    """An argparse type that checks a value against ``limits.LIMITS[key]``, so an option
+    takes exactly what the same setting takes from a variable or a profile."""
+    def convert(text: str) -> int | float:
+        try:
+            return limits.parse(key, text)
+        except limits.SettingError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+    convert.__name__ = key  # argparse names it in "invalid <name> value"
+    return convert
+
+
+def _range(key: str) -> str:
+    return limits.LIMITS[key].short()
+
+
+_address = setting("address")
+_baud = setting("baud")
+
+
+def _faults(text: str) -> dict[str, float]:
+    from ..sim.device import parse_rates  # only when --faults is given
+
+    try:
+        return parse_rates(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _seed(text: str) -> int:
+    try:
+        return int(text, 0)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+
+
+def _baud_or_auto(text: str) -> int | str:
+    return "auto" if text.strip().lower() == "auto" else _baud(text)
+
+
+def add_connection(p: argparse.ArgumentParser, *, auto_baud: bool = False,
+                   nested: bool = False) -> None:
+    """The connection options; ``nested`` (a subcommand's copy): an option not given leaves
+    what was given before the subcommand (``tmclsh --can scan``) instead of resetting it."""
+    first = len(p._actions)
+    g = p.add_argument_group("connection (default: the one attached Trinamic USB module; "
+                             "else --sim at the prompt, exit 3 elsewhere)")
+    x = g.add_mutually_exclusive_group()
+    x.add_argument("--port", metavar="PORT",
+                   help="serial device (/dev/ttyACM0, COM3) or pyserial URL (socket://, "
+                        "rfc2217://, loop://, spy://, hwgrep://)")
+    x.add_argument("--can", metavar="IFACE:CHANNEL", nargs="?", const=FROM_PYTHON_CAN,
+                   help="python-can bus, e.g. socketcan:can0 (Linux; vcan0 for a virtual bus "
+                        "other programs can join), pcan:PCAN_USBBUS1, kvaser:0, "
+                        "slcan:/dev/ttyACM0 or slcan:COM5; alone: the bus python-can's own "
+                        "configuration names (~/can.conf, CAN_INTERFACE, CAN_CHANNEL, "
+                        "CAN_BITRATE). python-can's virtual interface works inside one "
+                        "process only, so it cannot reach a 'tmclsh sim'")
+    x.add_argument("--sim", metavar="MODULE", nargs="?", const="TMCM-1311",
+                   help="the built-in simulator, in process (default module TMCM-1311)")
+    if auto_baud:
+        g.add_argument("--baud", type=_baud_or_auto, metavar="N|auto",
+                       help="baud rate (default 9600, the factory setting); auto: each rate "
+                            f"GP 65 can select, in turn ({_range('baud')})")
+    else:
+        g.add_argument("--baud", type=setting("baud"), metavar="N",
+                       help=f"baud rate (default 9600, the factory setting; {_range('baud')})")
+    g.add_argument("--bitrate", type=setting("bitrate"), metavar="N",
+                   help="CAN bit rate in bit/s; the modules' factory setting is 1000000 "
+                        "(GP 69 = 8); without it the adapter's own default or configuration "
+                        f"applies, which is often lower ({_range('bitrate')})")
+    g.add_argument("--can-id", type=setting("can_id"), metavar="N",
+                   help=f"module's CAN id (GP 71, default 1; {_range('can_id')})")
+    g.add_argument("--reply-id", type=setting("reply_id"), metavar="N",
+                   help=f"module's CAN reply id (GP 70, default 2; {_range('reply_id')})")
+    g.add_argument("--profile", metavar="NAME", help="connection profile from the config file")
+    if nested:
+        for action in p._actions[first:]:
+            action.default = argparse.SUPPRESS
+
+
+def add_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("options")
+    g.add_argument("-m", "--module", metavar="NAME",
+                   help="module type (default: detected with command 136; a type without data "
+                        "runs in generic mode, numbers only; \"generic\" forces it)")
+    g.add_argument("--module-file", metavar="PATH", action="append", dest="module_file",
+                   help="a module data file of your own (same format as the built-in ones; "
+                        "files in the config directory's modules/ are read too)")
+    g.add_argument("-a", "--address", type=_address, metavar="N",
+                   help=f"module address (default 1; {_range('address')})")
+    g.add_argument("--host-address", type=_address, metavar="N",
+                   help=f"host address (default 2; {_range('host_address')})")
+    g.add_argument("--ascii", action="store_true", default=None,
+                   help="talk to the module through its ASCII mode instead of binary frames")
+    g.add_argument("--json", action="store_true", help="one JSON object per result on stdout")
+    g.add_argument("--trace", action="store_true",
+                   help="every frame in hex, decoded, on stderr (the connect's own too)")
+    g.add_argument("--timeout", type=setting("timeout"), metavar="S",
+                   help=f"reply timeout in seconds (default 1; {_range('timeout')})")
+    g.add_argument("--retries", type=setting("retries"), metavar="N",
+                   help=f"retries of idempotent commands (default 2; {_range('retries')})")
+    g.add_argument("--keep-going", action="store_true", help="scripts: continue after an error")
+    g.add_argument("-y", "--yes", action="store_true",
+                   help="do not ask before EEPROM writes, factory reset or program download")
+    g.add_argument("--debug", action="store_true", help="show tracebacks instead of one-line errors")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="tmclsh",
+        description="Interactive shell for Trinamic TMCL modules (TMCM-1311, TMCM-351, TMCM-1640).",
+        epilog="Subcommands: asm, disasm, sim, ports, scan, modules ('tmclsh SUBCOMMAND --help').")
+    add_connection(p)
+    add_options(p)
+    run = p.add_mutually_exclusive_group()
+    run.add_argument("-c", metavar="LINES", dest="command",
+                     help="run shell lines (separated by ';' or newlines), print results, exit")
+    run.add_argument("-f", metavar="SCRIPT", dest="script", help="replay a script file ('-' = stdin), exit")
+    p.add_argument("--completions", metavar="SHELL", choices=("bash", "zsh", "fish"),
+                   help="print the completion script for bash, zsh or fish")
+    p.add_argument("--man", action="store_true",
+                   help="show this manual (also where 'man tmclsh' cannot find it: an "
+                        "editable install has none)")
+    p.add_argument("--version", action="version", version=f"tmclsh {__version__}")
+    sub = p.add_subparsers(dest="subcommand", metavar="SUBCOMMAND")
+
+    a = sub.add_parser("asm", help="assemble a TMCL program")
+    a.add_argument("file", metavar="FILE")
+    a.add_argument("-m", "--module", metavar="NAME", default="TMCM-1311", help="target module (default TMCM-1311)")
+    a.add_argument("-o", "--output", metavar="OUT",
+                   help="output file (default FILE with .bin, or .hex with --hex; \"-\" = stdout); "
+                        "binary output is the TMCL-IDE image: 8-byte records (command, type, "
+                        "motor, value MSB first, checksum = 8-bit sum of the seven)")
+    a.add_argument("--hex", action="store_true",
+                   help="hex text instead: one instruction per line, its 7 bytes in hex")
+    a.add_argument("--at", type=setting("origin"), metavar="ADDR", default=0,
+                   help=f"start address (default 0; {_range('origin')})")
+
+    d = sub.add_parser("disasm", help="disassemble a TMCL-IDE binary image (.bin) or hex text")
+    d.add_argument("file", metavar="FILE")
+    d.add_argument("-m", "--module", metavar="NAME", default="TMCM-1311", help="module for symbolic names")
+    d.add_argument("--at", type=setting("origin"), metavar="ADDR", default=0,
+                   help=f"address of the first instruction (default 0; {_range('origin')})")
+
+    s = sub.add_parser("sim", help="serve a simulated module on a pty, TCP or CAN")
+    s.add_argument("-m", "--module", metavar="NAME", default="TMCM-1311",
+                   help="module to simulate (default TMCM-1311; 'tmclsh modules' lists them)")
+    s.add_argument("--address", type=_address, default=1, metavar="N", help="module address (default 1)")
+    s.add_argument("--host-address", type=_address, default=2, metavar="N",
+                   help="address its replies are sent to (default 2)")
+    how = s.add_mutually_exclusive_group(required=True)
+    how.add_argument("--pty", action="store_true",
+                     help="serve on a pseudo-terminal (path on the first line; Linux and "
+                          "macOS only: use --tcp on Windows)")
+    how.add_argument("--tcp", metavar="HOST:PORT", help="serve on TCP, for socket:// URLs")
+    how.add_argument("--can", metavar="IFACE:CHANNEL",
+                     help="serve on a python-can bus, IFACE:CHANNEL as the client reads it "
+                          "(socketcan:vcan0 to test on Linux; python-can's virtual interface "
+                          "cannot be reached from another process)")
+    s.add_argument("--bitrate", type=setting("bitrate"), metavar="N",
+                   help=f"CAN bit rate in bit/s ({_range('bitrate')})")
+    s.add_argument("--faults", type=_faults, metavar="KIND=P,...",
+                   help="misbehave at random: for each reply, the probability P (0..1) of each "
+                        "fault: drop (not sent), corrupt (a bit flipped), truncate (half sent), "
+                        "delay (held back 0.2..2 s), garbage (noise before it), dup (sent "
+                        "twice), dup-late (a copy after the next request); e.g. "
+                        "drop=0.1,corrupt=0.05,dup=0.05")
+    s.add_argument("--faults-seed", type=_seed, metavar="N",
+                   help="seed for --faults, so a run misbehaves the same way again")
+
+    po = sub.add_parser("ports", help="list serial ports (Trinamic USB devices marked)")
+    # SUPPRESS: `tmclsh --json ports` and `tmclsh ports --json` both work
+    po.add_argument("--json", action="store_true", default=argparse.SUPPRESS,
+                    help="one JSON object per port")
+
+    mo = sub.add_parser("modules", help="known modules and where each comes from; "
+                                        "'modules check FILE' validates a module file")
+    mo.add_argument("action", nargs="?", choices=("check",), metavar="check",
+                    help="validate FILE: exit 0 if tmclsh can use it, else 1 naming the line")
+    mo.add_argument("file", nargs="?", metavar="FILE", help="the module file to check")
+    mo.add_argument("--json", action="store_true", default=argparse.SUPPRESS,
+                    help="one JSON object per module")
+
+    sc = sub.add_parser("scan", help="find modules on a bus (address, type, firmware)")
+    add_connection(sc, auto_baud=True, nested=True)
+    sc.add_argument("--from", dest="first", type=_address, default=1, metavar="N")
+    sc.add_argument("--to", dest="last", type=_address, default=255, metavar="N")
+    # (SUPPRESS: ``tmclsh --timeout S scan`` keeps the S given before the subcommand)
+    sc.add_argument("--timeout", type=setting("scan_timeout"), metavar="S",
+                    default=argparse.SUPPRESS,
+                    help="per-address timeout (default: from the link, the wire time of a "
+                         f"request and its reply at the baud rate plus a margin; "
+                         f"{_range('scan_timeout')})")
+    sc.add_argument("--json", action="store_true", default=argparse.SUPPRESS)
+    return p
+
+
+def parse_args(parser: argparse.ArgumentParser, argv: Sequence[str]) -> argparse.Namespace:
+    """``parser.parse_args``, except that an option whose value is optional (``--can``,
+    ``--sim``) right before a subcommand's name takes no value: ``tmclsh --can scan`` scans
+    python-can's configured bus (no CAN spec or module is called ``scan``)."""
+    optional = {s: a.const for a in parser._actions if a.nargs == argparse.OPTIONAL
+                for s in a.option_strings if a.const is not None}
+    argv = list(argv)
+    for i, word in enumerate(argv[:-1]):
+        if word == "--":
+            break
+        if word in optional and argv[i + 1] in SUBCOMMANDS:
+            argv[i] = f"{word}={optional[word]}"
+    return parser.parse_args(argv)

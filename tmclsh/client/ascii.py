@@ -1,0 +1,867 @@
+"""The module's ASCII mode: address characters, echo modes (GP 67), the reply parser, and
+``AsciiLink``, which carries a client's requests over the module's ASCII command line.
+
+The wire format (TMCM-1311 manual §4.4, TMCM-351 manual §5.6):
+
+* a command line is ``<address char> [spaces] <command as in the TMCL-IDE> <CR>``, the address
+  character being ``A`` for address 1, ``B`` for 2, and so on (``chr(0x40 + address)``);
+* the reply is ``<host char><module char> <status> <value> <CR>`` (``BA 100 -5000``), the host
+  character coming from GP 76; it carries no opcode, so the parsed ``Reply`` takes the opcode of
+  the request it answers and looks exactly like a binary one to the rest of tmclsh;
+* GP 67 bit 0 makes the module start up in ASCII mode; bits 5/4 choose the echo: ``00`` every
+  character as typed (backspace erases), ``01`` the whole line after the CR, ``10`` none.
+  Whether the CR itself is echoed (and whether an LF follows a CR) is not documented, so
+  nothing here depends on it: the echo of the line just sent is recognised by its text,
+  whether it ends in CR, CRLF, or runs straight into the reply;
+* only ROR ROL MST MVP SAP GAP STAP RSAP SGP GGP STGP RSGP RFS SIO GIO (SAC on the 351) SCO GCO
+  CCO UF0..UF7 are accepted, plus the ASCII-only ``BIN`` (back to binary mode), ``RUN`` and
+  ``STOP`` (start and stop the stored program). ``instructions.toml`` marks the first group.
+
+Mode detection (``probe_mode``) is built so that nothing harmful happens in either mode. A
+binary 136 type 1 (read the version number, harmless) goes first: a binary module answers it;
+in ASCII mode its bytes are an unaddressed line with no CR in it (the don't-care value field
+is chosen so that neither the checksum nor any other byte is CR, LF, BS or DEL), which the
+following lone CR ends, and the line discipline drops. Only then an ASCII ``GGP 67, 0`` line
+asks for the echo mode. Should a binary module have missed the first probe, the ASCII bytes
+reach its binary framer: no nine-byte window of them carries a valid checksum (a unit test
+checks every address), so they are never taken for a command.
+
+``decode_line`` and ``classify_line`` are pure (bytes in, results out, no I/O), in the style
+of ``protocol.decode_reply``; ``AsciiLink`` does the I/O through the client's transport, under
+the client's lock, so nothing else reads the line while it waits.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+import time
+import weakref
+from collections.abc import Callable
+from enum import Enum, IntEnum
+from typing import TYPE_CHECKING
+
+from ..tmcl import instructions as isa
+from ..base.errors import StatusError, TmclTimeoutError, TransportError, ValidationError
+from ..tmcl.frames import (INT32_MIN, SERIAL_FRAME_LEN, UINT32_MAX, Control, Reply, ReplyKind, Request, Status, decode_reply, status_ok, to_signed32)
+from ..link.base import StreamTransport
+
+if TYPE_CHECKING:
+    from .core import Client
+    from ..tmcl.modules import Module
+
+log = logging.getLogger(__name__)
+
+CR = b"\r"
+BS = b"\x08"
+_EOL = b"\r\n"
+# bytes the ASCII line discipline acts on: a binary probe frame must not contain them
+_LINE_BYTES = frozenset(b"\r\n\x08\x7f")
+# A reply that came before the echo of the line just sent is taken only if no echo follows
+# within this time (then the module does not echo, whatever GP 67 said).
+_ECHO_WAIT = 0.05
+
+GP_ASCII_MODE = 67  # bank 0
+GP_HOST_ADDRESS = 76  # bank 0
+GP_BANK = 0
+STARTUP_ASCII_BIT = 0
+ECHO_SHIFT = 4
+ECHO_MASK = 0b11 << ECHO_SHIFT
+_GGP, _SGP = int(isa.Opcode.GGP), int(isa.Opcode.SGP)
+
+MAX_ADDRESS = 0xFF - 0x40  # address characters are the bytes 0x41..0xFF
+_ADDRESS_BASE = 0x40
+
+
+class Echo(IntEnum):
+    """GP 67 bits 5/4: how the module echoes what it is sent."""
+
+    CHAR = 0  # 00: every character as it is typed (backspace erases)
+    LINE = 1  # 01: the whole line after the CR
+    NONE = 2  # 10: no echo, only the reply
+    UNDOCUMENTED = 3  # 11: not in the manuals
+
+    @property
+    def text(self) -> str:
+        return _ECHO_TEXT[self]
+
+
+_ECHO_TEXT = {Echo.CHAR: "echo each character", Echo.LINE: "echo the whole line after CR",
+              Echo.NONE: "no echo, reply only", Echo.UNDOCUMENTED: "echo bits 11 (undocumented)"}
+ECHO_NAMES = {"char": Echo.CHAR, "line": Echo.LINE, "none": Echo.NONE}
+
+
+class Mode(str, Enum):
+    BINARY = "binary"
+    ASCII = "ascii"
+
+
+# -- GP 67 ---------------------------------------------------------------------------------
+
+def echo_mode(gp67: int) -> Echo:
+    return Echo((gp67 & ECHO_MASK) >> ECHO_SHIFT)
+
+
+def starts_in_ascii(gp67: int) -> bool:
+    return bool(gp67 >> STARTUP_ASCII_BIT & 1)
+
+
+def gp67_value(current: int, *, startup: Mode | str | None = None,
+               echo: Echo | str | None = None) -> int:
+    """``current`` with the start-up bit and/or the echo bits replaced, other bits kept."""
+    value = current
+    if startup is not None:
+        startup = Mode(startup)
+        value = (value & ~(1 << STARTUP_ASCII_BIT)) | (
+            (1 << STARTUP_ASCII_BIT) if startup == Mode.ASCII else 0)
+    if echo is not None:
+        if isinstance(echo, str):
+            if echo.lower() not in ECHO_NAMES:
+                raise ValidationError(f"echo must be one of {'|'.join(ECHO_NAMES)}, got {echo!r}")
+            echo = ECHO_NAMES[echo.lower()]
+        if echo == Echo.UNDOCUMENTED:
+            raise ValidationError("echo bits 11 are undocumented; use char, line or none")
+        value = (value & ~ECHO_MASK) | (int(echo) << ECHO_SHIFT)
+    return value
+
+
+def describe_gp67(value: int) -> str:
+    """``start up in ASCII mode, echo each character``."""
+    start = "start up in ASCII mode" if starts_in_ascii(value) else "start up in binary mode"
+    return f"{start}, {echo_mode(value).text}"
+
+
+# -- address characters ----------------------------------------------------------------------
+
+def address_char(address: int) -> str:
+    """``A`` for address 1, ``B`` for 2, ... (host address 0 is ``@``)."""
+    if not isinstance(address, int) or not 0 <= address <= MAX_ADDRESS:
+        raise ValidationError(f"address {address!r} has no ASCII address character "
+                              f"(0..{MAX_ADDRESS}: '@', 'A' = 1, 'B' = 2, ...)")
+    return chr(_ADDRESS_BASE + address)
+
+
+def char_address(ch: str | int) -> int:
+    """The address an address character stands for (``"C"`` -> 3)."""
+    code = ord(ch) if isinstance(ch, str) else ch
+    if not _ADDRESS_BASE <= code <= 0xFF:
+        raise ValidationError(f"{chr(code)!r} is not an address character")
+    return code - _ADDRESS_BASE
+
+
+# -- requests as command lines ---------------------------------------------------------------
+
+FIELDS = ("type", "motor", "value")
+
+
+def ascii_commands(module: Module | None = None) -> list[str]:
+    """The mnemonics the module accepts in ASCII mode, then BIN, RUN and STOP."""
+    names = [s.mnemonic for s in isa.all_instructions()
+             if s.ascii and (module is None or s.on(module.name))]
+    return names + list(isa.ASCII_ONLY_COMMANDS)
+
+
+def _not_in_ascii(req: Request) -> ValidationError:
+    spec = isa.by_opcode(req.opcode)
+    if spec is not None:
+        name = spec.mnemonic
+    else:
+        ctl = isa.control(req.opcode)
+        name = f"command {req.opcode} ({ctl.name.lower().replace('_', ' ')})" if ctl \
+            else f"command {req.opcode}"
+    hint = ""
+    if req.opcode == Control.RUN_APPLICATION:
+        hint = "; RUN starts the stored program in ASCII mode"
+    elif req.opcode == Control.STOP_APPLICATION:
+        hint = "; STOP stops it in ASCII mode"
+    return ValidationError(f"{name} cannot be sent in ASCII mode (the module accepts only "
+                           f"{', '.join(ascii_commands())}){hint}; switch to binary mode with "
+                           ".mode binary to send it")
+
+
+def format_request(req: Request, module: Module | None = None) -> str:
+    """The TMCL-IDE text of a request, for the module's ASCII command line: ``GAP 1, 0``,
+    ``MVP ABS, 0, -5000``. Raises ValidationError for commands ASCII mode does not accept.
+
+    Fields the command does not use are left out (the module ignores them anyway), and numbers
+    are decimal, as the manuals write every ASCII example.
+    """
+    spec = isa.by_opcode(req.opcode)
+    if spec is None or not spec.ascii:
+        raise _not_in_ascii(req)
+    if module is not None and not spec.on(module.name):
+        raise ValidationError(f"{spec.mnemonic} is not available on the {module.name}")
+    dropped = [f for f in FIELDS if f not in spec.fields and getattr(req, f)]
+    if dropped:
+        log.debug("%s: don't-care field(s) %s not sent in ASCII mode", spec.mnemonic, dropped)
+    parts = {"type": str(req.type), "motor": str(req.motor), "value": str(to_signed32(req.value))}
+    if spec.type_kind == "symbolic":
+        parts["type"] = spec.type_name(req.type, module.name if module else None) or parts["type"]
+    ops = ", ".join(parts[f] for f in spec.fields)
+    return f"{spec.mnemonic} {ops}" if ops else spec.mnemonic
+
+
+def command_bytes(address: int, text: str) -> bytes:
+    """``command_bytes(1, "GAP 1, 0") == b"AGAP 1, 0\\r"``."""
+    if any(c in text for c in "\r\n"):
+        raise ValidationError("an ASCII command is one line")
+    return (address_char(address) + text).encode("latin-1") + CR
+
+
+# -- the reply parser (pure) -----------------------------------------------------------------
+
+_REPLY = re.compile(rb"([\x40-\xff])([\x40-\xff]) *([0-9]{1,3})(?: +([-+]?[0-9]{1,10}))? *")
+
+
+def parse_reply(line: bytes, opcode: int = 0) -> Reply | None:
+    """One reply line without its CR (``b"BA 100 -5000"``) as a Reply, else None.
+
+    The reply carries no opcode: ``opcode`` (the request's) is filled in. A value written as
+    an unsigned 32-bit number is folded to the signed form binary replies use.
+    """
+    m = _REPLY.fullmatch(bytes(line))
+    if m is None:
+        return None
+    value = int(m.group(4) or b"0")
+    if not INT32_MIN <= value <= UINT32_MAX:
+        return None
+    return Reply(m.group(1)[0] - _ADDRESS_BASE, m.group(2)[0] - _ADDRESS_BASE,
+                 int(m.group(3)), opcode, to_signed32(value))
+
+
+_REPLY_AT_END = re.compile(rb"[\x40-\xff][\x40-\xff] *[0-9]{1,3}(?: +[-+]?[0-9]{1,10})? *$")
+
+
+def reply_part(line: bytes) -> bytes:
+    """The reply at the end of a line (all of it, or what follows an echo that ran into it)."""
+    m = _REPLY_AT_END.search(bytes(line))
+    return bytes(line)[m.start():] if m is not None else bytes(line)
+
+
+def next_line(buf: bytes | bytearray) -> tuple[int, bytes | None]:
+    """Split the first line off a byte stream: ``(consumed, line)``.
+
+    A line ends at CR or LF (an LF right after a CR belongs to it). ``(0, None)`` means no
+    complete line yet.
+    """
+    for i, b in enumerate(buf):
+        if b in _EOL:
+            end = i + 1
+            if b == 0x0D and end < len(buf) and buf[end] == 0x0A:
+                end += 1
+            return end, bytes(buf[:i])
+    return 0, None
+
+
+def decode_line(buf: bytes | bytearray, opcode: int = 0) -> tuple[int, Reply | None]:
+    """Pure stream decoder for ASCII replies: ``(consumed, reply)``, like ``decode_reply``.
+
+    ``(0, None)``: no complete line yet. ``consumed > 0`` with None: a line that is no reply
+    (an echo, an empty line between CR and LF, noise) was consumed and should be dropped.
+    """
+    used, line = next_line(buf)
+    if line is None:
+        return 0, None
+    return used, parse_reply(line, opcode)
+
+
+def _norm(text: bytes) -> bytes:
+    return bytes(text).replace(b" ", b"").replace(b"\t", b"").upper()
+
+
+class LineKind(str, Enum):
+    ECHO = "echo"  # the echo of the line just sent
+    REPLY = "reply"
+    OTHER = "other"  # anything else: noise, another module's traffic, a stray error
+
+
+def echo_candidates(sent: bytes) -> list[bytes]:
+    """What the echo of ``sent`` may look like: the whole line, or the line without its
+    address character (the manuals do not say whether the address character is echoed)."""
+    line = bytes(sent).rstrip(b"\r\n")
+    out = [line]
+    if len(line) > 1:
+        out.append(line[1:].lstrip(b" "))
+    return [c for c in out if c]
+
+
+def classify_line(line: bytes, sent: bytes | None = None, opcode: int = 0
+                  ) -> tuple[LineKind, Reply | None]:
+    """What one received line (without CR) is, given the command line just ``sent``.
+
+    An echo is recognised by its text (case and spaces ignored), so character echo, line echo
+    and no echo all parse the same way; a character echo whose CR was not echoed runs straight
+    into the reply (``AGAP 1, 0BA 100 -5000``), which is split here as well.
+    """
+    line = bytes(line)
+    reply = parse_reply(line, opcode)
+    if reply is not None:
+        return LineKind.REPLY, reply
+    if sent:
+        norm = _norm(line)
+        for echo in echo_candidates(sent):
+            target = _norm(echo)
+            if norm == target:
+                return LineKind.ECHO, None
+            if norm.startswith(target):
+                # find where the echo ends in the raw line, then parse the rest
+                for cut in range(len(echo), len(line) + 1):
+                    if _norm(line[:cut]) == target:
+                        rest = parse_reply(line[cut:].lstrip(b" "), opcode)
+                        if rest is not None:
+                            return LineKind.REPLY, rest
+    return LineKind.OTHER, None
+
+
+def reply_summary(reply: Reply) -> str:
+    """``ok, value -5000`` / ``error 2: invalid command``."""
+    if status_ok(reply.status):
+        return f"{reply.status_text}, value {reply.value}"
+    return f"error {reply.status}: {reply.status_text}"
+
+
+# -- mode detection --------------------------------------------------------------------------
+
+def probe_frame(address: int) -> bytes:
+    """A binary 136 type 1 request whose bytes the ASCII line discipline ignores."""
+    for value in range(256):
+        raw = Request(address, Control.GET_VERSION, 1, 0, value).to_bytes()
+        if not _LINE_BYTES.intersection(raw[1:]):
+            return raw
+    raise AssertionError("unreachable: some value avoids the four line-discipline bytes")
+
+
+_PROBE_TEXTS = (f"GGP {GP_ASCII_MODE}, {GP_BANK}", f"GGP {GP_ASCII_MODE},{GP_BANK}",
+                f"GGP  {GP_ASCII_MODE}, {GP_BANK}")
+
+
+def ascii_probe_line(address: int) -> bytes:
+    """The ASCII probe's command line, ``AGGP 67, 0`` + CR, spaced so that the CR before it
+    and the line form no binary frame with a valid checksum (for a few addresses the plain
+    spelling would)."""
+    for text in _PROBE_TEXTS:
+        line = command_bytes(address, text)
+        if not has_valid_frame(CR + line):
+            return line
+    raise AssertionError(f"no safe ASCII probe for address {address}")  # pragma: no cover
+
+
+def ascii_probe_bytes(address: int) -> bytes:
+    """Everything the ASCII probe sends: a CR ending whatever line is pending, then the line."""
+    return CR + ascii_probe_line(address)
+
+
+def has_valid_frame(data: bytes) -> bool:
+    """Whether any nine-byte window of ``data`` has a valid TMCL checksum."""
+    return any(decode_reply(data[i:i + SERIAL_FRAME_LEN])[1] is not None
+               for i in range(len(data) - SERIAL_FRAME_LEN + 1))
+
+
+def _transport(client: Client) -> StreamTransport:
+    t = client.transport
+    if not isinstance(t, StreamTransport):
+        raise ValidationError("ASCII mode is a serial-line feature; it is not available over CAN")
+    if not t.is_open:
+        raise TransportError(f"{t.describe()} is not connected")
+    return t
+
+
+def _read_quiet(t: StreamTransport, quiet: float, limit: float,
+                stop: Callable[[bytes], bool] | None = None) -> bytes:
+    """Read until nothing arrived for ``quiet`` seconds, ``limit`` passed, or ``stop(data)``."""
+    data = bytearray(t.read_available())
+    end = time.monotonic() + limit
+    while not (stop is not None and stop(bytes(data))):
+        left = end - time.monotonic()
+        if left <= 0:
+            break
+        chunk = t.read(1, min(quiet, left))
+        if not chunk:
+            break
+        data += chunk + t.read_available()
+    return bytes(data)
+
+
+class Probe:
+    """What ``probe_mode`` found out."""
+
+    def __init__(self, mode: Mode, gp67: int | None = None, host: int | None = None,
+                 binary_garbage: bool = False):
+        self.mode = mode
+        self.gp67 = gp67
+        self.host = host  # the host address the module replied to (ASCII replies carry it)
+        self.binary_garbage = binary_garbage  # a binary module saw the ASCII probe
+
+    def __repr__(self) -> str:
+        return f"Probe({self.mode.value}, gp67={self.gp67}, host={self.host})"
+
+
+def _binary_answer(data: bytes, address: int, opcode: int) -> Reply | None:
+    for i in range(len(data) - SERIAL_FRAME_LEN + 1):
+        _, reply = decode_reply(data[i:i + SERIAL_FRAME_LEN])
+        if reply is not None and reply.module == address and reply.opcode == opcode:
+            return reply
+    return None
+
+
+def probe_mode(client: Client, timeout: float | None = None) -> Probe:
+    """Find out whether the module at ``client.address`` is in binary or ASCII mode.
+
+    See the module docstring for why neither probe can make either mode do anything.
+    Raises TmclTimeoutError when nothing answers either way.
+    """
+    t = _transport(client)
+    timeout = min(client.timeout, 0.5) if timeout is None else timeout
+    addr, host = client.address, client.host_address
+    with client.lock:
+        stale = _read_quiet(t, 0.02, 0.2)
+        if stale:
+            client.trace("drop", stale, "stale input before the mode probe")
+        raw = probe_frame(addr)
+        t.write(raw)
+        client.trace("tx", raw, "mode probe: binary 136 type 1")
+        data = _read_quiet(t, timeout, timeout,
+                           stop=lambda d: _binary_answer(d, addr, Control.GET_VERSION) is not None)
+        reply = _binary_answer(data, addr, Control.GET_VERSION)
+        if reply is not None:
+            client.trace("rx", data, reply)
+            if reply.host != host:
+                raise ValidationError(
+                    f"the module at address {addr} answers host address {reply.host} (GP 76), "
+                    f"not {host}; use --host-address {reply.host}")
+            return Probe(Mode.BINARY, host=reply.host)
+        if data:
+            client.trace("drop", data, "no binary answer to the mode probe")
+        # end the (unaddressed) line the binary bytes started and let any answer to it pass
+        t.write(CR)
+        late = _read_quiet(t, 0.05, timeout)
+        if late:
+            client.trace("drop", late, "after ending the probe line")
+            if _binary_answer(late, addr, Control.GET_VERSION) is not None:
+                client.resync_next()  # a slow binary module: resynchronise before its next use
+                return Probe(Mode.BINARY, host=host)
+        return probe_ascii(client, timeout)
+
+
+def probe_ascii(client: Client, timeout: float | None = None) -> Probe:
+    """Ask ``GGP 67, 0`` on the ASCII command line: an ASCII reply means ASCII mode (and gives
+    the echo mode); binary frames coming back mean a binary module saw it (and refused it: no
+    window of the probe's bytes has a valid checksum)."""
+    t = _transport(client)
+    timeout = min(client.timeout, 0.5) if timeout is None else timeout
+    addr, host = client.address, client.host_address
+    with client.lock:
+        line = ascii_probe_line(addr)
+        t.write(line)
+        client.trace("tx", line, "mode probe: ASCII GGP 67, 0")
+        buf = bytearray()
+        deadline = time.monotonic() + timeout
+        other_host: int | None = None
+        while True:
+            while True:
+                used, text = next_line(buf)
+                if text is None:
+                    break
+                del buf[:used]
+                kind, rep = classify_line(text, line, _GGP)
+                if kind == LineKind.REPLY and rep is not None and rep.module == addr:
+                    client.trace("rx", text + CR, rep)
+                    if rep.host != host:
+                        other_host = rep.host
+                        continue
+                    gp67 = rep.value if rep.status == Status.OK else None
+                    return Probe(Mode.ASCII, gp67, rep.host)
+                if text:
+                    client.trace("rx" if kind == LineKind.ECHO else "drop", text, kind.value)
+            left = deadline - time.monotonic()
+            if left <= 0:
+                break
+            buf += t.read(1, left) + t.read_available()
+        if other_host is not None:
+            raise ValidationError(
+                f"the module at address {addr} answers host address {other_host} (GP 76), "
+                f"not {host}; use --host-address {other_host}")
+        rest = bytes(buf)
+        if has_valid_frame(rest):
+            client.resync_next()
+            return Probe(Mode.BINARY, host=host, binary_garbage=True)
+        raise TmclTimeoutError(f"no module answered at address {addr} "
+                               f"({address_char(addr)}) in binary or ASCII mode "
+                               f"within {timeout:g} s")
+
+
+# -- the link --------------------------------------------------------------------------------
+
+_LINKS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+class AsciiLink:
+    """A client's requests, carried over the module's ASCII command line.
+
+    ``AsciiLink.attach(client)`` finds the mode the module is in, enters ASCII mode if needed
+    (binary 139), reads GP 67 for the echo mode and sets ``client.ascii_link``: from then on
+    ``client.request`` goes through ``transact``. ``detach()`` sends BIN. One link object is
+    kept per client (``for_client``) so that it remembers the mode the module was found in:
+    ``close()`` (called by ``Client.close``) leaves the module in that mode unless ``on_exit``
+    says otherwise.
+    """
+
+    def __init__(self, client: Client, *, found: Mode, echo: Echo = Echo.CHAR,
+                 gp67: int | None = None):
+        self.client = client
+        self.found = found
+        self.on_exit: Mode = found
+        self.echo = echo
+        self.gp67 = gp67
+        self._buf = bytearray()
+        self._dirty = False
+        self._closed = False
+        self.entered = False  # the last attach sent 139 (the module was in binary mode)
+        self.stats = {"sent": 0, "timeouts": 0, "dropped_lines": 0, "echo_lines": 0}
+        # Client.close runs its close hooks while the transport is still open: restore the
+        # mode there even after .mode binary detached the link
+        client.close_hooks.append(self._on_client_close)
+
+    # -- attaching ----------------------------------------------------------------------
+    @classmethod
+    def for_client(cls, client: Client) -> AsciiLink | None:
+        """The link made for ``client`` earlier (attached or not), if any."""
+        return _LINKS.get(client)
+
+    @classmethod
+    def attach(cls, client: Client, *, timeout: float | None = None,
+               found: Probe | None = None) -> AsciiLink:
+        """Drive ``client`` through the module's ASCII mode (entering it with 139 if needed).
+        ``found``: what a ``probe_mode`` just now found (it is not asked again)."""
+        if client.ascii_link is not None:
+            return client.ascii_link
+        _transport(client)
+        if client.module is not None and not client.module.ascii_mode:
+            raise ValidationError(f"the {client.module.name} has no ASCII mode")
+        link = _LINKS.get(client)
+        with client.lock:
+            probe = found or probe_mode(client, timeout)
+            if probe.mode == Mode.ASCII and client.module is None:
+                # 136 does not exist in ASCII mode: step out briefly to identify the module
+                cls._bin(client)
+                client.identify()
+                probe = Probe(Mode.BINARY, host=probe.host)
+                entered_from = Mode.ASCII
+            else:
+                entered_from = probe.mode
+            entered = probe.mode == Mode.BINARY
+            sent_139 = False
+            try:
+                if entered:
+                    if client.module is None:
+                        client.identify()
+                    if not client.module.ascii_mode:  # type: ignore[union-attr]
+                        raise ValidationError(f"the {client.module.name} has no ASCII mode")  # type: ignore[union-attr]
+                    sent_139 = True  # from here the module may be in ASCII mode
+                    cls._enter(client)
+                    probe = None
+                    for _ in range(2):  # a probe or its answer lost on a bad line: ask again
+                        try:
+                            probe = probe_ascii(client, timeout)
+                            break
+                        except TmclTimeoutError:
+                            continue
+                    if probe is None:
+                        # silence proves nothing: the module may be in ASCII mode, and the
+                        # shell goes on in binary frames, so the except below sends BIN
+                        raise TransportError(
+                            f"the module at address {client.address} did not answer in ASCII "
+                            "mode after command 139 (enter ASCII mode); sent BIN so that it "
+                            "stays in binary mode")
+                    if probe.mode != Mode.ASCII:
+                        sent_139 = False  # binary frames came back: it did not take
+                        client.resync_next()
+                        raise TransportError(f"the module at address {client.address} did not "
+                                             "enter ASCII mode after command 139")
+                echo = echo_mode(probe.gp67) if probe.gp67 is not None else Echo.CHAR
+                if link is None:
+                    link = cls(client, found=entered_from, echo=echo, gp67=probe.gp67)
+                    _LINKS[client] = link
+                else:
+                    link.echo, link.gp67, link._closed = echo, probe.gp67, False
+                link.entered = entered
+                link._buf.clear()
+                link._dirty = False
+                client.clear_input()
+                client.ascii_link = link
+            except BaseException:
+                # interrupted (Ctrl-C, SIGTERM) between 139 and the link taking over: leave
+                # the module in binary mode, as it was found
+                if sent_139 and client.ascii_link is None:
+                    try:
+                        cls._bin(client)
+                    except Exception:
+                        pass
+                    client.resync_next()
+                raise
+        log.info("ASCII mode on address %d (%s; found in %s mode)", client.address,
+                 link.echo.text, link.found.value)
+        return link
+
+    @staticmethod
+    def _enter(client: Client) -> None:
+        """Binary 139; its reply (if the firmware sends one) is read and dropped."""
+        t = _transport(client)
+        raw = Request(client.address, Control.ENTER_ASCII, 0, 0, 0).to_bytes()
+        if t.pending():
+            client.absorb()  # stale replies dropped, events kept
+        t.write(raw)
+        client.stats["sent"] += 1
+        client.trace("tx", raw, "enter ASCII mode (139)")
+        got = _read_quiet(t, 0.05, min(client.timeout, 0.3),
+                          stop=lambda d: len(d) >= SERIAL_FRAME_LEN)
+        if got:
+            client.trace("rx", got, "answer to 139")
+        answer = _binary_answer(got, client.address, Control.ENTER_ASCII)
+        if answer is not None and not status_ok(answer.status):
+            raise StatusError(answer.status, answer,
+                              f"the module refused to enter ASCII mode (139): status "
+                              f"{answer.status}, {answer.status_text}")
+
+    @staticmethod
+    def _bin(client: Client, timeout: float | None = None) -> None:
+        """ASCII ``BIN``; what follows it (echo, a reply if any) is read and dropped, and the
+        client resynchronises its binary framing before its next request."""
+        t = _transport(client)
+        line = command_bytes(client.address, "BIN")
+        t.write(line)
+        client.trace("tx", line, "BIN")
+        timeout = min(client.timeout, 0.3) if timeout is None else timeout
+        got = _read_quiet(t, 0.05, timeout)
+        if got:
+            client.trace("rx", got, "after BIN")
+        client.resync_next()
+
+    # -- leaving ------------------------------------------------------------------------
+    @property
+    def active(self) -> bool:
+        return self.client.ascii_link is self
+
+    def detach(self, *, send_bin: bool = True, verify: bool = True) -> None:
+        """Stop using ASCII mode: send BIN (back to binary mode) and give the client back its
+        binary path. ``send_bin=False`` only forgets the link (the module stays in ASCII mode
+        and binary requests would go unanswered)."""
+        client = self.client
+        with client.lock:
+            if send_bin:
+                self._bin(client)
+            client.ascii_link = None
+            self._buf.clear()
+        if send_bin and verify:
+            try:
+                client.request(Request(client.address, Control.GET_VERSION, 1, 0, 0))
+            except TmclTimeoutError:
+                raise TransportError(f"the module at address {client.address} did not return "
+                                     "to binary mode after BIN") from None
+
+    def close(self) -> None:
+        """Leave the module in the mode it was found in (or ``on_exit``). Called by
+        ``Client.close`` (and when ``.connect`` leaves the link); safe to call more than
+        once. The client is done with this module: a later ``attach`` makes a new link."""
+        if self._closed:
+            return
+        self._closed = True
+        client = self.client
+        if _LINKS.get(client) is self:
+            del _LINKS[client]
+        if not client.transport.is_open:
+            return
+        try:
+            if self.active and self.on_exit == Mode.BINARY:
+                self.detach(send_bin=True, verify=False)
+            elif not self.active and self.on_exit == Mode.ASCII:
+                with client.lock:
+                    self._enter(client)
+        except TransportError:
+            log.warning("could not restore %s mode on exit", self.on_exit.value)
+
+    def _on_client_close(self) -> None:
+        self.close()
+
+    # -- the request path ---------------------------------------------------------------
+    def transact(self, req: Request, timeout: float | None = None) -> Reply:
+        """Send ``req`` as an ASCII command line and return the module's reply, parsed into
+        the same Reply a binary frame gives (opcode taken from the request)."""
+        from .core import idempotent
+
+        text = format_request(req, self.client.module)
+        if req.reply_kind != ReplyKind.NORMAL:  # pragma: no cover - 134/136/137 not ASCII
+            raise _not_in_ascii(req)
+        tries = 1 + (self.client.retries if idempotent(req) else 0)
+        last: TmclTimeoutError | None = None
+        for attempt in range(tries):
+            try:
+                return self.command(text, timeout, opcode=req.opcode, address=req.address,
+                                    request=req)
+            except TmclTimeoutError as exc:
+                last = exc
+                if attempt + 1 < tries:
+                    self.client.trace("note", b"", f"retry {attempt + 1} of {tries - 1}")
+        assert last is not None
+        if tries > 1:
+            raise TmclTimeoutError(f"{last} (after {tries} attempts)")
+        raise last
+
+    def command(self, text: str, timeout: float | None = None, *, opcode: int = 0,
+                address: int | None = None, request: Request | None = None) -> Reply:
+        """Send one command line (``"GAP 1, 0"``, ``"RUN"``; the address character is added)
+        and return the reply; echo is skipped, other modules' and stale lines dropped.
+        ``request``: the binary request the line stands for (told to sent-only tracers)."""
+        client = self.client
+        timeout = client.timeout if timeout is None else timeout
+        address = client.address if address is None else address
+        line = command_bytes(address, text)
+        with client.lock:
+            t = _transport(client)
+            self._clean(t)
+            t.write(line)
+            self.stats["sent"] += 1
+            client.stats["sent"] += 1
+            if client.tracing:
+                client.trace("tx", line, line.decode("latin-1").rstrip(), request=request)
+            try:
+                return self._await(t, line, opcode, address, timeout)
+            except BaseException:
+                self._dirty = True
+                raise
+
+    def _clean(self, t: StreamTransport) -> None:
+        """Before a command: whatever is waiting is stale (after a timeout, wait for quiet)."""
+        if self._dirty:
+            data = _read_quiet(t, 0.03, max(0.2, self.client.timeout))
+            self._dirty = False
+        else:
+            data = t.read_available()
+        data = bytes(self._buf) + data
+        self._buf.clear()
+        if data:
+            self.client.stats["discarded"] += len(data)
+            self.client.trace("drop", data, "stale input")
+
+    def _await(self, t: StreamTransport, sent: bytes, opcode: int, address: int,
+               timeout: float) -> Reply:
+        """The reply to the line just ``sent``. An ASCII reply names no command, so a late
+        reply to an earlier line looks like this one's; but a module that echoes sends the
+        echo of this line after every earlier reply. So while an echo is expected, a reply
+        that comes before it is held: if the echo follows, the reply was stale and is
+        dropped; if the line stays quiet (the module does not echo after all), it is taken."""
+        client, buf = self.client, self._buf
+        deadline = time.monotonic() + timeout
+        echoed = self.echo not in (Echo.CHAR, Echo.LINE)
+        held: tuple[bytes, Reply] | None = None  # a reply that came before the echo
+        held_until = 0.0
+        while True:
+            while True:
+                used, text = next_line(buf)
+                if text is None:
+                    break
+                raw = bytes(buf[:used])
+                del buf[:used]
+                if not text:
+                    continue  # the LF of a CRLF, or an empty line
+                kind, reply = classify_line(text, sent, opcode)
+                if kind == LineKind.ECHO:
+                    self.stats["echo_lines"] += 1
+                    if client.tracing:
+                        client.trace("rx", raw, "echo")
+                    echoed = True
+                    if held is not None:
+                        self._drop(held[0], "late reply to an earlier command (it came "
+                                            "before the echo)")
+                        held = None
+                    continue
+                if kind == LineKind.REPLY and reply is not None:
+                    if reply.host != client.host_address:
+                        self._drop(raw, f"reply for host {reply.host} "
+                                        f"({address_char(reply.host)})")
+                        continue
+                    if reply.module != address:
+                        self._drop(raw, f"reply from address {reply.module}")
+                        continue
+                    if not echoed and parse_reply(text, opcode) is not None:
+                        # (a reply the echo ran into is no candidate: it came after the echo)
+                        if held is not None:
+                            self._drop(held[0], "late reply to an earlier command")
+                        held, held_until = (raw, reply), time.monotonic() + _ECHO_WAIT
+                        continue
+                    if client.tracing:
+                        client.trace("rx", raw, reply)
+                    return reply
+                self._drop(raw, "not a reply")
+            now = time.monotonic()
+            if held is not None and (now >= held_until or now >= deadline):
+                if client.tracing:
+                    client.trace("rx", held[0], held[1])
+                return held[1]  # no echo followed: this module does not echo
+            end = deadline if held is None else min(deadline, held_until)
+            left = end - now
+            if left <= 0:
+                break
+            buf += t.read(1, left)
+            buf += t.read_available()
+        self.stats["timeouts"] += 1
+        client.stats["timeouts"] += 1
+        raise TmclTimeoutError(f"no ASCII reply to {sent.decode('latin-1').rstrip()!r} from "
+                               f"address {address} within {timeout:g} s")
+
+    def _drop(self, raw: bytes, why: str) -> None:
+        self.stats["dropped_lines"] += 1
+        self.client.stats["discarded"] += len(raw)
+        if self.client.tracing:
+            self.client.trace("drop", raw, why)
+
+    # -- ASCII-only commands ------------------------------------------------------------
+    def run(self, timeout: float | None = None) -> Reply:
+        """``RUN``: start the TMCL program stored in the module."""
+        return self._special("RUN", Control.RUN_APPLICATION, timeout)
+
+    def stop_program(self, timeout: float | None = None) -> Reply:
+        """``STOP``: stop the running TMCL program."""
+        return self._special("STOP", Control.STOP_APPLICATION, timeout)
+
+    def _special(self, word: str, opcode: int, timeout: float | None) -> Reply:
+        reply = self.command(word, timeout, opcode=opcode,
+                             request=Request(self.client.address, opcode, 0, 0, 0))
+        if not status_ok(reply.status):
+            raise StatusError(reply.status, reply, f"{word}: module answered status "
+                                                   f"{reply.status}: {reply.status_text}")
+        return reply
+
+    def refresh_echo(self) -> Echo:
+        """Read GP 67 again (after it was changed) and adopt its echo mode."""
+        reply = self.command(f"GGP {GP_ASCII_MODE}, {GP_BANK}", opcode=_GGP)
+        if reply.status == Status.OK:
+            self.gp67, self.echo = reply.value, echo_mode(reply.value)
+        return self.echo
+
+    # -- raw access, for the terminal ---------------------------------------------------
+    def write_raw(self, data: bytes) -> None:
+        with self.client.lock:
+            _transport(self.client).write(bytes(data))
+            if self.client.tracing:
+                self.client.trace("tx", bytes(data), "terminal")
+
+    def read_raw(self, timeout: float) -> bytes:
+        """Whatever the module sent within ``timeout`` (holding the client's lock while
+        waiting, so keep ``timeout`` short when other threads transact)."""
+        with self.client.lock:
+            t = _transport(self.client)
+            data = bytes(self._buf)
+            self._buf.clear()
+            if not data:
+                data = t.read(1, timeout)
+            data += t.read_available()
+        if data and self.client.tracing:
+            self.client.trace("rx", data, "terminal")
+        return data
+
+    def describe(self) -> str:
+        found = f"found in {self.found.value} mode"
+        leave = "BIN at exit" if self.active and self.on_exit == Mode.BINARY else \
+            f"left in {self.on_exit.value} mode at exit"
+        return f"ASCII mode, {self.echo.text} ({found}; {leave})"

@@ -1,0 +1,237 @@
+"""pyserial as a transport: device paths and every pyserial URL (socket://, rfc2217://,
+loop://, spy://, hwgrep://).
+
+pyserial opens and configures every port. For a plain POSIX device (a tty or pty, the common
+case and the hot path of every round trip) reads and writes then go straight to its file
+descriptor with ``os.read``/``os.write`` and ``select``, which is what pyserial's own
+``read``/``write`` do underneath, minus about 8 us of per-call bookkeeping. Everything else
+(URL handlers, Windows) goes through pyserial's ``read``/``write``.
+
+pyserial re-applies the termios settings (and the exclusive lock) whenever ``timeout``
+changes, which would cost more than a whole round trip; so on that path the read timeout is
+only set when it differs from the last one, and the client asks with the same timeout for the
+first read of every transaction.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import sys
+import time
+
+import serial as pyserial
+
+from ..base.errors import TransportError
+from .base import StreamTransport
+
+try:  # bytes waiting on a POSIX descriptor (what pyserial's in_waiting asks, minus its layers)
+    import fcntl
+    import termios
+
+    _FIONREAD: int | None = termios.FIONREAD
+except ImportError:  # pragma: no cover - Windows: pyserial's in_waiting
+    _FIONREAD = None
+_FOUR_ZEROS = bytes(4)
+
+WRITE_TIMEOUT = 2.0  # a write that cannot finish in this time means the port is stuck
+
+
+def is_url(port: str) -> bool:
+    return "://" in port
+
+
+class SerialTransport(StreamTransport):
+    def __init__(self, port: str, baudrate: int = 9600):
+        super().__init__(port)
+        if not isinstance(baudrate, int) or baudrate <= 0:
+            raise ValueError(f"baud rate must be a positive number, got {baudrate!r}")
+        self.baudrate = baudrate
+        self._ser: pyserial.SerialBase | None = None
+        self._fd: int | None = None  # set when reads and writes may use the descriptor
+        self._timeout: float | None = 0.0
+
+    def open(self) -> None:
+        if self._ser is not None:
+            return
+        kw: dict = {"baudrate": self.baudrate, "timeout": 0, "write_timeout": WRITE_TIMEOUT}
+        if not is_url(self.url):
+            # two programs on one port steal each other's replies: refuse the second
+            kw["exclusive"] = True
+        try:
+            try:
+                self._ser = ser = pyserial.serial_for_url(self.url, **kw)
+            except NotImplementedError:
+                # rfc2217:// has no write timeout; its writes are bounded by the TCP socket
+                del kw["write_timeout"]
+                self._ser = ser = pyserial.serial_for_url(self.url, **kw)
+        except (pyserial.SerialException, OSError, ValueError) as exc:
+            raise TransportError(_friendly(self.url, exc)) from exc
+        self._timeout = 0
+        # pyserial's POSIX port opens the descriptor non-blocking and reads it with select
+        fd = getattr(ser, "fd", None)
+        self._fd = fd if os.name == "posix" and type(ser) is pyserial.Serial \
+            and isinstance(fd, int) else None
+
+    def close(self) -> None:
+        ser, self._ser = self._ser, None
+        self._fd = None
+        if ser is not None:
+            try:
+                ser.close()
+            except Exception:  # closing a vanished port must not mask the real error
+                pass
+
+    @property
+    def is_open(self) -> bool:
+        # (a descriptor is kept only while the port is open: close() drops it; asked twice
+        # per script line, so pyserial's own property is left for the other ports)
+        return self._fd is not None or (self._ser is not None and self._ser.is_open)
+
+    def _port(self) -> pyserial.SerialBase:
+        if self._ser is None:
+            raise TransportError(f"{self.url} is not open")
+        return self._ser
+
+    def _lost(self, what: str, exc: Exception) -> TransportError:
+        self.close()
+        reason = str(exc)
+        if not reason.lower().startswith(what):  # pyserial often says "read failed: ..." itself
+            reason = f"{what} failed: {reason}"
+        return TransportError(
+            f"lost {self.url} ({reason}); the port is gone (module unplugged "
+            "or powered off?). Reconnect once it is back.")
+
+    def write(self, data: bytes) -> None:
+        fd = self._fd
+        if fd is not None:
+            try:
+                n = os.write(fd, data)
+            except BlockingIOError:
+                n = 0  # output buffer full: pyserial waits for room (up to WRITE_TIMEOUT)
+            except OSError as exc:
+                raise self._lost("write", exc) from exc
+            if n == len(data):
+                return
+            data = data[n:]
+        try:
+            self._port().write(data)
+        except pyserial.SerialTimeoutException as exc:
+            raise TransportError(f"{self.url}: write timed out after {WRITE_TIMEOUT:g} s "
+                                 "(flow control stuck?)") from exc
+        except (pyserial.SerialException, OSError) as exc:
+            raise self._lost("write", exc) from exc
+
+    def read(self, size: int, timeout: float | None) -> bytes:
+        fd = self._fd
+        if fd is not None:
+            return self._read_fd(fd, size, timeout)
+        ser = self._port()
+        try:
+            if timeout != self._timeout:
+                ser.timeout = timeout
+                self._timeout = timeout
+            return ser.read(size)
+        except (pyserial.SerialException, OSError) as exc:
+            raise self._lost("read", exc) from exc
+
+    def transact(self, data: bytes, size: int, timeout: float | None) -> bytes:
+        fd = self._fd
+        if fd is None:
+            return super().transact(data, size, timeout)
+        self.write(data)
+        # the reply mostly comes whole: one wait, one read; anything else as read() does it
+        start = time.monotonic()
+        try:
+            ready = select.select((fd,), (), (), timeout)[0]
+        except (OSError, ValueError) as exc:
+            raise self._lost("read", exc) from exc
+        if not ready:
+            return b""  # timed out
+        try:
+            got = os.read(fd, size)
+        except BlockingIOError:
+            got = bytes()  # (select saw it readable and something else took it: wait on)
+        except OSError as exc:
+            raise self._lost("read", exc) from exc
+        else:
+            if not got:
+                raise self._lost("read", OSError("device reports readiness to read but "
+                                                 "returned no data"))
+        if len(got) >= size:
+            return got
+        left = None if timeout is None else max(0.0, timeout - (time.monotonic() - start))
+        return got + self._read_fd(fd, size - len(got), left)
+
+    def _read_fd(self, fd: int, size: int, timeout: float | None) -> bytes:
+        """pyserial's POSIX ``read`` with the same meaning of ``timeout``."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        wait = timeout
+        data = b""
+        while True:
+            chunk = None
+            try:
+                ready = select.select((fd,), (), (), wait)[0]
+            except (OSError, ValueError) as exc:
+                raise self._lost("read", exc) from exc
+            if ready:
+                try:
+                    chunk = os.read(fd, size - len(data))
+                except BlockingIOError:
+                    pass
+                except OSError as exc:
+                    raise self._lost("read", exc) from exc
+                if chunk == b"":
+                    # a vanished USB device stays readable and reads nothing (as pyserial says)
+                    raise self._lost("read", OSError("device reports readiness to read but "
+                                                     "returned no data"))
+                if chunk:
+                    data += chunk
+                    if len(data) >= size:
+                        return data
+            if deadline is not None:
+                wait = deadline - time.monotonic()
+                if wait <= 0:
+                    if not chunk:
+                        return data  # timed out
+                    wait = 0  # one more look at what is there already
+
+    def pending(self) -> int:
+        fd = self._fd
+        if fd is not None and _FIONREAD is not None:
+            # the client asks before every request: one ioctl, without pyserial's layers
+            try:
+                return int.from_bytes(fcntl.ioctl(fd, _FIONREAD, _FOUR_ZEROS), sys.byteorder)
+            except OSError as exc:
+                raise self._lost("status query", exc) from exc
+        try:
+            return self._port().in_waiting
+        except (pyserial.SerialException, OSError) as exc:
+            raise self._lost("status query", exc) from exc
+
+    def set_baudrate(self, baud: int) -> None:
+        self.baudrate = baud
+        if self._ser is not None:
+            try:
+                self._ser.baudrate = baud
+            except (pyserial.SerialException, OSError, ValueError) as exc:
+                raise TransportError(f"{self.url}: cannot set {baud} baud: {exc}") from exc
+
+    def describe(self) -> str:
+        if is_url(self.url) and not self.url.startswith(("rfc2217://", "spy://", "hwgrep://")):
+            return self.url  # socket://, loop://: a baud rate means nothing there
+        return f"{self.url} @ {self.baudrate}"
+
+
+def _friendly(url: str, exc: Exception) -> str:
+    text = str(exc)
+    if "Permission denied" in text:
+        return (f"cannot open {url}: permission denied; add yourself to the 'dialout' group "
+                "(sudo usermod -aG dialout $USER, then log in again)")
+    if "Could not exclusively lock" in text or "Resource temporarily unavailable" in text:
+        return f"cannot open {url}: the port is in use by another program"
+    if "No such file" in text:
+        return f"cannot open {url}: no such port (see 'tmclsh ports')"
+    if "Connection refused" in text:
+        return f"cannot open {url}: connection refused (is the server running?)"
+    return f"cannot open {url}: {text}"

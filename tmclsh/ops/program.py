@@ -1,0 +1,911 @@
+"""The program stored on a module: upload, verify, read back, run, stop, step, status.
+
+Operations on a :class:`~tmclsh.client.core.Client`, usable from Python and from the shell alike
+(the shell's debugger is a thin layer over this module). Nothing here prints: progress goes to
+a callback, problems are raised as :class:`~tmclsh.base.errors.TmclError` subclasses.
+
+The control commands (TMCM-351 manual, "TMCL control commands"; used by the TMCL-IDE on all
+three modules):
+
+* 128 stop, 129 run (type 0 from the current address, type 1 from the value's address),
+  130 step one instruction, 131 reset (program counter to 0, application stopped);
+* 132 start download at the value's address: every following frame is stored (and answered
+  with status 101) until 133 quits download mode;
+* 134 reads one instruction back (reply in the legacy layout, ``Reply.stored``);
+* 135 the application status (0 stop, 1 run, 2 step, 3 reset); GP 130 is the program counter,
+  GP 129 the download-mode flag, GP 128 the application status as a parameter.
+
+These firmwares have no breakpoint command: :func:`continue_to` runs to a breakpoint by
+stepping the module and reading the program counter after every step.
+
+In ASCII mode the module knows only ``RUN`` and ``STOP`` for its program (TMCM-1311 manual
+§4.4.3); :func:`run` and :func:`stop` use the ASCII link's ``run()``/``stop_program()`` then,
+:func:`status` reads GP 128/130 (GGP works in ASCII mode), and everything else raises a
+:class:`~tmclsh.base.errors.ValidationError` saying binary mode is needed.
+
+Example::
+
+    from tmclsh import asm, program
+    from tmclsh.client.connect import connect
+
+    with connect(sim="TMCM-1311") as c:
+        prog = asm.assemble_file("demo.tmc", c.require_module())
+        result = program.upload(c, prog)          # 132, frames, 133, then 134 verify
+        assert result.verified
+        program.run(c)                            # 129 type 0
+        print(program.status(c))                  # AppStatus(state='run', pc=...)
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from enum import IntEnum
+
+from ..tmcl import instructions as isa
+from ..tmcl.asm import Program
+from ..base.errors import StatusError, TmclError, TmclTimeoutError, TransportError, ValidationError
+from ..tmcl.frames import Control, Instruction, Request, Status
+
+log = logging.getLogger(__name__)
+
+# GGP <type>, 0: the program's global parameters (bank 0)
+GGP = 10
+GP_APPLICATION_STATUS = 128
+GP_DOWNLOAD_MODE = 129
+GP_PROGRAM_COUNTER = 130
+USER_VARIABLE_BANK = 2
+_WAIT = isa.by_mnemonic("WAIT").opcode  # type: ignore[union-attr]
+
+#: ``progress(phase, done, total)``; phase is "upload", "verify" or "read"
+Progress = Callable[[str, int, int], None]
+
+
+class AppState(IntEnum):
+    """Values of 135 (and GP 128)."""
+
+    STOP = 0
+    RUN = 1
+    STEP = 2
+    RESET = 3
+
+
+def state_name(code: int) -> str:
+    try:
+        return AppState(code).name.lower()
+    except ValueError:
+        return f"unknown({code})"
+
+
+@dataclass(frozen=True)
+class AppStatus:
+    """The stored application's state and program counter."""
+
+    state: str  # stop | run | step | reset
+    pc: int
+    code: int
+
+    def to_json(self) -> dict[str, object]:
+        return {"state": self.state, "pc": self.pc}
+
+    def __str__(self) -> str:
+        return f"{self.state} at {self.pc}"
+
+
+@dataclass(frozen=True)
+class Mismatch:
+    """The first address whose stored instruction differs from the one uploaded."""
+
+    address: int
+    expected: Instruction
+    actual: Instruction
+    # the read-back stayed in doubt (answers that may have been another request's, three
+    # rounds running): not shown to differ, not shown to be the same either
+    doubtful: bool = False
+
+
+@dataclass
+class UploadResult:
+    start: int
+    count: int
+    verified: bool | None  # None: not verified
+    mismatch: Mismatch | None = None
+    upload_seconds: float = 0.0
+    verify_seconds: float = 0.0
+
+    def to_json(self) -> dict[str, object]:
+        obj: dict[str, object] = {"uploaded": self.count, "verified": bool(self.verified)}
+        if self.mismatch is not None:
+            obj["mismatch"] = self.mismatch.address
+        return obj
+
+
+class UploadError(TmclError):
+    """An upload that did not complete, with what the program memory holds now.
+
+    ``written``: addresses confirmed stored (status 101); ``unknown``: the address whose frame
+    was sent but not confirmed (it may or may not be stored); ``unchanged``: addresses after
+    it, which still hold what was there before. ``download_ended`` says whether 133 was
+    answered; ``interrupted`` is True for Ctrl-C.
+    """
+
+    def __init__(self, reason: str, *, start: int, total: int, acked: int, sent: int,
+                 download_ended: bool, end_error: str | None = None,
+                 interrupted: bool = False):
+        self.reason = reason
+        self.start = start
+        self.total = total
+        self.acked = acked
+        self.sent = sent
+        self.download_ended = download_ended
+        self.end_error = end_error
+        self.interrupted = interrupted
+        super().__init__(self.describe())
+
+    @property
+    def written(self) -> range:
+        return range(self.start, self.start + self.acked)
+
+    @property
+    def unknown(self) -> range:
+        return range(self.start + self.acked, self.start + self.sent)
+
+    @property
+    def unchanged(self) -> range:
+        return range(self.start + self.sent, self.start + self.total)
+
+    def memory_text(self) -> str:
+        parts = []
+        if self.written:
+            parts.append(f"instructions {_span(self.written)} written")
+        if self.unknown:
+            parts.append(f"{_span(self.unknown)} unknown (sent, not confirmed)")
+        if self.unchanged:
+            parts.append(f"{_span(self.unchanged)} unchanged (old contents)")
+        if not self.written and not self.unknown:
+            return "nothing was written; the program memory is unchanged"
+        return ", ".join(parts)
+
+    def describe(self) -> str:
+        if self.download_ended:
+            ended = "download mode ended"
+        else:
+            ended = (f"could not end download mode ({self.end_error}): the module may still "
+                     "store every command it receives; the next command asks and ends it "
+                     "first (else power-cycle the module)")
+        return (f"upload failed: {self.reason}; {self.memory_text()}; {ended}. "
+                "Upload again to store the whole program")
+
+
+def _span(r: range) -> str:
+    return str(r.start) if len(r) == 1 else f"{r.start}..{r.stop - 1}"
+
+
+# -- checks ------------------------------------------------------------------------------
+
+def require_binary(client, what: str) -> None:
+    """Refuse control commands other than RUN/STOP while the link is in ASCII mode."""
+    if client.mode == "ascii":
+        raise ValidationError(f"{what} needs binary mode; in ASCII mode the module only knows "
+                              "RUN and STOP for its program (switch with .mode binary)")
+
+
+def check_fits(module, start: int, count: int) -> None:
+    """Refuse a program that does not fit the module's memory, before anything is sent."""
+    size = module.program_memory
+    if not 0 <= start < size:
+        raise ValidationError(f"start address {start} is outside program memory 0..{size - 1}")
+    if start + count > size:
+        raise ValidationError(
+            f"the program has {count} instructions; from address {start} only "
+            f"{size - start} fit in the {module.name}'s memory ({size} instructions); "
+            "nothing was sent")
+
+
+def _image(program: Program | Sequence[Instruction], origin: int | None
+           ) -> tuple[list[Instruction], int]:
+    if isinstance(program, Program):
+        if origin is not None and origin != program.origin and any(
+                (spec := isa.by_opcode(i.opcode)) is not None and spec.jumps
+                for i in program.instructions):
+            raise ValidationError(f"the program was assembled for address {program.origin}; "
+                                  f"its jumps would be wrong at {origin} (assemble it there)")
+        return list(program.instructions), program.origin if origin is None else origin
+    return list(program), 0 if origin is None else origin
+
+
+def _ok(reply, what: str, expect: Iterable[int] = (Status.OK,)):
+    if reply is None:
+        raise TmclError(f"no reply to {what}")
+    if reply.status not in tuple(expect):
+        raise StatusError(reply.status, reply,
+                          f"{what}: module answered status {reply.status} ({reply.status_text})")
+    return reply
+
+
+# a plain int: Request.make takes its fast path only for plain ints (Control is an IntEnum),
+# and a verify sends this once per instruction
+_READ_MEMORY = int(Control.READ_MEMORY)
+
+
+def _send(client, opcode: int, type_: int = 0, motor: int = 0, value: int = 0, *,
+          timeout: float | None = None, retries: int | None = None):
+    # an upload is thousands of these: Request.make checks plain in-range numbers without
+    # the constructor's per-field calls (anything else still goes through the constructor);
+    # the value is taken as 32 bits either way, signed as Request holds it
+    value = ((value & 0xFFFFFFFF) ^ 0x80000000) - 0x80000000
+    return client.request(Request.make(client.address, opcode, type_, motor, value),
+                          timeout=timeout, retries=retries)
+
+
+# -- upload and read-back ----------------------------------------------------------------
+
+def upload(client, program: Program | Sequence[Instruction], origin: int | None = None, *,
+           verify: bool = True, progress: Progress | None = None,
+           timeout: float | None = None) -> UploadResult:
+    """Store ``program`` on the module from ``origin`` (default: the program's origin).
+
+    132 (start download), one frame per instruction (each answered with status 101), 133;
+    then, with ``verify``, every instruction is read back with 134 and compared. Download mode
+    is always ended (133 in a ``finally``, best effort, also after Ctrl-C); an upload that did
+    not complete raises :class:`UploadError` saying what the memory holds now.
+    """
+    instructions, start = _image(program, origin)
+    module = client.require_module()
+    require_binary(client, "uploading a program (132/133)")
+    if not instructions:
+        raise ValidationError("the program has no instructions; nothing to upload")
+    check_fits(module, start, len(instructions))
+    total = len(instructions)
+    acked = sent = 0
+    failure: BaseException | None = None
+    began = time.monotonic()
+    client.downloading = True  # no retries: a repeated frame would be stored twice
+    try:
+        _ok(_send(client, Control.START_DOWNLOAD, 0, 0, start, timeout=timeout),
+            f"start download (132) at address {start}")
+        for ins in instructions:
+            sent += 1
+            reply = _send(client, ins.opcode, ins.type, ins.motor, ins.value, timeout=timeout)
+            _ok(reply, f"instruction at address {start + acked}", (Status.LOADED,))
+            acked += 1
+            if progress is not None:
+                progress("upload", acked, total)
+    except (TmclError, KeyboardInterrupt) as exc:
+        failure = exc
+    finally:
+        ended, end_error = _quit_download(client, timeout)
+        client.downloading = False
+        if not ended:
+            client.check_download_next()  # the next command ends it first, not stored
+    upload_seconds = time.monotonic() - began
+    if failure is not None:
+        interrupted = isinstance(failure, KeyboardInterrupt)
+        reason = "interrupted (Ctrl-C)" if interrupted else _reason(failure)
+        if isinstance(failure, StatusError) and acked < sent:
+            sent = acked  # the module refused that frame: nothing was stored there
+        raise UploadError(reason, start=start, total=total, acked=acked, sent=sent,
+                          download_ended=ended, end_error=end_error,
+                          interrupted=interrupted) from failure
+    if not ended:
+        raise UploadError("quit download (133) failed", start=start, total=total,
+                          acked=acked, sent=sent, download_ended=False, end_error=end_error)
+    result = UploadResult(start, total, None, upload_seconds=upload_seconds)
+    if verify:
+        began = time.monotonic()
+        result.mismatch = verify_image(client, instructions, start, progress=progress,
+                                       timeout=timeout)
+        result.verified = result.mismatch is None
+        result.verify_seconds = time.monotonic() - began
+    return result
+
+
+def _reason(exc: BaseException) -> str:
+    if isinstance(exc, TmclTimeoutError):
+        return f"link lost ({exc})"
+    if isinstance(exc, TransportError):
+        return f"link lost ({exc})"
+    return str(exc)
+
+
+def _quit_download(client, timeout: float | None) -> tuple[bool, str | None]:
+    """133, best effort: sent again while it gets no reply (a repeated 133 is harmless), as
+    often as the client retries a request, and at least twice."""
+    error = None
+    for _ in range(max(2, 1 + client.retries)):
+        try:
+            reply = _send(client, Control.QUIT_DOWNLOAD, timeout=timeout)
+            if reply is not None and reply.ok:
+                return True, None
+            error = f"status {reply.status}" if reply is not None else "no reply"
+        except KeyboardInterrupt:
+            return False, "interrupted"
+        except TmclError as exc:
+            error = str(exc)
+            if isinstance(exc, TransportError) and not client.connected:
+                break
+        log.warning("quit download (133) failed: %s", error)
+    return False, error
+
+
+def end_download(client, *, timeout: float | None = None) -> None:
+    """133 on its own: end a download mode left behind (e.g. by a link lost mid-upload)."""
+    require_binary(client, "quit download (133)")
+    client.downloading = True  # until it is answered, the module may store what it gets
+    ended = False
+    try:
+        _ok(_send(client, Control.QUIT_DOWNLOAD, timeout=timeout), "quit download (133)")
+        ended = True
+    finally:
+        client.downloading = False
+        if not ended:
+            client.check_download_next()
+
+
+def read_instruction(client, address: int, *, timeout: float | None = None) -> Instruction:
+    """The instruction stored at ``address`` (134)."""
+    require_binary(client, "reading program memory (134)")
+    reply = _send(client, _READ_MEMORY, 0, 0, address, timeout=timeout)
+    if reply is None or reply.stored is None:
+        raise TmclError(f"no program-memory reply for address {address}")
+    return reply.stored
+
+
+def is_end_marker(ins: Instruction) -> bool:
+    """Opcode 0 (memory never written, or cleared) or an erased cell (all bytes 0xFF)."""
+    return ins.opcode == 0 or ins.to_bytes() == b"\xff" * 7
+
+
+def read_program(client, start: int = 0, count: int | None = None, *,
+                 progress: Progress | None = None, timeout: float | None = None
+                 ) -> list[Instruction]:
+    """Read the stored program back with 134.
+
+    With ``count``, exactly that many instructions; else up to the end marker (see
+    :func:`is_end_marker`, not included) or the end of memory.
+    """
+    module = client.require_module()
+    require_binary(client, "reading program memory (134)")
+    size = module.program_memory
+    if not 0 <= start < size:
+        raise ValidationError(f"address {start} is outside program memory 0..{size - 1}")
+    end = size if count is None else start + count
+    if end > size:
+        raise ValidationError(f"{start}+{count} runs past the end of program memory ({size})")
+    out: list[Instruction] = []
+    for addr in range(start, end):
+        ins = read_instruction(client, addr, timeout=timeout)
+        if count is None and is_end_marker(ins):
+            break
+        out.append(ins)
+        if progress is not None:
+            progress("read", len(out), end - start)
+    return out
+
+
+def verify_image(client, instructions: Sequence[Instruction], start: int = 0, *,
+                 progress: Progress | None = None, timeout: float | None = None
+                 ) -> Mismatch | None:
+    """Read every instruction back and compare bytes; the first difference, or None.
+
+    A 134 answer is any well-formed frame, so a copy of an earlier answer that a bad line
+    brings late reads as the cell's content: it may match where the cell differs, or differ
+    where it matches. The client finds such a read out when the cell's own answer comes
+    while nothing waits (a suspect); those cells are read again, ``_CONFIRM_ROUNDS`` times
+    at most. A cell still in doubt then is no pass (``Mismatch.doubtful``): verified means
+    certain."""
+    total = len(instructions)
+    got: dict[int, Instruction] = {}
+    todo: Sequence[int] = range(total)
+    doubtful: set[int] = set()
+    for round_ in range(1 + _CONFIRM_ROUNDS):
+        read_at: dict[int, int] = {}  # Client.replies after the read -> the cell's index
+        for n, idx in enumerate(todo):
+            got[idx] = read_instruction(client, start + idx, timeout=timeout)
+            read_at[client.replies] = idx
+            if progress is not None and round_ == 0:
+                progress("verify", n + 1, total)
+        doubtful = _doubtful_reads(client, read_at, timeout)
+        if not doubtful:
+            break
+        todo = sorted(doubtful)
+    for idx, want in enumerate(instructions):
+        if idx in doubtful:
+            return Mismatch(start + idx, want, got[idx], doubtful=True)
+        if got[idx].to_bytes() != want.to_bytes():
+            # a difference is said only when a second read says the same (a copy of another
+            # frame that no suspect gave away would otherwise be named the cell's content)
+            again = read_instruction(client, start + idx, timeout=timeout)
+            unsure = bool(_doubtful_reads(client, {client.replies: idx}, timeout))
+            if again.to_bytes() == want.to_bytes() and not unsure:
+                continue
+            certain = again.to_bytes() == got[idx].to_bytes() and not unsure
+            return Mismatch(start + idx, want, again, doubtful=not certain)
+    return None
+
+
+def _doubtful_reads(client, read_at: dict[int, int], timeout: float | None) -> set[int]:
+    """The cells (``read_at``'s values) whose answer may have been another request's. One
+    more exchange (136 type 1) first: the line's last answer may still be on its way."""
+    suspects = getattr(client, "suspects", None)
+    if suspects is None or not read_at:
+        return set()
+    try:
+        _send(client, Control.GET_VERSION, 1, timeout=timeout)
+    except TmclError:
+        pass  # what it could find is found by the reads' own flushes as well
+    with client.lock:  # (the event poller may add one meanwhile)
+        return {read_at[s.seq] for s in suspects if s.seq in read_at}
+
+
+def same_image(a: Sequence[Instruction], b: Sequence[Instruction]) -> bool:
+    return len(a) == len(b) and all(x.to_bytes() == y.to_bytes() for x, y in zip(a, b))
+
+
+# -- running -----------------------------------------------------------------------------
+
+def _ascii_call(client, name: str, what: str):
+    link = client.ascii_link
+    fn = getattr(link, name, None)
+    if not callable(fn):
+        raise ValidationError(f"{what} is not available in ASCII mode with this link "
+                              f"(it offers no {name}()); switch with .mode binary")
+    return fn()
+
+
+def run(client, address: int | None = None) -> None:
+    """129: type 0 runs from the current address, type 1 from ``address``."""
+    module = client.require_module()
+    if address is not None and not 0 <= address < module.program_memory:
+        raise ValidationError(f"address {address} is outside program memory "
+                              f"0..{module.program_memory - 1}")
+    if client.mode == "ascii":
+        if address is not None:
+            raise ValidationError("running from an address (129 type 1) needs binary mode; "
+                                  "ASCII RUN starts from the current address (switch with "
+                                  ".mode binary)")
+        _ascii_call(client, "run", "RUN")
+        return
+    if address is None:
+        _ok(_send(client, Control.RUN_APPLICATION, 0), "run (129)")
+    else:
+        _ok(_send(client, Control.RUN_APPLICATION, 1, 0, address), f"run from {address} (129)")
+
+
+def stop(client) -> None:
+    """128: stop the running (or stepped) application."""
+    if client.mode == "ascii":
+        _ascii_call(client, "stop_program", "STOP")
+        return
+    _ok(_send(client, Control.STOP_APPLICATION), "stop (128)")
+
+
+def reset(client) -> None:
+    """131: program counter to 0, application stopped."""
+    require_binary(client, "reset (131)")
+    _ok(_send(client, Control.RESET_APPLICATION), "reset (131)")
+
+
+def step(client) -> None:
+    """130: execute the next instruction."""
+    require_binary(client, "stepping (130)")
+    _ok(_send(client, Control.STEP_APPLICATION), "step (130)")
+
+
+def program_counter(client) -> int:
+    """GP 130."""
+    reply = _ok(_send(client, GGP, GP_PROGRAM_COUNTER, 0), "program counter (GGP 130)")
+    return reply.value
+
+
+def status(client) -> AppStatus:
+    """135 (GP 128 in ASCII mode) and the program counter (GP 130)."""
+    if client.mode == "ascii":
+        code = _ok(_send(client, GGP, GP_APPLICATION_STATUS, 0),
+                   "application status (GGP 128)").value
+    else:
+        code = _ok(_send(client, Control.GET_STATUS), "application status (135)").value
+    return AppStatus(state_name(code), program_counter(client), code)
+
+
+def download_mode(client) -> bool:
+    """GP 129: True while the module is in download mode."""
+    return bool(_ok(_send(client, GGP, GP_DOWNLOAD_MODE, 0), "download mode (GGP 129)").value)
+
+
+@dataclass
+class StopInfo:
+    """Why :func:`continue_to` returned: "breakpoint", "ended" or "limit"."""
+
+    reason: str
+    pc: int
+    steps: int
+    status: AppStatus | None = None
+
+
+def step_one(client, *, pc: int | None = None,
+             instruction_at: Callable[[int], Instruction] | None = None,
+             on_wait: Callable[[int], None] | None = None) -> int:
+    """130 once and return the new program counter; a WAIT is stepped over in its time.
+
+    A step that starts a WAIT leaves the program counter on it until the module finishes
+    the WAIT by itself; sending 130 again meanwhile could run the next instruction as soon as
+    the WAIT ends, unseen. So while a WAIT holds the program counter this polls GP 130 (read
+    only) until it moves, calling ``on_wait(pc)`` once first (Ctrl-C interrupts the wait;
+    the module stays in step mode). ``pc``: the program counter before the step, if known.
+    """
+    require_binary(client, "stepping (130)")
+    if pc is None:
+        pc = program_counter(client)
+    step(client)
+    new = program_counter(client)
+    if new != pc:
+        return new
+    ins = instruction_at(pc) if instruction_at is not None else read_instruction(client, pc)
+    if ins.opcode != _WAIT:
+        return new  # a jump to itself, or a STOP
+    if on_wait is not None:
+        on_wait(pc)
+    polls = 0
+    while new == pc:
+        polls += 1
+        time.sleep(min(0.02, 0.001 * polls))
+        new = program_counter(client)
+        if new == pc and polls % 16 == 0 and status(client).state != "step":
+            break  # stopped or reset meanwhile
+    return new
+
+
+def continue_to(client, breakpoints: Iterable[int], *, max_steps: int | None = None,
+                on_step: Callable[[int, int], None] | None = None,
+                instruction_at: Callable[[int], Instruction] | None = None) -> StopInfo:
+    """Step until the program counter arrives at a breakpoint (at least one step).
+
+    These firmwares have no breakpoint command, so this costs two round trips per
+    instruction, and a WAIT takes its full time (see :func:`step_one`). A breakpoint counts
+    when the program counter arrives there: moving off the breakpoint it starts at takes a
+    step. Returns when a breakpoint is reached, the program stopped by itself (STOP, or the
+    end of the program), or after ``max_steps`` steps. KeyboardInterrupt propagates (the
+    module stays in step mode, at an instruction boundary). ``instruction_at(address)`` gives
+    the stored instruction (default: read with 134, once per address).
+    """
+    require_binary(client, "running to a breakpoint (130 steps)")
+    targets = set(breakpoints)
+    cache: dict[int, Instruction] = {}
+
+    def stored(address: int) -> Instruction:
+        if instruction_at is not None:
+            return instruction_at(address)
+        if address not in cache:
+            cache[address] = read_instruction(client, address)
+        return cache[address]
+
+    steps = 0
+    pc = program_counter(client)
+    while max_steps is None or steps < max_steps:
+        before = pc
+        pc = step_one(client, pc=pc, instruction_at=stored)
+        steps += 1
+        if on_step is not None:
+            on_step(steps, pc)
+        if pc in targets:
+            return StopInfo("breakpoint", pc, steps)
+        if pc == before:
+            st = status(client)
+            if st.state != "step":  # STOP ran, or the end of the program
+                return StopInfo("ended", st.pc, steps, st)
+    return StopInfo("limit", pc, steps)
+
+
+def is_wait(ins: Instruction) -> bool:
+    return ins.opcode == _WAIT
+
+
+# -- user variables ----------------------------------------------------------------------
+
+def user_variable_range(module) -> range:
+    """All user variables (global parameters of bank 2) the module's database lists."""
+    params = [p for p in module.global_params if p.bank == USER_VARIABLE_BANK]
+    if not params:
+        raise ValidationError(f"the {module.name} has no user variables (bank 2)")
+    lo = min(p.number for p in params)
+    hi = max(p.number + p.count for p in params)
+    return range(lo, hi)
+
+
+def read_user_variables(client, numbers: Iterable[int]) -> dict[int, int]:
+    """GGP n, 2 for each number."""
+    module = client.require_module()
+    valid = user_variable_range(module)
+    out = {}
+    for n in numbers:
+        if n not in valid:
+            raise ValidationError(f"user variable {n} does not exist on the {module.name}: "
+                                  f"{valid.start}..{valid.stop - 1}")
+        out[n] = _ok(_send(client, GGP, n, USER_VARIABLE_BANK), f"GGP {n}, 2").value
+    return out
+
+
+__all__ = ["AppState", "AppStatus", "Mismatch", "UploadResult", "UploadError", "StopInfo",
+           "upload", "end_download", "verify_image", "read_program", "read_instruction", "is_end_marker",
+           "same_image", "run", "stop", "reset", "step", "status", "program_counter",
+           "download_mode", "continue_to", "step_one", "is_wait", "check_fits", "require_binary",
+           "user_variable_range", "read_user_variables", "state_name"]
+
+
+# -- stopping everything -----------------------------------------------------------------
+
+_MST, _GAP = 3, 6
+SPEED_PARAMETER = 3  # AP 3 ActualSpeed on every module in the database (used when unknown)
+SETTLE = 3.0  # s a motor is given to ramp down after MST before it is called still turning
+
+
+@dataclass
+class StopReport:
+    """What :func:`stop_everything` found, motor by motor, read back from the module.
+
+    ``program``: "stopped" (it ran; 128 accepted), "not running", or None when its state
+    could not be read (128 was sent all the same); ``program_error`` if 128 failed.
+    ``stopped``: motors whose actual speed read 0 after MST; ``turning``: motor -> the
+    speed last read; ``unknown``: motor -> why MST or the read-back failed.
+    """
+
+    program: str | None = None
+    program_error: str | None = None
+    stopped: list[int] = field(default_factory=list)
+    turning: dict[int, int] = field(default_factory=dict)
+    unknown: dict[int, str] = field(default_factory=dict)
+    reconnected: bool = False  # the link was lost and brought back for the stop
+    link_error: str | None = None  # the link was lost and could not be: nothing was sent
+
+    @property
+    def ok(self) -> bool:
+        return (not self.turning and not self.unknown and self.program_error is None
+                and self.link_error is None)
+
+    def to_json(self) -> dict[str, object]:
+        return {"program": self.program, "stopped": self.stopped,
+                "turning": {str(m): v for m, v in self.turning.items()},
+                "unknown": {str(m): v for m, v in self.unknown.items()},
+                **({"program_error": self.program_error} if self.program_error else {}),
+                **({"reconnected": True} if self.reconnected else {}),
+                **({"link_error": self.link_error} if self.link_error else {})}
+
+
+@dataclass
+class Activity:
+    """Whether anything is going on: the stored program runs, motors turn (motor -> speed)."""
+
+    program_running: bool = False
+    turning: dict[int, int] = field(default_factory=dict)
+    slowing: set[int] = field(default_factory=set)  # turning, its target speed read 0 (MST)
+
+    @property
+    def idle(self) -> bool:
+        return not self.program_running and not self.turning
+
+    @property
+    def only_slowing(self) -> bool:
+        """Every motor that turns is ramping down to a target speed of 0, no program runs."""
+        return (bool(self.turning) and not self.program_running
+                and set(self.turning) <= self.slowing)
+
+    def __str__(self) -> str:
+        """``motor 0 turns (speed 2000) and the stored program runs``."""
+        parts = [f"motor {m} slows down (speed {v}, target speed 0)" if m in self.slowing
+                 else f"motor {m} turns (speed {v})" for m, v in sorted(self.turning.items())]
+        if self.program_running:
+            parts.append("the stored program runs")
+        return " and ".join([", ".join(parts[:-1]), parts[-1]] if len(parts) > 2 else parts)
+
+
+# generic mode (a type without data): how many motors is not known, so every motor number
+# up to the most axes a TMCL module has (TMCM-6110, TMCM-6214) is tried, until one is refused
+_GENERIC_MOTORS = 6
+
+
+def _motors(client) -> range:
+    mod = client.module
+    if mod is not None and getattr(mod, "generic", False):
+        return range(_GENERIC_MOTORS)
+    return range(mod.motors if mod is not None else 1)
+
+
+def _no_such_motor(client, motor: int, exc: TmclError) -> bool:
+    """In generic mode, a refusal (status) for a motor after 0: the module has no such motor,
+    nor any after it."""
+    mod = client.module
+    return (motor > 0 and isinstance(exc, StatusError) and mod is not None
+            and getattr(mod, "generic", False))
+
+
+def _speed_parameter(client) -> int:
+    number = _axis_parameter(client, "ActualSpeed")
+    return SPEED_PARAMETER if number is None else number
+
+
+def _axis_parameter(client, name: str) -> int | None:
+    """The number of the module's axis parameter ``name``; None without data on it."""
+    mod = client.module
+    if mod is None or getattr(mod, "generic", False):
+        return None
+    try:
+        return mod.lookup("axis", name).number
+    except (ValidationError, KeyError):
+        return None
+
+
+def _has(client, opcode: int) -> bool:
+    mod = client.module
+    return mod is None or mod.has_control(opcode)
+
+
+def _program_running(client, timeout: float, retries: int | None = None) -> bool | None:
+    """135 (GP 128 in ASCII mode): True if the stored program runs, None if unknown."""
+    if client.mode != "ascii" and not _has(client, Control.GET_STATUS):
+        return False
+    try:
+        if client.mode == "ascii":
+            reply = _send(client, GGP, GP_APPLICATION_STATUS, 0, timeout=timeout,
+                          retries=retries)
+        else:
+            reply = _send(client, Control.GET_STATUS, timeout=timeout, retries=retries)
+        return _ok(reply, "application status").value == AppState.RUN
+    except TmclError:
+        return None
+
+
+def _speed(client, motor: int, number: int, timeout: float, retries: int | None = None) -> int:
+    reply = _ok(_send(client, _GAP, number, motor, timeout=timeout, retries=retries),
+                f"GAP {number}, {motor}")
+    return reply.value
+
+
+def activity(client, *, timeout: float | None = None) -> Activity:
+    """Is a program running, is a motor turning? (135 and each motor's actual speed; a read
+    that fails counts as nothing going on: this is for a question, not for safety.)"""
+    t = min(client.timeout, 0.5) if timeout is None else timeout
+    act = Activity(bool(_program_running(client, t, retries=0)))
+    number = _speed_parameter(client)
+    target = _axis_parameter(client, "TargetSpeed")
+    for m in _motors(client):
+        try:
+            v = _speed(client, m, number, t, retries=0)
+        except TmclError as exc:
+            if _no_such_motor(client, m, exc):
+                break
+            continue
+        if v:
+            act.turning[m] = v
+            try:  # (after MST: the motor ramps down, nothing drives it any more)
+                if target is not None and _speed(client, m, target, t, retries=0) == 0:
+                    act.slowing.add(m)
+            except TmclError:
+                pass
+    return act
+
+
+def stop_everything(client, *, settle: float = SETTLE,
+                    sleep: Callable[[float], None] = time.sleep,
+                    reconnect: Callable[[], BaseException | None] | None = None) -> StopReport:
+    """The safety stop behind Ctrl-C, ``.stopall`` and the watch's stop key.
+
+    ``reconnect`` (None when the link is back, else why not): a link that is lost before
+    the stop, or found lost on its way (a cable pulled and put back while a script waited),
+    is worth one attempt to bring it back, and then the whole stop again;
+    ``report.reconnected`` says it was, ``report.link_error`` why it could not be.
+    """
+    if reconnect is not None and not client.connected:
+        why = reconnect()
+        if why is not None:
+            return StopReport(link_error=str(why))
+        report = _stop_everything(client, settle, sleep)
+        report.reconnected = True
+        return report
+    report = _stop_everything(client, settle, sleep)
+    if reconnect is not None and not report.ok and not client.connected:
+        why = reconnect()
+        if why is None:
+            report = _stop_everything(client, settle, sleep)
+            report.reconnected = True
+    return report
+
+
+def _stop_everything(client, settle: float, sleep: Callable[[float], None]) -> StopReport:
+    """``stop_everything`` on the link as it is.
+
+    A stored program that runs would drive the motors again right after MST, so it is
+    stopped first (128; the state is read with 135, and 128 is sent anyway when that read
+    fails); then MST to every motor; then each motor's actual speed is read back until it
+    is 0 (a motor ramps down) or ``settle`` seconds have passed. A 0 that may have been
+    another request's answer (the line brought a late copy of the reply before it) is read
+    again, and is "unknown" if it stays in doubt. Never raises a TmclError: everything that
+    went wrong is in the report.
+    """
+    report = StopReport()
+    t = min(client.timeout, 0.5)
+    running = _program_running(client, t)
+    if running is not False and (client.mode == "ascii" or _has(client, Control.STOP_APPLICATION)):
+        try:
+            if client.mode == "ascii":
+                _ascii_call(client, "stop_program", "STOP")
+            else:
+                _ok(_send(client, Control.STOP_APPLICATION, timeout=t), "stop (128)")
+            report.program = "stopped" if running else None
+        except TmclError as exc:
+            report.program_error = str(exc)
+    elif running is False:
+        report.program = "not running"
+    pending: list[int] = []
+    for m in _motors(client):
+        try:
+            _ok(_send(client, _MST, 0, m, timeout=t), f"MST {m}")
+            pending.append(m)
+        except TmclError as exc:
+            if _no_such_motor(client, m, exc):
+                break
+            report.unknown[m] = str(exc)
+    number = _speed_parameter(client)
+    deadline = time.monotonic() + settle
+    zero_at: dict[int, int] = {}  # motor -> Client.replies when its speed read 0
+    doubtful: list[int] = []
+    for _ in range(_CONFIRM_ROUNDS):
+        _settle(client, report, pending, zero_at, number, t, deadline, sleep)
+        doubtful = _doubtful(client, zero_at, t)
+        if not doubtful:
+            break
+        for m in doubtful:  # read again: that 0 may have been another motor's
+            report.stopped.remove(m)
+            del zero_at[m]
+        pending = doubtful
+    else:
+        for m in doubtful:
+            report.unknown[m] = ("its speed read 0, but that answer may have been another "
+                                 "request's (the line brought a reply nothing was waiting for)")
+    report.stopped.sort()
+    return report
+
+
+_CONFIRM_ROUNDS = 3
+
+
+def _settle(client, report: StopReport, pending: list[int], zero_at: dict[int, int],
+            number: int, t: float, deadline: float, sleep: Callable[[float], None]) -> None:
+    """Read each pending motor's speed until it is 0 or the deadline has passed (at least
+    once): 0 moves it to ``report.stopped`` (``zero_at``: which reply said so)."""
+    while pending:
+        for m in list(pending):
+            try:
+                v = _speed(client, m, number, t)
+            except TmclError as exc:
+                report.unknown[m] = f"its speed could not be read: {exc}"
+                report.turning.pop(m, None)
+                pending.remove(m)
+                continue
+            if v == 0:
+                report.stopped.append(m)
+                zero_at[m] = client.replies
+                report.turning.pop(m, None)
+                pending.remove(m)
+            else:
+                report.turning[m] = v
+        if not pending or time.monotonic() >= deadline:
+            break
+        sleep(0.05)
+
+
+def _doubtful(client, zero_at: dict[int, int], t: float) -> list[int]:
+    """Motors whose 0 may have been another request's answer (a late copy of the reply
+    before it, taken for this one; the client finds that out when the real answer comes
+    while nothing waits for it, so one more exchange, 136 type 1, gives it the chance)."""
+    seqs = getattr(client, "suspect_seqs", None)
+    if not zero_at or client.mode == "ascii" or not callable(seqs):
+        return []
+    try:
+        _send(client, Control.GET_VERSION, 1, timeout=t)
+    except TmclError:
+        pass  # what it could find is found by the reads' own flushes as well
+    found = seqs()
+    return sorted(m for m, seq in zero_at.items() if seq in found)

@@ -1,0 +1,229 @@
+"""What a module data file must hold (SCHEMA.md in words, here as data), checked at load.
+
+A user's own module file is read at start-up; a mistake in it must be one line naming the
+file and the line, never a traceback, so every key's type is checked here before ``Module``
+reads the data. tomllib gives no positions, so ``_Lines`` finds the line of a key by reading
+the text the way TOML lays it out (headers, then ``key = value`` lines).
+"""
+
+from __future__ import annotations
+
+import re
+import tomllib
+from pathlib import Path
+
+from ...base.errors import ValidationError
+
+ACCESS_CODES = ("R", "W", "RW", "RWE")
+IO_KINDS = ("digital_in", "analog_in", "digital_out")
+
+# key -> (type, required); "ints"/"strs" are lists of those, "names" an int-keyed text table
+MODULE_KEYS: dict[str, tuple[str, bool]] = {
+    "name": ("str", True), "summary": ("str", False), "motors": ("int", True),
+    "program_memory": ("int", True), "firmware_id": ("int", True),
+    "version_string": ("str", True), "firmware_version": ("int", False),
+    "ascii_mode": ("bool", False), "interrupts": ("bool", False),
+    "position_min": ("int", False), "position_max": ("int", False),
+    "velocity_min": ("int", False), "velocity_max": ("int", False),
+    "units": ("table", False), "notes": ("strs", False), "io_all_port": ("int", False),
+    "io_all_banks": ("ints", False), "coordinates": ("int", False),
+    "commands_like": ("str", False),
+}
+PARAMETER_KEYS: dict[str, tuple[str, bool]] = {
+    "number": ("int", True), "name": ("str", True), "manual_name": ("str", False),
+    "description": ("str", False), "access": ("str", True), "bank": ("int", False),
+    "count": ("int", False), "min": ("int", False), "max": ("int", False),
+    "choices": ("ints", False), "unit": ("str", False), "default": ("int", False),
+    "values": ("names", False), "bits": ("names", False), "note": ("str", False),
+    "source": ("str", False), "state": ("bool", False), "link": ("bool", False),
+}
+IO_KEYS: dict[str, tuple[str, bool]] = {
+    "bank": ("int", True), "port": ("int", True), "name": ("str", True), "kind": ("str", True),
+    "min": ("int", True), "max": ("int", True), "description": ("str", False),
+    "unit": ("str", False), "default": ("int", False), "note": ("str", False),
+    "source": ("str", False),
+}
+TABLES = {"axis": PARAMETER_KEYS, "global": PARAMETER_KEYS, "io": IO_KEYS}
+# what each key means, for the man page (SCHEMA.md says the same at more length)
+MEANINGS = {
+    "module": {
+        "name": "the module's name, \"TMCM-1161\" (a built-in name replaces the built-in)",
+        "motors": "number of axes: motors 0..motors-1",
+        "program_memory": "TMCL program memory, in instructions",
+        "firmware_id": "the type number 136 reports (1161 for 1161V130)",
+        "version_string": "the 136 type 0 answer of the firmware described (\"1161V130\"); "
+                          "an exact match wins over one by type number",
+        "commands_like": "whose command set the module has: TMCM-1311, TMCM-351, TMCM-1640, "
+                         "or generic (the commands all of them have; the default)",
+        "position_min": "position range of MVP (position_max too; default 32 bits)",
+        "velocity_min": "velocity range of ROR/ROL (velocity_max too; default 32 bits)",
+    },
+    "axis": {
+        "number": "the parameter number (type field of SAP/GAP)",
+        "name": "the name typed on the command line (GAP MaxSpeed, 0)",
+        "access": "R, W, RW or RWE (E: may be stored with STAP/STGP)",
+        "min": "inclusive range (max too); choices = [..] lists the only legal values",
+        "bank": "global parameters only: the bank (0..3)",
+        "values": "names of values: { \"0\" = \"off\" }; bits names bits the same way",
+    },
+    "io": {
+        "bank": "0 digital inputs, 1 analog inputs, 2 digital outputs (as the manual numbers)",
+        "port": "the port number",
+        "kind": "one of digital_in, analog_in, digital_out",
+        "min": "the value range (max too)",
+    },
+}
+_TYPE_WORDS = {"str": "a string", "int": "an integer", "bool": "true or false",
+               "table": "a table", "strs": "a list of strings", "ints": "a list of integers",
+               "names": "a table of texts keyed by numbers (\"0\" = \"...\")"}
+
+
+class ModuleFileError(ValidationError):
+    """A module data file that cannot be used: ``FILE:LINE: what is wrong``."""
+
+
+class _Lines:
+    """Line numbers of tables and keys in a TOML text, by (table, entry index, key)."""
+
+    _HEADER = re.compile(r"\s*(\[\[?)\s*([A-Za-z0-9_.\"-]+)\s*\]\]?")
+    _KEY = re.compile(r"\s*(\"[^\"]*\"|[A-Za-z0-9_-]+)\s*=")
+
+    def __init__(self, text: str):
+        self.headers: dict[tuple[str, int], int] = {}
+        self.keys: dict[tuple[str, int, str], int] = {}
+        counts: dict[str, int] = {}
+        where: tuple[str, int] = ("", 0)
+        for no, raw in enumerate(text.splitlines(), 1):
+            header = self._HEADER.match(raw)
+            if header:
+                name = header.group(2)
+                if header.group(1) == "[[":
+                    counts[name] = counts.get(name, -1) + 1
+                where = (name, counts.get(name, 0))
+                self.headers.setdefault(where, no)
+                continue
+            key = self._KEY.match(raw)
+            if key:
+                self.keys.setdefault((*where, key.group(1).strip('"')), no)
+
+    def line(self, table: str, index: int, key: str | None = None) -> int:
+        if key is not None and (table, index, key) in self.keys:
+            return self.keys[(table, index, key)]
+        return self.headers.get((table, index), 1)
+
+
+def _is(kind: str, value: object) -> bool:
+    if kind == "int":
+        return isinstance(value, int) and not isinstance(value, bool)
+    if kind == "str":
+        return isinstance(value, str)
+    if kind == "bool":
+        return isinstance(value, bool)
+    if kind == "table":
+        return isinstance(value, dict)
+    if kind == "strs":
+        return isinstance(value, list) and all(isinstance(v, str) for v in value)
+    if kind == "ints":
+        return isinstance(value, list) and all(_is("int", v) for v in value)
+    if kind == "names":
+        return isinstance(value, dict) and all(
+            re.fullmatch(r"-?\d+", k) and isinstance(v, str) for k, v in value.items())
+    raise AssertionError(kind)
+
+
+def parse(text: str, path: str) -> dict:
+    """A module file's text as data, checked against the schema; ModuleFileError if not."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        m = re.search(r"\(at line (\d+), column \d+\)", str(exc))
+        msg = re.sub(r"\s*\(at line \d+, column \d+\)", "", str(exc))
+        raise ModuleFileError(f"{path}:{m.group(1) if m else 1}: not valid TOML: {msg}") from None
+    check(data, _Lines(text), path)
+    return data
+
+
+def check(data: dict, lines: _Lines, path: str) -> None:
+    def fail(table: str, index: int, key: str | None, msg: str) -> ModuleFileError:
+        return ModuleFileError(f"{path}:{lines.line(table, index, key)}: {msg}")
+
+    unknown = sorted(set(data) - {"module", *TABLES})
+    if unknown:
+        first = unknown[0]
+        what = f"unknown table [{first}]" if isinstance(data[first], (dict, list)) \
+            else f"{first} = ... outside any table (module keys go under [module])"
+        raise fail(first, 0, None, f"{what}; a module file has "
+                   "[module], [[axis]], [[global]] and [[io]]")
+    if not isinstance(data.get("module"), dict):
+        raise fail("", 0, None, "no [module] table (name, motors, program_memory, "
+                   "firmware_id, version_string)")
+    _entry(data["module"], MODULE_KEYS, "module", 0, "[module]", fail)
+    info = data["module"]
+    if info["motors"] < 1:
+        raise fail("module", 0, "motors", "[module] motors must be at least 1")
+    if len(info["version_string"]) != 8 or not info["version_string"].isascii():
+        raise fail("module", 0, "version_string", "[module] version_string must be the 8 "
+                   f"characters 136 answers (\"1161V130\"), got {info['version_string']!r}")
+    if info["program_memory"] < 1:
+        raise fail("module", 0, "program_memory", "[module] program_memory must be at least 1")
+    like = info.get("commands_like")
+    if like is not None:
+        from ..instructions import GENERIC, family
+
+        allowed = sorted(family()) + [GENERIC]
+        if like not in allowed:
+            raise fail("module", 0, "commands_like", f"[module] commands_like must be one of "
+                       f"{', '.join(allowed)}, got {like!r}")
+    for table, keys in TABLES.items():
+        entries = data.get(table, [])
+        if not isinstance(entries, list):
+            raise fail(table, 0, None, f"{table} must be written [[{table}]] (one per entry)")
+        seen: dict[tuple, int] = {}
+        for i, entry in enumerate(entries):
+            what = f"[[{table}]] entry {i + 1}"
+            if isinstance(entry, dict) and _is("int", entry.get("number")):
+                what += f" ({'AP' if table == 'axis' else 'GP'} {entry['number']})"
+            _entry(entry, keys, table, i, what, fail)
+            if table == "io":
+                if entry["kind"] not in IO_KINDS:
+                    raise fail(table, i, "kind", f"{what}: kind must be one of "
+                               f"{', '.join(IO_KINDS)}, got {entry['kind']!r}")
+                ident: tuple = (entry["bank"], entry["port"])
+            else:
+                if entry["access"] not in ACCESS_CODES:
+                    raise fail(table, i, "access", f"{what}: access must be one of "
+                               f"{', '.join(ACCESS_CODES)}, got {entry['access']!r}")
+                ident = (entry.get("bank", 0), entry["number"])
+            if ident in seen:
+                raise fail(table, i, None, f"{what} repeats entry {seen[ident] + 1}")
+            seen[ident] = i
+
+
+def _entry(entry: object, keys: dict[str, tuple[str, bool]], table: str, index: int,
+           what: str, fail) -> None:
+    if not isinstance(entry, dict):
+        raise fail(table, index, None, f"{what} must be a table")
+    for key, value in entry.items():
+        if key not in keys:
+            raise fail(table, index, key, f"{what}: unknown key {key!r}; known: "
+                       f"{', '.join(keys)}")
+        kind = keys[key][0]
+        if not _is(kind, value):
+            raise fail(table, index, key, f"{what}: {key} must be {_TYPE_WORDS[kind]}, "
+                       f"got {value!r}")
+    missing = [k for k, (_, required) in keys.items() if required and k not in entry]
+    if missing:
+        raise fail(table, index, None, f"{what} lacks {', '.join(missing)}")
+
+
+def read(path: Path) -> dict:
+    """Read and check one module file (ModuleFileError for any problem, with file and line)."""
+    from ...base.files import FileError, read_bytes
+
+    try:
+        text = read_bytes(path, what="module file").decode("utf-8")  # bounded: /dev/zero
+    except FileError as exc:
+        raise ModuleFileError(str(exc)) from None
+    except UnicodeDecodeError:
+        raise ModuleFileError(f"{path}:1: not a text file (UTF-8)") from None
+    return parse(text, str(path))
