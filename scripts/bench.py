@@ -59,6 +59,30 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 BAUD = 115200
 
+
+# Where the modules measured live: this tree's layout, or the one before the core
+# restructuring (tmclsh/client.py, protocol.py, transport/, ...), so that --tree measures an
+# older checkout against this one.
+_OLD_LAYOUT = {"tmclsh.client.text": "tmclsh.client", "tmclsh.tmcl.frames": "tmclsh.protocol",
+               "tmclsh.link": "tmclsh.transport", "tmclsh.tmcl.asm": "tmclsh.asm",
+               "tmclsh.ops.program": "tmclsh.program", "tmclsh.tmcl.modules": "tmclsh.modules"}
+
+
+def tm(name: str):
+    """The measured tree's module ``name`` (as this tree calls it)."""
+    import importlib
+
+    try:
+        return importlib.import_module(name)
+    except ImportError:
+        return importlib.import_module(_OLD_LAYOUT[name])
+
+
+def client_class():
+    """The client that takes TMCL lines (``LineClient``; ``Client`` before the split)."""
+    text = tm("tmclsh.client.text")
+    return getattr(text, "LineClient", None) or text.Client
+
 Benchmark = Callable[[argparse.Namespace], dict]
 BENCHMARKS: dict[str, tuple[Benchmark, str]] = {}
 
@@ -291,9 +315,9 @@ def _client_rows(args: argparse.Namespace, which: str) -> dict:
     """One GAP round trip of ``which`` (a client method, PyTrinamic) beside the raw floor, in
     short alternating blocks (``bracket``): the figure is the median of the per-pair ratios
     (each path block's median over the mean of the raw blocks' medians either side)."""
-    from tmclsh.client.core import Client
-    from tmclsh.tmcl.frames import Request
-    from tmclsh.link import open_serial
+    LineClient = client_class()
+    Request = tm("tmclsh.tmcl.frames").Request
+    open_serial = tm("tmclsh.link").open_serial
 
     block = max(50, args.count // 10)
     pairs = args.pairs or 20 * args.rounds
@@ -321,7 +345,7 @@ def _client_rows(args: argparse.Namespace, which: str) -> dict:
                 return figures(lat, c0)
             return run_pytrinamic, iface.close
 
-        client = Client(open_serial(path, BAUD), module=args.module, timeout=1.0)
+        client = LineClient(open_serial(path, BAUD), module=args.module, timeout=1.0)
         req = Request(1, 6, 1, 0, 0)
 
         def run_request(count: int) -> Block:
@@ -697,12 +721,13 @@ def bench_upload(args: argparse.Namespace) -> dict:
     simulator, in the same run (rounds alternate raw and tmclsh)."""
     import serial
 
-    from tmclsh.tmcl import asm
-    from tmclsh.ops import program
-    from tmclsh.client.core import Client
-    from tmclsh.tmcl.modules import load
-    from tmclsh.tmcl.frames import Control, Instruction, Request
-    from tmclsh.link import open_serial
+    asm = tm("tmclsh.tmcl.asm")
+    program = tm("tmclsh.ops.program")
+    LineClient = client_class()
+    load = tm("tmclsh.tmcl.modules").load
+    frames = tm("tmclsh.tmcl.frames")
+    Control, Instruction, Request = frames.Control, frames.Instruction, frames.Request
+    open_serial = tm("tmclsh.link").open_serial
 
     module = load(args.module)
     n = min(2000, module.program_memory)
@@ -742,7 +767,7 @@ def bench_upload(args: argparse.Namespace) -> dict:
         return t2 - t0
 
     def client_round(path: str) -> float:
-        client = Client(open_serial(path, BAUD), module=args.module, timeout=1.0)
+        client = LineClient(open_serial(path, BAUD), module=args.module, timeout=1.0)
         try:
             t0 = time.perf_counter()
             result = program.upload(client, prog)
@@ -785,18 +810,18 @@ def bench_watch(args: argparse.Namespace) -> dict:
     reported as time per sample over four raw round trips."""
     import io
 
-    from tmclsh.client.core import Client
+    LineClient = client_class()
     from tmclsh.shell import watch
     from tmclsh.shell.render import Output
     from tmclsh.shell.session import Session
-    from tmclsh.link import open_serial
+    open_serial = tm("tmclsh.link").open_serial
 
     count = args.count // 4 or 1
     frame = gap_frame()
     clock = time.perf_counter
 
     def run_watch(path: str) -> float:
-        client = Client(open_serial(path, BAUD), module=args.module, timeout=1.0)
+        client = LineClient(open_serial(path, BAUD), module=args.module, timeout=1.0)
         try:
             session = Session(client, Output(json_mode=True))
             items = watch.parse_items(session, WATCH_EXPRESSIONS)
@@ -868,13 +893,13 @@ def bench_save(args: argparse.Namespace) -> dict:
 
     import serial
 
-    from tmclsh.client.core import Client
-    from tmclsh.tmcl.modules import load
-    from tmclsh.tmcl.frames import Request
+    LineClient = client_class()
+    load = tm("tmclsh.tmcl.modules").load
+    Request = tm("tmclsh.tmcl.frames").Request
     from tmclsh.shell.clone import READ, readable_slots
     from tmclsh.shell.render import Output
     from tmclsh.shell.session import Session
-    from tmclsh.link import open_serial
+    open_serial = tm("tmclsh.link").open_serial
 
     module = load(args.module)
     frames = [Request(1, READ[kind], number, index, 0).to_bytes()
@@ -896,7 +921,7 @@ def bench_save(args: argparse.Namespace) -> dict:
             ser.close()
 
     def save_round(path: str) -> None:
-        client = Client(open_serial(path, 115200), module=args.module, timeout=1.0)
+        client = LineClient(open_serial(path, 115200), module=args.module, timeout=1.0)
         client.version = module.version_string  # as after the connect banner: no 136 here
         try:
             session = Session(client, Output(json_mode=True))

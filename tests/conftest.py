@@ -5,9 +5,9 @@
   a serial port. ``make_pty_sim(...)`` serves any ``Simulator``/``SimBus`` arguments.
 * ``client``: ``tmclsh.connect(sim="TMCM-1311")``, in process, 0.5 s timeout; the simulator is
   ``client.transport.simulator``.
-* ``fast_client``: a ``Client`` on an in-process TMCM-1311 whose module time runs 20x real
+* ``fast_client``: a ``LineClient`` on an in-process TMCM-1311 whose module time runs 20x real
   time (moves and WAITs finish quickly), 0.5 s timeout, no retries.
-* ``pty_client``: a ``Client`` on ``pty_sim`` through pyserial, 0.2 s timeout (fault tests);
+* ``pty_client``: a ``LineClient`` on ``pty_sim`` through pyserial, 0.2 s timeout (fault tests);
   the simulator is ``pty_client.sim``.
 * ``run_tmclsh(*args, timeout=...)``: ``python -m tmclsh ARGS`` in a subprocess with this
   checkout on the path; returns the ``CompletedProcess`` (text, stdout and stderr captured).
@@ -53,10 +53,10 @@ def run_tmclsh():
 
 @pytest.fixture
 def fast_client():
-    from tmclsh.client.core import Client
+    from tmclsh.client.text import LineClient
     from tmclsh.link import open_sim
 
-    client = Client(open_sim("TMCM-1311", 1, speed=20), module="TMCM-1311", timeout=0.5,
+    client = LineClient(open_sim("TMCM-1311", 1, speed=20), module="TMCM-1311", timeout=0.5,
                     retries=0)
     yield client
     client.close()
@@ -109,11 +109,11 @@ def client():
 
 @pytest.fixture
 def pty_client(pty_sim):
-    from tmclsh.client.core import Client
+    from tmclsh.client.text import LineClient
     from tmclsh.link import open_serial
 
     sim, path = pty_sim
-    c = Client(open_serial(path), module="TMCM-1311", timeout=0.2, retries=2)
+    c = LineClient(open_serial(path), module="TMCM-1311", timeout=0.2, retries=2)
     c.sim = sim  # type: ignore[attr-defined]  # the tests' handle on the module
     yield c
     c.close()

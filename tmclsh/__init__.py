@@ -11,10 +11,10 @@ from typing import TYPE_CHECKING, Any
 __version__ = "0.1.0"
 
 if TYPE_CHECKING:
-    from .client.core import Client
+    from .client.text import LineClient
 
 
-def connect(*args: Any, **kwargs: Any) -> "Client":
+def connect(*args: Any, **kwargs: Any) -> "LineClient":
     """Open a client; see :func:`tmclsh.client.connect.connect` for the arguments."""
     from .client.connect import connect as _connect
 

@@ -10,7 +10,7 @@ import pytest
 from tmclsh.client import ascii as am
 from tmclsh.tmcl import instructions as isa
 from tmclsh.client.ascii import Echo, LineKind
-from tmclsh.client.core import Client
+from tmclsh.client.text import LineClient
 from tmclsh.base.errors import AsmError, TmclTimeoutError, ValidationError
 from tmclsh.tmcl.modules import load
 from tmclsh.tmcl.frames import SERIAL_FRAME_LEN, Reply, Request, checksum
@@ -245,8 +245,8 @@ class Canned(StreamTransport):
         return min(len(self.rx), self.chunk or len(self.rx))
 
 
-def _link(transport: Canned, **kw) -> tuple[Client, am.AsciiLink]:
-    client = Client(transport, module="TMCM-1311", timeout=0.05, retries=0, **kw)
+def _link(transport: Canned, **kw) -> tuple[LineClient, am.AsciiLink]:
+    client = LineClient(transport, module="TMCM-1311", timeout=0.05, retries=0, **kw)
     link = am.AsciiLink(client, found=am.Mode.ASCII)
     client.ascii_link = link
     return client, link
@@ -334,7 +334,7 @@ def test_reply_part():
 
 def test_attach_refused_without_an_ascii_interface():
     t = Canned([])
-    client = Client(t, module="TMCM-1640", timeout=0.05)
+    client = LineClient(t, module="TMCM-1640", timeout=0.05)
     with pytest.raises(ValidationError, match="TMCM-1640 has no ASCII mode"):
         am.AsciiLink.attach(client)
     assert t.written == [] and client.ascii_link is None
@@ -350,6 +350,6 @@ def test_attach_refused_over_can():
         def send(self, arbitration_id, data): raise AssertionError("nothing may be sent")
         def recv(self, timeout): return None
 
-    client = Client(Can("virtual:x"), module="TMCM-1311")
+    client = LineClient(Can("virtual:x"), module="TMCM-1311")
     with pytest.raises(ValidationError, match="not available over CAN"):
         am.AsciiLink.attach(client)

@@ -15,9 +15,10 @@ import pytest
 
 from tmclsh.tmcl import asm
 from tmclsh.client.ascii import (AsciiLink, Echo, Mode, ascii_probe_bytes, probe_frame, probe_mode)
-from tmclsh.client.core import Client
+from tmclsh.client.text import LineClient
 from tmclsh.base.errors import StatusError, TmclTimeoutError, ValidationError
-from tmclsh.tmcl.frames import Control, Request, Status, decode_reply
+from tmclsh.tmcl.decoder import FRAME_PIECE, pieces
+from tmclsh.tmcl.frames import Control, Reply, Request, Status
 from tmclsh.sim import Simulator
 from tmclsh.link.sim import SimTransport
 
@@ -28,13 +29,13 @@ GAP, SAP, SGP, GGP = 6, 5, 9, 10
 @pytest.fixture
 def make():
     """``make(**simulator_kwargs) -> (sim, client)`` in process; everything closed after."""
-    made: list[tuple[Simulator, Client]] = []
+    made: list[tuple[Simulator, LineClient]] = []
 
     def factory(address: int = 1, host_address: int = 2, client_host: int | None = None,
-                module: str | None = "TMCM-1311", **kw) -> tuple[Simulator, Client]:
+                module: str | None = "TMCM-1311", **kw) -> tuple[Simulator, LineClient]:
         sim = Simulator("TMCM-1311", address, host_address=host_address, **kw)
         t = SimTransport("TMCM-1311", address, simulator=sim)
-        client = Client(t, address=address, module=module, timeout=TIMEOUT, retries=0,
+        client = LineClient(t, address=address, module=module, timeout=TIMEOUT, retries=0,
                         host_address=host_address if client_host is None else client_host)
         made.append((sim, client))
         return sim, client
@@ -45,7 +46,7 @@ def make():
         sim.close()
 
 
-def set_echo(client: Client, echo: Echo) -> None:
+def set_echo(client: LineClient, echo: Echo) -> None:
     """GP 67 echo bits, written in binary mode before attaching."""
     reply = client.request(Request(client.address, SGP, 67, 0, int(echo) << 4))
     assert reply is not None and reply.status == Status.OK
@@ -140,7 +141,7 @@ def test_on_exit_override(make):
     assert sim.ascii_active
 
 
-def _upload(client: Client, source: str) -> None:
+def _upload(client: LineClient, source: str) -> None:
     prog = asm.assemble(source, client.require_module())
     client.downloading = True
     try:
@@ -259,17 +260,18 @@ def test_probes_execute_nothing():
         time.sleep(0.06)
         sim.write(ascii_probe_bytes(1))
         out = sim.read(0.1)
-        frames = [decode_reply(out[i:i + 9])[1] for i in range(0, len(out), 9)]
-        assert all(f is not None and f.status == Status.WRONG_CHECKSUM for f in frames)
+        found = list(pieces(out, 2))
+        assert all(kind == FRAME_PIECE for kind, _ in found)  # (nothing at all, mostly)
+        assert all(Reply.from_frame(raw).status == Status.WRONG_CHECKSUM for _, raw in found)
         assert not sim.ascii_active
 
 
 # -- through a pty, with pyserial -------------------------------------------------------------------
 
-def _serial_client(path: str, **kw) -> Client:
+def _serial_client(path: str, **kw) -> LineClient:
     from tmclsh.link import open_serial
 
-    return Client(open_serial(path, 115200), module="TMCM-1311", timeout=0.5, retries=0, **kw)
+    return LineClient(open_serial(path, 115200), module="TMCM-1311", timeout=0.5, retries=0, **kw)
 
 
 @pytest.mark.parametrize("echo", [Echo.CHAR, Echo.LINE, Echo.NONE])
@@ -348,9 +350,9 @@ class _LosesProbes(SimTransport):
         super().write(data)
 
 
-def _lossy(n: int) -> tuple[Simulator, Client]:
+def _lossy(n: int) -> tuple[Simulator, LineClient]:
     sim = Simulator("TMCM-1311", 1)
-    client = Client(_LosesProbes(sim, n), module="TMCM-1311", timeout=TIMEOUT, retries=0)
+    client = LineClient(_LosesProbes(sim, n), module="TMCM-1311", timeout=TIMEOUT, retries=0)
     return sim, client
 
 

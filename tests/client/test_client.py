@@ -11,15 +11,17 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from tmclsh.client.core import Client, idempotent
+from tmclsh.client.core import idempotent
+from tmclsh.client.text import LineClient
 from tmclsh.base.errors import AsmError, StatusError, TmclTimeoutError, ValidationError
 from tmclsh.tmcl.frames import Control, Instruction, Reply, ReplyKind, Request, Status
 from tmclsh.link import open_serial
+from tmclsh.ops.stop import stop_everything
 
 GAP, SAP, GIO, MVP, SGP, GGP, MST = 6, 5, 15, 4, 9, 10, 3
 
 
-def setup_move(c: Client, speed: int = 100_000, accel: int = 2_000_000) -> None:
+def setup_move(c: LineClient, speed: int = 100_000, accel: int = 2_000_000) -> None:
     c.send(SAP, 4, 0, speed)  # MaxPositioningSpeed
     c.send(SAP, 5, 0, accel)  # MaxAcceleration
 
@@ -54,7 +56,7 @@ def test_execute_checks_the_line_and_the_status(client):
 
 def test_identify_reads_the_version_string(make_pty_sim):
     sim, path = make_pty_sim("TMCM-351", address=5)
-    c = Client(open_serial(path), address=5, timeout=0.5)
+    c = LineClient(open_serial(path), address=5, timeout=0.5)
     try:
         assert c.module is None
         mod = c.require_module()
@@ -75,7 +77,7 @@ def test_wrong_address_times_out_quickly(pty_client):
 
 def test_replies_for_another_host_are_ignored(make_pty_sim):
     sim, path = make_pty_sim(host_address=7)
-    c = Client(open_serial(path), module="TMCM-1311", timeout=0.1, retries=0)
+    c = LineClient(open_serial(path), module="TMCM-1311", timeout=0.1, retries=0)
     try:
         with pytest.raises(TmclTimeoutError):
             c.send(GAP, 1, 0)
@@ -304,17 +306,18 @@ def test_idempotent_commands():
     assert not idempotent(Request(1, GAP, 1, 0), downloading=True)
 
 
-def test_stop_all_stops_every_motor(make_pty_sim):
+def test_the_safety_stop_stops_every_motor(make_pty_sim):
     sim, path = make_pty_sim("TMCM-351")
-    c = Client(open_serial(path), module="TMCM-351", timeout=0.5)
+    c = LineClient(open_serial(path), module="TMCM-351", timeout=0.5)
     try:
         for m in range(3):
             c.send(1, 0, m, 500)  # ROR
         time.sleep(0.05)
         assert all(c.send(GAP, 3, m).value != 0 for m in range(3))  # actual speed
-        assert c.stop_all() == [0, 1, 2]
+        report = stop_everything(c)  # the one safety stop (ops/stop.py)
+        assert report.ok and report.stopped == [0, 1, 2]
         assert all(c.send(GAP, 2, m).value == 0 for m in range(3))  # target speed
-        c.wait_until(lambda: all(c.send(GAP, 3, m).value == 0 for m in range(3)), timeout=3)
+        assert all(c.send(GAP, 3, m).value == 0 for m in range(3))  # actual speed
     finally:
         c.close()
 
@@ -365,7 +368,7 @@ def test_timeouts_must_be_positive(client):
     with pytest.raises(ValueError, match="positive"):
         client.timeout = None
     with pytest.raises(ValueError):
-        Client(client.transport, timeout=-1)
+        LineClient(client.transport, timeout=-1)
 
 
 @given(st.one_of(st.integers(-5, 300), st.just(True), st.just(1.0)),

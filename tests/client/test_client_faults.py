@@ -249,7 +249,7 @@ def test_event_survives_faults_on_other_replies(pty_client):
 def _outcomes(make_pty_sim, trace: bool, seed: int) -> list:
     import random
 
-    from tmclsh.client.core import Client
+    from tmclsh.client.text import LineClient
     from tmclsh.base.errors import TmclError
     from tmclsh.link import open_serial
 
@@ -259,7 +259,7 @@ def _outcomes(make_pty_sim, trace: bool, seed: int) -> list:
     # same bytes whatever the client's speed
     sim.faults.rates = {"drop": 0.04, "corrupt": 0.04, "truncate": 0.04, "garbage": 0.04,
                         "dup-late": 0.06}
-    c = Client(open_serial(path), module="TMCM-1311", timeout=0.1, retries=1)
+    c = LineClient(open_serial(path), module="TMCM-1311", timeout=0.1, retries=1)
     if trace:
         c.add_tracer(lambda d, raw, dec: None)
     lines = random.Random(seed + 1)

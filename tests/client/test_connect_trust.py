@@ -22,7 +22,7 @@ from serial.tools import list_ports
 from serial.tools.list_ports_common import ListPortInfo
 
 from tmclsh.cli import main as cli
-from tmclsh.client.core import Client
+from tmclsh.client.text import LineClient
 from tmclsh.base.errors import DownloadModeError
 from tmclsh.tmcl.frames import Request
 from tmclsh.link import open_serial
@@ -168,7 +168,7 @@ def test_a_132_line_left_unended_is_ended_when_tmclsh_exits(run_tmclsh, responde
 def test_the_first_command_after_a_reconnect_ends_download_mode(responders):
     module = responders(DownloadModeModule)
     module.downloading = False
-    client = Client(open_serial(module.path), module="TMCM-1311", timeout=0.5)
+    client = LineClient(open_serial(module.path), module="TMCM-1311", timeout=0.5)
     notices: list[str] = []
     client.on_notice = notices.append
     try:
@@ -334,7 +334,7 @@ def test_no_internal_words_in_messages():
 
 def test_a_request_after_an_earlier_failure_speaks_plainly(responders):
     module = responders(Silent)
-    client = Client(open_serial(module.path), module="TMCM-1311", timeout=0.05, retries=0)
+    client = LineClient(open_serial(module.path), module="TMCM-1311", timeout=0.05, retries=0)
     try:
         for _ in range(2):
             with pytest.raises(TimeoutError) as exc:

@@ -1,4 +1,4 @@
-"""The client keeps the checked form of lines it has seen (Client.prepare), so a script or a
+"""The client keeps the checked form of lines it has seen (LineClient.prepare), so a script or a
 watch that repeats a line pays the parser once: what is sent stays what the line says, for
 the module, mode and address of the moment."""
 
@@ -7,7 +7,7 @@ from __future__ import annotations
 import pytest
 
 from tmclsh.tmcl import asm
-from tmclsh.client import core as client_module
+from tmclsh.client import text as client_module
 from tmclsh.client.ascii import AsciiLink
 from tmclsh.base.errors import AsmError, TmclTimeoutError
 from tmclsh.tmcl.modules import load
@@ -68,11 +68,11 @@ def test_another_mode_checks_the_line_again(client, counted):
 
 
 def test_another_address_gets_its_own_request(make_pty_sim):
-    from tmclsh.client.core import Client
+    from tmclsh.client.text import LineClient
     from tmclsh.link import open_serial
 
     sim, path = make_pty_sim(address=3)
-    c = Client(open_serial(path), address=1, module="TMCM-1311", timeout=0.2, retries=0)
+    c = LineClient(open_serial(path), address=1, module="TMCM-1311", timeout=0.2, retries=0)
     try:
         with pytest.raises(TmclTimeoutError):
             c.execute("GAP 1, 0")  # nobody at address 1

@@ -21,7 +21,7 @@ import sys
 
 import pytest
 
-from tmclsh.client.core import Client
+from tmclsh.client.text import LineClient
 from tmclsh.base.errors import TmclError
 from tmclsh.tmcl.frames import Request
 from tmclsh.sim.device import RATE_KINDS, parse_rates
@@ -32,7 +32,7 @@ from conftest import ROOT, tmclsh_env
 SGP = 9
 
 
-def drive(c: Client, n: int) -> tuple[set[int], set[int], int]:
+def drive(c: LineClient, n: int) -> tuple[set[int], set[int], int]:
     """``n`` SGPs with unique values: (replies with a wrong value, replies reported suspect,
     failed requests), by ``Client.replies`` number."""
     unique = itertools.count(1000)
@@ -58,7 +58,7 @@ def drive(c: Client, n: int) -> tuple[set[int], set[int], int]:
 def dup_client(pty_sim):
     sim, path = pty_sim
     sim.faults.rng = random.Random(7)
-    c = Client(open_serial(path), module="TMCM-1311", timeout=0.2)
+    c = LineClient(open_serial(path), module="TMCM-1311", timeout=0.2)
     yield c, sim
     c.close()
 

@@ -38,7 +38,7 @@ from hypothesis import strategies as st
 
 from tmclsh.ops import program
 from tmclsh.client.ascii import AsciiLink
-from tmclsh.client.core import Client
+from tmclsh.client.text import LineClient
 from tmclsh.base.errors import (ChecksumError, StatusError, TmclError, TmclTimeoutError,
                            TransportError)
 from tmclsh.ops.program import UploadError
@@ -124,7 +124,7 @@ def test_headers_never_line_up():
 class Harness:
     """A client on a simulator, the values each register may hold, and the checks."""
 
-    def __init__(self, client: Client, sim: Simulator, *, budget_per_attempt: float):
+    def __init__(self, client: LineClient, sim: Simulator, *, budget_per_attempt: float):
         self.c, self.sim = client, sim
         self.per_attempt = budget_per_attempt
         self.unique = itertools.count(1000)
@@ -316,7 +316,7 @@ def drive(h: Harness, ops, seed: int) -> None:
        seed=st.integers(0, 2**16))
 def test_binary_link_under_faults(ops, timeout, retries, seed):
     sim = Simulator("TMCM-1311")
-    client = Client(SimTransport(simulator=sim), module="TMCM-1311", timeout=timeout,
+    client = LineClient(SimTransport(simulator=sim), module="TMCM-1311", timeout=timeout,
                     retries=retries)
     try:
         drive(Harness(client, sim, budget_per_attempt=binary_budget(timeout)), ops, seed)
@@ -336,7 +336,7 @@ def test_binary_link_under_faults_over_a_pty(ops, retries, seed):
 
     sim = Simulator("TMCM-1311")
     server = serve_pty(sim)
-    client = Client(open_serial(server.path), module="TMCM-1311", timeout=0.2, retries=retries)
+    client = LineClient(open_serial(server.path), module="TMCM-1311", timeout=0.2, retries=retries)
     try:
         drive(Harness(client, sim, budget_per_attempt=binary_budget(0.2)), ops, seed)
     finally:
@@ -360,7 +360,7 @@ def test_ascii_link_under_faults(ops, timeout, retries, echo):
         # the next command's (an ASCII reply names no command): no late replies then.
         ops = [op for op in ops if op[0] != "delay"]
     sim = Simulator("TMCM-1311")
-    client = Client(SimTransport(simulator=sim), module="TMCM-1311", timeout=timeout,
+    client = LineClient(SimTransport(simulator=sim), module="TMCM-1311", timeout=timeout,
                     retries=retries)
     try:
         # echo each character (GP 67 = 0), the whole line (16), or none (32)
@@ -403,7 +403,7 @@ INJECT = st.lists(st.tuples(st.integers(0, 14), st.one_of(
        retries=st.integers(0, 2), start=st.integers(0, 5), seed=st.integers(0, 2**16))
 def test_upload_under_faults(shape, inject, timeout, retries, start, seed):
     sim = Simulator("TMCM-1311")
-    client = Client(SimTransport(simulator=sim), module="TMCM-1311", timeout=timeout,
+    client = LineClient(SimTransport(simulator=sim), module="TMCM-1311", timeout=timeout,
                     retries=retries)
     try:
         h = Harness(client, sim, budget_per_attempt=binary_budget(timeout))

@@ -8,7 +8,8 @@ from __future__ import annotations
 import pytest
 
 from tmclsh.ops import program
-from tmclsh.client.core import Client
+from tmclsh.ops import stop as stop_ops
+from tmclsh.client.text import LineClient
 from tmclsh.link import open_serial
 
 from responder import OK, Module, fields
@@ -67,7 +68,7 @@ class Axes(Module):
 @pytest.fixture
 def axes():
     m = Axes()
-    c = Client(open_serial(m.path), module="TMCM-351", timeout=0.3, retries=1)
+    c = LineClient(open_serial(m.path), module="TMCM-351", timeout=0.3, retries=1)
     yield c, m
     c.close()
     m.close()
@@ -96,7 +97,7 @@ def test_stop_never_says_stopped_on_a_copy_of_another_motors_zero(axes):
     m.speeds(0, 3000, 5000)
     m.ignores_mst.add(2)
     m.dup_late.add((6, SPEED, 1))
-    report = program.stop_everything(c, settle=0.3)
+    report = stop_ops.stop_everything(c, settle=0.3)
     assert 2 not in report.stopped, report
     assert not report.ok
     assert report.turning.get(2) == 5000 or 2 in report.unknown, report
@@ -108,7 +109,7 @@ def test_stop_never_says_stopped_when_the_copy_equals_an_older_answer(axes):
     m.speeds(5000, 3000, 5000)
     m.ignores_mst.update({0, 2})
     m.dup_late.add((6, SPEED, 1))
-    report = program.stop_everything(c, settle=0.3, sleep=lambda s: None)
+    report = stop_ops.stop_everything(c, settle=0.3, sleep=lambda s: None)
     assert 2 not in report.stopped, report
     assert report.turning.get(0) == 5000
     assert report.turning.get(2) == 5000 or 2 in report.unknown, report
@@ -153,7 +154,7 @@ def test_an_upload_whose_133_got_lost_does_not_leave_the_module_in_download_mode
     from tmclsh.tmcl.frames import Instruction
 
     m = LosesQuitDownload()
-    c = Client(open_serial(m.path), module="TMCM-1311", timeout=0.2, retries=1)
+    c = LineClient(open_serial(m.path), module="TMCM-1311", timeout=0.2, retries=1)
     notices = []
     c.on_notice = notices.append
     try:
@@ -255,7 +256,7 @@ def test_connect_to_a_silent_port_keeps_the_link_and_says_what_was_tried(capsys)
 
     master, slave = os.openpty()
     m = Module(version="1311V111")
-    c = Client(open_serial(m.path), module="TMCM-1311", timeout=0.2, retries=0)
+    c = LineClient(open_serial(m.path), module="TMCM-1311", timeout=0.2, retries=0)
     try:
         s = Session(c, Output())
         s.run_line(f".connect {os.ttyname(slave)}")
@@ -286,7 +287,7 @@ def _ctrl_c_on(opcodes: set[int], times: int = 1):
 def test_ctrl_c_while_a_reply_is_on_its_way_does_not_shift_the_answers():
     m = Module(version="1311V111")
     m.values.update({(1, 0, False): 111, (4, 0, False): 444})
-    c = Client(open_serial(m.path), module="TMCM-1311", timeout=0.3)
+    c = LineClient(open_serial(m.path), module="TMCM-1311", timeout=0.3)
     try:
         c.add_tracer(_ctrl_c_on({6}))
         with pytest.raises(KeyboardInterrupt):
@@ -304,7 +305,7 @@ def test_ctrl_c_twice_in_an_upload_does_not_leave_download_mode_behind():
 
     m = LosesQuitDownload(lost=1)
     m.values[(1, 0, False)] = 77
-    c = Client(open_serial(m.path), module="TMCM-1311", timeout=0.3)
+    c = LineClient(open_serial(m.path), module="TMCM-1311", timeout=0.3)
     c.on_notice = lambda text: None
     try:
         c.add_tracer(_ctrl_c_on({1, 133}, times=2))  # the 2nd ROR frame, then the 133
@@ -343,7 +344,7 @@ def test_an_unanswered_relative_move_says_it_may_have_been_executed():
     from tmclsh.shell.session import Session
 
     m = LosesMoveReplies(version="1311V111")
-    c = Client(open_serial(m.path), module="TMCM-1311", timeout=0.2, retries=2)
+    c = LineClient(open_serial(m.path), module="TMCM-1311", timeout=0.2, retries=2)
     try:
         s = Session(c, Output())
         with pytest.raises(TmclTimeoutError) as err:
@@ -383,7 +384,7 @@ def test_events_reach_listeners_in_order_with_the_poller_running():
     import time
 
     m = Announces(version="1311V111")
-    c = Client(open_serial(m.path), module="TMCM-1311", timeout=0.3)
+    c = LineClient(open_serial(m.path), module="TMCM-1311", timeout=0.3)
     seen: list[tuple[int, float]] = []
     first = threading.Event()
 
@@ -417,7 +418,7 @@ def test_reconnect_to_another_module_on_the_same_port_is_noticed():
     from responder import TcpModule
 
     m = TcpModule(version="1311V111")
-    c = Client(open_serial(m.url), timeout=0.3)
+    c = LineClient(open_serial(m.url), timeout=0.3)
     try:
         assert c.require_module().name == "TMCM-1311"
         m.version = "1640V140"  # another module on the same line...
@@ -444,7 +445,7 @@ def test_after_a_reconnect_the_first_line_is_checked_against_the_module_there(ve
     from responder import TcpModule
 
     m = TcpModule(version="1311V111")
-    c = Client(open_serial(m.url), timeout=0.3)
+    c = LineClient(open_serial(m.url), timeout=0.3)
     try:
         s = Session(c, Output())
         s.run_line("GAP 1, 0")
@@ -472,7 +473,7 @@ def test_connect_to_a_module_in_ascii_mode_recognises_it(make_pty_sim, capsys):
 
     _, path_a = make_pty_sim()
     _, path_b = make_pty_sim(ascii_startup=True)
-    c = Client(open_serial(path_a), module="TMCM-1311", timeout=0.3)
+    c = LineClient(open_serial(path_a), module="TMCM-1311", timeout=0.3)
     try:
         s = Session(c, Output())
         s.run_line(f".connect {path_b}")
@@ -527,12 +528,12 @@ def test_stop_in_generic_mode_stops_every_motor_the_module_has():
     numbers are not checked in generic mode). Ctrl-C must stop motor 2 too, and the quit
     question must see it turn."""
     m = ThreeAxesNoData()
-    c = Client(open_serial(m.path), timeout=0.3)
+    c = LineClient(open_serial(m.path), timeout=0.3)
     try:
         assert c.require_module().generic
         m.speeds(0, 0, 4000)
-        assert program.activity(c).turning == {2: 4000}
-        report = program.stop_everything(c, settle=0.3)
+        assert stop_ops.activity(c).turning == {2: 4000}
+        report = stop_ops.stop_everything(c, settle=0.3)
         assert report.stopped == [0, 1, 2] and report.ok, report
         assert (3, 0, 2, 0) in m.got
     finally:
@@ -564,7 +565,7 @@ def test_a_damaged_echo_and_a_slow_module_are_no_corrupted_reply():
 
     m = DamagedEchoThenPause(version="1311V111")
     m.values[(1, 0, False)] = 4242
-    c = Client(open_serial(m.path), module="TMCM-1311", timeout=1.0, retries=0)
+    c = LineClient(open_serial(m.path), module="TMCM-1311", timeout=1.0, retries=0)
     try:
         try:
             value = c.value("GAP 1, 0")
@@ -591,7 +592,7 @@ def test_a_run_whose_last_answer_was_displaced_fails(json_mode, capsys, tmp_path
     m = Axes()
     m.dup_late.add((9, 0, 2))
     m.gap = 0.012  # nine bytes at 9600 baud, and a little
-    c = Client(open_serial(m.path), module="TMCM-351", timeout=0.3)
+    c = LineClient(open_serial(m.path), module="TMCM-351", timeout=0.3)
     try:
         s = Session(c, Output(json_mode=json_mode))
         args = argparse.Namespace(command="SGP 0, 2, 111; SGP 0, 2, 222", script=None,
@@ -631,7 +632,7 @@ def test_a_raw_139_line_does_not_strand_the_module_in_ascii_mode(make_pty_sim):
     from tmclsh.shell.session import Session
 
     sim, path = make_pty_sim()
-    c = Client(open_serial(path), module="TMCM-1311", timeout=0.3)
+    c = LineClient(open_serial(path), module="TMCM-1311", timeout=0.3)
     try:
         s = Session(c, Output())
         with pytest.raises(TmclError) as err:
@@ -665,13 +666,13 @@ def test_stop_never_says_stopped_for_a_turning_motor_under_late_copies():
     rng = random.Random(7)
     m = RandomLateCopies()
     m.rng = rng
-    c = Client(open_serial(m.path), module="TMCM-351", timeout=0.2)
+    c = LineClient(open_serial(m.path), module="TMCM-351", timeout=0.2)
     try:
         lies = []
         for i in range(80):
             m.speeds(*(rng.choice([0, 0, 1000, 5000]) for _ in range(3)))
             m.ignores_mst = {k for k in range(3) if rng.random() < 0.5}
-            report = program.stop_everything(c, settle=0.05, sleep=lambda s: None)
+            report = stop_ops.stop_everything(c, settle=0.05, sleep=lambda s: None)
             lies += [(i, mo) for mo in report.stopped if m.values[(SPEED, mo, False)]]
             c.take_suspects()
         assert not lies
@@ -688,13 +689,13 @@ def test_the_end_of_a_run_watches_the_line_once_for_the_same_last_answer(pty_cli
     c.send(6, 1, 0)
     c.send(6, 1, 0)  # the last two replies: the same command, so the line is watched
     waits = []
-    absorb = c._absorb
+    absorb = c.framing.absorb
 
-    def spy(timeout=0.0):
+    def spy(timeout=0.0, **kw):
         waits.append(timeout)
-        return absorb(timeout)
+        return absorb(timeout, **kw)
 
-    c._absorb = spy
+    c.framing.absorb = spy
     c.confirm_last()
     first, waits[:] = list(waits), []
     c.confirm_last()
@@ -734,7 +735,7 @@ def test_a_damaged_reply_then_an_event_loses_neither_the_event_nor_the_answer():
     it is taken whole before the request is sent again, not cut in two at a deadline."""
     m = DamagedReplyThenEvent(version="1311V111")
     m.values[(1, 0, False)] = 4242
-    c = Client(open_serial(m.path), module="TMCM-1311", timeout=0.3, retries=2)
+    c = LineClient(open_serial(m.path), module="TMCM-1311", timeout=0.3, retries=2)
     events = []
     c.add_listener(events.append)
     try:

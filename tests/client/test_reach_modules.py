@@ -97,7 +97,7 @@ def test_forced_generic_names_the_type_from_136(module_1161, config_home, run_tm
 
 
 def test_banner_and_toolbar_say_numbers_only():
-    from tmclsh.client.core import Client
+    from tmclsh.client.text import LineClient
     from tmclsh.shell.app import banner
     from tmclsh.shell.render import Output
     from tmclsh.shell.session import Session
@@ -108,7 +108,7 @@ def test_banner_and_toolbar_say_numbers_only():
         from tmclsh.client.connect import start
         from tmclsh.link import open_serial
 
-        client = start(Client(open_serial(m.url), timeout=1))
+        client = start(LineClient(open_serial(m.url), timeout=1))
         session = Session(client, Output())
         assert "TMCM-1161 (no parameter data: numbers only)" in banner(session).plain
         text = "".join(f[1] for f in create_toolbar_tokens_func(session)())

@@ -11,7 +11,7 @@ import uuid
 import pytest
 
 import tmclsh
-from tmclsh.client.core import Client
+from tmclsh.client.text import LineClient
 from tmclsh.base.errors import TmclTimeoutError, TransportError, ValidationError
 from tmclsh.tmcl.frames import Control, Reply, Request, Status
 from tmclsh.sim import Simulator
@@ -71,7 +71,7 @@ def test_a_port_is_opened_by_one_program_only(pty_sim):
 def test_loop_url_echo_is_never_taken_for_a_reply():
     # loop:// returns what was sent, like an RS485 adapter with local echo: our own request
     # (address byte 1 where the host address belongs) must be ignored
-    c = Client(open_serial("loop://"), module="TMCM-1311", timeout=0.1, retries=0)
+    c = LineClient(open_serial("loop://"), module="TMCM-1311", timeout=0.1, retries=0)
     try:
         assert c.describe() == "loop://"
         with pytest.raises(TmclTimeoutError):
@@ -115,7 +115,7 @@ def test_unplugged_port_gives_a_clear_transport_error(sim):
     from tmclsh.sim.serve import serve_pty
 
     server = serve_pty(sim)
-    c = Client(open_serial(server.path), module="TMCM-1311", timeout=0.3)
+    c = LineClient(open_serial(server.path), module="TMCM-1311", timeout=0.3)
     try:
         assert c.send(GAP, 1, 0).ok
         server.close()  # the pty vanishes, as a USB CDC device does when unplugged
@@ -189,7 +189,7 @@ def test_sim_transport_is_a_stream_with_the_same_timeouts():
 
 def test_sim_transport_leaves_a_given_simulator_running(sim):
     t = SimTransport(simulator=sim)
-    c = Client(t, module="TMCM-1311", timeout=0.5)
+    c = LineClient(t, module="TMCM-1311", timeout=0.5)
     assert c.send(GAP, 1, 0).ok
     c.close()
     sim.write(GAP1)
@@ -380,7 +380,7 @@ def test_transact_returns_the_whole_answer_however_it_comes(pieces):
         got = t.transact(GAP1, 9, 1.0)
         assert got == _reply_to(GAP1)
         # and through the client: the value the responder gave
-        c = Client(t, module="TMCM-1311")
+        c = LineClient(t, module="TMCM-1311")
         assert c.request(Request(1, GAP, 1, 0)).value == 1234
     finally:
         t.close()
@@ -413,7 +413,7 @@ def test_the_same_answer_twice_is_the_same_reply_and_another_is_another():
     responder = _PtyResponder(lambda f: [(0, _reply_to(f, next(values) & 0xFFFFFFFF))])
     t = open_serial(responder.path, 115200)
     try:
-        c = Client(t, module="TMCM-1311")
+        c = LineClient(t, module="TMCM-1311")
         got = [c.request(Request(1, GAP, 1, 0)) for _ in range(3)]
         assert [r.value for r in got] == [7, 7, -5]
         assert got[0] == got[1] and got[1] != got[2]
@@ -481,7 +481,7 @@ def test_transact_without_a_descriptor_goes_through_pyserial(pty_sim, monkeypatc
             real.fset(self, value)
 
         monkeypatch.setattr(ser_type, "timeout", property(real.fget, spy))
-        c = Client(t, module="TMCM-1311", timeout=0.5)
+        c = LineClient(t, module="TMCM-1311", timeout=0.5)
         assert [c.request(Request(1, GAP, 1, 0)).status for _ in range(5)] == [Status.OK] * 5
         assert sets == [0.5]  # once, for the first read; the rest ask with the same timeout
         assert t.transact(GAP1, 9, 0.5)[:4] == bytes((2, 1, 100, GAP))

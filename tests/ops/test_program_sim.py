@@ -1,6 +1,6 @@
 """Uploading, reading back, stepping and running programs against the simulator.
 
-Through real bytes: a ``Client`` on the in-process simulator (``SimTransport``), on a
+Through real bytes: a ``LineClient`` on the in-process simulator (``SimTransport``), on a
 pty-served one (``tmclsh.sim.serve``) and on a python-can virtual bus. Faults come from the
 simulator's ``Faults``; a test "presses Ctrl-C" or "pulls the cable" from a client tracer, at
 the moment a given frame has been sent.
@@ -16,7 +16,7 @@ import pytest
 
 from tmclsh.tmcl import asm
 from tmclsh.ops import program
-from tmclsh.client.core import Client
+from tmclsh.client.text import LineClient
 from tmclsh.base.errors import TmclError, ValidationError
 from tmclsh.ops.program import UploadError
 from tmclsh.tmcl.frames import Instruction
@@ -46,7 +46,7 @@ def sim():
 
 @pytest.fixture
 def client(sim):
-    c = Client(SimTransport(simulator=sim), module="TMCM-1311", timeout=0.3)
+    c = LineClient(SimTransport(simulator=sim), module="TMCM-1311", timeout=0.3)
     yield c
     c.close()
 
@@ -220,7 +220,7 @@ def test_lost_link_during_upload_pty_closed(sim):
     from tmclsh.link import open_serial
 
     server = serve_pty(sim)
-    c = Client(open_serial(server.path), module="TMCM-1311", timeout=0.3)
+    c = LineClient(open_serial(server.path), module="TMCM-1311", timeout=0.3)
     try:
         module = c.require_module()
         fail_at_frame(c, 5, server.close)
@@ -237,7 +237,7 @@ def test_lost_link_during_upload_pty_closed(sim):
         c.close()
         server.close()
     server = serve_pty(sim)
-    c = Client(open_serial(server.path), module="TMCM-1311", timeout=0.3)
+    c = LineClient(open_serial(server.path), module="TMCM-1311", timeout=0.3)
     try:
         program.end_download(c)
         assert sim.param("global", 129) == 0
@@ -446,7 +446,7 @@ def test_upload_and_step_over_can(sim):
 
     channel = f"tmclsh-program-{id(sim)}"
     server = serve_can(sim, "virtual", channel)
-    c = Client(open_can(f"virtual:{channel}"), module="TMCM-1311", timeout=0.5)
+    c = LineClient(open_can(f"virtual:{channel}"), module="TMCM-1311", timeout=0.5)
     try:
         prog = asm.assemble(TIMER_EXAMPLE, c.require_module())
         assert program.upload(c, prog).verified
@@ -462,7 +462,7 @@ def test_upload_and_step_over_can(sim):
 def test_ascii_mode_run_stop_status(sim):
     from tmclsh.client.ascii import AsciiLink
 
-    c = Client(SimTransport(simulator=sim), module="TMCM-1311", timeout=0.5)
+    c = LineClient(SimTransport(simulator=sim), module="TMCM-1311", timeout=0.5)
     try:
         prog = asm.assemble(TIMER_EXAMPLE, c.require_module())
         program.upload(c, prog)

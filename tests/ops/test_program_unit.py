@@ -9,7 +9,7 @@ import pytest
 
 from tmclsh.tmcl import asm, modules
 from tmclsh.ops import program
-from tmclsh.client.core import Client
+from tmclsh.client.text import LineClient
 from tmclsh.base.errors import ValidationError
 from tmclsh.ops.program import AppStatus, UploadError
 from tmclsh.tmcl.frames import Instruction
@@ -20,7 +20,7 @@ M1311 = modules.load("TMCM-1311")
 
 @pytest.fixture
 def idle_client():
-    c = Client(open_serial("loop://"), module="TMCM-1311", timeout=0.05, retries=0)
+    c = LineClient(open_serial("loop://"), module="TMCM-1311", timeout=0.05, retries=0)
     yield c
     assert c.stats["sent"] == 0, "nothing may be sent by these checks"
     c.close()

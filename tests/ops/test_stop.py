@@ -1,4 +1,4 @@
-"""Stop means stop: the shell's one stop (``program.stop_everything``) stops a running stored
+"""Stop means stop: the shell's one stop (``ops.stop.stop_everything``) stops a running stored
 program before MST, reads every motor's actual speed back, and says "stopped" only for motors
 that read 0 -- checked against the simulator through a pty, and against a small module
 written here from the manual's byte tables whose motor ignores MST.
@@ -14,7 +14,8 @@ import pytest
 
 from tmclsh.tmcl import asm
 from tmclsh.ops import program
-from tmclsh.client.core import Client
+from tmclsh.ops import stop as stop_ops
+from tmclsh.client.text import LineClient
 from tmclsh.shell.render import Output
 from tmclsh.shell.session import Session
 from tmclsh.link import open_serial
@@ -29,12 +30,12 @@ KEEPS_TURNING = "Loop:\n    ROR 0, 20000\n    WAIT TICKS, 0, 2\n    JA Loop\n"
 @pytest.fixture
 def pty_module(pty_sim):
     sim, path = pty_sim
-    c = Client(open_serial(path), module="TMCM-1311", timeout=0.3)
+    c = LineClient(open_serial(path), module="TMCM-1311", timeout=0.3)
     yield c, sim
     c.close()
 
 
-def start_program(c: Client) -> None:
+def start_program(c: LineClient) -> None:
     program.upload(c, asm.assemble(KEEPS_TURNING, c.require_module()))
     program.run(c)
     c.wait_until(lambda: c.value("GAP 3, 0") > 0, timeout=3)
@@ -53,7 +54,7 @@ def test_mst_alone_is_undone_by_a_running_program(pty_module):
 def test_stop_everything_stops_the_program_then_the_motor(pty_module):
     c, _ = pty_module
     start_program(c)
-    report = program.stop_everything(c)
+    report = stop_ops.stop_everything(c)
     assert report.program == "stopped" and report.stopped == [0] and report.ok
     time.sleep(0.3)  # nothing drives it again
     assert c.value("GAP 3, 0") == 0 and program.status(c).state == "stop"
@@ -62,7 +63,7 @@ def test_stop_everything_stops_the_program_then_the_motor(pty_module):
 def test_stop_everything_without_a_program(pty_module):
     c, _ = pty_module
     c.execute("ROR 0, 30000")
-    report = program.stop_everything(c)
+    report = stop_ops.stop_everything(c)
     assert report.program == "not running" and report.stopped == [0] and report.ok
     assert c.value("GAP 3, 0") == 0
 

@@ -19,7 +19,7 @@ import pytest
 
 from tmclsh.tmcl import modules
 from tmclsh.client.ascii import AsciiLink
-from tmclsh.client.core import Client
+from tmclsh.client.text import LineClient
 from tmclsh.base.errors import TmclError
 from tmclsh.shell.clone import CloneError, readable_slots
 from tmclsh.shell.render import Output
@@ -32,7 +32,7 @@ from responder import PtyModule
 LINE = re.compile(r"^(SAP|SGP) (\w+), (\d+), (-?\d+)", re.M)
 
 
-def shell(client: Client, json_mode: bool = False, yes: bool = False) -> Session:
+def shell(client: LineClient, json_mode: bool = False, yes: bool = False) -> Session:
     return Session(client, Output(json_mode=json_mode), yes=yes)
 
 
@@ -69,11 +69,11 @@ def changes(module) -> list[tuple[str, str, int]]:
 
 @pytest.fixture
 def pty_client(make_pty_sim):
-    made: list[Client] = []
+    made: list[LineClient] = []
 
-    def make(module: str, *, ascii: bool = False, target=None) -> tuple[Simulator, Client]:
+    def make(module: str, *, ascii: bool = False, target=None) -> tuple[Simulator, LineClient]:
         sim, path = make_pty_sim(module, target=target)
-        client = Client(open_serial(path, 115200), module=module, timeout=0.5, retries=2)
+        client = LineClient(open_serial(path, 115200), module=module, timeout=0.5, retries=2)
         made.append(client)
         if ascii:
             AsciiLink.attach(client)
@@ -172,7 +172,7 @@ def test_restore_onto_independent_responder_with_one_refusal(pty_client, respond
     responder.values[(6, 0, False)] = 17  # MaxCurrent: refused below
     responder.values[(12, 2, True)] = -5  # UserVariable #12
     responder.refuse.add((5, 6, 0))
-    other = Client(open_serial(responder.path), module="TMCM-1311", timeout=0.5, retries=0)
+    other = LineClient(open_serial(responder.path), module="TMCM-1311", timeout=0.5, retries=0)
     try:
         s = shell(other, json_mode=True)
         with pytest.raises(CloneError, match="1 of 3 parameters were not restored"):
@@ -607,7 +607,7 @@ def test_save_from_independent_responder(responder, tmp_path):
             v = (p.min or 0) + (number * 7 + index) % max(1, min((p.max or 255) - (p.min or 0), 200))
             responder.values[(number, index, kind == "global")] = v
     responder.values[(26, 0, False)] = -1  # I2tLimit, 0..4294967295: 0xFFFFFFFF on the wire
-    client = Client(open_serial(responder.path), module="TMCM-1640", timeout=0.5, retries=0)
+    client = LineClient(open_serial(responder.path), module="TMCM-1640", timeout=0.5, retries=0)
     client.version = "1640V100"
     try:
         shell(client).run_line(f".save {tmp_path / 'b.tmcl'}")

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from tmclsh.tmcl import asm
-from tmclsh.client.core import Client
+from tmclsh.client.text import LineClient
 from tmclsh.base.errors import AsmError, ValidationError
 from tmclsh.shell import debugger
 from tmclsh.shell.render import Output
@@ -22,7 +22,7 @@ DEMO = Path(__file__).resolve().parents[2] / "scripts" / "programs" / "demo" / "
 
 @pytest.fixture
 def session():
-    c = Client(open_serial("loop://"), module="TMCM-1311", timeout=0.05, retries=0)
+    c = LineClient(open_serial("loop://"), module="TMCM-1311", timeout=0.05, retries=0)
     s = Session(c, Output())
     yield s
     assert c.stats["sent"] == 0, "nothing may be sent by these commands"

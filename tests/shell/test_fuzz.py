@@ -23,7 +23,7 @@ from hypothesis import strategies as st
 
 from tmclsh.tmcl import instructions as isa
 from tmclsh.tmcl.asm import assemble, disassemble, parse_line, read_image
-from tmclsh.client.core import Client
+from tmclsh.client.text import LineClient
 from tmclsh.base.errors import TmclError
 from tmclsh.tmcl.modules import load
 from tmclsh.tmcl.frames import Control
@@ -191,7 +191,7 @@ MODULES = ("TMCM-1311", "TMCM-351", "TMCM-1640")
 
 
 def _session(json_mode: bool, module: str = "TMCM-1311") -> tuple[Session, list[bytes]]:
-    client = Client(open_sim(module, 1, speed=20), module=module, timeout=0.3, retries=0)
+    client = LineClient(open_sim(module, 1, speed=20), module=module, timeout=0.3, retries=0)
     sim = client.transport.simulator
     received: list[bytes] = []
     write = sim.write

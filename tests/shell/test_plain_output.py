@@ -9,7 +9,7 @@ import sys
 import pytest
 
 from tmclsh.tmcl import asm
-from tmclsh.client.core import Result
+from tmclsh.client.text import Result
 from tmclsh.tmcl.modules import load
 from tmclsh.tmcl.frames import Reply
 from tmclsh.shell.render import Output, _console, render_event, render_result

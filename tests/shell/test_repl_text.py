@@ -310,7 +310,7 @@ def test_interrupted_run_names_the_stopped_motors_in_prose(tmp_path):
         if proc.poll() is None:
             os.kill(proc.pid, signal.SIGKILL)
     assert proc.returncode == 130
-    assert "interrupted; stopped motors 0, 1, 2 (MST; speed reads 0)" in err, err
+    assert "interrupted: stopped motors 0, 1, 2 (MST; speed reads 0)" in err, err
     assert not _REPR.search(err), err
 
 

@@ -14,7 +14,7 @@ import time
 import pytest
 
 from tmclsh.cli import main as cli
-from tmclsh.client.core import Client
+from tmclsh.client.text import LineClient
 from tmclsh.base.errors import ValidationError
 from tmclsh.shell import script
 from tmclsh.shell.render import Output
@@ -436,7 +436,7 @@ def test_record_replays_as_is(session, tmp_path, capsys):
                     "# .watch GAP 1, 0 --count 1    // view, not replayed"]
     assert body[3].startswith("# GAPP 1, 0    // error: ") and "GAPP" in body[3]
     # replay in a fresh simulator: same end state
-    fresh = Client(open_sim("TMCM-1311", 1, speed=20), module="TMCM-1311", timeout=0.5)
+    fresh = LineClient(open_sim("TMCM-1311", 1, speed=20), module="TMCM-1311", timeout=0.5)
     try:
         assert script.run_file(Session(fresh, Output()), str(rec)) == 0
         assert fresh.value("GAP 4, 0") == 3000 and fresh.value("GAP 5, 0") == 1001

@@ -8,10 +8,11 @@ from __future__ import annotations
 import pytest
 
 from tmclsh.tmcl import asm
-from tmclsh.client.core import Result
+from tmclsh.client.text import Result
 from tmclsh.tmcl.modules import load
 from tmclsh.tmcl.frames import Reply, Request
-from tmclsh.shell.render import (binary_version, render_event, render_result, result_json,
+from tmclsh.tmcl.modules import type1_of as binary_version
+from tmclsh.shell.render import (render_event, render_result, result_json,
                                  value_text, version_text)
 from tmclsh.shell.trace import decode_hex, describe_instruction, format_frame
 

@@ -9,7 +9,7 @@ import json
 import pytest
 
 from tmclsh.client.ascii import AsciiLink, Echo, LineKind, Mode
-from tmclsh.client.core import Client
+from tmclsh.client.text import LineClient
 from tmclsh.base.errors import ValidationError
 from tmclsh.tmcl.frames import Request
 from tmclsh.shell import terminal as tm
@@ -153,7 +153,7 @@ def session(capsys):
 
     def factory(yes: bool = True, json_mode: bool = False, **kw) -> tuple[Simulator, Session]:
         sim = Simulator("TMCM-1311", 1, **kw)
-        client = Client(SimTransport("TMCM-1311", 1, simulator=sim), module="TMCM-1311",
+        client = LineClient(SimTransport("TMCM-1311", 1, simulator=sim), module="TMCM-1311",
                         timeout=0.25, retries=0)
         made.append((sim, client))
         return sim, Session(client, Output(json_mode=json_mode), yes=yes)

@@ -5,13 +5,14 @@ from __future__ import annotations
 import struct
 
 import pytest
-from hypothesis import assume, given
+from hypothesis import given
 from hypothesis import strategies as st
 
 from tmclsh.base.errors import ChecksumError, FrameError
+from tmclsh.tmcl.decoder import FRAME_PIECE, WHOLE, FrameDecoder, is_version_string
 from tmclsh.tmcl.frames import (INSTRUCTION_LEN, INT32_MAX, INT32_MIN, SERIAL_FRAME_LEN,
                              STATUS_TEXT, UINT32_MAX, Control, Instruction, Reply, ReplyKind,
-                             Request, Status, checksum, decode_reply, parse_hex, reply_kind,
+                             Request, Status, checksum, parse_hex, reply_kind,
                              status_ok, status_text, to_signed32)
 
 byte = st.integers(0, 255)
@@ -133,65 +134,6 @@ def test_status_texts() -> None:
     assert Reply(2, 1, 128, 138, 1).is_event
 
 
-# -- the stream decoder -----------------------------------------------------------------------
-
-def _drain(buf: bytes, kind: ReplyKind = ReplyKind.NORMAL) -> tuple[list[Reply], bytes]:
-    """Feed a whole buffer to decode_reply; return the replies and the unconsumed rest."""
-    found = []
-    while True:
-        used, reply = decode_reply(buf, kind)
-        if used == 0:
-            return found, buf
-        assert used in (1, SERIAL_FRAME_LEN)
-        assert (reply is None) == (used == 1)
-        if reply is not None:
-            found.append(reply)
-        buf = buf[used:]
-
-
-def _frame_at(buf: bytes, i: int) -> bool:
-    """Nine bytes at ``i`` that the decoder must take for a reply."""
-    window = buf[i:i + SERIAL_FRAME_LEN]
-    return (len(window) == SERIAL_FRAME_LEN and window[2] in {int(s) for s in Status}
-            and checksum(window[:8]) == window[8])
-
-
-def test_decoder_needs_nine_bytes() -> None:
-    frame = Reply(2, 1, 100, 6, 711).to_bytes()
-    for n in range(SERIAL_FRAME_LEN):
-        assert decode_reply(frame[:n]) == (0, None)
-    assert decode_reply(frame + b"\x00") == (SERIAL_FRAME_LEN, Reply(2, 1, 100, 6, 711))
-
-
-@given(st.binary(max_size=40), replies)
-def test_decoder_finds_the_frame_after_garbage(garbage: bytes, reply: Reply) -> None:
-    stream = garbage + reply.to_bytes()
-    # garbage that itself forms a valid frame (1 in 256 * 256/9 per position) is a frame
-    assume(not any(_frame_at(stream, i) for i in range(len(garbage))))
-    found, rest = _drain(stream)
-    assert found == [reply] and rest == b""
-
-
-@given(st.lists(replies, min_size=1, max_size=5), st.binary(max_size=12))
-def test_decoder_keeps_consecutive_frames(batch: list[Reply], tail: bytes) -> None:
-    stream = b"".join(r.to_bytes() for r in batch)
-    found, rest = _drain(stream + tail)
-    assert found[:len(batch)] == batch
-
-
-def test_decoder_resynchronises_after_a_lost_byte() -> None:
-    first, second = Reply(2, 1, 100, 6, 711), Reply(2, 1, 100, 10, 1)
-    damaged = first.to_bytes()[1:]  # the host byte got lost on the line
-    found, rest = _drain(damaged + second.to_bytes())
-    assert found == [second] and rest == b""
-
-
-def test_decoder_drops_frames_with_no_tmcl_status() -> None:
-    body = bytes([2, 1, 99, 6, 0, 0, 0, 0])
-    found, _ = _drain(body + bytes([checksum(body)]))
-    assert found == []
-
-
 # -- special replies --------------------------------------------------------------------------
 
 def test_reply_kind_of_each_request() -> None:
@@ -209,7 +151,9 @@ def test_version_string_reply(text: str) -> None:
     assert (reply.host, reply.module, reply.version) == (2, 1, text)
     assert reply.opcode == Control.GET_VERSION and reply.ok
     assert reply.to_bytes() == frame
-    assert decode_reply(frame, ReplyKind.VERSION_STRING, module=1) == (SERIAL_FRAME_LEN, reply)
+    dec = FrameDecoder(2)
+    dec.feed(frame)
+    assert dec.next(whole=lambda w: is_version_string(w, 2)) == (WHOLE, frame)
     can = Reply.from_can(2, text.encode(), ReplyKind.VERSION_STRING, module=1)
     assert can == reply and can.to_can() == text.encode()
 
@@ -227,8 +171,9 @@ def test_memory_reply_legacy_layout(host: int, stored: Instruction) -> None:
     assert frame[1:8] == stored.to_bytes() and frame[8] == checksum(frame[:8])
     back = Reply.from_bytes(frame, ReplyKind.MEMORY, module=1)
     assert back.stored == stored and back.host == host and back.module == 1
-    used, decoded = decode_reply(frame, ReplyKind.MEMORY, module=1)
-    assert used == SERIAL_FRAME_LEN and decoded.stored == stored
+    dec = FrameDecoder(host)
+    dec.feed(frame)
+    assert dec.next(memory=True) == (FRAME_PIECE, frame)  # whatever its "status" byte
     can = Reply.from_can(host, reply.to_can(), ReplyKind.MEMORY, module=1)
     assert can.stored == stored
 

@@ -10,7 +10,7 @@ import os
 import pytest
 
 from tmclsh.tmcl import asm, sourcemap
-from tmclsh.client.core import Client
+from tmclsh.client.text import LineClient
 from tmclsh.base.errors import TmclError
 from tmclsh.tmcl.modules import load
 from tmclsh.tmcl.frames import Control, Instruction, Request
@@ -90,7 +90,7 @@ def sim():
 
 
 def session_on(sim, json_mode: bool = False) -> Session:
-    client = Client(SimTransport(simulator=sim), module="TMCM-1311", timeout=0.3)
+    client = LineClient(SimTransport(simulator=sim), module="TMCM-1311", timeout=0.3)
     return Session(client, Output(json_mode=json_mode), yes=True)
 
 
@@ -169,7 +169,7 @@ def test_step_on_empty_memory_says_so_and_sends_no_step():
     from tmclsh.link import open_serial
 
     module = EmptyModule()
-    client = Client(open_serial(module.path), module="TMCM-1311", timeout=0.5, retries=0)
+    client = LineClient(open_serial(module.path), module="TMCM-1311", timeout=0.5, retries=0)
     try:
         s = Session(client, Output(), yes=True)
         with pytest.raises(TmclError, match=r"program memory of the TMCM-1311 is empty"):

@@ -12,6 +12,7 @@ from __future__ import annotations
 import marshal
 import os
 import sys
+from collections.abc import Callable
 from importlib import resources
 from pathlib import Path
 
@@ -29,8 +30,11 @@ def cache_dir() -> Path:
     return Path(user_cache_dir("tmclsh")) / "data"
 
 
-def load_toml(package: str, name: str) -> dict:
-    """The parsed TOML file ``name`` of ``package`` (a dict of plain values)."""
+def load_toml(package: str, name: str, check: Callable[[str], None] | None = None) -> dict:
+    """The parsed TOML file ``name`` of ``package`` (a dict of plain values).
+
+    ``check(text)`` runs when the file is parsed, before it is cached: a file that fails it
+    raises, and one that passed is not checked again while its content is the same."""
     raw = resources.files(package).joinpath(name).read_bytes()
     digest = blake2b(raw, digest_size=16, person=b"tmclsh-data").hexdigest()
     path = cache_dir() / f"{Path(name).stem}-{digest}-{_FORMAT}.marshal"
@@ -42,7 +46,10 @@ def load_toml(package: str, name: str) -> dict:
         pass
     import tomllib
 
-    data = tomllib.loads(raw.decode("utf-8"))
+    text = raw.decode("utf-8")
+    if check is not None:
+        check(text)
+    data = tomllib.loads(text)
     _store(path, data)
     return data
 

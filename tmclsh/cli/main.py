@@ -61,7 +61,7 @@ def cmd_ports(args: argparse.Namespace) -> int:
 
     from serial.tools import list_ports
 
-    from ..client.connect import TRINAMIC_VID
+    from ..link import TRINAMIC_VID
 
     ports = sorted(list_ports.comports(), key=lambda p: (p.vid != TRINAMIC_VID, p.device))
     as_json = bool(getattr(args, "json", False))
@@ -90,7 +90,8 @@ def cmd_scan(args: argparse.Namespace) -> int:
     import json
 
     from ..client.core import Client
-    from ..client.connect import baud_rates, connection_settings, open_transport
+    from ..client.connect import connection_settings, open_transport
+    from ..tmcl.modules import baud_rates
     from ..base.errors import ConnectError, TransportError, ValidationError
     from ..ops.scan import address_timeout, line_baud, scan
 
@@ -171,7 +172,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
 
 
 def _is_usb(port: str) -> bool:
-    from ..client.connect import trinamic_ports
+    from ..link import trinamic_ports
 
     return any(p.device == port for p in trinamic_ports())
 

@@ -27,7 +27,7 @@ reach its binary framer: no nine-byte window of them carries a valid checksum (a
 checks every address), so they are never taken for a command.
 
 ``decode_line`` and ``classify_line`` are pure (bytes in, results out, no I/O), in the style
-of ``protocol.decode_reply``; ``AsciiLink`` does the I/O through the client's transport, under
+of the frame decoder (tmcl/decoder.py); ``AsciiLink`` does the I/O through the client's transport, under
 the client's lock, so nothing else reads the line while it waits.
 """
 
@@ -43,7 +43,8 @@ from typing import TYPE_CHECKING
 
 from ..tmcl import instructions as isa
 from ..base.errors import StatusError, TmclTimeoutError, TransportError, ValidationError
-from ..tmcl.frames import (INT32_MIN, SERIAL_FRAME_LEN, UINT32_MAX, Control, Reply, ReplyKind, Request, Status, decode_reply, status_ok, to_signed32)
+from ..tmcl.decoder import is_frame
+from ..tmcl.frames import (INT32_MIN, SERIAL_FRAME_LEN, UINT32_MAX, Control, Reply, ReplyKind, Request, Status, status_ok, to_signed32)
 from ..link.base import StreamTransport
 
 if TYPE_CHECKING:
@@ -157,7 +158,7 @@ FIELDS = ("type", "motor", "value")
 def ascii_commands(module: Module | None = None) -> list[str]:
     """The mnemonics the module accepts in ASCII mode, then BIN, RUN and STOP."""
     names = [s.mnemonic for s in isa.all_instructions()
-             if s.ascii and (module is None or s.on(module.name))]
+             if s.ascii and (module is None or s.on(module))]
     return names + list(isa.ASCII_ONLY_COMMANDS)
 
 
@@ -189,14 +190,14 @@ def format_request(req: Request, module: Module | None = None) -> str:
     spec = isa.by_opcode(req.opcode)
     if spec is None or not spec.ascii:
         raise _not_in_ascii(req)
-    if module is not None and not spec.on(module.name):
+    if module is not None and not spec.on(module):
         raise ValidationError(f"{spec.mnemonic} is not available on the {module.name}")
     dropped = [f for f in FIELDS if f not in spec.fields and getattr(req, f)]
     if dropped:
         log.debug("%s: don't-care field(s) %s not sent in ASCII mode", spec.mnemonic, dropped)
     parts = {"type": str(req.type), "motor": str(req.motor), "value": str(to_signed32(req.value))}
     if spec.type_kind == "symbolic":
-        parts["type"] = spec.type_name(req.type, module.name if module else None) or parts["type"]
+        parts["type"] = spec.type_name(req.type, module) or parts["type"]
     ops = ", ".join(parts[f] for f in spec.fields)
     return f"{spec.mnemonic} {ops}" if ops else spec.mnemonic
 
@@ -254,7 +255,7 @@ def next_line(buf: bytes | bytearray) -> tuple[int, bytes | None]:
 
 
 def decode_line(buf: bytes | bytearray, opcode: int = 0) -> tuple[int, Reply | None]:
-    """Pure stream decoder for ASCII replies: ``(consumed, reply)``, like ``decode_reply``.
+    """Pure stream decoder for ASCII replies: ``(consumed, reply)``.
 
     ``(0, None)``: no complete line yet. ``consumed > 0`` with None: a line that is no reply
     (an echo, an empty line between CR and LF, noise) was consumed and should be dropped.
@@ -352,8 +353,8 @@ def ascii_probe_bytes(address: int) -> bytes:
 
 
 def has_valid_frame(data: bytes) -> bool:
-    """Whether any nine-byte window of ``data`` has a valid TMCL checksum."""
-    return any(decode_reply(data[i:i + SERIAL_FRAME_LEN])[1] is not None
+    """Whether any nine-byte window of ``data`` reads as a TMCL reply frame."""
+    return any(is_frame(data[i:i + SERIAL_FRAME_LEN], data[i])
                for i in range(len(data) - SERIAL_FRAME_LEN + 1))
 
 
@@ -397,10 +398,12 @@ class Probe:
 
 
 def _binary_answer(data: bytes, address: int, opcode: int) -> Reply | None:
+    """The reply frame among ``data`` from ``address`` to ``opcode``, if one is there (every
+    window is looked at: ASCII bytes around it need not make whole frames)."""
     for i in range(len(data) - SERIAL_FRAME_LEN + 1):
-        _, reply = decode_reply(data[i:i + SERIAL_FRAME_LEN])
-        if reply is not None and reply.module == address and reply.opcode == opcode:
-            return reply
+        window = data[i:i + SERIAL_FRAME_LEN]
+        if window[1] == address and window[3] == opcode and is_frame(window, window[0]):
+            return Reply.from_frame(window)
     return None
 
 

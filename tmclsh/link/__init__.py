@@ -1,32 +1,58 @@
-"""Open a transport from what the command line says: a port/URL, a CAN spec or the simulator.
+"""The links: which transport takes a ``--port``, ``--can`` or ``--sim``, opened on demand.
 
-Backends are imported on demand (pyserial only for serial links, python-can only for CAN
-links, the simulator only for ``--sim``), so start-up stays fast.
+Transports are a table of names, imported only when used (python-can's ``BACKENDS``):
+pyserial only for serial links, python-can only for CAN links, the simulator only for
+``--sim``, so start-up stays fast. A new stream transport (a URL scheme ``--port`` takes) is
+one file here, a ``StreamTransport`` subclass taking ``(url, baudrate)``, and one line in
+``PORT_SCHEMES``; its frames are read by the serial framing like any other stream's.
 """
 
 from __future__ import annotations
 
+import importlib
+
 from ..base.canspec import FROM_PYTHON_CAN, parse_can
 from .base import CanTransport, StreamTransport, Transport
 
-# pyserial's URL handlers (serial.serial_for_url); anything else with "://" is refused by it
+# pyserial's URL handlers (serial.serial_for_url)
 PYSERIAL_SCHEMES = ("socket", "rfc2217", "loop", "spy", "hwgrep", "alt", "cp2110")
+# what --port takes: a URL scheme -> (module in this package, class); "" is a device path
+# (/dev/ttyACM0, COM3). Anything else with "://" is refused, naming these.
+PORT_SCHEMES: dict[str, tuple[str, str]] = {
+    "": ("serial", "SerialTransport"),
+    **{scheme: ("serial", "SerialTransport") for scheme in PYSERIAL_SCHEMES},
+}
+TRINAMIC_VID = 0x2A3C  # the USB vendor id of Trinamic's modules
+
+
+def port_class(port: str) -> type[StreamTransport]:
+    """The transport class that takes ``port`` (a device path or a URL)."""
+    from ..base.errors import ValidationError
+
+    scheme, sep, _ = port.partition("://")
+    entry = PORT_SCHEMES.get(scheme if sep else "")
+    if entry is None:
+        known = ", ".join(s + "://" for s in PORT_SCHEMES if s)
+        raise ValidationError(f"unknown port URL scheme {scheme + '://'!r}; known: {known}")
+    module, name = entry
+    return getattr(importlib.import_module(f"{__name__}.{module}"), name)
 
 
 def open_serial(port: str, baudrate: int = 9600) -> StreamTransport:
-    """A serial device path (``/dev/ttyACM0``, ``COM3``) or a pyserial URL
-    (``socket://host:port``, ``rfc2217://host:port``, ``loop://``, ``spy://...``,
-    ``hwgrep://2a3c``)."""
-    from ..base.errors import ValidationError
-    from .serial import SerialTransport
-
-    scheme, sep, _ = port.partition("://")
-    if sep and scheme not in PYSERIAL_SCHEMES:
-        raise ValidationError(f"unknown port URL scheme {scheme + '://'!r}; known: "
-                              f"{', '.join(s + '://' for s in PYSERIAL_SCHEMES)}")
-    t = SerialTransport(port, baudrate)
+    """What ``--port`` names, opened: a serial device path (``/dev/ttyACM0``, ``COM3``) or a
+    URL (``socket://host:port``, ``rfc2217://host:port``, ``loop://``, ``spy://...``,
+    ``hwgrep://2a3c``, and whatever ``PORT_SCHEMES`` adds)."""
+    t = port_class(port)(port, baudrate)
     t.open()
     return t
+
+
+def trinamic_ports() -> list:
+    """Serial ports whose USB vendor is Trinamic (0x2A3C), sorted by device name."""
+    from serial.tools import list_ports
+
+    return sorted((p for p in list_ports.comports() if p.vid == TRINAMIC_VID),
+                  key=lambda p: p.device)
 
 
 def open_can(spec: str, bitrate: int | None = None, **kw) -> CanTransport:
@@ -55,4 +81,5 @@ def open_sim(module: str = "TMCM-1311", address: int = 1, **kw) -> StreamTranspo
 
 
 __all__ = ["Transport", "StreamTransport", "CanTransport", "open_serial", "open_can", "open_sim",
-           "parse_can", "PYSERIAL_SCHEMES", "FROM_PYTHON_CAN"]
+           "parse_can", "PYSERIAL_SCHEMES", "PORT_SCHEMES", "FROM_PYTHON_CAN", "TRINAMIC_VID",
+           "trinamic_ports", "port_class"]

@@ -11,11 +11,19 @@ Timeouts are float seconds with pyserial's meanings: None waits forever, 0 never
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from .framing import CanFraming, Owner, SerialFraming
 
 
 class Transport(ABC):
     kind = "stream"  # or "can"
     simulated = False
+
+    def framing(self, owner: Owner) -> SerialFraming | CanFraming:
+        """The framing object that reads and writes frames on this wire for ``owner``."""
+        raise NotImplementedError
 
     def __init__(self, url: str):
         self.url = url
@@ -73,6 +81,12 @@ class StreamTransport(Transport):
     def set_baudrate(self, baud: int) -> None:  # pragma: no cover - only real ports
         raise NotImplementedError
 
+    def framing(self, owner: Owner) -> SerialFraming:
+        """How frames travel on this wire: nine-byte frames delimited by their checksum."""
+        from .framing import SerialFraming
+
+        return SerialFraming(self, owner)
+
 
 class CanTransport(Transport):
     kind = "can"
@@ -82,3 +96,9 @@ class CanTransport(Transport):
 
     @abstractmethod
     def recv(self, timeout: float | None) -> tuple[int, bytes] | None: ...
+
+    def framing(self, owner: Owner) -> CanFraming:
+        """How frames travel on this wire: seven data bytes to an id, replies on another."""
+        from .framing import CanFraming
+
+        return CanFraming(self, owner)

@@ -24,8 +24,9 @@ from dataclasses import dataclass
 
 from ..client.core import Client
 from ..base.errors import ChecksumError, DownloadModeError, TmclError, TmclTimeoutError
-from ..tmcl.frames import SERIAL_FRAME_LEN, Control, Request, checksum
-from ..link.base import CanTransport, StreamTransport, Transport
+from ..tmcl.decoder import is_frame
+from ..tmcl.frames import SERIAL_FRAME_LEN, Control, Request, Status
+from ..link.base import Transport
 
 BITS_PER_BYTE = 10  # 8N1: a start bit, eight data bits, a stop bit
 # margins on top of the wire time (seconds)
@@ -71,7 +72,7 @@ def line_baud(transport: Transport) -> int | None:
     to whatever listens) do not. Only a byte stream has a baud rate (and
     ``set_baudrate``). The first pass's wait, ``Found.baud`` and ``scan --baud auto`` all
     ask this."""
-    if isinstance(transport, StreamTransport) and not transport.simulated and (
+    if transport.kind == "stream" and not transport.simulated and (
             "://" not in transport.url or _is_rfc2217(transport.url)):
         return getattr(transport, "baudrate", None)
     return None
@@ -83,7 +84,7 @@ def _is_rfc2217(url: str) -> bool:
 
 def address_timeout(transport: Transport, *, usb: bool = False) -> float:
     """How long to wait for each address in the first pass (see the module docstring)."""
-    if isinstance(transport, CanTransport):
+    if transport.kind == "can":
         return CAN_TIMEOUT
     if transport.simulated:
         return MARGIN_LOCAL
@@ -100,17 +101,18 @@ def _late_answerer(raw: bytes, host: int) -> int | None:
     """The address a dropped reply came from, if it may be a module's late or garbled answer
     to a presence probe (a damaged reply that still starts with our host address most likely
     names its sender next: worth a second look)."""
-    if len(raw) == SERIAL_FRAME_LEN and raw[0] == host and raw[3] == Control.GET_VERSION \
-            and checksum(raw[:8]) == raw[8]:
-        return raw[1]
-    if 2 <= len(raw) <= 2 * SERIAL_FRAME_LEN and raw[0] == host and checksum(raw[:8]) != \
-            (raw[8] if len(raw) > 8 else -1):
-        return raw[1]
+    if len(raw) < 2 or raw[0] != host:
+        return None
+    whole = len(raw) >= SERIAL_FRAME_LEN and is_frame(raw[:SERIAL_FRAME_LEN], host)
+    if whole and len(raw) == SERIAL_FRAME_LEN and raw[3] == Control.GET_VERSION:
+        return raw[1]  # a late answer
+    if len(raw) <= 2 * SERIAL_FRAME_LEN and not whole:
+        return raw[1]  # a damaged one
     return None
 
 
 def _identify(client: Client, addr: int, binary, timeout: float) -> Found:
-    from ..tmcl.modules import by_firmware_id, from_version_string
+    from ..tmcl.modules import identify
 
     version = None
     try:  # it is there: give it time and a retry for the string
@@ -119,10 +121,9 @@ def _identify(client: Client, addr: int, binary, timeout: float) -> Found:
         version = reply.version if reply is not None else None
     except TmclError:
         pass
-    mod = from_version_string(version) if version else None
-    if mod is None and binary.status == 100:
-        mod = by_firmware_id((binary.value >> 16) & 0xFFFF)
-    return Found(addr, mod.name if mod else None, version, line_baud(client.transport))
+    mod = identify(version, binary.value if binary.status == Status.OK else None)
+    name = mod.name if mod is not None and not mod.generic else None
+    return Found(addr, name, version, line_baud(client.transport))
 
 
 def _probe(client: Client, addr: int, timeout: float, retries: int):

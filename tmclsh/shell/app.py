@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING
 
 from .. import __version__
 from ..base.errors import TmclError, TransportError
-from .session import Abort, QuitShell
+from .session import Abort, QuitShell, reconnected
 
 if TYPE_CHECKING:
     from prompt_toolkit import PromptSession
@@ -241,15 +241,15 @@ LEAVE_OPTIONS = [("stop", "stop everything first, then leave"),
 def may_leave(session: Session) -> bool:
     """Leaving while a motor turns or the stored program runs: ask (stop first / leave
     running / cancel). True when the shell may end."""
-    from ..ops import program
-    from .builtin import stop_all
+    from ..ops.stop import activity
+    from .stop import stop_session
 
     client = session.client
     choose = getattr(session, "choose", None)
     if not client.connected or choose is None:
         return True
     try:
-        act = program.activity(client)
+        act = activity(client)
     except (TmclError, OSError):
         return True
     if act.idle:
@@ -257,7 +257,7 @@ def may_leave(session: Session) -> bool:
     what = str(act)
     answer = choose(f"{what[:1].upper()}{what[1:]}. Leave the shell?", LEAVE_OPTIONS)
     if answer == "stop":
-        report = stop_all(session, "leaving")
+        report = stop_session(session, "leaving")
         if report is not None and not report.ok:
             session.out.warn("not everything stopped: staying in the shell "
                              "(leave again to quit anyway)")
@@ -308,7 +308,7 @@ def run_repl(session: Session, prompt_session: PromptSession | None = None) -> i
     """The interactive shell; returns the exit status (0)."""
     from prompt_toolkit.patch_stdout import patch_stdout
 
-    from .keys import stop_motors
+    from .stop import stop_session
 
     session.interactive = True
     session.ask = ask_yes_no
@@ -343,10 +343,7 @@ def run_repl(session: Session, prompt_session: PromptSession | None = None) -> i
             except KeyboardInterrupt:
                 # Ctrl-C where the key binding is not active: a dumb terminal, or the
                 # moment between two prompts when the terminal is in cooked mode
-                try:
-                    stop_motors(session)
-                except KeyboardInterrupt:  # pressed again during the stop: keep going
-                    pass
+                stop_session(session, "Ctrl-C")
     finally:
         unlisten()
         client.stop_event_poller()
@@ -378,11 +375,11 @@ def _is_tmcl(line: str) -> bool:
 
 def run_one(session: Session, line: str) -> bool:
     """One line with every failure turned into a message; False after ``.quit``."""
-    from .keys import stop_motors
     from .main import report_error
+    from .stop import stop_session
 
     # a lost link (also one a .watch met) is brought back before the next TMCL line
-    lost = session.link_lost or not session.client.connected
+    lost = not session.client.connected
     if lost and _is_tmcl(line):
         if not _try_reconnect(session):
             return True
@@ -397,15 +394,14 @@ def run_one(session: Session, line: str) -> bool:
         session.out.info(str(exc))
     except TransportError as exc:
         report_error(session, line, exc)
-        if _is_tmcl(line) or not session.client.connected:  # (a failed .connect PORT
-            session.link_lost = True                          # leaves the old link alone)
+        if not session.client.connected:  # (a failed .connect PORT leaves the old link up)
             session.out.info("the link is down: the next command tries to reconnect "
                              "(or .connect [PORT])")
     except TmclError as exc:
         report_error(session, line, exc)
     except KeyboardInterrupt:
         session.end_interrupted_line()  # the terminal echoed ^C on the command's line
-        stop_motors(session, "interrupted")
+        stop_session(session, "interrupted")
     except Exception as exc:  # a bug must not take the motor shell down with it
         log.debug("internal error", exc_info=True)
         session.out.error(line, f"internal error ({type(exc).__name__}: {exc}); "
@@ -425,7 +421,7 @@ _NO_RECONNECT = frozenset({".connect", ".quit", ".exit", "quit", "exit", ".help"
 def _try_reconnect(session: Session, quiet: bool = False) -> bool:
     why = session.reconnect()
     if why is None:
-        session.out.ok(f"reconnected to {session.client.describe()}")
+        session.out.ok(reconnected(session.client))
         return True
     if not quiet:
         switch = ". .connect [PORT] to switch" if isinstance(why, TmclError) else ""

@@ -18,6 +18,7 @@ from ..tmcl.frames import Control, Request, status_ok
 from .commands import all_commands, command, find
 from .completer import Candidate, param_meta
 from .render import paged
+from .session import reconnected
 
 if TYPE_CHECKING:
     from .session import Session
@@ -254,10 +255,9 @@ def _help_instruction(session: Session, spec: isa.InstructionSpec,
 
     out = session.out
     mod = session.client.module
-    modname = mod.name if mod else None
     if out.json:
         out.emit({"mnemonic": spec.mnemonic, "opcode": spec.opcode, "summary": spec.summary,
-                  "syntax": spec.syntax, "types": spec.type_names(modname),
+                  "syntax": spec.syntax, "types": spec.type_names(mod),
                   "modules": sorted(spec.modules), "direct": spec.direct, "ascii": spec.ascii,
                   "note": spec.note, **({"source": spec.source} if source else {})})
         return
@@ -272,7 +272,7 @@ def _help_instruction(session: Session, spec: isa.InstructionSpec,
     for fld in spec.fields:
         grid.add_row(fld, _field_help(spec, fld, mod))
     grid.add_row("modules", ", ".join(sorted(spec.modules)) +
-                 ("" if mod is None or spec.on(mod.name) else
+                 ("" if mod is None or spec.on(mod) else
                   f"  (not the connected {mod.name})"))
     where = []
     where.append("at the prompt" if spec.direct else "only inside a stored program")
@@ -291,16 +291,15 @@ def _help_instruction(session: Session, spec: isa.InstructionSpec,
 def _syntax(spec: isa.InstructionSpec, mod: Module | None) -> str:
     if mod is None or spec.type_kind != "symbolic":
         return spec.syntax
-    names = "|".join(spec.type_names(mod.name))
+    names = "|".join(spec.type_names(mod))
     return spec.syntax.replace("|".join(spec.type_names()), names)
 
 
 def _field_help(spec: isa.InstructionSpec, fld: str, mod: Module | None) -> str:
-    modname = mod.name if mod else None
     if fld == "type":
         kind = spec.type_kind
         if kind == "symbolic":
-            return ", ".join(f"{n} = {v}" for n, v in spec.type_names(modname).items())
+            return ", ".join(f"{n} = {v}" for n, v in spec.type_names(mod).items())
         if kind in ("axis_param", "global_param"):
             what = "axis" if kind == "axis_param" else "global"
             count = ""
@@ -857,7 +856,7 @@ def cmd_connect(session: Session, arg: str) -> None:
         if client.module is None:
             client.identify()
         _refresh_program_state(session)
-        session.out.ok(f"reconnected: {_where(session)}")
+        session.out.ok(f"{reconnected(client)}: {_where(session)}")
         return
     settings = session.settings
     module: str | None = None
@@ -878,7 +877,6 @@ def cmd_connect(session: Session, arg: str) -> None:
     # the old module is left in the mode it was found in; the new one is brought up as at
     # the command line (136, -m checked, download mode ended, ASCII mode recognised)
     client.switch_transport(transport, module)
-    session.link_lost = False
     for key in ("port", "can", "sim"):
         settings.pop(key, None)
     settings.update(new)
@@ -1001,11 +999,14 @@ def cmd_version(session: Session, arg: str) -> None:
     value = binary.value & 0xFFFFFFFF if binary is not None and binary.ok else None
     client.version = version or client.version
     mod = from_version_string(version) if version else None
-    from .render import binary_version, parse_version_string, version_text
+    from ..tmcl.modules import type1_of
+    from ..tmcl.version import parse_string
+    from .render import version_text
 
     layout_of = mod or client.module
-    from_string = parse_version_string(version) if version else None
-    from_binary = binary_version(value, layout_of) if value is not None else None
+    parsed = parse_string(version)
+    from_string = (parsed.type_number, parsed.number) if parsed is not None else None
+    from_binary = type1_of(value, layout_of) if value is not None else None
     agrees = None if from_string is None or value is None else from_binary == from_string
     if session.out.json:
         session.out.emit({"version": version, "binary": value,
@@ -1034,67 +1035,12 @@ def cmd_version(session: Session, arg: str) -> None:
 
 @command(".stopall")
 def cmd_stopall(session: Session, arg: str) -> None:
-    report = stop_all(session)
-    if report is not None and not report.ok:
+    from .stop import stop_session
+
+    report = stop_session(session)
+    if report is not None and session.out.json:
+        session.out.emit(report.to_json())
+    if report is None or not report.ok:
         err = TmclError("not everything stopped (see above)")
         err.shown = True  # type: ignore[attr-defined]
         raise err
-
-
-def stop_all(session: Session, why: str = ""):
-    """Stop the program and the motors (``program.stop_everything``) and say what the module
-    reports afterwards; the one stop behind Ctrl-C, ``.stopall`` and the watch's keys.
-    Returns the report (None when not connected). Never raises a TmclError."""
-    from ..ops import program
-
-    client = session.client
-    prefix = f"{why}: " if why else ""
-    try:
-        # a link lost before or during the stop is worth one attempt to bring it back
-        report = program.stop_everything(client, reconnect=session.reconnect)
-    except (TmclError, OSError) as exc:  # not expected (it reports instead), but a stop never raises
-        session.out.warn(f"{prefix}stopping failed: {exc}")
-        return None
-    if report.link_error is not None:
-        session.out.warn(f"{prefix}not connected ({report.link_error}); nothing could be "
-                         "stopped")
-        return None
-    if report.reconnected:
-        session.out.info(f"reconnected to {client.describe()}")
-    if report.program is not None and report.program_error is None:
-        session.state["program_state"] = "stop"  # the toolbar and prompt follow
-    report_stop(session, report, why)
-    return report
-
-
-def describe_stop(report, prefix: str = "") -> tuple[str | None, list[str]]:
-    """The confirmation (None if nothing stopped) and the warnings for a StopReport:
-    ``stored program stopped; stopped motor 0 (MST; speed reads 0)``."""
-    parts = []
-    if report.program == "stopped":
-        parts.append("stored program stopped")
-    if report.stopped:
-        which = "motor" if len(report.stopped) == 1 else "motors"
-        parts.append(f"stopped {which} {', '.join(map(str, report.stopped))} "
-                     "(MST; speed reads 0)")
-    warnings = []
-    if report.program_error:
-        warnings.append(f"{prefix}the stored program may still run: {report.program_error}")
-    for m, speed in sorted(report.turning.items()):
-        warnings.append(f"{prefix}motor {m} did NOT stop: it still turns at speed {speed} "
-                        "after MST")
-    for m, why_not in sorted(report.unknown.items()):
-        warnings.append(f"{prefix}motor {m} may still turn: {why_not}; check the connection!")
-    return (prefix + "; ".join(parts) if parts else None), warnings
-
-
-def report_stop(session: Session, report, why: str = "") -> None:
-    """Say what a stop did (``describe_stop``); ``.stopall`` under --json also gives the
-    report as an object."""
-    if session.out.json and not why:
-        session.out.emit(report.to_json())
-    ok, warnings = describe_stop(report, f"{why}: " if why else "")
-    if ok:
-        session.out.ok(ok)
-    for text in warnings:
-        session.out.warn(text)

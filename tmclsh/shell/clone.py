@@ -93,10 +93,8 @@ class Slot:
 
 
 def _shown(value: int, param: Parameter | None) -> int:
-    """A reply's value as the parameter reads: unsigned parameters arrive as negative numbers."""
-    if param is not None and param.min is not None and param.min >= 0 and value < 0:
-        return value & 0xFFFFFFFF
-    return value
+    """A reply's value as the parameter reads (``Parameter.reading``)."""
+    return value if param is None else param.reading(value)
 
 
 def _same(a: int, b: int) -> bool:

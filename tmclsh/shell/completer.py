@@ -119,8 +119,8 @@ Suggestion = (Mnemonic | ShellCommand | CommandArg | SymbolicType | AxisParam | 
               | ReadMnemonic | Variable | Function)
 
 # which access a mnemonic needs from the parameter in its type slot
-_ACCESS = {"SAP": "W", "SGP": "W", "AAP": "W", "AGP": "W", "GAP": "R", "GGP": "R",
-           "STAP": "E", "STGP": "E", "RSAP": "E", "RSGP": "E"}
+# what a parameter's access letters must hold for a command's access (instructions.toml)
+_ACCESS = {"read": "R", "write": "W", "store": "E"}
 
 _WORD = re.compile(r"[\w.$]*$")
 _LABEL_PREFIX = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\s*:\s*")
@@ -177,11 +177,11 @@ def suggest(text: str, module: Module | None = None) -> list[Suggestion]:
         if kind == "symbolic":
             return [SymbolicType(mnem)]
         if kind == "axis_param":
-            return [AxisParam(mnem, _ACCESS.get(mnem, "R"))]
+            return [AxisParam(mnem, _ACCESS.get(spec.access or "read", "R"))]
         if kind == "global_param":
-            return [GlobalParam(mnem, _ACCESS.get(mnem, "R"))]
+            return [GlobalParam(mnem, _ACCESS.get(spec.access or "read", "R"))]
         if kind == "port":
-            return [IoPort(mnem, outputs=mnem == "SIO")]
+            return [IoPort(mnem, outputs=spec.access == "write")]
         if kind == "interrupt":
             return [Interrupt(mnem)]
         return []
@@ -190,7 +190,7 @@ def suggest(text: str, module: Module | None = None) -> list[Suggestion]:
             return [MotorNumber(mnem)]
         if spec.motor_kind == "bank":
             if spec.type_kind == "port":
-                return [IoBank(mnem, given.get("type", ""), outputs=mnem == "SIO")]
+                return [IoBank(mnem, given.get("type", ""), outputs=spec.access == "write")]
             if spec.type_kind == "global_param":
                 return [ParamBank(mnem, given.get("type", ""))]
         return []
@@ -315,7 +315,8 @@ _EXPR_KEYWORDS = ("and", "or", "not")
 
 
 def _read_fields() -> dict[str, int]:
-    return {s.mnemonic: len(s.fields) for s in isa.all_instructions() if s.reads} | {"RFS": 2}
+    return {s.mnemonic: len(s.fields) for s in isa.all_instructions()
+            if s.reads or s.read_types}
 
 
 def suggest_expression(text: str, names: tuple[str, ...] = ()) -> list[Suggestion]:
@@ -376,8 +377,9 @@ def suggest_expression(text: str, names: tuple[str, ...] = ()) -> list[Suggestio
             return []
         fragment = top[0] + text[top[1] + len(top[0]):]
         out = suggest(fragment)
-        if top[0] == "RFS":
-            out = [SymbolicType("RFS", ("STATUS",)) if isinstance(s, SymbolicType) else s
+        spec = isa.by_mnemonic(top[0])
+        if spec is not None and not spec.reads and spec.read_types:  # (RFS STATUS)
+            out = [SymbolicType(top[0], spec.read_types) if isinstance(s, SymbolicType) else s
                    for s in out]
         return out
     if want_value:
@@ -500,16 +502,17 @@ def candidates(s: Suggestion, word: str, module: Module | None,
         return out
     if isinstance(s, SymbolicType):
         spec = isa.by_mnemonic(s.mnemonic)
-        names = spec.type_names(module.name if module else None) if spec else {}
+        names = spec.type_names(module) if spec else {}
         return [Candidate(n, f"type {v}") for n, v in names.items()
                 if not s.only or n in s.only]
     if isinstance(s, ReadMnemonic):
         specs = module.instructions if module is not None else isa.all_instructions()
         ascii_mode = session is not None and session.client.mode == "ascii"
-        return [Candidate(sp.mnemonic, sp.summary) for sp in specs
-                if sp.reads and sp.direct and (sp.ascii or not ascii_mode)] + (
-            [Candidate("RFS", "RFS STATUS, motor: reference search running?")]
-            if any(sp.mnemonic == "RFS" for sp in specs) else [])
+        return [Candidate(sp.mnemonic, sp.summary if sp.reads else
+                          f"{sp.mnemonic} {'|'.join(sp.read_types)}, {sp.motor_kind}: "
+                          f"{sp.summary.lower()}")
+                for sp in specs if (sp.reads or sp.read_types) and sp.direct
+                and (sp.ascii or not ascii_mode)]
     if isinstance(s, Variable):
         values = dict(getattr(session, "variables", None) or {})
         out = [Candidate(n, "watched value") for n in s.extra]

@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING, Protocol
 from ..tmcl import instructions as isa
 from ..base import limits
 from ..base.errors import StatusError, TmclError, ValidationError
-from ..tmcl.frames import Control, Request, status_ok, status_text
+from ..tmcl.frames import status_ok, status_text
 
 if TYPE_CHECKING:
     from ..tmcl.asm import Encoded
@@ -299,12 +299,10 @@ def _check(value: Number, node: Node) -> Number:
 # -- parsing -----------------------------------------------------------------------------
 
 KEYWORDS = {"and", "or", "not"}
-# The commands whose reply value is a reading; RFS counts only with its STATUS type.
-_RFS = "RFS"
-
-
 def read_mnemonics() -> set[str]:
-    return {s.mnemonic for s in isa.all_instructions() if s.reads} | {_RFS}
+    """The commands whose reply value is a reading (GAP ...), or is with some types (RFS
+    STATUS: the instruction set's ``read_types``)."""
+    return {s.mnemonic for s in isa.all_instructions() if s.reads or s.read_types}
 
 
 class _Parser:
@@ -498,10 +496,11 @@ class _Parser:
         while len(operands) < limit and self.is_op(","):
             self.take()
             operands.append(self.operand())
-        if mnemonic == _RFS and not (isinstance(operands[0], str)
-                                     and operands[0].upper() == "STATUS"):
-            raise self.error("RFS can be read only as 'RFS STATUS, motor' (START and STOP "
-                             "move the motor)", self.toks[start])
+        only = spec.read_types if spec is not None and not spec.reads else ()
+        if only and not (isinstance(operands[0], str) and operands[0].upper() in only):
+            form = f"{mnemonic} {'|'.join(only)}, {spec.motor_kind}"
+            raise self.error(f"{mnemonic} can be read only as '{form}' (its other types act "
+                             "on the module)", self.toks[start])
         return Read(self.toks[start].col, self.span(start), mnemonic, tuple(operands))
 
     def operand(self) -> str | Node:
@@ -590,7 +589,6 @@ class SessionContext:
         return value
 
 
-CONFIRM_ROUNDS = 3  # reads again of an answer in doubt before it is said to be in doubt
 
 
 @dataclass
@@ -621,49 +619,9 @@ class TrackedContext(SessionContext):
 
 
 def can_doubt(session: Session) -> bool:
-    """Whether the client tells answers in doubt apart (``Client.suspect_seqs``)."""
-    client = session.client
-    return callable(getattr(client, "suspect_seqs", None)) and getattr(
-        client, "mode", None) != "ascii"
-
-
-def doubtful(session: Session, answered: Mapping[int, str], *, confirm: bool = True
-             ) -> set[str]:
-    """The reads (``answered``'s texts) whose answer may have been another request's: a late
-    copy of the reply before it, taken for it; the client finds that out when the real
-    answer comes while nothing waits for it. ``confirm``: what is waiting is taken in, and
-    one more exchange made (136 type 1) when the last answer may be such a copy, so the
-    line's last answer has arrived (the module answers in order)."""
-    if not answered or not can_doubt(session):
-        return set()
-    client = session.client
-    if confirm:
-        poll = getattr(client, "poll", None)
-        if callable(poll):
-            poll()  # what waits already is taken in (free: nothing is sent, nothing awaited)
-        copy = getattr(client, "last_may_be_a_copy", None)
-        simulated = getattr(getattr(client, "transport", None), "simulated", False)
-        # the exchange only if the last answer may be the reply before it, taken again; not
-        # on the simulator in process (whatever follows an answer is waiting already, as
-        # in Client.confirm_last)
-        if not simulated and (not callable(copy) or copy()):
-            try:
-                client.request(Request(client.address, Control.GET_VERSION, 1, 0, 0))
-            except TmclError:
-                pass  # what it could find is found by the next request's flush as well
-    found = client.suspect_seqs()
-    return {text for seq, text in answered.items() if seq in found}
-
-
-def settle_doubts(session: Session, answered: Mapping[int, str]) -> None:
-    """The suspects among ``answered`` were dealt with by their reader (read again, or
-    said to be in doubt): taken from the client, so they are not reported again."""
-    take = getattr(session.client, "take_suspects", None)
-    if callable(take) and answered:
-        try:
-            take(answered.keys())
-        except TypeError:  # (a client whose take_suspects takes everything)
-            pass
+    """Whether answers can be in doubt on this link (not in ASCII mode, whose replies are
+    lines in order)."""
+    return session.client.mode != "ascii"
 
 
 def encode_read(session: Session, text: str) -> Encoded:
@@ -688,11 +646,8 @@ def read_value(session: Session, text: str) -> Number:
         raise StatusError(reply.status, reply,
                           f"{text}: module answered status {reply.status}: "
                           f"{status_text(reply.status)}")
-    value = reply.value
     p = enc.parameter
-    if p is not None and p.min is not None and p.min >= 0 and value < 0:
-        value &= 0xFFFFFFFF  # unsigned 32-bit parameters arrive as negative numbers
-    return value
+    return reply.value if p is None else p.reading(reply.value)
 
 
 def validate(session: Session, expression: Expression) -> None:

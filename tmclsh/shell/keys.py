@@ -4,7 +4,7 @@ Ctrl-C is the safety key. At the prompt it stops everything and clears the line:
 program if it runs (128; a running program would start the motors again), MST to every motor
 (whether it moves or not: MST on a motor at rest does nothing), then each motor's actual
 speed read back. It says "stopped" only for motors that read 0, and names any that did not. While a command runs, Ctrl-C interrupts it and the REPL
-does the same stop (see ``app.py``). Ctrl-D on an empty line leaves.
+does the same stop (see ``app.py``); both are the one stop, ``stop.py``. Ctrl-D on an empty line leaves.
 
 Tab completes the way pgcli does it: the first Tab inserts the best match and opens the menu
 with the others, further Tabs cycle through them.
@@ -22,25 +22,16 @@ if TYPE_CHECKING:
     from .session import Session
 
 
-def stop_motors(session: Session, why: str = "Ctrl-C") -> None:
-    """Stop the stored program and every motor, then say what the module reads back
-    (``builtin.stop_all``). Never raises."""
-    from .builtin import stop_all
-
-    try:
-        stop_all(session, why)
-    except Exception as exc:  # the safety key must never break the shell
-        session.out.warn(f"{why}: stopping failed: {exc}")
-
-
 def tmcl_bindings(session: Session) -> KeyBindings:
     kb = KeyBindings()
 
     @kb.add("c-c")
     def _stop(event) -> None:
         """Stop every motor, clear the line."""
+        from .stop import stop_session
+
         event.current_buffer.reset()
-        run_in_terminal(lambda: stop_motors(session))
+        run_in_terminal(lambda: stop_session(session, "Ctrl-C"))
 
     @kb.add("tab", filter=~has_completions)
     def _complete(event) -> None:

@@ -119,37 +119,10 @@ def run_shell(args: argparse.Namespace) -> int:
 
 
 def _stop_on_interrupt(client) -> None:
-    """Ctrl-C in -c/-f: stop everything (program.stop_everything) and say what reads back."""
-    from ..ops.program import stop_everything
+    """Ctrl-C in -c/-f: the one stop (stop.py), said on stderr."""
+    from .stop import ToStderr, stop_all
 
-    def reconnect() -> BaseException | None:
-        try:
-            client.reconnect()
-        except (TmclError, OSError) as exc:
-            return exc
-        return None
-
-    try:
-        # a link lost before or during the stop is worth one attempt to bring it back
-        report = stop_everything(client, reconnect=reconnect)
-    except KeyboardInterrupt:
-        print("interrupted again: the motors may still turn", file=sys.stderr)
-        return
-    except (TmclError, OSError) as exc:
-        print(f"interrupted; stopping failed: {exc}", file=sys.stderr)
-        return
-    if report.link_error is not None:
-        print(f"interrupted; not connected ({report.link_error}); nothing could be stopped",
-              file=sys.stderr)
-        return
-    if report.reconnected:
-        print(f"reconnected to {client.describe()}", file=sys.stderr)
-    from .builtin import describe_stop
-
-    ok, warnings = describe_stop(report)
-    print("interrupted" + (f"; {ok}" if ok else ""), file=sys.stderr)
-    for text in warnings:
-        print(text, file=sys.stderr)
+    stop_all(client, ToStderr(), "interrupted")
 
 
 def _interactive(args: argparse.Namespace) -> bool:
@@ -243,25 +216,24 @@ def _last_events(session: Session) -> None:
         pass
 
 
-# commands that start a motor or the program: ROR ROL MVP RFS, run (129), step (130); and
-# SAP 2 (target speed: in velocity mode the motor follows it)
-_STARTS = frozenset({1, 2, 4, 13, 129, 130})
-_SAP, _TARGET_SPEED = 5, 2
-
-
 def _watch_for_starts(client):
-    """A tracer noting whether anything that starts motion was sent; returns the question."""
+    """A tracer noting whether anything that starts motion was sent (the instruction set's
+    ``starts_motion``, and a write to a parameter whose data says it does: SAP 2, the target
+    speed a velocity mode follows); returns the question."""
     from ..tmcl.frames import Request
+    from ..tmcl.instructions import starting_opcodes
 
+    starts = starting_opcodes()
+    writes = _motion_parameters(client)
     sent = []
 
     def tracer(direction: str, raw: bytes, decoded: object) -> None:
         if not sent and direction == "tx" and isinstance(decoded, Request) and (
-                decoded.opcode in _STARTS
-                or (decoded.opcode == _SAP and decoded.type == _TARGET_SPEED)):
+                decoded.opcode in starts or (decoded.opcode, decoded.type) in writes):
             sent.append(True)
 
-    remove = client.add_tracer(tracer, sent_only=True, opcodes=_STARTS | {_SAP})
+    remove = client.add_tracer(tracer, sent_only=True,
+                               opcodes=starts | {op for op, _ in writes})
 
     def started() -> bool:
         remove()
@@ -270,10 +242,25 @@ def _watch_for_starts(client):
     return started
 
 
+def _motion_parameters(client) -> frozenset[tuple[int, int]]:
+    """(write command, parameter number) of the parameters whose data says writing them can
+    start the motor."""
+    from ..tmcl import instructions as isa
+
+    mod = client.module
+    if mod is None or mod.generic:
+        return frozenset()
+    writes = [s for s in isa.all_instructions() if s.access == "write" and s.on(mod)]
+    return frozenset((s.opcode, p.number) for s in writes
+                     for p in (mod.axis_params if s.type_kind == "axis_param"
+                               else mod.global_params)
+                     if p.starts_motion)
+
+
 def _note_left_running(session: Session) -> None:
     """A script that ends while a motor turns or the program runs says so on stderr (it
     leaves them so: that may well be what it was for)."""
-    from ..ops.program import activity
+    from ..ops.stop import activity
 
     client = session.client
     if not client.connected:

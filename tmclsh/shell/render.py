@@ -32,8 +32,9 @@ from functools import wraps
 from typing import Any
 
 from ..tmcl import instructions as isa
-from ..client.core import Result
-from ..tmcl.modules import Module, Parameter
+from ..client.text import Result
+from ..tmcl.modules import Module, Parameter, type1_of
+from ..tmcl.version import TYPE_FIRST, type1_bytes
 from ..tmcl.frames import Control, Reply, Status, status_text
 from .style import rich_theme
 
@@ -475,9 +476,7 @@ def result_json(result: Result) -> dict[str, Any]:
 
 
 def _unsigned(value: int, param: Parameter | None) -> int:
-    if param is not None and param.min is not None and param.min >= 0 and value < 0:
-        return value & 0xFFFFFFFF  # unsigned 32-bit parameters arrive as negative numbers
-    return value
+    return value if param is None else param.reading(value)
 
 
 def value_text(value: int, param: Parameter | None) -> str:
@@ -495,16 +494,6 @@ def value_text(value: int, param: Parameter | None) -> str:
 
 
 # what a successful command without a read value did, in words
-_DONE = {
-    # MST sets the target speed to 0 (the manual): the motor ramps down, it has not stopped
-    "MST": "motor {motor} stopping (target speed 0; it ramps down)",
-    "STAP": "{param} stored in EEPROM",
-    "RSAP": "{param} restored from EEPROM",
-    "STGP": "{param} stored in EEPROM",
-    "RSGP": "{param} restored from EEPROM",
-}
-
-
 def render_result(result: Result, module: Module | None) -> Styled:
     reply = result.reply
     enc = result.encoded
@@ -524,7 +513,6 @@ def render_result(result: Result, module: Module | None) -> Styled:
             out.append(f"  ({hint})", style="tmcl.note")
         return out
     spec = enc.spec
-    param = enc.parameter
     if reply.stored is not None:
         from .trace import describe_instruction
 
@@ -545,66 +533,46 @@ def render_result(result: Result, module: Module | None) -> Styled:
             return out
         out.append(describe_reply(reply, module))
         return out
-    if spec.reads:
+    if spec.reads_with(ins.type, module) and spec.done_text(ins.type, module) is None:
         return _render_read(out, result, module)
-    mnem = spec.mnemonic
     out.append("ok", style="tmcl.status.ok")
-    velocity = (module.units.get("velocity", "") if module else "")
-    fields = {"motor": ins.motor, "value": ins.signed_value, "velocity": velocity,
-              "param": param.name if param else f"parameter {ins.type}"}
-    if mnem in ("SAP", "SGP") and param is not None:
-        out.append(f": {param.name} set to {value_text(ins.signed_value, param)}")
-    elif mnem in ("AAP", "AGP") and param is not None:
-        out.append(f": accumulator copied to {param.name}")
-    elif mnem == "MVP":
-        out.append(_mvp_text(result, module))
-    elif mnem == "SIO":
-        port = module.port(ins.motor, ins.type) if module else None
-        name = port.name if port else f"port {ins.type}"
-        if module is not None and ins.type == module.io_all_port:
-            name = "all outputs"
-        out.append(f": {name} set to {ins.signed_value}")
-    elif mnem == "RFS":
-        types = {v: n for n, v in spec.type_names(module.name if module else None).items()}
-        what = types.get(ins.type, str(ins.type))
-        if what == "STATUS":
-            out.append(f": reference search {'running' if reply.value else 'not running'} "
-                       f"(value {reply.value})")
-        else:
-            out.append(f": reference search {what.lower()} on motor {ins.motor}")
-    elif mnem in ("ROR", "ROL"):
-        out.append(": " + _rotate_text(mnem, ins.motor, ins.signed_value, velocity))
-    elif mnem in _DONE:
-        out.append(": " + _DONE[mnem].format(**fields).rstrip())
+    if spec.turns is not None:  # ROR/ROL: which way, said from the sign
+        velocity = module.units.get("velocity", "") if module else ""
+        out.append(": " + _rotate_text(spec, ins.motor, ins.signed_value, velocity))
+        return out
+    done = spec.done_text(ins.type, module)
+    if done is not None:
+        out.append(": " + done.format(**_done_fields(result, module)).rstrip())
     elif reply.value:
         out.append(f", value {reply.value}")
     return out
 
 
-def _rotate_text(mnem: str, motor: int, value: int, unit: str) -> str:
+def _done_fields(result: Result, module: Module | None) -> dict[str, object]:
+    """What a ``done`` sentence of the instruction set may name (instructions.toml)."""
+    ins, param, reply = result.encoded.instruction, result.encoded.parameter, result.reply
+    port = module.port(ins.motor, ins.type) if module is not None else None
+    port_name = port.name if port is not None else f"port {ins.type}"
+    if module is not None and ins.type == module.io_all_port:
+        port_name = "all outputs"
+    value = ins.signed_value
+    return {"motor": ins.motor, "value": value,
+            "value_text": value_text(value, param) if param is not None else str(value),
+            "param": param.name if param is not None else f"parameter {ins.type}",
+            "port": port_name, "reply": reply.value if reply is not None else "",
+            "running": "running" if reply is not None and reply.value else "not running",
+            "position_unit": module.units.get("position", "") if module else "",
+            "velocity_unit": module.units.get("velocity", "") if module else ""}
+
+
+def _rotate_text(spec, motor: int, value: int, unit: str) -> str:
     """Which way the motor turns: ROL with a negative speed turns right (the module sets
     the target speed to -value), and speed 0 stops it."""
     if value == 0:
         return f"motor {motor} stopping (speed 0; it ramps down)"
-    right = (value > 0) == (mnem == "ROR")
-    way = "right" if right else "left"
+    way = spec.turns if value > 0 else ("left" if spec.turns == "right" else "right")
     text = f"motor {motor} rotating {way} at {abs(value)} {unit}".rstrip()
-    return f"{text} ({mnem} with a negative speed)" if value < 0 else text
-
-
-def _mvp_text(result: Result, module: Module | None) -> str:
-    ins = result.encoded.instruction
-    spec = result.encoded.spec
-    names = {v: n for n, v in spec.type_names(module.name if module else None).items()} if spec else {}
-    kind = names.get(ins.type, str(ins.type))
-    unit = module.units.get("position", "") if module else ""
-    if kind == "ABS":
-        return f": motor {ins.motor} moving to {ins.signed_value} {unit}".rstrip()
-    if kind == "REL":
-        return f": motor {ins.motor} moving by {ins.signed_value} {unit}".rstrip()
-    if kind == "COORD":
-        return f": moving to coordinate {ins.signed_value}"
-    return ""
+    return f"{text} ({spec.mnemonic} with a negative speed)" if value < 0 else text
 
 
 def _render_read(out, result: Result, module: Module | None):
@@ -618,7 +586,7 @@ def _render_read(out, result: Result, module: Module | None):
         from .trace import param_for
 
         param = param_for(ins, module)
-    if spec is not None and spec.mnemonic == "GIO" and module is not None:
+    if spec is not None and spec.type_kind == "port" and module is not None:
         if ins.type == module.io_all_port and ins.motor in module.io_all_banks:
             ports = sorted((p for p in module.io if p.bank == ins.motor), key=lambda p: p.port)
             what = "outputs" if ports and ports[0].kind == "digital_out" else "inputs"
@@ -694,28 +662,6 @@ def _status_hint(status: int) -> str:
     }.get(status, "")
 
 
-def binary_version(value: int, module: Module | None) -> tuple[int, int] | None:
-    """``(module type, version)`` from a 136 type 1 value, or None if it does not decode."""
-    decoded = _binary_layout(value, module)
-    return None if decoded is None else decoded[:2]
-
-
-def _binary_layout(value: int, module: Module | None) -> tuple[int, int, bool] | None:
-    """``(module type, version, type first)``.
-
-    The manuals differ in byte order (TMCM-1311: type high, type low, version low, version
-    high; TMCM-1640: version low, version high, type low, type high): the layout whose type
-    matches the module's firmware id wins."""
-    b = (value & 0xFFFFFFFF).to_bytes(4, "big")
-    type_first = (b[0] << 8 | b[1], b[2] | b[3] << 8, True)
-    version_first = (b[2] | b[3] << 8, b[0] | b[1] << 8, False)
-    if module is not None and version_first[0] == module.firmware_id:
-        return version_first
-    if module is None or type_first[0] == module.firmware_id:
-        return type_first
-    return None
-
-
 def prose_list(items, empty: str = "none") -> str:
     """``0, 1, 2`` for people, never ``[0, 1, 2]``; ``empty`` when there is nothing."""
     words = [str(i) for i in items]
@@ -727,19 +673,15 @@ def version_text(value: int, module: Module | None) -> str:
     ``05 1F 6F 00: module type 1311 (05 1F), version 111 (6F 00, low byte first)``."""
     b = [f"{x:02X}" for x in (value & 0xFFFFFFFF).to_bytes(4, "big")]
     raw = " ".join(b)
-    decoded = _binary_layout(value, module)
+    decoded = type1_of(value, module)
     if decoded is None:
         return f"{raw} (not a module type and version this module's manual describes)"
-    kind, ver, type_first = decoded
-    kind_bytes, ver_bytes = (b[:2], b[2:]) if type_first else (b[2:], b[:2])
-    return (f"{raw}: module type {kind} ({' '.join(kind_bytes)}{'' if type_first else ', low byte first'}), "
-            f"version {ver} ({' '.join(ver_bytes)}, low byte first)")
-
-
-def parse_version_string(text: str) -> tuple[int, int] | None:
-    """``(module type, version)`` from a 136 type 0 string (``1311V111`` -> (1311, 111))."""
-    m = re.fullmatch(r"\s*(\d+)V(\d+)\s*", text or "")
-    return (int(m.group(1)), int(m.group(2))) if m else None
+    kind, ver = decoded
+    layout = module.version_layout if module is not None else TYPE_FIRST
+    kind_at, ver_at = type1_bytes(layout)
+    low_first = "" if layout == TYPE_FIRST else ", low byte first"
+    return (f"{raw}: module type {kind} ({' '.join(b[kind_at])}{low_first}), "
+            f"version {ver} ({' '.join(b[ver_at])}, low byte first)")
 
 
 def _scaled(value: int, unit: str) -> str:

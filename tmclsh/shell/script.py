@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING
 
 from ..base import files, limits
 from ..base.errors import AsmError, RangeError, TmclError, TmclTimeoutError, ValidationError
+from ..client.ledger import CONFIRM_ROUNDS
 from . import commands, expr
 from .commands import command
 from .lines import split_line
@@ -921,20 +922,20 @@ def judge(session: Session, expression: expr.Expression, *, again: bool = True,
     twice, a read may take a copy of the reply before it (same command, same layout); the
     client finds that out when the real answer comes while nothing waits for it, which one
     more exchange (136 type 1, ``confirm``) gives the chance to. A read in doubt is read
-    again (the whole condition, ``expr.CONFIRM_ROUNDS`` times at most, if ``again``).
+    again (the whole condition, ``CONFIRM_ROUNDS`` times at most, if ``again``).
     The suspects a check dealt with are taken from the client (not reported again)."""
     answered: dict[int, str] = {}
     tries = 0
-    for tries in range(1, 2 + (expr.CONFIRM_ROUNDS if again else 0)):
+    for tries in range(1, 2 + (CONFIRM_ROUNDS if again else 0)):
         ctx = expr.TrackedContext(session)
         try:
             ok, left, right = check(expression, ctx)
         finally:
             answered.update(ctx.answered)
-        doubt = expr.doubtful(session, ctx.answered, confirm=confirm)
+        doubt = session.client.in_doubt(ctx.answered, confirm=confirm)
         if not doubt:
             break
-    expr.settle_doubts(session, answered)
+    session.client.settle(answered)
     return Judged(ok, left, right, sorted(doubt), answered, tries)
 
 
@@ -982,11 +983,11 @@ def cmd_wait(session: Session, args: str) -> None:
         nonlocal last
         before, last = last, judge(session, expression, again=False, confirm=False)
         if before is not None:  # (judged by this poll's requests)
-            expr.settle_doubts(session, before.answered)
+            session.client.settle(before.answered)
         if not last.ok or last.doubt:
             return False  # a "not yet" in doubt costs one more poll: a condition met is confirmed
-        last.doubt = sorted(expr.doubtful(session, last.answered, confirm=True))
-        expr.settle_doubts(session, last.answered)
+        last.doubt = sorted(session.client.in_doubt(last.answered, confirm=True))
+        session.client.settle(last.answered)
         return not last.doubt
 
     left = session.time_left()
@@ -1000,8 +1001,8 @@ def cmd_wait(session: Session, args: str) -> None:
         seen = ""
         if last is not None:
             # the last answer judged, so it is not stated as read when it was in doubt
-            doubt = sorted(expr.doubtful(session, last.answered, confirm=True)) or last.doubt
-            expr.settle_doubts(session, last.answered)
+            doubt = sorted(session.client.in_doubt(last.answered, confirm=True)) or last.doubt
+            session.client.settle(last.answered)
             last.doubt = doubt
             seen = last.in_doubt() if doubt else last.seen()
         raise TmclTimeoutError(f"timed out after {timeout:g} s waiting for {expression.text} "

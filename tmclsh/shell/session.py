@@ -15,7 +15,11 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from ..tmcl import asm
-from ..client.core import Client, Result, _name, idempotent
+from ..tmcl import instructions as isa
+from ..client.core import idempotent
+from ..client.text import LineClient as Client
+from ..client.text import Result
+from ..link.framing import name_of as _name
 from ..base.errors import (ChecksumError, StatusError, TmclError, TmclTimeoutError, TransportError, ValidationError)
 from ..tmcl.modules import Module
 from ..tmcl.status import OK_STATUSES
@@ -25,7 +29,6 @@ from .render import Output
 
 _VAR = re.compile(r"\$\{([^}]*)\}")
 ANSWERED = 64  # recent replies whose line a later suspect report can name
-_ENTER_ASCII = 139  # (Control.ENTER_ASCII)
 
 
 
@@ -42,6 +45,12 @@ def unknown_command(word: str) -> str:
     close = difflib.get_close_matches(word.lower(), names, n=3, cutoff=0.6)
     near = f"did you mean {', '.join(close)}? " if close else ""
     return f"unknown shell command {word!r}; {near}type .help for the list"
+
+def reconnected(client) -> str:
+    """The one wording of a link brought back, wherever it is said (the prompt, a script
+    with --keep-going, the stop, a watch, .connect)."""
+    return f"reconnected to {client.describe()}"
+
 
 class Abort(TmclError):
     """The user declined a confirmation; nothing was sent."""
@@ -107,9 +116,6 @@ class Session:
         self.time_limit: float | None = None
         self._deadline: float | None = None
         self.state["evaluate"] = _evaluate  # ${expression} in any line
-        # the REPL saw the link fail (a TransportError): its next line reconnects first.
-        # Cleared by every reconnect that succeeds (reconnect below, .connect)
-        self.link_lost = False
 
     def close(self) -> bool:
         """End the session: run the closers; a failing one is reported, the rest still run.
@@ -138,15 +144,13 @@ class Session:
         self.interrupted_line_ended = True
 
     def reconnect(self) -> TmclError | OSError | None:
-        """One attempt to bring the link back (``client.reconnect``): None when it is back
-        (``link_lost`` cleared), else the error that says why not. The REPL, a watch,
-        ``.stopall`` and ``--keep-going`` scripts all come back this way and say it in their
-        own words."""
+        """One attempt to bring the link back (``client.reconnect``): None when it is back,
+        else the error that says why not. The REPL, a watch, the stop and ``--keep-going``
+        scripts all come back this way."""
         try:
             self.client.reconnect()
         except (TmclError, OSError) as exc:
             return exc
-        self.link_lost = False
         return None
 
     def ensure_link(self) -> None:
@@ -157,7 +161,7 @@ class Session:
         why = self.reconnect()
         if why is not None:
             raise TransportError(f"still disconnected ({why}); the line was not run")
-        self.out.info(f"reconnected to {self.client.describe()}")
+        self.out.info(reconnected(self.client))
 
     # -- confirmation -------------------------------------------------------------------
     def confirm(self, question: str) -> None:
@@ -325,14 +329,8 @@ class Session:
         client = self.client
         enc, req = client.prepare(self.expand(text) if "${" in text else text)
         spec = enc.spec
-        if spec is None or spec.persists or spec.mnemonic == "SGP":  # may ask first
-            if enc.instruction.opcode == _ENTER_ASCII:
-                raise ValidationError(
-                    "139 (enter ASCII mode) is not sent as a line: the module would stop "
-                    "listening to the binary commands tmclsh sends, and stay in ASCII mode "
-                    "after it exits; .mode ascii switches to it (tmclsh then talks ASCII "
-                    "and switches back at exit)")
-            self._confirm_persistent(enc)
+        if spec is None or spec.confirm:  # may refuse, or ask first
+            self._before_sending(enc)
         try:
             reply = client.request(req)
         except (TmclTimeoutError, ChecksumError) as exc:
@@ -358,15 +356,23 @@ class Session:
                                                               else reply.version))
         return result
 
-    def _confirm_persistent(self, enc: asm.Encoded) -> None:
-        spec, p, ins = enc.spec, enc.parameter, enc.instruction
-        if spec is not None and spec.persists:
+    def _before_sending(self, enc: asm.Encoded) -> None:
+        """What the instruction set says of a command before it is sent (``confirm``,
+        ``not_a_line``): a question, or a refusal (a raw number: its control's entry)."""
+        p, ins = enc.parameter, enc.instruction
+        spec = enc.spec or isa.control(ins.opcode)
+        if spec is None:
+            return
+        refusal = getattr(spec, "not_a_line", None)
+        if refusal:
+            raise ValidationError(f"{ins.opcode} ({spec.name}) is not sent as a line: {refusal}")
+        if spec.confirm == "store":
             what = p.name if p is not None else f"parameter {ins.type}"
             self.confirm(f"store {what} permanently in the module's EEPROM?")
-        elif spec is not None and spec.mnemonic == "SGP" and p is not None and p.storable \
-                and p.bank == 0:
-            self.confirm(f"SGP {p.name} writes the module's EEPROM; continue?")
-        elif spec is None and ins.opcode == 137:
+        elif spec.confirm == "storable" and p is not None and p.storable and p.bank == 0:
+            self.confirm(f"{spec.mnemonic} {p.name} writes the module's EEPROM; "
+                         "continue?")
+        elif spec.confirm == "factory":
             self.confirm("restore FACTORY DEFAULTS (all settings and the stored program are lost)?")
 
     def _record(self, line: str, outcome: str) -> None:

@@ -511,21 +511,9 @@ class Terminal:
     def stop_motors(self) -> None:
         """The shell's one stop (the stored program first: MST alone is undone by a program
         that runs), said as the shell says it: only a motor whose speed reads 0 is stopped."""
-        from ..ops import program
-        from .builtin import describe_stop
+        from .stop import ToNotes, stop_all
 
-        try:
-            report = program.stop_everything(self.session.client)
-        except Exception as exc:  # the safety key never breaks the terminal
-            self.note(f"stopping failed: {exc}; the motors may still turn")
-            return
-        said, warnings = describe_stop(report)
-        if said is not None:
-            self.note(said)
-        for text in warnings:
-            self.note(text)
-        if said is None and not warnings:
-            self.note("nothing to stop: the module reports no motor")
+        stop_all(self.session.client, ToNotes(self.note), session=self.session)
 
     def banner(self) -> None:
         c = self.session.client

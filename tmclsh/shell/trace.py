@@ -20,6 +20,7 @@ from ..tmcl import asm
 from ..tmcl import instructions as isa
 from ..base.errors import FrameError
 from ..tmcl.modules import Module
+from ..tmcl.decoder import FRAME_PIECE, pieces
 from ..tmcl.frames import (INSTRUCTION_LEN, SERIAL_FRAME_LEN, VERSION_STRING_LEN, Instruction, Reply, Request, Status, checksum, parse_hex, status_text, to_signed32)
 
 if TYPE_CHECKING:
@@ -297,14 +298,24 @@ def decode_hex(text: str, module: Module | None) -> list[tuple[bytes, list[Readi
     data = _parse_hex(text)
     if not data:
         raise FrameError("no bytes given: .decode 01 06 04 00 00 00 00 00 0b")
-    if len(data) in (INSTRUCTION_LEN, VERSION_STRING_LEN, SERIAL_FRAME_LEN):
-        frames = [data]
-    elif len(data) % SERIAL_FRAME_LEN == 0:
-        frames = [data[i:i + SERIAL_FRAME_LEN] for i in range(0, len(data), SERIAL_FRAME_LEN)]
-    else:
+    if len(data) in (INSTRUCTION_LEN, VERSION_STRING_LEN):
+        return [(data, decode_frame(data, module, hint))]  # CAN data
+    # serial frames, found as every reader finds them (tmcl/decoder.py); a run of bytes that
+    # are no frame is read nine bytes at a time when it has that length (a frame whose sum
+    # is wrong, or a version string), else shown as what it is
+    out: list[tuple[bytes, list[Reading]]] = []
+    for kind, raw in pieces(data):
+        if kind == FRAME_PIECE or len(raw) % SERIAL_FRAME_LEN == 0:
+            out += [(raw[i:i + SERIAL_FRAME_LEN],
+                     decode_frame(raw[i:i + SERIAL_FRAME_LEN], module, hint))
+                    for i in range(0, len(raw), SERIAL_FRAME_LEN)]
+        else:
+            out.append((raw, [Reading("no frame", f"{len(raw)} bytes that are no frame "
+                                                  "(no nine of them end in their sum)")]))
+    if not any(len(f) == SERIAL_FRAME_LEN for f, _ in out):
         raise FrameError(f"{len(data)} bytes: expected 9-byte serial frames (or 7/8 bytes of "
                          "CAN data)")
-    return [(f, decode_frame(f, module, hint)) for f in frames]
+    return out
 
 
 __all__ = ["enable_trace", "disable_trace", "trace_enabled", "format_frame", "decode_hex",

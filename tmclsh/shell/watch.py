@@ -22,7 +22,7 @@
 * Keys (when stdin is a terminal; read through prompt_toolkit's input in raw mode, so the
   Windows console works as a POSIX terminal does; restored on exit): ``s`` or space stops
   everything (the stored program if it runs, MST to every motor, speeds read back: the
-  shell's one stop, ``program.stop_everything``) and keeps watching; Ctrl-C does the same
+  shell's one stop, stop.py) and keeps watching; Ctrl-C does the same
   and ends the watch; ``q`` or Esc ends the watch quietly (motors keep running). Ctrl-C (a
   key in raw mode, a signal otherwise) is taken between reads, so a transaction is never
   cut in half; a second one interrupts at once.
@@ -47,8 +47,10 @@ from typing import TYPE_CHECKING, TextIO
 
 from ..base import files
 from ..base.errors import TmclError, TransportError, ValidationError
+from ..client.ledger import CONFIRM_ROUNDS
 from . import expr, lines, plot, script
 from .commands import command
+from .session import reconnected
 
 if TYPE_CHECKING:
     from .session import Session
@@ -180,19 +182,19 @@ class _Reading:
         """Judge the answers: ``confirm`` sends one 136 type 1 first, so the line's last
         answer has arrived (without it, the last read stays unjudged unless a suspect was
         found: reading again ends with that exchange). ``again``: read an answer in doubt
-        again (``expr.CONFIRM_ROUNDS`` times at most), else mark it at once (too late to be
+        again (``CONFIRM_ROUNDS`` times at most), else mark it at once (too late to be
         this sample's value). ``followed``: a request has been sent since the last read
         (the next sample's), so every answer can be judged without an exchange."""
         if self.lost is not None or self.judged:
             return
         session, ctx = self.session, self.ctx
-        doubt = expr.doubtful(session, ctx.answered, confirm=confirm)
+        doubt = session.client.in_doubt(ctx.answered, confirm=confirm)
         self.judged = confirm or followed or not expr.can_doubt(session)
         rounds = 0
-        while doubt and again and rounds < expr.CONFIRM_ROUNDS:
+        while doubt and again and rounds < CONFIRM_ROUNDS:
             rounds += 1
             self.reread += len(doubt)
-            expr.settle_doubts(session, ctx.answered)
+            session.client.settle(ctx.answered)
             for seq in [q for q, text in ctx.answered.items() if text in doubt]:
                 del ctx.answered[seq]
             for text in doubt:
@@ -201,7 +203,7 @@ class _Reading:
             for item in self.items:
                 if self.uses.get(item.name, set()) & doubt and not self._evaluate(item):
                     return
-            doubt = expr.doubtful(session, ctx.answered, confirm=True)
+            doubt = session.client.in_doubt(ctx.answered, confirm=True)
             self.judged = True
         if doubt:
             names = [i.name for i in self.items if self.uses.get(i.name, set()) & doubt]
@@ -210,7 +212,7 @@ class _Reading:
                 self.errors.pop(name, None)
             self.suspect += [n for n in names if n not in self.suspect]
         if self.judged:
-            expr.settle_doubts(session, ctx.answered)
+            session.client.settle(ctx.answered)
 
     def sample(self) -> Sample:
         if self.lost is not None:
@@ -558,7 +560,7 @@ class WatchResult:
     samples: int
     elapsed: float
     reason: str  # count, until, key, interrupt, pipe
-    stops: list = field(default_factory=list)  # program.StopReport of each stop, in order
+    stops: list = field(default_factory=list)  # ops.stop.StopReport of each stop, in order
     reread: int = 0  # answers found in doubt within their sample and read again
     doubtful: dict[str, int] = field(default_factory=dict)  # name -> samples it was in doubt
 
@@ -755,7 +757,7 @@ class _Watch:
 
     def _end(self, reason: str) -> str:
         stopped = False
-        if reason == "interrupt" and self.session.client.connected:
+        if reason == "interrupt":
             self._stop_all()  # Ctrl-C is the safety key here too
             stopped = True
         if self.pending is not None:  # shown too, judged first
@@ -766,12 +768,13 @@ class _Watch:
         return reason
 
     def _reconnect(self) -> bool:
-        """One attempt to bring the lost link back; True when it is."""
-        if self.session.reconnect() is not None:
+        """One attempt to bring the lost link back (unless something else did); True when it
+        is."""
+        if not self.session.client.connected and self.session.reconnect() is not None:
             return False
         lost, self.state.lost = self.state.lost, None
-        self.state.note = (f"link back at {time.monotonic() - self.start:.1f} s "
-                           f"(was lost: {lost})")
+        self.state.note = (f"{reconnected(self.session.client)} at "
+                           f"{time.monotonic() - self.start:.1f} s (lost: {lost})")
         if self.view is None:
             self.session.out.err.print(f"watch: {self.state.note}", style="tmcl.note",
                                        markup=False)
@@ -807,20 +810,21 @@ class _Watch:
                 return None
 
     def _stop_all(self) -> None:
-        """The shell's one stop (program, motors, read back), said in the table's caption."""
-        from ..ops import program
-        from .builtin import describe_stop
+        """The shell's one stop (a lost link brought back first, program, motors, read
+        back), said in the table's caption."""
+        from .stop import ToNotes, stop_all
 
-        if self.state.lost is not None:
-            self.state.note = "link lost: nothing could be stopped"
-        else:
-            report = program.stop_everything(self.session.client)
+        said: list[str] = []
+        report = stop_all(self.session.client, ToNotes(said.append), session=self.session)
+        if report is not None:
             self.result.stops.append(report)
-            if report.program is not None and report.program_error is None:
-                self.session.state["program_state"] = "stop"  # the toolbar and prompt follow
-            ok, warnings = describe_stop(report)
-            at = f"at {time.monotonic() - self.start:.1f} s"
-            self.state.note = "; ".join([f"{ok} {at}" if ok else f"stop {at}", *warnings])
+            if self.session.client.connected:
+                self.state.lost = None  # (brought back for the stop)
+        at = f"at {time.monotonic() - self.start:.1f} s"
+        done = [s for s in said if not s.startswith("reconnected")]  # (what the stop did)
+        first = done[0] if done else "stop"
+        self.state.note = "; ".join([*[s for s in said if s not in done],
+                                     f"{first} {at}", *done[1:]])
         if self.view is not None:
             self.view.update(force=True)
         else:
@@ -861,9 +865,9 @@ def cmd_watch(session: Session, args: str) -> None:
         else:
             session.out.warn(f"warning: {warning}")
     if result.stops and result.reason == "interrupt":  # Ctrl-C's stop, said below the table
-        from .builtin import report_stop
+        from .stop import say_report
 
-        report_stop(session, result.stops[-1], "watch")
+        say_report(session.out, result.stops[-1], "watch")
 
 
 def out_is_pipe(session: Session) -> bool:

@@ -95,7 +95,7 @@ class Commands:
         spec = isa.by_opcode(ins.opcode)
         if spec is None:
             return Status.INVALID_COMMAND, 0
-        if not spec.on(self.module.name):
+        if not spec.on(self.module):
             return Status.COMMAND_NOT_AVAILABLE, 0
         handler = self.handlers.get(ins.opcode)
         if handler is None:
@@ -128,7 +128,7 @@ class Commands:
         return Status.OK, 0
 
     def _mvp(self, ins: Instruction, accu: int | None) -> Result:
-        types = isa.by_mnemonic("MVP").type_names(self.module.name)  # type: ignore[union-attr]
+        types = isa.by_mnemonic("MVP").type_names(self.module)  # type: ignore[union-attr]
         value = ins.signed_value
         if ins.type == types.get("COORD"):
             motors = [ins.motor]
@@ -153,7 +153,7 @@ class Commands:
         return Status.OK, 0
 
     def _rfs(self, ins: Instruction, accu: int | None) -> Result:
-        types = isa.by_mnemonic("RFS").type_names(self.module.name)  # type: ignore[union-attr]
+        types = isa.by_mnemonic("RFS").type_names(self.module)  # type: ignore[union-attr]
         if ins.type not in types.values():
             return Status.WRONG_TYPE, 0
         if not self._motor_ok(ins.motor):

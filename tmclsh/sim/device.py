@@ -25,7 +25,10 @@ from ..tmcl import instructions as isa
 from ..tmcl.asm import Line, encode, parse_line
 from ..base.errors import AsmError
 from ..tmcl.modules import Module, load
-from ..tmcl.frames import (FACTORY_DEFAULT_KEY, SERIAL_FRAME_LEN, Control, Instruction, Reply, Request, Status, checksum, to_signed32)
+from ..tmcl.decoder import NOISE, WHOLE, FrameDecoder, is_frame
+from ..tmcl.frames import (FACTORY_DEFAULT_KEY, SERIAL_FRAME_LEN, Control, Instruction, Reply,
+                           Request, Status, to_signed32)
+from ..tmcl.version import encode_type1
 from .ascii import Echo, LineDiscipline, address_char, echo_mode, reply_line
 from .commands import Commands
 from .model import AXIS, EEPROM_MAGIC, GLOBAL, Coordinates, IoState, Live, ParamStore
@@ -37,11 +40,6 @@ log = logging.getLogger(__name__)
 
 SERIAL = "serial"
 CAN = "can"
-
-# Command 136 type 1: the TMCM-1640 manual puts the version first (version low, version high,
-# type low, type high); the TMCM-1311 manual the type first (05 1F, version low, version high).
-# The TMCM-351 manual prints no layout; it gets the TMCM-1311 one.
-VERSION_FIRST = frozenset({"TMCM-1640"})
 
 IRQ = isa.interrupts()
 RUN_FROM_CURRENT, RUN_FROM_ADDRESS = 0, 1  # command 129 types
@@ -196,7 +194,7 @@ class Simulator:
         self._outq: deque[tuple[float, str, object]] = deque()
         self._late_copies: deque[tuple[str, object]] = deque()  # the "dup-late" fault
         self._last_due = 0.0
-        self._rx = bytearray()
+        self._rx = FrameDecoder()  # requests: any frame that adds up
         self._rx_time = 0.0
         self._line = LineDiscipline()
         self._ascii = False
@@ -538,44 +536,41 @@ class Simulator:
         return False
 
     def _receive_binary(self, data: bytes) -> bytes:
+        """Frames out of the bytes, as every reader finds them (tmcl/decoder.py)."""
         now = time.monotonic()
-        if self._rx and now - self._rx_time > self.FRAME_GAP:
-            log.debug("discarding %d bytes of a partial frame after a gap", len(self._rx))
-            self._rx.clear()
-        self._rx_time = now
-        self._rx += data
         rx = self._rx
-        while len(rx) >= SERIAL_FRAME_LEN:
-            frame = bytes(rx[:SERIAL_FRAME_LEN])
-            me = self.address
-            if checksum(frame[:8]) == frame[8]:
-                del rx[:SERIAL_FRAME_LEN]
-                if frame[0] != me:
-                    continue  # another module's frame on a shared line
-                if not self._lose():
-                    self._handle(Request.from_bytes(frame), SERIAL)
-                if self._ascii:
-                    rest = bytes(rx)
-                    rx.clear()
-                    return rest
-            elif frame[0] == me and not self._frame_ahead(me):
-                del rx[:SERIAL_FRAME_LEN]
+        if rx.buf and now - self._rx_time > self.FRAME_GAP:
+            log.debug("discarding %d bytes of a partial frame after a gap", len(rx.buf))
+            rx.clear()
+        self._rx_time = now
+        rx.feed(data)
+        me = self.address
+        while (piece := rx.next(whole=self._damaged)) is not None:
+            kind, frame = piece
+            if kind == NOISE:
+                continue  # garbage or a misaligned frame: the decoder slid past it
+            if kind == WHOLE:  # a frame for this module whose sum is wrong
                 if not self._lose():
                     self._last_command = time.monotonic()
                     self._send_reply(SERIAL, me, frame[1], Answer(Status.WRONG_CHECKSUM))
-            else:
-                del rx[0]  # garbage or a misaligned frame: slide one byte to resynchronise
+                continue
+            if frame[0] != me:
+                continue  # another module's frame on a shared line
+            if not self._lose():
+                self._handle(Request.from_bytes(frame), SERIAL)
+            if self._ascii:
+                return rx.rest()
         return b""
 
-    def _frame_ahead(self, me: int) -> bool:
-        """A valid frame for this module starts inside the head frame: the head is garbage,
-        not a frame. (A valid frame further on does not overlap the head, which is then a
-        frame of its own; looking only this far keeps a flood of address bytes linear.)"""
-        rx = self._rx
-        for k in range(1, min(SERIAL_FRAME_LEN, len(rx) - SERIAL_FRAME_LEN + 1)):
-            if rx[k] == me and checksum(rx[k:k + 8]) == rx[k + 8]:
-                return True
-        return False
+    def _damaged(self, window: bytearray) -> bool:
+        """Nine bytes addressed to this module that are no frame, with no frame for it
+        starting inside them: a request damaged on the line, which a module answers with
+        status 1. (A valid frame further on does not overlap the head, which is then a frame
+        of its own; looking only this far keeps a flood of address bytes linear.)"""
+        me = self.address
+        return window[0] == me and not any(
+            window[k] == me and is_frame(window[k:k + SERIAL_FRAME_LEN])
+            for k in range(1, min(SERIAL_FRAME_LEN, len(window) - SERIAL_FRAME_LEN + 1)))
 
     def _receive_ascii(self, data: bytes) -> bytes:
         me = address_char(self.address)
@@ -640,7 +635,7 @@ class Simulator:
         spec = isa.by_mnemonic(line.mnemonic)
         if spec is None:
             return Answer(Status.INVALID_COMMAND)
-        if not spec.on(self.module.name) or not spec.ascii or not spec.direct:
+        if not spec.on(self.module) or not spec.ascii or not spec.direct:
             return Answer(Status.COMMAND_NOT_AVAILABLE, _ascii_value_field(line, spec))
         try:
             enc = encode(line, self.module, direct=True, ascii=True)
@@ -703,7 +698,7 @@ class Simulator:
         spec = isa.by_opcode(op)
         if spec is None:
             return Answer(Status.INVALID_COMMAND)
-        if not spec.on(self.module.name):
+        if not spec.on(self.module):
             return Answer(Status.COMMAND_NOT_AVAILABLE)
         if self.vm.download:
             if self.vm.download_addr >= self.vm.size:
@@ -779,12 +774,9 @@ class Simulator:
         self._line.clear()
 
     def _version_binary(self) -> int:
-        fid, ver = self.module.firmware_id & 0xFFFF, self.module.firmware_version & 0xFFFF
-        if self.module.name in VERSION_FIRST:
-            layout = (ver & 0xFF, ver >> 8, fid & 0xFF, fid >> 8)
-        else:
-            layout = (fid >> 8, fid & 0xFF, ver & 0xFF, ver >> 8)
-        return int.from_bytes(bytes(layout), "big")
+        """136 type 1, in the byte order the module's data file gives (``version_layout``)."""
+        mod = self.module
+        return encode_type1(mod.firmware_id, mod.firmware_version, mod.version_layout)
 
     # -- VM host --------------------------------------------------------------------------------
     def clock(self) -> float:

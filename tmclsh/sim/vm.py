@@ -15,11 +15,10 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
-from enum import IntEnum
 from typing import Protocol
 
 from ..tmcl import instructions as isa
-from ..tmcl.frames import Instruction, Status, to_signed32
+from ..tmcl.frames import AppState, Instruction, Status, to_signed32
 
 log = logging.getLogger(__name__)
 
@@ -50,15 +49,6 @@ WAIT = _types("WAIT")
 CLE = _types("CLE")
 RFS = _types("RFS")
 GLOBAL_IRQ = isa.interrupts()["TI_GLOBAL"]
-
-
-class State(IntEnum):
-    """GP 128 / command 135 values."""
-
-    STOP = 0
-    RUN = 1
-    STEP = 2
-    RESET = 3
 
 
 class Host(Protocol):
@@ -124,7 +114,7 @@ class Vm:
     host: Host
     interrupts_supported: bool = False
     memory: list[Instruction | None] = field(init=False)
-    state: State = State.STOP
+    state: AppState = AppState.STOP
     pc: int = 0
     accu: int = 0
     x: int = 0
@@ -147,16 +137,16 @@ class Vm:
     # -- host-facing controls (128-135) ----------------------------------------------------
     @property
     def active(self) -> bool:
-        return self.state == State.RUN or self.wait is not None
+        return self.state == AppState.RUN or self.wait is not None
 
     def reset(self) -> None:
-        self.state = State.RESET
+        self.state = AppState.RESET
         self.pc = 0
         self._clear()
 
     def power_up(self) -> None:
         self.reset()
-        self.state = State.STOP
+        self.state = AppState.STOP
         self.download = False
 
     def _clear(self) -> None:
@@ -174,10 +164,10 @@ class Vm:
         """Wipe program memory (GP 81 code protection switched off); the program stops."""
         self.memory = [None] * self.size
         self.reset()
-        self.state = State.STOP
+        self.state = AppState.STOP
 
     def stop(self) -> None:
-        self.state = State.STOP
+        self.state = AppState.STOP
         self.wait = None
 
     def run(self, address: int | None = None) -> None:
@@ -187,13 +177,13 @@ class Vm:
             self.isr = None
             self.pending.clear()
             self.wait = None
-        self.state = State.RUN
+        self.state = AppState.RUN
 
     def step(self) -> None:
         """Execute one instruction; a WAIT that is not yet met completes in later ticks."""
         if self.wait is not None:
             return
-        self.state = State.STEP
+        self.state = AppState.STEP
         self._execute_one()
 
     def read(self, address: int) -> Instruction:
@@ -201,7 +191,7 @@ class Vm:
 
     # -- interrupts ---------------------------------------------------------------------------
     def raise_interrupt(self, number: int) -> None:
-        if self.interrupts_supported and self.state == State.RUN and number in self.enabled:
+        if self.interrupts_supported and self.state == AppState.RUN and number in self.enabled:
             self.pending.add(number)
 
     def _service_interrupt(self) -> bool:
@@ -222,11 +212,11 @@ class Vm:
     def tick(self, budget: int) -> int:
         """Run up to ``budget`` instructions (RUN state) and complete a pending WAIT."""
         done = 0
-        if self.state == State.RUN:
+        if self.state == AppState.RUN:
             self._service_interrupt()
         if self.wait is not None and not self._poll_wait():
             return 0
-        while self.state == State.RUN and done < budget:
+        while self.state == AppState.RUN and done < budget:
             self._service_interrupt()
             self._execute_one()
             done += 1
@@ -255,11 +245,11 @@ class Vm:
     def _execute_one(self) -> None:
         if not 0 <= self.pc < self.size:
             log.info("program counter %d left program memory: program stopped", self.pc)
-            self.state = State.STOP
+            self.state = AppState.STOP
             return
         ins = self.memory[self.pc]
         if ins is None or ins.opcode == 0:
-            self.state = State.STOP  # unwritten memory reads as opcode 0: end of program
+            self.state = AppState.STOP  # unwritten memory reads as opcode 0: end of program
             return
         self._exec(ins)
 
@@ -268,7 +258,7 @@ class Vm:
             self.pc = address
         else:
             log.info("jump to %d outside program memory: program stopped", address)
-            self.state = State.STOP
+            self.state = AppState.STOP
 
     def _load(self, value: int) -> None:
         self.accu = _int32(value)
@@ -295,7 +285,7 @@ class Vm:
             self.pc = self.stack.pop() if self.stack else nxt
             return None
         if op == OP["STOP"]:
-            self.state = State.STOP
+            self.state = AppState.STOP
             return None
         if op == OP["WAIT"]:
             self.wait = Wait(ins.type, ins.motor, self.host.clock(), max(value, 0))

@@ -396,7 +396,7 @@ def encode(line: Line, module: Module, symbols: Symbols | None = None, *,
         if module.generic and not hint:
             hint = "; any command can be sent by number: <command> <type>, <motor>, <value>"
         raise line.error(f"unknown command {line.mnemonic!r}{hint}", line.mnemonic_col)
-    if not spec.on(module.name):
+    if not spec.on(module):
         hint = (f" (no data on this module's commands: send it by number, {spec.opcode} "
                 "<type>, <motor>, <value>)") if module.generic else ""
         raise line.error(f"{spec.mnemonic} is not available on the {module.name}{hint}",
@@ -489,7 +489,7 @@ class _Encoder:
             return value  # SCO/GCO bank 255: copy coordinates between RAM and EEPROM
         if kind == "motor":
             if (spec.mnemonic == "MVP" and mod.motors > 1 and value >= mod.motors
-                    and type_ == spec.type_names(mod.name).get("COORD")):
+                    and type_ == spec.type_names(mod).get("COORD")):
                 # TMCM-351 MVP COORD: bit 7 multi-motor, bit 6 interpolation, bits 0-2 mask
                 if not 0 <= value <= 0xFF or value & 0x38 or not value & 0xC0 or not value & 0x07:
                     raise self.fail(f"motor field {value} is not a valid MVP COORD motor mask "
@@ -519,7 +519,7 @@ class _Encoder:
         spec, mod = self.spec, self.module
         kind = spec.type_kind
         if kind == "symbolic":
-            names = spec.type_names(mod.name)
+            names = spec.type_names(mod)
             name = (expr.name or "").upper()
             if expr.is_name and name in names:
                 return names[name]
@@ -587,7 +587,7 @@ class _Encoder:
             if not lo <= value <= hi:
                 raise self.fail(f"velocity {value} out of range {lo}..{hi}", expr, "range")
         elif kind == "position":
-            if spec.mnemonic == "MVP" and fields["type"] == spec.type_names(mod.name).get("COORD"):
+            if spec.mnemonic == "MVP" and fields["type"] == spec.type_names(mod).get("COORD"):
                 if not 0 <= value < mod.coordinates:
                     raise self.fail(f"coordinate {value} out of range: 0..{mod.coordinates - 1}", expr,
                                 "range")
@@ -649,11 +649,11 @@ class _Encoder:
         p, spec = self.param, self.spec
         if p is None:
             return
-        if spec.mnemonic in ("SAP", "SGP", "AAP", "AGP") and not p.writable:
+        if spec.access == "write" and not p.writable:
             raise self.fail(f"{p.label} {p.name} is read-only")
-        if spec.reads and not p.readable:
+        if spec.access == "read" and not p.readable:
             raise self.fail(f"{p.label} {p.name} is write-only")
-        if spec.mnemonic in ("STAP", "STGP", "RSAP", "RSGP") and not p.storable:
+        if spec.access == "store" and not p.storable:
             raise self.fail(f"{p.label} {p.name} cannot be stored in EEPROM (access {p.access})")
 
 
@@ -1038,23 +1038,20 @@ def disassemble_instruction(ins: Instruction, module: Module | None = None,
     spec = isa.by_opcode(ins.opcode)
     if spec is None:
         return _raw_text(ins), "raw command"
-    if module is not None and not spec.on(module.name):
+    if module is not None and not spec.on(module):
         return _raw_text(ins), f"{spec.mnemonic} is not available on the {module.name}"
     dont_care = [f for f in FIELDS if f not in spec.fields and getattr(ins, f) != 0]
     if dont_care:
         return _raw_text(ins), f"{spec.mnemonic} with don't-care {'/'.join(dont_care)} set"
-    modname = module.name if module else None
     param = None
     if module is not None and spec.type_kind == "axis_param":
         param = module.axis(ins.type)
     elif module is not None and spec.type_kind == "global_param":
         param = module.glob(ins.type, ins.motor)
-    value = ins.signed_value
-    if value < 0 and param is not None and param.max is not None and param.max > INT32_MAX:
-        value = ins.value & 0xFFFFFFFF  # an unsigned parameter: print it as its range reads
+    value = ins.signed_value if param is None else param.reading(ins.signed_value)
     parts = {"type": str(ins.type), "motor": str(ins.motor), "value": str(value)}
     if spec.type_kind == "symbolic":
-        parts["type"] = spec.type_name(ins.type, modname) or str(ins.type)
+        parts["type"] = spec.type_name(ins.type, module) or str(ins.type)
     elif spec.type_kind == "interrupt":
         parts["type"] = isa.interrupt_name(ins.type) or str(ins.type)
     if (spec.mnemonic == "MVP" and module is not None and module.motors > 1

@@ -53,6 +53,15 @@ class Control(IntEnum):
 FACTORY_DEFAULT_KEY = 1234
 
 
+class AppState(IntEnum):
+    """The stored program's state, as 135 answers it (and GP 128 holds it)."""
+
+    STOP = 0
+    RUN = 1
+    STEP = 2
+    RESET = 3
+
+
 class ReplyKind(IntEnum):
     """How a request's answer is laid out on the wire."""
 
@@ -368,32 +377,6 @@ class Reply:
             return f"<- host {self.host} stored {self.stored}"
         return (f"<- host {self.host} module {self.module} status {self.status} "
                 f"({self.status_text}) op {self.opcode} value {self.value}")
-
-
-_STATUSES = frozenset(int(s) for s in Status)
-
-
-def decode_reply(buf: bytes | bytearray, kind: ReplyKind = ReplyKind.NORMAL,
-                 module: int | None = None, opcode: int | None = None
-                 ) -> tuple[int, Reply | None]:
-    """Pure stream decoder for the serial framing: ``(consumed, reply)``.
-
-    ``(0, None)`` means "need more bytes". Nine bytes with a bad checksum are not a frame, nor
-    (in the normal layout) nine whose status byte is no TMCL status (1-6, 100, 101, 128): the
-    decoder drops one byte so the caller re-synchronises on the next candidate (garbage or a
-    lost byte on an RS485 line must not wedge the link). ``consumed > 0`` with ``None`` means
-    bytes were discarded. Garbage that happens to form a valid frame cannot be told from one.
-    """
-    if len(buf) < SERIAL_FRAME_LEN:
-        return 0, None
-    frame = bytes(buf[:SERIAL_FRAME_LEN])
-    if kind == ReplyKind.NORMAL and frame[2] not in _STATUSES:
-        return 1, None
-    try:
-        return SERIAL_FRAME_LEN, Reply.from_bytes(frame, kind, module, opcode)
-    except (ChecksumError, FrameError):
-        return 1, None
-
 
 
 def hexdump(data: bytes) -> str:

@@ -9,9 +9,30 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from enum import IntEnum
 from functools import cache
+from typing import Protocol, Union
 
 from ..base.datafiles import load_toml
 from .frames import Control
+
+
+class HasCommands(Protocol):
+    """A module as the instruction set sees it: its name and whose command set it has (its
+    own for a documented module; another's, or ``GENERIC``, for one the manuals do not
+    describe). ``tmcl.modules.Module`` is one."""
+
+    name: str
+    commands_like: str
+
+
+# a module, by name or as a ``HasCommands``; None: any documented module
+ModuleRef = Union[str, HasCommands, None]
+
+
+def _family_key(module: ModuleRef) -> str | None:
+    """Whose command set ``module`` has: a documented module's name or ``GENERIC``."""
+    if module is None or isinstance(module, str):
+        return module
+    return module.commands_like
 
 
 @dataclass(frozen=True)
@@ -26,8 +47,14 @@ class InstructionSpec:
     modules: frozenset[str]
     direct: bool
     ascii: bool
-    reads: bool = False
-    persists: bool = False
+    access: str | None = None  # read | write | store (of the parameter the type names)
+    read_types: tuple[str, ...] = ()  # symbolic types whose reply value is a reading
+    idempotent: bool = False  # sending it twice has the outcome of sending it once
+    once_types: tuple[str, ...] = ()  # ... except with these symbolic types
+    starts_motion: bool = False
+    confirm: str | None = None  # store | storable | factory: asked before it is sent
+    done: str | dict[str, str] | None = None  # what the shell says when it was accepted
+    turns: str | None = None  # ROR/ROL: the way a positive speed turns the motor
     note: str | None = None  # for users: shown by `help MNEMONIC`
     source: str | None = None  # for maintainers: how the entry was read from the manuals
     types: dict[str, int] = field(default_factory=dict)
@@ -36,9 +63,38 @@ class InstructionSpec:
     # (TMCM-1311 SCO/GCO bank 255: copy coordinates between RAM and EEPROM)
     motor_special: dict[str, dict[int, str]] = field(default_factory=dict)
 
-    def type_names(self, module: str | None = None) -> dict[str, int]:
+    @property
+    def reads(self) -> bool:
+        """Its reply value is a reading of what its type names (GAP, GGP, GIO, GCO)."""
+        return self.access == "read"
+
+    @property
+    def persists(self) -> bool:
+        """It writes the module's EEPROM (STAP, STGP)."""
+        return self.confirm == "store"
+
+    def reads_with(self, type_: int, module: ModuleRef = None) -> bool:
+        """Is the reply value to this command with type ``type_`` a reading (GAP; RFS
+        STATUS)?"""
+        if self.reads:
+            return True
+        names = self.type_names(module)
+        return any(names.get(t) == type_ for t in self.read_types)
+
+    def repeatable(self, type_: int) -> bool:
+        """May a request with type ``type_`` be sent again when its reply was lost?"""
+        return self.idempotent and not any(self.types.get(t) == type_ for t in self.once_types)
+
+    def done_text(self, type_: int, module: ModuleRef = None) -> str | None:
+        """The template of what the shell says once the module accepted the command."""
+        if isinstance(self.done, dict):
+            name = self.type_name(type_, module)
+            return self.done.get(name) if name is not None else None
+        return self.done
+
+    def type_names(self, module: ModuleRef = None) -> dict[str, int]:
         """Symbolic types valid on ``module`` (all documented ones when None)."""
-        module = None if module is None else _LIKE.get(module, module)
+        module = _family_key(module)
         if module == GENERIC:
             return self.types
         if module is not None and module in self.types_for:
@@ -50,13 +106,13 @@ class InstructionSpec:
             return merged
         return self.types
 
-    def type_name(self, number: int, module: str | None = None) -> str | None:
+    def type_name(self, number: int, module: ModuleRef = None) -> str | None:
         for name, num in self.type_names(module).items():
             if num == number:
                 return name
         return None
 
-    def on(self, module: str) -> bool:
+    def on(self, module: ModuleRef) -> bool:
         return _offered(self.modules, module)
 
     @property
@@ -87,29 +143,28 @@ class ControlSpec:
     modules: frozenset[str]
     note: str | None = None
     source: str | None = None
+    idempotent: bool = False
+    starts_motion: bool = False
+    confirm: str | None = None
+    not_a_line: str | None = None  # never sent as a typed line: why
 
-    def on(self, module: str) -> bool:
+    def on(self, module: ModuleRef) -> bool:
         return _offered(self.modules, module)
+
+    def repeatable(self, type_: int) -> bool:
+        return self.idempotent
 
 
 # A module the manuals above do not describe (a user's module file, or one known only by its
 # 136 answer) borrows the command set of a documented module, or the generic one: the
 # commands every documented module has, i.e. the TMCL family's common core.
 GENERIC = "generic"
-_LIKE: dict[str, str] = {}
 
 
-def use_commands_of(module: str, like: str) -> None:
-    """Let ``module`` have the commands of ``like`` (a documented module, or ``"generic"``)."""
-    _LIKE[module] = like
-
-
-def commands_like(module: str) -> str:
-    return _LIKE.get(module, module)
-
-
-def _offered(modules: frozenset[str], module: str) -> bool:
-    module = _LIKE.get(module, module)
+def _offered(modules: frozenset[str], module: ModuleRef) -> bool:
+    module = _family_key(module)
+    if module is None:
+        return True
     if module == GENERIC:
         return modules >= family()
     return module in modules
@@ -138,7 +193,11 @@ def _tables() -> tuple[dict[int, InstructionSpec], dict[int, ControlSpec], dict[
                             "summary": raw["summary"].replace("0", str(n), 1)})
                 by_opcode[uf.opcode] = uf
     controls = {c["opcode"]: ControlSpec(c["opcode"], c["name"], frozenset(c["modules"]),
-                                         c.get("note"), c.get("source")) for c in data["control"]}
+                                         c.get("note"), c.get("source"),
+                                         c.get("idempotent", False),
+                                         c.get("starts_motion", False), c.get("confirm"),
+                                         c.get("not_a_line"))
+                for c in data["control"]}
     return by_opcode, controls, dict(data["interrupts"])
 
 
@@ -147,8 +206,10 @@ def _spec(raw: dict) -> InstructionSpec:
         opcode=raw["opcode"], mnemonic=raw["mnemonic"], summary=raw["summary"],
         fields=tuple(raw["fields"]), type_kind=raw["type"], motor_kind=raw["motor"],
         value_kind=raw["value"], modules=frozenset(raw["modules"]), direct=raw["direct"],
-        ascii=raw["ascii"], reads=raw.get("reads", False), persists=raw.get("persists", False),
-        note=raw.get("note"), source=raw.get("source"), types=dict(raw.get("types", {})),
+        ascii=raw["ascii"], access=raw.get("access"), read_types=tuple(raw.get("read_types", ())),
+        idempotent=raw.get("idempotent", False), once_types=tuple(raw.get("once_types", ())),
+        starts_motion=raw.get("starts_motion", False), confirm=raw.get("confirm"),
+        done=raw.get("done"), turns=raw.get("turns"), note=raw.get("note"), source=raw.get("source"), types=dict(raw.get("types", {})),
         types_for={k: dict(v) for k, v in raw.get("types_for", {}).items()},
         motor_special={mod: {int(k): v for k, v in table.items()}
                        for mod, table in raw.get("motor_special", {}).items()},
@@ -178,6 +239,26 @@ def controls() -> dict[int, ControlSpec]:
 
 def control(opcode: int) -> ControlSpec | None:
     return _tables()[1].get(opcode)
+
+
+def spec_of(opcode: int) -> InstructionSpec | ControlSpec | None:
+    """The entry of a command number: an instruction or a control command."""
+    return _tables()[0].get(opcode) or _tables()[1].get(opcode)
+
+
+@cache
+def repeatable(opcode: int, type_: int) -> bool:
+    """May a request be sent again when its reply was lost (a retry)? Only a command whose
+    entry says so: a retried ``MVP REL`` would move twice as far; anything unknown (a raw
+    number, CALC, the user functions) is sent at most once."""
+    spec = spec_of(opcode)
+    return spec is not None and spec.repeatable(type_)
+
+
+@cache
+def starting_opcodes() -> frozenset[int]:
+    """The commands that can start a motor or the stored program (``starts_motion``)."""
+    return frozenset(op for op in (*_tables()[0], *_tables()[1]) if spec_of(op).starts_motion)
 
 
 def interrupts() -> dict[str, int]:

@@ -16,8 +16,10 @@ from pathlib import Path
 
 from ...base.datafiles import load_toml
 from ...base.errors import RangeError, ValidationError
-from ..instructions import (GENERIC, InstructionSpec, all_instructions, controls, family, use_commands_of)
+from ..instructions import GENERIC, InstructionSpec, all_instructions, controls, family
+from ..version import TYPE_FIRST, decode_type1, parse_string
 from .schema import ACCESS_CODES, ModuleFileError  # noqa: F401
+from .schema import check_text
 from .schema import read as read_data
 
 BUILT_IN = "built in"
@@ -54,10 +56,20 @@ class Parameter:
     # writing it changes how the module is reached (address, baud rate, interface): a restore
     # writes it last and cannot read it back over the same connection
     link: bool = False
+    # writing it can start the motor (AP 2 TargetSpeed: in velocity mode the motor follows it)
+    starts_motion: bool = False
 
     @property
     def readable(self) -> bool:
         return "R" in self.access
+
+    def reading(self, value: int) -> int:
+        """A reply's value as this parameter reads (the one rule, for every reader): the
+        value field is 32 signed bits, so a parameter whose range is not negative gets the
+        same bits read unsigned."""
+        if value < 0 and self.min is not None and self.min >= 0:
+            return value & 0xFFFFFFFF
+        return value
 
     @property
     def writable(self) -> bool:
@@ -141,7 +153,8 @@ def _parameter(kind: str, raw: dict) -> Parameter:
         choices=tuple(raw["choices"]) if raw.get("choices") else None, unit=raw.get("unit", ""),
         default=raw.get("default"), values=_int_keys(raw.get("values")),
         bits=_int_keys(raw.get("bits")), note=raw.get("note"), source=raw.get("source"),
-        state=bool(raw.get("state", False)), link=bool(raw.get("link", False)))
+        state=bool(raw.get("state", False)), link=bool(raw.get("link", False)),
+        starts_motion=bool(raw.get("starts_motion", False)))
 
 
 def _normalise(name: str) -> str:
@@ -175,6 +188,12 @@ class Module:
         self.io_all_port: int | None = info.get("io_all_port")
         self.io_all_banks: tuple[int, ...] = tuple(info.get("io_all_banks", ()))
         self.coordinates: int = info.get("coordinates", 21)
+        # the byte order of its 136 type 1 answer (tmcl/version.py)
+        self.version_layout: str = info.get("version_layout", TYPE_FIRST)
+        # whose command set it has: its own (a documented module), the one its file names
+        # (commands_like), or the generic one (the commands every documented module has)
+        self.commands_like: str = info.get("commands_like") or (
+            self.name if self.name in family() else GENERIC)
         self.axis_params: list[Parameter] = [_parameter("axis", p) for p in data.get("axis", [])]
         self.global_params: list[Parameter] = [_parameter("global", p) for p in data.get("global", [])]
         self.io: list[IoPort] = [IoPort(**{k: v for k, v in p.items()}) for p in data.get("io", [])]
@@ -185,14 +204,14 @@ class Module:
     # -- instructions -------------------------------------------------------------------
     @cached_property
     def instructions(self) -> list[InstructionSpec]:
-        return [s for s in all_instructions() if s.on(self.name)]
+        return [s for s in all_instructions() if s.on(self)]
 
     def has_instruction(self, opcode: int) -> bool:
         return any(s.opcode == opcode for s in self.instructions)
 
     def has_control(self, opcode: int) -> bool:
         spec = controls().get(opcode)
-        return spec is not None and spec.on(self.name)
+        return spec is not None and spec.on(self)
 
     @property
     def label(self) -> str:
@@ -308,7 +327,7 @@ class GenericModule(Module):
             "program_memory": 65536, "firmware_id": firmware_id, "version_string": version,
             "coordinates": 256}})
         self.type_name = type_name or "TMCL module"
-        use_commands_of(self.name, GENERIC)
+        self.commands_like = GENERIC
 
     @property
     def forced(self) -> bool:
@@ -394,20 +413,12 @@ def forget_user_files() -> None:
 
 def read_file(path: str | Path) -> Module:
     """A module from a user's data file, checked (ModuleFileError: one line, file and line)."""
-    path = Path(path)
-    data = read_data(path)
-    mod = Module(data, source=str(path))
-    like = data["module"].get("commands_like")
-    if like is not None or mod.name not in family():
-        use_commands_of(mod.name, like or GENERIC)
-    return mod
+    return Module(read_data(Path(path)), source=str(path))
 
 
 def commands_of(mod: Module) -> str:
     """Whose command set ``mod`` uses: its own (a documented module), another's, or generic."""
-    from ..instructions import commands_like
-
-    return commands_like(mod.name)
+    return mod.commands_like
 
 
 def _user() -> tuple[list[Module], list[str]]:
@@ -484,10 +495,13 @@ def load(name: str) -> Module:
 
 @cache
 def _load(file_name: str) -> Module | None:
+    """A built-in module: read as a user's file is, through the same schema check (run when
+    the file is parsed, not on every start: the parsed data is cached by content)."""
     entry = resources.files(__package__).joinpath(file_name)
     if not entry.is_file():
         return None
-    return Module(load_toml(__package__, file_name))
+    return Module(load_toml(__package__, file_name, check=lambda text: check_text(
+        text, f"tmclsh/tmcl/modules/{file_name}")))
 
 
 def by_firmware_id(firmware_id: int) -> Module | None:
@@ -504,11 +518,65 @@ def from_version_string(text: str) -> Module | None:
     exact = [m for m in _user()[0] if m.version_string == text.strip()]
     if exact:
         return exact[-1]
-    m = re.match(r"\s*0*(\d{1,9})V", text)
-    return by_firmware_id(int(m.group(1))) if m else None
+    parsed = parse_string(text)
+    return by_firmware_id(parsed.type_number) if parsed is not None and \
+        not parsed.bootloader else None
 
 
 def generic_for(text: str) -> GenericModule | None:
     """The numbers-only module for a 136 string naming a type with no data (``1161V130``)."""
-    m = re.match(r"\s*0*(\d+)V", text)
-    return GenericModule(f"TMCM-{int(m.group(1))}", text.strip()) if m else None
+    parsed = parse_string(text)
+    if parsed is None or parsed.bootloader:
+        return None
+    return GenericModule(f"TMCM-{parsed.type_number}", text.strip())
+
+
+def by_type1(value: int) -> Module | None:
+    """The module a 136 type 1 value names, each known module's value read in its own byte
+    order (tmcl/version.py): a TMCM-1640 answers version first, a TMCM-1311 type first."""
+    for name in available():
+        mod = load(name)
+        if decode_type1(value, mod.version_layout)[0] == mod.firmware_id:
+            return mod
+    return None
+
+
+def identify(version: str | None = None, type1: int | None = None
+             ) -> Module | GenericModule | None:
+    """The one reading of "what module is this" from its 136 answers: the string names a
+    module with data, else the type 1 value does (its checksum makes it the surer of the two
+    when the string is garbled), else the string names a type without data (numbers only).
+    None when neither names anything."""
+    if version is not None:
+        mod = from_version_string(version)
+        if mod is not None:
+            return mod
+    if type1 is not None:
+        mod = by_type1(type1)
+        if mod is not None:
+            return mod
+    return generic_for(version) if version is not None else None
+
+
+def type1_of(value: int, module: Module | None) -> tuple[int, int] | None:
+    """``(type number, version)`` from a 136 type 1 value, read in ``module``'s byte order;
+    None when the type read so is not ``module``'s (another layout or another module)."""
+    layout = module.version_layout if module is not None else TYPE_FIRST
+    kind, ver = decode_type1(value, layout)
+    if module is not None and not module.generic and kind != module.firmware_id:
+        return None
+    return kind, ver
+
+
+def baud_rates(module: Module | None = None) -> list[int]:
+    """The baud rates GP 65 can select, from the module database (``module``'s, or those of
+    every known module), in the order of their codes."""
+    mods = [module] if module is not None else [load(n) for n in available()]
+    rates: dict[int, int] = {}
+    for mod in mods:
+        p = mod.glob(65)
+        for code, text in (p.values.items() if p is not None else ()):
+            word = text.split()[0] if text.split() else ""
+            if word.isdigit():
+                rates.setdefault(int(word), code)
+    return sorted(rates, key=lambda r: (rates[r], r))

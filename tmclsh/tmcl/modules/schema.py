@@ -27,7 +27,7 @@ MODULE_KEYS: dict[str, tuple[str, bool]] = {
     "velocity_min": ("int", False), "velocity_max": ("int", False),
     "units": ("table", False), "notes": ("strs", False), "io_all_port": ("int", False),
     "io_all_banks": ("ints", False), "coordinates": ("int", False),
-    "commands_like": ("str", False),
+    "commands_like": ("str", False), "version_layout": ("str", False),
 }
 PARAMETER_KEYS: dict[str, tuple[str, bool]] = {
     "number": ("int", True), "name": ("str", True), "manual_name": ("str", False),
@@ -36,6 +36,7 @@ PARAMETER_KEYS: dict[str, tuple[str, bool]] = {
     "choices": ("ints", False), "unit": ("str", False), "default": ("int", False),
     "values": ("names", False), "bits": ("names", False), "note": ("str", False),
     "source": ("str", False), "state": ("bool", False), "link": ("bool", False),
+    "starts_motion": ("bool", False),
 }
 IO_KEYS: dict[str, tuple[str, bool]] = {
     "bank": ("int", True), "port": ("int", True), "name": ("str", True), "kind": ("str", True),
@@ -55,6 +56,8 @@ MEANINGS = {
                           "an exact match wins over one by type number",
         "commands_like": "whose command set the module has: TMCM-1311, TMCM-351, TMCM-1640, "
                          "or generic (the commands all of them have; the default)",
+        "version_layout": "byte order of the 136 type 1 value: type_first (type, then "
+                          "version; the default) or version_first (as the TMCM-1640)",
         "position_min": "position range of MVP (position_max too; default 32 bits)",
         "velocity_min": "velocity range of ROR/ROL (velocity_max too; default 32 bits)",
     },
@@ -131,6 +134,12 @@ def _is(kind: str, value: object) -> bool:
     raise AssertionError(kind)
 
 
+def check_text(text: str, path: str) -> None:
+    """Check a module file's text already parsed elsewhere (a built-in file, whose parsed
+    data is cached): ModuleFileError as for a user's file."""
+    parse(text, path)
+
+
 def parse(text: str, path: str) -> dict:
     """A module file's text as data, checked against the schema; ModuleFileError if not."""
     try:
@@ -166,6 +175,13 @@ def check(data: dict, lines: _Lines, path: str) -> None:
                    f"characters 136 answers (\"1161V130\"), got {info['version_string']!r}")
     if info["program_memory"] < 1:
         raise fail("module", 0, "program_memory", "[module] program_memory must be at least 1")
+    layout = info.get("version_layout")
+    if layout is not None:
+        from ..version import LAYOUTS
+
+        if layout not in LAYOUTS:
+            raise fail("module", 0, "version_layout", f"[module] version_layout must be one "
+                       f"of {', '.join(LAYOUTS)}, got {layout!r}")
     like = info.get("commands_like")
     if like is not None:
         from ..instructions import GENERIC, family

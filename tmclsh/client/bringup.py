@@ -1,0 +1,393 @@
+"""Bringing a module up: finding out what answers at the client's address, in which mode, and
+getting it ready to execute commands. One bring-up, run wherever a module is met: at
+connect (the command line, ``tmclsh.connect()``, the shell's ``.connect``), after every
+reconnect (before the next command), and when ``.address`` turns to another module.
+
+It checks rather than assumes:
+
+* the type is asked with 136. The string carries no checksum; one that names no module
+  tmclsh has data for is confirmed through 136 type 1 (whose frame has one), read in each
+  module's own byte order (a TMCM-1640 answers version first);
+* a module given beforehand (``-m``) that contradicts the answer is a ``ConnectError`` at
+  connect; after a reconnect another module type on the port is taken, with a notice;
+* a serial module that answers only in its ASCII mode is driven through it, with a notice;
+  one driven in ASCII mode before a reconnect is found again in whichever mode it is in;
+* a module found in download mode (an upload cut short) is brought out of it with 133;
+* when nothing answers, a ``NoAnswerError`` says what was tried and what to try next.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from ..base.errors import (ChecksumError, ConnectError, DownloadModeError, NoAnswerError,
+                           StatusError, TmclError, TmclTimeoutError, ValidationError)
+from ..tmcl import instructions as isa
+from ..tmcl.frames import Control, Request
+from ..tmcl.modules import Module, baud_rates, by_type1, generic_for, identify as named_by
+
+if TYPE_CHECKING:
+    from .core import Client
+
+_GET_VERSION = int(Control.GET_VERSION)
+_QUIT_DOWNLOAD = int(Control.QUIT_DOWNLOAD)
+_FIRST_CONTROL = int(Control.STOP_APPLICATION)
+_OK = 100
+# GP 129 "download mode" (all three manuals): read to find out whether the module executes
+# commands; in download mode the read itself is stored (answered with status 101) instead
+_GP_DOWNLOAD_MODE = 129
+
+
+def start(client: Client, *, ascii: bool = False) -> Client:
+    """Bring a new client up (see the module docstring). On any failure the client is
+    closed, so a half-opened port is never left behind."""
+    try:
+        bring_up(client, ascii=ascii)
+    except BaseException:
+        client.close()
+        raise
+    return client
+
+
+def bring_up(client: Client, *, ascii: bool = False, strict: bool = True) -> None:
+    """What ``start`` does, leaving the client open when it fails (the shell's ``.connect``
+    after ``Client.switch_transport``: the link stays, its module unknown). The module the
+    client holds is the one expected; ``strict``: another type answering is an error (at
+    connect), else it is taken (after a reconnect, ``.address``)."""
+    expected = client.module
+    if ascii:
+        _attach_ascii(client, expected, strict)
+    else:
+        _bring_up_binary(client, expected, strict)
+
+
+def again(client: Client, req: Request) -> ValidationError | None:
+    """Before the first command after a reconnect: the module is brought up exactly as at
+    connect, in the mode it was driven in. Another module type answering now is taken, with
+    a notice; ``req``, checked against the old module's data, is then refused: the error to
+    raise instead of sending it is returned (the bring-up itself raises when it fails)."""
+    old = client.module
+    link = client.ascii_link
+    if link is not None:
+        client.ascii_link = None  # found again, in whichever mode the module is in now
+    bring_up(client, ascii=link is not None, strict=False)
+    new = client.module
+    if old is None or new is None or new.name == old.name:
+        return None
+    client.notice(f"another module answers at address {client.address} on "
+                  f"{client.describe()} since the link came back: a {new.label}, version "
+                  f"{client.version} (it was a {old.name}); lines are checked against its "
+                  "data from now on")
+    if req.opcode >= _FIRST_CONTROL:
+        return None
+    return ValidationError(
+        f"{_name(req)} was not sent: it was checked against the {old.name}'s data "
+        f"(the module at address {client.address} is a {new.name} now); give it again")
+
+
+def switch_address(client: Client, address: int) -> None:
+    """Talk to the module at ``address`` (on CAN: that id) from now on, brought up as at
+    connect; on failure the client stays with the module it had."""
+    old = (client.address, client.can_id, client.module, client.version, client.ascii_link)
+    client.address = address
+    if client.is_can:
+        client.can_id = address
+    ascii = client.ascii_link is not None
+    client.ascii_link = None
+    try:
+        bring_up(client, ascii=ascii, strict=False)
+    except BaseException as exc:
+        (client.address, client.can_id, client.module, client.version,
+         client.ascii_link) = old
+        if isinstance(exc, TmclError):
+            raise type(exc)(f"{exc}\nstill talking to address {old[0]}") from exc
+        raise
+
+
+def identify(client: Client) -> Module:
+    """Ask the module what it is (136 type 0) and take its data (numbers only for a type
+    tmclsh has none for)."""
+    reply = client.request(Request(client.address, _GET_VERSION, 0, 0, 0))
+    if reply is None or reply.version is None:
+        status = reply.status if reply is not None else 0
+        raise StatusError(status, reply, f"address {client.address} refused the version "
+                          f"request (136): status {status}")
+    _adopt_version(client, reply.version)
+    assert client.module is not None
+    return client.module
+
+
+def leave_download_mode(client: Client) -> bool:
+    """Bring a module found in download mode out of it (133), with a notice.
+
+    Asks GP 129 (download mode): a module in normal mode answers it, one in download mode
+    stores it and answers status 101. True if the module was in download mode.
+    """
+    try:
+        client.request(Request(client.address, isa.Opcode.GGP, _GP_DOWNLOAD_MODE, 0, 0))
+    except DownloadModeError:
+        pass
+    else:
+        return False
+    client.downloading = True  # until 133 is answered, whatever is sent is stored
+    try:
+        reply = client.request(Request(client.address, _QUIT_DOWNLOAD, 0, 0, 0))
+    finally:
+        client.downloading = False
+    if reply is None or not reply.ok:
+        status = reply.status if reply is not None else 0
+        raise StatusError(status, reply, f"the module at address {client.address} is in "
+                          "download mode (it stores commands instead of executing them) "
+                          f"and refused to leave it (133): status {status}")
+    client.notice(f"the module at address {client.address} was in download mode (an upload "
+                  "was cut short?): ended it with 133; the program stored on it may be "
+                  "incomplete")
+    return True
+
+
+# -- the steps ----------------------------------------------------------------------------
+
+def _attach_ascii(client: Client, expected: Module | None, strict: bool, found=None) -> None:
+    from .ascii import AsciiLink
+
+    client.module = None  # so that the link asks 136 (stepping out of ASCII mode if need be)
+    try:
+        try:
+            AsciiLink.attach(client, found=found)
+        except StatusError:
+            # 139 refused: a module in download mode takes no control command but 132-136;
+            # end download mode (with a notice), then try once more
+            if client.ascii_link is not None or not leave_download_mode(client):
+                raise
+            AsciiLink.attach(client)
+    except (TmclTimeoutError, ChecksumError) as exc:
+        raise NoAnswerError(no_answer_message(client, exc, ascii=True)) from exc
+    _check_type(client, expected, strict)
+
+
+def _bring_up_binary(client: Client, expected: Module | None, strict: bool) -> None:
+    client.module = None
+    try:
+        # once: if this goes unanswered, the mode probe below is the second try (and
+        # tells a module in ASCII mode from a silent line)
+        reply = client.request(Request(client.address, _GET_VERSION, 0, 0, 0), retries=0)
+    except DownloadModeError:
+        # a firmware that stores even 136 while downloading: end download mode first
+        leave_download_mode(client)
+        reply = None
+    except (TmclTimeoutError, ChecksumError) as exc:
+        # (a ValidationError from the probe, such as another host address, is the answer)
+        if not _answers_after_all(client, expected, strict, exc):
+            return  # found in ASCII mode, and attached
+        reply = None
+    try:
+        if reply is not None and reply.version is not None:
+            _adopt_version(client, _confirmed_version(client, reply.version))
+        else:
+            try:
+                identify(client)
+            except ValidationError:  # a version string naming no type: damaged?
+                if client.version is None:
+                    raise
+            if client.version is not None:
+                _adopt_version(client, _confirmed_version(client, client.version))
+    except ValidationError:
+        if expected is None:  # a version string naming no module we know
+            raise
+        client.module = expected
+    _check_type(client, expected, strict)
+    if client.ascii_link is None:
+        try:
+            leave_download_mode(client)
+        except (TmclTimeoutError, ChecksumError) as exc:
+            tries = 1 + client.retries
+            raise NoAnswerError(no_answer_message(
+                client, exc, what=f"it answered 136 (version {client.version}), but not GGP "
+                f"129 (download mode), asked {_times(tries)}, "
+                f"waiting {client.timeout:g} s each")) from exc
+
+
+def _confirmed_version(client: Client, version: str) -> str:
+    """The 136 type 0 string carries no checksum: one naming no module tmclsh has data for
+    (a bit flipped on the line makes '1311V111' '1311v111' or '1711V111') is checked against
+    136 type 1, which has one, read in each module's own byte order; while the two disagree
+    on a type tmclsh knows, the string is asked again (1 + retries times at most)."""
+    from ..tmcl.modules import from_version_string
+
+    if from_version_string(version) is not None:
+        return version  # the usual case: nothing more is sent
+    try:
+        ident = client.request(Request(client.address, _GET_VERSION, 1, 0, 0))
+    except TmclError:
+        return version
+    known = by_type1(ident.value) if ident is not None and ident.status == _OK else None
+    if known is None:
+        return version  # a type without data (TMCM-1161): the string stands
+    for _ in range(1 + client.retries):
+        try:
+            again_ = client.request(Request(client.address, _GET_VERSION, 0, 0, 0))
+        except (TmclTimeoutError, ChecksumError):
+            continue
+        named = from_version_string(again_.version) if again_ is not None and \
+            again_.version is not None else None
+        if named is not None and named.name == known.name:
+            return again_.version
+    return version
+
+
+def _adopt_version(client: Client, version: str) -> None:
+    client.version = version
+    mod = named_by(version)  # data if tmclsh has it, else numbers only
+    if mod is None:
+        raise ValidationError(f"unknown module type in version string {version!r}; "
+                              "give it with --module (or --module generic)")
+    client.module = mod
+
+
+def _ask_version(client: Client, times: int, failed: Exception) -> Exception | None:
+    """136 up to ``times`` more times: None once it is answered, else the last failure
+    (``failed``, the one before, when it is not asked again)."""
+    for _ in range(times):
+        try:
+            client.request(Request(client.address, _GET_VERSION, 0, 0, 0), retries=0)
+            return None
+        except (TmclTimeoutError, ChecksumError) as exc:
+            failed = exc
+    return failed
+
+
+def _answers_after_all(client: Client, expected: Module | None, strict: bool,
+                       exc: Exception) -> bool:
+    """After an unanswered 136: True if a binary module is there after all (slow, or a reply
+    lost); False if one in ASCII mode was found (and attached). Else a NoAnswerError."""
+    from .ascii import Mode, probe_mode
+
+    t = client.transport
+    if t.kind != "stream" or t.simulated:
+        failed = _ask_version(client, client.retries, exc)  # CAN, simulator: its retries
+        if failed is None:
+            return True
+        raise NoAnswerError(no_answer_message(client, failed)) from exc
+    try:
+        probe = probe_mode(client)
+    except (TmclTimeoutError, ChecksumError) as silent:
+        # the probe's binary 136 was the first retry; --retries asks for the rest (a flaky
+        # RS485 line at 2 a.m. is worth them)
+        failed = _ask_version(client, client.retries - 1, silent)
+        if failed is None:
+            return True
+        raise NoAnswerError(no_answer_message(
+            client, failed if isinstance(failed, ChecksumError) else exc,
+            ascii_tried=True)) from exc
+    if probe.mode == Mode.BINARY:
+        return True
+    client.forget_stale()  # a module in ASCII mode sends no late binary replies
+    _attach_ascii(client, expected, strict, probe)
+    link = client.ascii_link
+    echo = f" ({link.echo.text}; it stays in ASCII mode at exit)" if link else ""
+    client.notice(f"the module at address {client.address} is in its ASCII mode (it ignores "
+                  "binary commands; GP 67 makes it start in it): talking to it through ASCII "
+                  f"mode{echo}; '.mode binary --keep' switches it back to binary for good")
+    return False
+
+
+def _check_type(client: Client, expected: Module | None, strict: bool) -> None:
+    found = client.module
+    if expected is not None and expected.generic:
+        # -m generic: no data is used, but the banner still names the type that answered
+        named = generic_for(client.version) if client.version else None
+        client.module = named or expected
+        return
+    if expected is None or found is None:
+        client.module = found or expected
+        return
+    if found.name != expected.name and strict:
+        if client.transport.simulated:
+            hint = f"--sim {expected.name} simulates a {expected.name}"
+        else:
+            hint = f"leave -m out to use what the module says, or give -m {found.name}"
+        raise ConnectError(
+            f"-m {expected.name} does not match the module: address {client.address} says it "
+            f"is a {found.name} (version {client.version}); {hint}")
+
+
+def _name(req: Request) -> str:
+    from ..link.framing import name_of
+
+    return name_of(req)
+
+
+def _is_usb_module(client: Client) -> bool:
+    from ..link import trinamic_ports
+
+    url = getattr(client.transport, "url", "")
+    try:
+        return any(p.device == url for p in trinamic_ports())
+    except Exception:  # listing ports is best effort here
+        return False
+
+
+def _times(n: int) -> str:
+    return {1: "once", 2: "twice"}.get(n, f"{n} times")
+
+
+def no_answer_message(client: Client, exc: BaseException, *, ascii: bool = False,
+                      ascii_tried: bool = False, what: str | None = None) -> str:
+    """What was tried, in the user's words, then the likely causes, most likely first."""
+    where = client.describe()
+    addr = client.address
+    tries = 1 + client.retries
+    garbled = isinstance(exc, ChecksumError)
+    if client.is_can:
+        return (
+            f"no module answered on {where}: asked for its version (136) on CAN id "
+            f"{client.can_id}, listening on reply id {client.reply_id}, {_times(tries)}, "
+            f"{client.timeout:g} s each. Likely causes, most likely first:\n"
+            "  - bit rate: every node on the bus must use the module's CAN bit rate "
+            "(GP 69; factory setting 1000 kbit/s)\n"
+            f"  - CAN ids: the module's id (GP 71, factory 1) and reply id (GP 70, factory "
+            f"2) must match --can-id and --reply-id; 'tmclsh scan --can ...' tries the ids\n"
+            f"  - a slow bus: --timeout {max(2 * client.timeout, 2):g}\n"
+            "  - wiring: termination (120 ohm at both ends), CAN_H/CAN_L, power")
+    url = getattr(client.transport, "url", where)
+    usb = _is_usb_module(client)
+    socket_url = "://" in url
+    first = (f"replies came from {where} but were garbled (bad checksums)" if garbled else
+             f"the module at address {addr} on {where} answered only in part"
+             if client.version is not None and client.ascii_link is None else
+             f"no module answered at address {addr} on {where}")
+    if what is not None:
+        pass
+    elif ascii:
+        what = f"looked for it in ASCII mode, waiting {client.timeout:g} s"
+    else:
+        if ascii_tried:
+            asked = max(2, tries)  # (the mode probe asks 136 too)
+            what = (f"asked for its version (136) {_times(asked)} and tried its ASCII mode, "
+                    f"waiting up to {client.timeout:g} s each")
+        else:
+            what = (f"asked for its version (136) {_times(tries)}, waiting "
+                    f"{client.timeout:g} s each")
+    lines = [f"{first}: {what}. Likely causes, most likely first:"]
+    if client.version is not None and client.ascii_link is None:
+        # it answered 136 here, readable: the baud rate, the address and the mode are right
+        lines.append("  - the line: noise garbles or loses replies (RS485: termination "
+                     "at both ends, ground, cable length), or another device talks on the "
+                     "same bus")
+        lines.append(f"  - a slow link: --timeout {max(2 * client.timeout, 2):g}")
+        return "\n".join(lines)
+    if not usb and not socket_url:
+        baud = getattr(client.transport, "baudrate", 9600)
+        others = ", ".join(str(r) for r in baud_rates() if r != baud)
+        lines.append(f"  - baud rate: the module may be set to another rate than {baud} (GP 65 "
+                     f"allows {others}); try --baud 115200, or 'tmclsh scan --port {url} "
+                     "--baud auto' tries each")
+    lines.append(f"  - address: the module may have another address than {addr} (GP 66, "
+                 f"factory 1): 'tmclsh scan --port {url}' lists who answers; then -a N")
+    if not ascii and not ascii_tried:
+        lines.append("  - ASCII mode: a module in its ASCII mode ignores binary commands: "
+                     "try --ascii")
+    lines.append(f"  - a slow link: --timeout {max(2 * client.timeout, 2):g}")
+    lines.append("  - the port: is it the module's? 'tmclsh ports' lists the serial ports; "
+                 "check cable and power")
+    return "\n".join(lines)

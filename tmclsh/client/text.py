@@ -1,0 +1,104 @@
+"""TMCL lines as text, on top of the client: ``client.value("GAP ActualPosition, 0")``.
+
+The client (core.py) moves requests and replies and knows nothing of mnemonics or parameter
+names; this layer parses and checks a line against the module's data (the assembler's
+``encode``, where every check lives), keeps what it checked, and sends the request. The
+shell, the Python API (``tmclsh.connect()`` returns a ``LineClient``) and the benchmarks use
+it; everything below it works with ``Request`` objects.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, NamedTuple
+
+from ..base.errors import StatusError, ValidationError
+from ..tmcl.frames import Reply, Request, status_ok
+from ..tmcl.modules import Module
+from .core import Client
+
+if TYPE_CHECKING:  # the assembler is imported when a line is first encoded
+    from ..tmcl import asm
+
+ENCODE_CACHE = 512  # checked lines kept per client (prepare)
+
+
+class Result(NamedTuple):
+    """A typed line and what the module answered (reply is None for 137). A named tuple: a
+    script makes one a line, and a frozen dataclass costs several times as much to make."""
+
+    line: str
+    encoded: asm.Encoded
+    reply: Reply | None
+
+    @property
+    def request(self):
+        return self.encoded.instruction
+
+    @property
+    def ok(self) -> bool:
+        return self.reply is None or self.reply.ok
+
+    @property
+    def value(self) -> int | None:
+        return None if self.reply is None else self.reply.value
+
+
+class LineClient(Client):
+    """A client that also takes TMCL lines: ``prepare``, ``encode``, ``execute``, ``value``."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        # checked lines: line -> (Encoded, Request), for (module, binary mode); see prepare()
+        self._encoded: dict[str, tuple[asm.Encoded, Request]] = {}
+        self._encoded_for: tuple[Module | None, bool] = (None, False)
+
+    def encode(self, line: str) -> asm.Encoded:
+        """Parse and check one TMCL line against the module (nothing is sent)."""
+        return self.prepare(line)[0]
+
+    def prepare(self, line: str) -> tuple[asm.Encoded, Request]:
+        """The checked instruction of one TMCL line and its request to this address.
+
+        A script or a watch repeats its lines: the result of a line that passed the checks is
+        kept (ENCODE_CACHE lines, the oldest dropped first) for the module and mode it was
+        checked against; another module or mode starts the cache afresh. Lines that fail are
+        checked again every time. ``${...}`` is expanded by the shell before it gets here."""
+        mod = self.module if self.module is not None else self.require_module()
+        ascii_mode = self.ascii_link is not None
+        cache = self._encoded
+        if mod is not self._encoded_for[0] or ascii_mode is not self._encoded_for[1]:
+            cache.clear()
+            self._encoded_for = (mod, ascii_mode)
+        hit = cache.get(line)
+        if hit is not None:
+            enc, req = hit
+            if req.address == self.address:
+                return hit
+        else:
+            from ..tmcl import asm
+
+            parsed = asm.parse_line(line)
+            if parsed.mnemonic is None:
+                raise ValidationError(f"no command in {line!r}")
+            enc = asm.encode(parsed, mod, direct=True, ascii=ascii_mode)
+            if len(cache) >= ENCODE_CACHE:
+                del cache[next(iter(cache))]
+        ins = enc.instruction
+        hit = (enc, Request.make(self.address, ins.opcode, ins.type, ins.motor, ins.value))
+        cache[line] = hit
+        return hit
+
+    def execute(self, line: str, *, check: bool = True, timeout: float | None = None) -> Result:
+        """Parse, check, send one TMCL line (``"GAP 1, 0"``); StatusError on an error status."""
+        enc, req = self.prepare(line)
+        reply = self.request(req, timeout=timeout)
+        if check and reply is not None and not status_ok(reply.status):
+            raise StatusError(reply.status, reply)
+        return Result(line, enc, reply)
+
+    def value(self, line: str, *, timeout: float | None = None) -> int:
+        """The reply value of one TMCL line: ``client.value("GAP ActualPosition, 0")``."""
+        r = self.execute(line, timeout=timeout)
+        if r.reply is None:
+            raise ValidationError(f"{line!r} gets no reply, so it has no value")
+        return r.reply.value
