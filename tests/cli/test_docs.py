@@ -83,15 +83,15 @@ def test_exit_statuses_match_the_code(man):
     codes = [int(c) for c in re.findall(r"^\\fB(\d+)\\fR$", section, re.M)]
     import signal
 
-    assert codes == [cli.EXIT_OK, cli.EXIT_ERROR, cli.EXIT_USAGE, cli.EXIT_CONNECT, 130,
+    assert codes == [cli.EXIT_OK, cli.EXIT_FAILED, cli.EXIT_USAGE, cli.EXIT_CONNECT, 130,
                      128 + signal.SIGHUP, 128 + signal.SIGTERM]  # tests/shell/test_signals.py
     from tmclsh.shell import main as shell_main, script
 
-    assert (script.EXIT_OK, script.EXIT_FAILED, script.EXIT_SYNTAX) == (
-        cli.EXIT_OK, cli.EXIT_ERROR, cli.EXIT_USAGE)
+    assert (script.EXIT_OK, script.EXIT_FAILED, script.EXIT_USAGE) == (
+        cli.EXIT_OK, cli.EXIT_FAILED, cli.EXIT_USAGE)
 
-    assert (shell_main.EXIT_OK, shell_main.EXIT_ERROR, shell_main.EXIT_CONNECT) == (
-        cli.EXIT_OK, cli.EXIT_ERROR, cli.EXIT_CONNECT)
+    assert (shell_main.EXIT_OK, shell_main.EXIT_FAILED, shell_main.EXIT_CONNECT) == (
+        cli.EXIT_OK, cli.EXIT_FAILED, cli.EXIT_CONNECT)
 
 
 def test_usage_error_exits_2(capsys):

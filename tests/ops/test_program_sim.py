@@ -280,7 +280,7 @@ def test_verify_reports_first_mismatch(client, sim):
 def test_shell_walkthrough_json(client, sim, timer_file, tmp_path, capsys):
     s = json_session(client)
     assert run_json(s, capsys, f".upload {timer_file}") == [{"uploaded": 15, "verified": True}]
-    assert s.state["program_state"] == "stop"
+    assert s.state.program_state == "stop"
 
     out = run_json(s, capsys, ".status")
     assert out == [{"state": "stop", "pc": 0, "file": str(timer_file), "line": 1,
@@ -289,11 +289,11 @@ def test_shell_walkthrough_json(client, sim, timer_file, tmp_path, capsys):
     (step,) = run_json(s, capsys, ".step")
     assert (step["state"], step["pc"], step["line"]) == ("step", 1, 2)
     assert step["text"].startswith("SGP 0, 3, 1000")
-    assert s.state["repeat_on_empty"] == ".step"
-    assert s.state["program_state"] == "step @1"
+    assert s.state.repeat_on_empty == ".step"
+    assert s.state.program_state == "step @1"
     steps = run_json(s, capsys, ".step 3")
     assert [(o["pc"], o["line"], o["step"]) for o in steps] == [(2, 3, 1), (3, 4, 2), (4, 8, 3)]
-    assert s.state["repeat_on_empty"] == ".step 3"
+    assert s.state.repeat_on_empty == ".step 3"
 
     run_json(s, capsys, ".display GGP 0, 2")
     (bp,) = run_json(s, capsys, ".break 12")  # the line of "JA Loop"
@@ -302,13 +302,13 @@ def test_shell_walkthrough_json(client, sim, timer_file, tmp_path, capsys):
     assert (hit["reason"], hit["pc"], hit["line"], hit["breakpoint"]) == \
         ("breakpoint", 8, 12, 1)
     assert hit["display"] == {"GGP 0, 2": "0"}
-    assert "repeat_on_empty" not in s.state
+    assert s.state.repeat_on_empty is None
 
     (stopped,) = run_json(s, capsys, ".stop")
     assert (stopped["state"], stopped["pc"]) == ("stop", 8)
     (reset,) = run_json(s, capsys, ".reset")
     assert (reset["state"], reset["pc"], reset["line"]) == ("reset", 0, 1)
-    assert s.state["program_state"] == "reset"
+    assert s.state.program_state == "reset"
 
     (ran,) = run_json(s, capsys, ".run Loop")
     assert ran["state"] == "run"

@@ -11,6 +11,7 @@ from prompt_toolkit.document import Document
 
 from tmclsh.tmcl.modules import load
 from tmclsh.shell import commands
+from tmclsh.shell.session import SessionState
 from tmclsh.shell.completer import (AxisParam, CommandArg, GlobalParam, Interrupt, IoBank, IoPort,
                                     Label, Mnemonic, MotorNumber, ParamBank, ParamValue,
                                     ShellCommand, SymbolicType, TmclCompleter, current_word,
@@ -216,7 +217,7 @@ class _FakeProgram:
 
 class _FakeSession:
     def __init__(self):
-        self.state = {"program": _FakeProgram()}
+        self.state = SessionState(program=_FakeProgram())
         self.client = type("C", (), {"module": M1311, "mode": "binary"})()
 
 

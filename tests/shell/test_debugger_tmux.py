@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import pytest
 
-from test_program_sim import TIMER_EXAMPLE
+from manuals import listing
 from tmux import needs_tmux
+
+TIMER_EXAMPLE = listing("tmcm1311-timer-interrupt")
 
 pytestmark = needs_tmux
 

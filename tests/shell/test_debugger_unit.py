@@ -110,7 +110,7 @@ def test_display_refuses_commands_that_change_things(session) -> None:
     with pytest.raises(ValidationError):
         session.run_line(".display SAP 4, 0, 100")
     # ... and without it, where one TMCL read line is accepted
-    session.state.pop("evaluate", None)
+    session.state.take("evaluate")
     with pytest.raises(ValidationError, match="does not read a value"):
         session.run_line(".display SAP 4, 0, 100")
     with pytest.raises(AsmError):
@@ -131,7 +131,7 @@ def test_upload_refuses_too_large_before_asking(session, tmp_path) -> None:
         session.run_line(f".upload {big} --at 2040 --yes")
     with pytest.raises(ValidationError, match="usage: .upload FILE"):
         session.run_line(".upload")
-    with pytest.raises(ValidationError, match="unknown option '--force'"):
+    with pytest.raises(ValidationError, match=r"unknown option --force \(options: --at, --yes"):
         session.run_line(f".upload {big} --force")
 
 

@@ -165,39 +165,6 @@ def test_format_number():
     assert expr.format_number(1 / 3) == "0.333333"
 
 
-def test_split_options():
-    rest, opts = expr.split_options('pos=GAP 1, 0; b=GIO 0, 0 --interval 0.1 --until "pos >= 5000"'
-                                    " --csv x.csv", {"interval": True, "until": True, "csv": True})
-    assert rest == "pos=GAP 1, 0; b=GIO 0, 0"
-    assert opts == {"interval": "0.1", "until": "pos >= 5000", "csv": "x.csv"}
-    # a minus inside an expression is no option; quotes protect their content
-    rest, opts = expr.split_options("GAP 1, 0 - -5 --flag", {"flag": False})
-    assert rest == "GAP 1, 0 - -5" and opts == {"flag": True}
-    with pytest.raises(ValidationError, match="unknown option --timout .*--timeout"):
-        expr.split_options("x --timout 3", {"timeout": True})
-    with pytest.raises(ValidationError, match="needs a value"):
-        expr.split_options("x --timeout", {"timeout": True})
-    with pytest.raises(ValidationError, match="unclosed quote"):
-        expr.split_options('x --until "a > 1', {"until": True})
-
-
-def test_option_numbers():
-    assert expr.option_float({"timeout": "2.5"}, "timeout", 30) == 2.5
-    assert expr.option_float({}, "timeout", 30) == 30
-    assert expr.option_float({"timeout": "none"}, "timeout", 30, allow_none=True) is None
-    with pytest.raises(ValidationError, match="seconds"):
-        expr.option_float({"timeout": "soon"}, "timeout", 30)
-    with pytest.raises(ValidationError, match="from 0 to 86400, got '-1'"):
-        expr.option_float({"timeout": "-1"}, "timeout", 30)
-    with pytest.raises(ValidationError, match="from 0 to 86400, got '1e300'"):
-        expr.option_float({"timeout": "1e300"}, "timeout", 30)
-    with pytest.raises(ValidationError, match="got 'nan'"):
-        expr.option_float({"timeout": "nan"}, "timeout", 30)
-    assert expr.option_int({"count": "0x10"}, "count", None) == 16
-    with pytest.raises(ValidationError, match="from 1 to 1000000, got .0."):
-        expr.option_int({"count": "0"}, "count", None)
-
-
 # -- property: the evaluator agrees with integer arithmetic done on the tree ---------------
 
 _ints = st.integers(min_value=-10**6, max_value=10**6)

@@ -241,7 +241,7 @@ def test_empty_line_repeats_what_the_debugger_asks_for(repl):
     repl.wait_prompt()
     repl.type(ENTER)  # nothing set: an empty line does nothing
     repl.wait_prompt()
-    repl.session.state["repeat_on_empty"] = "GAP 4, 0"
+    repl.session.state.repeat_on_empty = "GAP 4, 0"
     repl.type(ENTER)
     repl.expect("MaxPositioningSpeed = 777 pps")
     assert repl.quit() == 0

@@ -113,7 +113,7 @@ def test_an_unterminated_substitution_is_a_syntax_error(session, tmp_path, capsy
         SAP 4, 0, 1000
         .echo ${GAP 1, 0
         """)
-    assert run(session, path) == script.EXIT_SYNTAX
+    assert run(session, path) == script.EXIT_USAGE
     cap = capsys.readouterr()
     assert f"{path}:2: unterminated ${{...}}: a '}}' is missing" in cap.err
     assert simulator(session).param("axis", 4) != 1000  # nothing was sent
@@ -252,7 +252,7 @@ def test_syntax_errors_stop_before_anything_is_sent(session, tmp_path, capsys, b
                                                     message):
     path = write(tmp_path, "bad.tmcl", "MVP ABS, 0, 1000\n" + body)
     sent = session.client.stats["sent"]
-    assert run(session, path) == script.EXIT_SYNTAX
+    assert run(session, path) == script.EXIT_USAGE
     err = capsys.readouterr().err
     assert f"{path}:{line + 1}: " in err and message in err, err
     assert session.client.stats["sent"] == sent  # the MVP on line 1 never went out
@@ -291,7 +291,7 @@ def test_onerror_runs_when_the_script_stops(session, tmp_path, capsys):
     assert "onerr.tmcl:1: .onerror: MST 0" in capsys.readouterr().out
     time.sleep(0.2)
     assert session.client.value("GAP 2, 0") == 0  # target speed: stopped by the handler
-    assert "script.onerror" not in session.state
+    assert session.state.onerror is None
 
 
 def test_quit_ends_a_script_without_error(session, tmp_path, capsys):
@@ -385,7 +385,7 @@ def test_blocks_typed_line_by_line(session, capsys):
                  ".end"]:
         session.run_line(line)
     assert capsys.readouterr().out.split() == ["zero", "one"]
-    assert "capture" not in session.state
+    assert session.state.capture is None
     assert session.history[-1] == ".end" and len(session.history) == 7  # as typed, once
 
 

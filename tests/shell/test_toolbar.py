@@ -43,7 +43,7 @@ def whole_words_only(line: str) -> None:
 @pytest.mark.parametrize("trace", [False, True])
 def test_it_fits_and_keeps_connection_and_module(sim_session, columns, state, trace):
     if state:
-        sim_session.state["program_state"] = state
+        sim_session.state.program_state = state
     if trace:
         enable_trace(sim_session)
     line = text(sim_session, columns)
@@ -61,7 +61,7 @@ def test_the_least_useful_go_first(sim_session):
     assert "binary" in wide and "trace off" in wide
     at80 = text(sim_session, 80)
     assert "trace off" in at80 and "^C stop motors" in at80
-    sim_session.state["program_state"] = {"state": "step", "pc": 4}
+    sim_session.state.program_state = {"state": "step", "pc": 4}
     at60 = text(sim_session, 60)
     assert "step @4" in at60 and "^C stop" in at60
     assert "trace off" not in at60  # an idle trace is worth less than the program state

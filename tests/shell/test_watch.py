@@ -297,7 +297,7 @@ def test_watch_in_a_script_is_checked_before_the_run(session, tmp_path, capsys):
 
     bad = tmp_path / "bad.tmcl"
     bad.write_text("MVP ABS, 0, 1000\n.watch x=GAP 99, 0 --count 1\n")
-    assert script.run_file(session, str(bad)) == script.EXIT_SYNTAX
+    assert script.run_file(session, str(bad)) == script.EXIT_USAGE
     assert f"{bad}:2: " in capsys.readouterr().out  # an error object (JSON session)
     good = tmp_path / "good.tmcl"
     good.write_text('.let limit = 3\n.watch n=GIO 8, 1 / 80 --interval 0 --until "n >= limit"\n')

@@ -176,7 +176,7 @@ def test_step_on_empty_memory_says_so_and_sends_no_step():
             s.run_line(".step")
         assert 130 not in module.commands()  # nothing stepped
         assert 134 in module.commands()  # it looked at the memory
-        assert "repeat_on_empty" not in s.state  # an empty line will not try again
+        assert s.state.repeat_on_empty is None  # an empty line will not try again
     finally:
         client.close()
         module.close()
@@ -188,10 +188,10 @@ def test_step_past_the_end_of_a_program(sim, tmp_path):
     s = session_on(sim)
     s.run_line(f".upload {src}")
     s.run_line(".step")
-    assert s.state["program_state"] == "step @1"
+    assert s.state.program_state == "step @1"
     with pytest.raises(TmclError, match=r"no instruction at @1 \(the end of the stored"):
         s.run_line(".step")
-    assert s.state["program_state"] == "step @1"  # nothing was stepped
+    assert s.state.program_state == "step @1"  # nothing was stepped
 
 
 # -- .connect --------------------------------------------------------------------------------
@@ -202,10 +202,10 @@ def test_connect_refreshes_the_program_state(sim, tmp_path):
     s = session_on(sim)
     s.run_line(f".upload {src}")
     s.run_line(".run")
-    assert s.state["program_state"] == "run"
+    assert s.state.program_state == "run"
     s.run_line(".connect sim TMCM-1311")  # another (simulated) module: nothing runs there
-    assert s.state["program_state"] == "stop"
-    s.state["program_state"] = "run"  # what the prompt showed before a cable was pulled
+    assert s.state.program_state == "stop"
+    s.state.program_state = "run"  # what the prompt showed before a cable was pulled
     s.run_line(".connect")  # the same link again: read at once, not remembered
-    assert s.state["program_state"] == "stop"
+    assert s.state.program_state == "stop"
     s.client.close()

@@ -8,6 +8,14 @@ script can stop with FILE:LINE. They also inherit from the builtins a Python cal
 from __future__ import annotations
 
 
+# The exit statuses of every tmclsh command (the man page's EXIT STATUS says the same).
+EXIT_OK = 0  # everything passed
+EXIT_FAILED = 1  # a line or check failed, or an answer was in doubt
+EXIT_USAGE = 2  # refused before anything was sent: the command line, a line the module refuses
+EXIT_CONNECT = 3  # no module to talk to
+EXIT_INTERRUPTED = 130  # Ctrl-C (128 + SIGINT)
+
+
 class TmclError(Exception):
     """Base of every tmclsh error."""
 

@@ -413,12 +413,9 @@ def _details(text: str) -> list[str]:
 
 def _category_layout() -> tuple[tuple[str, ...], dict[str, str]]:
     """The order and titles of the command categories, as ``.help`` shows them."""
-    try:
-        from ..shell import builtin
-    except ImportError:
-        return ("general",), {}
-    return (tuple(getattr(builtin, "CATEGORY_ORDER", ("general",))),
-            dict(getattr(builtin, "CATEGORY_TITLES", {})))
+    from ..shell.commands import CATEGORIES
+
+    return tuple(name for name, _ in CATEGORIES), dict(CATEGORIES)
 
 
 def _shell_commands_section() -> list[str]:
@@ -687,11 +684,11 @@ Load the completions into the running shell:
 
 
 def _exit_status() -> list[str]:
-    from .options import EXIT_CONNECT, EXIT_ERROR, EXIT_OK, EXIT_USAGE
+    from ..base.errors import EXIT_CONNECT, EXIT_FAILED, EXIT_OK, EXIT_USAGE
 
     rows = [
         (EXIT_OK, "Success."),
-        (EXIT_ERROR, "A TMCL or shell command failed (a rejected line, an error status from "
+        (EXIT_FAILED, "A TMCL or shell command failed (a rejected line, an error status from "
                      "the module, a timeout), a script stopped at an error, asm or disasm "
                      "failed, a file could not be written (the message names it and why), "
                      "scan found no module, or a module file that cannot be used (tmclsh "

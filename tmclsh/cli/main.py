@@ -9,7 +9,8 @@ import argparse
 import os
 import sys
 
-from .options import (EXIT_CONNECT, EXIT_ERROR, EXIT_OK, EXIT_USAGE, SUBCOMMANDS, build_parser, parse_args)
+from ..base.errors import EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE
+from .options import SUBCOMMANDS, build_parser, parse_args
 
 
 # -- subcommands -------------------------------------------------------------------------
@@ -224,7 +225,7 @@ def cmd_modules(args: argparse.Namespace) -> int:
             mod = modules.read_file(args.file)
         except modules.ModuleFileError as exc:
             print(f"tmclsh: {exc}", file=sys.stderr)
-            return EXIT_ERROR
+            return EXIT_FAILED
         print(f"{args.file}: {mod.name} (firmware id {mod.firmware_id}, version "
               f"{mod.version_string}): {len(mod.axis_params)} axis and {len(mod.global_params)} "
               f"global parameters, {len(mod.io)} I/O ports, commands of "
@@ -244,7 +245,7 @@ def cmd_modules(args: argparse.Namespace) -> int:
         print(f"{'generic':<12} {'any':<10} built in: numbers only, for any other TMCL module")
     for problem in modules.problems():
         print(f"tmclsh: not loaded: {problem}", file=sys.stderr)
-    return EXIT_ERROR if modules.problems() else EXIT_OK
+    return EXIT_FAILED if modules.problems() else EXIT_OK
 
 
 # -- entry point -------------------------------------------------------------------------
@@ -307,13 +308,13 @@ def main(argv: list[str] | None = None) -> int:
 
         return run_shell(args)
     except KeyboardInterrupt:
-        return 130
+        return EXIT_INTERRUPTED
     except BrokenPipeError:  # `tmclsh modules | head`: the reader has gone; stop quietly
         try:
             sys.stdout = open(os.devnull, "w")
         except OSError:
             pass
-        return EXIT_ERROR
+        return EXIT_FAILED
     except UsageError as exc:
         if debug:
             raise
@@ -325,9 +326,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"tmclsh: {exc}", file=sys.stderr)
         from ..base.errors import ConnectError
 
-        return EXIT_CONNECT if isinstance(exc, ConnectError) else EXIT_ERROR
+        return EXIT_CONNECT if isinstance(exc, ConnectError) else EXIT_FAILED
     except OSError as exc:
         if debug:
             raise
         print(f"tmclsh: {exc}", file=sys.stderr)
-        return EXIT_ERROR
+        return EXIT_FAILED

@@ -14,8 +14,8 @@ from .. import __version__
 from ..base import limits
 from ..base.canspec import FROM_PYTHON_CAN
 
+
 SUBCOMMANDS = ("asm", "disasm", "sim", "ports", "scan", "modules")
-EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_CONNECT = 0, 1, 2, 3
 
 
 def setting(key: str):

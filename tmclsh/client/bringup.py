@@ -94,6 +94,10 @@ def switch_address(client: Client, address: int) -> None:
         client.can_id = address
     ascii = client.ascii_link is not None
     client.ascii_link = None
+    client.version = None  # (nothing is known yet of the module there)
+    if client.module is not None and not client.module.generic:
+        client.module = None  # another module: what it is comes from its answer (-m generic
+        # stays: numbers only, as asked)
     try:
         bring_up(client, ascii=ascii, strict=False)
     except BaseException as exc:

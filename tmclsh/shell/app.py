@@ -9,7 +9,7 @@ Behaviour worth knowing:
 
 * Ctrl-C at the prompt or while a command runs sends MST to every motor (keys.py explains
   why always); the shell stays up. Ctrl-D on an empty line, ``.quit`` or ``quit`` leave.
-* An empty line repeats ``session.state["repeat_on_empty"]`` if a feature set it (the
+* An empty line repeats ``session.state.repeat_on_empty`` if a feature set it (the
   debugger sets it to ``.step``).
 * 138 events and trace lines from other threads appear above the prompt (``patch_stdout``).
 * After a link failure (TransportError) the next TMCL line first tries ``client.reconnect()``,
@@ -135,6 +135,7 @@ def _rewrite_history(path, entries: list[str]) -> None:
 
 def prompt_message(session: Session):
     """``TMCM-1311:1> `` (module type and address), with the program state if it runs."""
+    from .toolbar import program_state_text
 
     def message():
         c = session.client
@@ -143,9 +144,7 @@ def prompt_message(session: Session):
         parts = [(style, f"{mod}:{c.address}")]
         if c.mode == "ascii":
             parts.append(("class:prompt.state", " ascii"))
-        state = session.state.get("program_state")
-        text = str(state.get("state", "")) if isinstance(state, dict) else (
-            str(getattr(state, "name", state)).lower() if state is not None else "")
+        text = program_state_text(session) or ""
         if text.startswith(("run", "step")):  # the debugger's "run", "step @12"
             parts.append(("class:prompt.state", f" [{text}]"))
         parts.append((style, "> "))
@@ -313,7 +312,7 @@ def run_repl(session: Session, prompt_session: PromptSession | None = None) -> i
     session.interactive = True
     session.ask = ask_yes_no
     session.choose = ask_choice
-    session.state["pager"] = repl_settings().get("pager", True) is not False
+    session.state.pager = repl_settings().get("pager", True) is not False
     if repl_settings().get("color") == "never":
         session.out.console.no_color = session.out.err.no_color = True
     from prompt_toolkit.utils import is_dumb_terminal
@@ -356,7 +355,7 @@ def run_text(session: Session, text: str) -> bool:
     if not lines:
         if text.strip():  # only a comment
             return True
-        repeat = session.state.get("repeat_on_empty")
+        repeat = session.state.repeat_on_empty
         if not repeat:
             return True
         lines = [str(repeat)]
@@ -366,24 +365,18 @@ def run_text(session: Session, text: str) -> bool:
     return True
 
 
-def _is_tmcl(line: str) -> bool:
-    from . import commands
-
-    word = line.split(None, 1)[0] if line.split() else ""
-    return not word.startswith(".") and commands.find(word) is None
-
-
-def run_one(session: Session, line: str) -> bool:
+def run_one(session: Session, text: str) -> bool:
     """One line with every failure turned into a message; False after ``.quit``."""
-    from .main import report_error
+    from .lines import classify
     from .stop import stop_session
 
+    line = classify(text)
     # a lost link (also one a .watch met) is brought back before the next TMCL line
     lost = not session.client.connected
-    if lost and _is_tmcl(line):
+    if lost and line.tmcl:
         if not _try_reconnect(session):
             return True
-    elif lost and line.split()[0].lower() not in _NO_RECONNECT:
+    elif lost and (line.command is None or line.command.reconnects):
         _try_reconnect(session, quiet=True)  # a shell command that fails says why itself
     session.interrupted_line_ended = False
     try:
@@ -393,18 +386,18 @@ def run_one(session: Session, line: str) -> bool:
     except Abort as exc:
         session.out.info(str(exc))
     except TransportError as exc:
-        report_error(session, line, exc)
+        session.report_error(text, exc)
         if not session.client.connected:  # (a failed .connect PORT leaves the old link up)
             session.out.info("the link is down: the next command tries to reconnect "
                              "(or .connect [PORT])")
     except TmclError as exc:
-        report_error(session, line, exc)
+        session.report_error(text, exc)
     except KeyboardInterrupt:
         session.end_interrupted_line()  # the terminal echoed ^C on the command's line
         stop_session(session, "interrupted")
     except Exception as exc:  # a bug must not take the motor shell down with it
         log.debug("internal error", exc_info=True)
-        session.out.error(line, f"internal error ({type(exc).__name__}: {exc}); "
+        session.out.error(text, f"internal error ({type(exc).__name__}: {exc}); "
                                 "please report it" + ("" if os.environ.get("TMCLSH_DEBUG")
                                                       else " (TMCLSH_DEBUG=1 shows the traceback)"))
         if os.environ.get("TMCLSH_DEBUG"):
@@ -414,8 +407,6 @@ def run_one(session: Session, line: str) -> bool:
     return True
 
 
-# shell commands that do not try to bring a lost link back first
-_NO_RECONNECT = frozenset({".connect", ".quit", ".exit", "quit", "exit", ".help", "help", "?"})
 
 
 def _try_reconnect(session: Session, quiet: bool = False) -> bool:

@@ -13,22 +13,17 @@ from typing import TYPE_CHECKING
 from ..tmcl import instructions as isa
 from ..base import limits
 from ..base.errors import StatusError, TmclError, TmclTimeoutError, TransportError, ValidationError
-from ..tmcl.modules import Module, Parameter, available, from_version_string, load
+from ..tmcl.modules import Module, Parameter, available, identify, load, type1_of
+from ..tmcl.version import parse_string
 from ..tmcl.frames import Control, Request, status_ok
-from .commands import all_commands, command, find
+from . import options
+from .commands import CATEGORIES, all_commands, command, find, options_of
 from .completer import Candidate, param_meta
 from .render import paged
 from .session import reconnected
 
 if TYPE_CHECKING:
     from .session import Session
-
-CATEGORY_ORDER = ("general", "parameters", "motion", "connection", "protocol")
-CATEGORY_TITLES = {"general": "General", "parameters": "Parameters", "motion": "Motion",
-                   "connection": "Connection and module", "protocol": "Protocol",
-                   "ascii": "ASCII mode", "program": "Stored program (debugger)",
-                   "script": "Scripts and variables", "watch": "Watching values",
-                   "configuration": "Configuration backup (clone a module)"}
 
 _GAP = isa.Opcode.GAP
 _GGP = isa.Opcode.GGP
@@ -105,11 +100,11 @@ def complete_module(session: Session | None, text: str) -> list[Candidate]:
 @command(".help")
 @paged
 def cmd_help(session: Session, arg: str) -> None:
-    arg = arg.strip()
-    source = "--source" in arg.split()
-    if not arg or arg == "--source":
+    rest, given = options.parse(arg, options_of(".help"))
+    source = "--source" in given
+    if not rest:
         return _help_overview(session)
-    word = next(w for w in arg.split() if w != "--source")
+    word = rest.split()[0]
     cmd = find(word)  # `.param`, or a bare word: `help quit`
     if cmd is not None:
         return _help_command(session, cmd)
@@ -141,7 +136,8 @@ def _help_overview(session: Session) -> None:
     cats: dict[str, list] = {}
     for c in _unique_commands():
         cats.setdefault(c.category, []).append(c)
-    order = [c for c in CATEGORY_ORDER if c in cats] + sorted(set(cats) - set(CATEGORY_ORDER))
+    known = [name for name, _ in CATEGORIES]
+    order = [c for c in known if c in cats] + sorted(set(cats) - set(known))
     # one syntax column for all categories, at most 45% of the width: a longer syntax gets a
     # line of its own with the description under it, so no description is squeezed away
     titles = {c.name: _command_title(c) for cs in cats.values() for c in cs}
@@ -159,7 +155,7 @@ def _help_overview(session: Session) -> None:
             rows.clear()
 
     for cat in order:
-        out.print(Text(CATEGORY_TITLES.get(cat, cat.capitalize()), style="tmcl.heading"))
+        out.print(Text(dict(CATEGORIES).get(cat, cat.capitalize()), style="tmcl.heading"))
         rows: list[tuple[str, str]] = []
         for c in cats[cat]:
             if len(titles[c.name]) <= col:
@@ -387,9 +383,9 @@ command(".exit")(_quit)
 @command(".param")
 @paged
 def cmd_param(session: Session, arg: str, from_help: bool = False) -> None:
-    words = arg.split()
-    source = "--source" in words
-    query = " ".join(w for w in words if w != "--source")
+    query, given = options.parse(arg, options_of(".param"))
+    source = "--source" in given
+    query = " ".join(query.split())
     if not query:
         raise ValidationError("which parameter? .param 140, .param MaxPositioningSpeed, "
                               ".param microstep")
@@ -924,28 +920,11 @@ def cmd_address(session: Session, arg: str) -> None:
                                                          if client.is_can else ""))
         return
     n = int(limits.parse("address", text, ".address"))  # as -a and TMCLSH_ADDRESS take it
-    old_addr, old_can = client.address, client.can_id
-    client.address = n
-    if client.is_can:
-        client.can_id = n
-    wait = min(client.timeout, 0.5)
-    try:
-        session.stats.commands += 1
-        reply = client.request(Request(n, Control.GET_VERSION, 0, 0, 0), timeout=wait,
-                               retries=0)
-    except TmclTimeoutError:
-        client.address, client.can_id = old_addr, old_can
-        raise TmclTimeoutError(f"no module answered at address {n} within {wait:g} s; "
-                               f"still talking to address {old_addr}") from None
-    except BaseException:
-        client.address, client.can_id = old_addr, old_can
-        raise
-    version = reply.version if reply is not None else None
-    mod = from_version_string(version) if version else None
-    client.version = version
-    if mod is not None:
-        client.module = mod
-    session.out.ok(f"address {n}: {mod.name if mod else 'unknown module type'}"
+    from ..client.bringup import switch_address
+
+    switch_address(client, n)  # brought up as at connect; the old one kept if it fails
+    mod, version = client.module, client.version
+    session.out.ok(f"address {n}: {mod.label if mod else 'unknown module type'}"
                    + (f", firmware {version}" if version else ""))
 
 
@@ -957,7 +936,7 @@ def cmd_module(session: Session, arg: str) -> None:
     name = arg.strip()
     if name:
         mod = load(name)
-        detected = from_version_string(client.version) if client.version else None
+        detected = identify(client.version) if client.version else None
         client.module = mod
         if detected is not None and detected.name != mod.name:
             session.out.warn(f"the module reported {client.version} ({detected.name}); "
@@ -998,11 +977,10 @@ def cmd_version(session: Session, arg: str) -> None:
     session.stats.commands += 2
     value = binary.value & 0xFFFFFFFF if binary is not None and binary.ok else None
     client.version = version or client.version
-    mod = from_version_string(version) if version else None
-    from ..tmcl.modules import type1_of
-    from ..tmcl.version import parse_string
     from .render import version_text
 
+    found = identify(version, value)
+    mod = found if found is not None and not found.generic else None
     layout_of = mod or client.module
     parsed = parse_string(version)
     from_string = (parsed.type_number, parsed.number) if parsed is not None else None

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import os
 import re
-import shlex
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -26,10 +25,11 @@ from typing import TYPE_CHECKING
 from ..tmcl import asm
 from ..tmcl import modules as moddb
 from ..tmcl import instructions as isa
-from ..base.errors import AsmError, RangeError, TmclError, ValidationError
+from ..base.errors import EXIT_USAGE, AsmError, RangeError, TmclError, ValidationError
 from ..tmcl.modules import Module, Parameter
 from ..tmcl.frames import Control, Request, status_ok, status_text
-from .commands import command
+from . import options
+from .commands import command, find, options_of
 from .lines import split_line
 
 if TYPE_CHECKING:
@@ -129,24 +129,16 @@ def _request(session: Session, opcode: int, slot: Slot | tuple[str, int, int],
 
 # -- argument parsing --------------------------------------------------------------------
 
-def _args(argtext: str, usage: str, flags: dict[str, str]) -> tuple[str, set[str]]:
-    """FILE and the flags given (short forms mapped to long ones by ``flags``)."""
+def _args(argtext: str, command: str) -> tuple[str, set[str]]:
+    """FILE and the options given (shell/options.py, as the table declares them)."""
+    usage = find(command).syntax  # type: ignore[union-attr]
     try:
-        words = shlex.split(argtext)
-    except ValueError as exc:
-        raise ValidationError(f"cannot split arguments: {exc}; usage: {usage}") from None
-    pos, given = [], set()
-    for w in words:
-        if w.startswith("-") and len(w) > 1:
-            if w not in flags:
-                known = ", ".join(sorted({v for v in flags.values()}))
-                raise ValidationError(f"unknown option {w!r} (known: {known}); usage: {usage}")
-            given.add(flags[w])
-        else:
-            pos.append(w)
+        pos, given = options.parse_words(argtext, options_of(command))
+    except ValidationError as exc:
+        raise ValidationError(f"{exc}; usage: {usage}") from None
     if len(pos) != 1:
         raise ValidationError(f"usage: {usage}")
-    return pos[0], given
+    return pos[0], set(given)
 
 
 def _file(session: Session, name: str) -> Path:
@@ -336,9 +328,7 @@ def _may_overwrite(session: Session, paths: list[Path | None], yes: bool) -> Non
 
 @command(".save")
 def cmd_save(session: Session, argtext: str) -> None:
-    usage = ".save FILE [--program] [--yes]"
-    name, given = _args(argtext, usage, {"--program": "--program", "--yes": "--yes",
-                                         "-y": "--yes"})
+    name, given = _args(argtext, ".save")
     path = Path(name).expanduser()
     if path.is_dir():
         raise CloneError(f"cannot write {path}: it is a directory")
@@ -420,7 +410,7 @@ class BackupFileError(CloneError):
     line the module accepts. Raised before anything is sent; in -c, exit status 2 (as -f
     gives for a script it refuses) when nothing else of the run was sent either."""
 
-    exit_status = 2  # EXIT_USAGE: nothing was sent
+    exit_status = EXIT_USAGE  # nothing was sent
 
     def __init__(self, message: str, kind: str = "syntax"):
         self.kind = kind
@@ -478,7 +468,6 @@ def read_backup(session: Session, path: Path, *, force: bool, command: str) -> B
     .restore) is named in the hint for another module's backup."""
     live = session.module
     from ..base import files
-    from .session import owns_line
 
     try:
         text = files.read_bytes(path, what="backup").decode("utf-8")  # bounded: /dev/zero
@@ -503,7 +492,7 @@ def read_backup(session: Session, path: Path, *, force: bool, command: str) -> B
             "not have are skipped)", "check")
     ascii_mode = session.client.mode == "ascii"
     for number, raw in enumerate(lines, 1):
-        for shell_line in split_line(raw, owns_line):  # comments off, `;` between lines
+        for shell_line in split_line(raw):  # comments off, `;` between lines
             _read_line(session, backup, path, number, shell_line, source, live, ascii_mode)
     if not (backup.slots or backup.state or backup.skipped):
         # an empty or truncated file must not read as "matches" either
@@ -641,12 +630,12 @@ class DiffFound(TmclError):
     """``.diff --exit-code``: the module differs from the file."""
 
 
-def _against_backup(session: Session, argtext: str, usage: str, flags: dict[str, str]):
+def _against_backup(session: Session, argtext: str, command: str):
     """What .diff and .restore both start with: the backup read and checked, the live values
     compared with it, and the notes on what was not compared. -> (backup, diffs, flags given)"""
-    name, given = _args(argtext, usage, flags)
+    name, given = _args(argtext, command)
     backup = read_backup(session, _file(session, name), force="--force" in given,
-                         command=usage.split()[0])
+                         command=command)
     diffs = compare(session, backup)
     _notes(session, backup, session.module)
     return backup, diffs, given
@@ -654,9 +643,7 @@ def _against_backup(session: Session, argtext: str, usage: str, flags: dict[str,
 
 @command(".diff")
 def cmd_diff(session: Session, argtext: str) -> None:
-    backup, diffs, given = _against_backup(
-        session, argtext, ".diff FILE [--exit-code] [--force]",
-        {"--exit-code": "--exit-code", "--force": "--force", "-f": "--force"})
+    backup, diffs, given = _against_backup(session, argtext, ".diff")
     live = session.module
     out = session.out
     if out.json:
@@ -697,10 +684,7 @@ class Written:
 
 @command(".restore")
 def cmd_restore(session: Session, argtext: str) -> None:
-    backup, diffs, given = _against_backup(
-        session, argtext, ".restore FILE [--yes] [--store] [--force]",
-        {"--yes": "--yes", "-y": "--yes", "--store": "--store", "--force": "--force",
-         "-f": "--force"})
+    backup, diffs, given = _against_backup(session, argtext, ".restore")
     live = session.module
     c = session.client
     out = session.out

@@ -17,6 +17,8 @@ from collections.abc import Callable, Iterable
 from dataclasses import KW_ONLY, dataclass, field
 from typing import TYPE_CHECKING
 
+from .options import Option
+
 if TYPE_CHECKING:
     from .session import Session
 
@@ -50,6 +52,17 @@ class Command:
     # it takes the rest of its line; for all others ';' ends the command and starts a new line
     owns_line: bool = False
     same_as: str = ""
+    # it may change the module or the mode lines are checked against (.connect, .mode, ...):
+    # a script's or -c's lines after it are checked as they run, not before the first
+    changes_link: bool = False
+    # a lost link is brought back before it runs (False: .connect, .quit, .help, which work
+    # without one or make their own)
+    reconnects: bool = True
+    # the name of a function ``check(session, argtext)`` in the feature module that checks
+    # the arguments before a script runs (nothing sent), raising what the command would
+    check: str = ""
+    # its options (shell/options.py reads them; the completer offers them)
+    options: tuple[Option, ...] = ()
     _handler: Handler | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
@@ -74,6 +87,12 @@ class Command:
     def load(self) -> Handler:
         """Import the feature module now (a script's check of the line may live there)."""
         return self.handler
+
+    def checker(self) -> Callable[[Session, str], None] | None:
+        """The check of the arguments before a script runs (imported now), if it has one."""
+        if not self.check:
+            return None
+        return getattr(_import_feature(self.feature), self.check)
 
     def completion(self) -> list | ArgCompleter | None:
         """The argument completion: a list as written, or the feature's function (imported
@@ -136,6 +155,12 @@ def find(word: str) -> Command | None:
     return REGISTRY.get(word) or REGISTRY.get(_ALIASES.get(word, ""))
 
 
+def options_of(name: str) -> tuple[Option, ...]:
+    """The options the table declares for the command ``name`` (``.upload``)."""
+    cmd = find(name)
+    return cmd.options if cmd is not None else ()
+
+
 def all_commands() -> list[Command]:
     return sorted(REGISTRY.values(), key=lambda c: c.name)
 
@@ -156,6 +181,15 @@ def features() -> list[str]:
 
 
 # -- the table ---------------------------------------------------------------------------
+
+# The categories of .help and the man page, in their order, with their titles.
+CATEGORIES: tuple[tuple[str, str], ...] = (
+    ("general", "General"), ("parameters", "Parameters"), ("motion", "Motion"),
+    ("connection", "Connection and module"), ("protocol", "Protocol"),
+    ("ascii", "ASCII mode"), ("configuration", "Configuration backup (clone a module)"),
+    ("program", "Stored program (debugger)"), ("script", "Scripts and variables"),
+    ("watch", "Watching values"))
+
 # In the order .help's twins and the man page's categories expect: a category's commands
 # are listed by name, categories in their first appearance.
 
@@ -170,13 +204,17 @@ COMMANDS: tuple[Command, ...] = (
                      '`//` starts a comment to the end of the line. Questions are answered '
                      'with y and Enter ([y/N]: Enter alone is no). --source also shows how an '
                      'instruction or parameter was read from the module manuals (where they are '
-                     'unclear or disagree, and what tmclsh assumes), like .param --source.')),
+                     'unclear or disagree, and what tmclsh assumes), like .param --source.'),
+            reconnects=False,
+            options=(Option("--source", help="also how it was read from the manuals"),)),
     Command('.quit', 'builtin', '.quit',
             'leave the shell (also Ctrl-D)',
-            bare=True),
+            bare=True,
+            reconnects=False),
     Command('.exit', 'builtin', '.exit',
             'leave the shell (same as .quit)',
-            bare=True, same_as='.quit'),
+            bare=True, same_as='.quit',
+            reconnects=False),
     Command('.param', 'builtin', '.param [--source] QUERY',
             'explain a parameter: number, name or part of a name, with its current value',
             complete='complete_param', category='parameters',
@@ -185,7 +223,8 @@ COMMANDS: tuple[Command, ...] = (
                      'value is read from the module (GAP/GGP) when the parameter is '
                      "readable. --source also shows how the entry was read from the module's "
                      'manual (where the manual is unclear or wrong, and what tmclsh '
-                     'assumes).')),
+                     'assumes).'),
+            options=(Option("--source", help="also how it was read from the manual"),)),
     Command('.params', 'builtin', '.params [axis|global] [FILTER]',
             'table of all parameters with their live values (one GAP/GGP each)',
             complete='complete_params', category='parameters',
@@ -214,18 +253,22 @@ COMMANDS: tuple[Command, ...] = (
             details=('Without an argument the current link is closed and opened again (after '
                      'a cable was pulled). The module type is asked with 136 on a real link. '
                      "'can' alone takes the bus from python-can's configuration, as --can "
-                     "does; the bit rate is --bitrate's.")),
+                     "does; the bit rate is --bitrate's."),
+            changes_link=True,
+            reconnects=False),
     Command('.address', 'builtin', '.address [N]',
             'talk to the module with address N on the same bus',
             complete='complete_address', category='connection',
             details=('The new address is checked with a 136 (version) request; if nothing '
-                     "answers, the old address stays. On CAN, N is the module's CAN id.")),
+                     "answers, the old address stays. On CAN, N is the module's CAN id."),
+            changes_link=True),
     Command('.module', 'builtin', '.module [NAME]',
             'show the module type, or override it',
             complete='complete_module', category='connection',
             details=('The type normally comes from the 136 version string. Overriding it '
                      'changes which parameters, ranges and commands the shell checks '
-                     'against.')),
+                     'against.'),
+            changes_link=True),
     Command('.version', 'builtin', '.version',
             'ask the module for its firmware version (command 136)',
             category='connection'),
@@ -266,7 +309,8 @@ COMMANDS: tuple[Command, ...] = (
             details=('  .onerror MST 0\n'
                      'Makes a failed script leave the motor stopped. It runs once, when an '
                      'error stops the script (not with --keep-going), and is forgotten when '
-                     'the script ends.')),
+                     'the script ends.'),
+            check='check_onerror'),
     Command('.source', 'script', '.source FILE',
             'run a script file in this session',
             category='script',
@@ -280,7 +324,8 @@ COMMANDS: tuple[Command, ...] = (
                      '  .let speed = 1000\n'
                      '  .let p = GAP 1, 0\n'
                      '  SAP 4, 0, ${speed * 2}\n'
-                     '.let alone lists the variables.')),
+                     '.let alone lists the variables.'),
+            check='check_let'),
     Command('.expect', 'script', '.expect EXPR',
             'check a condition; the script fails if it is false',
             category='script',
@@ -289,19 +334,24 @@ COMMANDS: tuple[Command, ...] = (
                      'A failure says what was expected and what was read. An answer the '
                      'line may have given another request (a reply came that nothing was '
                      'waiting for) is read again; one still in doubt fails the check, said '
-                     'to be in doubt, its value not stated.')),
+                     'to be in doubt, its value not stated.'),
+            check='check_expect'),
     Command('.wait', 'script', '.wait EXPR [--timeout S] [--interval S]',
             'poll until a condition holds (default timeout 30 s, interval 0.05 s)',
-            complete=['--timeout', '--interval'], category='script',
+            category='script',
             details=('  .wait GAP 8, 0 == 1 --timeout 10\n'
                      '  .wait RFS STATUS, 0 == 0\n'
                      '--timeout none waits forever; otherwise at most a day (86400 s); '
                      '--interval 0.001..86400 s. A timeout is an error that shows the last '
                      'value read (or says it was in doubt). A condition met on an answer '
-                     'that may have been another request\'s does not end the wait.')),
+                     'that may have been another request\'s does not end the wait.'),
+            check='check_wait',
+            options=(Option("--timeout", "S", "give up after S seconds (none: never)"),
+                     Option("--interval", "S", "seconds between polls"))),
     Command('.sleep', 'script', '.sleep SECONDS',
             'pause up to a day (seconds may be a fraction or an expression)',
-            category='script'),
+            category='script',
+            check='check_sleep'),
     Command('.echo', 'script', '.echo TEXT [> FILE | >> FILE]',
             'print a line (${...} expanded), or write it to a file',
             category='script',
@@ -321,11 +371,13 @@ COMMANDS: tuple[Command, ...] = (
             category='script'),
     Command('.plot', 'plot', '.plot [CSV] [--only NAME,...] [--height N] [--width N]',
             'chart a CSV log (from .watch --csv) or the last watch in the terminal',
-            complete=['--only', '--height', '--width'], category='watch'),
+            category='watch',
+            options=(Option("--only", "NAME,...", "these columns"),
+                     Option("--height", "N", "rows"), Option("--width", "N", "columns"))),
     Command('.watch', 'watch',
             '.watch [NAME=]EXPR; ... [--interval S] [--count N] [--until EXPR] [--csv FILE]',
             'poll values live: value, min, max, rate, recent history',
-            complete=['--interval', '--count', '--until', '--csv'], category='watch',
+            category='watch',
             owns_line=True,
             details=('  .watch pos=GAP 1, 0; speed=GAP 3, 0; in0=GIO 0, 0\n'
                      "It takes the rest of its line (';' separates its expressions): put "
@@ -343,7 +395,12 @@ COMMANDS: tuple[Command, ...] = (
                      'judged, one sample late. With no '
                      'expressions: the position and speed of each motor. .plot draws the '
                      'last watch. --interval is 0..86400 s, --count 1..1000000; the CSV file '
-                     'is put in place when the watch ends.')),
+                     'is put in place when the watch ends.'),
+            check='check_watch',
+            options=(Option("--interval", "S", "seconds between samples"),
+                     Option("--count", "N", "stop after N samples"),
+                     Option("--until", "EXPR", "stop once EXPR holds"),
+                     Option("--csv", "FILE", "log every sample to FILE"))),
     Command('.upload', 'debugger', '.upload FILE [--at ADDR] [--yes] [--no-verify]',
             'assemble FILE for this module, store it in program memory and verify it',
             complete='complete_file', category='program',
@@ -361,7 +418,10 @@ COMMANDS: tuple[Command, ...] = (
                      'download mode is ended anyway and the message says which instructions '
                      'are written.\n'
                      'Under --json: {"uploaded": N, "verified": true|false}. Needs binary '
-                     'mode.')),
+                     'mode.'),
+            options=(Option("--at", "ADDR", "store it from this address"),
+                     Option("--yes", help="overwrite a program that is there", aliases=("-y",)),
+                     Option("--no-verify", help="do not read it back"))),
     Command('.dump', 'debugger', '.dump [[-o] FILE] [--at ADDR] [--count N]',
             'read the stored program back (134) and show it as source, or write it to FILE',
             aliases=('.disasm',), complete='complete_file', category='program',
@@ -381,7 +441,10 @@ COMMANDS: tuple[Command, ...] = (
                      'binary image (8-byte\n'
                      'records with checksums), .hex the hex text (-o FILE says the same as '
                      'FILE). Needs binary\n'
-                     'mode.')),
+                     'mode.'),
+            options=(Option("-o", help="(the FILE that follows is written)"),
+                     Option("--at", "ADDR", "from this address"),
+                     Option("--count", "N", "this many instructions"))),
     Command('.source-map', 'debugger', '.source-map [FILE [--at ADDR] | --off]',
             'use FILE as the source of the stored program (lines and labels in the debugger)',
             complete='complete_file', category='program',
@@ -392,7 +455,9 @@ COMMANDS: tuple[Command, ...] = (
                      'read back and compared; a difference is reported (the mapping is '
                      'kept). Without FILE: show\n'
                      'the current mapping; --off forgets it (locations are then disassembled '
-                     'from memory).')),
+                     'from memory).'),
+            options=(Option("--at", "ADDR", "the address FILE was uploaded at"),
+                     Option("--off", help="forget the source map"))),
     Command('.run', 'debugger', '.run [LABEL|ADDR]',
             'run the stored program (from the current address, or from LABEL/ADDR)',
             complete='complete_location', category='program',
@@ -493,13 +558,20 @@ COMMANDS: tuple[Command, ...] = (
                      'Ctrl-T opens a menu, as in tio: e local echo on/off, h hex view of '
                      'what arrives, t timestamps, f log the session to a file (f again '
                      'stops), u send a file line by line (each reply waited for), ? the '
-                     'menu; Ctrl-T Ctrl-T sends Ctrl-T in --raw.')),
+                     'menu; Ctrl-T Ctrl-T sends Ctrl-T in --raw.'),
+            changes_link=True,
+            options=(Option("--raw", help="keys go to the module as typed"),
+                     Option("--echo", help="echo typed keys locally"),
+                     Option("--bin", help="send BIN when leaving"),
+                     Option("--no-bin", help="stay in ASCII mode when leaving"))),
     Command('.mode', 'terminal', '.mode [ascii|binary] [--keep]',
             "show or switch the link: binary frames or the module's ASCII mode",
             complete='_complete_mode', category='ascii',
             details=('ascii enters ASCII mode (command 139) unless the module is in it '
                      'already; binary sends BIN. On exit tmclsh leaves the module in the '
-                     'mode it found it in, unless --keep was given with the last switch.')),
+                     'mode it found it in, unless --keep was given with the last switch.'),
+            changes_link=True,
+            options=(Option("--keep", help="the module keeps the mode after tmclsh exits"),)),
     Command('.ascii-config', 'terminal',
             '.ascii-config [startup=ascii|binary] [echo=char|line|none]',
             'show or set the ASCII interface configuration (GP 67)',
@@ -530,7 +602,9 @@ COMMANDS: tuple[Command, ...] = (
                      'source, beside FILE with .program.tmcl in place of its suffix '
                      '(backup.tmcl:\n'
                      'backup.program.tmcl; put it back with .upload). JSON: {"saved": N,\n'
-                     '"file": FILE} (and "program": PATH, "instructions": N with --program).')),
+                     '"file": FILE} (and "program": PATH, "instructions": N with --program).'),
+            options=(Option("--program", help="also the stored program"),
+                     Option("--yes", help="replace a file that exists", aliases=("-y",)))),
     Command('.diff', 'clone', '.diff FILE [--exit-code] [--force]',
             'compare the module with a backup (or any script of SAP/SGP lines)',
             complete='complete_file', category='configuration',
@@ -548,7 +622,10 @@ COMMANDS: tuple[Command, ...] = (
                      'equal values. Exits 0\n'
                      'either way; with --exit-code a difference is a failure (exit status '
                      '1). A backup of another\n'
-                     'module type is compared by parameter name only with --force.')),
+                     'module type is compared by parameter name only with --force.'),
+            options=(Option("--exit-code", help="exit 1 when there are differences"),
+                     Option("--force", help="compare a backup of another module type",
+                            aliases=("-f",)))),
     Command('.restore', 'clone', '.restore FILE [--yes] [--store] [--force]',
             'write the parameters that differ from a backup back to the module',
             complete='complete_file', category='configuration',
@@ -569,7 +646,11 @@ COMMANDS: tuple[Command, ...] = (
                      'name) are restored, and the skipped ones are listed. Motion state is '
                      'never written. JSON:\n'
                      '{"file", "restored": [...], "failed": [...], "skipped": [...], '
-                     '"stored": N}.')),
+                     '"stored": N}.'),
+            options=(Option("--yes", help="do not ask", aliases=("-y",)),
+                     Option("--store", help="also store in EEPROM (STAP/STGP)"),
+                     Option("--force", help="restore a backup of another module type",
+                            aliases=("-f",)))),
 )
 
 REGISTRY: dict[str, Command] = {}

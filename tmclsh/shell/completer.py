@@ -471,11 +471,11 @@ def _param_candidates(params: Iterable[Parameter], access: str, numeric: bool) -
 
 
 def labels_of(session: Session | None) -> dict[str, int]:
-    """Labels of the program the debugger holds (``session.state["program"]``), if any."""
+    """Labels of the program the debugger holds (``session.state.program``), if any."""
     if session is None:
         return {}
     for key in ("program", "debugger"):
-        obj = session.state.get(key)
+        obj = getattr(session.state, key)
         prog = getattr(obj, "program", obj)
         labels = getattr(prog, "labels", None)
         if isinstance(labels, dict):
@@ -617,10 +617,18 @@ def _resolve_param(module: Module, kind: str, key: str, bank: str) -> Parameter 
 
 
 def complete_arg(session: Session | None, command: str, text: str) -> list[Candidate]:
-    """Candidates of a shell command's own completion (``Command.complete``)."""
+    """Candidates of a shell command's own completion (``Command.complete``), and its
+    options (``Command.options``) where an option may start."""
     cmd = commands.find(command)
-    if cmd is None or cmd.complete is None:
+    if cmd is None:
         return []
+    word = arg_word(text)
+    given = set(text.split())
+    options = [Candidate(o.name, o.help) for o in cmd.options
+               if word.startswith("-") or not word
+               if not given & set(o.spellings())]
+    if cmd.complete is None:
+        return options if word.startswith("-") else []
     try:
         source = cmd.completion()
         items = source(session, text) if callable(source) else source
@@ -634,7 +642,8 @@ def complete_arg(session: Session | None, command: str, text: str) -> list[Candi
             out.append(Candidate(str(item[0]), str(item[1]) if len(item) > 1 else ""))
         else:
             out.append(Candidate(str(item)))
-    return out
+    named = {c.text for c in out}
+    return out + [c for c in options if c.text not in named and word.startswith("-")]
 
 
 def arg_word(text: str) -> str:

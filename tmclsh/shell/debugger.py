@@ -1,9 +1,9 @@
 """The program on the module, from the shell: upload, read back, run, step, breakpoints.
 
 Dot-commands over :mod:`tmclsh.ops.program` (which does the bus work and is usable without the
-shell). The debugger's state lives in ``session.state["debugger"]`` (a :class:`DebuggerState`);
-``session.state["program_state"]`` holds a short text for the toolbar ("run", "stop",
-"step @12") and ``session.state["repeat_on_empty"]`` is set after ``.step`` so an empty line
+shell). The debugger's state lives in ``session.state.debugger`` (a :class:`DebuggerState`);
+``session.state.program_state`` holds a short text for the toolbar ("run", "stop",
+"step @12") and ``session.state.repeat_on_empty`` is set after ``.step`` so an empty line
 steps again, as in gdb and pdb.
 
 When the program's source is known (uploaded in this session, or named with ``.source-map``)
@@ -20,7 +20,6 @@ from __future__ import annotations
 import glob
 import os
 import re
-import shlex
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -33,7 +32,8 @@ from ..ops import program
 from ..base.errors import AsmError, TmclError, ValidationError
 from ..ops.program import AppStatus, UploadError
 from ..tmcl.frames import Instruction
-from .commands import command
+from . import options
+from .commands import command, options_of
 from .render import paged, paging
 
 if TYPE_CHECKING:
@@ -128,10 +128,10 @@ class DebuggerState:
 
 
 def state(session: Session) -> DebuggerState:
-    dbg = session.state.get("debugger")
+    dbg = session.state.debugger
     if not isinstance(dbg, DebuggerState):
         dbg = DebuggerState()
-        session.state["debugger"] = dbg
+        session.state.debugger = dbg
     return dbg
 
 
@@ -147,13 +147,6 @@ def _show_path(path: str) -> str:
 
 # -- small parsing helpers ---------------------------------------------------------------
 
-def _words(argtext: str) -> list[str]:
-    try:
-        return shlex.split(argtext)
-    except ValueError as exc:
-        raise ValidationError(f"cannot split arguments: {exc}") from None
-
-
 def _number(text: str, what: str) -> int:
     t = text.strip()
     try:
@@ -163,30 +156,6 @@ def _number(text: str, what: str) -> int:
     except ValueError:
         shown = t if len(t) <= 40 else t[:40] + "..."
         raise ValidationError(f"{what} must be a number, got {shown!r}") from None
-
-
-def _options(words: list[str], flags: set[str], valued: set[str]) -> tuple[list[str], dict]:
-    """Split ``--flag`` and ``--opt VALUE`` (or ``--opt=VALUE``) from positional words."""
-    pos: list[str] = []
-    opts: dict[str, object] = {}
-    it = iter(words)
-    for w in it:
-        if w.startswith("--") and len(w) > 2:
-            name, eq, val = w.partition("=")
-            if name in flags and not eq:
-                opts[name] = True
-            elif name in valued:
-                if not eq:
-                    val = next(it, None)
-                    if val is None:
-                        raise ValidationError(f"{name} needs a value")
-                opts[name] = val
-            else:
-                known = ", ".join(sorted(flags | valued))
-                raise ValidationError(f"unknown option {w!r} (known: {known})")
-        else:
-            pos.append(w)
-    return pos, opts
 
 
 def _resolve_file(session: Session, name: str) -> Path:
@@ -326,7 +295,7 @@ def _line_address(prog: asm.Program, line: int, file: str | None) -> tuple[int, 
 
 def _set_state(session: Session, st: AppStatus) -> None:
     state(session).last = st
-    session.state["program_state"] = f"step @{st.pc}" if st.state == "step" else st.state
+    session.state.program_state = f"step @{st.pc}" if st.state == "step" else st.state
 
 
 def _read_status(session: Session) -> AppStatus:
@@ -346,7 +315,7 @@ def _display_values(session: Session) -> list[tuple[Display, str]]:
 
 
 def _evaluate(session: Session, expr: str) -> int | float:
-    evaluate = session.state.get("evaluate")
+    evaluate = session.state.evaluate
     if callable(evaluate):
         return evaluate(session, expr)
     enc = session.client.encode(expr)
@@ -436,9 +405,9 @@ def _rebind_breakpoints(session: Session) -> None:
 
 
 def _not_repeating(session: Session) -> None:
-    repeat = session.state.get("repeat_on_empty")
+    repeat = session.state.repeat_on_empty
     if isinstance(repeat, str) and repeat.startswith(".step"):
-        session.state.pop("repeat_on_empty", None)
+        session.state.repeat_on_empty = None
 
 
 # -- completion --------------------------------------------------------------------------
@@ -470,7 +439,7 @@ def complete_breakpoints(session: Session, text: str) -> list[str | tuple[str, s
 
 @command(".upload")
 def cmd_upload(session: Session, argtext: str) -> None:
-    pos, opts = _options(_words(argtext), {"--yes", "--no-verify"}, {"--at"})
+    pos, opts = options.parse_words(argtext, options_of(".upload"))
     if len(pos) != 1:
         raise ValidationError("usage: .upload FILE [--at ADDR] [--yes] [--no-verify]")
     program.require_binary(session.client, "uploading a program (132/133)")
@@ -494,7 +463,7 @@ def cmd_upload(session: Session, argtext: str) -> None:
                                     verify=not opts.get("--no-verify"), progress=progress)
     except UploadError as exc:
         dbg.program = None  # memory now holds parts of two programs
-        session.state["program_state"] = "stop"
+        session.state.program_state = "stop"
         if exc.interrupted:
             # say what is in memory, then let the shell's Ctrl-C policy run (motors stop)
             session.out.error(None, str(exc))
@@ -572,13 +541,9 @@ def _original_source(session: Session, image: list[Instruction], start: int,
 
 @command(".dump")
 def cmd_dump(session: Session, argtext: str) -> None:
-    words = _words(argtext)
-    if "-o" in words:  # `.dump -o FILE`, as asm -o
-        i = words.index("-o")
-        if i + 1 >= len(words):
-            raise ValidationError("-o needs a FILE")
-        words = words[:i] + words[i + 1:]
-    pos, opts = _options(words, set(), {"--at", "--count"})
+    pos, opts = options.parse_words(argtext, options_of(".dump"))
+    if opts.get("-o") and not pos:  # `.dump -o FILE`, as asm -o
+        raise ValidationError("-o needs a FILE")
     if len(pos) > 1:
         raise ValidationError("usage: .dump [[-o] FILE] [--at ADDR] [--count N]")
     program.require_binary(session.client, "reading program memory (134)")
@@ -650,7 +615,7 @@ def cmd_dump(session: Session, argtext: str) -> None:
 
 @command(".source-map")
 def cmd_source_map(session: Session, argtext: str) -> None:
-    pos, opts = _options(_words(argtext), {"--off"}, {"--at"})
+    pos, opts = options.parse_words(argtext, options_of(".source-map"))
     dbg = state(session)
     if opts.get("--off"):
         dbg.program = None
@@ -739,7 +704,7 @@ def cmd_step(session: Session, argtext: str) -> None:
     program.require_binary(session.client, "stepping (130)")
     pc: int | None = program.program_counter(session.client)
     _check_something_to_step(session, pc)
-    session.state["repeat_on_empty"] = ".step" if n == 1 else f".step {n}"
+    session.state.repeat_on_empty = ".step" if n == 1 else f".step {n}"
     def waiting(pc: int) -> None:
         session.out.info(f"  WAIT at @{pc}: waiting for it to finish (Ctrl-C stops waiting)")
 
@@ -785,7 +750,7 @@ def refresh_program_state(session: Session) -> None:
     dbg = state(session)
     dbg.forget_memory()
     dbg.last = None
-    session.state.pop("program_state", None)
+    session.state.program_state = None
     _not_repeating(session)
     client = session.client
     if not client.connected or client.module is None or client.mode == "ascii":

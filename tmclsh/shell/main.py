@@ -5,28 +5,10 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..base.errors import TmclError
+from ..base.errors import EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, TmclError
 from .render import Output
-from .session import RECHECK_AFTER, QuitShell, Session, frames_sent
+from .session import QuitShell, Session, frames_sent
 
-EXIT_OK, EXIT_ERROR, EXIT_SYNTAX, EXIT_CONNECT = 0, 1, 2, 3
-
-
-def banner(session: Session) -> str:
-    c = session.client
-    mod = c.module.label if c.module else "unknown module"
-    sim = " [SIMULATED]" if c.transport.simulated else ""
-    mode = " ASCII mode" if c.mode == "ascii" else ""
-    return f"tmclsh: {mod} at address {c.address} on {c.describe()}{sim}{mode}"
-
-
-def report_error(session: Session, line: str | None, exc: BaseException) -> None:
-    if getattr(exc, "shown", False):
-        return
-    where = ""
-    if session.location is not None:
-        where = f"{session.location[0]}:{session.location[1]}: "
-    session.out.error(line, f"{where}{exc}")
 
 
 def refused_line(session: Session, lines: list[str]) -> tuple[str, TmclError] | None:
@@ -34,28 +16,23 @@ def refused_line(session: Session, lines: list[str]) -> tuple[str, TmclError] | 
     script is): a typo in the last line of ``-c "MVP ...; SPA ..."`` must not leave the move
     of the first one running. Lines with ``${...}`` are checked when they run."""
     from ..base.errors import ValidationError
-    from . import commands
-    from .lines import strip_comment
+    from .lines import classify
     from .session import unknown_command
 
-    for line in lines:
-        text = strip_comment(line)
-        if not text:
-            continue
-        word = text.split(None, 1)[0]
-        cmd = commands.find(word)
-        if word.startswith(".") or cmd is not None:
-            if cmd is None:
-                return line, ValidationError(unknown_command(word))
-            if cmd.name in RECHECK_AFTER:
+    for raw in lines:
+        line = classify(raw)
+        if line.unknown:
+            return raw, ValidationError(unknown_command(line.word))
+        if line.command is not None:
+            if line.command.changes_link:
                 return None
             continue
-        if "${" in text:
+        if not line.text or "${" in line.text:
             continue
         try:
-            session.client.encode(text)
+            session.client.encode(line.text)
         except TmclError as exc:
-            return line, exc
+            return raw, exc
     return None
 
 
@@ -67,7 +44,7 @@ def run_lines(session: Session, lines: list[str]) -> int:
         line, exc = bad
         why = "" if session.out.json else " (nothing was sent: every line is checked first)"
         session.out.error(line, f"{exc}{why}")
-        return EXIT_SYNTAX
+        return EXIT_USAGE
     refused = True  # every error so far was a file refused whole (exit_status 2)
     sent = frames_sent(session.client)
     for line in lines:
@@ -78,13 +55,13 @@ def run_lines(session: Session, lines: list[str]) -> int:
             break
         except TmclError as exc:
             failed = True
-            refused = refused and getattr(exc, "exit_status", None) == EXIT_SYNTAX
-            report_error(session, line, exc)
+            refused = refused and getattr(exc, "exit_status", None) == EXIT_USAGE
+            session.report_error(line, exc)
             if not session.keep_going:
                 break
     if failed and refused and frames_sent(session.client) == sent:
-        return EXIT_SYNTAX  # a file refused before anything was sent, as -f says of a script
-    return EXIT_ERROR if failed or session.stats.suspects > suspects else EXIT_OK
+        return EXIT_USAGE  # a file refused before anything was sent, as -f says of a script
+    return EXIT_FAILED if failed or session.stats.suspects > suspects else EXIT_OK
 
 
 def run_shell(args: argparse.Namespace) -> int:
@@ -108,12 +85,12 @@ def run_shell(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         print(file=sys.stderr)
         _stop_on_interrupt(client)
-        return 130
+        return EXIT_INTERRUPTED
     except BrokenPipeError:
         # whoever read our output has gone (`tmclsh -c ... | head`): stop quietly, as other
         # command-line tools do, instead of `tmclsh: [Errno 32] Broken pipe`
         _silence_stdout()
-        return EXIT_ERROR
+        return EXIT_FAILED
     finally:
         client.close()  # leaves ASCII mode if tmclsh entered it, whatever happened
 
@@ -172,7 +149,7 @@ def _run(args: argparse.Namespace, client, settings: dict) -> int:
         session.close()
         raise
     if not session.close():  # a recording that could not be put in place
-        status = status or EXIT_ERROR
+        status = status or EXIT_FAILED
     return status
 
 
@@ -204,7 +181,7 @@ def _run_unattended(args: argparse.Namespace, session: Session) -> int:
         if started() and finished:  # else nothing this run sent can have started anything
             _note_left_running(session)
     if status == EXIT_OK and session.stats.suspects > suspects:
-        status = EXIT_ERROR  # (an answer found suspect as the run ended is no pass either)
+        status = EXIT_FAILED  # (an answer found suspect as the run ended is no pass either)
     return status
 
 

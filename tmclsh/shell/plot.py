@@ -16,8 +16,8 @@ from typing import TYPE_CHECKING
 
 from ..base import files
 from ..base.errors import ValidationError
-from . import expr
-from .commands import command
+from . import expr, options
+from .commands import command, options_of
 
 if TYPE_CHECKING:
     from .session import Session
@@ -176,23 +176,22 @@ def read_csv(path: Path) -> Log:
     return log
 
 
-PLOT_OPTIONS = {"height": True, "width": True, "only": True}
 
 
 @command(".plot")
 def cmd_plot(session: Session, args: str) -> None:
-    rest, opts = expr.split_options(args, PLOT_OPTIONS)
-    width = expr.option_int(opts, "width", max(20, min(100, session.out.console.width - 14)),
+    rest, opts = options.parse(args, options_of(".plot"))
+    width = options.int_value(opts, "--width", max(20, min(100, session.out.console.width - 14)),
                             minimum=10, limit="plot_size")
-    height = expr.option_int(opts, "height", 6, minimum=2, limit="plot_size")
+    height = options.int_value(opts, "--height", 6, minimum=2, limit="plot_size")
     if rest:
         log = read_csv(Path(rest.strip("\"'")).expanduser())
     else:
-        last = session.state.get("watch.log")
+        last = session.state.watch_log
         if not isinstance(last, Log) or not last.t:
             raise ValidationError("nothing to plot: run .watch first, or give a CSV file")
         log = last
-    only = [n.strip() for n in str(opts["only"]).split(",")] if "only" in opts else None
+    only = [n.strip() for n in str(opts["--only"]).split(",")] if "--only" in opts else None
     assert width is not None and height is not None
     renderable = render(log, width, height, only)
     if session.out.json:

@@ -31,11 +31,12 @@ from contextlib import contextmanager
 from functools import wraps
 from typing import Any
 
+from ..tmcl import asm
 from ..tmcl import instructions as isa
 from ..client.text import Result
 from ..tmcl.modules import Module, Parameter, type1_of
 from ..tmcl.version import TYPE_FIRST, type1_bytes
-from ..tmcl.frames import Control, Reply, Status, status_text
+from ..tmcl.frames import Control, Instruction, Reply, Request, Status, status_text
 from .style import rich_theme
 
 
@@ -435,8 +436,8 @@ def _page(text: str) -> None:
 def paging(session: Any) -> bool:
     """Long output is paged in the interactive shell when the ``pager`` setting is on
     (app.py keeps it in ``session.state``), never in -c, -f or a script run from the shell."""
-    return bool(session.interactive and session.state.get("pager")
-                and not session.state.get("script.depth"))
+    return bool(session.interactive and session.state.pager
+                and not session.state.script_depth)
 
 
 def paged(handler: Callable[[Any, str], None]) -> Callable[[Any, str], None]:
@@ -514,14 +515,10 @@ def render_result(result: Result, module: Module | None) -> Styled:
         return out
     spec = enc.spec
     if reply.stored is not None:
-        from .trace import describe_instruction
-
         out.append(f"stored at {ins.signed_value}: ", style="tmcl.note")
         out.append(describe_instruction(reply.stored, module), style="tmcl.value")
         return out
     if spec is None:  # a raw command number
-        from .trace import describe_reply
-
         if ins.opcode == Control.GET_VERSION and ins.type == 1:
             out.append(version_text(reply.value, module), style="tmcl.value")
             return out
@@ -583,8 +580,6 @@ def _render_read(out, result: Result, module: Module | None):
     spec = enc.spec
     param = enc.parameter
     if param is None:  # a raw `6 4, 0, 0`: name the parameter all the same
-        from .trace import param_for
-
         param = param_for(ins, module)
     if spec is not None and spec.type_kind == "port" and module is not None:
         if ins.type == module.io_all_port and ins.motor in module.io_all_banks:
@@ -701,3 +696,57 @@ def event_motors(reply: Reply) -> list[int]:
 def render_event(reply: Reply) -> str:
     motors = [str(m) for m in event_motors(reply)]
     return f"event: target position reached (motor {', '.join(motors) or reply.value})"
+
+
+# -- describing instructions and replies -------------------------------------------------
+
+def describe_instruction(ins: Instruction, module: Module | None) -> str:
+    """``GAP 4, 0  // MaxPositioningSpeed``, ``136 type 0: firmware version``."""
+    if ins.opcode >= 128:
+        ctl = isa.control(ins.opcode)
+        if ctl is not None:
+            fields = [f"{name} {v}" for name, v in (("type", ins.type), ("motor", ins.motor),
+                                                    ("value", ins.signed_value)) if v]
+            return f"{ins.opcode} {_control_name(ins.opcode)}" + (
+                f" ({', '.join(fields)})" if fields else "")
+    text, comment = asm.disassemble_instruction(ins, module)
+    return f"{text}  // {comment}" if comment else text
+
+
+def param_for(ins: Instruction, module: Module | None):
+    if module is None:
+        return None
+    spec = isa.by_opcode(ins.opcode)
+    if spec is None:
+        return None
+    if spec.type_kind == "axis_param":
+        return module.axis(ins.type)
+    if spec.type_kind == "global_param":
+        return module.glob(ins.type, ins.motor)
+    return None
+
+
+def describe_reply(reply: Reply, module: Module | None = None,
+                   request: Request | None = None) -> str:
+    """``100 ok, value 1000 (MaxPositioningSpeed = 1000 pps)``, ``event: ...``."""
+    if reply.version is not None:
+        return f"version {reply.version!r}"
+    if reply.stored is not None:
+        return f"stored instruction: {describe_instruction(reply.stored, module)}"
+    if reply.is_event:
+        motors = [str(m) for m in range(8) if reply.value >> m & 1]
+        return f"event: target position reached, motor {', '.join(motors) or '-'}"
+    spec = isa.by_opcode(reply.opcode)
+    what = spec.mnemonic if spec else (f"{reply.opcode}" if reply.opcode < 128 else
+                                        f"{reply.opcode} ({_control_name(reply.opcode)})")
+    text = f"{reply.status} {status_text(reply.status)}, {what} value {reply.value}"
+    if request is not None and request.opcode == reply.opcode and reply.ok:
+        param = param_for(request.instruction, module)
+        if param is not None and spec is not None and spec.reads:
+            text += f" ({param.name} = {value_text(reply.value, param)})"
+    return text
+
+
+def _control_name(opcode: int) -> str:
+    ctl = isa.control(opcode)
+    return ctl.name.split(" (")[0] if ctl else "unknown command"

@@ -31,18 +31,17 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..base import files, limits
-from ..base.errors import AsmError, RangeError, TmclError, TmclTimeoutError, ValidationError
+from ..base.errors import (EXIT_FAILED, EXIT_OK, EXIT_USAGE, AsmError, RangeError, TmclError,
+                           TmclTimeoutError, ValidationError)
 from ..client.ledger import CONFIRM_ROUNDS
-from . import commands, expr
-from .commands import command
-from .lines import split_line
-from .lines import strip_comment as _strip_comment
-from .session import RECHECK_AFTER, QuitShell, check_substitutions, owns_line, unknown_command
+from . import commands, expr, options
+from .commands import command, options_of
+from .lines import classify, split_line
+from .session import QuitShell, check_substitutions, unknown_command
 
 if TYPE_CHECKING:
     from .session import Session
 
-EXIT_OK, EXIT_FAILED, EXIT_SYNTAX = 0, 1, 2
 STDIN = "<stdin>"
 WAIT_TIMEOUT = 30.0  # .wait default, seconds
 WAIT_INTERVAL = 0.05
@@ -125,11 +124,6 @@ class Include(Node):
     body: list[Node] = field(default_factory=list)
 
 
-def strip_comment(text: str) -> str:
-    """Drop a ``#``/``//`` comment (outside quotes); see lines.py."""
-    return _strip_comment(text)
-
-
 def _word(text: str) -> tuple[str, str]:
     parts = text.split(None, 1)
     return parts[0].lower(), (parts[1].strip() if len(parts) > 1 else "")
@@ -191,7 +185,7 @@ class Parser:
                 if hit is not None:
                     yield Step(file, number, hit[0], hit[1])
                     continue
-            texts = split_line(raw, owns_line)  # `GAP 1, 0; GAP 2, 0` is two lines
+            texts = split_line(raw)  # `GAP 1, 0; GAP 2, 0` is two lines
             if len(texts) == 1 and not open_ and self.seen.get(texts[0]):
                 if len(again) >= _AGAIN_LINES:
                     again.clear()
@@ -225,9 +219,10 @@ class Parser:
             raise self.fail(number, str(exc), error_kind(exc), text) from None
 
     def _line(self, number: int, text: str, open_: list[tuple[Node, list[Node]]]) -> Node | None:
+        # ``text`` is one shell line, its comment off (split_line took it)
         file = self.file
         if "${" in text:
-            check_substitutions(_strip_comment(text))
+            check_substitutions(text)
         if not text.startswith("."):
             # a line seen before passed the same checks (parsing sends nothing, so the
             # module and mode cannot change between); a long script repeats its lines
@@ -236,13 +231,13 @@ class Parser:
                 return Step(file, number, text, seen)
             if len(self.seen) >= _AGAIN_LINES:
                 self.seen.clear()  # (stdin may bring any number of distinct lines)
-            word = text.split(None, 1)[0]
-            if commands.find(word) is not None:  # bare help/quit
+            if classify(text).command is not None:  # bare help/quit
                 self.seen[text] = None
                 return Step(file, number, text)
             if self.precheck and "${" not in text:
                 self.session.client.encode(text)
-            plain = self.seen[text] = _plain_tmcl(text)
+            # what Session.run_line would send as it is (see Step.plain)
+            plain = self.seen[text] = text if "${" not in text else None
             return Step(file, number, text, plain)
         word, args = _word(text)
         if word in (".repeat", ".if") and len(open_) + self.outer_blocks >= MAX_BLOCK_DEPTH:
@@ -287,11 +282,10 @@ class Parser:
         cmd = commands.find(word)
         if cmd is None:
             raise self.fail(number, unknown_command(word))
-        cmd.load()  # its feature module, which may add its check to CHECKS (.watch does)
-        check = CHECKS.get(cmd.name)
+        check = cmd.checker()  # (the entry names it; its feature module is imported)
         if check is not None:
             check(self.session, args)
-        if cmd.name in RECHECK_AFTER:
+        if cmd.changes_link:
             self.precheck = False
         return Step(file, number, text)
 
@@ -312,17 +306,6 @@ class Parser:
         body = list(sub.nodes(lines))
         self.precheck = sub.precheck
         return Include(self.file, number, text, str(path), body)
-
-
-def _plain_tmcl(text: str) -> str | None:
-    """The line ``Session.run_line`` would send as it is (see ``Step.plain``), else None."""
-    plain = _strip_comment(text)
-    if not plain or "${" in plain:
-        return None
-    word = plain.split(None, 1)[0]
-    if word.startswith(".") or commands.find(word) is not None:
-        return None
-    return plain
 
 
 def resolve(name: str, base: Path | None) -> Path:
@@ -380,20 +363,19 @@ def _check_let(session: Session, args: str) -> None:
         expr.validate(session, parse_let(args)[1])
 
 
-def _check_expr_options(options: dict[str, bool]) -> Callable[[Session, str], None]:
+def _check_expr_options(command: str) -> Callable[[Session, str], None]:
     def check(session: Session, args: str) -> None:
-        rest, opts = expr.split_options(args, options)
+        rest, opts = options.parse(args, options_of(command))
         for name in opts:
-            if options[name]:
-                expr.option_float(opts, name, None, allow_none=name == "timeout",
-                                  limit="wait_timeout" if name == "timeout" else "interval")
+            options.float_value(opts, name, None, allow_none=name == "--timeout",
+                                limit="wait_timeout" if name == "--timeout" else "interval")
         if not rest:
             raise ValidationError("an expression is needed")
         expr.validate(session, expr.parse(rest))
     return check
 
 
-def _check_sleep(session: Session, args: str) -> None:
+def check_sleep(session: Session, args: str) -> None:
     if not args:
         raise ValidationError(".sleep needs seconds: .sleep 0.5")
     expr.validate(session, expr.parse(blank_substitutions(args)))
@@ -404,7 +386,7 @@ def blank_substitutions(text: str) -> str:
     return re.sub(r"\$\{[^}]*\}", "0", text)
 
 
-def _check_onerror(session: Session, args: str) -> None:
+def check_onerror(session: Session, args: str) -> None:
     if not args:
         raise ValidationError(".onerror needs a line to run (e.g. .onerror MST 0) or 'off'")
     if args.lower() == "off":
@@ -416,13 +398,16 @@ def _check_onerror(session: Session, args: str) -> None:
         session.client.encode(args)
 
 
-CHECKS: dict[str, Callable[[Session, str], None]] = {
-    ".onerror": _check_onerror,
-    ".let": lambda s, a: _check_let(s, blank_substitutions(a)),
-    ".expect": lambda s, a: _check_expr_options({})(s, blank_substitutions(a)),
-    ".wait": lambda s, a: _check_expr_options(WAIT_OPTIONS)(s, blank_substitutions(a)),
-    ".sleep": _check_sleep,
-}
+def check_let(session: Session, args: str) -> None:
+    _check_let(session, blank_substitutions(args))
+
+
+def check_expect(session: Session, args: str) -> None:
+    _check_expr_options(".expect")(session, blank_substitutions(args))
+
+
+def check_wait(session: Session, args: str) -> None:
+    _check_expr_options(".wait")(session, blank_substitutions(args))
 
 
 # -- running -----------------------------------------------------------------------------
@@ -457,14 +442,14 @@ class Runner:
     def run(self, nodes: Iterable[Node]) -> None:
         session = self.session
         state = session.state
-        depth = state.get("script.depth", 0)
-        state["script.depth"] = depth + 1  # type: ignore[operator]
+        depth = state.script_depth
+        state.script_depth = depth + 1
         saved = session.location
         try:
             for node in nodes:
                 # the fast path: a plain TMCL line, what most of a long script is (see step)
                 plain = node.plain if type(node) is Step else None  # type: ignore[attr-defined]
-                if plain is None or session.time_limit is not None or "capture" in state:
+                if plain is None or session.time_limit is not None or state.capture is not None:
                     session.out.flush()  # a command may wait, ask or read: show what was held
                     self.node(node)
                     continue
@@ -483,7 +468,7 @@ class Runner:
                 self.interrupted_at = session.location
             raise
         finally:
-            state["script.depth"] = depth
+            state.script_depth = depth
             session.location = saved
 
     def node(self, node: Node) -> None:
@@ -518,7 +503,7 @@ class Runner:
         typed = len(session.history)
         session.time_left()  # a long .repeat stops at the session's time limit
         try:
-            if session.client is not None and strip_comment(node.text):
+            if session.client is not None and node.text:
                 session.ensure_link()  # the link was lost on an earlier line (--keep-going)
             session.run_line(node.text)
         finally:
@@ -526,7 +511,7 @@ class Runner:
 
     def on_error(self) -> None:
         """The script stopped at an error: run its ``.onerror`` line, if it set one."""
-        pending = self.session.state.pop("script.onerror", None)
+        pending = self.session.state.take("onerror")
         if pending is None:
             return
         node, line = pending  # type: ignore[misc]
@@ -647,7 +632,7 @@ def run_file(session: Session, path: str) -> int:
                     _run_nodes(runner, nodes)
     except ScriptError as exc:
         _report_plain(session, exc)
-        status, kind = EXIT_SYNTAX, exc.kind
+        status, kind = EXIT_USAGE, exc.kind
     except KeyboardInterrupt:
         # how far it got, before the Ctrl-C policy (stop everything) says what it stopped
         where = runner.interrupted_at
@@ -664,7 +649,7 @@ def run_file(session: Session, path: str) -> int:
     if status == EXIT_OK and (runner.failed or session.stats.suspects > before.suspects):
         status = EXIT_FAILED  # a result that may be another request's is no pass
     summary(session, name, before, time.monotonic() - start, status, kind)
-    if status == EXIT_SYNTAX and (session.stats.commands > before.commands
+    if status == EXIT_USAGE and (session.stats.commands > before.commands
                                   or session.stats.shell_commands > before.shell):
         # stdin runs each line as it arrives: a bad line after others were sent is a run
         # that failed (as in -c), not a script refused with nothing sent
@@ -680,7 +665,7 @@ def _run_nodes(runner: Runner, nodes: Iterable[Node]) -> None:
     except QuitShell:
         pass
     finally:
-        runner.session.state.pop("script.onerror", None)
+        runner.session.state.onerror = None
 
 
 def _stdin_lines() -> Iterator[str]:
@@ -720,9 +705,9 @@ def summary(session: Session, name: str, before: Counts, elapsed: float, status:
                 f"command{'s' if sent != 1 else ''} sent{also}, {passed} check"
                 f"{'s' if passed != 1 else ''} passed, {failed} failed, {errors} "
                 f"error{'s' if errors != 1 else ''}, {elapsed:.2f} s")
-    elif status == EXIT_SYNTAX and sent == 0 and not shell:
+    elif status == EXIT_USAGE and sent == 0 and not shell:
         text = f"{name}: not run ({why}; nothing was sent)"
-    elif status == EXIT_SYNTAX:  # stdin runs each line as it arrives, up to the bad one
+    elif status == EXIT_USAGE:  # stdin runs each line as it arrives, up to the bad one
         text = (f"{name}: stopped ({why}) after {sent} "
                 f"command{'s' if sent != 1 else ''} sent{also}, {elapsed:.2f} s")
     else:
@@ -758,7 +743,7 @@ def run_source(session: Session, path: str) -> bool:
 
 class BlockCollector:
     """Collects lines typed after ``.repeat``/``.if`` until the matching ``.end``, then runs
-    them. Installed as ``session.state["capture"]`` (consulted by ``Session.run_line``)."""
+    them. Installed as ``session.state.capture`` (consulted by ``Session.run_line``)."""
 
     def __init__(self, first: str):
         self.lines = [first]
@@ -768,13 +753,13 @@ class BlockCollector:
         self.lines.append(text)
         for fn in list(session.recorders):
             fn(text, "")
-        word = _word(strip_comment(text) or "#")[0]
+        word = _word(text or "#")[0]
         if word in (".repeat", ".if"):
             self.depth += 1
         elif word == ".end":
             self.depth -= 1
         if self.depth == 0:
-            session.state.pop("capture", None)
+            session.state.capture = None
             self.run(session)
         return True
 
@@ -796,7 +781,7 @@ def _open_block(session: Session, word: str, args: str) -> None:
         expr.validate(session, parse_repeat(args)[0])
     else:
         expr.validate(session, parse_condition(word, args))
-    session.state["capture"] = BlockCollector(f"{word} {args}")
+    session.state.capture = BlockCollector(f"{word} {args}")
     if session.interactive:
         session.out.info("  (collecting lines until .end)")
 
@@ -827,16 +812,16 @@ command(".end")(
 # -- the commands ------------------------------------------------------------------------
 
 def set_onerror(session: Session, args: str, node: Node | None = None) -> None:
-    _check_onerror(session, args)
+    check_onerror(session, args)
     if args.lower() == "off":
-        session.state.pop("script.onerror", None)
+        session.state.onerror = None
     else:
-        session.state["script.onerror"] = (node or Node("<input>", 0, args), args)
+        session.state.onerror = (node or Node("<input>", 0, args), args)
 
 
 @command(".onerror")
 def cmd_onerror(session: Session, args: str) -> None:
-    if session.state.get("script.depth", 0) == 0:
+    if session.state.script_depth == 0:
         raise ValidationError(".onerror works inside scripts (-f, .source)")
     set_onerror(session, args)
 
@@ -964,15 +949,14 @@ def cmd_expect(session: Session, args: str) -> None:
                           markup=False)
 
 
-WAIT_OPTIONS = {"timeout": True, "interval": True}
 
 
 @command(".wait")
 def cmd_wait(session: Session, args: str) -> None:
-    rest, opts = expr.split_options(args, WAIT_OPTIONS)
-    timeout = expr.option_float(opts, "timeout", WAIT_TIMEOUT, allow_none=True,
+    rest, opts = options.parse(args, options_of(".wait"))
+    timeout = options.float_value(opts, "--timeout", WAIT_TIMEOUT, allow_none=True,
                                 limit="wait_timeout")
-    interval = expr.option_float(opts, "interval", WAIT_INTERVAL, limit="interval")
+    interval = options.float_value(opts, "--interval", WAIT_INTERVAL, limit="interval")
     assert interval is not None
     if not rest:
         raise ValidationError(".wait needs a condition: .wait GAP 8, 0 == 1")
@@ -1087,7 +1071,7 @@ class Recorder:
 
     def __call__(self, line: str, outcome: str) -> None:
         s = self.session
-        if s.state.get("script.depth", 0):
+        if s.state.script_depth:
             return  # lines of a running script or block: the line that started it is recorded
         word = _word(line)[0]
         if word == ".record":
@@ -1122,8 +1106,8 @@ class Recorder:
         s = self.session
         if self in s.recorders:
             s.recorders.remove(self)
-        if s.state.get("record") is self:
-            s.state.pop("record", None)
+        if s.state.record is self:
+            s.state.record = None
         if self.close in s.closers:
             s.closers.remove(self.close)
 
@@ -1141,7 +1125,7 @@ def _is_read(session: Session, line: str) -> bool:
 
 @command(".record")
 def cmd_record(session: Session, args: str) -> None:
-    current: Recorder | None = session.state.get("record")  # type: ignore[assignment]
+    current: Recorder | None = session.state.record  # type: ignore[assignment]
     if not args:
         if current is None:
             session.out.info("not recording (.record FILE starts)")
@@ -1165,7 +1149,7 @@ def cmd_record(session: Session, args: str) -> None:
              f"({module}, address {client.address})\n# replay: tmclsh -f {path}\n")
     fh.flush()
     rec = Recorder(session, path, fh)
-    session.state["record"] = rec
+    session.state.record = rec
     session.recorders.append(rec)
     session.closers.append(rec.close)
     session.out.info(f"recording to {path} (.record off to stop)")
@@ -1177,7 +1161,7 @@ def cmd_history(session: Session, args: str) -> None:
         _word(session.history[-1])[0] == ".history" else list(session.history)
     first = 1
     if args:
-        n = expr.option_int({"N": args.strip()}, "N", None, minimum=1)
+        n = options.int_value({"N": args.strip()}, "N", None, minimum=1)
         assert n is not None
         first = max(1, len(lines) - n + 1)
         lines = lines[-n:]

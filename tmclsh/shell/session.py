@@ -13,6 +13,7 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 from ..tmcl import asm
 from ..tmcl import instructions as isa
@@ -24,7 +25,7 @@ from ..base.errors import (ChecksumError, StatusError, TmclError, TmclTimeoutErr
 from ..tmcl.modules import Module
 from ..tmcl.status import OK_STATUSES
 from . import commands
-from .lines import split_text, strip_comment
+from .lines import Line, classify, split_text
 from .render import Output
 
 _VAR = re.compile(r"\$\{([^}]*)\}")
@@ -65,6 +66,34 @@ class QuitShell(Exception):
 
 
 @dataclass
+class SessionState:
+    """What the features keep in a session, each slot named and typed here (a feature does
+    not guess another's keys; the session imports no feature: their objects are ``Any``)."""
+
+    # the stored program as the prompt and toolbar show it ("run", "stop", "step @12", or
+    # {"state": ..., "pc": ...}); None: not known
+    program_state: str | dict | None = None
+    repeat_on_empty: str | None = None  # what an empty line at the prompt runs (.step)
+    pager: bool = False  # long output goes through the pager (the REPL's setting)
+    script_depth: int = 0  # scripts (.source, blocks) being run inside one another
+    onerror: Any = None  # (node, line) a script runs when a line fails (.onerror)
+    record: Any = None  # the script.Recorder of .record
+    capture: Callable[[Session, str], bool] | None = None  # a block (.repeat/.if) collecting
+    debugger: Any = None  # the debugger's DebuggerState
+    program: Any = None  # a program whose labels completion offers
+    watch_log: Any = None  # the last watch's samples (.plot without a file)
+    trace: Callable[[], None] | None = None  # stops the trace (.trace off)
+    # ${expression} in any line (the expression engine, imported the first time)
+    evaluate: Callable[[Session, str], int | float] | None = None
+
+    def take(self, name: str) -> Any:
+        """The slot's value, the slot emptied."""
+        value = getattr(self, name)
+        setattr(self, name, None)
+        return value
+
+
+@dataclass
 class Stats:
     commands: int = 0
     errors: int = 0
@@ -100,8 +129,8 @@ class Session:
         self.ask: Callable[[str], bool] | None = None
         # lets the user pick one of (value, label) options (the REPL's: prompt_toolkit choice)
         self.choose: Callable[[str, list[tuple[str, str]]], str] | None = None
-        # features keep their state here (debugger, watch, ...), keyed by feature name
-        self.state: dict[str, object] = {}
+        # what features keep in the session (debugger, watch, scripts, ...)
+        self.state = SessionState()
         self.location: tuple[str, int] | None = None  # script file and line being run
         # the REPL sets it False before each line; see end_interrupted_line
         self.interrupted_line_ended = True
@@ -115,7 +144,7 @@ class Session:
         # the debugger's stepping end with a TimeLimitError at the deadline.
         self.time_limit: float | None = None
         self._deadline: float | None = None
-        self.state["evaluate"] = _evaluate  # ${expression} in any line
+        self.state.evaluate = _evaluate
 
     def close(self) -> bool:
         """End the session: run the closers; a failing one is reported, the rest still run.
@@ -163,6 +192,16 @@ class Session:
             raise TransportError(f"still disconnected ({why}); the line was not run")
         self.out.info(reconnected(self.client))
 
+    def report_error(self, line: str | None, exc: BaseException) -> None:
+        """Say what went wrong with ``line`` (once: an error already shown is not said
+        again), with FILE:LINE while a script runs."""
+        if getattr(exc, "shown", False):
+            return
+        where = ""
+        if self.location is not None:
+            where = f"{self.location[0]}:{self.location[1]}: "
+        self.out.error(line, f"{where}{exc}")
+
     # -- confirmation -------------------------------------------------------------------
     def confirm(self, question: str) -> None:
         """Raise Abort unless the user agrees (or --yes was given). Scripts need --yes."""
@@ -171,7 +210,7 @@ class Session:
         if self.ask is not None and self.interactive:
             # after a question, an empty line must not repeat the last .step (the debugger's
             # repeat_on_empty): the user answered the question, not the debugger
-            self.state.pop("repeat_on_empty", None)
+            self.state.repeat_on_empty = None
             if self.ask(question):
                 return
             raise Abort("cancelled; nothing was sent")
@@ -191,7 +230,7 @@ class Session:
             inner = m.group(1).strip()
             if inner in self.variables:
                 return format_number(self.variables[inner])
-            evaluate = self.state.get("evaluate")
+            evaluate = self.state.evaluate
             if callable(evaluate):
                 return format_number(evaluate(self, inner))
             raise ValidationError(f"unknown variable {inner!r} (set it with .let {inner} = ...)")
@@ -202,7 +241,7 @@ class Session:
     def split(self, text: str) -> list[str]:
         """Lines of typed text: newlines and ';' separate (see lines.py); a command that owns
         its line (``.watch``) takes the rest of it."""
-        return split_text(text, owns_line)
+        return split_text(text)
 
     def time_left(self) -> float | None:
         """Seconds the current line may still take (None: no limit); TimeLimitError once
@@ -215,8 +254,9 @@ class Session:
                                  f"limit of {self.time_limit:g} s")
         return left
 
-    def run_line(self, line: str) -> Result | None:
-        """Run one line; raises TmclError (or Abort) on failure, after counting it."""
+    def run_line(self, line: str | Line) -> Result | None:
+        """Run one line (text, or a line ``lines.classify`` read already); raises TmclError
+        (or Abort) on failure, after counting it."""
         if self.time_limit is None or self._deadline is not None:  # nested: a script's line
             return self._run_line(line)
         self._deadline = time.monotonic() + self.time_limit
@@ -225,17 +265,19 @@ class Session:
         finally:
             self._deadline = None
 
-    def _run_line(self, line: str) -> Result | None:
-        text = strip_comment(line)  # `GAP 1, 0 # where`, `.let a = 3 // why`
+    def _run_line(self, line: str | Line) -> Result | None:
+        if not isinstance(line, Line):
+            line = classify(line)  # `GAP 1, 0 # where`, `.let a = 3 // why`
+        text = line.text
         if not text:
             return None
         self.history.append(text)
-        capture = self.state.get("capture")  # a block (.repeat/.if) collecting its lines
+        capture = self.state.capture  # a block (.repeat/.if) collecting its lines
         if callable(capture) and capture(self, text):
             return None
         first = getattr(self.client, "replies", 0)
         try:
-            result = self._dispatch(text)
+            result = self._dispatch(line)
         except TmclError as exc:
             if not getattr(exc, "counted", False):  # a failed .expect counts as a failure
                 self.stats.errors += 1
@@ -286,13 +328,12 @@ class Session:
                 pass  # the link went: the next command, if any, says so
         self.report_suspects()
 
-    def _dispatch(self, text: str) -> Result | None:
-        word = text.split(None, 1)[0]
-        if word.startswith(".") or _is_bare_command(text):
-            cmd = commands.find(word)
-            if cmd is None:
-                raise ValidationError(unknown_command(word))
-            args = text[len(word):].strip()
+    def _dispatch(self, line: Line) -> Result | None:
+        text, cmd = line.text, line.command
+        if line.unknown:
+            raise ValidationError(unknown_command(line.word))
+        if cmd is not None:
+            args = line.args
             if args and cmd.syntax == cmd.name:  # `.stopall now`: a usage error, nothing sent
                 raise ValidationError(f"{cmd.name} takes no arguments (got {args!r})")
             frames, lines = frames_sent(self.client), self.stats.commands
@@ -402,16 +443,6 @@ def _evaluate(session: Session, text: str) -> int | float:
     return evaluate(session, text)
 
 
-def owns_line(text: str) -> bool:
-    """Whether ``text`` starts with a command that takes the rest of its line, ';' included."""
-    words = text.split(None, 1)
-    cmd = commands.find(words[0]) if words else None
-    return cmd is not None and cmd.owns_line
-
-
-# after one of these, a TMCL line is checked when it runs, not before (a script's or -c's
-# check of the lines ahead): the module or mode it is checked against may change
-RECHECK_AFTER = frozenset({".connect", ".module", ".mode", ".ascii", ".address"})
 
 
 def frames_sent(client) -> int:
@@ -424,9 +455,3 @@ def check_substitutions(text: str) -> None:
     """A ``${`` with no ``}`` after it is an error: it was sent or printed as it stood."""
     if "${" in _VAR.sub("", text):
         raise ValidationError("unterminated ${...}: a '}' is missing")
-
-
-def _is_bare_command(text: str) -> bool:
-    parts = text.split(None, 1)
-    word = parts[0] if parts else ""
-    return not word.startswith(".") and commands.find(word) is not None

@@ -85,7 +85,7 @@ def stop_all(client: Client, say: Say, why: str = "", *,
 
         say.info(reconnected(client))
     if session is not None and report.program is not None and report.program_error is None:
-        session.state["program_state"] = "stop"  # the toolbar and prompt follow
+        session.state.program_state = "stop"  # the toolbar and prompt follow
     say_report(say, report, why)
     return report
 

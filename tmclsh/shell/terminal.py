@@ -36,7 +36,8 @@ from ..tmcl import instructions as isa
 from ..client.ascii import (BS, CR, GP_ASCII_MODE, GP_BANK, ECHO_NAMES, AsciiLink, Echo, LineKind, Mode, address_char, ascii_commands, classify_line, describe_gp67, echo_mode, gp67_value, next_line, reply_part, reply_summary, starts_in_ascii)
 from ..base.errors import StatusError, ValidationError
 from ..tmcl.frames import Reply, Request, status_ok
-from .commands import command
+from . import options
+from .commands import command, options_of
 from .termtools import (MENU_KEY, MenuState, SessionLog, Stamper, choose, file_lines, hex_hint, hex_lines, is_bin, is_quit, menu_hint, menu_text)
 
 if TYPE_CHECKING:
@@ -252,19 +253,13 @@ class TerminalOptions:
 
 
 def parse_options(argtext: str) -> TerminalOptions:
-    opts = TerminalOptions()
-    for word in argtext.split():
-        if word == "--raw":
-            opts.raw = True
-        elif word == "--bin":
-            opts.send_bin = True
-        elif word == "--no-bin":
-            opts.send_bin = False
-        elif word == "--echo":
-            opts.local_echo = True
-        else:
-            raise ValidationError(f".ascii: unknown option {word!r} "
-                                  "(--raw, --echo, --bin, --no-bin)")
+    rest, given = options.parse(argtext, options_of(".ascii"))
+    if rest:
+        raise ValidationError(f".ascii takes only options, got {rest!r} "
+                              "(--raw, --echo, --bin, --no-bin)")
+    opts = TerminalOptions(raw="--raw" in given, local_echo="--echo" in given)
+    if "--bin" in given or "--no-bin" in given:
+        opts.send_bin = "--no-bin" not in given
     return opts
 
 
@@ -987,9 +982,8 @@ def _complete_mode(session: Session, text: str) -> list[tuple[str, str]]:
 
 @command(".mode")
 def cmd_mode(session: Session, argtext: str) -> None:
-    words = argtext.split()
-    keep = "--keep" in words
-    words = [w for w in words if w != "--keep"]
+    words, given = options.parse_words(argtext, options_of(".mode"))
+    keep = "--keep" in given
     client = session.client
     if len(words) > 1 or (words and words[0].lower() not in ("ascii", "binary")):
         raise ValidationError(".mode takes ascii or binary (and --keep)")

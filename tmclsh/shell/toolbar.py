@@ -18,8 +18,9 @@ if TYPE_CHECKING:
 Fragments = list[tuple[str, str]]
 
 
-def _program_state(session: Session) -> str | None:
-    state = session.state.get("program_state")
+def program_state_text(session: Session) -> str | None:
+    """The stored program's state as the prompt and toolbar show it (``run``, ``step @12``)."""
+    state = session.state.program_state
     if state is None:
         return None
     if isinstance(state, dict):  # {"state": "run", "pc": 12}
@@ -89,7 +90,7 @@ def toolbar_fragments(session: Session, columns: int) -> Fragments:
         items["trace_on"] = [[("class:bottom-toolbar.on", "trace on")], []]
     else:
         items["trace_off"] = [[("class:bottom-toolbar.dim", "trace off")], []]
-    state = _program_state(session)
+    state = program_state_text(session)
     if state:
         style = ("class:bottom-toolbar.on" if state.startswith(("run", "step"))
                  else "class:bottom-toolbar")

@@ -21,69 +21,14 @@ from ..tmcl import instructions as isa
 from ..base.errors import FrameError
 from ..tmcl.modules import Module
 from ..tmcl.decoder import FRAME_PIECE, pieces
-from ..tmcl.frames import (INSTRUCTION_LEN, SERIAL_FRAME_LEN, VERSION_STRING_LEN, Instruction, Reply, Request, Status, checksum, parse_hex, status_text, to_signed32)
+from ..tmcl.frames import (INSTRUCTION_LEN, SERIAL_FRAME_LEN, VERSION_STRING_LEN, Instruction, Reply, Request, Status, checksum, parse_hex, to_signed32)
+
+from .render import describe_instruction, describe_reply
 
 if TYPE_CHECKING:
     from .session import Session
 
-_STATE_KEY = "trace"
 _ARROW = {"tx": "tx>", "rx": "<rx", "drop": "!! ", "note": "-- "}
-
-
-# -- describing instructions and replies -------------------------------------------------
-
-def describe_instruction(ins: Instruction, module: Module | None) -> str:
-    """``GAP 4, 0  // MaxPositioningSpeed``, ``136 type 0: firmware version``."""
-    if ins.opcode >= 128:
-        ctl = isa.control(ins.opcode)
-        if ctl is not None:
-            fields = [f"{name} {v}" for name, v in (("type", ins.type), ("motor", ins.motor),
-                                                    ("value", ins.signed_value)) if v]
-            return f"{ins.opcode} {_control_name(ins.opcode)}" + (
-                f" ({', '.join(fields)})" if fields else "")
-    text, comment = asm.disassemble_instruction(ins, module)
-    return f"{text}  // {comment}" if comment else text
-
-
-def param_for(ins: Instruction, module: Module | None):
-    if module is None:
-        return None
-    spec = isa.by_opcode(ins.opcode)
-    if spec is None:
-        return None
-    if spec.type_kind == "axis_param":
-        return module.axis(ins.type)
-    if spec.type_kind == "global_param":
-        return module.glob(ins.type, ins.motor)
-    return None
-
-
-def describe_reply(reply: Reply, module: Module | None = None,
-                   request: Request | None = None) -> str:
-    """``100 ok, value 1000 (MaxPositioningSpeed = 1000 pps)``, ``event: ...``."""
-    if reply.version is not None:
-        return f"version {reply.version!r}"
-    if reply.stored is not None:
-        return f"stored instruction: {describe_instruction(reply.stored, module)}"
-    if reply.is_event:
-        motors = [str(m) for m in range(8) if reply.value >> m & 1]
-        return f"event: target position reached, motor {', '.join(motors) or '-'}"
-    spec = isa.by_opcode(reply.opcode)
-    what = spec.mnemonic if spec else (f"{reply.opcode}" if reply.opcode < 128 else
-                                        f"{reply.opcode} ({_control_name(reply.opcode)})")
-    text = f"{reply.status} {status_text(reply.status)}, {what} value {reply.value}"
-    if request is not None and request.opcode == reply.opcode and reply.ok:
-        from .render import value_text
-
-        param = param_for(request.instruction, module)
-        if param is not None and spec is not None and spec.reads:
-            text += f" ({param.name} = {value_text(reply.value, param)})"
-    return text
-
-
-def _control_name(opcode: int) -> str:
-    ctl = isa.control(opcode)
-    return ctl.name.split(" (")[0] if ctl else "unknown command"
 
 
 # -- trace lines -------------------------------------------------------------------------
@@ -152,17 +97,17 @@ def enable_trace(session: Session) -> None:
     """Print every frame the client sends and receives on stderr (``--trace``, ``.trace on``)."""
     if trace_enabled(session):
         return
-    session.state[_STATE_KEY] = session.client.add_tracer(Tracer(session))
+    session.state.trace = session.client.add_tracer(Tracer(session))
 
 
 def disable_trace(session: Session) -> None:
-    unsubscribe = session.state.pop(_STATE_KEY, None)
+    unsubscribe = session.state.take("trace")
     if callable(unsubscribe):
         unsubscribe()
 
 
 def trace_enabled(session: Session) -> bool:
-    return callable(session.state.get(_STATE_KEY))
+    return callable(session.state.trace)
 
 
 # -- .decode: bytes pasted from elsewhere ------------------------------------------------

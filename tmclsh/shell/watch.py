@@ -49,7 +49,8 @@ from ..base import files
 from ..base.errors import TmclError, TransportError, ValidationError
 from ..client.ledger import CONFIRM_ROUNDS
 from . import expr, lines, plot, script
-from .commands import command
+from . import options
+from .commands import command, options_of
 from .session import reconnected
 
 if TYPE_CHECKING:
@@ -501,7 +502,6 @@ class _Interrupt:
 
 # -- the command ---------------------------------------------------------------------------
 
-WATCH_OPTIONS = {"interval": True, "count": True, "until": True, "csv": True}
 
 
 def parse_args(session: Session, args: str, *, names: bool = True):
@@ -511,21 +511,22 @@ def parse_args(session: Session, args: str, *, names: bool = True):
     only watched values or variables: variables set earlier in the script do not exist yet.
     """
     _refuse_line_after_options(args)
-    rest, opts = expr.split_options(args, WATCH_OPTIONS)
-    interval = expr.option_float(opts, "interval", DEFAULT_INTERVAL, limit="watch_interval")
-    count = expr.option_int(opts, "count", None, minimum=1)
+    rest, opts = options.parse(args, options_of(".watch"))
+    interval = options.float_value(opts, "--interval", DEFAULT_INTERVAL,
+                                   limit="watch_interval")
+    count = options.int_value(opts, "--count", None, minimum=1)
     assert interval is not None
     items = parse_items(session, rest) if rest else default_items(session)
     until = None
-    if "until" in opts:
-        until = expr.parse(session.expand(str(opts["until"])))
+    if "--until" in opts:
+        until = expr.parse(session.expand(str(opts["--until"])))
         known = {i.name for i in items} | set(session.variables)
         unknown = [n for n in until.names() if n not in known]
         if unknown and names:
             raise ValidationError(f"--until uses {unknown[0]!r}, which is neither watched nor a "
                                   f"variable (watched: {', '.join(i.name for i in items)})")
         expr.validate(session, until)
-    csv_path = Path(str(opts["csv"])).expanduser() if "csv" in opts else None
+    csv_path = Path(str(opts["--csv"])).expanduser() if "--csv" in opts else None
     return items, interval, count, until, csv_path
 
 
@@ -535,7 +536,8 @@ def _refuse_line_after_options(args: str) -> None:
     (``--count 2;``) or its expressions."""
     import re
 
-    first = re.search(r"(?:^|\s)--(?:" + "|".join(WATCH_OPTIONS) + r")\b", args)
+    names = "|".join(o.name[2:] for o in options_of(".watch"))
+    first = re.search(r"(?:^|\s)--(?:" + names + r")\b", args)
     if first is None:
         return
     cut = next((i for i in lines.separators(args) if i > first.start()), None)
@@ -548,11 +550,11 @@ def _refuse_line_after_options(args: str) -> None:
             f"\n  {after}")
 
 
-def _check(session: Session, args: str) -> None:
+def check_watch(session: Session, args: str) -> None:
     parse_args(session, script.blank_substitutions(args), names=False)
 
 
-script.CHECKS[".watch"] = _check
+
 
 
 @dataclass
@@ -603,7 +605,7 @@ def run_watch(session: Session, items: Sequence[Item], *, interval: float = DEFA
     try:
         with (keys if keys is not None else Keys()) as w.keys, _Interrupt() as w.intr:
             w.state.keys = w.keys.active
-            session.state["watch.log"] = w.state.log
+            session.state.watch_log = w.state.log
             w.view = _Live(session, w.state) if live else None
             try:
                 w.result.reason = w.run()

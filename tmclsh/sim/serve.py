@@ -281,17 +281,17 @@ def run(module: str, address: int, *, pty: bool = False, tcp: str | None = None,
     is missing, no pty on this system).
     """
     from ..base.canspec import parse_can
-    from ..base.errors import ValidationError
+    from ..base.errors import EXIT_CONNECT, EXIT_USAGE, ValidationError
 
     chosen = [x for x in (pty, tcp, can) if x]
     if len(chosen) != 1:
         log.error("choose exactly one of --pty, --tcp HOST:PORT, --can IFACE:CHANNEL")
-        return 2
+        return EXIT_USAGE
     try:
         sim = Simulator(module, address, host_address=host_address).bench_layout()
     except ValueError as exc:
         log.error("%s", exc)
-        return 2
+        return EXIT_USAGE
     if faults:
         sim.faults.rng = random.Random(seed)
         sim.faults.rates = dict(faults)
@@ -307,11 +307,11 @@ def run(module: str, address: int, *, pty: bool = False, tcp: str | None = None,
     except (ValueError, ValidationError) as exc:
         sim.close()
         log.error("%s", exc)
-        return 2
+        return EXIT_USAGE
     except OSError as exc:
         sim.close()
         log.error("cannot start the simulator server: %s", exc)
-        return 3
+        return EXIT_CONNECT
     try:
         if pty:
             server = serve_pty(sim)
@@ -327,7 +327,7 @@ def run(module: str, address: int, *, pty: bool = False, tcp: str | None = None,
     except Exception as exc:  # OSError, python-can's own errors for unknown interfaces, ...
         sim.close()
         log.error("cannot start the simulator server: %s", exc)
-        return 3
+        return EXIT_CONNECT
     stop = threading.Event()
     previous = {}
     if threading.current_thread() is threading.main_thread():
