@@ -95,7 +95,7 @@ def test_commands_refused_in_ascii_mode(opcode):
 
 
 def test_refusal_names_alternatives():
-    with pytest.raises(ValidationError, match="RUN starts the stored program"):
+    with pytest.raises(ValidationError, match=r"in ASCII mode, RUN does it \(start the stored TMCL program\)"):
         am.format_request(Request(1, 129, 0, 0, 0), M1311)
     with pytest.raises(ValidationError, match="not available on the TMCM-1311"):
         am.format_request(Request(1, 29, 0, 0, 0), M1311)  # SAC: TMCM-351 only

@@ -170,11 +170,9 @@ def _not_in_ascii(req: Request) -> ValidationError:
         ctl = isa.control(req.opcode)
         name = f"command {req.opcode} ({ctl.name.lower().replace('_', ' ')})" if ctl \
             else f"command {req.opcode}"
-    hint = ""
-    if req.opcode == Control.RUN_APPLICATION:
-        hint = "; RUN starts the stored program in ASCII mode"
-    elif req.opcode == Control.STOP_APPLICATION:
-        hint = "; STOP stops it in ASCII mode"
+    ctl = isa.control(req.opcode)
+    word = ctl.ascii_word if ctl is not None else None
+    hint = f"; in ASCII mode, {word} does it ({isa.ASCII_ONLY[word]})" if word else ""
     return ValidationError(f"{name} cannot be sent in ASCII mode (the module accepts only "
                            f"{', '.join(ascii_commands())}){hint}; switch to binary mode with "
                            ".mode binary to send it")
@@ -631,9 +629,9 @@ class AsciiLink:
         """ASCII ``BIN``; what follows it (echo, a reply if any) is read and dropped, and the
         client resynchronises its binary framing before its next request."""
         t = _transport(client)
-        line = command_bytes(client.address, "BIN")
+        line = command_bytes(client.address, isa.ASCII_BIN)
         t.write(line)
-        client.trace("tx", line, "BIN")
+        client.trace("tx", line, isa.ASCII_BIN)
         timeout = min(client.timeout, 0.3) if timeout is None else timeout
         got = _read_quiet(t, 0.05, timeout)
         if got:
@@ -821,13 +819,19 @@ class AsciiLink:
     # -- ASCII-only commands ------------------------------------------------------------
     def run(self, timeout: float | None = None) -> Reply:
         """``RUN``: start the TMCL program stored in the module."""
-        return self._special("RUN", Control.RUN_APPLICATION, timeout)
+        return self.control(Control.RUN_APPLICATION, timeout)
 
     def stop_program(self, timeout: float | None = None) -> Reply:
         """``STOP``: stop the running TMCL program."""
-        return self._special("STOP", Control.STOP_APPLICATION, timeout)
+        return self.control(Control.STOP_APPLICATION, timeout)
 
-    def _special(self, word: str, opcode: int, timeout: float | None) -> Reply:
+    def control(self, opcode: int, timeout: float | None = None) -> Reply:
+        """A control command by the word the module's ASCII mode has for it (the instruction
+        set's ``ascii_word``: RUN for 129, STOP for 128)."""
+        ctl = isa.control(opcode)
+        word = ctl.ascii_word if ctl is not None else None
+        if word is None:
+            raise _not_in_ascii(Request(self.client.address, opcode, 0, 0, 0))
         reply = self.command(word, timeout, opcode=opcode,
                              request=Request(self.client.address, opcode, 0, 0, 0))
         if not status_ok(reply.status):

@@ -73,8 +73,7 @@ _FIRST_CONTROL = int(Control.STOP_APPLICATION)  # only control commands have oth
 _LOADED = int(Status.LOADED)
 _WRONG_CHECKSUM = int(Status.WRONG_CHECKSUM)
 _ALL_OPCODES = frozenset(range(256))  # a sent-only tracer that watches every command
-_START_DOWNLOAD = int(Control.START_DOWNLOAD)
-_QUIT_DOWNLOAD = int(Control.QUIT_DOWNLOAD)
+_QUIT_DOWNLOAD = isa.download_command("leave")
 _GET_VERSION = int(Control.GET_VERSION)
 
 __all__ = ["Client", "Suspect", "CONFIRM_ROUNDS", "idempotent"]
@@ -369,10 +368,11 @@ class Client:
                 except TransportError:
                     self._down = True
                     raise
-            if req.opcode >= _FIRST_CONTROL and reply is not None:
-                if req.opcode == _START_DOWNLOAD and reply.ok and not self.downloading:
+            if req.opcode >= _FIRST_CONTROL and reply is not None and reply.ok:
+                ctl = isa.control(req.opcode)  # (a typed 132 with no 133 after it)
+                if ctl is not None and ctl.download == "enter" and not self.downloading:
                     self.left_downloading = True
-                elif req.opcode == _QUIT_DOWNLOAD and reply.ok:
+                elif ctl is not None and ctl.download == "leave":
                     self.left_downloading = False
             if reply is not None and reply.status == _LOADED and not self.downloading:
                 raise DownloadModeError(

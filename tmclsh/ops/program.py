@@ -52,13 +52,11 @@ from ..client.ledger import CONFIRM_ROUNDS
 log = logging.getLogger(__name__)
 
 # GGP <type>, 0: the program's global parameters (bank 0)
-GGP = 10
+GGP = int(isa.parameter_command("global", "read").opcode)
 GP_APPLICATION_STATUS = 128
 GP_DOWNLOAD_MODE = 129
 GP_PROGRAM_COUNTER = 130
 USER_VARIABLE_BANK = 2
-_WAIT = isa.by_mnemonic("WAIT").opcode  # type: ignore[union-attr]
-
 #: ``progress(phase, done, total)``; phase is "upload", "verify" or "read"
 Progress = Callable[[str, int, int], None]
 
@@ -345,8 +343,9 @@ def read_instruction(client, address: int, *, timeout: float | None = None) -> I
 
 
 def is_end_marker(ins: Instruction) -> bool:
-    """Opcode 0 (memory never written, or cleared) or an erased cell (all bytes 0xFF)."""
-    return ins.opcode == 0 or ins.to_bytes() == b"\xff" * 7
+    """Memory never written, or cleared (``isa.END_MARKER``), or an erased cell (all bytes
+    0xFF)."""
+    return ins.opcode == isa.END_MARKER or ins.to_bytes() == b"\xff" * 7
 
 
 def read_program(client, start: int = 0, count: int | None = None, *,
@@ -423,13 +422,9 @@ def same_image(a: Sequence[Instruction], b: Sequence[Instruction]) -> bool:
 
 # -- running -----------------------------------------------------------------------------
 
-def _ascii_call(client, name: str, what: str):
-    link = client.ascii_link
-    fn = getattr(link, name, None)
-    if not callable(fn):
-        raise ValidationError(f"{what} is not available in ASCII mode with this link "
-                              f"(it offers no {name}()); switch with .mode binary")
-    return fn()
+def _ascii_control(client, opcode: int):
+    """A control command through the module's ASCII mode (its ``ascii_word``: RUN, STOP)."""
+    return client.ascii_link.control(opcode)
 
 
 def run(client, address: int | None = None) -> None:
@@ -443,7 +438,7 @@ def run(client, address: int | None = None) -> None:
             raise ValidationError("running from an address (129 type 1) needs binary mode; "
                                   "ASCII RUN starts from the current address (switch with "
                                   ".mode binary)")
-        _ascii_call(client, "run", "RUN")
+        _ascii_control(client, Control.RUN_APPLICATION)
         return
     if address is None:
         _ok(_send(client, Control.RUN_APPLICATION, 0), "run (129)")
@@ -454,7 +449,7 @@ def run(client, address: int | None = None) -> None:
 def stop(client) -> None:
     """128: stop the running (or stepped) application."""
     if client.mode == "ascii":
-        _ascii_call(client, "stop_program", "STOP")
+        _ascii_control(client, Control.STOP_APPLICATION)
         return
     _ok(_send(client, Control.STOP_APPLICATION), "stop (128)")
 
@@ -521,7 +516,7 @@ def step_one(client, *, pc: int | None = None,
     if new != pc:
         return new
     ins = instruction_at(pc) if instruction_at is not None else read_instruction(client, pc)
-    if ins.opcode != _WAIT:
+    if not is_wait(ins):
         return new  # a jump to itself, or a STOP
     if on_wait is not None:
         on_wait(pc)
@@ -577,7 +572,9 @@ def continue_to(client, breakpoints: Iterable[int], *, max_steps: int | None = N
 
 
 def is_wait(ins: Instruction) -> bool:
-    return ins.opcode == _WAIT
+    """Does it hold the program counter until its condition is met (WAIT)?"""
+    spec = isa.by_opcode(ins.opcode)
+    return spec is not None and spec.waits
 
 
 # -- user variables ----------------------------------------------------------------------

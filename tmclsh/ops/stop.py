@@ -18,7 +18,7 @@ from ..base.errors import StatusError, TmclError, ValidationError
 from ..client.ledger import CONFIRM_ROUNDS
 from ..tmcl import instructions as isa
 from ..tmcl.frames import Control
-from .program import GGP, GP_APPLICATION_STATUS, AppState, _ascii_call, _ok, _send
+from .program import GGP, GP_APPLICATION_STATUS, AppState, _ascii_control, _ok, _send
 
 
 _MST, _GAP = int(isa.Opcode.MST), int(isa.Opcode.GAP)
@@ -214,7 +214,7 @@ def _stop_everything(client, settle: float, sleep: Callable[[float], None]) -> S
     if running is not False and (client.mode == "ascii" or _has(client, Control.STOP_APPLICATION)):
         try:
             if client.mode == "ascii":
-                _ascii_call(client, "stop_program", "STOP")
+                _ascii_control(client, Control.STOP_APPLICATION)
             else:
                 _ok(_send(client, Control.STOP_APPLICATION, timeout=t), "stop (128)")
             report.program = "stopped" if running else None

@@ -36,10 +36,11 @@ if TYPE_CHECKING:
     from .session import Session
 
 CATEGORY = "configuration"
-SAP, GAP, STAP, SGP, GGP, STGP = 5, 6, 7, 9, 10, 11
-WRITE = {"axis": SAP, "global": SGP}
-READ = {"axis": GAP, "global": GGP}
-STORE = {"axis": STAP, "global": STGP}
+# what is done to each kind of parameter: the instruction set's commands for it
+# (GAP/SAP/STAP for axis parameters, GGP/SGP/STGP for global ones)
+READ = {kind: isa.parameter_command(kind, "read").opcode for kind in ("axis", "global")}
+WRITE = {kind: isa.parameter_command(kind, "write").opcode for kind in ("axis", "global")}
+STORE = {kind: isa.parameter_command(kind, "store").opcode for kind in ("axis", "global")}
 HEADER_LINES = 30  # the header keys are looked for in the file's first lines only
 _HEADER = re.compile(r"^\s*//\s*(module|firmware|address|connection|date|program)\s*:\s*(.*?)\s*$",
                      re.IGNORECASE)
@@ -250,7 +251,7 @@ def save_lines(session: Session, path: Path, with_program: Path | None) -> tuple
                 why = "state, not restored" if p.state else "read-only"
                 body.append(f"// {name} = {_with_unit(value, p)} ({why}; {comment})")
                 continue
-            mn = "SAP" if kind == "axis" else "SGP"
+            mn = isa.parameter_command(kind, "write").mnemonic
             target = p.name if p.count == 1 else str(number)  # a run is addressed by number
             if p.count > 1:
                 comment = f"GP {number}: {p.name} #{number - p.number}"
@@ -447,18 +448,24 @@ def _parse(path: Path, number: int, text: str, module: Module) -> asm.Line:
     if what is not None:
         raise _refuse(path, number, f"{what}: {ONLY}")
     mn = line.mnemonic
-    if mn in ("SAP", "SGP", str(SAP), str(SGP)):
+    spec = isa.by_opcode(int(mn)) if line.is_raw else isa.by_mnemonic(mn or "")
+    if spec is not None and spec.sets_parameter:  # SAP, SGP: what a backup is made of
         return line
     if line.is_raw:
-        spec = isa.by_opcode(int(mn))
         name = f" ({spec.mnemonic})" if spec is not None else ""
-        raise _refuse(path, number, f"command {mn}{name} is not SAP (5) or SGP (9): {ONLY}")
+        writes = " or ".join(f"{s.mnemonic} ({s.opcode})" for s in _setters())
+        raise _refuse(path, number, f"command {mn}{name} is not {writes}: {ONLY}")
     try:
         asm.encode(line, module, direct=True)
     except AsmError as exc:  # an unknown command: `unknown command 'SPA'; did you mean ...`
         if isa.by_mnemonic(mn) is None:
             raise _refuse(path, number, exc.message, exc.kind) from None
-    raise _refuse(path, number, f"{mn} is not SAP or SGP: {ONLY}")
+    raise _refuse(path, number, f"{mn} is not {' or '.join(s.mnemonic for s in _setters())}: "
+                  f"{ONLY}")
+
+
+def _setters() -> list[isa.InstructionSpec]:
+    return [isa.parameter_command(kind, "write") for kind in ("axis", "global")]
 
 
 def read_backup(session: Session, path: Path, *, force: bool, command: str) -> Backup:
@@ -509,7 +516,7 @@ def _read_line(session: Session, backup: Backup, path: Path, number: int, text: 
     except AsmError as exc:
         raise _refuse(path, number, exc.message, exc.kind) from None
     ins = enc.instruction
-    kind = "axis" if ins.opcode == SAP else "global"
+    kind = "axis" if isa.by_opcode(ins.opcode).type_kind == "axis_param" else "global"
     p = enc.parameter
     if p is not None and p.state:  # the file's own module says it is state
         backup.state.append(Slot(kind, ins.type, ins.motor, ins.value, p, number))

@@ -120,7 +120,7 @@ Suggestion = (Mnemonic | ShellCommand | CommandArg | SymbolicType | AxisParam | 
 
 # which access a mnemonic needs from the parameter in its type slot
 # what a parameter's access letters must hold for a command's access (instructions.toml)
-_ACCESS = {"read": "R", "write": "W", "store": "E"}
+_ACCESS = {"read": "R", "write": "W", "store": "E", "restore": "E"}
 
 _WORD = re.compile(r"[\w.$]*$")
 _LABEL_PREFIX = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\s*:\s*")

@@ -260,7 +260,7 @@ class Call(Node):
 class Read(Node):
     """A TMCL read as an operand: ``GAP 1, 0``. Operands are TMCL text or sub-expressions."""
 
-    mnemonic: str = "GAP"
+    mnemonic: str = ""
     operands: tuple[str | Node, ...] = ()
 
     def children(self) -> tuple[Node, ...]:

@@ -522,7 +522,8 @@ def render_result(result: Result, module: Module | None) -> Styled:
         if ins.opcode == Control.GET_VERSION and ins.type == 1:
             out.append(version_text(reply.value, module), style="tmcl.value")
             return out
-        if reply.opcode == ins.opcode and (ins.opcode >= 128 or isa.by_opcode(ins.opcode)):
+        if reply.opcode == ins.opcode and (isa.is_control(ins.opcode)
+                                           or isa.by_opcode(ins.opcode)):
             out.append("ok", style="tmcl.status.ok")
             ctl = isa.control(ins.opcode)
             name = ctl.name.split(" (")[0] if ctl else isa.by_opcode(ins.opcode).mnemonic
@@ -702,7 +703,7 @@ def render_event(reply: Reply) -> str:
 
 def describe_instruction(ins: Instruction, module: Module | None) -> str:
     """``GAP 4, 0  // MaxPositioningSpeed``, ``136 type 0: firmware version``."""
-    if ins.opcode >= 128:
+    if isa.is_control(ins.opcode):
         ctl = isa.control(ins.opcode)
         if ctl is not None:
             fields = [f"{name} {v}" for name, v in (("type", ins.type), ("motor", ins.motor),
@@ -737,7 +738,7 @@ def describe_reply(reply: Reply, module: Module | None = None,
         motors = [str(m) for m in range(8) if reply.value >> m & 1]
         return f"event: target position reached, motor {', '.join(motors) or '-'}"
     spec = isa.by_opcode(reply.opcode)
-    what = spec.mnemonic if spec else (f"{reply.opcode}" if reply.opcode < 128 else
+    what = spec.mnemonic if spec else (f"{reply.opcode}" if not isa.is_control(reply.opcode) else
                                         f"{reply.opcode} ({_control_name(reply.opcode)})")
     text = f"{reply.status} {status_text(reply.status)}, {what} value {reply.value}"
     if request is not None and request.opcode == reply.opcode and reply.ok:

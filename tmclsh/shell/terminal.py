@@ -586,10 +586,8 @@ def ascii_completions(session: Session, text: str) -> list[AsciiCompletion]:
     for s in suggest(body, mod):
         if isinstance(s, Mnemonic):
             specs = {sp.mnemonic: sp.summary for sp in isa.all_instructions()}
-            cands = [Candidate(n, specs.get(n, {"BIN": "leave ASCII mode (binary mode again)",
-                                                 "RUN": "start the stored TMCL program",
-                                                 "STOP": "stop the running TMCL program"}
-                                            .get(n, ""))) for n in ascii_commands(mod)]
+            cands = [Candidate(n, specs.get(n, isa.ASCII_ONLY.get(n, "")))
+                     for n in ascii_commands(mod)]
         elif isinstance(s, (AxisParam, GlobalParam)) and mod is not None:
             params = mod.axis_params if isinstance(s, AxisParam) else mod.global_params
             cands = [Candidate(str(p.number), param_meta(p), f"{p.number} {p.name}",

@@ -146,7 +146,7 @@ def _known_opcode(op: int) -> bool:
 def _instruction_plausible(ins: Instruction, module: Module | None) -> bool:
     if not _known_opcode(ins.opcode):
         return False
-    if ins.opcode >= 128:
+    if isa.is_control(ins.opcode):
         return True
     text, comment = asm.disassemble_instruction(ins, module)
     return not text[:1].isdigit()  # the raw form means fields the command does not take

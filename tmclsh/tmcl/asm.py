@@ -653,7 +653,7 @@ class _Encoder:
             raise self.fail(f"{p.label} {p.name} is read-only")
         if spec.access == "read" and not p.readable:
             raise self.fail(f"{p.label} {p.name} is write-only")
-        if spec.access == "store" and not p.storable:
+        if spec.access in ("store", "restore") and not p.storable:
             raise self.fail(f"{p.label} {p.name} cannot be stored in EEPROM (access {p.access})")
 
 

@@ -55,6 +55,7 @@ class InstructionSpec:
     confirm: str | None = None  # store | storable | factory: asked before it is sent
     done: str | dict[str, str] | None = None  # what the shell says when it was accepted
     turns: str | None = None  # ROR/ROL: the way a positive speed turns the motor
+    waits: bool = False  # WAIT: holds the program counter until its condition is met
     note: str | None = None  # for users: shown by `help MNEMONIC`
     source: str | None = None  # for maintainers: how the entry was read from the manuals
     types: dict[str, int] = field(default_factory=dict)
@@ -67,6 +68,13 @@ class InstructionSpec:
     def reads(self) -> bool:
         """Its reply value is a reading of what its type names (GAP, GGP, GIO, GCO)."""
         return self.access == "read"
+
+    @property
+    def sets_parameter(self) -> bool:
+        """It writes a value to the parameter its type names (SAP, SGP; not AAP/AGP, which
+        copy the accumulator): what a configuration backup is made of."""
+        return (self.access == "write" and "value" in self.fields
+                and self.type_kind in ("axis_param", "global_param"))
 
     @property
     def persists(self) -> bool:
@@ -147,6 +155,8 @@ class ControlSpec:
     starts_motion: bool = False
     confirm: str | None = None
     not_a_line: str | None = None  # never sent as a typed line: why
+    ascii_word: str | None = None  # the module's ASCII mode calls it this (RUN, STOP)
+    download: str | None = None  # enter | leave: it starts or ends download mode
 
     def on(self, module: ModuleRef) -> bool:
         return _offered(self.modules, module)
@@ -196,7 +206,8 @@ def _tables() -> tuple[dict[int, InstructionSpec], dict[int, ControlSpec], dict[
                                          c.get("note"), c.get("source"),
                                          c.get("idempotent", False),
                                          c.get("starts_motion", False), c.get("confirm"),
-                                         c.get("not_a_line"))
+                                         c.get("not_a_line"), c.get("ascii_word"),
+                                         c.get("download"))
                 for c in data["control"]}
     return by_opcode, controls, dict(data["interrupts"])
 
@@ -209,7 +220,8 @@ def _spec(raw: dict) -> InstructionSpec:
         ascii=raw["ascii"], access=raw.get("access"), read_types=tuple(raw.get("read_types", ())),
         idempotent=raw.get("idempotent", False), once_types=tuple(raw.get("once_types", ())),
         starts_motion=raw.get("starts_motion", False), confirm=raw.get("confirm"),
-        done=raw.get("done"), turns=raw.get("turns"), note=raw.get("note"), source=raw.get("source"), types=dict(raw.get("types", {})),
+        done=raw.get("done"), turns=raw.get("turns"), waits=raw.get("waits", False),
+        note=raw.get("note"), source=raw.get("source"), types=dict(raw.get("types", {})),
         types_for={k: dict(v) for k, v in raw.get("types_for", {}).items()},
         motor_special={mod: {int(k): v for k, v in table.items()}
                        for mod, table in raw.get("motor_special", {}).items()},
@@ -261,6 +273,34 @@ def starting_opcodes() -> frozenset[int]:
     return frozenset(op for op in (*_tables()[0], *_tables()[1]) if spec_of(op).starts_motion)
 
 
+def is_control(opcode: int) -> bool:
+    """A control command (128 and up): no mnemonic, other reply layouts, not for programs."""
+    return opcode >= Control.STOP_APPLICATION
+
+
+# Unwritten program memory reads as an instruction with this opcode (no command has it):
+# the end of a stored program.
+END_MARKER = 0
+
+
+@cache
+def parameter_command(kind: str, access: str) -> InstructionSpec:
+    """The command that does ``access`` (read, write, store, restore) to an ``axis`` or
+    ``global`` parameter with its value: GAP/SAP/STAP/RSAP, GGP/SGP/STGP/RSGP."""
+    want = "axis_param" if kind == "axis" else "global_param"
+    for spec in all_instructions():
+        if spec.type_kind == want and spec.access == access and (
+                access != "write" or spec.sets_parameter):
+            return spec
+    raise LookupError(f"no {access} command for {kind} parameters")
+
+
+@cache
+def download_command(which: str) -> int:
+    """The control command that enters or leaves download mode (132, 133)."""
+    return next(op for op, c in _tables()[1].items() if c.download == which)
+
+
 def interrupts() -> dict[str, int]:
     """Interrupt numbers by their Interrupts.inc name (TI_TIMER0 ...)."""
     return dict(_tables()[2])
@@ -281,5 +321,9 @@ def _opcode_enum() -> type[IntEnum]:
 
 Opcode = _opcode_enum()
 
-# ASCII-mode-only commands (no binary opcode): leave ASCII mode, run and stop the program.
-ASCII_ONLY_COMMANDS = ("BIN", "RUN", "STOP")
+# ASCII-mode-only commands (no binary opcode): leave ASCII mode, run and stop the program,
+# and what the ASCII terminal's completion says of them.
+ASCII_ONLY = {"BIN": "leave ASCII mode (binary mode again)",
+              "RUN": "start the stored TMCL program", "STOP": "stop the running TMCL program"}
+ASCII_ONLY_COMMANDS = tuple(ASCII_ONLY)
+ASCII_BIN = "BIN"
