@@ -69,13 +69,14 @@ _OLD_LAYOUT = {"tmclsh.client.text": "tmclsh.client", "tmclsh.tmcl.frames": "tmc
 
 
 def tm(name: str):
-    """The measured tree's module ``name`` (as this tree calls it)."""
+    """The measured tree's module ``name`` (as this tree calls it). An installed tmclsh may
+    find a new name in another tree, so the measured tree's own folders decide the layout."""
     import importlib
 
-    try:
-        return importlib.import_module(name)
-    except ImportError:
-        return importlib.import_module(_OLD_LAYOUT[name])
+    import tmclsh
+
+    new_layout = (Path(tmclsh.__file__).parent / "tmcl").is_dir()
+    return importlib.import_module(name if new_layout else _OLD_LAYOUT[name])
 
 
 def client_class():

@@ -9,7 +9,8 @@ import sys
 import pytest
 
 import tmclsh
-from tmclsh.base.errors import ConnectError, StatusError, TmclError, TmclTimeoutError, ValidationError
+from tmclsh.base.errors import (ConnectError, StatusError, TmclError, TmclTimeoutError,
+                                ValidationError)
 from tmclsh.tmcl.frames import Status
 
 from conftest import ROOT, tmclsh_env

@@ -105,7 +105,7 @@ def test_banner_and_toolbar_say_numbers_only():
 
     m = TcpModule(version="1161V130")
     try:
-        from tmclsh.client.connect import start
+        from tmclsh.client.bringup import start
         from tmclsh.link import open_serial
 
         client = start(LineClient(open_serial(m.url), timeout=1))

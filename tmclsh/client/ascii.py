@@ -44,7 +44,8 @@ from typing import TYPE_CHECKING
 from ..tmcl import instructions as isa
 from ..base.errors import StatusError, TmclTimeoutError, TransportError, ValidationError
 from ..tmcl.decoder import is_frame
-from ..tmcl.frames import (INT32_MIN, SERIAL_FRAME_LEN, UINT32_MAX, Control, Reply, ReplyKind, Request, Status, status_ok, to_signed32)
+from ..tmcl.frames import (INT32_MIN, SERIAL_FRAME_LEN, UINT32_MAX, Control, Reply, ReplyKind,
+                           Request, Status, status_ok, to_signed32)
 from ..link.base import StreamTransport
 
 if TYPE_CHECKING:

@@ -13,7 +13,7 @@ from ..base.canspec import FROM_PYTHON_CAN, parse_can
 from ..base.errors import ConnectError, UsageError, ValidationError
 from ..link import TRINAMIC_VID, trinamic_ports
 from ..link.base import Transport
-from .bringup import bring_up, start  # noqa: F401  (bring_up: the shell's .connect)
+from .bringup import start
 from .text import LineClient
 
 if TYPE_CHECKING:

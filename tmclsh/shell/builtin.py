@@ -840,7 +840,7 @@ def cmd_decode(session: Session, arg: str) -> None:
 @command(".connect")
 def cmd_connect(session: Session, arg: str) -> None:
     from .. import link as tr
-    from ..client.connect import bring_up
+    from ..client.bringup import bring_up
     from ..base.errors import ConnectError
 
     client = session.client

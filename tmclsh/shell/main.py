@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..base.errors import EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, TmclError
+from ..base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE,
+                           TmclError)
 from .render import Output
 from .session import QuitShell, Session, frames_sent
 

@@ -585,7 +585,8 @@ def _progress(session: Session, name: str, nodes: list[Node]):
     total, views = count_steps(nodes)
     if total < PROGRESS_MIN_STEPS or views:
         return None
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+    from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
+                               TimeElapsedColumn)
 
     progress = Progress(TextColumn("{task.description}", markup=False), BarColumn(), MofNCompleteColumn(),
                         TimeElapsedColumn(), console=session.out.console, transient=True)

@@ -21,7 +21,8 @@ from ..client.core import idempotent
 from ..client.text import LineClient as Client
 from ..client.text import Result
 from ..link.framing import name_of as _name
-from ..base.errors import (ChecksumError, StatusError, TmclError, TmclTimeoutError, TransportError, ValidationError)
+from ..base.errors import (ChecksumError, StatusError, TmclError, TmclTimeoutError, TransportError,
+                           ValidationError)
 from ..tmcl.modules import Module
 from ..tmcl.status import OK_STATUSES
 from . import commands

@@ -33,12 +33,16 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from ..tmcl import instructions as isa
-from ..client.ascii import (BS, CR, GP_ASCII_MODE, GP_BANK, ECHO_NAMES, AsciiLink, Echo, LineKind, Mode, address_char, ascii_commands, classify_line, describe_gp67, echo_mode, gp67_value, next_line, reply_part, reply_summary, starts_in_ascii)
+from ..client.ascii import (BS, CR, GP_ASCII_MODE, GP_BANK, ECHO_NAMES, AsciiLink, Echo, LineKind,
+                            Mode, address_char, ascii_commands, classify_line, describe_gp67,
+                            echo_mode, gp67_value, next_line, reply_part, reply_summary,
+                            starts_in_ascii)
 from ..base.errors import StatusError, ValidationError
 from ..tmcl.frames import Reply, Request, status_ok
 from . import options
 from .commands import command, options_of
-from .termtools import (MENU_KEY, MenuState, SessionLog, Stamper, choose, file_lines, hex_hint, hex_lines, is_bin, is_quit, menu_hint, menu_text)
+from .termtools import (MENU_KEY, MenuState, SessionLog, Stamper, choose, file_lines, hex_hint,
+                        hex_lines, is_bin, is_quit, menu_hint, menu_text)
 
 if TYPE_CHECKING:
     from .session import Session
@@ -569,7 +573,8 @@ def ascii_completions(session: Session, text: str) -> list[AsciiCompletion]:
     """Completions for the terminal's line: the commands ASCII mode accepts, symbolic types,
     and parameters, motors and ports *by number* (the module's ASCII parser knows no names;
     typing a name finds its number)."""
-    from .completer import (AxisParam, Candidate, GlobalParam, Mnemonic, candidates, current_word, param_meta, ranked, suggest)
+    from .completer import (AxisParam, Candidate, GlobalParam, Mnemonic, candidates, current_word,
+                            param_meta, ranked, suggest)
 
     mod = session.client.module
     body = text

@@ -21,7 +21,8 @@ from ..tmcl import instructions as isa
 from ..base.errors import FrameError
 from ..tmcl.modules import Module
 from ..tmcl.decoder import FRAME_PIECE, pieces
-from ..tmcl.frames import (INSTRUCTION_LEN, SERIAL_FRAME_LEN, VERSION_STRING_LEN, Instruction, Reply, Request, Status, checksum, parse_hex, to_signed32)
+from ..tmcl.frames import (INSTRUCTION_LEN, SERIAL_FRAME_LEN, VERSION_STRING_LEN, Instruction,
+                           Reply, Request, Status, checksum, parse_hex, to_signed32)
 
 from .render import describe_instruction, describe_reply
 
