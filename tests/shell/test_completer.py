@@ -299,3 +299,10 @@ def test_after_a_value_or_outside_the_expression_nothing_from_it():
 def test_a_computed_operand_keeps_the_read_going():
     assert texts(".expect GAP (GGP 0, 2), ") == texts("GAP 1, ")
     assert texts(".if GAP 1, (m) == GGP ") == texts("GGP ")
+
+
+def test_nothing_is_offered_inside_a_comment():
+    """A comment runs to the end of the line (`#` at a word's start, or `//`), as the shell
+    reads it; inside quotes a `#` is text."""
+    assert suggest("GAP 1, 0 # Max") == [] and suggest("GAP 1, 0 // Max") == []
+    assert suggest("GAP Max") != [] and suggest('.echo "a # b') != []

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, NamedTuple
 from ..tmcl import instructions as isa
 from ..tmcl.modules import Module, Parameter
 from . import commands
+from .lines import comment_at
 
 if TYPE_CHECKING:
     from .session import Session
@@ -134,7 +135,7 @@ def current_word(text_before_cursor: str) -> str:
 
 def suggest(text: str, module: Module | None = None) -> list[Suggestion]:
     """What may come at the end of ``text`` (the line up to the cursor)."""
-    if "//" in text:
+    if comment_at(text) is not None:  # in a comment (`#` or `//`): nothing to offer
         return []
     inner = open_substitution(text)
     if inner is not None:  # `SAP 4, 0, ${GAP 4, ` completes the expression inside
