@@ -498,6 +498,14 @@ parameter's range, a write to a read-only parameter or a motor the module does n
 gets a one-line error naming what is wrong and what is allowed, and nothing is sent. Writes to
 the EEPROM, restoring factory defaults and replacing the stored program ask first, unless
 {_b("--yes")} is given.
+.PP
+The module has the last word on what it holds: a value outside the manual's range is shown as
+the reply carries it (signed, unless the data calls the parameter an unsigned 32\-bit
+quantity) with the range it lies outside ({_b("outside_range")} in JSON). {_b("!")} before a
+TMCL line sends its value as typed, whatever the data says of its range
+({_b("!SAP 140, 0, 12")}); everything else is checked as usual and the module's answer decides.
+{_b(".save")} marks values outside the manual's ranges so; {_b(".restore")} writes them back,
+and refuses other such values unless {_b("--force")}.
 """
 
 _LANGUAGE = f"""\

@@ -20,6 +20,10 @@ if TYPE_CHECKING:  # the assembler is imported when a line is first encoded
     from ..tmcl import asm
 
 ENCODE_CACHE = 512  # checked lines kept per client (prepare)
+# A TMCL line that starts with this is sent with the value as typed, whatever the module data
+# says of its range (``!SAP 140, 0, 12``): for a firmware that accepts what its manual's table
+# does not list. Everything else is checked as usual; the module's answer decides.
+AS_TYPED = "!"
 
 
 class Result(NamedTuple):
@@ -77,10 +81,11 @@ class LineClient(Client):
         else:
             from ..tmcl import asm
 
-            parsed = asm.parse_line(line)
+            as_typed = line.startswith(AS_TYPED)
+            parsed = asm.parse_line(line[1:] if as_typed else line)
             if parsed.mnemonic is None:
                 raise ValidationError(f"no command in {line!r}")
-            enc = asm.encode(parsed, mod, direct=True, ascii=ascii_mode)
+            enc = asm.encode(parsed, mod, direct=True, ascii=ascii_mode, as_typed=as_typed)
             if len(cache) >= ENCODE_CACHE:
                 del cache[next(iter(cache))]
         ins = enc.instruction

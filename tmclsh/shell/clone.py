@@ -27,6 +27,7 @@ from ..tmcl import modules as moddb
 from ..tmcl import instructions as isa
 from ..base.errors import EXIT_USAGE, AsmError, RangeError, TmclError, ValidationError
 from ..tmcl.modules import Module, Parameter
+from ..client.text import AS_TYPED
 from ..tmcl.frames import Control, Request, status_ok, status_text
 from . import options
 from .commands import command, find, options_of
@@ -65,6 +66,7 @@ class Slot:
     value: int
     param: Parameter | None = None
     line: int | None = None  # where a file gave it
+    outside: str | None = None  # the manual's range, when the value lies outside it
 
     @property
     def key(self) -> tuple[str, int, int]:
@@ -219,14 +221,18 @@ def _comment(p: Parameter, number: int) -> str:
     return f"{'AP' if p.kind == 'axis' else 'GP'} {number}{unit}: {p.description}"
 
 
-def save_lines(session: Session, path: Path, with_program: Path | None) -> tuple[str, int]:
-    """The backup's text and how many parameters it restores (SAP/SGP lines)."""
+def save_lines(session: Session, path: Path, with_program: Path | None
+               ) -> tuple[str, int, list[str]]:
+    """The backup's text, how many parameters it restores (SAP/SGP lines), and which of the
+    values the module holds lie outside the manual's ranges (saved all the same, marked so
+    that .restore writes them back as they were: ``!SAP ...``, the module decides)."""
     c = session.client
     module = session.module
     firmware = _firmware(session)
     slots = list(readable_slots(module))
     body: list[str] = []
     saved = 0
+    outside: list[str] = []
     last_section = None
     with _Progress(session, "reading", len(slots)) as advance:
         for kind, p, number, index in slots:
@@ -255,7 +261,14 @@ def save_lines(session: Session, path: Path, with_program: Path | None) -> tuple
             target = p.name if p.count == 1 else str(number)  # a run is addressed by number
             if p.count > 1:
                 comment = f"GP {number}: {p.name} #{number - p.number}"
-            body.append(f"{mn} {target}, {index}, {value}  // {comment}")
+            beyond = p.outside(value)
+            mark = ""
+            if beyond is not None:  # the module holds it: kept, and restorable as it is
+                mark = AS_TYPED
+                comment = f"{comment} (outside the manual's range {beyond}: as the module held it)"
+                outside.append(f"{name} = {_with_unit(value, p)} ({'motor' if kind == 'axis' else 'bank'} "
+                               f"{index}; the manual says {beyond})")
+            body.append(f"{mark}{mn} {target}, {index}, {value}  // {comment}")
             saved += 1
     when = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
     head = [
@@ -274,7 +287,11 @@ def save_lines(session: Session, path: Path, with_program: Path | None) -> tuple
         "// Compare with the module: .diff FILE   write what differs: .restore FILE [--store]",
         "// Replay every line: tmclsh -f FILE --yes (bank 0 global parameters go to EEPROM)",
     ]
-    return "\n".join(head + body) + "\n", saved
+    if outside:
+        head.append(f"// {len(outside)} value{'s' if len(outside) != 1 else ''} outside the manual's ranges, "
+                    f"as the module held {'them' if len(outside) != 1 else 'it'}: the lines start with "
+                    f"{AS_TYPED} (sent as written; the module decides)")
+    return "\n".join(head + body) + "\n", saved, outside
 
 
 def _program_path(path: Path) -> Path:
@@ -338,7 +355,7 @@ def cmd_save(session: Session, argtext: str) -> None:
         raise ValidationError("--program reads program memory (134), which needs binary mode "
                               "(.mode binary)")
     _may_overwrite(session, [path, prog_path], "--yes" in given)  # before anything is read
-    text, saved = save_lines(session, path, prog_path)
+    text, saved, outside = save_lines(session, path, prog_path)
     instructions = None
     if prog_path is not None:
         prog_text, instructions = _program_text(session)
@@ -347,11 +364,17 @@ def cmd_save(session: Session, argtext: str) -> None:
     out = session.out
     if out.json:
         obj: dict[str, object] = {"saved": saved, "file": str(path)}
+        if outside:
+            obj["outside_range"] = outside
         if prog_path is not None:
             obj.update({"program": str(prog_path), "instructions": instructions})
         out.emit(obj)
         return
     out.ok(f"saved {_count(saved)} of the {session.module.name} to {path}")
+    if outside:
+        out.warn(f"{len(outside)} of them {'lie' if len(outside) != 1 else 'lies'} outside the "
+                 "manual's ranges, as the module holds them (saved as they are, marked with "
+                 f"{AS_TYPED}: .restore writes them back): " + "; ".join(outside))
     if prog_path is not None:
         out.ok(f"saved the stored program ({instructions} instructions) to {prog_path}")
 
@@ -428,7 +451,9 @@ def _refuse(path: Path, number: int, message: str, kind: str = "syntax") -> Back
 
 def _parse(path: Path, number: int, text: str, module: Module) -> asm.Line:
     """One shell line of a backup as a SAP/SGP line, or the error that says what it is
-    instead (an unknown command is named with the suggestions a typed line gets)."""
+    instead (an unknown command is named with the suggestions a typed line gets). A leading
+    ``!`` (the override) is not part of the command."""
+    text = text.removeprefix(AS_TYPED)
     if text.startswith("."):
         raise _refuse(path, number, f"shell command {text.split()[0]!r}: {ONLY}")
     if "${" in text:
@@ -498,9 +523,28 @@ def read_backup(session: Session, path: Path, *, force: bool, command: str) -> B
             f"parameter name with {command} {path} --force (parameters the {live.name} does "
             "not have are skipped)", "check")
     ascii_mode = session.client.mode == "ascii"
+    # .diff compares whatever the file holds; .restore writes a value outside the manual's
+    # range only where the file says so (``!``, as .save writes the module's own) or --force
+    anything = command == ".diff" or force
+    refused: list[BackupFileError] = []
     for number, raw in enumerate(lines, 1):
         for shell_line in split_line(raw):  # comments off, `;` between lines
-            _read_line(session, backup, path, number, shell_line, source, live, ascii_mode)
+            as_typed = anything or shell_line.startswith(AS_TYPED)
+            try:
+                _read_line(session, backup, path, number, shell_line, source, live, ascii_mode,
+                           as_typed)
+            except BackupFileError as exc:
+                refused.append(exc)
+    if refused:  # every refused line at once: one run to see them all, not one per line
+        if len(refused) == 1:
+            raise refused[0]
+        kinds = {e.kind for e in refused}
+        hint = (f"\n(a value outside the manual's range is written only from a line that "
+                f"starts with {AS_TYPED}, as .save marks the module's own, or with "
+                f"{command} --force)" if "range" in kinds and command != ".diff" else "")
+        raise BackupFileError(f"{path}: {len(refused)} lines refused, nothing sent:\n"
+                              + "\n".join(f"  {e}" for e in refused) + hint,
+                              "range" if kinds == {"range"} else refused[0].kind)
     if not (backup.slots or backup.state or backup.skipped):
         # an empty or truncated file must not read as "matches" either
         raise BackupFileError(f"{path} has no SAP/SGP lines: nothing to compare or restore "
@@ -509,10 +553,12 @@ def read_backup(session: Session, path: Path, *, force: bool, command: str) -> B
 
 
 def _read_line(session: Session, backup: Backup, path: Path, number: int, text: str,
-               source: Module | None, live: Module, ascii_mode: bool) -> None:
+               source: Module | None, live: Module, ascii_mode: bool,
+               as_typed: bool = False) -> None:
     line = _parse(path, number, text, source or live)
     try:
-        enc = asm.encode(line, source or live, direct=True, ascii=ascii_mode)
+        enc = asm.encode(line, source or live, direct=True, ascii=ascii_mode,
+                         as_typed=as_typed)
     except AsmError as exc:
         raise _refuse(path, number, exc.message, exc.kind) from None
     ins = enc.instruction
@@ -537,12 +583,15 @@ def _read_line(session: Session, backup: Backup, path: Path, number: int, text: 
                     live.check_motor(ins.motor)
                 if not p.writable:
                     raise ValidationError(f"{p.label} {p.name} is read-only")
-                p.check(_shown(ins.value, p))
+                if not as_typed:
+                    p.check(_shown(ins.value, p))
             except RangeError as exc:
                 raise _refuse(path, number, str(exc), "range") from None
             except ValidationError as exc:
                 raise _refuse(path, number, str(exc), "check") from None
         slot = Slot(kind, ins.type, ins.motor, _shown(ins.value, p), p, number)
+    if slot.param is not None:
+        slot.outside = slot.param.outside(slot.value)
     if slot.param is not None and slot.param.state:
         backup.state.append(slot)
         return
@@ -565,6 +614,9 @@ def _carry(backup: Backup, live: Module, p: Parameter, number: int, index: int, 
         return None
     if not q.writable:
         backup.skipped.append((what, f"read-only on the {live.name}"))
+        return None
+    if p.unit and q.unit and p.unit != q.unit:  # 1234 pps is no 1234 rpm
+        backup.skipped.append((what, f"in {p.unit} there, {q.unit} on the {live.name}"))
         return None
     new_number = q.number + (number - p.number)
     shown = _shown(value, q)
@@ -684,6 +736,8 @@ class Written:
 
     def to_json(self) -> dict[str, object]:
         obj = {**self.diff.slot.to_json(), "old": self.diff.live, "new": self.diff.slot.value}
+        if self.diff.slot.outside is not None:
+            obj["outside_range"] = self.diff.slot.outside
         if self.error:
             obj["error"] = self.error
         return obj
@@ -788,6 +842,11 @@ def _report_restore(session: Session, backup: Backup, restored: list[Written],
                  + (", stored" if w.stored else "")] for w in restored]
         _table(session, f"restored {_count(len(restored))} from {backup.path.name}",
                ["name", "number", "motor/bank", "old", "new", "verified"], rows)
+        beyond = [w.diff.slot for w in restored if w.diff.slot.outside is not None]
+        if beyond:
+            out.warn(f"{len(beyond)} of them outside the manual's ranges, as the module took "
+                     "them: " + "; ".join(f"{s.title()} = {s.value} (the manual says "
+                                          f"{s.outside})" for s in beyond))
     for w in failed:
         out.warn(f"not restored: {w.diff.slot.title()}: {w.error}")
     for w in link_changed:

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, NamedTuple
 from ..tmcl import instructions as isa
 from ..tmcl.modules import Module, Parameter
 from . import commands
+from ..client.text import AS_TYPED
 from .lines import comment_at
 
 if TYPE_CHECKING:
@@ -141,6 +142,10 @@ def suggest(text: str, module: Module | None = None) -> list[Suggestion]:
     if inner is not None:  # `SAP 4, 0, ${GAP 4, ` completes the expression inside
         return suggest_expression(inner)
     stripped = text.lstrip()
+    if stripped.startswith(AS_TYPED):  # `!SAP ...`: the line is TMCL all the same
+        stripped = stripped[1:].lstrip()
+        if not stripped:
+            return [Mnemonic()]
     if not stripped:
         return [Mnemonic(), ShellCommand(dotted=True)]
     first, sep, rest = _split_first(stripped)

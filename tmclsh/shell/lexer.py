@@ -99,6 +99,14 @@ class TmclLexer(Lexer):
             yield base, Whitespace, body[:indent]
         if stripped.startswith("#"):
             yield base + indent, Comment.Preproc, stripped
+        elif stripped.startswith("!"):  # the override: the value is sent as typed
+            yield base + indent, Keyword.Pseudo, "!"
+            rest = stripped[1:]
+            gap = len(rest) - len(rest.lstrip())
+            if gap:
+                yield base + indent + 1, Whitespace, rest[:gap]
+            if rest.strip():
+                yield from self._tokens(rest.lstrip(), base + indent + 1 + gap)
         elif stripped:
             yield from self._tokens(stripped, base + indent)
         if end:

@@ -473,6 +473,13 @@ def result_json(result: Result) -> dict[str, Any]:
                          "motor": reply.stored.motor, "value": reply.stored.signed_value}
     if reply is not None and reply.status not in (Status.OK, Status.LOADED, Status.EVENT):
         obj["error"] = status_text(reply.status)
+    param = result.encoded.parameter
+    if param is not None and reply is not None and reply.ok and result.encoded.spec is not None \
+            and result.encoded.spec.reads:
+        obj["reply"] = param.reading(reply.value)
+        outside = param.outside(obj["reply"])
+        if outside is not None:
+            obj["outside_range"] = outside  # the manual's range the value lies outside
     return obj
 
 
@@ -491,6 +498,9 @@ def value_text(value: int, param: Parameter | None) -> str:
     meaning = param.describe_value(value)
     if meaning:
         text += f" ({meaning})"
+    outside = param.outside(value)
+    if outside is not None:
+        text += f" (outside the manual's range {outside})"
     return text
 
 

@@ -377,11 +377,13 @@ def _suggest(word: str, choices) -> str:
 
 
 def encode(line: Line, module: Module, symbols: Symbols | None = None, *,
-           direct: bool = False, ascii: bool = False) -> Encoded:
+           direct: bool = False, ascii: bool = False, as_typed: bool = False) -> Encoded:
     """Turn a parsed command line into an instruction, checked against ``module``.
 
     ``direct``: the line is typed at a prompt (control-flow commands refused, labels unknown);
-    ``ascii``: it will go through the module's ASCII mode (only the commands it accepts).
+    ``ascii``: it will go through the module's ASCII mode (only the commands it accepts);
+    ``as_typed``: the value is sent as typed whatever the data says of its range (the
+    override, ``!SAP ...``: the module's answer decides; it must still fit 32 bits).
     Every refusal is an AsmError naming what is wrong and what is allowed.
     """
     symbols = symbols or Symbols()
@@ -407,13 +409,14 @@ def encode(line: Line, module: Module, symbols: Symbols | None = None, *,
     if ascii and not spec.ascii:
         raise line.error(f"{spec.mnemonic} is not accepted in ASCII mode; switch to binary "
                          "mode (.mode binary) to send it", line.mnemonic_col)
-    return _Encoder(line, spec, module, symbols, direct).run()
+    return _Encoder(line, spec, module, symbols, direct, as_typed).run()
 
 
 class _Encoder:
     def __init__(self, line: Line, spec: isa.InstructionSpec, module: Module, symbols: Symbols,
-                 direct: bool):
+                 direct: bool, as_typed: bool = False):
         self.line, self.spec, self.module, self.symbols, self.direct = line, spec, module, symbols, direct
+        self.as_typed = as_typed
         self.param: Parameter | None = None
         self.label: str | None = None
         self.all_fields = False  # three operands for a command that names fewer
@@ -582,6 +585,8 @@ class _Encoder:
         if kind == "label":
             return self.address(expr)
         value = self.number(expr)
+        if self.as_typed:
+            return value  # the module decides (the override)
         if kind == "velocity":
             lo, hi = mod.velocity_min, mod.velocity_max
             if not lo <= value <= hi:

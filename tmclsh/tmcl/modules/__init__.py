@@ -23,7 +23,7 @@ from .schema import check_text
 from .schema import read as read_data
 
 BUILT_IN = "built in"
-INT32_MIN, UINT32_MAX = -(2**31), 2**32 - 1
+INT32_MIN, INT32_MAX, UINT32_MAX = -(2**31), 2**31 - 1, 2**32 - 1
 
 # How well a name matches a query (Module.search / Module.lookup), best first.
 _RANK_EXACT, _RANK_PREFIX, _RANK_SUBSTRING, _RANK_SUBSEQUENCE, _RANK_FUZZY = range(5)
@@ -63,13 +63,24 @@ class Parameter:
     def readable(self) -> bool:
         return "R" in self.access
 
+    @property
+    def unsigned(self) -> bool:
+        """Its data says it is an unsigned 32-bit quantity (a range beyond 2**31 - 1)."""
+        return self.max is not None and self.max > INT32_MAX
+
     def reading(self, value: int) -> int:
-        """A reply's value as this parameter reads (the one rule, for every reader): the
-        value field is 32 signed bits, so a parameter whose range is not negative gets the
-        same bits read unsigned."""
-        if value < 0 and self.min is not None and self.min >= 0:
+        """A reply's value as this parameter reads (the one rule, for every reader): what
+        the reply carries, 32 signed bits, unless the data says the parameter is an unsigned
+        32-bit quantity. A -5 on a parameter the manual calls 0..2047 is shown as -5 (the
+        module holds it; the manual is not the witness), not as 4294967291."""
+        if value < 0 and self.unsigned:
             return value & 0xFFFFFFFF
         return value
+
+    def outside(self, value: int) -> str | None:
+        """The manual's range when ``value`` (as read) lies outside it, else None: said
+        beside the value, never in its place."""
+        return None if self.in_range(value) else self.range_text
 
     @property
     def writable(self) -> bool:
