@@ -110,6 +110,11 @@ class Client:
         # typed or a script's): close() ends it, so the module is not left storing what it gets
         self.left_downloading = False
         self.ascii_link = None  # set by tmclsh.client.ascii when the module is driven in ASCII
+        # while a write moves the module (client/reach.py): its answer may come from the new
+        # module address, go to the new host address, or come on the new CAN reply id
+        self.also_from: int | None = None
+        self.also_host: int | None = None
+        self.also_reply_id: int | None = None
         self._lock = threading.RLock()
         self.ledger = Ledger()
         self._events: deque[tuple[Reply, float]] = deque()  # with when each arrived

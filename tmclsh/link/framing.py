@@ -51,6 +51,9 @@ class Owner(Protocol):
     downloading: bool
     can_id: int
     reply_id: int
+    also_from: int | None  # (client/reach.py: an answer from the new address is the answer)
+    also_host: int | None
+    also_reply_id: int | None
     stats: dict[str, int]
     tracers: list  # (a framing asks whether any is there before it builds a trace's words)
     sent_tracers: list  # tracers of requests only (add_tracer(sent_only=True))
@@ -247,6 +250,10 @@ class SerialFraming:
             if kind != _VERSION:
                 return None  # a late or repeated version string (accept_version said so)
             reply = Reply.from_bytes(head, kind, module=req.address)
+        elif (o.also_from is not None or o.also_host is not None) and head[0] in (
+                host, o.also_host) and head[1] in (req.address, o.also_from) and \
+                head[3] == req.opcode and is_frame(head, head[0]) and head[2] != _EVENT:
+            reply = Reply.from_frame(head)  # a write that moved the module: its answer
         elif head[0] != host:
             # a frame for another host, or our own request echoed by an RS485 adapter
             o.discard(head, f"frame for address {head[0]}, not host {host}")
@@ -382,7 +389,7 @@ class CanFraming:
 
     def _take(self, req: Request, kind: ReplyKind, arb: int, data: bytes) -> Reply | None:
         o = self.owner
-        if arb != o.reply_id:
+        if arb != o.reply_id and (o.also_reply_id is None or arb != o.also_reply_id):
             return None  # other traffic on the bus
         host = o.host_address
         if kind == _VERSION and len(data) == _VERSION_LEN and all(32 <= b < 127 for b in data):

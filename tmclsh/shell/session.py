@@ -374,7 +374,7 @@ class Session:
         if spec is None or spec.confirm:  # may refuse, or ask first
             self._before_sending(enc)
         try:
-            reply = client.request(req)
+            reply = client.send_encoded(enc, req)
         except (TmclTimeoutError, ChecksumError) as exc:
             if idempotent(req) or isinstance(exc, TimeLimitError):
                 raise

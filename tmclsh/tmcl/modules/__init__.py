@@ -58,6 +58,9 @@ class Parameter:
     link: bool = False
     # writing it can start the motor (AP 2 TargetSpeed: in velocity mode the motor follows it)
     starts_motion: bool = False
+    # writing it changes where the module answers (address, host_address, can_id, reply_id,
+    # baud): the client follows it (client/reach.py)
+    reaches: str | None = None
 
     @property
     def readable(self) -> bool:
@@ -165,7 +168,7 @@ def _parameter(kind: str, raw: dict) -> Parameter:
         default=raw.get("default"), values=_int_keys(raw.get("values")),
         bits=_int_keys(raw.get("bits")), note=raw.get("note"), source=raw.get("source"),
         state=bool(raw.get("state", False)), link=bool(raw.get("link", False)),
-        starts_motion=bool(raw.get("starts_motion", False)))
+        starts_motion=bool(raw.get("starts_motion", False)), reaches=raw.get("reaches"))
 
 
 def _normalise(name: str) -> str:

@@ -16,6 +16,8 @@ from ...base.errors import ValidationError
 
 ACCESS_CODES = ("R", "W", "RW", "RWE")
 IO_KINDS = ("digital_in", "analog_in", "digital_out")
+# what a link parameter sets: how the module is reached from now on (the client follows it)
+REACHES = ("address", "host_address", "can_id", "reply_id", "baud")
 
 # key -> (type, required); "ints"/"strs" are lists of those, "names" an int-keyed text table
 MODULE_KEYS: dict[str, tuple[str, bool]] = {
@@ -36,7 +38,7 @@ PARAMETER_KEYS: dict[str, tuple[str, bool]] = {
     "choices": ("ints", False), "unit": ("str", False), "default": ("int", False),
     "values": ("names", False), "bits": ("names", False), "note": ("str", False),
     "source": ("str", False), "state": ("bool", False), "link": ("bool", False),
-    "starts_motion": ("bool", False),
+    "starts_motion": ("bool", False), "reaches": ("str", False),
 }
 IO_KEYS: dict[str, tuple[str, bool]] = {
     "bank": ("int", True), "port": ("int", True), "name": ("str", True), "kind": ("str", True),
@@ -206,6 +208,9 @@ def check(data: dict, lines: _Lines, path: str) -> None:
                                f"{', '.join(IO_KINDS)}, got {entry['kind']!r}")
                 ident: tuple = (entry["bank"], entry["port"])
             else:
+                if entry.get("reaches") not in (None, *REACHES):
+                    raise fail(table, i, "reaches", f"{what}: reaches must be one of "
+                               f"{', '.join(REACHES)}, got {entry['reaches']!r}")
                 if entry["access"] not in ACCESS_CODES:
                     raise fail(table, i, "access", f"{what}: access must be one of "
                                f"{', '.join(ACCESS_CODES)}, got {entry['access']!r}")
