@@ -268,8 +268,12 @@ class CanModule(Module):
     """The module on a python-can bus: requests on ``can_id``, replies on ``reply_id``."""
 
     def __init__(self, bus, can_id: int = 1, reply_id: int = 2, version: str = "1161V130",
-                 address: int = 1, host: int = 2):
+                 address: int = 1, host: int = 2, eighth: str | None = None):
         import can
+
+        # eighth: some modules answer with eight data bytes (DLC 8): "sum" adds the sum of
+        # the seven, "zero" a 0 byte
+        self.eighth = eighth
 
         self.version, self.address, self.host = version, address, host
         self.values, self.refuse, self.got = {}, set(), []
@@ -290,6 +294,10 @@ class CanModule(Module):
                 data = ans.encode("ascii")
             else:
                 data = bytes([self.address, ans[0], d[0]]) + struct.pack(">i", ans[1])
+                if self.eighth == "sum":
+                    data += bytes([sum(data) & 0xFF])
+                elif self.eighth == "zero":
+                    data += b"\x00"
             self.bus.send(self.can.Message(arbitration_id=self.reply_id, data=data,
                                            is_extended_id=False))
 

@@ -207,3 +207,32 @@ def test_the_binary_bring_up_reads_the_module_it_opened(modules):
         assert (c.module.name, c.version) == ("TMCM-1640", "1640V210")
     finally:
         c.close()
+
+
+class RefusesVersionWhileDownloading(Responder):
+    """Left in download mode, and refusing 136 there with status 2 (invalid command): the
+    manuals do not say what a module in download mode answers to 136. Every command below 128
+    is stored (status 101) until 133."""
+
+    downloading = True
+
+    def answer(self, raw):
+        cmd = raw[1]
+        if cmd in (132, 133):
+            self.downloading = cmd == 132
+            return reply(cmd, 0)
+        if self.downloading and cmd == GET_VERSION:
+            return reply(cmd, 0, status=INVALID_COMMAND)
+        if self.downloading and cmd < 128:
+            return reply(cmd, 0, status=101)
+        return super().answer(raw)
+
+
+@pytest.mark.parametrize("module", [None, "generic", "TMCM-1311"])
+def test_a_module_in_download_mode_that_refuses_136_is_brought_out(modules, run_tmclsh,
+                                                                    module):
+    m = modules(RefusesVersionWhileDownloading)
+    p = run_tmclsh("--port", m.path, *(("-m", module) if module else ()), "-c", "GAP 1, 0")
+    assert p.returncode == 0, p.stderr
+    assert "download mode" in p.stderr and not m.downloading
+    assert "refused the version request" not in p.stderr

@@ -192,3 +192,26 @@ def test_can_alone_before_or_after_scan_scans_the_configured_bus(monkeypatch, tm
     assert [json.loads(line) for line in out.splitlines()] == [
         {"address": 1, "module": "TMCM-1311", "version": "1311V111"}]
     assert "scanning CAN ids 1..2 on CAN virtual:reach-scan" in err
+
+
+@pytest.mark.parametrize("eighth", ["sum", "zero"])
+def test_replies_with_eight_data_bytes_are_taken(eighth):
+    """Some modules answer with DLC 8 (a TMCM-1260 candump in PyTrinamic's tracker): the
+    eighth byte, their sum or padding, is left out; the value is the seven bytes' as ever."""
+    import can
+
+    from responder import CanModule
+
+    from tmclsh.client.connect import connect
+
+    bus = can.Bus(interface="virtual", channel=f"eight-{eighth}")
+    m = CanModule(bus, version="1311V111", eighth=eighth)
+    m.values[(4, 0, False)] = 51200
+    c = connect(can=f"virtual:eight-{eighth}", timeout=0.5)
+    try:
+        assert c.module.name == "TMCM-1311"
+        assert c.value("GAP 4, 0") == 51200 and c.execute("SAP 4, 0, 1000").ok
+        assert c.stats["discarded"] == 0
+    finally:
+        c.close()
+        m.close()

@@ -184,6 +184,12 @@ def _bring_up_binary(client: Client, expected: Module | None, strict: bool) -> N
         if not _answers_after_all(client, expected, strict, exc):
             return  # found in ASCII mode, and attached
         reply = None
+    if reply is not None and reply.version is None and not reply.ok:
+        # 136 refused with an error status: the manuals do not say what a module in download
+        # mode answers to it; one that stores what it gets refuses it so. Ask GP 129, end
+        # download mode if it is in it, then ask again (nothing is lost if it was not)
+        leave_download_mode(client)
+        reply = None
     try:
         if reply is not None and reply.version is not None:
             _adopt_version(client, _confirmed_version(client, reply.version))

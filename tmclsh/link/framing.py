@@ -93,6 +93,13 @@ def _echo_of(raw: bytes, seen: bytes) -> bool:
     return len(seen) >= FRAME and sum(a != b for a, b in zip(raw, seen)) <= 1
 
 
+def _seven(data: bytes) -> bytes:
+    """A CAN reply's seven bytes. Some modules send eight (DLC 8; a TMCM-1260's candump in
+    PyTrinamic's tracker shows it): the eighth is left out, whether it is their sum or
+    padding; a reply is recognised by its first seven as from any module."""
+    return data[:_CAN_REPLY_LEN] if len(data) == _CAN_REPLY_LEN + 1 else data
+
+
 class SerialFraming:
     """Nine-byte frames on a byte stream, read through the one frame decoder."""
 
@@ -394,7 +401,11 @@ class CanFraming:
         host = o.host_address
         if kind == _VERSION and len(data) == _VERSION_LEN and all(32 <= b < 127 for b in data):
             reply = Reply.from_can(host, data, kind, module=req.address)
-        elif len(data) != _CAN_REPLY_LEN:
+            if o.tracers:
+                o.tell("rx", data, reply)
+            return reply
+        data = _seven(data)
+        if len(data) != _CAN_REPLY_LEN:
             o.discard(data, f"not a TMCL reply ({len(data)} bytes)")
             return None
         elif data[1] == _EVENT and data[2] == _TARGET_REACHED:
@@ -419,6 +430,7 @@ class CanFraming:
         if msg is None:
             return False
         arb, data = msg
+        data = _seven(data)
         if arb == o.reply_id and len(data) == _CAN_REPLY_LEN and data[1] == _EVENT \
                 and data[2] == _TARGET_REACHED:
             o.event(data, Reply.from_can(o.host_address, data))
