@@ -236,3 +236,45 @@ def test_a_module_in_download_mode_that_refuses_136_is_brought_out(modules, run_
     assert p.returncode == 0, p.stderr
     assert "download mode" in p.stderr and not m.downloading
     assert "refused the version request" not in p.stderr
+
+
+class OddString(PtyModule):
+    """A TMCM-1311 whose 136 string is in a form tmclsh does not read (another firmware's):
+    its 136 type 1 is as the TMCM-1311 manual prints it (type first)."""
+
+    def respond(self, command, type_, motor, value):
+        if command == GET_VERSION and type_ == 1:
+            self.got.append((command, type_, motor, value))
+            return OK, int.from_bytes(bytes([1311 >> 8, 1311 & 0xFF, 111, 0]), "big")
+        return super().respond(command, type_, motor, value)
+
+
+def test_a_string_in_an_unknown_form_falls_back_to_the_binary_version(modules):
+    m = modules(OddString, version="TMCL1.11")
+    c = connect(port=m.path, timeout=0.3)
+    try:
+        assert c.module.name == "TMCM-1311" and c.version == "TMCL1.11"
+    finally:
+        c.close()
+
+
+@pytest.mark.parametrize("text, name", [("351V1.03", "TMCM-351"), ("0351V103", "TMCM-351"),
+                                         ("1311V111", "TMCM-1311")])
+def test_the_forms_of_the_string_modules_use(text, name):
+    """Three-digit type numbers are written NNNVd.dd (PyTrinamic's updater expects it)."""
+    from tmclsh.tmcl.modules import identify
+
+    assert identify(text).name == name
+
+
+def test_a_string_nothing_names_says_the_way_out(modules, run_tmclsh):
+    class Nameless(PtyModule):
+        def respond(self, command, type_, motor, value):
+            if command == GET_VERSION and type_ == 1:
+                return OK, 0  # names no type either
+            return super().respond(command, type_, motor, value)
+
+    m = modules(Nameless, version="????????")
+    p = run_tmclsh("--port", m.path, "-c", "GAP 1, 0")
+    assert p.returncode == 3
+    assert "-m NAME (at the prompt: .module NAME)" in p.stderr

@@ -192,7 +192,7 @@ def _bring_up_binary(client: Client, expected: Module | None, strict: bool) -> N
         reply = None
     try:
         if reply is not None and reply.version is not None:
-            _adopt_version(client, _confirmed_version(client, reply.version))
+            _adopt_version(client, *_confirmed_version(client, reply.version))
         else:
             try:
                 identify(client)
@@ -200,7 +200,7 @@ def _bring_up_binary(client: Client, expected: Module | None, strict: bool) -> N
                 if client.version is None:
                     raise
             if client.version is not None:
-                _adopt_version(client, _confirmed_version(client, client.version))
+                _adopt_version(client, *_confirmed_version(client, client.version))
     except ValidationError:
         if expected is None:  # a version string naming no module we know
             raise
@@ -217,22 +217,24 @@ def _bring_up_binary(client: Client, expected: Module | None, strict: bool) -> N
                 f"waiting {client.timeout:g} s each")) from exc
 
 
-def _confirmed_version(client: Client, version: str) -> str:
+def _confirmed_version(client: Client, version: str) -> tuple[str, Module | None]:
     """The 136 type 0 string carries no checksum: one naming no module tmclsh has data for
-    (a bit flipped on the line makes '1311V111' '1311v111' or '1711V111') is checked against
-    136 type 1, which has one, read in each module's own byte order; while the two disagree
-    on a type tmclsh knows, the string is asked again (1 + retries times at most)."""
+    (a bit flipped on the line makes '1311V111' '1311v111' or '1711V111', or a firmware
+    writes it in a form not seen before) is checked against 136 type 1, which has one, read
+    in each module's own byte order; while the two disagree on a type tmclsh knows, the
+    string is asked again (1 + retries times at most). -> (the string, the module type 1
+    names when the string still names none)."""
     from ..tmcl.modules import from_version_string
 
     if from_version_string(version) is not None:
-        return version  # the usual case: nothing more is sent
+        return version, None  # the usual case: nothing more is sent
     try:
         ident = client.request(Request(client.address, _GET_VERSION, 1, 0, 0))
     except TmclError:
-        return version
+        return version, None
     known = by_type1(ident.value) if ident is not None and ident.status == _OK else None
     if known is None:
-        return version  # a type without data (TMCM-1161): the string stands
+        return version, None  # a type without data (TMCM-1161): the string stands
     for _ in range(1 + client.retries):
         try:
             again_ = client.request(Request(client.address, _GET_VERSION, 0, 0, 0))
@@ -241,16 +243,24 @@ def _confirmed_version(client: Client, version: str) -> str:
         named = from_version_string(again_.version) if again_ is not None and \
             again_.version is not None else None
         if named is not None and named.name == known.name:
-            return again_.version
-    return version
+            return again_.version, None
+    return version, known
 
 
-def _adopt_version(client: Client, version: str) -> None:
+def _adopt_version(client: Client, version: str, by_binary: Module | None = None) -> None:
     client.version = version
     mod = named_by(version)  # data if tmclsh has it, else numbers only
+    if by_binary is not None and (mod is None or mod.generic):
+        # the string names no type tmclsh knows, the checksummed binary version does
+        client.notice(f"the module's version string {version!r} names no module type "
+                      f"tmclsh knows; its binary version (136 type 1) says {by_binary.name}: "
+                      f"using its data (-m to say otherwise)")
+        mod = by_binary
     if mod is None:
-        raise ValidationError(f"unknown module type in version string {version!r}; "
-                              "give it with --module (or --module generic)")
+        raise ValidationError(f"unknown module type in version string {version!r}: tell "
+                              "tmclsh what it is with -m NAME (at the prompt: .module NAME), "
+                              "or -m generic for numbers only ('tmclsh modules' lists the "
+                              "names)")
     client.module = mod
 
 
