@@ -71,3 +71,26 @@ def test_killed_during_upload_ends_download_mode(served, tmp_path):
         port.reset_input_buffer()
         port.write(Request(1, 6, 1, 0, 0).to_bytes())
         assert Reply.from_bytes(port.read(9)).status == 100
+
+
+@pytest.mark.parametrize("sig, words", [(signal.SIGTERM, "terminated (SIGTERM)"),
+                                        (signal.SIGHUP, "hung up (SIGHUP)")])
+@pytest.mark.parametrize("how", ["-c", "-f"])
+def test_killed_with_a_motor_turning_stops_it_and_says_so(served, tmp_path, sig, words, how):
+    """A CI job's timeout (SIGTERM) or a terminal that went away (SIGHUP) is treated as
+    Ctrl-C: the motor is stopped and read back, it is said on stderr, and the exit status is
+    the signal's (it exited silently with 143 and left the axis moving)."""
+    sim, path = served
+    lines = "ROR 0, 30000\n.sleep 30\n"
+    if how == "-f":
+        script = tmp_path / "turn.tmcl"
+        script.write_text(lines)
+        p = start(path, "-f", str(script))
+    else:
+        p = start(path, "-c", lines.replace("\n", "; ").strip("; "))
+    wait_for(lambda: sim.param("axis", 3, 0) != 0)
+    p.send_signal(sig)
+    _, err = p.communicate(timeout=20)
+    assert p.returncode == 128 + sig, err
+    assert f"{words}: stopped motor 0 (MST; speed reads 0)" in err, err
+    assert sim.param("axis", 3, 0) == 0

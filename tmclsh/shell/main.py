@@ -87,6 +87,9 @@ def run_shell(args: argparse.Namespace) -> int:
         print(file=sys.stderr)
         _stop_on_interrupt(client)
         return EXIT_INTERRUPTED
+    except Terminated as exc:  # SIGTERM (a CI job's timeout), SIGHUP (the terminal went)
+        _stop_on_interrupt(client, exc.why)
+        return exc.code
     except BrokenPipeError:
         # whoever read our output has gone (`tmclsh -c ... | head`): stop quietly, as other
         # command-line tools do, instead of `tmclsh: [Errno 32] Broken pipe`
@@ -96,11 +99,12 @@ def run_shell(args: argparse.Namespace) -> int:
         client.close()  # leaves ASCII mode if tmclsh entered it, whatever happened
 
 
-def _stop_on_interrupt(client) -> None:
-    """Ctrl-C in -c/-f: the one stop (stop.py), said on stderr."""
+def _stop_on_interrupt(client, why: str = "interrupted") -> None:
+    """Ctrl-C, SIGTERM or SIGHUP in -c/-f (and SIGTERM/SIGHUP at the prompt): the one stop
+    (stop.py), said on stderr."""
     from .stop import ToStderr, stop_all
 
-    stop_all(client, ToStderr(), "interrupted")
+    stop_all(client, ToStderr(), why)
 
 
 def _interactive(args: argparse.Namespace) -> bool:
@@ -254,14 +258,27 @@ def _note_left_running(session: Session) -> None:
               file=sys.stderr)
 
 
+class Terminated(SystemExit):
+    """SIGTERM or SIGHUP: ends the run like Ctrl-C does (the one stop), with the signal's
+    exit status. A SystemExit, not a KeyboardInterrupt: the prompt, which stops and goes on
+    after Ctrl-C, must end here."""
+
+    def __init__(self, signum: int):
+        import signal
+
+        super().__init__(128 + signum)
+        self.why = {signal.SIGTERM: "terminated (SIGTERM)"}.get(signum, "hung up (SIGHUP)")
+
+
 def _exit_cleanly_on_signals() -> None:
-    """SIGTERM (kill, systemd) and SIGHUP (the terminal or SSH session went away) unwind like
-    an exception, so ``client.close()`` still runs: a module is never left in ASCII or
-    download mode because the shell was killed."""
+    """SIGTERM (kill, systemd, a CI job's timeout) and SIGHUP (the terminal or SSH session
+    went away) unwind like an exception: the motors and the stored program are stopped as
+    for Ctrl-C and ``client.close()`` runs, so a module is never left moving, or in ASCII or
+    download mode, because the shell was killed."""
     import signal
 
     def leave(signum: int, frame: object) -> None:
-        raise SystemExit(128 + signum)
+        raise Terminated(signum)
 
     for sig in (signal.SIGTERM, signal.SIGHUP):
         try:

@@ -33,10 +33,14 @@ class Say(Protocol):
 
 
 class ToStderr:
-    """Say it on stderr (a run whose stdout may be a pipe or JSON)."""
+    """Say it on stderr (a run whose stdout may be a pipe or JSON; after a hang-up there may
+    be nobody to say it to: the stop is done all the same)."""
 
     def ok(self, text: str) -> None:
-        print(text, file=sys.stderr)
+        try:
+            print(text, file=sys.stderr)
+        except (OSError, ValueError):
+            pass
 
     warn = info = ok
 
