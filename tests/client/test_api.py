@@ -32,10 +32,37 @@ def test_connect_to_a_port_send_and_execute(pty_sim):
     assert not c.connected
 
 
-def test_connect_defaults_to_the_simulator_and_checks_its_arguments():
+def _attached(monkeypatch, *devices: str) -> None:
+    """What pyserial lists: these devices, each a Trinamic USB module (vendor 0x2A3C)."""
+    from serial.tools import list_ports
+    from serial.tools.list_ports_common import ListPortInfo
+
+    ports = []
+    for device in devices:
+        p = ListPortInfo(device)
+        p.vid, p.pid = 0x2A3C, 0x0100
+        ports.append(p)
+    monkeypatch.setattr(list_ports, "comports", lambda *a, **k: list(ports))
+
+
+def test_connect_opens_the_one_usb_module_never_the_simulator_by_itself(monkeypatch, pty_sim):
+    """As the command line does: a jig written in Python must not pass on a simulator with
+    its cable unplugged (it did: connect() opened the simulator)."""
+    from tmclsh.base.errors import ConnectError
+
+    _attached(monkeypatch)
+    with pytest.raises(ConnectError, match='sim="TMCM-1311" for the simulator'):
+        tmclsh.connect()
+    _attached(monkeypatch, "/dev/ttyACM7", "/dev/ttyACM8")
+    with pytest.raises(ConnectError, match="2 Trinamic USB modules attached"):
+        tmclsh.connect()
+    sim, path = pty_sim
+    _attached(monkeypatch, path)
     with tmclsh.connect() as c:
+        assert not c.transport.simulated and c.describe().startswith(path)
+        assert c.execute("GAP 1, 0").ok
+    with tmclsh.connect(sim="TMCM-1311") as c:
         assert c.transport.simulated and c.module.name == "TMCM-1311"
-        assert c.execute("GAP 1, 0").value == 0
     with pytest.raises(ValidationError, match="only one"):
         tmclsh.connect(port="loop://", sim="TMCM-1311")
 

@@ -500,7 +500,7 @@ the EEPROM, restoring factory defaults and replacing the stored program ask firs
 {_b("--yes")} is given.
 .PP
 The module has the last word on what it holds: a value outside the manual's range is shown as
-the reply carries it (signed, unless the data calls the parameter an unsigned 32\-bit
+the reply carries it (signed, unless the data calls the parameter an unsigned 32\\-bit
 quantity) with the range it lies outside ({_b("outside_range")} in JSON). {_b("!")} before a
 TMCL line sends its value as typed, whatever the data says of its range
 ({_b("!SAP 140, 0, 12")}); everything else is checked as usual and the module's answer decides.
@@ -846,6 +846,34 @@ as source to {_i("FILE")}{_b(".program.tmcl")} (the suffix of {_i("FILE")} repla
 
 
 _WINDOWS_CONFIG = "%LOCALAPPDATA%\\tmclsh"
+_PYTHON = f"""\
+.SH PYTHON API
+The shell's client is a Python API too.
+{_b("tmclsh.connect()")} opens a module as the command line does: the one Trinamic USB module
+attached (none or several is a {_b("ConnectError")} saying what to give), {_b("port=")} (a
+device or a URL), {_b("can=")} ({_i("IFACE:CHANNEL")}), or the simulator only when asked,
+{_b("sim=")}; further arguments {_b("module")}, {_b("address")}, {_b("host_address")},
+{_b("timeout")}, {_b("retries")}, {_b("baud")}, {_b("bitrate")}, {_b("can_id")},
+{_b("reply_id")}, {_b("ascii")} (a value out of range is refused before anything is opened).
+The client is a context manager.
+.TP
+{_b("c.execute(")}{_i("line")}{_b(")")}
+A TMCL line as at the prompt, checked against the module's data first; returns a result with
+{_b(".value")}, {_b(".reply")} and {_b(".ok")}; {_b("StatusError")} when the module answers
+with an error status. {_b("!")} before the line sends its value as typed.
+.TP
+{_b("c.value(")}{_i("line")}{_b(")")}
+The reply's value of a line ({_b('c.value("GAP ActualPosition, 0")')}).
+.TP
+{_b("c.send(")}{_i("opcode, type, motor, value")}{_b(")")}
+A raw command, no checks; the reply's status is returned, not raised.
+.PP
+Every error is a {_b("TmclError")}: {_b("TmclTimeoutError")} (also a TimeoutError) when the
+module does not answer, {_b("TransportError")} when the link is lost, {_b("ValidationError")}
+and {_b("AsmError")} for a line refused before anything was sent (all in
+{_b("tmclsh.base.errors")}).
+"""
+
 _FILES = f"""\
 .SH FILES
 .TP
@@ -994,6 +1022,7 @@ def manpage(parser: argparse.ArgumentParser | None = None) -> str:
     out += _configuration()
     out.append(_BACKUPS.rstrip("\n"))
     out += _limits()
+    out.append(_PYTHON.rstrip("\n"))
     out.append(_FILES.rstrip("\n"))
     out += _module_files()
     out.append(_IMAGES.rstrip("\n"))

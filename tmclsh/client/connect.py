@@ -124,8 +124,10 @@ def connect(port: str | None = None, *, baud: int = 9600, can: str | None = None
             can_id: int | None = None, reply_id: int | None = None,
             bitrate: int | None = None, ascii: bool = False) -> LineClient:
     """Open a client: ``connect(port="/dev/ttyACM0")``, ``connect(port="socket://host:4001")``,
-    ``connect(can="virtual:bench")``, ``connect(sim="TMCM-351")``; with none of them, the
-    built-in simulated TMCM-1311.
+    ``connect(can="virtual:bench")``, ``connect(sim="TMCM-351")``; with none of them, the one
+    Trinamic USB module attached, as the command line does. The simulator only when asked
+    (``sim=``): a test jig written in Python must not pass with its cable unplugged. No module
+    attached, or several, is a ``ConnectError`` saying what to give.
 
     The module type is asked with 136; a ``module`` that contradicts the answer is a
     ``ConnectError``. A number outside its range (``limits.LIMITS``, as for the command line:
@@ -142,14 +144,19 @@ def connect(port: str | None = None, *, baud: int = 9600, can: str | None = None
                        ("reply_id", reply_id), ("bitrate", bitrate)):
         if value is not None:
             limits.check(key, value, key)
+    if port is None and can is None and sim is None:
+        port = attached_module_port()
+        if port is None:
+            raise ConnectError("no module found: no Trinamic USB module is attached (USB vendor "
+                               f"{TRINAMIC_VID:04x}); give port=\"/dev/ttyACM0\" (or a URL), "
+                               "can=\"IFACE:CHANNEL\", or sim=\"TMCM-1311\" for the simulator")
     if port is not None:
         t: Transport = tr.open_serial(port, baud)
     elif can is not None:
         t = tr.open_can(can, bitrate)
     else:
-        name = sim or module or "TMCM-1311"
-        t = tr.open_sim(name, address, host_address=host_address)
-        module = module or name
+        t = tr.open_sim(sim, address, host_address=host_address)
+        module = module or sim
     try:
         client = LineClient(t, address=address, host_address=host_address, module=module,
                         timeout=timeout, retries=retries, can_id=can_id, reply_id=reply_id)
