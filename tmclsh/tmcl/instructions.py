@@ -268,6 +268,15 @@ def repeatable(opcode: int, type_: int) -> bool:
 
 
 @cache
+def reading(opcode: int, type_: int) -> bool:
+    """Is the reply to this request a reading of what its type names (GAP, GGP, GIO, RFS
+    STATUS)? Asking again then changes nothing on the module: an answer in doubt is read
+    again."""
+    spec = _tables()[0].get(opcode)
+    return spec is not None and spec.reads_with(type_)
+
+
+@cache
 def starting_opcodes() -> frozenset[int]:
     """The commands that can start a motor or the stored program (``starts_motion``)."""
     return frozenset(op for op in (*_tables()[0], *_tables()[1]) if spec_of(op).starts_motion)
