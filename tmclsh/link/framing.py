@@ -51,6 +51,7 @@ class Owner(Protocol):
     downloading: bool
     can_id: int
     reply_id: int
+    other_reply_ids: frozenset[int]  # more ids replies come on (a CAN bootloader's 0x7FF)
     stats: dict[str, int]
     tracers: list  # (a framing asks whether any is there before it builds a trace's words)
     sent_tracers: list  # tracers of requests only (add_tracer(sent_only=True))
@@ -382,7 +383,7 @@ class CanFraming:
 
     def _take(self, req: Request, kind: ReplyKind, arb: int, data: bytes) -> Reply | None:
         o = self.owner
-        if arb != o.reply_id:
+        if arb != o.reply_id and arb not in o.other_reply_ids:
             return None  # other traffic on the bus
         host = o.host_address
         if kind == _VERSION and len(data) == _VERSION_LEN and all(32 <= b < 127 for b in data):
@@ -412,10 +413,11 @@ class CanFraming:
         if msg is None:
             return False
         arb, data = msg
-        if arb == o.reply_id and len(data) == _CAN_REPLY_LEN and data[1] == _EVENT \
+        ours = arb == o.reply_id or arb in o.other_reply_ids
+        if ours and len(data) == _CAN_REPLY_LEN and data[1] == _EVENT \
                 and data[2] == _TARGET_REACHED:
             o.event(data, Reply.from_can(o.host_address, data))
-        elif arb == o.reply_id:
+        elif ours:
             if len(data) == _CAN_REPLY_LEN:
                 o.late(data[0], data[2], Reply.from_can(o.host_address, data))
             o.discard(data, "stale reply")
