@@ -219,6 +219,9 @@ class Update:
         c.address, c.host_address, c.can_id, c.reply_id = address, host, can_id, reply_id
         now = line_baud(c.transport)
         if baud is not None and now is not None and baud != now:
+            # what was sent last (242, 205: no reply says it arrived) must leave the line
+            # at the rate it was sent at
+            time.sleep(self.boot.switch_s + 10 * 9 / now)
             c.transport.set_baudrate(baud)
             c.forget_stale()  # nothing sent at the other rate can still arrive
 
@@ -329,9 +332,7 @@ class Update:
         self.version = version
         self.type_number = parsed.type_number if parsed is not None else 0
         self.module = _module_name(self.type_number)
-        at = (f" (where a bootloader answers: address {c.address}"
-              + (f", {line_baud(c.transport)} baud" if line_baud(c.transport) else "") + ")"
-              if where else "")
+        at = f", found where a bootloader answers (address {c.address})" if where else ""
         self.progress(Step("found", f"{self.module} on {c.describe()} in its bootloader "
                                     f"({version}){at}: an earlier update did not complete"))
 

@@ -50,6 +50,7 @@ class Facts:
     can_other_reply_ids: tuple[int, ...]
     usb_reconnect_s: float
     restart_s: float
+    switch_s: float
     erase_s: float
     application_letter: str
     bootloader_letter: str
@@ -79,6 +80,7 @@ def facts() -> Facts:
         can_bitrate=link["can_bitrate"],
         can_other_reply_ids=tuple(link.get("can_other_reply_ids", ())),
         usb_reconnect_s=float(link["usb_reconnect_s"]), restart_s=float(link["restart_s"]),
+        switch_s=float(link["switch_s"]),
         erase_s=float(link["erase_s"]),
         application_letter=ver["application"], bootloader_letter=ver["bootloader"],
         version_digits={int(k): v for k, v in ver["digits"].items()},
