@@ -11,11 +11,10 @@ import pytest
 
 from bootmodel import START, BootModule, CanBootModule, hex_image
 from tmclsh.base.errors import TransportError
-from tmclsh.ops.firmware import (APPLICATION, BOOTLOADER, UPDATED, WRITING, FirmwareError,
-                                 ImageRefused, Step, Update)
+from tmclsh.ops.firmware import APPLICATION, WRITING, FirmwareError, ImageRefused, Step, Update
 from tmclsh.sim import Simulator
 from tmclsh.sim.boot import Bootloader
-from tmclsh.sim.serve import serve_can, serve_pty, serve_tcp
+from tmclsh.sim.serve import serve_can, serve_tcp
 from tmclsh.tmcl.bootloader import Image, image_from_hex
 
 SIM_START = Bootloader.START

@@ -140,7 +140,9 @@ def cmd_firmware(args: argparse.Namespace) -> int:
     except (KeyboardInterrupt, SystemExit) as exc:
         code = exc.code if isinstance(exc, SystemExit) and isinstance(exc.code, int) \
             else EXIT_INTERRUPTED
-        _stopped(report, update, args, "interrupted", None)
+        report.close()
+        _stopped(report, update, args, "interrupted" if code == EXIT_INTERRUPTED
+                 else f"stopped by a signal (exit status {code})", None)
         return code
     except TmclError as exc:
         report.close()

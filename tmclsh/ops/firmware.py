@@ -219,9 +219,6 @@ class Update:
         c.address, c.host_address, c.can_id, c.reply_id = address, host, can_id, reply_id
         now = line_baud(c.transport)
         if baud is not None and now is not None and baud != now:
-            # what was sent last (242, 205: no reply says it arrived) must leave the line
-            # at the rate it was sent at
-            time.sleep(self.boot.switch_s + 10 * 9 / now)
             c.transport.set_baudrate(baud)
             c.forget_stale()  # nothing sent at the other rate can still arrive
 
@@ -229,6 +226,12 @@ class Update:
         b = self.boot
         baud = b.baud if line_baud(self.client.transport) is not None else None
         return (b.address, b.host_address, b.can_id, b.can_reply_id, baud)
+
+    def _restarting(self) -> None:
+        """After 242 or 205 (no reply says it arrived): the frame leaves the line at the rate
+        it was sent at, and the module restarts (what reaches it meanwhile is lost)."""
+        baud = line_baud(self.client.transport)
+        time.sleep(self.boot.switch_s + (10 * 9 / baud if baud else 0.0))
 
     def _usb(self) -> bool:
         from ..link import trinamic_ports
@@ -453,6 +456,7 @@ class Update:
         self.state = BOOTLOADER  # (from the moment 242 may have gone out)
         self.entered = True
         self._request("enter", *self.boot.key)
+        self._restarting()
         usb = self._usb()
         if usb:
             self._reopen()
@@ -548,6 +552,7 @@ class Update:
         self.progress(Step("start", "starting the new firmware (205)"))
         self.state = STARTING
         self._request("start")
+        self._restarting()
 
     def _reach_application(self) -> None:
         c = self.client
@@ -579,6 +584,7 @@ class Update:
             if self._usb() or not self.client.connected:
                 return
             self._request("start")
+            self._restarting()
             self._set_link(*self._user_link)
             version = self._ask_version(self.boot.restart_s)
         except BaseException:
