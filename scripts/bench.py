@@ -830,6 +830,7 @@ def _firmware_frames(hex_path: str) -> list[tuple[str, bytes]]:
     ih.padding = 0
     data = ih.tobinstr(start=lo, end=hi - 1)
     frames = [("rt", tmcl_frame(136, 0, 0, 0)), ("rt", tmcl_frame(10, 129, 0, 0)),
+              ("rt", tmcl_frame(135, 0, 0, 0)), ("rt", tmcl_frame(6, 3, 0, 0)),
               ("w", tmcl_frame(242, 0x81, 0x92, -0x5C4B3A2A)),
               ("rt", tmcl_frame(136, 0, 0, 0)), ("rt", tmcl_frame(136, 0, 0, 0)),
               ("rt", tmcl_frame(206, 0, 0, 0)), ("rt", tmcl_frame(206, 1, 0, 0)),

@@ -327,3 +327,40 @@ def test_the_same_version_is_nothing_to_do(make_pty_sim):
     _, result, _ = run({"port": path}, sim_image("1311V111"))
     assert result.nothing_to_do and not sim.in_bootloader
     assert sim.boot.checksum != 0  # its memory as it was
+
+
+def test_a_turning_motor_is_stopped_before_the_restart(make_pty_sim):
+    sim, path = make_pty_sim()
+    sim.write(__import__("tmclsh.tmcl.frames", fromlist=["Request"]).Request(
+        1, 1, 0, 0, 20000).to_bytes())  # ROR 0, 20000
+    sim.read(0.2)
+    questions = []
+    steps: list[Step] = []
+    update = Update({"port": path, "timeout": 0.3}, sim_image(), progress=steps.append,
+                    confirm=lambda q: questions.append(q) or True)
+    try:
+        update.run()
+    finally:
+        update.close()
+    assert "motor 0 turns (speed" in questions[0] and "stopped first" in questions[0]
+    stop = next(s for s in steps if s.step == "stop")
+    assert steps.index(stop) < [s.step for s in steps].index("enter")
+    assert version_of(sim) == "1311V112"
+
+
+def test_a_usb_module_is_found_again_under_its_port_name(make_pty_sim, monkeypatch):
+    """After 242 and 205 a module on its own USB port leaves the bus: the port is closed and
+    opened again under the same name (here a pty stands in for the USB port)."""
+    sim, path = make_pty_sim()
+    monkeypatch.setattr(Update, "_usb", lambda self: True)
+    reopened = []
+    real = Update._reopen
+
+    def counting(self):
+        reopened.append(self.state)
+        real(self)
+
+    monkeypatch.setattr(Update, "_reopen", counting)
+    _, result, _ = run({"port": path}, sim_image())
+    assert reopened == ["bootloader", "starting"]
+    assert result.new_version == "1311V112" == version_of(sim)

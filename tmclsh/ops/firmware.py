@@ -10,8 +10,10 @@ facts from ``tmcl/bootloader.toml``):
    baud);
 2. refuse an image for another module type (its version string names the type) before
    anything is written: the module's own string names its type;
-3. ask (``confirm``), then restart it into its bootloader (242 with its key; not when it is
-   there already) and reach it again (a USB module leaves the bus and comes back);
+3. ask (``confirm``); stop a running program and turning motors first (the one safety stop:
+   a restart would cut their drive mid-move); restart it into its bootloader (242 with its
+   key; not when it is there already) and reach it again (a USB module leaves the bus and
+   comes back);
 4. ask the bootloader for its memory (206: page size, start, size): an image that does not
    start where the memory does, or does not fit, is refused before anything is erased (and
    a module this run restarted is sent back to its firmware, 205);
@@ -46,6 +48,7 @@ from ..tmcl.frames import Control, Request, Status, to_signed32
 from ..tmcl.modules import by_firmware_id
 from ..tmcl.version import VersionString, parse_string
 from .scan import line_baud
+from .stop import activity, stop_everything
 
 # Where the module stands (``Update.state``), in the order an update passes them.
 APPLICATION = "application"  # it runs its firmware; nothing was changed
@@ -410,11 +413,15 @@ class Update:
                                                "already, the image's version: nothing to do"))
                     return Result(self.module, self.old_version, self.old_version, 0,
                                   time.monotonic() - t0, False, nothing_to_do=True)
+                busy = activity(self.client)
+                first = f" ({busy}: stopped first)" if not busy.idle else ""
                 self._ask(f"update the {self.module} at address {self.client.address} on "
                           f"{self.client.describe()} from {self.old_version} to "
                           f"{image_version.text} ({self.image.name}, {self.image.length} "
-                          "bytes)? It restarts into its bootloader and its firmware is "
-                          "erased and written; do not switch it off until it is done")
+                          f"bytes)?{first} It restarts into its bootloader and its firmware "
+                          "is erased and written; do not switch it off until it is done")
+                if not busy.idle:
+                    self._stop_first(busy)
                 self._enter()
             self.memory = self._info()
             problem = self._fit_problem(self.memory)
@@ -448,6 +455,18 @@ class Update:
         if self.confirm is not None and not self.confirm(question):
             raise FirmwareError("not updated: nothing was changed" if self.state == APPLICATION
                                 else "not updated: nothing was erased")
+
+    def _stop_first(self, busy) -> None:
+        """A restart would cut the motors' drive mid-move: the program and the motors are
+        stopped first, with the one safety stop, and nothing goes on unless they did."""
+        self.progress(Step("stop", f"{busy}: stopping the program and the motors first"))
+        report = stop_everything(self.client)
+        if not report.ok:
+            left = [f"motor {m} still turns (speed {v})" for m, v in report.turning.items()]
+            left += [f"motor {m}: {why}" for m, why in report.unknown.items()]
+            left += [f"the program: {report.program_error}"] if report.program_error else []
+            raise FirmwareError(f"not updated: the module did not stop before its restart "
+                                f"({'; '.join(left) or 'the link'}); nothing was changed")
 
     def _enter(self) -> None:
         """242 with its key; reach the module again in its bootloader."""
