@@ -600,13 +600,17 @@ class Update:
         if not (self.entered and self.state == BOOTLOADER and self.client is not None):
             return
         try:
-            if self._usb() or not self.client.connected:
+            if not self.client.connected:
                 return
             self._request("start")
             self._restarting()
+            usb = self._usb()
+            if usb:
+                self._reopen()
             self._set_link(*self._user_link)
-            version = self._ask_version(self.boot.restart_s)
-        except BaseException:
+            version = self._ask_version(self.boot.usb_reconnect_s if usb
+                                        else self.boot.restart_s)
+        except BaseException:  # (a second Ctrl-C, a link gone: the situation says where)
             return
         parsed = parse_string(version or "")
         if parsed is not None and not parsed.bootloader:
