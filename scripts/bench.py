@@ -797,6 +797,199 @@ def bench_upload(args: argparse.Namespace) -> dict:
     return row(result, f".upload + verify of {n} instructions", ratio, "x raw", 1.1)
 
 
+# -- firmware update --------------------------------------------------------------------------
+
+FIRMWARE_SIZE = 64 * 1024  # bytes of the image (the issue's 64 KiB)
+FIRMWARE_START = 0x8000  # where the simulated bootloader's memory starts (tmclsh/sim/README.md)
+FIRMWARE_PAGE = 0x800
+FIRMWARE_RESTART = 0.1  # s a restarting module is given after 242 and 205 (bootloader.toml)
+
+
+def _firmware_hex(folder: str, version: str) -> str:
+    """A 64 KiB image for the simulated TMCM-1311 carrying ``version``, as an Intel HEX file
+    (written by intelhex, as a vendor's tool would)."""
+    from intelhex import IntelHex
+
+    data = bytearray((i * 13 + 5) & 0xFF for i in range(FIRMWARE_SIZE))
+    data[0x200:0x200 + len(version)] = version.encode()
+    path = os.path.join(folder, f"fw-{version}.hex")
+    ih = IntelHex()
+    ih.puts(FIRMWARE_START, bytes(data))
+    ih.write_hex_file(path)
+    return path
+
+
+def _firmware_frames(hex_path: str) -> list[tuple[str, bytes]]:
+    """The frames of an update, built here from the issue's table (not by the measured
+    tree), in the order ``tmclsh firmware`` sends them: ("rt", frame) for a round trip,
+    ("w", frame) for a frame that gets no reply (242, 205)."""
+    from intelhex import IntelHex
+
+    ih = IntelHex(hex_path)
+    lo, hi = ih.minaddr(), ih.maxaddr() + 1
+    ih.padding = 0
+    data = ih.tobinstr(start=lo, end=hi - 1)
+    frames = [("rt", tmcl_frame(136, 0, 0, 0)), ("rt", tmcl_frame(10, 129, 0, 0)),
+              ("rt", tmcl_frame(135, 0, 0, 0)), ("rt", tmcl_frame(6, 3, 0, 0)),
+              ("w", tmcl_frame(242, 0x81, 0x92, -0x5C4B3A2A)),
+              ("rt", tmcl_frame(136, 0, 0, 0)), ("rt", tmcl_frame(136, 0, 0, 0)),
+              ("rt", tmcl_frame(206, 0, 0, 0)), ("rt", tmcl_frame(206, 1, 0, 0)),
+              ("rt", tmcl_frame(206, 2, 0, 0)), ("rt", tmcl_frame(200, 0, 0, 0))]
+    for page in range(lo, hi, FIRMWARE_PAGE):
+        for addr in range(page, min(page + FIRMWARE_PAGE, hi), 4):
+            index = (addr - page) // 4
+            word = struct.unpack("<i", data[addr - lo:addr - lo + 4].ljust(4, b"\0"))[0]
+            frames.append(("rt", tmcl_frame(201, index & 0xFF, index >> 8, word)))
+        frames.append(("rt", tmcl_frame(202, 0, 0, page)))
+    total = sum(data) & 0xFFFFFFFF
+    signed = total - (1 << 32) if total >= 1 << 31 else total
+    frames += [("rt", tmcl_frame(203, 0, 0, hi - 1)), ("rt", tmcl_frame(208, 0, 0, hi - lo)),
+               ("rt", tmcl_frame(208, 1, 0, signed)), ("w", tmcl_frame(205, 0, 0, 0)),
+               ("rt", tmcl_frame(136, 0, 0, 0))]
+    return frames
+
+
+def _firmware_tools(args: argparse.Namespace):
+    """The measured tree's update and image reader, or None when it has none."""
+    try:
+        return tm("tmclsh.ops.firmware"), tm("tmclsh.tmcl.bootloader")
+    except ImportError:
+        say("firmware: the measured tree has no firmware update")
+        return None
+
+
+def _firmware_process(args: argparse.Namespace, argv: list[str]) -> float:
+    t0 = time.perf_counter()
+    p = subprocess.run(argv, capture_output=True, text=True, env=tree_env(args),
+                       cwd=args.state_dir, timeout=600)
+    took = time.perf_counter() - t0
+    if p.returncode != 0:
+        raise RuntimeError(f"{argv[0]} failed: {p.stdout[-300:]} {p.stderr[-300:]}")
+    return took
+
+
+_FIRMWARE_VERSIONS = iter(f"1311V{n}" for n in range(120, 1000))  # a new one every round
+
+
+@benchmark("firmware", "64 KiB firmware update over a pty at 115200 baud vs a raw pyserial "
+                       "loop of the same frames")
+def bench_firmware(args: argparse.Namespace) -> dict:
+    """Seconds to update the simulated TMCM-1311 (``tmclsh sim --pty``, its own process) with
+    a 64 KiB image, the pty opened at 115200 baud, with ``tmclsh.ops.firmware.Update``,
+    beside a raw pyserial loop of the same frames built here from the issue's table (each
+    round one of each, right beside the other; each writes an image of another version, so
+    none finds its work done). A pty moves bytes at no rate of its own: these are the
+    round trips' own costs, the harder comparison (on a line paced at 115200 baud both take
+    the 25 s the wire takes)."""
+    import serial
+
+    tools = _firmware_tools(args)
+    if tools is None:
+        return {"benchmark": "firmware", "skipped": "no tmclsh.ops.firmware in the tree"}
+    firmware, boot = tools
+    with tempfile.TemporaryDirectory(prefix="tmclsh-fw-") as folder:
+
+        def raw_round(path: str) -> float:
+            frames = _firmware_frames(_firmware_hex(folder, next(_FIRMWARE_VERSIONS)))
+            ser = serial.serial_for_url(path, baudrate=BAUD, timeout=1.0)
+            try:
+                write, read = ser.write, ser.read
+                t0 = time.perf_counter()
+                for kind, frame in frames:
+                    write(frame)
+                    if kind == "rt":
+                        reply = read(9)
+                        if len(reply) != 9:
+                            raise RuntimeError(f"raw update: no reply to {frame.hex()}")
+                    else:  # 242, 205: the module restarts (tmclsh waits as long)
+                        time.sleep(FIRMWARE_RESTART)
+                took = time.perf_counter() - t0
+                assert reply[1:5] == b"1311" and reply[5:6] == b"V", reply  # it runs again
+            finally:
+                ser.close()
+            return took
+
+        def tmclsh_round(path: str) -> float:
+            image = boot.read_image(_firmware_hex(folder, next(_FIRMWARE_VERSIONS)))
+            update = firmware.Update({"port": path, "baud": BAUD, "timeout": 1.0}, image)
+            try:
+                t0 = time.perf_counter()
+                result = update.run()
+                took = time.perf_counter() - t0
+            finally:
+                update.close()
+            assert result.written == FIRMWARE_SIZE and not result.nothing_to_do, result
+            return took
+
+        with SimProcess(args.module) as sim:
+            rounds = args.rounds
+            say(f"firmware: {rounds} round(s) of a {FIRMWARE_SIZE // 1024} KiB image on "
+                f"{sim.path} ({load_note()})")
+            # each round a raw update and a tmclsh one right beside it (in turn first): this
+            # machine's round trip drifts within seconds, so the row's figure is the median
+            # of the rounds' ratios, not a ratio of two bests measured apart
+            ratios, raws, ours = [], [], []
+            for rnd in range(rounds):
+                if rnd % 2:
+                    ours.append(tmclsh_round(sim.path))
+                    raws.append(raw_round(sim.path))
+                else:
+                    raws.append(raw_round(sim.path))
+                    ours.append(tmclsh_round(sim.path))
+                ratios.append(ours[-1] / raws[-1])
+                if args.verbose:
+                    say(f"  round {rnd + 1}: raw {raws[-1]:.3f} s, tmclsh {ours[-1]:.3f} s: "
+                        f"{ratios[-1]:.2f}x")
+    ratio = statistics.median(ratios)
+    say(f"  raw {min(raws):.3f}..{max(raws):.3f} s, tmclsh {min(ours):.3f}..{max(ours):.3f} s;"
+        f" ratio per round {min(ratios):.2f}..{max(ratios):.2f}, median {ratio:.2f}x")
+    result = {"benchmark": "firmware", "bytes": FIRMWARE_SIZE, "raw_s": round(min(raws), 3),
+              "tmclsh_s": round(min(ours), 3),
+              **rounded(spread(ratios))}
+    return row(result, f"firmware update of {FIRMWARE_SIZE // 1024} KiB", ratio, "x raw", 1.1,
+               note=f"median of {rounds} rounds, {min(ratios):.2f}..{max(ratios):.2f}")
+
+
+@benchmark("firmware-pytrinamic", "64 KiB firmware update: tmclsh firmware vs PyTrinamic's "
+                                  "tmclfwupload, whole processes side by side")
+def bench_firmware_pytrinamic(args: argparse.Namespace) -> dict:
+    """Seconds of a whole ``tmclsh firmware FILE --port PTY --baud 115200 --yes`` process and
+    of PyTrinamic's ``tmclfwupload FILE --interface serial_tmcl --port PTY --data-rate
+    115200`` (as their users run them; its own 1 s waits included) on the same simulated
+    bootloader, alternating, up to 3 rounds; each round writes an image of another version."""
+    import shutil
+
+    if _firmware_tools(args) is None:
+        return {"benchmark": "firmware-pytrinamic", "skipped": "no firmware update in the tree"}
+    tool = shutil.which("tmclfwupload", path=str(Path(sys.executable).parent)) or \
+        shutil.which("tmclfwupload")
+    if tool is None:
+        say("firmware-pytrinamic: PyTrinamic's tmclfwupload is not installed")
+        return {"benchmark": "firmware-pytrinamic", "skipped": "no tmclfwupload"}
+    with tempfile.TemporaryDirectory(prefix="tmclsh-fw-") as folder, \
+            SimProcess(args.module) as sim:
+        say(f"firmware-pytrinamic: {min(args.rounds, 3)} round(s) on {sim.path} "
+            f"({load_note()})")
+        runs = {
+            "tmclsh": lambda: _firmware_process(args, tmclsh_cmd(
+                "firmware", _firmware_hex(folder, next(_FIRMWARE_VERSIONS)), "--port",
+                sim.path, "--baud", str(BAUD), "--yes")),
+            "tmclfwupload": lambda: _firmware_process(args, [
+                tool, _firmware_hex(folder, next(_FIRMWARE_VERSIONS)), "--interface",
+                "serial_tmcl", "--port", sim.path, "--data-rate", str(BAUD)]),
+        }
+        best = alternate(max(1, min(args.rounds, 3)), runs, args.verbose)
+    faster = best["tmclfwupload"] / best["tmclsh"]
+    say(f"  tmclsh firmware {best['tmclsh']:.3f} s, tmclfwupload {best['tmclfwupload']:.3f} s:"
+        f" tmclsh {faster:.2f}x faster")
+    result = {"benchmark": "firmware-pytrinamic", "bytes": FIRMWARE_SIZE,
+              "tmclsh_s": round(best["tmclsh"], 3),
+              "pytrinamic_s": round(best["tmclfwupload"], 3), "faster": round(faster, 3)}
+    return row(result, "tmclsh firmware, time of tmclfwupload's", best["tmclsh"]
+               / best["tmclfwupload"], "x", round(1 / 1.8, 3),
+               note=f"{faster:.2f}x faster; target at least 1.8x")
+
+
 # -- scan -------------------------------------------------------------------------------------
 
 # -- watch polling ----------------------------------------------------------------------------

@@ -377,8 +377,39 @@ _SUB_NOTES = {
             "then a summary on standard error; a progress bar while it runs on a terminal. The "
             "wait per address comes from the link (the wire time of request and reply at the "
             "baud rate, plus a margin); addresses that answered late or garbled are asked again, "
-            "slower. --baud auto scans at each baud rate global parameter 65 can select. Exit "
-            "status 3 when nothing answers.",
+            "slower. --baud auto scans at each baud rate global parameter 65 can select. A "
+            "module in its bootloader (a firmware update did not complete) is marked, with the "
+            "tmclsh firmware command that completes the update. Exit status 3 when nothing "
+            "answers.",
+    "firmware": "Writes the firmware image FILE.hex (Intel HEX, as the vendor ships it) to the "
+                "module over its TMCL bootloader. The image is refused before anything is "
+                "sent when it cannot be read, and before anything is written when its version "
+                "string (such as 1311V112) names another module type than the module's own. "
+                "Then, after the question (or --yes; without a terminal to answer, --yes is "
+                "needed), a running program and turning motors are stopped (the safety stop), "
+                "and command 242 restarts the module into its bootloader, which "
+                "answers at address 1, 115200 baud (a USB module leaves the bus and comes back "
+                "under the same port name); 206 asks its memory, and an image that does not "
+                "start where the memory does or does not fit is refused before the erase (the "
+                "module is sent back to its firmware); 200 erases, 201 and 202 write the image "
+                "page by page, 203 compares the memory's checksum with the image's, 208 writes "
+                "length and checksum, 205 starts the new firmware, whose version is read back. "
+                "On a terminal a bar shows the bytes written, the rate and the time left; with "
+                "--json each step is one object on standard output and the result one more. "
+                "The last line names the old and the new version. --check says what would "
+                "happen and writes nothing (whether the image fits is known from the "
+                "bootloader only: --check does not restart a running module to ask). "
+                "Interrupted anywhere (Ctrl-C, SIGTERM, a lost link, a module that stops "
+                "answering), tmclsh says where the module stands and, unless it runs its "
+                "firmware, the exact command that completes the update; before the erase, a "
+                "module it restarted is sent back to its firmware first. Run again, the same "
+                "command finds the module in its bootloader (also at address 1, 115200 baud "
+                "when it does not answer where asked) and completes the update: when the "
+                "memory already holds the image (203 agrees) it only finishes it, otherwise it "
+                "erases and writes again. A module that already runs the image's version is "
+                "left alone. Exit status 0 when updated (or nothing to do), 1 when refused or "
+                "stopped, 2 for an unreadable image or a missing --yes (nothing sent), 3 when "
+                "no module answers, 130 when interrupted.",
 }
 
 
@@ -661,6 +692,16 @@ Assemble a program and look at the result; find the modules on a bus:
 {_b("tmclsh asm blink.tmc --hex -o blink.hex")}
 {_b("tmclsh disasm blink.hex")}
 {_b("tmclsh scan --port /dev/ttyUSB0")}
+.fi
+.RE
+.PP
+Update the firmware of the module on a USB port, asking before the erase; run the same
+command again to complete an update that broke off:
+.PP
+.RS 4
+.nf
+{_b("tmclsh firmware TMCM-1311_V1.12.hex --port /dev/ttyACM0")}
+{_b("tmclsh firmware TMCM-1311_V1.12.hex --port /dev/ttyACM0 --check")}
 .fi
 .RE
 .PP

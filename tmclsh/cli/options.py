@@ -15,7 +15,7 @@ from ..base import limits
 from ..base.canspec import FROM_PYTHON_CAN
 
 
-SUBCOMMANDS = ("asm", "disasm", "sim", "ports", "scan", "modules")
+SUBCOMMANDS = ("asm", "disasm", "sim", "ports", "scan", "modules", "firmware")
 
 
 def setting(key: str):
@@ -130,7 +130,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="tmclsh",
         description="Interactive shell for Trinamic TMCL modules (TMCM-1311, TMCM-351, TMCM-1640).",
-        epilog="Subcommands: asm, disasm, sim, ports, scan, modules ('tmclsh SUBCOMMAND --help').")
+        epilog="Subcommands: asm, disasm, sim, ports, scan, modules, firmware ('tmclsh "
+               "SUBCOMMAND --help').")
     add_connection(p)
     add_options(p)
     run = p.add_mutually_exclusive_group()
@@ -188,6 +189,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "drop=0.1,corrupt=0.05,dup=0.05")
     s.add_argument("--faults-seed", type=_seed, metavar="N",
                    help="seed for --faults, so a run misbehaves the same way again")
+    s.add_argument("--bootloader", action="store_true",
+                   help="start in the module's bootloader with no valid firmware, as after a "
+                        "firmware update that broke off (it answers at address 1; 'tmclsh "
+                        "firmware FILE.hex' completes the update)")
 
     po = sub.add_parser("ports", help="list serial ports (Trinamic USB devices marked)")
     # SUPPRESS: `tmclsh --json ports` and `tmclsh ports --json` both work
@@ -213,6 +218,25 @@ def build_parser() -> argparse.ArgumentParser:
                          f"request and its reply at the baud rate plus a margin; "
                          f"{_range('scan_timeout')})")
     sc.add_argument("--json", action="store_true", default=argparse.SUPPRESS)
+
+    fw = sub.add_parser("firmware", help="update the module's firmware over its TMCL "
+                                         "bootloader; completes an update that broke off")
+    fw.add_argument("file", metavar="FILE.hex",
+                    help="the firmware image, an Intel HEX file as the vendor ships it")
+    add_connection(fw, nested=True)
+    fw.add_argument("-a", "--address", type=_address, metavar="N", default=argparse.SUPPRESS,
+                    help=f"module address (default 1; {_range('address')}); a module in its "
+                         "bootloader is also looked for at address 1, 115200 baud")
+    fw.add_argument("--timeout", type=setting("timeout"), metavar="S",
+                    default=argparse.SUPPRESS,
+                    help=f"reply timeout in seconds (default 1; {_range('timeout')})")
+    fw.add_argument("--check", action="store_true",
+                    help="say what would happen (module type and firmware now, image type and "
+                         "version, whether it fits) and write nothing")
+    fw.add_argument("-y", "--yes", action="store_true", default=argparse.SUPPRESS,
+                    help="do not ask before erasing (needed where nobody can answer)")
+    fw.add_argument("--json", action="store_true", default=argparse.SUPPRESS,
+                    help="one JSON object per step, then the result")
     return p
 
 

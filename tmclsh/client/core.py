@@ -103,6 +103,8 @@ class Client:
         self.retries = retries
         self.can_id = can_id if can_id is not None else 1
         self.reply_id = reply_id if reply_id is not None else 2
+        # CAN ids besides reply_id whose messages are replies too (a bootloader's 0x7FF)
+        self.other_reply_ids: frozenset[int] = frozenset()
         self.module: Module | None = load_module(module) if isinstance(module, str) else module
         self.version: str | None = None
         self.downloading = False  # set by tmclsh.ops.program between 132 and 133
@@ -431,7 +433,7 @@ class Client:
         if not self.transport.is_open:
             raise TransportError(f"{self.transport.describe()} is not connected "
                                  "(the link was closed or lost; reconnect first)")
-        kind = _NORMAL if req.opcode < _FIRST_CONTROL else req.reply_kind
+        kind = _NORMAL if req.opcode < _FIRST_CONTROL else isa.reply_kind(req.opcode, req.type)
         framing = self.framing
         ledger = self.ledger
         attempt = 0
@@ -741,17 +743,19 @@ class Client:
             time.sleep(interval if deadline is None else min(interval, deadline - now))
 
     # -- the link -----------------------------------------------------------------------
-    def reconnect(self, wait: float = 0.0) -> None:
+    def reconnect(self, wait: float = 0.0, *, bring_up: bool = True) -> None:
         """Close and reopen the transport (after the port was lost, e.g. USB unplugged).
 
         ``wait``: keep trying for that many seconds while the port is not back yet. Raises
         ``TransportError`` if it cannot be opened. Before the next command the module is
         brought up again as at connect (tmclsh.client.bringup): what answers now (another
-        module type is taken, with a notice), in which mode, whether in download mode.
+        module type is taken, with a notice), in which mode, whether in download mode;
+        unless ``bring_up`` is false (a firmware update, which expects the module to have
+        restarted into its bootloader and asks it itself).
         """
         with self._lock:
             self._reopen(wait)
-            self._bring_up_next = True
+            self._bring_up_next = bring_up
             self.stats["reconnects"] += 1
             if self.tracers:
                 _tell(self.tracers, "note", b"", f"reconnected to {self.describe()}")
