@@ -11,10 +11,22 @@ Timeouts are float seconds with pyserial's meanings: None waits forever, 0 never
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 if TYPE_CHECKING:
     from .framing import CanFraming, Owner, SerialFraming
+
+
+class CanFrame(NamedTuple):
+    """A CAN frame as a listener hears it (a bus, a log file): when (the bus's or the log's
+    timestamp, in seconds), on which id, its data, and what kind of frame it is."""
+
+    t: float
+    arbitration_id: int
+    data: bytes
+    extended: bool = False
+    error: bool = False
+    remote: bool = False
 
 
 class Transport(ABC):
