@@ -249,14 +249,16 @@ class Monitor:
                     self.summary.modules[request.address] = (
                         f"{mod.name} ({version})" if version is not None else mod.name)
 
-    def noise(self, t: float, raw: bytes, note: str = "") -> list[Item]:
+    def noise(self, t: float, raw: bytes, note: str = "",
+              direction: str | None = None) -> list[Item]:
         s = self.summary
         s.noise += 1
         s.noise_bytes += len(raw)
         if s.first is None:
             s.first = t
         s.last = t
-        return [Seen(t, NOISE_RUN, raw, note=note or f"{len(raw)} bytes that are no frame")]
+        return [Seen(t, NOISE_RUN, raw, direction=direction,
+                     note=note or f"{len(raw)} bytes that are no frame")]
 
     def text(self, t: float, line: bytes, direction: str | None = None) -> list[Item]:
         """A line of the module's ASCII mode (a command or a reply, as the module reads it)."""
@@ -485,8 +487,8 @@ def _noise_items(monitor: Monitor, t: float, raw: bytes, partial: bool = False,
         return out
     if partial and len(raw) < FRAME:
         return monitor.noise(t, raw, f"partial frame: {len(raw)} of {FRAME} bytes, then "
-                                     "nothing")
-    return monitor.noise(t, raw)
+                                     "nothing", direction)
+    return monitor.noise(t, raw, direction=direction)
 
 
 class SerialPair:
