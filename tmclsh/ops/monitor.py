@@ -111,7 +111,8 @@ class Summary:
     slowest: Exchange | None = None
     first: float | None = None
     last: float | None = None
-    shown: int = 0
+    shown: int = 0  # lines or objects the front end showed (filters let through)
+    filtered: bool = False  # a filter chose what was shown
     modules: dict[int, str] = field(default_factory=dict)  # address -> what 136 said
 
     @property
@@ -131,11 +132,13 @@ class Summary:
                 "unpaired": self.unpaired, "late": self.late, "errors": self.errors,
                 "statuses": {str(k): v for k, v in sorted(self.statuses.items())},
                 "slowest": None if slow is None else {
-                    "t": slow.t, "address": slow.request.address,
-                    "op": slow.request.instruction.opcode, "latency": slow.latency},
-                "seconds": (self.last - self.first) if self.first is not None
+                    "t": round(slow.t, 6), "address": slow.request.address,
+                    "op": slow.request.instruction.opcode,
+                    "latency": round(slow.latency or 0.0, 6)},
+                "seconds": round(self.last - self.first, 6) if self.first is not None
                 and self.last is not None else 0.0,
-                "modules": {str(k): v for k, v in sorted(self.modules.items())}}
+                "modules": {str(k): v for k, v in sorted(self.modules.items())},
+                "shown": self.shown}
 
 
 class Monitor:
@@ -772,6 +775,8 @@ class Filter:
         self.params = tuple(params)
         self.monitor = monitor
         self.active = bool(self.addresses or self.ops or self.params)
+        if monitor is not None:
+            monitor.summary.filtered = self.active
         self._names = {_norm(p) for p in self.params if isinstance(p, str)}
         self._numbers = {p for p in self.params if isinstance(p, int)}
 

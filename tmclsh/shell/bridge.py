@@ -42,8 +42,7 @@ def run_bridge(args) -> int:
     host = getattr(args, "host_address", None)
     host = DEFAULT_HOST if host is None else host
     transport = _open_module(args, port, can_spec)
-    view = View(monitor, json_mode=bool(getattr(args, "json", False)), hex_bytes=args.hex,
-                can=is_can)
+    view = View(monitor, json_mode=bool(getattr(args, "json", False)), hex_bytes=args.hex)
     try:
         capture, close_capture = _capture(args.output, is_can)
     except BaseException:

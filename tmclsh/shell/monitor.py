@@ -27,8 +27,8 @@ from collections.abc import Iterable
 from typing import Any
 
 from ..base.errors import EXIT_OK, ConnectError, TransportError, UsageError, ValidationError
-from ..ops.monitor import (EVENT, NOISE_RUN, OTHER, REPLY, REQUEST, RX, TEXT, TX, CanReader,
-                           Exchange, Filter, Item, Monitor, Seen, Summary)
+from ..ops.monitor import (DEFAULT_REPLY_ID, EVENT, NOISE_RUN, OTHER, REPLY, REQUEST, RX,
+                           TEXT, TX, CanReader, Exchange, Filter, Item, Monitor, Seen, Summary)
 from ..tmcl import asm
 from ..tmcl.frames import Request
 from ..tmcl.modules import Module
@@ -56,11 +56,10 @@ class View:
     """Items for people (lines) or programs (JSON objects), written to ``stream``."""
 
     def __init__(self, monitor: Monitor, *, json_mode: bool = False, hex_bytes: bool = False,
-                 can: bool = False, stream=None, color: str = "auto"):
+                 stream=None, color: str = "auto"):
         self.monitor = monitor
         self.json = json_mode
         self.hex = hex_bytes
-        self.can = can
         self.stream = stream if stream is not None else sys.stdout
         self._console = None
         self._color = color
@@ -190,8 +189,8 @@ class View:
         self._hex(out, reply)
         ok = reply.reply.ok
         out.append(self._reply_words(reply), "" if ok else "tmcl.status.error")
-        if self.can and reply.can_id is not None:
-            out.append(f"  (id {reply.can_id})", "tmcl.note")
+        if reply.can_id is not None and reply.can_id != DEFAULT_REPLY_ID:
+            out.append(f"  (on id {reply.can_id})", "tmcl.note")
         out.append(f"  {took(reply.latency)}", "tmcl.note")
         if reply.late:
             out.append("  (late: after the request was given up)", "tmcl.warn")
@@ -318,8 +317,8 @@ def summary_lines(s: Summary, view: View) -> list[str]:
                      f"{view._where(req)} {view._request_words(req)}")
     if s.modules:
         lines.append("modules: " + ", ".join(f"@{a} {v}" for a, v in sorted(s.modules.items())))
-    if s.shown != s.frames:
-        lines.append(f"shown: {_n(s.shown, 'line')}")
+    if s.filtered:
+        lines.append(f"shown: {_n(s.shown, 'line')} (the filters let these through)")
     return lines
 
 
@@ -400,7 +399,7 @@ def run_monitor(args) -> int:
                               "or --port TAP")
     json_mode = bool(getattr(args, "json", False))
     is_can = can_spec is not None or (log_path is not None and _can_log(log_path))
-    view = View(monitor, json_mode=json_mode, hex_bytes=args.hex, can=is_can)
+    view = View(monitor, json_mode=json_mode, hex_bytes=args.hex)
     capture, close_capture = _capture(args.output, is_can)
     transport = None
     live = log_path is None
