@@ -90,6 +90,12 @@ class StreamTransport(Transport):
         n = self.pending()
         return self.read(n, 0) if n else b""
 
+    def read_some(self, timeout: float | None) -> bytes:
+        """Whatever comes first, as soon as it comes: at least a byte, or b"" after
+        ``timeout`` (a reader that forwards bytes as they arrive: the bridge)."""
+        data = self.read(1, timeout)
+        return data + self.read_available() if data else data
+
     def set_baudrate(self, baud: int) -> None:  # pragma: no cover - only real ports
         raise NotImplementedError
 

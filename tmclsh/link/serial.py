@@ -196,6 +196,27 @@ class SerialTransport(StreamTransport):
                         return data  # timed out
                     wait = 0  # one more look at what is there already
 
+    def read_some(self, timeout: float | None) -> bytes:
+        fd = self._fd
+        if fd is None:
+            return super().read_some(timeout)
+        try:
+            ready = select.select((fd,), (), (), timeout)[0]
+        except (OSError, ValueError) as exc:
+            raise self._lost("read", exc) from exc
+        if not ready:
+            return b""
+        try:
+            data = os.read(fd, 4096)
+        except BlockingIOError:
+            return b""
+        except OSError as exc:
+            raise self._lost("read", exc) from exc
+        if not data:  # (as _read_fd: a vanished USB device stays readable, reads nothing)
+            raise self._lost("read", OSError("device reports readiness to read but "
+                                             "returned no data"))
+        return data
+
     def pending(self) -> int:
         fd = self._fd
         if fd is not None and _FIONREAD is not None:

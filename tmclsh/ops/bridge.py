@@ -7,16 +7,14 @@ bytes (``write``) and hands bytes back (``on_output``). Here the target is the m
 link:
 
 * ``SerialBridge``: a serial module (``--port``). Bytes go both ways as they come, unread
-  and unchanged; each chunk is then queued for the monitor (``heard``).
+  and unchanged; each chunk is then told to the monitor (``heard``).
 * ``CanBridge``: a CAN module (``--can``). The master speaks serial frames; each request's
   seven instruction bytes go to the module's CAN id as they are, and each reply's seven
   (or a version string's eight) come back as a serial frame to the host address, checksum
-  added. Bytes that are no frame cannot be forwarded on CAN: they are queued as noise.
+  added. Bytes that are no frame cannot be forwarded on CAN: they are told as noise.
 
-The monitor reads on the caller's thread, from a queue: forwarding waits for no decoding.
-Each chunk is queued just before it is forwarded (a put costs a microsecond), so the queue
-holds them in the order the wire carried them: an answer is never read ahead of its
-request, nor a request ahead of the answer the master waited for. ``Left`` keeps what the master's exchanges
+What was forwarded is told to the caller (``heard``) in the order the wire carried it, after
+it was forwarded (see ``_Bridge``): reading it never delays a byte. ``Left`` keeps what the master's exchanges
 leave behind (a motor started, download or ASCII mode entered), which the front end ends
 when the bridge closes. Nothing here prints.
 """
@@ -24,9 +22,10 @@ when the bridge closes. Nothing here prints.
 from __future__ import annotations
 
 import logging
-import queue
 import threading
 import time
+from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from ..base.errors import TransportError
@@ -42,9 +41,11 @@ from .monitor import RX, TEXT, TX, Exchange, Item
 log = logging.getLogger(__name__)
 
 TICK = 0.1  # s the module's reader waits before it looks whether the bridge closed
-# what the queue carries: (TX | RX, bytes, time) on serial; (CAN_TX | CAN_RX, CanFrame) on
+# what ``heard`` is told: (TX | RX, bytes, time) on serial; (CAN_TX | CAN_RX, CanFrame) on
 # CAN; (NOISE, bytes, time) for bytes of the master no frame could be made of; (LOST, why)
 CAN_TX, CAN_RX, NOISE, LOST = "can-tx", "can-rx", "noise", "lost"
+
+Heard = Callable[[tuple], None]
 
 
 class _Target:
@@ -57,10 +58,24 @@ class _Target:
 
 
 class _Bridge:
-    def __init__(self, *, pty: bool = False, tcp: tuple[str, int] | None = None):
+    """The forwarding, and the telling of what was forwarded.
+
+    Each chunk is noted (a deque append, atomic) just before it is forwarded, so the notes
+    keep the order the wire had: an answer is never noted ahead of its request, nor a
+    request ahead of the answer the master waited for. Once forwarded, the thread that
+    forwarded it tells ``heard`` every note in order, holding ``lock`` (the caller takes it
+    too, for its own looks at the monitor). Telling on the forwarding threads after the
+    forwarding wakes no other thread: an exchange through the bridge costs its two hops
+    and its reading, nothing more.
+    """
+
+    def __init__(self, heard: Heard, *, pty: bool = False,
+                 tcp: tuple[str, int] | None = None):
         from ..sim.serve import serve_pty, serve_tcp
 
-        self.heard: queue.SimpleQueue = queue.SimpleQueue()
+        self.heard = heard
+        self.lock = threading.Lock()
+        self._notes: deque[tuple] = deque()
         self._closed = threading.Event()
         self.target = _Target(self._from_master)
         if pty:
@@ -73,6 +88,19 @@ class _Bridge:
             self.endpoint = f"{host}:{port}"
         self._reader = threading.Thread(target=self._loop, name="bridge-module", daemon=True)
         self._reader.start()
+
+    def note(self, event: tuple) -> None:
+        self._notes.append(event)
+
+    def tell(self) -> None:
+        """Tell ``heard`` what was noted, in order (on whichever thread gets here first)."""
+        notes = self._notes
+        with self.lock:
+            while notes:
+                try:
+                    self.heard(notes.popleft())
+                except Exception:  # a reader's failure must not stop the forwarding
+                    log.exception("reading what the bridge forwarded failed")
 
     def _to_master(self, data: bytes) -> None:
         out = self.target.on_output
@@ -88,47 +116,47 @@ class _Bridge:
                 self._step()
         except TransportError as exc:
             if not self._closed.is_set():
-                self.heard.put((LOST, str(exc)))
+                self.note((LOST, str(exc)))
         except Exception as exc:  # the bridge must say why it stopped forwarding
             log.exception("the bridge's module reader failed")
-            self.heard.put((LOST, f"the bridge stopped forwarding: {exc}"))
+            self.note((LOST, f"the bridge stopped forwarding: {exc}"))
+        self.tell()
 
     def _step(self) -> None:  # pragma: no cover - overridden
         raise NotImplementedError
 
     def close(self) -> None:
         """Stop serving the master and stop reading the module (its link stays open: the
-        front end may still need it)."""
+        front end may still need it); what was forwarded is told."""
         if self._closed.is_set():
             return
         self._closed.set()
         self.server.close()
         self._reader.join(timeout=2)
+        self.tell()
 
 
 class SerialBridge(_Bridge):
     """A master on a pty or TCP port and a serial module: bytes forwarded unchanged."""
 
-    def __init__(self, module: StreamTransport, **kw):
+    def __init__(self, module: StreamTransport, heard: Heard, **kw):
         self.module = module
-        super().__init__(**kw)
+        super().__init__(heard, **kw)
 
     def _from_master(self, data: bytes) -> None:
-        # queued before it is written: the module's answer cannot be queued ahead of it
-        self.heard.put((TX, data, time.time()))
+        self.note((TX, data, time.time()))
         try:
             self.module.write(data)
         except TransportError as exc:
-            self.heard.put((LOST, str(exc)))
+            self.note((LOST, str(exc)))
+        self.tell()
 
     def _step(self) -> None:
-        module = self.module
-        data = module.read(1, TICK)
-        if not data:
-            return
-        data += module.read_available()
-        self.heard.put((RX, data, time.time()))
-        self._to_master(data)
+        data = self.module.read_some(TICK)
+        if data:
+            self.note((RX, data, time.time()))
+            self._to_master(data)
+            self.tell()
 
 
 class CanBridge(_Bridge):
@@ -139,14 +167,14 @@ class CanBridge(_Bridge):
     ``host``: the address byte of the serial replies the master gets.
     """
 
-    def __init__(self, module: CanTransport, *, can_id: int | None = None,
+    def __init__(self, module: CanTransport, heard: Heard, *, can_id: int | None = None,
                  reply_id: int = 2, host: int = 2, **kw):
         self.module = module
         self.can_id = can_id
         self.reply_id = reply_id
         self.host = host
         self.requests = FrameDecoder(None, resync=plausible_request)
-        super().__init__(**kw)
+        super().__init__(heard, **kw)
 
     def _from_master(self, data: bytes) -> None:
         dec = self.requests
@@ -155,21 +183,22 @@ class CanBridge(_Bridge):
         while (piece := dec.next()) is not None:
             kind, raw = piece
             if kind != FRAME_PIECE:
-                self.heard.put((NOISE, raw, now))
+                self.note((NOISE, raw, now))
                 continue
             arb = self.can_id if self.can_id is not None else raw[0]
-            self.heard.put((CAN_TX, CanFrame(time.time(), arb, raw[1:8])))
+            self.note((CAN_TX, CanFrame(time.time(), arb, raw[1:8])))
             try:
                 self.module.send(arb, raw[1:8])
             except TransportError as exc:
-                self.heard.put((LOST, str(exc)))
-                return
+                self.note((LOST, str(exc)))
+                break
+        self.tell()
 
     def _step(self) -> None:
         f = self.module.listen(TICK)  # type: ignore[attr-defined]
         if f is None:
             return
-        self.heard.put((CAN_RX, f))
+        self.note((CAN_RX, f))
         if f.arbitration_id == self.reply_id and not (f.error or f.remote or f.extended):
             data = f.data
             if len(data) == FRAME - 1:  # a version string: the host byte, no checksum
@@ -177,6 +206,7 @@ class CanBridge(_Bridge):
             elif len(data) == FRAME - 2:
                 body = bytes((self.host,)) + data
                 self._to_master(body + bytes((checksum(body),)))
+        self.tell()
 
 
 @dataclass

@@ -14,14 +14,14 @@ and ASCII mode it entered is left for binary mode.
 from __future__ import annotations
 
 import os
-import queue
 import sys
+import threading
 import time
 from typing import Any
 
 from ..base.errors import (EXIT_OK, ConnectError, TmclError, TransportError, UsageError,
                            ValidationError)
-from ..ops.bridge import CAN_RX, CAN_TX, LOST, NOISE, TICK, CanBridge, Left, SerialBridge
+from ..ops.bridge import CAN_RX, CAN_TX, LOST, TICK, CanBridge, Left, SerialBridge
 from ..ops.monitor import DEFAULT_HOST, RX, TX, CanReader, Filter, Monitor, SerialPair
 from .monitor import Limits, View, _capture, interruptible, load_module, restore, show_items
 
@@ -33,7 +33,7 @@ def run_bridge(args) -> int:
     port, can_spec = getattr(args, "port", None), getattr(args, "can", None)
     if (port is None) == (can_spec is None):
         raise UsageError("bridge forwards to one module: give --port PORT or "
-                              "--can [IFACE:CHANNEL]")
+                         "--can [IFACE:CHANNEL]")
     if args.pty and not hasattr(os, "openpty"):
         raise UsageError("a pseudo-terminal needs Linux or macOS; use --tcp HOST:PORT")
     is_can = can_spec is not None
@@ -49,15 +49,18 @@ def run_bridge(args) -> int:
         transport.close()
         raise
     serve: dict[str, Any] = {"pty": True} if args.pty else {"tcp": args.tcp}
+    if is_can:
+        reader: Any = CanReader(monitor, [can_id] if can_id is not None else None,
+                                [reply_id], learn=False)
+    else:
+        reader = SerialPair(monitor)
+    told = _Told(reader, view, filt, monitor, capture, Limits(args.count, args.duration, False))
     try:
         if is_can:
-            bridge: Any = CanBridge(transport, can_id=can_id, reply_id=reply_id, host=host,
-                                    **serve)
-            reader: Any = CanReader(monitor, [can_id] if can_id is not None else None,
-                                    [reply_id], learn=False)
+            bridge: Any = CanBridge(transport, told, can_id=can_id, reply_id=reply_id,
+                                    host=host, **serve)
         else:
-            bridge = SerialBridge(transport, **serve)
-            reader = SerialPair(monitor)
+            bridge = SerialBridge(transport, told, **serve)
     except OSError as exc:
         transport.close()
         close_capture()
@@ -66,16 +69,13 @@ def run_bridge(args) -> int:
     sys.stdout.flush()
     print(f"bridging {bridge.endpoint} <-> {transport.describe()}; Ctrl-C ends",
           file=sys.stderr, flush=True)
-    left = Left()
-    lost: str | None = None
     try:
-        lost = _forward(bridge, reader, view, filt, monitor, left, capture,
-                        Limits(args.count, args.duration, False))
+        _forward(bridge, told)
     finally:
         close_capture()
         try:
-            if left:
-                _put_right(transport, left, monitor, args, is_can, lost)
+            if told.left:
+                _put_right(transport, told.left, monitor, args, is_can, told.lost)
         finally:
             transport.close()
     view.summary(monitor.summary)
@@ -95,58 +95,61 @@ def _open_module(args, port: str | None, can_spec: str | None):
         raise ConnectError(str(exc)) from exc
 
 
-def _forward(bridge, reader, view: View, filt: Filter, monitor: Monitor, left: Left,
-             capture, limits: Limits) -> str | None:
-    """Show what the bridge forwards until Ctrl-C, a limit, or the module's link is lost
-    (then why)."""
-    summary = monitor.summary
+class _Told:
+    """What the bridge tells (on its forwarding threads, in the wire's order, under its
+    lock): read into items, shown, and what they leave behind kept (``left``)."""
+
+    def __init__(self, reader, view: View, filt: Filter, monitor: Monitor, capture,
+                 limits: Limits):
+        self.reader, self.view, self.filt, self.monitor = reader, view, filt, monitor
+        self.capture, self.limits = capture, limits
+        self.left = Left()
+        self.lost: str | None = None
+        self.done = threading.Event()  # a limit reached or the module's link lost
+
+    def __call__(self, event: tuple) -> None:
+        items, lost = _read(event, self.reader, self.monitor, self.capture)
+        if lost is not None and self.lost is None:
+            self.lost = lost
+            self.done.set()
+        self.show(items)
+
+    def show(self, items: list) -> None:
+        for item in items:
+            self.left.take(item)
+        if self.done.is_set() and self.lost is None:
+            return  # (the count was reached: still read and counted, not shown)
+        summary = self.monitor.summary
+        if show_items(items, self.view, self.filt, summary, self.limits) \
+                or self.limits.reached(summary.shown, summary):
+            self.done.set()
+        self.view.flush()
+
+
+def _forward(bridge, told: _Told) -> None:
+    """Forward until Ctrl-C, SIGTERM, a limit, or the module's link is lost; in between,
+    a silence ends partial frames and requests wait no longer than their timeout."""
     previous = interruptible()
-    lost = None
-    done = False
     try:
         try:
-            while not done and lost is None:
-                try:
-                    event = bridge.heard.get(timeout=TICK)
-                except queue.Empty:
-                    done = show_items(_took(left, reader.quiet(time.time())), view, filt,
-                                      summary, limits) or limits.reached(summary.shown, summary)
-                    continue
-                items, lost = _read(event, reader, monitor, capture)
-                done = show_items(_took(left, items), view, filt, summary, limits) \
-                    or limits.reached(summary.shown, summary)
-                view.flush()
+            while not told.done.wait(TICK):
+                with bridge.lock:
+                    told.show(told.reader.quiet(time.time()))
         except KeyboardInterrupt:
             pass
         finally:
-            bridge.close()
-        while True:  # what was forwarded before the bridge closed
-            try:
-                event = bridge.heard.get_nowait()
-            except queue.Empty:
-                break
-            items, why = _read(event, reader, monitor, capture)
-            lost = lost or why
-            if not done:
-                done = show_items(_took(left, items), view, filt, summary, limits)
-        items = reader.end(time.time())
-        if not done:
-            show_items(_took(left, items), view, filt, summary, limits)
-        if lost is not None:
-            print(f"bridge: {lost}", file=sys.stderr)
+            bridge.close()  # (what was forwarded before is told)
+        with bridge.lock:
+            told.show(told.reader.end(time.time()))
+        if told.lost is not None:
+            print(f"bridge: {told.lost}", file=sys.stderr)
     finally:
         restore(previous)
-        view.flush()
-    return lost
-
-
-def _took(left: Left, items: list) -> list:
-    for item in items:
-        left.take(item)
-    return items
+        told.view.flush()
 
 
 def _read(event: tuple, reader, monitor: Monitor, capture) -> tuple[list, str | None]:
+    """One thing the bridge told, read: (the items, why the module's link was lost)."""
     kind = event[0]
     if kind == LOST:
         return [], event[1]
@@ -163,11 +166,9 @@ def _read(event: tuple, reader, monitor: Monitor, capture) -> tuple[list, str | 
             reader.request_ids.add(f.arbitration_id)
         return reader.feed(f.t, f.arbitration_id, f.data, extended=f.extended, error=f.error,
                            remote=f.remote), None
-    if kind == NOISE:
-        _, data, t = event
-        return monitor.noise(t, data, f"{len(data)} bytes of the program's that are no "
-                                      "frame: not forwarded to CAN"), None
-    return [], None
+    _, data, t = event  # NOISE: the master's bytes no frame could be made of
+    return monitor.noise(t, data, f"{len(data)} bytes of the program's that are no frame: "
+                                  "not forwarded to CAN", TX), None
 
 
 def _put_right(transport, left: Left, monitor: Monitor, args, is_can: bool,
