@@ -188,3 +188,23 @@ def test_the_bridge_refuses_what_it_cannot_do(run_tmclsh):
     r = run_tmclsh("bridge", "--tcp", "nowhere", "--port", "x")
     assert r.returncode == 2 and "HOST:PORT" in r.stderr
     assert not os.path.exists("x")
+
+
+def test_a_module_that_goes_away_ends_the_bridge():
+    from responder import PtyModule
+
+    module = PtyModule(version="1311V111")
+    bridge = Bridge("--pty", "--port", module.path)
+    try:
+        with serial.Serial(bridge.endpoint, timeout=1) as port:
+            port.write(request(1, 6, 1))
+            assert len(port.read(9)) == 9
+            module.close()  # unplugged
+            out, err = bridge.proc.communicate(timeout=10)
+    finally:
+        bridge.kill()
+    assert bridge.proc.returncode == 1, err
+    assert "bridge: lost " in err and "Traceback" not in err
+    objs = [json.loads(line) for line in out.splitlines()]  # (the endpoint line was read)
+    assert [o.get("frame") for o in objs] == ["request", "reply", None]
+    assert objs[-1]["summary"]["frames"] == 2

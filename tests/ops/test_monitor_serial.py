@@ -279,3 +279,22 @@ def test_a_tap_on_the_line_of_a_pyserial_master_and_a_module(tmp_path):
     again = [json.loads(line) for line in replay.stdout.splitlines()]
     assert [(o["frame"], o["bytes"]) for o in again if "frame" in o] == [
         (o["frame"], o["bytes"]) for o in objs if "frame" in o]
+
+
+def test_a_tap_that_goes_away_ends_the_run_with_its_summary():
+    tap_master, tap_slave = os.openpty()
+    tty.setraw(tap_slave)
+    proc = _monitor("--port", os.ttyname(tap_slave))
+    try:
+        _wait_listening(proc)
+        os.write(tap_master, request(1, 6, 1) + reply(6, 7))
+        time.sleep(0.3)
+        os.close(tap_slave)
+        os.close(tap_master)  # the adapter is unplugged
+        out, err = proc.communicate(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 1, err
+    assert "GAP 1, 0  =>  100 ok, GAP value 7" in out
+    assert "tmclsh: lost " in err and "2 frames in" in err and "Traceback" not in err

@@ -63,14 +63,14 @@ def serial_tap(transport: StreamTransport, tap: SerialTap, *, quiet: float = QUI
                ) -> Iterator[list[Item]]:
     """Every byte a serial line carries (``transport``: opened, only ever read)."""
     settled = True
+    read = transport.read_some
     while True:
-        data = transport.read(1, quiet)
+        data = read(quiet)
         now = time.time()
         if not data:
             yield tap.monitor.expire(now) if settled else tap.quiet(now)
             settled = True
             continue
-        data += transport.read_available()
         if capture is not None:
             capture(now, data)
         settled = False

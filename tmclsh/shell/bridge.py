@@ -19,7 +19,7 @@ import threading
 import time
 from typing import Any
 
-from ..base.errors import (EXIT_OK, ConnectError, TmclError, TransportError, UsageError,
+from ..base.errors import (EXIT_FAILED, EXIT_OK, ConnectError, TmclError, TransportError, UsageError,
                            ValidationError)
 from ..ops.bridge import CAN_RX, CAN_TX, LOST, TICK, CanBridge, Left, SerialBridge
 from ..ops.monitor import DEFAULT_HOST, RX, TX, CanReader, Filter, Monitor, SerialPair
@@ -79,7 +79,7 @@ def run_bridge(args) -> int:
         finally:
             transport.close()
     view.summary(monitor.summary)
-    return EXIT_OK
+    return EXIT_OK if told.lost is None else EXIT_FAILED
 
 
 def _open_module(args, port: str | None, can_spec: str | None):

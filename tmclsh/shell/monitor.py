@@ -26,7 +26,8 @@ import time
 from collections.abc import Iterable
 from typing import Any
 
-from ..base.errors import EXIT_OK, ConnectError, TransportError, UsageError, ValidationError
+from ..base.errors import (EXIT_FAILED, EXIT_OK, ConnectError, TmclError, TransportError,
+                           UsageError, ValidationError)
 from ..ops.monitor import (DEFAULT_REPLY_ID, EVENT, NOISE_RUN, OTHER, REPLY, REQUEST, RX,
                            TEXT, TX, CanReader, Exchange, Filter, Item, Monitor, Seen, Summary)
 from ..tmcl import asm
@@ -415,7 +416,7 @@ def run_monitor(args) -> int:
             from ..ops.monitor import SerialTap
 
             baud = getattr(args, "baud", None) or 9600
-            transport = _open(lambda: open_serial(port, baud))
+            transport = _open(lambda: open_serial(port, baud, listen_only=True))
             reader = SerialTap(monitor)
             source = listen.serial_tap(transport, reader, quiet=listen.quiet_time(baud),
                                        capture=capture)
@@ -430,14 +431,16 @@ def run_monitor(args) -> int:
         if live:
             print(f"listening on {transport.describe()} (nothing is sent); Ctrl-C ends",
                   file=sys.stderr, flush=True)
-        _run(source, reader if live else None, view, filt, monitor,
-             Limits(args.count, args.duration, not live), live)
+        failed = _run(source, reader if live else None, view, filt, monitor,
+                      Limits(args.count, args.duration, not live), live)
     finally:
         if transport is not None:
             transport.close()
         close_capture()
+    if failed is not None:  # (what was heard until then is still summed up)
+        print(f"tmclsh: {failed}", file=sys.stderr, flush=True)
     view.summary(monitor.summary)
-    return EXIT_OK
+    return EXIT_OK if failed is None else EXIT_FAILED
 
 
 def _can_log(path: str) -> bool:
@@ -470,11 +473,13 @@ def _capture(path: str | None, is_can: bool):
 
 
 def _run(source, reader, view: View, filt: Filter, monitor: Monitor, limits: Limits,
-         live: bool) -> None:
+         live: bool) -> str | None:
     """Show what the source yields until it ends, the limits are reached or Ctrl-C; a live
-    source is ended by the reader (requests still waiting are unanswered)."""
+    source is ended by the reader (requests still waiting are unanswered). Returns why the
+    source failed (a lost adapter, a log python-can cannot read on), else None."""
     previous = interruptible()
     summary = monitor.summary
+    failed = None
     try:
         try:
             for items in source:
@@ -485,6 +490,8 @@ def _run(source, reader, view: View, filt: Filter, monitor: Monitor, limits: Lim
                     view.flush()
         except KeyboardInterrupt:
             pass
+        except TmclError as exc:
+            failed = str(exc)
         finally:
             close = getattr(source, "close", None)
             if close is not None:
@@ -494,3 +501,4 @@ def _run(source, reader, view: View, filt: Filter, monitor: Monitor, limits: Lim
     finally:
         restore(previous)
         view.flush()
+    return failed
