@@ -205,3 +205,18 @@ def test_a_file_python_can_cannot_read(tmp_path, capsys):
     assert cli.main(["monitor", "--log", str(other)]) != 0
     err = capsys.readouterr().err
     assert "bus.xyz:1: not a line of a serial capture" in err and "Traceback" not in err
+
+
+def test_what_the_command_line_refuses(run_tmclsh):
+    r = run_tmclsh("monitor")
+    assert r.returncode == 2 and "one of the arguments --can --log --port is required" in r.stderr
+    r = run_tmclsh("monitor", "--log", "x.asc", "--op", "GAPP")
+    assert r.returncode == 2 and "'GAPP' is no command" in r.stderr
+    r = run_tmclsh("monitor", "--log", "x.asc", "--param", "ActualPositon")
+    assert r.returncode == 2 and "'ActualPositon' is no parameter name" in r.stderr
+    r = run_tmclsh("monitor", "--log", "x.asc", "--address", "5-2")
+    assert r.returncode == 2 and "runs backwards" in r.stderr
+    r = run_tmclsh("monitor", "--can", "nosuchiface:0")
+    assert r.returncode == 3 and "Traceback" not in r.stderr
+    r = run_tmclsh("monitor", "--log", "missing.asc")
+    assert r.returncode == 1 and "missing.asc" in r.stderr and "Traceback" not in r.stderr

@@ -399,7 +399,9 @@ _SUB_NOTES = {
                "partial frame. Commands tmclsh has no data for are shown by number, never "
                "dropped. Ctrl-C or SIGTERM ends it with a summary (frames, errors, status "
                "counts, the slowest exchange) on standard error, or a last {\"summary\": "
-               "...} object; exit status 0, 3 when the port or bus cannot be opened.",
+               "...} object. Exit status 0; 1 when the adapter goes away or a log cannot "
+               "be read on (after the summary of what came before); 3 when the port or bus "
+               "cannot be opened.",
     "bridge": "Another program connects to the pseudo-terminal or TCP port as to the module; "
               "every frame it sends and every byte the module answers is forwarded unchanged "
               "(on --can: the request's seven instruction bytes to the module's CAN id, the "
@@ -408,7 +410,8 @@ _SUB_NOTES = {
               "or HOST:PORT, as for sim. It runs until interrupted; then, as tmclsh does "
               "for its own commands, it stops a motor or stored program the traffic "
               "started, ends download mode and leaves ASCII mode the traffic entered, and "
-              "prints the summary.",
+              "prints the summary. Exit status 0; 1 when the module's link goes away; 3 "
+              "when the module's port or bus cannot be opened or the bridge cannot serve.",
 }
 
 

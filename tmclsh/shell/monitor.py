@@ -398,6 +398,8 @@ def run_monitor(args) -> int:
     if sum(x is not None for x in (can_spec, log_path, port)) != 1:
         raise UsageError("monitor listens to one of --can [IFACE:CHANNEL], --log FILE "
                               "or --port TAP")
+    if log_path is not None:
+        _readable(log_path)
     json_mode = bool(getattr(args, "json", False))
     is_can = can_spec is not None or (log_path is not None and _can_log(log_path))
     view = View(monitor, json_mode=json_mode, hex_bytes=args.hex)
@@ -441,6 +443,17 @@ def run_monitor(args) -> int:
         print(f"tmclsh: {failed}", file=sys.stderr, flush=True)
     view.summary(monitor.summary)
     return EXIT_OK if failed is None else EXIT_FAILED
+
+
+def _readable(path: str) -> None:
+    """A log that cannot be opened is one line before anything is shown."""
+    from ..base.files import FileError
+
+    try:
+        with open(path, "rb"):
+            pass
+    except OSError as exc:
+        raise FileError(f"cannot read {path}: {exc.strerror or exc}") from None
 
 
 def _can_log(path: str) -> bool:
