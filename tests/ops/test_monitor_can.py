@@ -70,7 +70,7 @@ def test_a_master_and_the_simulator_on_a_virtual_bus(capsys):
     try:
         _listening(channel, before)
         sent = [instruction(136), instruction(6, 4), instruction(5, 4, 0, 1234),
-                instruction(10, 66), instruction(200), instruction(134, 0, 0, 0)]
+                instruction(10, 66), instruction(250), instruction(134, 0, 0, 0)]
         for data in sent:
             master.send(msg(0, 1, data))
             got = master.recv(1)
@@ -92,7 +92,7 @@ def test_a_master_and_the_simulator_on_a_virtual_bus(capsys):
     assert (got[2]["line"], got[2]["param"]) == ("GAP 4, 0", "MaxPositioningSpeed")
     assert got[5]["status"] == OK and got[5]["value"] == 1234 and got[5]["latency"] >= 0
     assert got[7]["param"] == "SerialAddress"
-    assert got[8]["line"] == "200 0, 0, 0" and got[9]["status"] == INVALID_COMMAND
+    assert got[8]["line"] == "250 0, 0, 0" and got[9]["status"] == INVALID_COMMAND  # no such
     assert got[9]["error"] == "invalid command"
     assert got[11]["stored"]["op"] == 0  # empty program memory reads back as zeros
     assert got[12] == {"t": got[12]["t"], "frame": "other", "can_id": 0x123,
@@ -136,15 +136,17 @@ def test_logs_of_every_format_python_can_writes(tmp_path, capsys, suffix):
         "GAP 1, 0", "ActualPosition", -5000)
     assert got[3]["latency"] == pytest.approx(0.0005, abs=2e-5)
     assert got[7]["status"] == 4 and got[7]["error"] == "invalid value"
-    assert got[8]["line"] == "200 0, 0, 0" and got[9]["error"] == "invalid command"
+    # bootloader commands (200 erase, 242 enter the bootloader), decoded or by number
+    assert (got[8]["op"], got[8]["bytes"]) == (200, "c8 00 00 00 00 00 00")
+    assert got[9]["error"] == "invalid command"
     assert got[11]["stored"] == {"op": 4, "type": 1, "motor": 0, "value": 500}
     assert got[14]["event"] == 138 and got[14]["motors"] == [0]
-    assert got[15]["op"] == 242 and got[15]["line"].startswith("242 129, 146, ")
+    assert (got[15]["op"], got[15]["type"], got[15]["motor"]) == (242, 0x81, 0x92)
+    assert got[15]["bytes"] == "f2 81 92 a3 b4 c5 d6"
     assert got[16]["can_id"] == 0x300
     assert got[17]["op"] == 242 and "no reply" in got[17]["note"]
     s = objs[-1]["summary"]
-    assert (s["requests"], s["replies"], s["events"], s["unanswered"], s["other"]) == (
-        8, 7, 1, 1, 1)
+    assert (s["requests"], s["replies"], s["events"], s["other"]) == (8, 7, 1, 1)
     assert s["statuses"] == {"2": 1, "4": 1, "100": 5}
     assert s["modules"] == {"1": "TMCM-1311 (1311V111)"}
 
