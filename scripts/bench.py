@@ -1168,6 +1168,156 @@ def bench_save(args: argparse.Namespace) -> dict:
     return result
 
 
+# -- listening in: monitor and bridge --------------------------------------------------------
+
+# a 1 Mbit/s CAN bus carrying nothing but TMCL frames (7 data bytes, standard ids): 111 bits
+# a frame without stuff bits (SOF, id, control, 56 data bits, CRC, ACK, EOF, interframe
+# space), so at most this many frames a second
+SATURATED_BUS = 1_000_000 // 111
+MONITOR_TARGET_US = 20.0  # the issue's figure: at least 50,000 frames/s decoded to JSON
+
+
+def _bus_session(n: int) -> list:
+    """``n`` CAN frames of a PLC polling a moving axis through python-can's ``Message``
+    (built here, not by the measured tree): GAP 1 (position), GAP 3 (speed), GIO 0, 0 and
+    a SAP now and then, each answered 0.3 ms later; positions and speeds change, so the
+    replies are not the same few frames over and over."""
+    import can
+
+    out, t = [], 1_700_000_000.0
+    polls = [(6, 1), (6, 3), (15, 0), (5, 4)]
+    i = 0
+    while len(out) < n:
+        cmd, typ = polls[i % len(polls)]
+        value = 1000 if cmd == 5 else 0
+        reply = {1: i * 37, 3: 51200 - i % 700, 0: i & 1}.get(typ, 1000) if cmd != 5 else 1000
+        out.append(can.Message(timestamp=t, arbitration_id=1, is_extended_id=False,
+                               data=struct.pack(">BBBi", cmd, typ, 0, value)))
+        out.append(can.Message(timestamp=t + 0.0003, arbitration_id=2, is_extended_id=False,
+                               data=struct.pack(">BBBi", 1, 100, cmd, reply)))
+        t += 0.001
+        i += 1
+    return out[:n]
+
+
+@benchmark("monitor-log", "tmclsh monitor --log --json: frames/s decoded vs python-can reading "
+                          "the same log (target >= 50,000/s)")
+def bench_monitor_log(args: argparse.Namespace) -> dict:
+    """Frames a second ``tmclsh monitor --log FILE --json`` decodes (in process, the JSON
+    written to /dev/null), beside the floor: python-can's ``LogReader`` reading the same
+    file and doing nothing with the frames, in the same run, rounds alternating. Logs of
+    ``--count`` x 50 frames in two formats python-can writes (.blf, the compact binary one;
+    .asc, the common text one). The table's row is the .asc figure in microseconds a frame
+    (lower is better; the target, 20 us, is 50,000 frames/s, five and a half times a
+    saturated 1 Mbit/s bus)."""
+    import contextlib
+
+    import can
+
+    cli = tm("tmclsh.cli.main")
+    n = args.count * 50
+    frames = _bus_session(n)
+    result: dict = {"benchmark": "monitor-log", "frames": n,
+                    "saturated_bus_per_s": SATURATED_BUS}
+    with tempfile.TemporaryDirectory(prefix="tmclsh-bench-") as tmp:
+        for suffix in (".blf", ".asc"):
+            path = str(Path(tmp) / f"bus{suffix}")
+            with can.Logger(path) as log:
+                for m in frames:
+                    log.on_message_received(m)
+
+            def floor() -> float:
+                t0 = time.perf_counter()
+                count = sum(1 for _ in can.LogReader(path))
+                assert count == n, count
+                return (time.perf_counter() - t0) / n * 1e6
+
+            def monitor() -> float:
+                with open(os.devnull, "w") as sink, contextlib.redirect_stdout(sink), \
+                        contextlib.redirect_stderr(sink):
+                    t0 = time.perf_counter()
+                    rc = cli.main(["monitor", "--log", path, "--json"])
+                    took = time.perf_counter() - t0
+                assert rc == 0
+                return took / n * 1e6
+
+            say(f"monitor-log: {args.rounds} round(s) of {n} frames in {suffix}")
+            best = alternate(args.rounds, {"python-can": floor, "monitor": monitor},
+                             args.verbose)
+            per_s = 1e6 / best["monitor"]
+            say(f"  python-can reads a frame in {best['python-can']:.2f} us; tmclsh monitor "
+                f"decodes one to JSON in {best['monitor']:.2f} us: {per_s:,.0f} frames/s, "
+                f"{per_s / SATURATED_BUS:.1f}x a saturated 1 Mbit/s bus, "
+                f"{best['monitor'] / best['python-can']:.2f}x python-can's own reading")
+            key = suffix.lstrip(".")
+            result.update({f"{key}_floor_us": round(best["python-can"], 3),
+                           f"{key}_us": round(best["monitor"], 3),
+                           f"{key}_per_s": round(per_s),
+                           f"{key}_ratio": round(best["monitor"] / best["python-can"], 3)})
+    return row(result, "monitor --log .asc --json, per frame", result["asc_us"], "us",
+               MONITOR_TARGET_US, f"{result['asc_per_s']:,}/s; .blf "
+               f"{result['blf_per_s']:,}/s; python-can alone {result['asc_floor_us']} us")
+
+
+BRIDGE_TARGET_US = 200.0  # the issue's figure: at most 0.2 ms added per exchange
+
+
+@benchmark("bridge", "GAP round trip through tmclsh bridge --pty vs straight to the simulator "
+                     "(target: <= 200 us added)")
+def bench_bridge(args: argparse.Namespace) -> dict:
+    """Microseconds ``tmclsh bridge --pty --port SIM`` (its own process, its lines to
+    /dev/null) adds to a raw pyserial GAP round trip, beside the floor: the same raw
+    pyserial round trip straight to a simulator, measured side by side. Two simulators of
+    the same module in their own processes (the bridge holds one pty, the floor reads the
+    other); short alternating blocks (``bracket``), the figure is the median over pairs of
+    the bridge block's median minus the mean of the raw blocks' medians either side."""
+    block = max(50, args.count // 10)
+    pairs = args.pairs or 10 * args.rounds
+    frame = gap_frame()
+    with SimProcess(args.module) as direct, SimProcess(args.module) as behind:
+        with open(os.devnull, "w") as sink:
+            proc = subprocess.Popen(tmclsh_cmd("bridge", "--pty", "--port", behind.path,
+                                               "--baud", str(BAUD)),
+                                    stdout=subprocess.PIPE, stderr=sink, text=True,
+                                    env=tree_env(args), cwd=args.state_dir)
+            try:
+                assert proc.stdout is not None
+                endpoint = proc.stdout.readline().strip()
+                if not endpoint:
+                    raise RuntimeError("the bridge did not start")
+                # the bridge's lines are read and dropped (a pipe nobody reads fills up)
+                drain = subprocess.Popen(["cat"], stdin=proc.stdout, stdout=sink)
+                with RawPort(direct.path) as raw, RawPort(endpoint) as bridged:
+                    raw.round_trips([frame], 200)
+                    bridged.round_trips([frame], 200)
+
+                    def raw_block(_: int) -> Block:
+                        return {"us": statistics.median(raw.round_trips([frame], block)) * 1e6}
+
+                    def bridge_block(_: int) -> Block:
+                        return {"us": statistics.median(
+                            bridged.round_trips([frame], block)) * 1e6}
+
+                    say(f"bridge: {pairs} pairs of {block} GAP round trips, raw | bridged "
+                        f"({load_note()})")
+                    raws, paths = bracket(pairs, raw_block, bridge_block, args.verbose)
+            finally:
+                proc.terminate()
+                proc.wait(10)
+                drain.wait(10)
+    added = [p["us"] - (a["us"] + b["us"]) / 2 for p, a, b in zip(paths, raws, raws[1:])]
+    med = statistics.median(added)
+    floor = median_of(raws, "us")
+    say(f"  straight to the simulator {floor:.1f} us, through the bridge "
+        f"{median_of(paths, 'us'):.1f} us: {med:.1f} us added (pairs {min(added):.1f}.."
+        f"{max(added):.1f})")
+    return row({"benchmark": "bridge", "floor_us": round(floor, 1),
+                "bridged_us": round(median_of(paths, "us"), 1),
+                "added_us_min": round(min(added), 1), "added_us_max": round(max(added), 1)},
+               "bridge: added per GAP exchange", med, "us", BRIDGE_TARGET_US,
+               f"{floor:.0f} us straight to the simulator")
+
+
 # -- entry point ------------------------------------------------------------------------------
 
 def print_table(results: list[dict], tree: Path) -> None:

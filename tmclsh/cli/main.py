@@ -55,6 +55,18 @@ def cmd_sim(args: argparse.Namespace) -> int:
                seed=args.faults_seed, bootloader=args.bootloader)
 
 
+def cmd_monitor(args: argparse.Namespace) -> int:
+    from ..shell.monitor import run_monitor
+
+    return run_monitor(args)
+
+
+def cmd_bridge(args: argparse.Namespace) -> int:
+    from ..shell.bridge import run_bridge
+
+    return run_bridge(args)
+
+
 def cmd_ports(args: argparse.Namespace) -> int:
     """One line per serial port: device, USB vendor:product, description, serial number;
     Trinamic devices first and marked."""
@@ -323,8 +335,8 @@ def main(argv: list[str] | None = None) -> int:
             return EXIT_OK
         _user_modules(args)
         handler = {"asm": cmd_asm, "disasm": cmd_disasm, "sim": cmd_sim, "ports": cmd_ports,
-                   "scan": cmd_scan, "modules": cmd_modules,
-                   "firmware": cmd_firmware}.get(args.subcommand or "")
+                   "scan": cmd_scan, "modules": cmd_modules, "firmware": cmd_firmware,
+                   "monitor": cmd_monitor, "bridge": cmd_bridge}.get(args.subcommand or "")
         if handler is not None:
             return handler(args)
         from ..shell.main import run_shell
