@@ -25,6 +25,7 @@ import pytest
 from tmclsh.client.ledger import Ledger
 from tmclsh.client.text import LineClient
 from tmclsh.link import open_serial
+from tmclsh.base.errors import TmclTimeoutError
 from tmclsh.tmcl.frames import Reply, Request
 
 from conftest import ROOT, tmclsh_env
@@ -32,7 +33,7 @@ from conftest import ROOT, tmclsh_env
 sys.path.insert(0, str(ROOT / "scripts"))
 import fault_trial  # noqa: E402
 
-GGP, SGP = 10, 9
+GGP, SGP, GAP = 10, 9, 6
 
 
 def tmclsh(path: str, *args: str) -> subprocess.CompletedProcess:
@@ -213,3 +214,53 @@ def test_the_trial_counts_a_wrong_value_it_is_shown():
     assert fault_trial.judge([{"line": "GGP 0, 2", "reply": 22},
                               {"line": "GGP 0, 2", "suspect": True}], values)[
         "wrong, later"] == 1
+
+
+def test_a_line_check_is_not_answered_by_an_earlier_checks_late_reply(pty_sim):
+    """Both kinds of 136 reply may still be on their way (two earlier checks of the line
+    went unanswered), and a read's reply is held back behind them. The check made now must
+    not take an earlier check's late reply for its own: the read's reply behind it would
+    then be taken for the next read's answer (seen in the fault trial under long delays)."""
+    sim, path = pty_sim
+    c = LineClient(open_serial(path), module="TMCM-1311", timeout=0.15, retries=0)
+    try:
+        c.execute("SAP 5, 0, 22222")
+        c.execute("SAP 7, 0, 50")
+        send = sim._send_reply
+        held: list[tuple] = []
+        state = {"hold": True, "after": None}
+
+        def sending(channel, module, op, ans):
+            if state["hold"]:
+                held.append((channel, module, op, copy.copy(ans)))
+                return
+            if state["after"] is not None:
+                # the replies held so far come in order, the rest with the next request
+                for args in held[:state["after"]]:
+                    send(*args)
+                del held[:state["after"]]
+                state["after"] = None
+                held.append((channel, module, op, copy.copy(ans)))
+                return
+            for args in held:
+                send(*args)
+            held.clear()
+            send(channel, module, op, ans)
+
+        sim._send_reply = sending
+        with pytest.raises(TmclTimeoutError):
+            c.request(Request(1, GGP, 0, 2, 0))  # its reply is held: it may come late
+        for _ in range(2):  # each check of the line fails (a 136 of each kind is late)
+            with pytest.raises(TmclTimeoutError):
+                c.request(Request(1, GGP, 1, 2, 0))
+        with pytest.raises(TmclTimeoutError):
+            c.request(Request(1, GAP, 5, 0, 0))  # another command: sent, reply held
+        assert c.ledger.marker(1) is None
+        # the next check of the line gets the first two held replies (GGP 0's, the first
+        # 136's); everything else comes with the request after it
+        state.update(hold=False, after=2)
+        assert c.request(Request(1, GAP, 7, 0, 0)).value == 50
+        assert c.request(Request(1, GAP, 5, 0, 0)).value == 22222
+    finally:
+        sim._send_reply = send
+        c.close()

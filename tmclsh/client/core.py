@@ -525,29 +525,42 @@ class Client:
             ledger.drained = True
             return
         framing.absorb()
-        chosen = ledger.marker(address)
-        if chosen is None:
-            # both markers' replies may still be on their way: take in what comes (for at
-            # most a timeout) until one of them has shown up or the line is quiet
-            end = time.monotonic() + timeout
-            while chosen is None and (left := end - time.monotonic()) > 0:
-                if not framing.absorb(left):
-                    break
-                chosen = ledger.marker(address)
-        marker, kind = chosen or (Request(address, _GET_VERSION, 1, 0, 0), _NORMAL)
-        try:
-            got = framing.exchange(marker, kind, timeout)
+        # Replies come in the order of their requests, so a marker's own reply comes after
+        # every late one: then nothing sent before can still arrive. When both kinds of
+        # marker reply may themselves still be on their way (earlier markers went
+        # unanswered), one more reply of a marker is taken than earlier ones may come:
+        # that last one is then certainly from a marker sent now, after everything stale.
+        extra = 0  # markers sent now whose replies may still come (the earlier ones came)
+        while True:
+            chosen = ledger.marker(address)
+            if chosen is None:
+                # take in what comes (for at most a timeout) until one has shown up
+                end = time.monotonic() + timeout
+                while chosen is None and (left := end - time.monotonic()) > 0:
+                    if not framing.absorb(left):
+                        break
+                    chosen = ledger.marker(address)
+            marker, kind = chosen or (Request(address, _GET_VERSION, 1, 0, 0), _NORMAL)
+            try:
+                got = framing.exchange(marker, kind, timeout)
+            except (TmclTimeoutError, ChecksumError) as exc:
+                ledger.expect_late(marker, kind)
+                raise type(exc)(f"address {address} stopped answering: after a reply that "
+                                "went wrong, its version (136) was asked to be sure which "
+                                f"reply is which, and this failed too: {exc}") from exc
+            except BaseException:
+                ledger.expect_late(marker, kind)
+                raise
+            if chosen is None:
+                ledger.late(address, _GET_VERSION, got)  # (an earlier marker's, or this one's)
+                extra += 1
+                continue
             if got is not None:
                 ledger.took_marker(marker, got)
-        except (TmclTimeoutError, ChecksumError) as exc:
-            ledger.expect_late(marker, kind)
-            raise type(exc)(f"address {address} stopped answering: after a reply that went "
-                            "wrong, its version (136) was asked to be sure which reply is "
-                            f"which, and this failed too: {exc}") from exc
-        except BaseException:
-            ledger.expect_late(marker, kind)
-            raise
-        ledger.forget()
+            ledger.forget()
+            for _ in range(extra):  # (crossed off when they come)
+                ledger.expect_late(Request(address, _GET_VERSION, 1, 0, 0), _NORMAL)
+            return
 
     def _judge(self, req: Request, reply: Reply, timeout: float, retries: int) -> Reply:
         """``reply`` is byte for byte one taken lately for another request: it may be a copy
