@@ -262,3 +262,113 @@ def test_ctrl_c_in_a_script_after_the_link_was_lost_reconnects_and_stops(tcp_sim
     assert p.returncode == 130, err
     assert f"reconnected to {url}" in err and "stopped motor 0 (MST; speed reads 0)" in err, err
     assert sim.param("axis", 3, 0) == 0
+
+
+class Unplugging:
+    """A TCP relay between tmclsh and the simulator's TCP port that can be unplugged: the
+    connection is cut and, for a while, nothing listens on its port (a USB adapter pulled
+    out: the port is gone, opening it fails), then it listens again."""
+
+    def __init__(self, target: tuple[str, int]):
+        import socket
+
+        self.socket = socket
+        self.target = target
+        self.port = self._listen(0)
+        self.cut = threading.Event()
+        self.connections = 0
+        threading.Thread(target=self._serve, daemon=True).start()
+
+    def _listen(self, port: int) -> int:
+        s = self.socket.socket()
+        s.setsockopt(self.socket.SOL_SOCKET, self.socket.SO_REUSEADDR, 1)
+        s.bind(("127.0.0.1", port))
+        s.listen(1)
+        s.settimeout(0.05)
+        self.listener = s
+        return s.getsockname()[1]
+
+    def _serve(self) -> None:
+        while True:
+            try:
+                front, _ = self.listener.accept()
+            except TimeoutError:
+                continue
+            except OSError:
+                time.sleep(0.02)  # unplugged: nothing listens
+                continue
+            self.connections += 1
+            back = self.socket.create_connection(self.target)
+            self.cut.clear()
+            pumps = [threading.Thread(target=self._pump, args=(a, b), daemon=True)
+                     for a, b in ((front, back), (back, front))]
+            for p in pumps:
+                p.start()
+            self.cut.wait()
+            for s in (front, back):
+                s.shutdown(self.socket.SHUT_RDWR)  # (wakes the pumps: close alone would not)
+            for p in pumps:
+                p.join()
+            for s in (front, back):
+                s.close()
+
+    def _pump(self, src, dst) -> None:
+        while not self.cut.is_set():
+            try:
+                data = src.recv(4096)
+            except OSError:
+                return
+            if not data:
+                return
+            try:
+                dst.sendall(data)
+            except OSError:
+                return
+
+    def unplug(self, seconds: float) -> None:
+        self.listener.close()
+        self.cut.set()
+        time.sleep(seconds)
+        self._listen(self.port)
+
+
+def test_keep_going_waits_for_a_link_that_comes_back(tmp_path):
+    """Through a relay that is unplugged for 2 s in the middle of a script: with
+    --keep-going, .sleep still sleeps and a line that needs the module waits for the link
+    (as long as it would wait for its answer) before it is given up; after the link is back
+    every read is right. (It used to refuse every remaining line at once as not run.)"""
+    sim = Simulator("TMCM-1311")
+    server = serve_tcp(sim, "127.0.0.1", 0)
+    relay = Unplugging(("127.0.0.1", server.address[1]))
+    try:
+        reads = 12
+        script = tmp_path / "s.tmcl"
+        script.write_text("GAP 4, 0\n.sleep 0.25\n" * reads)
+        url = f"socket://127.0.0.1:{relay.port}"
+
+        def unplug():
+            while relay.connections == 0:
+                time.sleep(0.01)
+            time.sleep(0.6)
+            relay.unplug(2.0)
+
+        threading.Thread(target=unplug, daemon=True).start()
+        t0 = time.monotonic()
+        p = subprocess.run([sys.executable, "-m", "tmclsh", "--port", url, "-m", "TMCM-1311",
+                            "--timeout", "0.3", "-f", str(script), "--keep-going"],
+                           capture_output=True, text=True, timeout=60, env=tmclsh_env(),
+                           cwd=str(ROOT))
+        took = time.monotonic() - t0
+        print(p.stdout, p.stderr)
+        assert took >= reads * 0.25  # every .sleep slept
+        right = p.stdout.count("MaxPositioningSpeed = 51200")
+        assert f"reconnected to {url}" in p.stdout
+        after = p.stdout[p.stdout.index(f"reconnected to {url}"):]
+        # 0.6 s (about 2 reads) before the cut, 2 s without a link: a line waits 0.9 s for it
+        assert after.count("MaxPositioningSpeed = 51200") >= reads - 8
+        failed = [x for x in p.stderr.splitlines() if "s.tmcl:" in x]
+        assert right + len(failed) == reads and len(failed) <= 3  # a line lost, 2 s waited
+        assert "Traceback" not in p.stderr and p.returncode == 1
+    finally:
+        server.close()
+        sim.close()

@@ -621,7 +621,9 @@ interactive prompt, {_b(PROG)} exits with status 130. A script that ends while a
 or the stored program runs leaves them so, with a note on standard error.
 .IP \\(bu 2
 A lost link fails the line it was lost on, with the reason; with {_b("--keep-going")} the
-next line first reconnects.
+script goes on: lines that need no module run as always ({_b(".sleep")} still sleeps), and
+a line that needs the module waits for the link to come back (its timeout times its
+attempts) before it is given up, not run.
 .SS Keys at the prompt
 .TP
 {_b("Tab")}

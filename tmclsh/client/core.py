@@ -138,6 +138,10 @@ class Client:
         # one-line notices about what the client did on its own (ended download mode); the
         # shell points it at its output, else they are logged
         self.on_notice: Callable[[str], None] | None = None
+        # called when a request finds the link down, to bring it back before the request
+        # goes (a --keep-going script waits for a cable plugged back in); it raises
+        # TransportError if the link stays down. None: the request fails at once.
+        self.on_link_lost: Callable[[], None] | None = None
         # run by close() while the link is still open (the ASCII link restores the mode the
         # module was found in)
         self.close_hooks: list[Callable[[], None]] = []
@@ -363,6 +367,8 @@ class Client:
             timeout = self._timeout
         elif not (isinstance(timeout, (int, float)) and timeout > 0):
             raise ValueError(f"timeout must be a positive number of seconds, got {timeout!r}")
+        if self.on_link_lost is not None and not self.connected:
+            self.on_link_lost()
         try:
             with self._lock:
                 if (self._bring_up_next or self._check_download) and not self.downloading:

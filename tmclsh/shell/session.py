@@ -117,6 +117,8 @@ class Session:
         self.interactive = interactive
         self.yes = yes
         self.keep_going = keep_going
+        if keep_going:  # a line that needs the module waits for a lost link to come back
+            client.on_link_lost = self.relink
         self.settings = settings or {}
         self.variables: dict[str, int | float] = {}
         self.history: list[str] = []
@@ -184,14 +186,26 @@ class Session:
         return None
 
     def ensure_link(self) -> None:
-        """After a lost link (-c/-f with --keep-going): reconnect before the next line runs;
-        TransportError, and the line is not run, if the link cannot be brought back."""
+        """Before each line of -c/-f --keep-going after the link was lost: one attempt to
+        bring it back. The line runs either way: one that needs no module (``.sleep``,
+        ``.echo``) does what it does, one that needs it waits for the link (``relink``)."""
         if self.client.connected:
             return
-        why = self.reconnect()
-        if why is not None:
-            raise TransportError(f"still disconnected ({why}); the line was not run")
-        self.out.info(reconnected(self.client))
+        if self.reconnect() is None:
+            self.out.info(reconnected(self.client))
+
+    def relink(self) -> None:
+        """A request found the link down (``Client.on_link_lost``, set with --keep-going):
+        wait for it as long as the request would wait for its answer, then bring the module
+        up again; TransportError (nothing sent) if it does not come back in that time."""
+        client = self.client
+        wait = client.timeout * (1 + client.retries)
+        try:
+            client.reconnect(wait=wait)
+        except (TmclError, OSError) as exc:
+            raise TransportError(f"still disconnected after waiting {wait:g} s ({exc}); "
+                                 "the line was not run") from exc
+        self.out.info(reconnected(client))
 
     def report_error(self, line: str | None, exc: BaseException) -> None:
         """Say what went wrong with ``line`` (once: an error already shown is not said
