@@ -179,7 +179,8 @@ class Simulator:
         self.io = IoState(self.module)
         self.coords = Coordinates(self.module.motors, self.module.coordinates)
         self.axes = [Axis() for _ in range(self.module.motors)]
-        self.commands = Commands(self.module, self.store, self.io, self.coords, self.axes)
+        self.commands = Commands(self.module, self.store, self.io, self.coords, self.axes,
+                                 self.clock)
         self.vm = Vm(self.module.program_memory, self, self.module.interrupts)
         self.faults = Faults()
         self.on_output: Callable[[bytes], None] | None = None
@@ -838,7 +839,7 @@ class Simulator:
     def _step(self, h: float, limits: list) -> list:
         for axis, lim in zip(self.axes, limits):
             if axis.moving:
-                axis.advance(h, lim)
+                axis.advance(h, lim, now=self._t + h)
         self._t += h
         self._interrupt_sources()
         if self.vm.active:

@@ -38,7 +38,10 @@ START_VALUES: dict[str, dict[str, int]] = {
     "TMCM-351": {"MaxPositioningSpeed": 1000, "MaxAcceleration": 100, "PulseDivisor": 3,
                  "RampDivisor": 7},
     # MotorPoles: the QBL4208 the manual names as its example motor has 8 poles
-    "TMCM-1640": {"MaxPositioningSpeed": 4000, "Acceleration": 2000, "MotorPoles": 8},
+    # EnableDriver, ActivateRamp: a module that drives its motor with the ramp it is given;
+    # the manual prints no default and PyTrinamic's examples for it set neither to start
+    "TMCM-1640": {"MaxPositioningSpeed": 4000, "Acceleration": 2000, "MotorPoles": 8,
+                  "EnableDriver": 1, "ActivateRamp": 1},
 }
 
 Key = tuple[str, int, int]  # (kind, motor or bank, number)
@@ -256,6 +259,8 @@ class IoState:
     def __init__(self, module: Module):
         self.module = module
         self.values: dict[tuple[int, int], int] = {}
+        # ports that measure what the model computes (coil currents): read, never set
+        self.live: dict[tuple[int, int], Callable[[], int]] = {}
         for port in module.io:
             self.values[(port.bank, port.port)] = port.default if port.default is not None else port.min
         self._sync_from_analog()
@@ -284,12 +289,17 @@ class IoState:
             raise ValueError(f"{self.module.name} has no I/O port {port} in bank {bank}")
         if p.kind == "digital_out":
             raise ValueError(f"{p.name} is an output; outputs are set with SIO")
+        if (bank, port) in self.live:
+            raise ValueError(f"{p.name} follows the simulated motor; it cannot be set")
         if not p.min <= value <= p.max:
             raise ValueError(f"{value} out of range {p.min}..{p.max} for {p.name}")
         self.values[(bank, port)] = value
         self._link(p)
 
     def get(self, bank: int, port: int) -> int:
+        live = self.live.get((bank, port))
+        if live is not None:
+            return live()
         return self.values.get((bank, port), 0)
 
     def ports(self, bank: int, kinds: tuple[str, ...]) -> list[IoPort]:

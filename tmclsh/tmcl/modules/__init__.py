@@ -61,6 +61,8 @@ class Parameter:
     # writing it changes where the module answers (address, host_address, can_id, reply_id,
     # baud): the client follows it (client/reach.py)
     reaches: str | None = None
+    # the analog input that reads the same quantity (TMCM-1311 AP 153 and GIO 8, 1)
+    io: str | None = None
 
     @property
     def readable(self) -> bool:
@@ -168,7 +170,8 @@ def _parameter(kind: str, raw: dict) -> Parameter:
         default=raw.get("default"), values=_int_keys(raw.get("values")),
         bits=_int_keys(raw.get("bits")), note=raw.get("note"), source=raw.get("source"),
         state=bool(raw.get("state", False)), link=bool(raw.get("link", False)),
-        starts_motion=bool(raw.get("starts_motion", False)), reaches=raw.get("reaches"))
+        starts_motion=bool(raw.get("starts_motion", False)), reaches=raw.get("reaches"),
+        io=raw.get("io"))
 
 
 def _normalise(name: str) -> str:

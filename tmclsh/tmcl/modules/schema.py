@@ -38,7 +38,7 @@ PARAMETER_KEYS: dict[str, tuple[str, bool]] = {
     "choices": ("ints", False), "unit": ("str", False), "default": ("int", False),
     "values": ("names", False), "bits": ("names", False), "note": ("str", False),
     "source": ("str", False), "state": ("bool", False), "link": ("bool", False),
-    "starts_motion": ("bool", False), "reaches": ("str", False),
+    "starts_motion": ("bool", False), "reaches": ("str", False), "io": ("str", False),
 }
 IO_KEYS: dict[str, tuple[str, bool]] = {
     "bank": ("int", True), "port": ("int", True), "name": ("str", True), "kind": ("str", True),
@@ -70,6 +70,7 @@ MEANINGS = {
         "min": "inclusive range (max too); choices = [..] lists the only legal values",
         "bank": "global parameters only: the bank (0..3)",
         "values": "names of values: { \"0\" = \"off\" }; bits names bits the same way",
+        "io": "the analog input ([[io]] name) that reads the same quantity in the same unit",
     },
     "io": {
         "bank": "0 digital inputs, 1 analog inputs, 2 digital outputs (as the manual numbers)",
@@ -218,6 +219,19 @@ def check(data: dict, lines: _Lines, path: str) -> None:
             if ident in seen:
                 raise fail(table, i, None, f"{what} repeats entry {seen[ident] + 1}")
             seen[ident] = i
+    _check_io_links(data, fail)
+
+
+def _check_io_links(data: dict, fail) -> None:
+    """``io`` names the analog input that measures the same quantity as the parameter."""
+    inputs = {p["name"] for p in data.get("io", []) if p["kind"] == "analog_in"}
+    for table in ("axis", "global"):
+        for i, entry in enumerate(data.get(table, [])):
+            name = entry.get("io")
+            if name is not None and name not in inputs:
+                raise fail(table, i, "io", f"[[{table}]] entry {i + 1} ({entry['name']}): io "
+                           f"must name an analog input of [[io]] ({', '.join(sorted(inputs)) or 'none'}), "
+                           f"got {name!r}")
 
 
 def _entry(entry: object, keys: dict[str, tuple[str, bool]], table: str, index: int,
