@@ -288,3 +288,18 @@ def test_1640_hall_angle_and_current_while_turning(witness):
     w.iface.stop(0)
     w.until(lambda: w.gap(3) == 0)
     assert w.gap(150) == 0
+
+
+# -- what help says ------------------------------------------------------------------------------
+
+def test_help_says_which_values_are_simulated_and_what_rfs_status_means(run_tmclsh):
+    cite("TMCM-1311", 2001, "100 – OK 0 ref. search active")
+    r = run_tmclsh("--sim", "-c", "help 206\nhelp 153\nhelp RFS")
+    assert r.returncode == 0, r.stderr
+    out = " ".join(r.stdout.split())
+    assert "simulator Simulated: an unloaded motor" in out
+    assert "same as GIO 8, 1 (SupplyVoltage)" in out
+    assert ("On the TMCM-1311, RFS STATUS answers 0 when no reference search is running and "
+            "another value while one runs") in out
+    r = run_tmclsh("--sim", "TMCM-351", "-c", "help RFS")
+    assert "On the TMCM-1311" not in r.stdout  # other modules keep the common note
