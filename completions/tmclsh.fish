@@ -35,7 +35,7 @@ complete -c tmclsh -n __fish_use_subcommand -a asm -d 'assemble a TMCL program'
 complete -c tmclsh -n __fish_use_subcommand -a disasm -d 'disassemble a TMCL-IDE binary image (.bin) or hex text'
 complete -c tmclsh -n __fish_use_subcommand -a sim -d 'serve a simulated module on a pty, TCP or CAN'
 complete -c tmclsh -n __fish_use_subcommand -a ports -d 'list serial ports (Trinamic USB devices marked)'
-complete -c tmclsh -n __fish_use_subcommand -a modules -d 'known modules and where each comes from; \'modules check FILE\' validates a module file'
+complete -c tmclsh -n __fish_use_subcommand -a modules -d 'known modules and where each comes from; \'modules check FILE\' validates a module file; \'modules import pytrinamic NAME\' writes one from PyTrinamic\'s tables'
 complete -c tmclsh -n __fish_use_subcommand -a scan -d 'find modules on a bus (address, type, firmware)'
 
 # options of tmclsh itself
@@ -98,6 +98,8 @@ complete -c tmclsh -n '__fish_seen_subcommand_from ports' -l json -d 'one JSON o
 
 # tmclsh modules
 complete -c tmclsh -n '__fish_seen_subcommand_from modules' -s h -l help -d 'show this help message and exit'
+complete -c tmclsh -n '__fish_seen_subcommand_from modules' -l all -d 'import: every module PyTrinamic has a class for (except those tmclsh has built in)'
+complete -c tmclsh -n '__fish_seen_subcommand_from modules' -s o -l output -r -F -d 'import: write here instead of the config directory\'s modules/ (\'-\' = standard output; with --all a folder)'
 complete -c tmclsh -n '__fish_seen_subcommand_from modules' -l json -d 'one JSON object per module'
 
 # tmclsh scan

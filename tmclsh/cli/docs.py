@@ -366,7 +366,15 @@ _SUB_NOTES = {
                "FILES). Exit status 1 when a user's file cannot be used (each named on "
                "standard error). modules check FILE validates one file: exit 0 and a summary "
                "if tmclsh can use it, else 1 and one line naming the file, the line and what "
-               "is wrong.",
+               "is wrong. modules import pytrinamic NAME (TMCM1260) writes a module file from "
+               "the installed PyTrinamic's class for that module (pip install "
+               "'tmclsh[pytrinamic]'): its motors and its axis and global parameter names and "
+               "numbers, nothing else (ranges, units and access are not known, so values are "
+               "checked as 32-bit numbers and the module decides). The file goes to the config "
+               "directory's modules/ (or -o FILE, - for standard output); tmclsh then knows the "
+               "module by its 136 answer and names it with the data's origin. --all imports "
+               "every class PyTrinamic has, except the modules tmclsh has built in from their "
+               "manuals; a file that an import did not write is never replaced.",
     "sim": "The first line on standard output is the pseudo-terminal's path or the endpoint; "
            "connect to it with --port PATH, --port socket://HOST:PORT or --can IFACE:CHANNEL. "
            "Runs until interrupted. --pty needs Linux or macOS; --tcp and --can work on "

@@ -195,10 +195,22 @@ def build_parser() -> argparse.ArgumentParser:
                     help="one JSON object per port")
 
     mo = sub.add_parser("modules", help="known modules and where each comes from; "
-                                        "'modules check FILE' validates a module file")
-    mo.add_argument("action", nargs="?", choices=("check",), metavar="check",
-                    help="validate FILE: exit 0 if tmclsh can use it, else 1 naming the line")
-    mo.add_argument("file", nargs="?", metavar="FILE", help="the module file to check")
+                                        "'modules check FILE' validates a module file; "
+                                        "'modules import pytrinamic NAME' writes one from "
+                                        "PyTrinamic's tables")
+    mo.add_argument("action", nargs="?", choices=("check", "import"), metavar="check|import",
+                    help="check FILE: exit 0 if tmclsh can use it, else 1 naming the line; "
+                         "import pytrinamic NAME (or --all): write a module file from the "
+                         "installed PyTrinamic's class for NAME (TMCM1260): its motors and "
+                         "parameter names and numbers")
+    mo.add_argument("file", nargs="*", metavar="FILE|pytrinamic NAME",
+                    help="the module file to check, or where to import from and what")
+    mo.add_argument("--all", dest="import_all", action="store_true",
+                    help="import: every module PyTrinamic has a class for (except those "
+                         "tmclsh has built in)")
+    mo.add_argument("-o", "--output", metavar="FILE",
+                    help="import: write here instead of the config directory's modules/ "
+                         "('-' = standard output; with --all a folder)")
     mo.add_argument("--json", action="store_true", default=argparse.SUPPRESS,
                     help="one JSON object per module")
 

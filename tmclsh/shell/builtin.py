@@ -980,6 +980,8 @@ def cmd_module(session: Session, arg: str) -> None:
     grid.add_column(style="tmcl.note")
     grid.add_column()
     grid.add_row("module", f"{mod.name}: {mod.summary}")
+    if getattr(mod, "origin", None):
+        grid.add_row("data", f"from {mod.origin} ({mod.source})")
     grid.add_row("motors", "not known (motor numbers are sent as typed, 0..255)"
                  if mod.generic else str(mod.motors))
     grid.add_row("firmware", client.version or "(not asked; .version)")
@@ -989,7 +991,7 @@ def cmd_module(session: Session, arg: str) -> None:
                                                     else ""))
     grid.add_row("mode", client.mode)
     grid.add_row("parameters", f"{len(mod.axis_params)} axis, {len(mod.global_params)} global")
-    grid.add_row("program memory", "not known" if mod.generic
+    grid.add_row("program memory", "not known" if mod.generic or mod.origin
                  else f"{mod.program_memory} instructions")
     out.print(grid)
 

@@ -30,6 +30,7 @@ MODULE_KEYS: dict[str, tuple[str, bool]] = {
     "units": ("table", False), "notes": ("strs", False), "io_all_port": ("int", False),
     "io_all_banks": ("ints", False), "coordinates": ("int", False),
     "commands_like": ("str", False), "version_layout": ("str", False),
+    "origin": ("str", False), "any_io": ("bool", False),
 }
 PARAMETER_KEYS: dict[str, tuple[str, bool]] = {
     "number": ("int", True), "name": ("str", True), "manual_name": ("str", False),
@@ -60,6 +61,8 @@ MEANINGS = {
                          "or generic (the commands all of them have; the default)",
         "version_layout": "byte order of the 136 type 1 value: type_first (type, then "
                           "version; the default) or version_first (as the TMCM-1640)",
+        "origin": "where the data comes from when not from a manual (shown in the banner)",
+        "any_io": "true: the I/O ports are not known; GIO/SIO take any port and bank",
         "position_min": "position range of MVP (position_max too; default 32 bits)",
         "velocity_min": "velocity range of ROR/ROL (velocity_max too; default 32 bits)",
     },

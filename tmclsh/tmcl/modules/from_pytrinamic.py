@@ -1,0 +1,270 @@
+"""Module files written from PyTrinamic's module classes: names and numbers, nothing more.
+
+PyTrinamic, the vendor's Python package, has a class per module (``pytrinamic.modules.TMCM1260``)
+whose instance lists its motors; each motor has a nested ``AP`` class naming the axis
+parameters (``MaxVelocity = 4``), and the module class has ``GP``/``GP0``/``GP3`` ... classes
+naming global parameters by bank (``GP`` is bank 0). That is all it carries: no ranges, units,
+access or defaults, no I/O port kinds, no program memory size. A file written from it says so
+in every entry; tmclsh then checks those values as 32-bit numbers only and the module decides.
+
+PyTrinamic is optional (``pip install 'tmclsh[pytrinamic]'``) and imported here only, only
+when a user asks for an import. A missing PyTrinamic, or one whose classes no longer look like
+this, is one clear ``ImportFailed`` line, never a traceback.
+"""
+
+from __future__ import annotations
+
+import inspect
+import json
+import re
+from dataclasses import dataclass, field
+
+from ...base.errors import TmclError, UsageError
+from . import _normalise, built_in
+from .schema import parse
+
+SOURCE_TAG = "# Written by 'tmclsh modules import pytrinamic'"  # first line of every such file
+PROGRAM_MEMORY = 65536  # not known: as for a module without data, addresses are not checked
+COORDINATES = 256
+_CLASS = re.compile(r"([A-Z]+)(\d{3,4})$")  # TMCM1260, TMCC160: letters, then the type number
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*$")
+
+
+class ImportFailed(TmclError):
+    """PyTrinamic is missing, or a class of it is not what this importer reads."""
+
+
+@dataclass
+class Imported:
+    """One module file's text, and what it holds."""
+
+    class_name: str
+    name: str
+    text: str
+    motors: int
+    axis: int
+    globals_: int
+    notes: list[str] = field(default_factory=list)
+
+
+def _library():
+    try:
+        import pytrinamic
+        import pytrinamic.modules as modules
+    except ImportError as exc:
+        raise ImportFailed(f"PyTrinamic is not installed ({exc}); pip install "
+                           "'tmclsh[pytrinamic]' brings it") from None
+    except Exception as exc:  # a broken installation: say so, in one line
+        raise ImportFailed(f"PyTrinamic could not be imported: {type(exc).__name__}: "
+                           f"{exc}") from None
+    base = getattr(modules, "TMCLModule", None)
+    if not inspect.isclass(base):
+        raise ImportFailed(f"PyTrinamic {version()} has no pytrinamic.modules.TMCLModule: "
+                           "tmclsh reads the module classes of PyTrinamic 0.2 (a class per "
+                           "module, an AP class per motor)")
+    return pytrinamic, modules, base
+
+
+def version() -> str:
+    try:
+        from importlib.metadata import version as dist_version
+
+        return dist_version("pytrinamic")
+    except Exception:
+        return "(version unknown)"
+
+
+def class_names() -> list[str]:
+    """PyTrinamic's module classes (its own spelling: ``TMCM1260``), sorted."""
+    _, modules, base = _library()
+    return sorted(name for name, cls in vars(modules).items()
+                  if inspect.isclass(cls) and issubclass(cls, base) and cls is not base)
+
+
+def find(query: str) -> str:
+    """The class a user's name means (``TMCM1260``, ``TMCM-1260``, ``tmcm1260``, ``1260``)."""
+    names = class_names()
+    want = _normalise(query)
+    for name in names:
+        if want in (_normalise(name), _normalise(name).removeprefix("tmcm")):
+            return name
+    raise UsageError(f"PyTrinamic {version()} has no module class {query!r}; it has "
+                     f"{', '.join(names)}")
+
+
+def tmclsh_name(class_name: str) -> str | None:
+    """``TMCM1260`` -> ``TMCM-1260``; None when the class name holds no type number."""
+    m = _CLASS.match(class_name)
+    return f"{m.group(1)}-{m.group(2)}" if m else None
+
+
+def convert(class_name: str) -> Imported:
+    """A module file for PyTrinamic's ``class_name`` (ImportFailed when it cannot be read)."""
+    _, modules, _base = _library()
+    cls = getattr(modules, class_name, None)
+    name = tmclsh_name(class_name)
+    if cls is None:
+        raise UsageError(f"PyTrinamic {version()} has no module class {class_name!r}")
+    if name is None:
+        raise ImportFailed(f"{class_name}: the class name holds no type number (such as 1260), "
+                           "so the module could not be recognised by its 136 answer")
+    try:
+        instance = cls(None)  # the classes keep the connection and never use it to build
+        motors = list(instance.motors)
+    except Exception as exc:
+        raise ImportFailed(f"PyTrinamic {version()}'s {class_name} could not be read: "
+                           f"{type(exc).__name__}: {exc}") from None
+    if not motors:
+        raise ImportFailed(f"PyTrinamic {version()}'s {class_name} lists no motors")
+    tables = [getattr(m, "AP", None) for m in motors]
+    if any(t is None for t in tables):
+        raise ImportFailed(f"PyTrinamic {version()}'s {class_name} has a motor without an AP "
+                           "class of parameter numbers")
+    notes: list[str] = []
+    axis = _entries([_numbers(t) for t in tables], notes, "axis")
+    if len({id(t) for t in tables}) > 1 and any(_numbers(t) != _numbers(tables[0])
+                                                 for t in tables):
+        notes.append("The motors' AP classes differ; every number any of them names is here.")
+    globals_: list[tuple[int, int, str, list[str]]] = []
+    for bank, table in _gp_tables(cls):
+        for number, first, others in _entries([_numbers(table)], notes, f"bank {bank}"):
+            globals_.append((bank, number, first, others))
+    text = _render(class_name, name, cls, len(motors), axis, globals_, notes)
+    parse(text, f"{name} (from PyTrinamic)")  # what is written is a file tmclsh can use
+    return Imported(class_name, name, text, len(motors), len(axis), len(globals_), notes)
+
+
+def _numbers(table: type) -> list[tuple[str, int]]:
+    """``(name, number)`` in the order the class names them (ints, or objects with an index)."""
+    out = []
+    for key, value in vars(table).items():
+        if key.startswith("_"):
+            continue
+        if isinstance(value, int) and not isinstance(value, bool):
+            out.append((key, value))
+        elif isinstance(getattr(value, "index", None), int):  # PyTrinamic's Parameter objects
+            out.append((key, value.index))
+    return out
+
+
+def _gp_tables(cls: type) -> list[tuple[int, type]]:
+    out = []
+    for key, value in vars(cls).items():
+        m = re.fullmatch(r"GP(\d?)", key)
+        if m and inspect.isclass(value):
+            out.append((int(m.group(1) or 0), value))
+    return sorted(out, key=lambda bt: bt[0])
+
+
+def _entries(tables: list[list[tuple[str, int]]], notes: list[str],
+             where: str) -> list[tuple[int, str, list[str]]]:
+    """``(number, name, other names)`` per number: PyTrinamic's first name for it (usable on a
+    command line, unique in the table), and the others it gives the same number."""
+    by_number: dict[int, list[str]] = {}
+    beyond: set[int] = set()
+    for table in tables:
+        for key, number in table:
+            if not 0 <= number <= 255:
+                beyond.add(number)
+            elif key not in by_number.setdefault(number, []):
+                by_number[number].append(key)
+    if beyond:
+        notes.append(f"{where}: numbers above 255 ({', '.join(map(str, sorted(beyond)))}) "
+                     "are left out: the type byte of a TMCL command holds 0..255.")
+    out = []
+    taken: set[str] = set()
+    for number in sorted(by_number):
+        names = by_number[number]
+        first = names[0] if _NAME.match(names[0]) else f"P{number}"
+        if _normalise(first) in taken:
+            notes.append(f"{where}: {first} names two numbers in PyTrinamic; "
+                         f"number {number} is {first}_{number} here.")
+            first = f"{first}_{number}"
+        taken.add(_normalise(first))
+        out.append((number, first, names[1:]))
+    return out
+
+
+def _q(text: str) -> str:
+    return json.dumps(text, ensure_ascii=False)  # a TOML basic string
+
+
+def _render(class_name: str, name: str, cls: type, motors: int,
+            axis: list[tuple[int, str, list[str]]],
+            globals_: list[tuple[int, int, str, list[str]]], notes: list[str]) -> str:
+    ver = version()
+    doc = " ".join((inspect.getdoc(cls) or "").split())
+    summary = doc.split(". ")[0].rstrip(".") if doc else f"{name} (PyTrinamic's {class_name})"
+    number = int(_CLASS.match(class_name).group(2))  # type: ignore[union-attr]
+    origin = f"PyTrinamic {ver}, names and numbers only"
+    note = ("From PyTrinamic's tables: its range, unit and access are not known, so tmclsh "
+            "checks the value as a 32-bit number and the module decides.")
+    lines = [
+        SOURCE_TAG + f" from PyTrinamic {ver}'s {class_name} class.",
+        "# Names and numbers only: PyTrinamic carries no ranges, units, access or I/O ports.",
+        "# Edit it freely (add ranges, units, access); a new import will not overwrite an",
+        "# edited copy unless this first line is still here.",
+        "",
+        "[module]",
+        f"name = {_q(name)}",
+        f"summary = {_q(summary[:200])}",
+        f"origin = {_q(origin)}",
+        f"motors = {motors}",
+        f"program_memory = {PROGRAM_MEMORY}",
+        f"firmware_id = {number}",
+        f"version_string = {_q(f'{number:04d}V000')}",
+        f"coordinates = {COORDINATES}",
+        'commands_like = "generic"',
+        "any_io = true",
+        "notes = [",
+        *[f"  {_q(n)}," for n in _module_notes(ver, class_name)],
+        *[f"  {_q(n)}," for n in notes],
+        "]",
+        "",
+    ]
+    for num, pname, others in axis:
+        lines += _param("axis", num, pname, others, f"{class_name}.AP", note)
+    for bank, num, pname, others in globals_:
+        table = f"{class_name}.GP{bank}" if hasattr(cls, f"GP{bank}") else f"{class_name}.GP"
+        lines += _param("global", num, pname, others, table, note, bank=bank)
+    return "\n".join(lines)
+
+
+def _module_notes(ver: str, class_name: str) -> list[str]:
+    return [
+        f"Written from PyTrinamic {ver} (pytrinamic.modules.{class_name}): the motors, the axis "
+        "parameter names and numbers of its AP class, the global parameters of its GP classes "
+        "by bank. Nothing else is known from it.",
+        "Every parameter has access RWE and no range (the module decides what it takes) and "
+        "is marked state, so .restore writes none of them: which are settings is not known.",
+        "version_string V000: the firmware version is not known; the module is recognised by "
+        "its type number. Program memory, coordinates and I/O ports are not checked. Bank 2 "
+        "(user variables) is not in PyTrinamic's tables, so it is not here.",
+    ]
+
+
+def _param(kind: str, number: int, name: str, others: list[str], table: str, note: str,
+           bank: int | None = None) -> list[str]:
+    also = f" (also {', '.join(others)})" if others else ""
+    out = [f"[[{kind}]]", f"number = {number}"]
+    if bank is not None:
+        out.append(f"bank = {bank}")
+    out += [f"name = {_q(name)}", 'access = "RWE"', "state = true",
+            f"note = {_q(note)}",
+            f"source = {_q(f'PyTrinamic {version()}: {table}.{name} = {number}{also}')}", ""]
+    return out
+
+
+def refuse_built_in(name: str) -> str | None:
+    """Why a module tmclsh has from its manual is not imported (None: it is not built in)."""
+    if name in built_in():
+        return (f"{name} is built in, from its manual (ranges, units, access); PyTrinamic's "
+                "names would replace it with less (to write one anyway: modules import pytrinamic "
+                f"{name.replace('-', '')} -o FILE)")
+    return None
+
+
+def file_name(name: str) -> str:
+    """The file a module of this name is written to in the config directory (tmcm1260.toml,
+    tmcc160.toml): tmclsh reads every file there and goes by the name inside."""
+    return _normalise(name) + ".toml"
