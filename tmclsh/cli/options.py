@@ -76,8 +76,10 @@ def add_connection(p: argparse.ArgumentParser, *, auto_baud: bool = False,
                         "configuration names (~/can.conf, CAN_INTERFACE, CAN_CHANNEL, "
                         "CAN_BITRATE). python-can's virtual interface works inside one "
                         "process only, so it cannot reach a 'tmclsh sim'")
-    x.add_argument("--sim", metavar="MODULE", nargs="?", const="TMCM-1311",
-                   help="the built-in simulator, in process (default module TMCM-1311)")
+    # a bare --sim is "" here: the -m module, else a TMCM-1311 (client/connect.py decides)
+    x.add_argument("--sim", metavar="MODULE", nargs="?", const="",
+                   help="the built-in simulator, in process, of MODULE (default: the -m "
+                        "module, else a TMCM-1311)")
     if auto_baud:
         g.add_argument("--baud", type=_baud_or_auto, metavar="N|auto",
                        help="baud rate (default 9600, the factory setting); auto: each rate "
