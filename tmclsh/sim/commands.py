@@ -212,7 +212,8 @@ class Commands:
                 self.io.values[(p.bank, p.port)] = value >> p.port & 1
             return Status.OK, 0
         port = self.module.port(bank, ins.type)
-        if port is None or port.kind != "digital_out":
+        # "unknown": a port of a module whose data lists none (any_io): taken, read back
+        if port is None or port.kind not in ("digital_out", "unknown"):
             return Status.WRONG_TYPE, 0
         if not port.min <= value <= port.max:
             return Status.INVALID_VALUE, 0

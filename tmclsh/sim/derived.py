@@ -163,8 +163,9 @@ class Derived:
         elif not accept:
             setter = self._keep(name)
         self.store.add_live(AXIS, name, Live(lambda m: get(axes[m], m), setter))
-        if note:
-            self.notes[(AXIS, name)] = note
+        if note:  # under the module's own name, which help looks it up by
+            own = self.store.by_name(AXIS, name)
+            self.notes[(AXIS, own.name if own is not None else name)] = note
         return True
 
     def _keep(self, name: str) -> Callable[[int, int], int]:

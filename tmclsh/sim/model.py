@@ -24,6 +24,7 @@ log = logging.getLogger(__name__)
 AXIS = "axis"
 GLOBAL = "global"
 
+OTHER = "?"  # START_VALUES: a module without an entry of its own
 EEPROM_MAGIC = 0xE4  # GP 64: any other value in EEPROM means "factory defaults at next boot"
 LOCK_WRITE = 1234  # GP 73: writing 1234 locks the configuration EEPROM ...
 UNLOCK_WRITE = 4321  # ... and 4321 unlocks it (module notes of all three data files)
@@ -42,19 +43,72 @@ START_VALUES: dict[str, dict[str, int]] = {
     # the manual prints no default and PyTrinamic's examples for it set neither to start
     "TMCM-1640": {"MaxPositioningSpeed": 4000, "Acceleration": 2000, "MotorPoles": 8,
                   "EnableDriver": 1, "ActivateRamp": 1},
+    # any other module (a user's file, one imported from PyTrinamic, which carries no
+    # defaults): a motor that moves when told to, at the TMCM-1311's start values
+    OTHER: {"MaxPositioningSpeed": 51200, "MaxAcceleration": 51200, "Acceleration": 51200,
+            "EnableDriver": 1, "ActivateRamp": 1},
 }
+
+# Other names the simulator's rules (written by the names of the built-in files) know a
+# parameter by: PyTrinamic's names, which files imported from it carry. A rule for the name on
+# the left applies to a module that has one of those on the right instead (never beside it).
+ALSO_CALLED: dict[str, dict[str, tuple[str, ...]]] = {
+    AXIS: {
+        "MaxPositioningSpeed": ("MaxVelocity",),
+        "TargetSpeed": ("TargetVelocity",),
+        "ActualSpeed": ("ActualVelocity",),
+        "TargetPositionReached": ("PositionReachedFlag",),
+        "ReferenceSwitchStatus": ("HomeSwitch", "referenceSwitchStatus"),
+        "RightLimitSwitchStatus": ("RightEndstop",),
+        "LeftLimitSwitchStatus": ("LeftEndstop",),
+        "RightLimitSwitchDisable": ("rightLimitSwitchDisable",),
+        "LeftLimitSwitchDisable": ("leftLimitSwitchDisable",),
+        "ReferenceSwitchSpeed": ("RefSwitchSpeed", "referenceSwitchSpeed"),
+        "ActivateRamp": ("EnableRamp",),
+    },
+    GLOBAL: {
+        "SerialAddress": ("serialAddress",),
+        "SerialHostAddress": ("serialHostAddress",),
+        "TelegramPauseTime": ("telegramPauseTime",),
+        "AutoStartMode": ("autoStartMode",),
+    },
+}
+
+
+def known_as(module: Module) -> dict[tuple[str, str], Parameter]:
+    """``(kind, name) -> parameter`` for every name the simulator may ask for on ``module``:
+    its own names, and those of ``ALSO_CALLED`` it has under another name only."""
+    names: dict[tuple[str, str], Parameter] = {}
+    for kind, params in ((AXIS, module.axis_params), (GLOBAL, module.global_params)):
+        for p in params:
+            names.setdefault((kind, p.name), p)
+    for kind, table in ALSO_CALLED.items():
+        for name, others in table.items():
+            if (kind, name) in names:
+                continue
+            found = next((names[(kind, o)] for o in others if (kind, o) in names), None)
+            if found is not None:
+                names[(kind, name)] = found
+    return names
+
 
 Key = tuple[str, int, int]  # (kind, motor or bank, number)
 Getter = Callable[[int], int]  # motor/bank -> value
 Setter = Callable[[int, int], int]  # (motor/bank, value) -> status
 
 
-def _start_value(module: Module, p: Parameter) -> int:
+def _start_value(module: Module, p: Parameter, names: tuple[str, ...],
+                 overrides: dict[str, int]) -> int:
+    """``names``: what the simulator knows ``p`` by (its own name first)."""
+    for name in names:
+        if name in overrides:
+            return overrides[name]
     if p.default is not None:
         return p.default
-    for table in (START_VALUES.get(module.name, {}), START_VALUES["*"]):
-        if p.name in table:
-            return table[p.name]
+    for table in (START_VALUES.get(module.name, START_VALUES[OTHER]), START_VALUES["*"]):
+        for name in names:
+            if name in table:
+                return table[name]
     if p.in_range(0):
         return 0
     if p.choices:
@@ -102,18 +156,21 @@ class ParamStore:
         self.factory: dict[Key, int] = {}
         self.live: dict[Key, Live] = {}
         self._params: dict[Key, Parameter] = {}
-        self._names: dict[tuple[str, str], Parameter] = {}
+        self._names = known_as(module)
         overrides = overrides or {}
+        also: dict[int, tuple[str, ...]] = {}  # id(parameter) -> its names, its own first
+        for (kind, name), p in self._names.items():
+            also[id(p)] = also.get(id(p), ()) + ((name,) if name != p.name else ())
         for p in module.axis_params:
-            self._names.setdefault((AXIS, p.name), p)
+            start = _start_value(module, p, (p.name, *also.get(id(p), ())), overrides)
             for motor in range(module.motors):
                 self._params[(AXIS, motor, p.number)] = p
-                self.factory[(AXIS, motor, p.number)] = overrides.get(p.name, _start_value(module, p))
+                self.factory[(AXIS, motor, p.number)] = start
         for p in module.global_params:
-            self._names.setdefault((GLOBAL, p.name), p)
+            start = _start_value(module, p, (p.name, *also.get(id(p), ())), overrides)
             for n in range(p.number, p.number + p.count):
                 self._params[(GLOBAL, p.bank, n)] = p
-                self.factory[(GLOBAL, p.bank, n)] = overrides.get(p.name, _start_value(module, p))
+                self.factory[(GLOBAL, p.bank, n)] = start
         self.factory_reset()
         self.power_up()
 
