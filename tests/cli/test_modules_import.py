@@ -86,9 +86,12 @@ def test_import_to_stdout_a_file_and_all(run_tmclsh, env, tmp_path):
     assert r.returncode == 0, r.stderr
     written = sorted(p.name for p in folder.glob("*.toml"))
     assert len(written) >= 35 and "tmcm1260.toml" in written
-    # the built-in modules (from their manuals) and a class without a type number: left out
+    # the built-in modules (from their manuals): left out, each said in a line
     assert "tmcm1311.toml" not in written and "tmcm1640.toml" not in written
-    assert "left out: TMCM-1311 is built in" in r.stderr and "TMCM123x_0_1" in r.stderr
+    assert "left out: TMCM-1311 is built in" in r.stderr
+    assert len(r.stderr.splitlines()) == 2, r.stderr
+    # one class for a family (TMCM123x_0_1, "represents TMCM-1230 and TMCM-1231"): a file each
+    assert {"tmcm1230.toml", "tmcm1231.toml"} <= set(written)
     from tmclsh.tmcl.modules import read_file  # what `modules check` runs, in this process
 
     for path in folder.glob("*.toml"):
@@ -118,6 +121,7 @@ def test_an_edited_file_is_not_overwritten(run_tmclsh, env, tmp_path):
     (["TMCM1260"], "modules import takes where to import from"),
     (["pytrinamic"], "takes one NAME (TMCM1260) or --all"),
     (["pytrinamic", "TMCM9999"], "has no module class 'TMCM9999'; it has TMCC160"),
+    (["pytrinamic", "TMCM123x_0_1"], "stands for TMCM-1230 and TMCM-1231: name one of them"),
 ])
 def test_bad_words_are_one_line(run_tmclsh, env, words, message):
     r = run_tmclsh("modules", "import", *words, env=env)
@@ -223,3 +227,19 @@ def test_an_imported_module_is_detected_named_and_completed(run_tmclsh, env, tmp
     finally:
         sim.terminate()
         sim.wait(5)
+
+
+def test_a_family_class_and_status_bits(run_tmclsh, env):
+    """TMCM123x_0_1 stands for two modules: each is its own file, found by its own type
+    number. A BLDC class's ENUM names status bits (FLAG_POSITION_END = 0x4000), which its
+    get_position_reached tests AP StatusFlags against: they are the parameter's bits."""
+    r = run_tmclsh("modules", "import", "pytrinamic", "TMCM-1231", "-o", "-", env=env)
+    assert r.returncode == 0, r.stderr
+    data = tomllib.loads(r.stdout)
+    assert (data["module"]["name"], data["module"]["version_string"]) == ("TMCM-1231",
+                                                                          "1231V000")
+    assert any("stands for TMCM-1230 and TMCM-1231" in n for n in data["module"]["notes"])
+    r = run_tmclsh("modules", "import", "pytrinamic", "TMCM1630", "-o", "-", env=env)
+    status = next(p for p in tomllib.loads(r.stdout)["axis"] if p["name"] == "StatusFlags")
+    assert status["number"] == 156 and status["bits"] == {"14": "position end"}
+

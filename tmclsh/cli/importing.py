@@ -38,13 +38,13 @@ def import_modules(args: argparse.Namespace) -> int:
         raise UsageError("modules import pytrinamic takes one NAME (TMCM1260) or --all")
     if args.import_all and args.output == "-":
         raise UsageError("--all writes one file per module: -o takes a folder, not '-'")
-    classes = fp.class_names() if args.import_all else [fp.find(words[1])]
+    pairs = fp.targets() if args.import_all else [fp.find(words[1])]
     folder = Path(args.output) if (args.import_all and args.output) else user_dir()
     ver = fp.version()
     written = 0
-    for cls in classes:
+    for cls, name in pairs:
         try:
-            imp = fp.convert(cls)
+            imp = fp.convert(cls, name)
         except fp.ImportFailed as exc:
             if not args.import_all:
                 raise

@@ -27,7 +27,11 @@ SOURCE_TAG = "# Written by 'tmclsh modules import pytrinamic'"  # first line of 
 PROGRAM_MEMORY = 65536  # not known: as for a module without data, addresses are not checked
 COORDINATES = 256
 _CLASS = re.compile(r"([A-Z]+)(\d{3,4})$")  # TMCM1260, TMCC160: letters, then the type number
+# TMCM123x_0_1: one class for a family; its docstring names the modules ("TMCM-1230 and
+# TMCM-1231"), each a type number of its own
+_FAMILY = re.compile(r"([A-Z]+)(\d{2,3})x(?:_\w+)?$")
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*$")
+STATUS_WORD = "StatusFlags"  # the axis parameter PyTrinamic tests its FLAG_ values against
 
 
 class ImportFailed(TmclError):
@@ -81,15 +85,51 @@ def class_names() -> list[str]:
                   if inspect.isclass(cls) and issubclass(cls, base) and cls is not base)
 
 
-def find(query: str) -> str:
-    """The class a user's name means (``TMCM1260``, ``TMCM-1260``, ``tmcm1260``, ``1260``)."""
-    names = class_names()
+def targets() -> list[tuple[str, str]]:
+    """``(class, module name)`` for every module PyTrinamic has a class for, sorted by name:
+    ``("TMCM1260", "TMCM-1260")``, and one pair per module a family class names
+    (``("TMCM123x_0_1", "TMCM-1230")``, ``("TMCM123x_0_1", "TMCM-1231")``). A class whose name
+    holds no type number is ``(class, "")``."""
+    _, modules, _base = _library()
+    out = []
+    for cls in class_names():
+        names = modules_of(cls, getattr(modules, cls))
+        out += [(cls, name) for name in names] or [(cls, "")]
+    return sorted(out, key=lambda cn: (cn[1] or cn[0]).lower())
+
+
+def modules_of(class_name: str, cls: type | None = None) -> list[str]:
+    """The module names a class stands for: ``TMCM1260`` -> ``["TMCM-1260"]``; a family class
+    (``TMCM123x_0_1``) -> the modules its docstring names; ``[]`` when none can be told."""
+    name = tmclsh_name(class_name)
+    if name is not None:
+        return [name]
+    m = _FAMILY.match(class_name)
+    if m is None or cls is None:
+        return []
+    letters, stem = m.groups()
+    doc = inspect.getdoc(cls) or ""
+    found = re.findall(rf"\b{letters}-?({stem}\d)\b", doc)
+    return sorted({f"{letters}-{digits}" for digits in found})
+
+
+def find(query: str) -> tuple[str, str]:
+    """``(class, module name)`` a user's name means (``TMCM1260``, ``TMCM-1260``,
+    ``tmcm1260``, ``1260``; ``TMCM1230`` is one of the family class ``TMCM123x_0_1``)."""
+    pairs = targets()
     want = _normalise(query)
-    for name in names:
-        if want in (_normalise(name), _normalise(name).removeprefix("tmcm")):
-            return name
-    raise UsageError(f"PyTrinamic {version()} has no module class {query!r}; it has "
-                     f"{', '.join(names)}")
+    for cls, name in pairs:
+        if name and want in (_normalise(name), _normalise(name).removeprefix("tmcm")):
+            return cls, name
+    for cls in dict.fromkeys(cls for cls, _ in pairs):
+        if want == _normalise(cls):
+            names = [name for c, name in pairs if c == cls and name]
+            if len(names) > 1:
+                raise UsageError(f"PyTrinamic's {cls} stands for {' and '.join(names)}: name "
+                                 f"one of them ({names[0].replace('-', '')})")
+            return cls, (names[0] if names else "")
+    known = ", ".join(name.replace("-", "") or cls for cls, name in pairs)
+    raise UsageError(f"PyTrinamic {version()} has no module class {query!r}; it has {known}")
 
 
 def tmclsh_name(class_name: str) -> str | None:
@@ -98,16 +138,20 @@ def tmclsh_name(class_name: str) -> str | None:
     return f"{m.group(1)}-{m.group(2)}" if m else None
 
 
-def convert(class_name: str) -> Imported:
-    """A module file for PyTrinamic's ``class_name`` (ImportFailed when it cannot be read)."""
+def convert(class_name: str, name: str | None = None) -> Imported:
+    """A module file for PyTrinamic's ``class_name``, as module ``name`` (default: the one
+    the class stands for; one of a family class's); ImportFailed when it cannot be read."""
     _, modules, _base = _library()
     cls = getattr(modules, class_name, None)
-    name = tmclsh_name(class_name)
     if cls is None:
         raise UsageError(f"PyTrinamic {version()} has no module class {class_name!r}")
-    if name is None:
-        raise ImportFailed(f"{class_name}: the class name holds no type number (such as 1260), "
-                           "so the module could not be recognised by its 136 answer")
+    names = modules_of(class_name, cls)
+    if name is None and len(names) == 1:
+        name = names[0]
+    if name is None or name not in names:
+        raise ImportFailed(f"{class_name}: the class name holds no type number (such as 1260) "
+                           "and its description names no module, so the module could not be "
+                           "recognised by its 136 answer")
     try:
         instance = cls(None)  # the classes keep the connection and never use it to build
         motors = list(instance.motors)
@@ -121,6 +165,9 @@ def convert(class_name: str) -> Imported:
         raise ImportFailed(f"PyTrinamic {version()}'s {class_name} has a motor without an AP "
                            "class of parameter numbers")
     notes: list[str] = []
+    if len(names) > 1:
+        notes.append(f"PyTrinamic's {class_name} stands for {' and '.join(names)}: the same "
+                     "names and numbers for each.")
     axis = _entries([_numbers(t) for t in tables], notes, "axis")
     if len({id(t) for t in tables}) > 1 and any(_numbers(t) != _numbers(tables[0])
                                                  for t in tables):
@@ -129,7 +176,8 @@ def convert(class_name: str) -> Imported:
     for bank, table in _gp_tables(cls):
         for number, first, others in _entries([_numbers(table)], notes, f"bank {bank}"):
             globals_.append((bank, number, first, others))
-    text = _render(class_name, name, cls, len(motors), axis, globals_, notes)
+    flags = _flags(motors) if any(n == STATUS_WORD for _, n, _o in axis) else {}
+    text = _render(class_name, name, cls, len(motors), axis, globals_, notes, flags)
     parse(text, f"{name} (from PyTrinamic)")  # what is written is a file tmclsh can use
     return Imported(class_name, name, text, len(motors), len(axis), len(globals_), notes)
 
@@ -145,6 +193,20 @@ def _numbers(table: type) -> list[tuple[str, int]]:
         elif isinstance(getattr(value, "index", None), int):  # PyTrinamic's Parameter objects
             out.append((key, value.index))
     return out
+
+
+def _flags(motors: list) -> dict[int, str]:
+    """The status word's bits, from the ``FLAG_*`` values of the motors' ``ENUM`` classes
+    (``FLAG_POSITION_END = 0x4000``: bit 14, "position end"), which PyTrinamic tests AP
+    StatusFlags against; single bits only."""
+    bits: dict[int, str] = {}
+    for motor in motors:
+        for key, value in vars(getattr(motor, "ENUM", object)).items():
+            if key.startswith("FLAG_") and isinstance(value, int) and value > 0 \
+                    and value & (value - 1) == 0 and value < 2**32:
+                bits.setdefault(value.bit_length() - 1,
+                                key.removeprefix("FLAG_").replace("_", " ").lower())
+    return dict(sorted(bits.items()))
 
 
 def _gp_tables(cls: type) -> list[tuple[int, type]]:
@@ -191,11 +253,12 @@ def _q(text: str) -> str:
 
 def _render(class_name: str, name: str, cls: type, motors: int,
             axis: list[tuple[int, str, list[str]]],
-            globals_: list[tuple[int, int, str, list[str]]], notes: list[str]) -> str:
+            globals_: list[tuple[int, int, str, list[str]]], notes: list[str],
+            flags: dict[int, str]) -> str:
     ver = version()
     doc = " ".join((inspect.getdoc(cls) or "").split())
     summary = doc.split(". ")[0].rstrip(".") if doc else f"{name} (PyTrinamic's {class_name})"
-    number = int(_CLASS.match(class_name).group(2))  # type: ignore[union-attr]
+    number = int(_CLASS.match(name.replace("-", "")).group(2))  # type: ignore[union-attr]
     origin = f"PyTrinamic {ver}, names and numbers only"
     note = ("From PyTrinamic's tables: its range, unit and access are not known, so tmclsh "
             "checks the value as a 32-bit number and the module decides.")
@@ -223,7 +286,8 @@ def _render(class_name: str, name: str, cls: type, motors: int,
         "",
     ]
     for num, pname, others in axis:
-        lines += _param("axis", num, pname, others, f"{class_name}.AP", note)
+        lines += _param("axis", num, pname, others, f"{class_name}.AP", note,
+                        bits=flags if pname == STATUS_WORD else None, enum=f"{class_name}.ENUM")
     for bank, num, pname, others in globals_:
         table = f"{class_name}.GP{bank}" if hasattr(cls, f"GP{bank}") else f"{class_name}.GP"
         lines += _param("global", num, pname, others, table, note, bank=bank)
@@ -244,15 +308,20 @@ def _module_notes(ver: str, class_name: str) -> list[str]:
 
 
 def _param(kind: str, number: int, name: str, others: list[str], table: str, note: str,
-           bank: int | None = None) -> list[str]:
+           bank: int | None = None, bits: dict[int, str] | None = None,
+           enum: str = "") -> list[str]:
     also = f" (also {', '.join(others)})" if others else ""
+    if bits:
+        also += f"; bits from {enum}.FLAG_*"
     out = [f"[[{kind}]]", f"number = {number}"]
     if bank is not None:
         out.append(f"bank = {bank}")
     out += [f"name = {_q(name)}", 'access = "RWE"', "state = true",
             f"note = {_q(note)}",
-            f"source = {_q(f'PyTrinamic {version()}: {table}.{name} = {number}{also}')}", ""]
-    return out
+            f"source = {_q(f'PyTrinamic {version()}: {table}.{name} = {number}{also}')}"]
+    if bits:
+        out.append("bits = { " + ", ".join(f'"{b}" = {_q(t)}' for b, t in bits.items()) + " }")
+    return out + [""]
 
 
 def refuse_built_in(name: str) -> str | None:
