@@ -41,7 +41,7 @@ complete -c tmclsh -n __fish_use_subcommand -a scan -d 'find modules on a bus (a
 # options of tmclsh itself
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan' -l port -x -a '(__tmclsh_ports)' -d 'serial device (/dev/ttyACM0, COM3) or pyserial URL (socket://, rfc2217://, loop://, spy://, hwgrep://)'
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan' -l can -x -a '(__tmclsh_can)' -d 'python-can bus, e.g. socketcan:can0 (Linux; vcan0 for a virtual bus other programs can join), pcan:PCAN_USBBUS1, kvaser:0, slcan:/dev/ttyACM0 or slcan:COM5; alone: the bus python-can\'s own configuration names (~/can.conf, CAN_INTERFACE, CAN_CHANNEL, CAN_BITRATE). python-can\'s virtual interface works inside one process only, so it cannot reach a \'tmclsh sim\''
-complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan' -l sim -x -a '(__tmclsh_modules)' -d 'the built-in simulator, in process (default module TMCM-1311)'
+complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan' -l sim -x -a '(__tmclsh_modules)' -d 'the built-in simulator, in process, of MODULE (default: the -m module, else a TMCM-1311)'
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan' -l baud -x -d 'baud rate (default 9600, the factory setting; 9600..1000000, a module baud rate)'
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan' -l bitrate -x -d 'CAN bit rate in bit/s; the modules\' factory setting is 1000000 (GP 69 = 8); without it the adapter\'s own default or configuration applies, which is often lower (10000..1000000)'
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan' -l can-id -x -d 'module\'s CAN id (GP 71, default 1; 0..2047)'
@@ -105,7 +105,7 @@ complete -c tmclsh -n '__fish_seen_subcommand_from modules' -l json -d 'one JSON
 # tmclsh scan
 complete -c tmclsh -n '__fish_seen_subcommand_from scan' -l port -x -a '(__tmclsh_ports)' -d 'serial device (/dev/ttyACM0, COM3) or pyserial URL (socket://, rfc2217://, loop://, spy://, hwgrep://)'
 complete -c tmclsh -n '__fish_seen_subcommand_from scan' -l can -x -a '(__tmclsh_can)' -d 'python-can bus, e.g. socketcan:can0 (Linux; vcan0 for a virtual bus other programs can join), pcan:PCAN_USBBUS1, kvaser:0, slcan:/dev/ttyACM0 or slcan:COM5; alone: the bus python-can\'s own configuration names (~/can.conf, CAN_INTERFACE, CAN_CHANNEL, CAN_BITRATE). python-can\'s virtual interface works inside one process only, so it cannot reach a \'tmclsh sim\''
-complete -c tmclsh -n '__fish_seen_subcommand_from scan' -l sim -x -a '(__tmclsh_modules)' -d 'the built-in simulator, in process (default module TMCM-1311)'
+complete -c tmclsh -n '__fish_seen_subcommand_from scan' -l sim -x -a '(__tmclsh_modules)' -d 'the built-in simulator, in process, of MODULE (default: the -m module, else a TMCM-1311)'
 complete -c tmclsh -n '__fish_seen_subcommand_from scan' -l baud -x -d 'baud rate (default 9600, the factory setting); auto: each rate GP 65 can select, in turn (9600..1000000, a module baud rate)'
 complete -c tmclsh -n '__fish_seen_subcommand_from scan' -l bitrate -x -d 'CAN bit rate in bit/s; the modules\' factory setting is 1000000 (GP 69 = 8); without it the adapter\'s own default or configuration applies, which is often lower (10000..1000000)'
 complete -c tmclsh -n '__fish_seen_subcommand_from scan' -l can-id -x -d 'module\'s CAN id (GP 71, default 1; 0..2047)'
