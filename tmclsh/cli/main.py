@@ -52,7 +52,19 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
     return run(args.module, args.address, pty=args.pty, tcp=args.tcp, can=args.can,
                host_address=args.host_address, bitrate=args.bitrate, faults=args.faults,
-               seed=args.faults_seed)
+               seed=args.faults_seed, bootloader=args.bootloader)
+
+
+def cmd_monitor(args: argparse.Namespace) -> int:
+    from ..shell.monitor import run_monitor
+
+    return run_monitor(args)
+
+
+def cmd_bridge(args: argparse.Namespace) -> int:
+    from ..shell.bridge import run_bridge
+
+    return run_bridge(args)
 
 
 def cmd_ports(args: argparse.Namespace) -> int:
@@ -140,8 +152,13 @@ def cmd_scan(args: argparse.Namespace) -> int:
                           flush=True)
                 else:
                     at = f"  {hit.baud} baud" if auto else ""
+                    if hit.bootloader:
+                        at += (f"  IN ITS BOOTLOADER (a firmware update did not complete: "
+                               f"'tmclsh firmware FILE.hex{_connection_words(args)}' "
+                               "completes it)")
+                    what = "bootloader" if hit.bootloader else "firmware"
                     print(f"address {hit.address:3d}  {hit.module or 'unknown module':<10}  "
-                          f"firmware {hit.version or '?'}{at}", flush=True)
+                          f"{what} {hit.version or '?'}{at}", flush=True)
 
             if show_progress:
                 hits = _scan_with_progress(client, addresses, timeout,
@@ -170,6 +187,17 @@ def cmd_scan(args: argparse.Namespace) -> int:
     n = len(found)
     print(f"{n} module{'s' if n != 1 else ''} found at {where}", file=sys.stderr)
     return EXIT_OK
+
+
+def _connection_words(args: argparse.Namespace) -> str:
+    """The link options of this run again, as ``tmclsh firmware`` takes them."""
+    if getattr(args, "port", None):
+        return f" --port {args.port}"
+    if getattr(args, "can", None):
+        from ..base.canspec import FROM_PYTHON_CAN
+
+        return " --can" if args.can == FROM_PYTHON_CAN else f" --can {args.can}"
+    return ""
 
 
 def _is_usb(port: str) -> bool:
@@ -259,6 +287,12 @@ def cmd_modules(args: argparse.Namespace) -> int:
     return EXIT_FAILED if modules.problems() else EXIT_OK
 
 
+def cmd_firmware(args: argparse.Namespace) -> int:
+    from .firmware import cmd_firmware as run
+
+    return run(args)
+
+
 # -- entry point -------------------------------------------------------------------------
 
 def show_manual(parser: argparse.ArgumentParser) -> int:
@@ -312,7 +346,8 @@ def main(argv: list[str] | None = None) -> int:
             return EXIT_OK
         _user_modules(args)
         handler = {"asm": cmd_asm, "disasm": cmd_disasm, "sim": cmd_sim, "ports": cmd_ports,
-                   "scan": cmd_scan, "modules": cmd_modules}.get(args.subcommand or "")
+                   "scan": cmd_scan, "modules": cmd_modules, "firmware": cmd_firmware,
+                   "monitor": cmd_monitor, "bridge": cmd_bridge}.get(args.subcommand or "")
         if handler is not None:
             return handler(args)
         from ..shell.main import run_shell

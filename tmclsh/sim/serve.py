@@ -272,8 +272,12 @@ def _split(spec: str, what: str) -> tuple[str, str]:
 
 def run(module: str, address: int, *, pty: bool = False, tcp: str | None = None,
         can: str | None = None, host_address: int = 2, bitrate: int | None = None,
-        faults: dict[str, float] | None = None, seed: int | None = None) -> int:
+        faults: dict[str, float] | None = None, seed: int | None = None,
+        bootloader: bool = False) -> int:
     """Serve one simulated module until SIGINT/SIGTERM; the first stdout line is the endpoint.
+
+    ``bootloader``: the module starts in its bootloader with no valid application, as after
+    a firmware update that broke off (``tmclsh firmware`` completes it).
 
     ``faults``: probabilities per reply by kind (``Faults.rates``), drawn from a generator
     seeded with ``seed`` (None: a different run each time). Exit status 0 after a signal, 2
@@ -288,7 +292,8 @@ def run(module: str, address: int, *, pty: bool = False, tcp: str | None = None,
         log.error("choose exactly one of --pty, --tcp HOST:PORT, --can IFACE:CHANNEL")
         return EXIT_USAGE
     try:
-        sim = Simulator(module, address, host_address=host_address).bench_layout()
+        sim = Simulator(module, address, host_address=host_address,
+                        bootloader=bootloader).bench_layout()
     except ValueError as exc:
         log.error("%s", exc)
         return EXIT_USAGE
@@ -336,7 +341,11 @@ def run(module: str, address: int, *, pty: bool = False, tcp: str | None = None,
     try:
         sys.stdout.write(endpoint + "\n")
         sys.stdout.flush()
-        log.info("simulated %s at address %d on %s", sim.module.name, address, endpoint)
+        if bootloader:
+            log.info("simulated %s in its bootloader, at address %d on %s",
+                     sim.module.name, sim.address, endpoint)
+        else:
+            log.info("simulated %s at address %d on %s", sim.module.name, address, endpoint)
         if faults:
             log.warning("misbehaving on purpose: %s",
                         ", ".join(f"{k}={v:g}" for k, v in faults.items()))
