@@ -96,6 +96,19 @@ def test_an_output_of_a_module_whose_ports_are_not_known_reads_back(imported, ru
     assert r.stdout.splitlines() == ["ok: port 3 set to 1", "port 3 = 1", "port 1 = 0"]
 
 
+def test_help_says_which_start_values_are_the_simulators(imported, run_tmclsh):
+    """PyTrinamic carries no defaults: what the simulated module starts at is the simulator's
+    choice, and help on it says so (the module's own note says what is not known)."""
+    env = imported("TMCM1260", "TMCM-1260")
+    r = run_tmclsh("-m", "TMCM-1260", "--sim", "-c", "help MaxVelocity; help TargetPosition",
+                   env=env)
+    assert r.returncode == 0, r.stderr
+    text = " ".join(r.stdout.split())
+    assert "simulator Starts at 51200 in the simulator, a value of its own" in text
+    assert "range, unit and access are not known" in text
+    assert text.count("Starts at") == 1  # TargetPosition: nothing the simulator chose
+
+
 def test_the_built_in_modules_are_simulated_by_their_own_names_only():
     """ALSO_CALLED only fills in a name a module lacks: the built-in files (from the manuals)
     gain no second name, so nothing the manuals' rules do changes for them."""

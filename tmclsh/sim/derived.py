@@ -86,6 +86,9 @@ class Derived:
         self._closed_loop: dict[int, _Init] = {}
         self._encoder_offset = [0] * module.motors
         self._register()
+        for key, value in store.assumed.items():
+            self.notes.setdefault(key, f"Starts at {value} in the simulator, a value of its "
+                                       "own: the module's data gives no default.")
 
     # -- reading the store ----------------------------------------------------------------
     def has(self, *names: str) -> bool:

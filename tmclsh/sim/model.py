@@ -98,22 +98,23 @@ Setter = Callable[[int, int], int]  # (motor/bank, value) -> status
 
 
 def _start_value(module: Module, p: Parameter, names: tuple[str, ...],
-                 overrides: dict[str, int]) -> int:
-    """``names``: what the simulator knows ``p`` by (its own name first)."""
+                 overrides: dict[str, int]) -> tuple[int, bool]:
+    """``p``'s start value, and whether it is the simulator's own (from ``START_VALUES``);
+    ``names``: what the simulator knows ``p`` by (its own name first)."""
     for name in names:
         if name in overrides:
-            return overrides[name]
+            return overrides[name], False
     if p.default is not None:
-        return p.default
+        return p.default, False
     for table in (START_VALUES.get(module.name, START_VALUES[OTHER]), START_VALUES["*"]):
         for name in names:
             if name in table:
-                return table[name]
+                return table[name], True
     if p.in_range(0):
-        return 0
+        return 0, False
     if p.choices:
-        return p.choices[0]
-    return p.min if p.min is not None else 0
+        return p.choices[0], False
+    return (p.min if p.min is not None else 0), False
 
 
 def wire_to_param(p: Parameter, value: int) -> int:
@@ -161,13 +162,19 @@ class ParamStore:
         also: dict[int, tuple[str, ...]] = {}  # id(parameter) -> its names, its own first
         for (kind, name), p in self._names.items():
             also[id(p)] = also.get(id(p), ()) + ((name,) if name != p.name else ())
+        # (kind, name) -> the simulator's own start value, where the data gives none
+        self.assumed: dict[tuple[str, str], int] = {}
         for p in module.axis_params:
-            start = _start_value(module, p, (p.name, *also.get(id(p), ())), overrides)
+            start, own = _start_value(module, p, (p.name, *also.get(id(p), ())), overrides)
+            if own:
+                self.assumed[(AXIS, p.name)] = start
             for motor in range(module.motors):
                 self._params[(AXIS, motor, p.number)] = p
                 self.factory[(AXIS, motor, p.number)] = start
         for p in module.global_params:
-            start = _start_value(module, p, (p.name, *also.get(id(p), ())), overrides)
+            start, own = _start_value(module, p, (p.name, *also.get(id(p), ())), overrides)
+            if own:
+                self.assumed[(GLOBAL, p.name)] = start
             for n in range(p.number, p.number + p.count):
                 self._params[(GLOBAL, p.bank, n)] = p
                 self.factory[(GLOBAL, p.bank, n)] = start

@@ -255,13 +255,33 @@ def _entry(entry: object, keys: dict[str, tuple[str, bool]], table: str, index: 
 
 
 def read(path: Path) -> dict:
-    """Read and check one module file (ModuleFileError for any problem, with file and line)."""
+    """Read and check one module file (ModuleFileError for any problem, with file and line).
+
+    A file is parsed and checked once per content and checking code: the result is kept in
+    the data cache (a user with forty imported files would otherwise parse them all on every
+    start)."""
+    from ...base.datafiles import parsed
     from ...base.files import FileError, read_bytes
 
     try:
-        text = read_bytes(path, what="module file").decode("utf-8")  # bounded: /dev/zero
+        raw = read_bytes(path, what="module file")  # bounded: /dev/zero
+        raw.decode("utf-8")
     except FileError as exc:
         raise ModuleFileError(str(exc)) from None
     except UnicodeDecodeError:
         raise ModuleFileError(f"{path}:1: not a text file (UTF-8)") from None
-    return parse(text, str(path))
+    return parsed(raw, "user-module", lambda text: parse(text, str(path)), salt=_rules())
+
+
+_RULES: list[bytes] = []
+
+
+def _rules() -> bytes:
+    """This checking code, as bytes: a file that passed another version's check is checked
+    again."""
+    if not _RULES:
+        try:
+            _RULES.append(Path(__file__).read_bytes())
+        except OSError:
+            _RULES.append(repr((MODULE_KEYS, TABLES, ACCESS_CODES, IO_KINDS, REACHES)).encode())
+    return _RULES[0]
