@@ -104,7 +104,7 @@ def test_help_says_which_start_values_are_the_simulators(imported, run_tmclsh):
                    env=env)
     assert r.returncode == 0, r.stderr
     text = " ".join(r.stdout.split())
-    assert "simulator Starts at 51200 in the simulator, a value of its own" in text
+    assert "simulator Starts at 51200 in the simulator, a start value of its own" in text
     assert "range, unit and access are not known" in text
     assert text.count("Starts at") == 1  # TargetPosition: nothing the simulator chose
 

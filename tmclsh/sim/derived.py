@@ -87,8 +87,8 @@ class Derived:
         self._encoder_offset = [0] * module.motors
         self._register()
         for key, value in store.assumed.items():
-            self.notes.setdefault(key, f"Starts at {value} in the simulator, a value of its "
-                                       "own: the module's data gives no default.")
+            self.notes.setdefault(key, f"Starts at {value} in the simulator, a start value "
+                                       "of its own: the module's data names none.")
 
     # -- reading the store ----------------------------------------------------------------
     def has(self, *names: str) -> bool:
