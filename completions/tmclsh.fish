@@ -35,7 +35,7 @@ complete -c tmclsh -n __fish_use_subcommand -a asm -d 'assemble a TMCL program'
 complete -c tmclsh -n __fish_use_subcommand -a disasm -d 'disassemble a TMCL-IDE binary image (.bin) or hex text'
 complete -c tmclsh -n __fish_use_subcommand -a sim -d 'serve a simulated module on a pty, TCP or CAN'
 complete -c tmclsh -n __fish_use_subcommand -a ports -d 'list serial ports (Trinamic USB devices marked)'
-complete -c tmclsh -n __fish_use_subcommand -a modules -d 'known modules and where each comes from; \'modules check FILE\' validates a module file'
+complete -c tmclsh -n __fish_use_subcommand -a modules -d 'known modules and where each comes from; \'modules check FILE\' validates a module file; \'modules import pytrinamic NAME\' writes one from PyTrinamic\'s tables'
 complete -c tmclsh -n __fish_use_subcommand -a scan -d 'find modules on a bus (address, type, firmware)'
 complete -c tmclsh -n __fish_use_subcommand -a firmware -d 'update the module\'s firmware over its TMCL bootloader; completes an update that broke off'
 complete -c tmclsh -n __fish_use_subcommand -a monitor -d 'decode TMCL traffic tmclsh does not send: a CAN bus, a serial tap, a log file (sends nothing)'
@@ -44,7 +44,7 @@ complete -c tmclsh -n __fish_use_subcommand -a bridge -d 'forward another progra
 # options of tmclsh itself
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan firmware monitor bridge' -l port -x -a '(__tmclsh_ports)' -d 'serial device (/dev/ttyACM0, COM3) or pyserial URL (socket://, rfc2217://, loop://, spy://, hwgrep://)'
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan firmware monitor bridge' -l can -x -a '(__tmclsh_can)' -d 'python-can bus, e.g. socketcan:can0 (Linux; vcan0 for a virtual bus other programs can join), pcan:PCAN_USBBUS1, kvaser:0, slcan:/dev/ttyACM0 or slcan:COM5; alone: the bus python-can\'s own configuration names (~/can.conf, CAN_INTERFACE, CAN_CHANNEL, CAN_BITRATE). python-can\'s virtual interface works inside one process only, so it cannot reach a \'tmclsh sim\''
-complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan firmware monitor bridge' -l sim -x -a '(__tmclsh_modules)' -d 'the built-in simulator, in process (default module TMCM-1311)'
+complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan firmware monitor bridge' -l sim -x -a '(__tmclsh_modules)' -d 'the built-in simulator, in process, of MODULE (default: the -m module, else a TMCM-1311)'
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan firmware monitor bridge' -l baud -x -d 'baud rate (default 9600, the factory setting; 9600..1000000, a module baud rate)'
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan firmware monitor bridge' -l bitrate -x -d 'CAN bit rate in bit/s; the modules\' factory setting is 1000000 (GP 69 = 8); without it the adapter\'s own default or configuration applies, which is often lower (10000..1000000)'
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan firmware monitor bridge' -l can-id -x -d 'module\'s CAN id (GP 71, default 1; 0..2047)'
@@ -102,12 +102,14 @@ complete -c tmclsh -n '__fish_seen_subcommand_from ports' -l json -d 'one JSON o
 
 # tmclsh modules
 complete -c tmclsh -n '__fish_seen_subcommand_from modules' -s h -l help -d 'show this help message and exit'
+complete -c tmclsh -n '__fish_seen_subcommand_from modules' -l all -d 'import: every module PyTrinamic has a class for (except those tmclsh has built in)'
+complete -c tmclsh -n '__fish_seen_subcommand_from modules' -s o -l output -r -F -d 'import: write here instead of the config directory\'s modules/ (\'-\' = standard output; with --all a folder)'
 complete -c tmclsh -n '__fish_seen_subcommand_from modules' -l json -d 'one JSON object per module'
 
 # tmclsh scan
 complete -c tmclsh -n '__fish_seen_subcommand_from scan' -l port -x -a '(__tmclsh_ports)' -d 'serial device (/dev/ttyACM0, COM3) or pyserial URL (socket://, rfc2217://, loop://, spy://, hwgrep://)'
 complete -c tmclsh -n '__fish_seen_subcommand_from scan' -l can -x -a '(__tmclsh_can)' -d 'python-can bus, e.g. socketcan:can0 (Linux; vcan0 for a virtual bus other programs can join), pcan:PCAN_USBBUS1, kvaser:0, slcan:/dev/ttyACM0 or slcan:COM5; alone: the bus python-can\'s own configuration names (~/can.conf, CAN_INTERFACE, CAN_CHANNEL, CAN_BITRATE). python-can\'s virtual interface works inside one process only, so it cannot reach a \'tmclsh sim\''
-complete -c tmclsh -n '__fish_seen_subcommand_from scan' -l sim -x -a '(__tmclsh_modules)' -d 'the built-in simulator, in process (default module TMCM-1311)'
+complete -c tmclsh -n '__fish_seen_subcommand_from scan' -l sim -x -a '(__tmclsh_modules)' -d 'the built-in simulator, in process, of MODULE (default: the -m module, else a TMCM-1311)'
 complete -c tmclsh -n '__fish_seen_subcommand_from scan' -l baud -x -d 'baud rate (default 9600, the factory setting); auto: each rate GP 65 can select, in turn (9600..1000000, a module baud rate)'
 complete -c tmclsh -n '__fish_seen_subcommand_from scan' -l bitrate -x -d 'CAN bit rate in bit/s; the modules\' factory setting is 1000000 (GP 69 = 8); without it the adapter\'s own default or configuration applies, which is often lower (10000..1000000)'
 complete -c tmclsh -n '__fish_seen_subcommand_from scan' -l can-id -x -d 'module\'s CAN id (GP 71, default 1; 0..2047)'
@@ -122,7 +124,7 @@ complete -c tmclsh -n '__fish_seen_subcommand_from scan' -l json -d ''
 # tmclsh firmware
 complete -c tmclsh -n '__fish_seen_subcommand_from firmware' -l port -x -a '(__tmclsh_ports)' -d 'serial device (/dev/ttyACM0, COM3) or pyserial URL (socket://, rfc2217://, loop://, spy://, hwgrep://)'
 complete -c tmclsh -n '__fish_seen_subcommand_from firmware' -l can -x -a '(__tmclsh_can)' -d 'python-can bus, e.g. socketcan:can0 (Linux; vcan0 for a virtual bus other programs can join), pcan:PCAN_USBBUS1, kvaser:0, slcan:/dev/ttyACM0 or slcan:COM5; alone: the bus python-can\'s own configuration names (~/can.conf, CAN_INTERFACE, CAN_CHANNEL, CAN_BITRATE). python-can\'s virtual interface works inside one process only, so it cannot reach a \'tmclsh sim\''
-complete -c tmclsh -n '__fish_seen_subcommand_from firmware' -l sim -x -a '(__tmclsh_modules)' -d 'the built-in simulator, in process (default module TMCM-1311)'
+complete -c tmclsh -n '__fish_seen_subcommand_from firmware' -l sim -x -a '(__tmclsh_modules)' -d 'the built-in simulator, in process, of MODULE (default: the -m module, else a TMCM-1311)'
 complete -c tmclsh -n '__fish_seen_subcommand_from firmware' -l baud -x -d 'baud rate (default 9600, the factory setting; 9600..1000000, a module baud rate)'
 complete -c tmclsh -n '__fish_seen_subcommand_from firmware' -l bitrate -x -d 'CAN bit rate in bit/s; the modules\' factory setting is 1000000 (GP 69 = 8); without it the adapter\'s own default or configuration applies, which is often lower (10000..1000000)'
 complete -c tmclsh -n '__fish_seen_subcommand_from firmware' -l can-id -x -d 'module\'s CAN id (GP 71, default 1; 0..2047)'

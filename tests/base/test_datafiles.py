@@ -67,3 +67,30 @@ def test_bad_toml_is_still_an_error(package):
     (root / "table.toml").write_text("[module\n")
     with pytest.raises(tomllib.TOMLDecodeError):
         datafiles.load_toml("tmcl_data_test", "table.toml")
+
+
+def test_a_users_module_file_is_checked_once_per_content(tmp_path, monkeypatch):
+    """A user's module file (forty of them after 'modules import pytrinamic --all') is parsed
+    and checked once; read again unchanged it comes from the cache, edited it is checked again
+    and a mistake in it is still one line naming the file and the line."""
+    from tmclsh.tmcl.modules import ModuleFileError, read_file, schema
+
+    monkeypatch.setattr(datafiles, "cache_dir", lambda: tmp_path / "cache")
+    checked = []
+    real = schema.parse
+    monkeypatch.setattr(schema, "parse", lambda text, where: checked.append(where) or
+                        real(text, where))
+    path = tmp_path / "tmcm1161.toml"
+    text = ('[module]\nname = "TMCM-1161"\nmotors = 1\nprogram_memory = 2048\n'
+            'firmware_id = 1161\nversion_string = "1161V130"\n\n'
+            '[[axis]]\nnumber = 4\nname = "MaxPositioningSpeed"\naccess = "RWE"\n')
+    path.write_text(text)
+    assert read_file(path).axis(4).name == "MaxPositioningSpeed"
+    assert read_file(path).axis(4).name == "MaxPositioningSpeed"
+    assert checked == [str(path)]
+    path.write_text(text.replace('access = "RWE"', 'access = "RWX"'))
+    with pytest.raises(ModuleFileError, match=r"tmcm1161\.toml:11: .*access must be one of"):
+        read_file(path)
+    with pytest.raises(ModuleFileError):  # a refused file is not kept: refused every time
+        read_file(path)
+    assert len(checked) == 3

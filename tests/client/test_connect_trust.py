@@ -202,6 +202,18 @@ def test_a_contradicting_module_option_is_an_error_naming_both(run_tmclsh, respo
     assert p.returncode == 0 and "TMCM-351" not in p.stderr
 
 
+def test_a_bare_sim_simulates_the_module_m_names(run_tmclsh):
+    """``-m TMCM-351 --sim``: the simulator is of the module asked for, not the default one
+    and then an error that they differ; ``--sim`` alone is still a TMCM-1311."""
+    for args in (["-m", "TMCM-351", "--sim"], ["--sim", "-m", "tmcm351"]):
+        p = run_tmclsh(*args, "-c", ".version")
+        assert p.returncode == 0 and "0351V103" in p.stdout, (args, p.stderr)
+    assert "1311V111" in run_tmclsh("--sim", "-c", ".version").stdout
+    assert "1311V111" in run_tmclsh("-m", "generic", "--sim", "-c", ".version").stdout
+    p = run_tmclsh("-m", "TMCM-1311", "--sim", "TMCM-351", "-c", ".version")  # both named
+    assert p.returncode == 3 and "--sim TMCM-1311 simulates a TMCM-1311" in p.stderr
+
+
 class FlippedVersionOnce(Responder):
     """A bit flipped on the line in the first version string (it has no checksum)."""
 

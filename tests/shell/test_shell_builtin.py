@@ -102,7 +102,8 @@ def test_instruction_help_shows_the_note_and_keeps_the_source_for_source(session
     out = " ".join(capsys.readouterr().out.split())
     assert "source TMCM-1311 manual §5.7.2 says 'positive direction' (copied from ROR)" in out
     assert "tmclsh follows the TMCM-351 wording" in out
-    assert "STATUS replies 0 when no reference search is running" in out  # the note as well
+    # the note as well: on this TMCM-1311, what the value means here (issue 27)
+    assert "On the TMCM-1311, RFS STATUS answers 0 when no reference search is running" in out
     run(session, "help --source ROR")  # nothing to say: as for parameters
     assert "source as the manuals describe it" in " ".join(capsys.readouterr().out.split())
 

@@ -258,7 +258,11 @@ def test_gio_sio_every_port(host):
             assert host.ok(15, port.port, port.bank) == 1
             assert host.tx(14, port.port, port.bank, 2).status == Status.INVALID_VALUE
         else:
-            sim.set_input(port.bank, port.port, port.max)
+            try:
+                sim.set_input(port.bank, port.port, port.max)
+            except ValueError as exc:  # a coil current: it follows the motor (derived.py)
+                assert "follows the simulated motor" in str(exc)
+                continue
             assert host.ok(15, port.port, port.bank) == port.max
 
 

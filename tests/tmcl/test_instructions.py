@@ -203,6 +203,8 @@ def _user_texts() -> list[tuple[str, str]]:
     for spec in isa.all_instructions():
         out += [(f"{spec.mnemonic} summary", spec.summary), (f"{spec.mnemonic} note",
                                                                spec.note or "")]
+        out += [(f"{spec.mnemonic} note on the {mod}", text)
+                for mod, text in spec.notes_for.items()]
         out += [(f"{spec.mnemonic} type {name}", name) for name in spec.type_names()]
         out += [(f"{spec.mnemonic} {mod} motor {n}", text)
                 for mod, table in spec.motor_special.items() for n, text in table.items()]

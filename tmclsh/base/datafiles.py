@@ -35,21 +35,32 @@ def load_toml(package: str, name: str, check: Callable[[str], None] | None = Non
 
     ``check(text)`` runs when the file is parsed, before it is cached: a file that fails it
     raises, and one that passed is not checked again while its content is the same."""
+    def parse(text: str) -> dict:
+        import tomllib  # only when the cache misses
+
+        if check is not None:
+            check(text)
+        return tomllib.loads(text)
+
     raw = resources.files(package).joinpath(name).read_bytes()
-    digest = blake2b(raw, digest_size=16, person=b"tmclsh-data").hexdigest()
-    path = cache_dir() / f"{Path(name).stem}-{digest}-{_FORMAT}.marshal"
+    return parsed(raw, Path(name).stem, parse)
+
+
+def parsed(raw: bytes, stem: str, parse: Callable[[str], dict], salt: bytes = b"") -> dict:
+    """``parse(text)`` of the UTF-8 bytes ``raw``, kept under their content hash (and
+    ``salt``: whatever else the result depends on, such as the rules that check it), so the
+    same bytes are parsed once per machine. ``parse`` raises for a file it refuses; nothing is
+    kept then."""
+    key = raw + b"\0" + salt if salt else raw
+    digest = blake2b(key, digest_size=16, person=b"tmclsh-data").hexdigest()
+    path = cache_dir() / f"{stem}-{digest}-{_FORMAT}.marshal"
     try:
         data = marshal.loads(path.read_bytes())
         if isinstance(data, dict):
             return data
     except (OSError, ValueError, EOFError, TypeError):
         pass
-    import tomllib
-
-    text = raw.decode("utf-8")
-    if check is not None:
-        check(text)
-    data = tomllib.loads(text)
+    data = parse(raw.decode("utf-8"))
     _store(path, data)
     return data
 

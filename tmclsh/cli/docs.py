@@ -372,7 +372,20 @@ _SUB_NOTES = {
                "FILES). Exit status 1 when a user's file cannot be used (each named on "
                "standard error). modules check FILE validates one file: exit 0 and a summary "
                "if tmclsh can use it, else 1 and one line naming the file, the line and what "
-               "is wrong.",
+               "is wrong. modules import pytrinamic NAME (TMCM1260) writes a module file from "
+               "the installed PyTrinamic's class for that module (pip install "
+               "'tmclsh[pytrinamic]'): its motors and its axis and global parameter names and "
+               "numbers, nothing else (ranges, units and access are not known, so values are "
+               "checked as 32-bit numbers and the module decides). The file goes to the config "
+               "directory's modules/ (or -o FILE, - for standard output); tmclsh then knows the "
+               "module by its 136 answer and names it with the data's origin. --all imports "
+               "every class PyTrinamic has, except the modules tmclsh has built in from their "
+               "manuals (a class standing for several modules, such as TMCM123x_0_1 for the "
+               "TMCM-1230 and TMCM-1231, gives a file for each); a file that an import did not "
+               "write is never replaced. tmclsh -m NAME --sim simulates such a module: its "
+               "motor moves by PyTrinamic's names (MaxVelocity, PositionReachedFlag) at the "
+               "simulator's own start values, in position units per second, and any I/O port "
+               "answers.",
     "sim": "The first line on standard output is the pseudo-terminal's path or the endpoint; "
            "connect to it with --port PATH, --port socket://HOST:PORT or --can IFACE:CHANNEL. "
            "Runs until interrupted. --pty needs Linux or macOS; --tcp and --can work on "
@@ -545,7 +558,8 @@ module. The same lines can be given with {_b("-c")} or replayed from a file with
 .PP
 Without a connection option (or a profile or variable naming one) {_b(PROG)} uses the one
 attached Trinamic USB module if exactly one is found. With none attached, the interactive
-shell starts the built-in simulator of a TMCM-1311, labelled SIMULATED in the banner and the
+shell starts the built-in simulator of a TMCM-1311 (of the {_b("-m")} module when one is
+given, as {_b("--sim")} alone does), labelled SIMULATED in the banner and the
 toolbar; runs nobody watches ({_b("-c")}, {_b("-f")}, standard input that is not a terminal,
 {_b("scan")}) never fall back to it: they exit with status 3 ({_b("--sim")} asks for the
 simulator). Two or more Trinamic USB modules attached without {_b("--port")} are named, and

@@ -30,7 +30,9 @@ def resume_command(args: argparse.Namespace) -> str:
                      ("--reply-id", "reply_id"), ("-a", "address"),
                      ("--host-address", "host_address"), ("--timeout", "timeout")):
         value = getattr(args, key, None)
-        if value is not None:
+        if value == "" and key == "sim":  # a bare --sim (the -m module, else a TMCM-1311)
+            words.append(opt)
+        elif value is not None:
             words += [opt, str(value)]
     can = getattr(args, "can", None)
     if can is not None:

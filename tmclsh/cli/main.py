@@ -245,18 +245,27 @@ def cmd_modules(args: argparse.Namespace) -> int:
 
     from ..tmcl import modules
 
+    if args.action == "import":
+        from .importing import import_modules
+
+        return import_modules(args)
+    if args.import_all or args.output:
+        print("tmclsh: --all and -o go with 'modules import pytrinamic'", file=sys.stderr)
+        return EXIT_USAGE
     if args.action == "check" or args.file:
-        if not args.file:
-            print("tmclsh: modules check wants a FILE", file=sys.stderr)
+        if len(args.file) != 1:
+            print("tmclsh: modules check wants one FILE", file=sys.stderr)
             return EXIT_USAGE
+        path = args.file[0]
         try:
-            mod = modules.read_file(args.file)
+            mod = modules.read_file(path)
         except modules.ModuleFileError as exc:
             print(f"tmclsh: {exc}", file=sys.stderr)
             return EXIT_FAILED
-        print(f"{args.file}: {mod.name} (firmware id {mod.firmware_id}, version "
+        print(f"{path}: {mod.name} (firmware id {mod.firmware_id}, version "
               f"{mod.version_string}): {len(mod.axis_params)} axis and {len(mod.global_params)} "
-              f"global parameters, {len(mod.io)} I/O ports, commands of "
+              f"global parameters, {'any I/O port' if mod.any_io else f'{len(mod.io)} I/O ports'}"
+              f", commands of "
               f"{modules.commands_of(mod)}: OK")
         return EXIT_OK
     built = set(modules.built_in())
@@ -264,6 +273,8 @@ def cmd_modules(args: argparse.Namespace) -> int:
         source = mod.source
         if source != modules.BUILT_IN and mod.name in built:
             source += " (replaces the built-in)"
+        if mod.origin:
+            source += f" (data from {mod.origin})"
         if getattr(args, "json", False):
             print(json.dumps({"module": mod.name, "firmware_id": mod.firmware_id,
                               "version_string": mod.version_string, "source": source}))

@@ -175,8 +175,10 @@ def add_connection(p: argparse.ArgumentParser, *, auto_baud: bool = False,
                         "configuration names (~/can.conf, CAN_INTERFACE, CAN_CHANNEL, "
                         "CAN_BITRATE). python-can's virtual interface works inside one "
                         "process only, so it cannot reach a 'tmclsh sim'")
-    x.add_argument("--sim", metavar="MODULE", nargs="?", const="TMCM-1311",
-                   help="the built-in simulator, in process (default module TMCM-1311)")
+    # a bare --sim is "" here: the -m module, else a TMCM-1311 (client/connect.py decides)
+    x.add_argument("--sim", metavar="MODULE", nargs="?", const="",
+                   help="the built-in simulator, in process, of MODULE (default: the -m "
+                        "module, else a TMCM-1311)")
     if auto_baud:
         g.add_argument("--baud", type=_baud_or_auto, metavar="N|auto",
                        help="baud rate (default 9600, the factory setting); auto: each rate "
@@ -299,10 +301,22 @@ def build_parser() -> argparse.ArgumentParser:
                     help="one JSON object per port")
 
     mo = sub.add_parser("modules", help="known modules and where each comes from; "
-                                        "'modules check FILE' validates a module file")
-    mo.add_argument("action", nargs="?", choices=("check",), metavar="check",
-                    help="validate FILE: exit 0 if tmclsh can use it, else 1 naming the line")
-    mo.add_argument("file", nargs="?", metavar="FILE", help="the module file to check")
+                                        "'modules check FILE' validates a module file; "
+                                        "'modules import pytrinamic NAME' writes one from "
+                                        "PyTrinamic's tables")
+    mo.add_argument("action", nargs="?", choices=("check", "import"), metavar="check|import",
+                    help="check FILE: exit 0 if tmclsh can use it, else 1 naming the line; "
+                         "import pytrinamic NAME (or --all): write a module file from the "
+                         "installed PyTrinamic's class for NAME (TMCM1260): its motors and "
+                         "parameter names and numbers")
+    mo.add_argument("file", nargs="*", metavar="FILE|pytrinamic NAME",
+                    help="the module file to check, or where to import from and what")
+    mo.add_argument("--all", dest="import_all", action="store_true",
+                    help="import: every module PyTrinamic has a class for (except those "
+                         "tmclsh has built in)")
+    mo.add_argument("-o", "--output", metavar="FILE",
+                    help="import: write here instead of the config directory's modules/ "
+                         "('-' = standard output; with --all a folder)")
     mo.add_argument("--json", action="store_true", default=argparse.SUPPRESS,
                     help="one JSON object per module")
 

@@ -21,6 +21,9 @@ if TYPE_CHECKING:
     from collections.abc import Callable
 
 
+SIM_DEFAULT = "TMCM-1311"  # the module --sim simulates when neither it nor -m names one
+
+
 def connection_settings(args: argparse.Namespace) -> dict:
     from ..base.config import load_config, resolve
 
@@ -31,6 +34,9 @@ def connection_settings(args: argparse.Namespace) -> dict:
     if len(given) > 1:  # one before a subcommand, one after it (argparse sees two parsers)
         raise UsageError(f"{given[0]} and {given[1]} both name the link; give one of them")
     settings = resolve(cli, load_config())
+    if settings.get("sim") == "":  # a bare --sim: simulate the module -m names
+        module = settings.get("module")
+        settings["sim"] = module if module and module.lower() != "generic" else SIM_DEFAULT
     if settings.get("can") and settings["can"] != FROM_PYTHON_CAN:
         parse_can(settings["can"])  # a malformed --can is a usage error, before opening anything
     return settings
@@ -84,7 +90,7 @@ def open_transport(settings: dict, *, fallback: bool = False) -> Transport:
                 "TMCLSH_PORT/TMCLSH_CAN naming one) and no Trinamic USB module attached "
                 f"(USB vendor {TRINAMIC_VID:04x}); give --port PORT ('tmclsh ports' lists "
                 "the serial ports), or --sim to simulate")
-    module = settings.get("sim") or settings.get("module") or "TMCM-1311"
+    module = settings.get("sim") or settings.get("module") or SIM_DEFAULT
     settings["sim"] = module
     return tr.open_sim(module, _setting(settings, "address", 1),
                        host_address=_setting(settings, "host_address", 2))

@@ -255,7 +255,7 @@ def _help_instruction(session: Session, spec: isa.InstructionSpec,
         out.emit({"mnemonic": spec.mnemonic, "opcode": spec.opcode, "summary": spec.summary,
                   "syntax": spec.syntax, "types": spec.type_names(mod),
                   "modules": sorted(spec.modules), "direct": spec.direct, "ascii": spec.ascii,
-                  "note": spec.note, **({"source": spec.source} if source else {})})
+                  "note": spec.note_for(mod), **({"source": spec.source} if source else {})})
         return
     title = Text()
     title.append(spec.mnemonic, style="tmcl.mnemonic")
@@ -277,8 +277,9 @@ def _help_instruction(session: Session, spec: isa.InstructionSpec,
     grid.add_row("use", ", ".join(where))
     if spec.persists:
         grid.add_row("EEPROM", "writes the module's EEPROM (asks for confirmation)")
-    if spec.note:
-        grid.add_row("note", spec.note)
+    note = spec.note_for(mod)
+    if note:
+        grid.add_row("note", note)
     if source:
         grid.add_row("source", spec.source or "as the manuals describe it")
     out.print(grid)
@@ -560,8 +561,13 @@ def _show_params(session: Session, params: list[Parameter], numbered: int | None
             grid.add_row("  bits", "\n".join(f"bit {b}: {t}" for b, t in sorted(p.bits.items())))
         if p.note:
             grid.add_row("  note", p.note)
+        if p.io is not None:
+            grid.add_row("  same as", _io_twin(session.module, p.io))
         if source:
             grid.add_row("  source", p.source or "as the manual prints it")
+        simulated = _simulated_note(session, p) if (source or _simulated(session)) else None
+        if simulated:
+            grid.add_row("  simulator", simulated)
         for label, text, _ in current:
             grid.add_row("  now" + (f" ({label})" if label else ""),
                          Text(text, style="tmcl.value" if not text.startswith(
@@ -570,6 +576,26 @@ def _show_params(session: Session, params: list[Parameter], numbered: int | None
         if how:
             grid.add_row("  use", how)
         out.print(grid)
+
+
+def _io_twin(mod: Module, name: str) -> str:
+    """``GIO 8, 1 (SupplyVoltage)``: the input that reads the same quantity."""
+    port = next((q for q in mod.io if q.name == name and q.kind == "analog_in"), None)
+    return f"GIO {port.port}, {port.bank} ({name})" if port is not None else name
+
+
+def _simulated(session: Session) -> bool:
+    return bool(getattr(session.client.transport, "simulated", False))
+
+
+def _simulated_note(session: Session, p: Parameter) -> str | None:
+    """What the built-in simulator does for ``p`` where it derives or invents its value."""
+    mod = session.module
+    if mod.generic:
+        return None
+    from ..sim.derived import simulated_notes
+
+    return simulated_notes(mod).get((p.kind, p.name))
 
 
 def _how_to_use(p: Parameter, number: int | None) -> str:
@@ -954,6 +980,8 @@ def cmd_module(session: Session, arg: str) -> None:
     grid.add_column(style="tmcl.note")
     grid.add_column()
     grid.add_row("module", f"{mod.name}: {mod.summary}")
+    if getattr(mod, "origin", None):
+        grid.add_row("data", f"from {mod.origin} ({mod.source})")
     grid.add_row("motors", "not known (motor numbers are sent as typed, 0..255)"
                  if mod.generic else str(mod.motors))
     grid.add_row("firmware", client.version or "(not asked; .version)")
@@ -963,7 +991,7 @@ def cmd_module(session: Session, arg: str) -> None:
                                                     else ""))
     grid.add_row("mode", client.mode)
     grid.add_row("parameters", f"{len(mod.axis_params)} axis, {len(mod.global_params)} global")
-    grid.add_row("program memory", "not known" if mod.generic
+    grid.add_row("program memory", "not known" if mod.generic or mod.origin
                  else f"{mod.program_memory} instructions")
     out.print(grid)
 

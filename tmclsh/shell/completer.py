@@ -461,7 +461,8 @@ def ranked(word: str, candidates: Iterable[Candidate]) -> list[Candidate]:
 def param_meta(p: Parameter) -> str:
     """``AP 4 · 0..327679999 pps · RWE · Maximum positioning speed``."""
     rng = p.range_text + (f" {p.unit}" if p.unit else "")
-    return f"{p.label} · {rng} · {p.access} · {p.manual_name}"
+    named = f" · {p.manual_name}" if p.manual_name != p.name else ""  # not the name twice
+    return f"{p.label} · {rng} · {p.access}{named}"
 
 
 def _param_candidates(params: Iterable[Parameter], access: str, numeric: bool) -> list[Candidate]:

@@ -12,14 +12,14 @@ motor/bank, value or address out of range answers 4 "invalid value".
 from __future__ import annotations
 
 import logging
-import math
 from collections.abc import Callable
 
 from ..tmcl import instructions as isa
 from ..tmcl.modules import Module
 from ..tmcl.frames import Instruction, Status
-from .model import AXIS, GLOBAL, Coordinates, IoState, Live, ParamStore
-from .motion import Axis, Limits, Mode, Units
+from .derived import Derived
+from .model import AXIS, GLOBAL, Coordinates, IoState, ParamStore
+from .motion import Axis, Limits
 
 log = logging.getLogger(__name__)
 
@@ -31,13 +31,14 @@ Result = tuple[int, int]  # (status, value)
 
 class Commands:
     def __init__(self, module: Module, store: ParamStore, io: IoState, coords: Coordinates,
-                 axes: list[Axis]):
+                 axes: list[Axis], clock: Callable[[], float] = lambda: 0.0):
         self.module = module
         self.store = store
         self.io = io
         self.coords = coords
         self.axes = axes
-        self.units = Units(module)
+        # every parameter read from the state, and the limits the parameters set, in one place
+        self.derived = Derived(module, store, io, axes, clock)
         self.handlers: dict[int, Callable[[Instruction, int | None], Result]] = {}
         for name, fn in (
                 ("ROR", self._ror), ("ROL", self._rol), ("MST", self._mst), ("MVP", self._mvp),
@@ -52,43 +53,16 @@ class Commands:
         for spec in isa.all_instructions():
             if spec.mnemonic.startswith("UF"):
                 self.handlers[spec.opcode] = self._nothing
-        self._register_live()
 
-    # -- unit conversion and limits -------------------------------------------------------------
-    def _get(self, motor: int) -> Callable[[str], int]:
-        return lambda name: self.store.get(AXIS, name, motor)
-
+    # -- units and limits (derived.py: what the parameters allow and what they read) ---------
     def vscale(self, motor: int) -> float:
-        return self.units.velocity(self._get(motor))
-
-    def ascale(self, motor: int) -> float:
-        return self.units.acceleration(self._get(motor))
+        return self.derived.vscale(motor)
 
     def limits(self, motor: int) -> Limits:
-        get = self._get(motor)
-        vs = self.vscale(motor)
-        accel_units = get("MaxAcceleration") if self.store.has(AXIS, "MaxAcceleration") \
-            else get("Acceleration")
-        accel = accel_units * self.ascale(motor) if accel_units else math.inf
-        vmax = get("MaxPositioningSpeed") * vs
-        search = abs(get("ReferenceSearchSpeed")) * vs or vmax
-        switch = abs(get("ReferenceSwitchSpeed")) * vs or vmax / 4
-        return Limits(vmax=vmax, accel=accel, stop_left=self._stop_enabled(motor, 0),
-                      stop_right=self._stop_enabled(motor, 1), search_speed=search,
-                      switch_speed=switch)
-
-    def _stop_enabled(self, motor: int, bit: int) -> bool:
-        name = ("LeftLimitSwitchDisable", "RightLimitSwitchDisable")[bit]
-        if self.store.has(AXIS, name):
-            return not self.store.get(AXIS, name, motor)
-        if self.store.has(AXIS, "StopSwitchEnable"):
-            return bool(self.store.get(AXIS, "StopSwitchEnable", motor) >> bit & 1)
-        return False
+        return self.derived.limits(motor)
 
     def wrap_position(self, value: float) -> int:
-        lo, hi = self.module.position_min, self.module.position_max
-        span = hi - lo + 1
-        return (int(round(value)) - lo) % span + lo
+        return self.derived.wrap_position(value)
 
     # -- dispatch -------------------------------------------------------------------------------
     def execute(self, ins: Instruction, accu: int | None = None) -> Result:
@@ -238,7 +212,8 @@ class Commands:
                 self.io.values[(p.bank, p.port)] = value >> p.port & 1
             return Status.OK, 0
         port = self.module.port(bank, ins.type)
-        if port is None or port.kind != "digital_out":
+        # "unknown": a port of a module whose data lists none (any_io): taken, read back
+        if port is None or port.kind not in ("digital_out", "unknown"):
             return Status.WRONG_TYPE, 0
         if not port.min <= value <= port.max:
             return Status.INVALID_VALUE, 0
@@ -324,119 +299,3 @@ class Commands:
 
     def _nothing(self, ins: Instruction, accu: int | None) -> Result:
         return Status.OK, 0  # SAC (no SPI devices) and UF0-7 (no customer functions)
-
-    # -- parameters owned by the motion state --------------------------------------------------
-    def _register_live(self) -> None:
-        st, axes = self.store, self.axes
-
-        def axis_live(name: str, get: Callable[[Axis, int], int],
-                      set_: Callable[[Axis, int, int], int] | None = None) -> None:
-            st.add_live(AXIS, name, Live(
-                lambda m: get(axes[m], m),
-                None if set_ is None else (lambda m, v: set_(axes[m], m, v))))
-
-        def move(a: Axis, m: int, v: int) -> int:
-            a.move_to(v)
-            return Status.OK
-
-        def set_pos(a: Axis, m: int, v: int) -> int:
-            a.set_position(v)
-            return Status.OK
-
-        def set_speed(a: Axis, m: int, v: int) -> int:
-            a.rotate(v * self.vscale(m), v)
-            return Status.OK
-
-        def target_speed(a: Axis, m: int) -> int:
-            """Velocity mode: as commanded. Position mode: "set by hardware: during
-            acceleration to maximum speed, during deceleration and rest to zero" (TMCM-1311
-            AP 2)."""
-            if a.mode == Mode.VELOCITY and not a.rfs:
-                return a.target_vel_units
-            if not a.moving or a.accel_now * a.vel < 0:
-                return 0
-            vmax_units = self.store.get(AXIS, "MaxPositioningSpeed", m)
-            return vmax_units if a.target_pos >= a.pos else -vmax_units
-
-        position = lambda a, m: self.wrap_position(a.pos)  # noqa: E731
-        speed = lambda a, m: int(round(a.vel / self.vscale(m)))  # noqa: E731
-        axis_live("TargetPosition", lambda a, m: a.target_pos, move)
-        axis_live("ActualPosition", position, set_pos)
-        axis_live("VirtualActualPosition", position)
-        axis_live("TargetSpeed", target_speed, set_speed)
-        axis_live("ActualSpeed", speed)
-        axis_live("MeasuredSpeed", speed)
-        axis_live("RampGeneratorSpeed", speed)
-        axis_live("ActualAcceleration",
-                  lambda a, m: int(round(abs(a.accel_now) / self.ascale(m)))
-                  if math.isfinite(a.accel_now) else 0)
-        axis_live("TargetPositionReached", lambda a, m: int(a.reached))
-        axis_live("ReferenceSwitchStatus", lambda a, m: int(a.switch("ref")))
-        axis_live("RightLimitSwitchStatus", lambda a, m: int(a.switch("right")))
-        axis_live("LeftLimitSwitchStatus", lambda a, m: int(a.switch("left")))
-        axis_live("VelocityReached", lambda a, m: int(self._velocity_reached(a, m)))
-        self._register_ramp_mode(axis_live)
-        for name in ("StatusWord", "StatusFlags"):
-            p = st.by_name(AXIS, name)
-            if p is not None and p.bits:
-                axis_live(name, self._status_word(p.bits))
-
-    def _velocity_reached(self, a: Axis, m: int) -> bool:
-        """Compared in the module's units, as AP 3 reads them: when the actual speed reads
-        as the target speed, the target speed is reached."""
-        vs = self.vscale(m)
-        actual = int(round(a.vel / vs))
-        target = int(round(a.target_vel / vs)) if a.mode == Mode.VELOCITY else actual
-        return abs(actual - target) <= self.store.get(AXIS, "VelocityReachedWindow", m)
-
-    def _register_ramp_mode(self, axis_live) -> None:
-        """RampMode numbers differ per module (1311: 1 = velocity, 351: 2 = velocity); read
-        them from the value names in the data file."""
-        p = self.store.by_name(AXIS, "RampMode")
-        if p is None:
-            return
-        velocity = next((n for n, t in p.values.items() if "velocity" in t.lower()), None)
-        position = next((n for n, t in p.values.items() if "position" in t.lower()), 0)
-
-        def get(a: Axis, m: int) -> int:
-            return velocity if a.mode == Mode.VELOCITY and velocity is not None else position
-
-        def set_(a: Axis, m: int, v: int) -> int:
-            if v == velocity:
-                a.rotate(a.target_vel, a.target_vel_units)
-            elif v == position:
-                a.move_to(a.target_pos)
-            return Status.OK  # other modes (torque, soft) are accepted and not modelled
-
-        axis_live("RampMode", get, set_)
-
-    def _status_word(self, bits: dict[int, str]) -> Callable[[Axis, int], int]:
-        """Build a status word getter from the bit names in the data file."""
-        probes: list[tuple[int, Callable[[Axis, int], bool]]] = []
-        for bit, text in bits.items():
-            t = text.lower()
-            probe: Callable[[Axis, int], bool] | None = None
-            if t.startswith("target reached") or t.startswith("position end"):
-                probe = lambda a, m: a.reached  # noqa: E731
-            elif t.startswith("velocity reached"):
-                probe = self._velocity_reached
-            elif t.startswith("position mode"):
-                probe = lambda a, m: a.mode == Mode.POSITION  # noqa: E731
-            elif t.startswith("velocity mode"):
-                probe = lambda a, m: a.mode == Mode.VELOCITY  # noqa: E731
-            elif t.startswith("home switch"):
-                probe = lambda a, m: a.switch("ref")  # noqa: E731
-            elif t.startswith("left stop switch"):
-                probe = lambda a, m: a.switch("left")  # noqa: E731
-            elif t.startswith("right stop switch"):
-                probe = lambda a, m: a.switch("right")  # noqa: E731
-            elif t.startswith("module initialized"):
-                probe = lambda a, m: True  # noqa: E731
-            if probe is not None:
-                probes.append((bit, probe))
-
-        def get(a: Axis, m: int) -> int:
-            return sum(1 << bit for bit, probe in probes if probe(a, m))
-
-        return get
-

@@ -236,7 +236,8 @@ class Simulator:
         self.io = IoState(module)
         self.coords = Coordinates(module.motors, module.coordinates)
         self.axes = [Axis() for _ in range(module.motors)]
-        self.commands = Commands(module, self.store, self.io, self.coords, self.axes)
+        self.commands = Commands(module, self.store, self.io, self.coords, self.axes,
+                                 self.clock)
         self.vm = Vm(module.program_memory, self, module.interrupts)
         self._register_global_live()
 
@@ -926,7 +927,7 @@ class Simulator:
     def _step(self, h: float, limits: list) -> list:
         for axis, lim in zip(self.axes, limits):
             if axis.moving:
-                axis.advance(h, lim)
+                axis.advance(h, lim, now=self._t + h)
         self._t += h
         self._interrupt_sources()
         if self.vm.active:

@@ -24,6 +24,7 @@ log = logging.getLogger(__name__)
 AXIS = "axis"
 GLOBAL = "global"
 
+OTHER = "?"  # START_VALUES: a module without an entry of its own
 EEPROM_MAGIC = 0xE4  # GP 64: any other value in EEPROM means "factory defaults at next boot"
 LOCK_WRITE = 1234  # GP 73: writing 1234 locks the configuration EEPROM ...
 UNLOCK_WRITE = 4321  # ... and 4321 unlocks it (module notes of all three data files)
@@ -38,25 +39,82 @@ START_VALUES: dict[str, dict[str, int]] = {
     "TMCM-351": {"MaxPositioningSpeed": 1000, "MaxAcceleration": 100, "PulseDivisor": 3,
                  "RampDivisor": 7},
     # MotorPoles: the QBL4208 the manual names as its example motor has 8 poles
-    "TMCM-1640": {"MaxPositioningSpeed": 4000, "Acceleration": 2000, "MotorPoles": 8},
+    # EnableDriver, ActivateRamp: a module that drives its motor with the ramp it is given;
+    # the manual prints no default and PyTrinamic's examples for it set neither to start
+    "TMCM-1640": {"MaxPositioningSpeed": 4000, "Acceleration": 2000, "MotorPoles": 8,
+                  "EnableDriver": 1, "ActivateRamp": 1},
+    # any other module (a user's file, one imported from PyTrinamic, which carries no
+    # defaults): a motor that moves when told to, at the TMCM-1311's start values
+    OTHER: {"MaxPositioningSpeed": 51200, "MaxAcceleration": 51200, "Acceleration": 51200,
+            "EnableDriver": 1, "ActivateRamp": 1},
 }
+
+# Other names the simulator's rules (written by the names of the built-in files) know a
+# parameter by: PyTrinamic's names, which files imported from it carry. A rule for the name on
+# the left applies to a module that has one of those on the right instead (never beside it).
+ALSO_CALLED: dict[str, dict[str, tuple[str, ...]]] = {
+    AXIS: {
+        "MaxPositioningSpeed": ("MaxVelocity",),
+        "TargetSpeed": ("TargetVelocity",),
+        "ActualSpeed": ("ActualVelocity",),
+        "TargetPositionReached": ("PositionReachedFlag",),
+        "ReferenceSwitchStatus": ("HomeSwitch", "referenceSwitchStatus"),
+        "RightLimitSwitchStatus": ("RightEndstop",),
+        "LeftLimitSwitchStatus": ("LeftEndstop",),
+        "RightLimitSwitchDisable": ("rightLimitSwitchDisable",),
+        "LeftLimitSwitchDisable": ("leftLimitSwitchDisable",),
+        "ReferenceSwitchSpeed": ("RefSwitchSpeed", "referenceSwitchSpeed"),
+        "ActivateRamp": ("EnableRamp",),
+    },
+    GLOBAL: {
+        "SerialAddress": ("serialAddress",),
+        "SerialHostAddress": ("serialHostAddress",),
+        "TelegramPauseTime": ("telegramPauseTime",),
+        "AutoStartMode": ("autoStartMode",),
+    },
+}
+
+
+def known_as(module: Module) -> dict[tuple[str, str], Parameter]:
+    """``(kind, name) -> parameter`` for every name the simulator may ask for on ``module``:
+    its own names, and those of ``ALSO_CALLED`` it has under another name only."""
+    names: dict[tuple[str, str], Parameter] = {}
+    for kind, params in ((AXIS, module.axis_params), (GLOBAL, module.global_params)):
+        for p in params:
+            names.setdefault((kind, p.name), p)
+    for kind, table in ALSO_CALLED.items():
+        for name, others in table.items():
+            if (kind, name) in names:
+                continue
+            found = next((names[(kind, o)] for o in others if (kind, o) in names), None)
+            if found is not None:
+                names[(kind, name)] = found
+    return names
+
 
 Key = tuple[str, int, int]  # (kind, motor or bank, number)
 Getter = Callable[[int], int]  # motor/bank -> value
 Setter = Callable[[int, int], int]  # (motor/bank, value) -> status
 
 
-def _start_value(module: Module, p: Parameter) -> int:
+def _start_value(module: Module, p: Parameter, names: tuple[str, ...],
+                 overrides: dict[str, int]) -> tuple[int, bool]:
+    """``p``'s start value, and whether it is the simulator's own (from ``START_VALUES``);
+    ``names``: what the simulator knows ``p`` by (its own name first)."""
+    for name in names:
+        if name in overrides:
+            return overrides[name], False
     if p.default is not None:
-        return p.default
-    for table in (START_VALUES.get(module.name, {}), START_VALUES["*"]):
-        if p.name in table:
-            return table[p.name]
+        return p.default, False
+    for table in (START_VALUES.get(module.name, START_VALUES[OTHER]), START_VALUES["*"]):
+        for name in names:
+            if name in table:
+                return table[name], True
     if p.in_range(0):
-        return 0
+        return 0, False
     if p.choices:
-        return p.choices[0]
-    return p.min if p.min is not None else 0
+        return p.choices[0], False
+    return (p.min if p.min is not None else 0), False
 
 
 def wire_to_param(p: Parameter, value: int) -> int:
@@ -99,18 +157,27 @@ class ParamStore:
         self.factory: dict[Key, int] = {}
         self.live: dict[Key, Live] = {}
         self._params: dict[Key, Parameter] = {}
-        self._names: dict[tuple[str, str], Parameter] = {}
+        self._names = known_as(module)
         overrides = overrides or {}
+        also: dict[int, tuple[str, ...]] = {}  # id(parameter) -> its names, its own first
+        for (kind, name), p in self._names.items():
+            also[id(p)] = also.get(id(p), ()) + ((name,) if name != p.name else ())
+        # (kind, name) -> the simulator's own start value, where the data gives none
+        self.assumed: dict[tuple[str, str], int] = {}
         for p in module.axis_params:
-            self._names.setdefault((AXIS, p.name), p)
+            start, own = _start_value(module, p, (p.name, *also.get(id(p), ())), overrides)
+            if own:
+                self.assumed[(AXIS, p.name)] = start
             for motor in range(module.motors):
                 self._params[(AXIS, motor, p.number)] = p
-                self.factory[(AXIS, motor, p.number)] = overrides.get(p.name, _start_value(module, p))
+                self.factory[(AXIS, motor, p.number)] = start
         for p in module.global_params:
-            self._names.setdefault((GLOBAL, p.name), p)
+            start, own = _start_value(module, p, (p.name, *also.get(id(p), ())), overrides)
+            if own:
+                self.assumed[(GLOBAL, p.name)] = start
             for n in range(p.number, p.number + p.count):
                 self._params[(GLOBAL, p.bank, n)] = p
-                self.factory[(GLOBAL, p.bank, n)] = overrides.get(p.name, _start_value(module, p))
+                self.factory[(GLOBAL, p.bank, n)] = start
         self.factory_reset()
         self.power_up()
 
@@ -256,6 +323,8 @@ class IoState:
     def __init__(self, module: Module):
         self.module = module
         self.values: dict[tuple[int, int], int] = {}
+        # ports that measure what the model computes (coil currents): read, never set
+        self.live: dict[tuple[int, int], Callable[[], int]] = {}
         for port in module.io:
             self.values[(port.bank, port.port)] = port.default if port.default is not None else port.min
         self._sync_from_analog()
@@ -284,12 +353,17 @@ class IoState:
             raise ValueError(f"{self.module.name} has no I/O port {port} in bank {bank}")
         if p.kind == "digital_out":
             raise ValueError(f"{p.name} is an output; outputs are set with SIO")
+        if (bank, port) in self.live:
+            raise ValueError(f"{p.name} follows the simulated motor; it cannot be set")
         if not p.min <= value <= p.max:
             raise ValueError(f"{value} out of range {p.min}..{p.max} for {p.name}")
         self.values[(bank, port)] = value
         self._link(p)
 
     def get(self, bank: int, port: int) -> int:
+        live = self.live.get((bank, port))
+        if live is not None:
+            return live()
         return self.values.get((bank, port), 0)
 
     def ports(self, bank: int, kinds: tuple[str, ...]) -> list[IoPort]:

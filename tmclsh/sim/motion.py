@@ -30,6 +30,7 @@ TMC428_CLOCK = 16e6  # Hz; the TMCM-351's TMC428 velocity/acceleration unit form
 class Mode(IntEnum):
     POSITION = 0
     VELOCITY = 1
+    TORQUE = 2  # a target current: the unloaded motor speeds up to the speed limit (derived.py)
 
 
 class RfsPhase(IntEnum):
@@ -86,6 +87,7 @@ class Limits:
     stop_right: bool = True
     search_speed: float = 0.0
     switch_speed: float = 0.0
+    driver: bool = True  # False: the driver is off (TMCM-1640 AP 255 = 0), the motor holds still
 
 
 @dataclass
@@ -118,6 +120,8 @@ class Axis:
     target_vel: float = 0.0  # position units/s (velocity mode)
     target_vel_units: int = 0  # as commanded, for GAP TargetSpeed
     rfs: RfsPhase = RfsPhase.IDLE
+    target_current: int = 0  # mA, torque mode
+    still_since: float | None = None  # module time the motor came to rest (None: long ago)
     switches: dict[str, Switch] = field(default_factory=lambda: {s: Switch(s) for s in SWITCHES})
 
     # -- commands ---------------------------------------------------------------------------
@@ -129,6 +133,14 @@ class Axis:
 
     def stop(self) -> None:
         self.rotate(0.0, 0)
+
+    def torque(self, vel: float, current: int) -> None:
+        """Torque mode: ``current`` mA; the motor follows ``vel`` (what it reaches unloaded)."""
+        self.rfs = RfsPhase.IDLE
+        self.mode = Mode.TORQUE
+        self.target_vel = vel
+        self.target_vel_units = 0
+        self.target_current = current
 
     def move_to(self, target: int) -> None:
         self.rfs = RfsPhase.IDLE
@@ -165,6 +177,8 @@ class Axis:
         self.target_pos = 0
         self.target_vel = 0.0
         self.target_vel_units = 0
+        self.target_current = 0
+        self.still_since = None
 
     # -- state --------------------------------------------------------------------------------
     @property
@@ -179,11 +193,17 @@ class Axis:
             return self.pos != self.target_pos
         return self.target_vel != 0.0
 
+    @property
+    def accelerating(self) -> bool:
+        """Speeding up or slowing down (the boost current's time on a stepper)."""
+        return self.accel_now != 0.0 and self.vel != 0.0
+
     def switch(self, which: str) -> bool:
         return self.switches[which].active(self.pos)
 
     # -- integration --------------------------------------------------------------------------
-    def advance(self, dt: float, lim: Limits) -> None:
+    def advance(self, dt: float, lim: Limits, now: float | None = None) -> None:
+        """Move on by ``dt`` seconds; ``now`` (module time at the end) marks when it stopped."""
         left = dt
         for _ in range(MAX_SEGMENTS):
             if left <= EPS_T:
@@ -193,6 +213,10 @@ class Axis:
             self.accel_now = 0.0  # gave up on a degenerate case: hold still for the rest
         if self.rfs:
             self._rfs_update()
+        if self.vel != 0.0 or self.accel_now != 0.0:
+            self.still_since = None
+        elif self.still_since is None and now is not None:
+            self.still_since = now
 
     def _blocked(self, direction: int, lim: Limits) -> bool:
         if self.rfs or direction == 0:
@@ -202,9 +226,11 @@ class Axis:
         return lim.stop_left and self.switch("left")
 
     def _segment(self, budget: float, lim: Limits) -> float:
+        if not lim.driver:
+            return self._hold(budget)
         if self.rfs:
             self._rfs_update()
-        if self.mode == Mode.VELOCITY:
+        if self.mode != Mode.POSITION:
             vt = self._rfs_velocity(lim) if self.rfs else self.target_vel
             return self._velocity_segment(budget, vt, lim)
         return self._position_segment(budget, lim)

@@ -59,6 +59,8 @@ class InstructionSpec:
     waits: bool = False  # WAIT: holds the program counter until its condition is met
     note: str | None = None  # for users: shown by `help MNEMONIC`
     source: str | None = None  # for maintainers: how the entry was read from the manuals
+    # per module: what it means on that module, shown instead of ``note`` when connected to it
+    notes_for: dict[str, str] = field(default_factory=dict)
     types: dict[str, int] = field(default_factory=dict)
     types_for: dict[str, dict[str, int]] = field(default_factory=dict)
     # per module: motor/bank values with a special meaning besides the motor numbers
@@ -100,6 +102,10 @@ class InstructionSpec:
             name = self.type_name(type_, module)
             return self.done.get(name) if name is not None else None
         return self.done
+
+    def note_for(self, module: ModuleRef = None) -> str | None:
+        """What users should know about it on ``module`` (its own note, else the common)."""
+        return self.notes_for.get(_family_key(module) or "", self.note)
 
     def type_names(self, module: ModuleRef = None) -> dict[str, int]:
         """Symbolic types valid on ``module`` (all documented ones when None)."""
@@ -224,7 +230,8 @@ def _spec(raw: dict) -> InstructionSpec:
         idempotent=raw.get("idempotent", False), once_types=tuple(raw.get("once_types", ())),
         starts_motion=raw.get("starts_motion", False), confirm=raw.get("confirm"),
         done=raw.get("done"), turns=raw.get("turns"), waits=raw.get("waits", False),
-        note=raw.get("note"), source=raw.get("source"), types=dict(raw.get("types", {})),
+        note=raw.get("note"), source=raw.get("source"),
+        notes_for=dict(raw.get("notes_for", {})), types=dict(raw.get("types", {})),
         types_for={k: dict(v) for k, v in raw.get("types_for", {}).items()},
         motor_special={mod: {int(k): v for k, v in table.items()}
                        for mod, table in raw.get("motor_special", {}).items()},

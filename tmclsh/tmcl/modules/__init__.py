@@ -61,6 +61,8 @@ class Parameter:
     # writing it changes where the module answers (address, host_address, can_id, reply_id,
     # baud): the client follows it (client/reach.py)
     reaches: str | None = None
+    # the analog input that reads the same quantity (TMCM-1311 AP 153 and GIO 8, 1)
+    io: str | None = None
 
     @property
     def readable(self) -> bool:
@@ -168,7 +170,8 @@ def _parameter(kind: str, raw: dict) -> Parameter:
         default=raw.get("default"), values=_int_keys(raw.get("values")),
         bits=_int_keys(raw.get("bits")), note=raw.get("note"), source=raw.get("source"),
         state=bool(raw.get("state", False)), link=bool(raw.get("link", False)),
-        starts_motion=bool(raw.get("starts_motion", False)), reaches=raw.get("reaches"))
+        starts_motion=bool(raw.get("starts_motion", False)), reaches=raw.get("reaches"),
+        io=raw.get("io"))
 
 
 def _normalise(name: str) -> str:
@@ -202,6 +205,10 @@ class Module:
         self.io_all_port: int | None = info.get("io_all_port")
         self.io_all_banks: tuple[int, ...] = tuple(info.get("io_all_banks", ()))
         self.coordinates: int = info.get("coordinates", 21)
+        # where the data comes from when not from a manual (a PyTrinamic import)
+        self.origin: str | None = info.get("origin")
+        # the file does not know the I/O ports: any port and bank, the module answers
+        self.any_io: bool = info.get("any_io", False)
         # the byte order of its 136 type 1 answer (tmcl/version.py)
         self.version_layout: str = info.get("version_layout", TYPE_FIRST)
         # whose command set it has: its own (a documented module), the one its file names
@@ -229,8 +236,9 @@ class Module:
 
     @property
     def label(self) -> str:
-        """The name as banner and toolbar show it."""
-        return self.name
+        """The name as banner and toolbar show it (and where its data comes from, when that
+        is not a manual)."""
+        return f"{self.name} (data from {self.origin})" if self.origin else self.name
 
     def check_motor(self, motor: int) -> None:
         if not 0 <= motor < self.motors:
@@ -311,9 +319,14 @@ class Module:
 
     # -- I/O ----------------------------------------------------------------------------
     def port(self, bank: int, port: int) -> IoPort | None:
-        return next((p for p in self.io if p.bank == bank and p.port == port), None)
+        found = next((p for p in self.io if p.bank == bank and p.port == port), None)
+        if found is None and self.any_io and 0 <= bank <= 255 and 0 <= port <= 255:
+            return IoPort(bank, port, f"port {port}", "unknown", INT32_MIN, UINT32_MAX)
+        return found
 
     def io_banks(self) -> list[int]:
+        if self.any_io:
+            return list(range(256))
         return sorted({p.bank for p in self.io})
 
 

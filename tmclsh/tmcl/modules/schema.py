@@ -30,6 +30,7 @@ MODULE_KEYS: dict[str, tuple[str, bool]] = {
     "units": ("table", False), "notes": ("strs", False), "io_all_port": ("int", False),
     "io_all_banks": ("ints", False), "coordinates": ("int", False),
     "commands_like": ("str", False), "version_layout": ("str", False),
+    "origin": ("str", False), "any_io": ("bool", False),
 }
 PARAMETER_KEYS: dict[str, tuple[str, bool]] = {
     "number": ("int", True), "name": ("str", True), "manual_name": ("str", False),
@@ -38,7 +39,7 @@ PARAMETER_KEYS: dict[str, tuple[str, bool]] = {
     "choices": ("ints", False), "unit": ("str", False), "default": ("int", False),
     "values": ("names", False), "bits": ("names", False), "note": ("str", False),
     "source": ("str", False), "state": ("bool", False), "link": ("bool", False),
-    "starts_motion": ("bool", False), "reaches": ("str", False),
+    "starts_motion": ("bool", False), "reaches": ("str", False), "io": ("str", False),
 }
 IO_KEYS: dict[str, tuple[str, bool]] = {
     "bank": ("int", True), "port": ("int", True), "name": ("str", True), "kind": ("str", True),
@@ -60,6 +61,8 @@ MEANINGS = {
                          "or generic (the commands all of them have; the default)",
         "version_layout": "byte order of the 136 type 1 value: type_first (type, then "
                           "version; the default) or version_first (as the TMCM-1640)",
+        "origin": "where the data comes from when not from a manual (shown in the banner)",
+        "any_io": "true: the I/O ports are not known; GIO/SIO take any port and bank",
         "position_min": "position range of MVP (position_max too; default 32 bits)",
         "velocity_min": "velocity range of ROR/ROL (velocity_max too; default 32 bits)",
     },
@@ -70,6 +73,7 @@ MEANINGS = {
         "min": "inclusive range (max too); choices = [..] lists the only legal values",
         "bank": "global parameters only: the bank (0..3)",
         "values": "names of values: { \"0\" = \"off\" }; bits names bits the same way",
+        "io": "the analog input ([[io]] name) that reads the same quantity in the same unit",
     },
     "io": {
         "bank": "0 digital inputs, 1 analog inputs, 2 digital outputs (as the manual numbers)",
@@ -218,6 +222,19 @@ def check(data: dict, lines: _Lines, path: str) -> None:
             if ident in seen:
                 raise fail(table, i, None, f"{what} repeats entry {seen[ident] + 1}")
             seen[ident] = i
+    _check_io_links(data, fail)
+
+
+def _check_io_links(data: dict, fail) -> None:
+    """``io`` names the analog input that measures the same quantity as the parameter."""
+    inputs = {p["name"] for p in data.get("io", []) if p["kind"] == "analog_in"}
+    for table in ("axis", "global"):
+        for i, entry in enumerate(data.get(table, [])):
+            name = entry.get("io")
+            if name is not None and name not in inputs:
+                raise fail(table, i, "io", f"[[{table}]] entry {i + 1} ({entry['name']}): io "
+                           f"must name an analog input of [[io]] ({', '.join(sorted(inputs)) or 'none'}), "
+                           f"got {name!r}")
 
 
 def _entry(entry: object, keys: dict[str, tuple[str, bool]], table: str, index: int,
@@ -238,13 +255,33 @@ def _entry(entry: object, keys: dict[str, tuple[str, bool]], table: str, index: 
 
 
 def read(path: Path) -> dict:
-    """Read and check one module file (ModuleFileError for any problem, with file and line)."""
+    """Read and check one module file (ModuleFileError for any problem, with file and line).
+
+    A file is parsed and checked once per content and checking code: the result is kept in
+    the data cache (a user with forty imported files would otherwise parse them all on every
+    start)."""
+    from ...base.datafiles import parsed
     from ...base.files import FileError, read_bytes
 
     try:
-        text = read_bytes(path, what="module file").decode("utf-8")  # bounded: /dev/zero
+        raw = read_bytes(path, what="module file")  # bounded: /dev/zero
+        raw.decode("utf-8")
     except FileError as exc:
         raise ModuleFileError(str(exc)) from None
     except UnicodeDecodeError:
         raise ModuleFileError(f"{path}:1: not a text file (UTF-8)") from None
-    return parse(text, str(path))
+    return parsed(raw, "user-module", lambda text: parse(text, str(path)), salt=_rules())
+
+
+_RULES: list[bytes] = []
+
+
+def _rules() -> bytes:
+    """This checking code, as bytes: a file that passed another version's check is checked
+    again."""
+    if not _RULES:
+        try:
+            _RULES.append(Path(__file__).read_bytes())
+        except OSError:
+            _RULES.append(repr((MODULE_KEYS, TABLES, ACCESS_CODES, IO_KINDS, REACHES)).encode())
+    return _RULES[0]
