@@ -700,6 +700,9 @@ class Program:
     source: list[SourceLoc]
     labels: dict[str, int]
     origin: int = 0
+    # read from an image (.bin/.hex), not assembled: its "source" is the disassembly, one
+    # line per instruction, and its file holds bytes, never lines to show
+    image: bool = False
 
     def __len__(self) -> int:
         return len(self.instructions)
@@ -997,7 +1000,7 @@ def read_image_file(path: str | Path, module: Module, origin: int = 0) -> Progra
     instructions = read_image_instructions(path, module)
     source = [SourceLoc(str(path), n, disassemble_instruction(ins, module)[0])
               for n, ins in enumerate(instructions, 1)]
-    return Program(module, instructions, source, {}, origin)
+    return Program(module, instructions, source, {}, origin, image=True)
 
 
 def load_program(path: str | Path, module: Module, origin: int = 0) -> Program:
