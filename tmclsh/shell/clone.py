@@ -359,9 +359,28 @@ def _may_overwrite(session: Session, paths: list[Path | None], yes: bool) -> Non
                 f"replace {'it' if one else 'them'}, or save under another name")
 
 
+def _has_parameters_to_save(module: Module) -> None:
+    """A backup reads the parameters the module's data lists; a module known by number only
+    has none, and a file of 0 parameters restores nothing: refused, with what can be done."""
+    if _has_data(module):
+        return
+    if getattr(module, "forced", False):
+        type_name = getattr(module, "type_name", module.name)
+        why = (f"generic mode (-m generic) uses no parameter data, so .save has nothing to "
+               f"read: switch to the {type_name}'s data with '.module {type_name}' (or "
+               "connect without -m generic) and .save again")
+    else:
+        why = (f"tmclsh has no parameter data for the {module.name}, so .save has nothing to "
+               "read: describe its parameters in a module file (--module-file FILE; "
+               "'tmclsh modules check FILE' checks it) and .save again, or read the values "
+               "you need by number (GAP/GGP)")
+    raise ValidationError(why + "; nothing saved (the stored program: .dump FILE)")
+
+
 @command(".save")
 def cmd_save(session: Session, argtext: str) -> None:
     name, given = _args(argtext, ".save")
+    _has_parameters_to_save(session.module)
     path = Path(name).expanduser()
     if path.is_dir():
         raise CloneError(f"cannot write {path}: it is a directory")

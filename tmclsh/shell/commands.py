@@ -607,7 +607,11 @@ COMMANDS: tuple[Command, ...] = (
                      'source, beside FILE with .program.tmcl in place of its suffix '
                      '(backup.tmcl:\n'
                      'backup.program.tmcl; put it back with .upload). JSON: {"saved": N,\n'
-                     '"file": FILE} (and "program": PATH, "instructions": N with --program).'),
+                     '"file": FILE} (and "program": PATH, "instructions": N with --program).\n'
+                     'A module read by number only (no parameter data, or -m generic) has no '
+                     'list of parameters\n'
+                     'to read: .save refuses it (a failure in -c/-f) and says what to do '
+                     'instead.'),
             options=(Option("--program", help="also the stored program"),
                      Option("--yes", help="replace a file that exists", aliases=("-y",)))),
     Command('.diff', 'clone', '.diff FILE [--exit-code] [--force]',

@@ -1,0 +1,55 @@
+"""Issue 23, section 5 ("smaller things seen on the way"), each tried as a user would: through
+``tmclsh -c``/``-f`` against a module written from the manual's byte tables
+(tests/responder.py, which imports nothing of tmclsh) or the simulator served on a pty.
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from responder import PtyModule
+
+SAVE_REFUSED = "nothing saved"
+
+
+# -- .save without parameter data -------------------------------------------------------------
+
+def test_save_on_a_module_without_parameter_data_fails_and_says_what_to_do(tmp_path,
+                                                                           run_tmclsh):
+    """A module tmclsh has no data for (a TMCM-1161 here) was "saved" as a backup of 0
+    parameters, exit 0: a file that restores nothing. Now refused, nothing read or written."""
+    module = PtyModule(version="1161V130")
+    try:
+        backup = tmp_path / "b.tmcl"
+        run_tmclsh("--port", module.path, "-c", ".echo connected")
+        connecting = module.commands()  # what bring-up asks
+        module.got.clear()
+        p = run_tmclsh("--port", module.path, "-c", f".save {backup}")
+        assert p.returncode != 0
+        assert SAVE_REFUSED in p.stderr and "--module-file" in p.stderr
+        assert not backup.exists()
+        assert module.commands() == connecting  # nothing read for the backup
+        p = run_tmclsh("--json", "--port", module.path, "-c", f".save {backup}")
+        assert p.returncode != 0
+        record = json.loads(p.stdout.splitlines()[-1])
+        assert SAVE_REFUSED in record["error"]
+    finally:
+        module.close()
+
+
+def test_save_in_generic_mode_names_the_modules_own_data(tmp_path, run_tmclsh):
+    module = PtyModule(version="1311V111")
+    try:
+        backup = tmp_path / "b.tmcl"
+        p = run_tmclsh("--port", module.path, "-m", "generic", "-c", f".save {backup}")
+        assert p.returncode != 0 and not backup.exists()
+        assert "'.module TMCM-1311'" in p.stderr and SAVE_REFUSED in p.stderr
+        # what it says works
+        p = run_tmclsh("--port", module.path, "-m", "generic", "-c",
+                       f".module TMCM-1311; .save {backup}")
+        assert p.returncode == 0, p.stderr
+        assert "SAP " in backup.read_text()
+    finally:
+        module.close()
