@@ -53,3 +53,36 @@ def test_save_in_generic_mode_names_the_modules_own_data(tmp_path, run_tmclsh):
         assert "SAP " in backup.read_text()
     finally:
         module.close()
+
+
+# -- .ascii-config on a module without GP 67 ----------------------------------------------------
+
+def test_ascii_config_offers_nothing_the_module_lacks(run_tmclsh):
+    """The TMCM-1640's data has no ASCII interface; a module that answers GGP 67 with 0 (as
+    an unset parameter may read) was offered a GP 67 written to EEPROM. Now refused from the
+    module's data, before anything is sent, with --yes too."""
+    module = PtyModule(version="1640V210")
+    try:
+        for line in (".ascii-config startup=ascii", ".ascii-config"):
+            module.got.clear()
+            p = run_tmclsh("--port", module.path, "-y", "-c", line)
+            assert p.returncode != 0
+            assert "the TMCM-1640 has no ASCII interface" in p.stderr and "nothing sent" in \
+                p.stderr
+            assert not [g for g in module.got if g[1] == 67]  # neither GGP nor SGP 67
+    finally:
+        module.close()
+    # the 1311 has it: shown, and offered in completion; the 1640 offers nothing
+    from tmclsh.shell.completer import complete_arg
+    from tmclsh.shell.render import Output
+    from tmclsh.shell.session import Session
+    import tmclsh
+
+    for name, offered in (("TMCM-1311", True), ("TMCM-1640", False)):
+        client = tmclsh.connect(sim=name, timeout=0.5)
+        try:
+            session = Session(client, Output())
+            texts = [c.text for c in complete_arg(session, ".ascii-config", "")]
+            assert ("startup=ascii" in texts) is offered
+        finally:
+            client.close()

@@ -584,7 +584,9 @@ COMMANDS: tuple[Command, ...] = (
             details=('Reads GP 67 and writes it back with the named bits changed (other bits '
                      'kept). GP 67 is one of the bank-0 parameters 64..128 that SGP writes '
                      'to EEPROM directly (manual §10.1), so the change is permanent and asks '
-                     'first (--yes). The start-up mode applies from the next power-up.')),
+                     'first (--yes). The start-up mode applies from the next power-up. A '
+                     "module whose data has no ASCII interface (TMCM-1640) is refused before "
+                     'anything is sent.')),
     Command('.save', 'clone', '.save FILE [--program] [--yes]',
             "back up the module's configuration as a replayable script",
             complete='complete_file', category='configuration',
