@@ -86,3 +86,38 @@ def test_ascii_config_offers_nothing_the_module_lacks(run_tmclsh):
             assert ("startup=ascii" in texts) is offered
         finally:
             client.close()
+
+
+# -- .diff --force across module types ------------------------------------------------------------
+
+def test_diff_across_module_types_never_compares_different_units(tmp_path, run_tmclsh):
+    """A TMCM-1311 backup (MaxPositioningSpeed 1234 pps) against a TMCM-1640 (3000 rpm): the
+    parameter is skipped and the units named, never read, compared or written as a number."""
+    backup = tmp_path / "s1311.tmcl"
+    p = run_tmclsh("--sim", "TMCM-1311", "-y", "-c", f"SAP 4, 0, 1234; SAP 6, 0, 100; "
+                   f".save {backup}")
+    assert p.returncode == 0, p.stderr
+    module = PtyModule(version="1640V210")
+    module.values[(4, 0, False)] = 3000  # rpm
+    try:
+        p = run_tmclsh("--port", module.path, "-c", f".diff {backup} --force")
+        assert p.returncode == 0, p.stderr
+        said = p.stdout + p.stderr
+        assert ("MaxPositioningSpeed (motor 0, line 17): units differ: pps there, rpm on the "
+                "TMCM-1640") in said
+        assert "MaxCurrent (motor 0, line 19): units differ: 1/255 of module max. current " \
+               "there, mA on the TMCM-1640" in said
+        rows = [ln for ln in p.stdout.splitlines() if "│" in ln]
+        assert rows and not [r for r in rows if r.startswith(("MaxPositioningSpeed", "MaxCurr"))]
+        assert not [g for g in module.got if g[:3] in ((6, 4, 0), (6, 6, 0))]  # never read
+        p = run_tmclsh("--json", "--port", module.path, "-c", f".diff {backup} --force")
+        records = [json.loads(line) for line in p.stdout.splitlines()]
+        why = {r["skipped"].split()[0]: r["why"] for r in records if "skipped" in r}
+        assert why["MaxPositioningSpeed"].startswith("units differ: pps there, rpm")
+        assert not any(r.get("name") == "MaxPositioningSpeed" for r in records)
+        module.got.clear()
+        p = run_tmclsh("--port", module.path, "-y", "-c", f".restore {backup} --force")
+        assert not [g for g in module.got if g[:3] in ((5, 4, 0), (5, 6, 0))]  # never written
+        assert module.values[(4, 0, False)] == 3000
+    finally:
+        module.close()

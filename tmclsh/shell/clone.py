@@ -649,8 +649,9 @@ def _carry(backup: Backup, live: Module, p: Parameter, number: int, index: int, 
     if not q.writable:
         backup.skipped.append((what, f"read-only on the {live.name}"))
         return None
-    if p.unit and q.unit and p.unit != q.unit:  # 1234 pps is no 1234 rpm
-        backup.skipped.append((what, f"in {p.unit} there, {q.unit} on the {live.name}"))
+    if p.unit != q.unit:  # 1234 pps is no 1234 rpm; a 0..255 scale is no mA either
+        backup.skipped.append((what, f"units differ: {_unit_of(p)} there, {_unit_of(q)} on the "
+                                     f"{live.name} (not converted)"))
         return None
     new_number = q.number + (number - p.number)
     shown = _shown(value, q)
@@ -659,6 +660,10 @@ def _carry(backup: Backup, live: Module, p: Parameter, number: int, index: int, 
                                      f"({q.range_text}{' ' + q.unit if q.unit else ''})"))
         return None
     return Slot(p.kind, new_number, q.bank if p.kind == "global" else index, shown, q, line)
+
+
+def _unit_of(p: Parameter) -> str:
+    return p.unit if p.unit else f"no unit given ({p.range_text})"
 
 
 @dataclass
@@ -741,6 +746,8 @@ def cmd_diff(session: Session, argtext: str) -> None:
     live = session.module
     out = session.out
     if out.json:
+        for what, why in backup.skipped:  # not compared, and why (another module's backup)
+            out.emit({"skipped": what, "why": why})
         for d in diffs:
             out.emit(d.to_json())
     elif not diffs:

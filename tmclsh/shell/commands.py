@@ -633,7 +633,11 @@ COMMANDS: tuple[Command, ...] = (
                      'equal values. Exits 0\n'
                      'either way; with --exit-code a difference is a failure (exit status '
                      '1). A backup of another\n'
-                     'module type is compared by parameter name only with --force.'),
+                     'module type is compared by parameter name only with --force; a '
+                     'parameter whose unit differs\n'
+                     '(pps there, rpm here) is skipped and named, never compared as a number '
+                     '(JSON: {"skipped",\n'
+                     '"why"} for each parameter not compared).'),
             options=(Option("--exit-code", help="exit 1 when there are differences"),
                      Option("--force", help="compare a backup of another module type",
                             aliases=("-f",)))),
