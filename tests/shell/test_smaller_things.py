@@ -121,3 +121,122 @@ def test_diff_across_module_types_never_compares_different_units(tmp_path, run_t
         assert module.values[(4, 0, False)] == 3000
     finally:
         module.close()
+
+
+# -- JSON of checks: the same record passed or failed; exit 3 a record too ----------------------
+
+def test_check_records_are_uniform(run_tmclsh):
+    """.expect passed and failed, .wait met and timed out: one record each, with "check",
+    "passed" and the values read (a failed .expect had no "passed": false, a .wait none)."""
+    module = PtyModule(version="1311V111")
+    module.values[(4, 0, False)] = 1234
+    try:
+        p = run_tmclsh("--json", "--port", module.path, "--keep-going", "-c",
+                       ".expect GAP 4, 0 == 1234\n.expect GAP 4, 0 > 2000\n"
+                       ".wait GAP 4, 0 == 1234 --timeout 2\n"
+                       ".wait GAP 4, 0 == 5 --timeout 0.3 --interval 0.05")
+    finally:
+        module.close()
+    assert p.returncode == 1
+    passed, failed, met, timed_out = (json.loads(line) for line in p.stdout.splitlines())
+    for record, ok in ((passed, True), (failed, False), (met, True), (timed_out, False)):
+        assert record["passed"] is ok and record["values"] == {"GAP 4, 0": 1234}
+    assert passed["check"] == "GAP 4, 0 == 1234" and "error" not in passed
+    assert failed["check"] == "GAP 4, 0 > 2000" and "expectation failed" in failed["error"]
+    assert met["check"] == "GAP 4, 0 == 1234" and 0 <= met["elapsed"] < 2
+    assert timed_out["timed_out"] is True and 0.3 <= timed_out["elapsed"] < 1.5
+    assert 0 <= timed_out["read_at"] <= timed_out["elapsed"]
+    assert "timed out after 0.3 s waiting for GAP 4, 0 == 5 (GAP 4, 0 is 1234)" \
+        in timed_out["error"]
+
+
+def test_the_exit_3_message_is_a_record_under_json(tmp_path, run_tmclsh):
+    missing = str(tmp_path / "no-such-port")
+    for args, line in ((("--json", "-c", "GAP 4, 0"), True),
+                       (("--json", "--port", missing, "-c", "GAP 4, 0"), True),
+                       (("--json", "--port", missing, "-f", "-"), True),
+                       (("--json", "scan", "--port", missing), False)):
+        p = run_tmclsh(*args, input="GAP 4, 0\n")
+        assert p.returncode == 3
+        (record,) = [json.loads(x) for x in p.stdout.splitlines()]
+        assert record["exit"] == 3 and record["error"]
+        assert ("line" in record) is line
+    p = run_tmclsh("--port", missing, "-c", "GAP 4, 0")  # without --json: a line on stderr
+    assert p.returncode == 3 and p.stdout == "" and p.stderr.startswith("tmclsh: ")
+
+
+# -- .wait timing out: what was waited for, the last value read or why none, and when -----------
+
+class StopsAnswering(PtyModule):
+    """A TMCM-1311 (tests/responder.py) that answers GAP 4 ``answers`` times, then never."""
+
+    def __init__(self, answers: int, **kw):
+        self.answers = answers
+        super().__init__(version="1311V111", **kw)
+
+    def answer(self, raw: bytes) -> bytes | None:
+        if raw[1] == 6 and raw[2] == 4:
+            if self.answers <= 0:
+                self.got.append((6, 4, raw[3], 0))
+                return None
+            self.answers -= 1
+        return super().answer(raw)
+
+
+@pytest.mark.parametrize("answers", [0, 1])
+def test_wait_timing_out_says_what_it_read_or_why_not(answers, run_tmclsh):
+    """A read that got no answer ended the wait at once with "timed out after 3 s ... ()";
+    now the wait polls on to its timeout and says the last value read and when, or that
+    none could be read, and why."""
+    module = StopsAnswering(answers)
+    module.values[(4, 0, False)] = 777
+    try:
+        p = run_tmclsh("--json", "--port", module.path, "--timeout", "0.1", "--retries", "0",
+                       "-c", ".wait GAP 4, 0 == 5 --timeout 1 --interval 0.05")
+    finally:
+        module.close()
+    assert p.returncode == 1
+    (record,) = [json.loads(x) for x in p.stdout.splitlines()]
+    message = record["error"]
+    assert not message.endswith("()") and "waiting for GAP 4, 0 == 5" in message
+    assert record["elapsed"] >= 1.0  # it waited its time, polling
+    assert len([g for g in module.got if g[:2] == (6, 4)]) >= 4
+    assert "no reply to GAP" in record["read_error"]
+    if answers:
+        assert "(GAP 4, 0 is 777, read at 0.0" in message and "reads after it failed" in message
+        assert record["values"] == {"GAP 4, 0": 777} and record["read_at"] < 0.2
+    else:
+        assert "(no value could be read: no reply to GAP" in message
+        assert record["values"] is None
+
+
+def test_wait_under_the_simulators_faults_never_ends_in_empty_brackets(make_pty_sim, capsys):
+    """The simulator on a pty dropping and garbling replies at random (seeded): each timed-out
+    wait names the condition and either a value read or why none could be."""
+    import random
+
+    from tmclsh.base.errors import TmclError
+    from tmclsh.client.text import LineClient
+    from tmclsh.link import open_serial
+    from tmclsh.shell.render import Output
+    from tmclsh.shell.session import Session
+
+    sim, path = make_pty_sim()
+    client = LineClient(open_serial(path), module="TMCM-1311", timeout=0.1, retries=0)
+    try:
+        session = Session(client, Output(), yes=True)
+        session.run_line("GAP 4, 0")
+        sim.faults.rng = random.Random(23)
+        sim.faults.rates = {"drop": 0.5, "garbage": 0.2, "corrupt": 0.1}
+        messages = []
+        for _ in range(6):
+            with pytest.raises(TmclError) as exc:
+                session.run_line(".wait GAP 4, 0 == 5 --timeout 0.4 --interval 0.02")
+            messages.append(str(exc.value))
+    finally:
+        sim.faults.rates = {}
+        client.close()
+    for message in messages:
+        assert message.startswith("timed out after 0.4 s waiting for GAP 4, 0 == 5 (")
+        assert not message.endswith("()")
+        assert "GAP 4, 0 is 51200" in message or "no value could be read: " in message

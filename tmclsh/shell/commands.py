@@ -339,7 +339,9 @@ COMMANDS: tuple[Command, ...] = (
                      'A failure says what was expected and what was read. An answer the '
                      'line may have given another request (a reply came that nothing was '
                      'waiting for) is read again; one still in doubt fails the check, said '
-                     'to be in doubt, its value not stated.'),
+                     'to be in doubt, its value not stated. JSON: {"check", "passed": '
+                     'true|false, "values": {READ: value}} ("in_doubt": [READ] in place of '
+                     'the values; a failure also has "error").'),
             check='check_expect'),
     Command('.wait', 'script', '.wait EXPR [--timeout S] [--interval S]',
             'poll until a condition holds (default timeout 30 s, interval 0.05 s)',
@@ -347,9 +349,14 @@ COMMANDS: tuple[Command, ...] = (
             details=('  .wait GAP 8, 0 == 1 --timeout 10\n'
                      '  .wait RFS STATUS, 0 == 0\n'
                      '--timeout none waits forever; otherwise at most a day (86400 s); '
-                     '--interval 0.001..86400 s. A timeout is an error that shows the last '
-                     'value read (or says it was in doubt). A condition met on an answer '
-                     'that may have been another request\'s does not end the wait.'),
+                     '--interval 0.001..86400 s. A poll that gets no intact answer is '
+                     'polled again. A timeout is an error that shows the last value read '
+                     'and when (or says it was in doubt, or that none could be read, and '
+                     'why). A condition met on an answer that may have been another '
+                     'request\'s does not end the wait. JSON, met or not: {"check", '
+                     '"passed", "values" (null: none read), "elapsed": s}; a timeout adds '
+                     '"timed_out": true, "read_at" (s into the wait), "read_error" and '
+                     '"error".'),
             check='check_wait',
             options=(Option("--timeout", "S", "give up after S seconds (none: never)"),
                      Option("--interval", "S", "seconds between polls"))),
