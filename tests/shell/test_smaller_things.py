@@ -240,3 +240,31 @@ def test_wait_under_the_simulators_faults_never_ends_in_empty_brackets(make_pty_
         assert message.startswith("timed out after 0.4 s waiting for GAP 4, 0 == 5 (")
         assert not message.endswith("()")
         assert "GAP 4, 0 is 51200" in message or "no value could be read: " in message
+
+
+# -- an operand in a field the command does not use ---------------------------------------------
+
+def test_an_extra_operand_is_refused_and_nothing_is_sent(tmp_path, run_tmclsh):
+    """`GAP 4, 0, 5` sent GAP 4, 0 (the 5 dropped, or put in the unused value field) without a
+    word; now one line naming the field, exit 2, and the module hears nothing of it."""
+    module = PtyModule(version="1311V111")
+    script = tmp_path / "s.tmcl"
+    script.write_text("GAP 4, 0\nGAP 4, 0, 5\n")
+    try:
+        run_tmclsh("--port", module.path, "-c", ".echo connected")
+        connecting = module.commands()
+        for args in (("-c", "GAP 4, 0, 5"), ("-c", "GAP 4, 0; MST 0, 0, 5"),
+                     ("-f", str(script))):
+            module.got.clear()
+            p = run_tmclsh("--port", module.path, *args)
+            assert p.returncode == 2, p.stderr
+            (line,) = [x for x in p.stderr.splitlines() if "too many operands" in x]
+            assert "does not use its value field" in line
+            assert module.commands() == connecting  # checked before anything was sent
+        module.got.clear()
+        p = run_tmclsh("--port", module.path, "-c", "GAP 4, 0, 0; 6 4, 0, 5")
+        assert p.returncode == 0, p.stderr  # the manuals' form; the raw form as written
+        # (a reply byte for byte the one before is asked again: it may be a late copy)
+        assert {g for g in module.got if g[0] == 6} == {(6, 4, 0, 0), (6, 4, 0, 5)}
+    finally:
+        module.close()

@@ -585,6 +585,11 @@ Numbers in decimal or hex ({_b("$1F")}, {_b("0x1F")}); symbolic types ({_b("ABS 
 {_b("START STOP STATUS")}, {_b("TICKS POS")}, ...); parameter names in the type slot
 ({_b("GAP ActualPosition, 0")}). Any command number can be sent raw as well.
 .IP \\(bu 2
+A command takes the operands it uses ({_b("GAP 4, 0")}), or all three fields with 0 in the ones
+it does not use ({_b("GAP 4, 0, 0")}, as the manuals write it); an operand in a field the
+command does not use ({_b("GAP 4, 0, 5")}) is refused and nothing is sent. The raw form
+({_b("6 4, 0, 5")}) sends every field as written.
+.IP \\(bu 2
 Shell commands start with a dot ({_b(".help")}, {_b(".param")}, {_b(".watch")}, ...);
 {_b("help")}, {_b("?")} and {_b("quit")} also work bare ({_b("help")} or {_b("?")} alone is the
 overview).
