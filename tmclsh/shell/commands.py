@@ -407,7 +407,13 @@ COMMANDS: tuple[Command, ...] = (
                      'judged, one sample late. With no '
                      'expressions: the position and speed of each motor. .plot draws the '
                      'last watch. --interval is 0..86400 s, --count 1..1000000; the CSV file '
-                     'is put in place when the watch ends.'),
+                     'is put in place when the watch ends. A CSV row: time (the clock) and t '
+                     '(s since the start) when its first value was read, the values, '
+                     'together (yes: read back to back; no: a retry, a slow answer or a read '
+                     'again came between them) and t(NAME), when each value was read (the '
+                     'request whose answer was taken went out; a retry\'s, not the first '
+                     'attempt\'s). JSON: "t" is the first read\'s; a row not read together '
+                     'adds "together": false and "times": {NAME: s}.'),
             check='check_watch',
             options=(Option("--interval", "S", "seconds between samples"),
                      Option("--count", "N", "stop after N samples"),
