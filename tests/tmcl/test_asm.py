@@ -86,7 +86,7 @@ def test_all_three_fields_may_be_written() -> None:
     for line, col, field in (("GAP 1, 0, 5", 11, "value"), ("MST 0, 0, 5", 11, "value"),
                              ("MST 2, 0, 0", 5, "type"), ("GGP 66, 0, 5", 12, "value")):
         with pytest.raises(AsmError, match=rf"too many operands: .*does not use its {field} "
-                           r"field; leave it out, or write the command number") as info:
+                           r"field; the raw form \d+ <type>, <motor>, <value> sends") as info:
             enc(line)
         assert info.value.col == col
     assert enc("6 1, 0, 5") == Instruction(6, 1, 0, 5)

@@ -471,9 +471,8 @@ class _Encoder:
         spec = self.spec
         self.all_fields = False
         raise self.fail(f"too many operands: {spec.syntax} ({spec.mnemonic} does not use its "
-                        f"{name} field; leave it out, or write the command number to send "
-                        f"every field as written: {spec.opcode} <type>, <motor>, <value>)",
-                        expr, "syntax")
+                        f"{name} field; the raw form {spec.opcode} <type>, <motor>, <value> "
+                        "sends every field as written)", expr, "syntax")
 
     def run(self) -> Encoded:
         spec = self.spec
