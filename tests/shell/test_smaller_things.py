@@ -161,6 +161,7 @@ def test_the_exit_3_message_is_a_record_under_json(tmp_path, run_tmclsh):
         (record,) = [json.loads(x) for x in p.stdout.splitlines()]
         assert record["exit"] == 3 and record["error"]
         assert ("line" in record) is line
+        assert p.stderr.startswith("tmclsh: ") or p.stderr.startswith("nothing answered")
     p = run_tmclsh("--port", missing, "-c", "GAP 4, 0")  # without --json: a line on stderr
     assert p.returncode == 3 and p.stdout == "" and p.stderr.startswith("tmclsh: ")
 

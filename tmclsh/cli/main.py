@@ -307,14 +307,13 @@ def show_manual(parser: argparse.ArgumentParser) -> int:
 
 def _say_error(args: argparse.Namespace, message: str, status: int, prefix: str = "tmclsh: "
                ) -> None:
-    """The error a run ends with: under --json a record on stdout (``{"error", "exit"}``),
-    so that stdout stays JSON; else a line on stderr."""
+    """The error a run ends with: a line on stderr, and under --json a record on stdout
+    (``{"error", "exit"}``) too, so that stdout stays JSON."""
+    print(f"{prefix}{message}", file=sys.stderr)
     if getattr(args, "json", False):
         import json
 
         print(json.dumps({"error": message, "exit": status}), flush=True)
-    else:
-        print(f"{prefix}{message}", file=sys.stderr)
 
 
 def _user_modules(args: argparse.Namespace) -> None:

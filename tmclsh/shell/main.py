@@ -79,13 +79,12 @@ def run_shell(args: argparse.Namespace) -> int:
         client = open_client(settings, fallback=_interactive(args), notice=_notice,
                              tracer=tracer)
     except TmclError as exc:
-        if args.json:  # stdout stays JSON: the failure is a record too, as every error is
+        print(f"tmclsh: {exc}", file=sys.stderr)
+        if args.json:  # stdout stays JSON: the failure is a record there too
             import json
 
             print(json.dumps({"line": None, "error": str(exc), "exit": EXIT_CONNECT}),
                   flush=True)
-        else:
-            print(f"tmclsh: {exc}", file=sys.stderr)
         return EXIT_CONNECT
     try:
         return _run(args, client, settings)
