@@ -18,7 +18,7 @@ def test_save_diff_restore_at_the_prompt(terminal, tmp_path):
     screen = t.run(".diff axis1.tmcl", "1 of 155 parameters differ from axis1.tmcl")
     row = next(ln for ln in screen.splitlines() if ln.startswith("MaxCurrent"))
     assert row.split() == ["MaxCurrent", "│", "AP", "6", "│", "motor", "0", "│", "0", "│",
-                           "128", "│"]
+                           "128", "│", "1/255", "of", "module", "max.", "current"]
     t.run(".restore axis1.tmcl", "write 1 parameter from axis1.tmcl to the TMCM-1311")
     t.line("n")  # answers end with Enter, as everywhere ([y/N])
     t.wait("cancelled; nothing was sent")

@@ -202,7 +202,7 @@ def test_csv_log_and_plot(sim, tmp_path, capsys):
     s.run_line(f".watch pos=GAP 1, 0; in0=GIO 0, 0 --count 5 --interval 0.01 --csv {log}")
     with open(log, newline="") as fh:
         rows = list(csv.reader(fh))
-    assert rows[0] == ["time", "t", "pos", "in0"]
+    assert rows[0] == ["time", "t", "pos", "in0", "together", "t(pos)", "t(in0)"]
     assert len(rows) == 6
     assert "T" in rows[1][0]  # ISO wall-clock timestamp
     positions = [int(r[2]) for r in rows[1:]]

@@ -81,7 +81,16 @@ def test_all_three_fields_may_be_written() -> None:
     # the manual writes `GAP 1, 0, 0` (don't-care value) and `GCO 0, 255, 0`
     assert enc("GAP 1, 0, 0") == enc("GAP 1, 0") == Instruction(6, 1, 0, 0)
     assert enc("ROR 0, 0, 500") == enc("ROR 0, 500")
-    assert enc("GAP 1, 0, 5") == Instruction(6, 1, 0, 5)  # kept: the bytes as written
+    # a value in a field the command does not use is refused (issue 23: it went unseen), the
+    # instruction data saying which fields each command uses; the raw form sends it
+    for line, col, field in (("GAP 1, 0, 5", 11, "value"), ("MST 0, 0, 5", 11, "value"),
+                             ("MST 2, 0, 0", 5, "type"), ("GGP 66, 0, 5", 12, "value")):
+        with pytest.raises(AsmError, match=rf"too many operands: .*does not use its {field} "
+                           r"field; the raw form \d+ <type>, <motor>, <value> sends") as info:
+            enc(line)
+        assert info.value.col == col
+    assert enc("6 1, 0, 5") == Instruction(6, 1, 0, 5)
+    assert enc("GAP 1, 0, 2 - 2") == Instruction(6, 1, 0, 0)  # (an expression that is 0)
     with pytest.raises(AsmError, match=r"too many operands: MST <motor>") as info:
         enc("MST 0, 0")
     assert info.value.col == 8
@@ -411,3 +420,36 @@ def test_symbols_are_case_insensitive() -> None:
     symbols = asm.Symbols(constants={"MaxSpeed": 5}, labels={"Loop": 3})
     assert symbols.lookup("MaxSpeed") == symbols.lookup("MAXSPEED") == 5
     assert symbols.lookup("loop") == 3 and symbols.lookup("nope") is None
+
+
+@pytest.mark.parametrize("module", [M1311, M351, M1640], ids=lambda m: m.name)
+def test_no_command_takes_a_value_in_a_field_it_does_not_use(module) -> None:
+    """For every command the instruction data gives fewer than three fields: written with all
+    three, a 0 in the unused field is the manuals' form; anything else is refused, naming the
+    field (`GAP 4, 0, 5` used to send, or drop, the 5 without a word)."""
+    from tmclsh.tmcl import instructions as isa
+
+    checked = 0
+    for spec in isa.all_instructions():
+        if not spec.on(module.name) or len(spec.fields) == 3:
+            continue
+        for t, m, v in ((t, m, v) for t in (0, 1, 4, 255) for m in (0, 1, 2)
+                        for v in (0, 1, 1234)):
+            fields = {"type": t, "motor": m, "value": v}
+            used = {f: (fields[f] if f in spec.fields else 0) for f in asm.FIELDS}
+            line = f"{spec.mnemonic} {used['type']}, {used['motor']}, {used['value']}"
+            direct = spec.direct  # (a program-only command: as the assembler reads it)
+            try:
+                enc(line, module, direct=direct)
+            except AsmError:
+                continue  # not valid on this module: try other field values
+            break
+        else:
+            continue  # nothing simple is valid for it here (checked elsewhere by example)
+        for unused in (f for f in asm.FIELDS if f not in spec.fields):
+            bad = dict(used, **{unused: 7})
+            with pytest.raises(AsmError, match=rf"does not use its {unused} field"):
+                enc(f"{spec.mnemonic} {bad['type']}, {bad['motor']}, {bad['value']}", module,
+                    direct=direct)
+        checked += 1
+    assert checked >= 20  # the commands of the module, not a handful

@@ -151,6 +151,37 @@ def test_dump_json_names_the_upload(sim, tmp_path, capsys):
     assert "Start:" in obj["source"]
 
 
+def test_an_image_upload_lists_its_disassembly_and_dump_names_it(sim, tmp_path, capsys):
+    """Issue 23: .list after `.upload loop.bin` printed the image's bytes (escape characters
+    into the terminal), and .dump named an older upload of the same bytes from source."""
+    src = tmp_path / "blink.tmcl"
+    src.write_text(SOURCE)
+    binary = tmp_path / "blink.bin"
+    binary.write_bytes(asm.image_bytes(image()))
+    s = session_on(sim)
+    s.run_line(f".upload {src}")
+    s.run_line(f".upload {binary}")  # the same bytes, from the image this time
+    capsys.readouterr()
+    s.run_line(".list")
+    listing = capsys.readouterr().out
+    assert "SIO 0, 2, 1" in listing and "JA 0" in listing
+    assert all(ch.isprintable() for line in listing.splitlines() for ch in line)
+    assert "@5  (no instruction stored)" in listing  # past the image: the end marker
+    out = dump(s, capsys)
+    assert f"// uploaded from the image {binary.resolve()}" in out
+    assert "Start:" not in out and "// output 0 on" not in out  # not the older source
+    body = out[out.index("// program memory"):]
+    assert asm.assemble(body, M1311, "<dump>").instructions == image()
+    js = session_on(sim, json_mode=True)
+    capsys.readouterr()
+    js.run_line(".dump")
+    assert json.loads(capsys.readouterr().out.splitlines()[-1])["uploaded_from"] == str(
+        binary.resolve())
+    # and the source again: .dump names it again
+    s.run_line(f".upload {src}")
+    assert "Start:  SIO 0, 2, 1" in dump(s, capsys)
+
+
 # -- .step on empty memory, against a module written from the manual's byte tables -------------
 
 class EmptyModule(Responder):

@@ -599,6 +599,11 @@ Numbers in decimal or hex ({_b("$1F")}, {_b("0x1F")}); symbolic types ({_b("ABS 
 {_b("START STOP STATUS")}, {_b("TICKS POS")}, ...); parameter names in the type slot
 ({_b("GAP ActualPosition, 0")}). Any command number can be sent raw as well.
 .IP \\(bu 2
+A command takes the operands it uses ({_b("GAP 4, 0")}), or all three fields with 0 in the ones
+it does not use ({_b("GAP 4, 0, 0")}, as the manuals write it); an operand in a field the
+command does not use ({_b("GAP 4, 0, 5")}) is refused and nothing is sent. The raw form
+({_b("6 4, 0, 5")}) sends every field as written.
+.IP \\(bu 2
 Shell commands start with a dot ({_b(".help")}, {_b(".param")}, {_b(".watch")}, ...);
 {_b("help")}, {_b("?")} and {_b("quit")} also work bare ({_b("help")} or {_b("?")} alone is the
 overview).
@@ -622,7 +627,11 @@ Scripts stop at the first error, reported as {_i("FILE")}:{_i("LINE")}, unless
 .IP \\(bu 2
 With {_b("--json")} every result is one JSON object on a line of standard output, e.g.
 {_b('{"line": "GAP 1, 0", "op": 6, "type": 1, "motor": 0, "value": 0, "status": 100, "reply": -5000}')};
-an error gives {_b('{"line": ..., "error": "..."}')}.
+an error gives {_b('{"line": ..., "error": "..."}')}; a check ({_b(".expect")}, {_b(".wait")})
+has the same fields passed or failed ({_b('"check"')}, {_b('"passed": true|false')},
+{_b('"values"')}), and no module to talk to (exit status 3) gives
+{_b('{"line": null, "error": "...", "exit": 3}')} (the subcommands: {_b('{"error", "exit"}')})
+besides the line on standard error.
 On the built-in simulator every object also has {_b('"simulated": true')} (and a script's
 summary line says SIMULATED). A 138 target-reached message is an object of its own, in order
 with the results: {_b('{"event": 138, "motors": [0], "t": 1.25}')} (seconds since the start).

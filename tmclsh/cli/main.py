@@ -179,9 +179,9 @@ def cmd_scan(args: argparse.Namespace) -> int:
     finally:
         client.close()
     if not found:
-        print(f"nothing answered; tried {'; '.join(tried)}"
-              + ("" if auto or client.is_can else "; other baud rates: --baud auto"),
-              file=sys.stderr)
+        _say_error(args, f"nothing answered; tried {'; '.join(tried)}"
+                   + ("" if auto or client.is_can else "; other baud rates: --baud auto"),
+                   EXIT_CONNECT, prefix="")
         return EXIT_CONNECT
     where = ", ".join(str(f.address) + (f" ({f.baud} baud)" if auto else "") for f in found)
     n = len(found)
@@ -316,6 +316,17 @@ def show_manual(parser: argparse.ArgumentParser) -> int:
         return subprocess.call([man, page])  # a path with a slash: man reads that file
 
 
+def _say_error(args: argparse.Namespace, message: str, status: int, prefix: str = "tmclsh: "
+               ) -> None:
+    """The error a run ends with: a line on stderr, and under --json a record on stdout
+    (``{"error", "exit"}``) too, so that stdout stays JSON."""
+    print(f"{prefix}{message}", file=sys.stderr)
+    if getattr(args, "json", False):
+        import json
+
+        print(json.dumps({"error": message, "exit": status}), flush=True)
+
+
 def _user_modules(args: argparse.Namespace) -> None:
     """Take in --module-file; a module file that cannot be used is one warning line and the
     run goes on without it (``tmclsh modules`` reports them itself)."""
@@ -369,10 +380,11 @@ def main(argv: list[str] | None = None) -> int:
     except TmclError as exc:
         if debug:
             raise
-        print(f"tmclsh: {exc}", file=sys.stderr)
         from ..base.errors import ConnectError
 
-        return EXIT_CONNECT if isinstance(exc, ConnectError) else EXIT_FAILED
+        status = EXIT_CONNECT if isinstance(exc, ConnectError) else EXIT_FAILED
+        _say_error(args, str(exc), status)
+        return status
     except OSError as exc:
         if debug:
             raise

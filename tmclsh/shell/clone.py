@@ -359,9 +359,28 @@ def _may_overwrite(session: Session, paths: list[Path | None], yes: bool) -> Non
                 f"replace {'it' if one else 'them'}, or save under another name")
 
 
+def _has_parameters_to_save(module: Module) -> None:
+    """A backup reads the parameters the module's data lists; a module known by number only
+    has none, and a file of 0 parameters restores nothing: refused, with what can be done."""
+    if _has_data(module):
+        return
+    if getattr(module, "forced", False):
+        type_name = getattr(module, "type_name", module.name)
+        why = (f"generic mode (-m generic) uses no parameter data, so .save has nothing to "
+               f"read: switch to the {type_name}'s data with '.module {type_name}' (or "
+               "connect without -m generic) and .save again")
+    else:
+        why = (f"tmclsh has no parameter data for the {module.name}, so .save has nothing to "
+               "read: describe its parameters in a module file (--module-file FILE; "
+               "'tmclsh modules check FILE' checks it) and .save again, or read the values "
+               "you need by number (GAP/GGP)")
+    raise ValidationError(why + "; nothing saved (the stored program: .dump FILE)")
+
+
 @command(".save")
 def cmd_save(session: Session, argtext: str) -> None:
     name, given = _args(argtext, ".save")
+    _has_parameters_to_save(session.module)
     path = Path(name).expanduser()
     if path.is_dir():
         raise CloneError(f"cannot write {path}: it is a directory")
@@ -630,8 +649,9 @@ def _carry(backup: Backup, live: Module, p: Parameter, number: int, index: int, 
     if not q.writable:
         backup.skipped.append((what, f"read-only on the {live.name}"))
         return None
-    if p.unit and q.unit and p.unit != q.unit:  # 1234 pps is no 1234 rpm
-        backup.skipped.append((what, f"in {p.unit} there, {q.unit} on the {live.name}"))
+    if p.unit != q.unit:  # 1234 pps is no 1234 rpm; a 0..255 scale is no mA either
+        backup.skipped.append((what, f"units differ: {_unit_of(p)} there, {_unit_of(q)} on the "
+                                     f"{live.name} (not converted)"))
         return None
     new_number = q.number + (number - p.number)
     shown = _shown(value, q)
@@ -640,6 +660,10 @@ def _carry(backup: Backup, live: Module, p: Parameter, number: int, index: int, 
                                      f"({q.range_text}{' ' + q.unit if q.unit else ''})"))
         return None
     return Slot(p.kind, new_number, q.bank if p.kind == "global" else index, shown, q, line)
+
+
+def _unit_of(p: Parameter) -> str:
+    return p.unit if p.unit else f"no unit given ({p.range_text})"
 
 
 @dataclass
@@ -722,6 +746,8 @@ def cmd_diff(session: Session, argtext: str) -> None:
     live = session.module
     out = session.out
     if out.json:
+        for what, why in backup.skipped:  # not compared, and why (another module's backup)
+            out.emit({"skipped": what, "why": why})
         for d in diffs:
             out.emit(d.to_json())
     elif not diffs:

@@ -339,7 +339,9 @@ COMMANDS: tuple[Command, ...] = (
                      'A failure says what was expected and what was read. An answer the '
                      'line may have given another request (a reply came that nothing was '
                      'waiting for) is read again; one still in doubt fails the check, said '
-                     'to be in doubt, its value not stated.'),
+                     'to be in doubt, its value not stated. JSON: {"check", "passed": '
+                     'true|false, "values": {READ: value}} ("in_doubt": [READ] in place of '
+                     'the values; a failure also has "error").'),
             check='check_expect'),
     Command('.wait', 'script', '.wait EXPR [--timeout S] [--interval S]',
             'poll until a condition holds (default timeout 30 s, interval 0.05 s)',
@@ -347,9 +349,14 @@ COMMANDS: tuple[Command, ...] = (
             details=('  .wait GAP 8, 0 == 1 --timeout 10\n'
                      '  .wait RFS STATUS, 0 == 0\n'
                      '--timeout none waits forever; otherwise at most a day (86400 s); '
-                     '--interval 0.001..86400 s. A timeout is an error that shows the last '
-                     'value read (or says it was in doubt). A condition met on an answer '
-                     'that may have been another request\'s does not end the wait.'),
+                     '--interval 0.001..86400 s. A poll that gets no intact answer is '
+                     'polled again. A timeout is an error that shows the last value read '
+                     'and when (or says it was in doubt, or that none could be read, and '
+                     'why). A condition met on an answer that may have been another '
+                     'request\'s does not end the wait. JSON, met or not: {"check", '
+                     '"passed", "values" (null: none read), "elapsed": s}; a timeout adds '
+                     '"timed_out": true, "read_at" (s into the wait), "read_error" and '
+                     '"error".'),
             check='check_wait',
             options=(Option("--timeout", "S", "give up after S seconds (none: never)"),
                      Option("--interval", "S", "seconds between polls"))),
@@ -400,7 +407,13 @@ COMMANDS: tuple[Command, ...] = (
                      'judged, one sample late. With no '
                      'expressions: the position and speed of each motor. .plot draws the '
                      'last watch. --interval is 0..86400 s, --count 1..1000000; the CSV file '
-                     'is put in place when the watch ends.'),
+                     'is put in place when the watch ends. A CSV row: time (the clock) and t '
+                     '(s since the start) when its first value was read, the values, '
+                     'together (yes: read back to back; no: a retry, a slow answer or a read '
+                     'again came between them) and t(NAME), when each value was read (the '
+                     'request whose answer was taken went out; a retry\'s, not the first '
+                     'attempt\'s). JSON: "t" is the first read\'s; a row not read together '
+                     'adds "together": false and "times": {NAME: s}.'),
             check='check_watch',
             options=(Option("--interval", "S", "seconds between samples"),
                      Option("--count", "N", "stop after N samples"),
@@ -584,7 +597,9 @@ COMMANDS: tuple[Command, ...] = (
             details=('Reads GP 67 and writes it back with the named bits changed (other bits '
                      'kept). GP 67 is one of the bank-0 parameters 64..128 that SGP writes '
                      'to EEPROM directly (manual §10.1), so the change is permanent and asks '
-                     'first (--yes). The start-up mode applies from the next power-up.')),
+                     'first (--yes). The start-up mode applies from the next power-up. A '
+                     "module whose data has no ASCII interface (TMCM-1640) is refused before "
+                     'anything is sent.')),
     Command('.save', 'clone', '.save FILE [--program] [--yes]',
             "back up the module's configuration as a replayable script",
             complete='complete_file', category='configuration',
@@ -607,7 +622,11 @@ COMMANDS: tuple[Command, ...] = (
                      'source, beside FILE with .program.tmcl in place of its suffix '
                      '(backup.tmcl:\n'
                      'backup.program.tmcl; put it back with .upload). JSON: {"saved": N,\n'
-                     '"file": FILE} (and "program": PATH, "instructions": N with --program).'),
+                     '"file": FILE} (and "program": PATH, "instructions": N with --program).\n'
+                     'A module read by number only (no parameter data, or -m generic) has no '
+                     'list of parameters\n'
+                     'to read: .save refuses it (a failure in -c/-f) and says what to do '
+                     'instead.'),
             options=(Option("--program", help="also the stored program"),
                      Option("--yes", help="replace a file that exists", aliases=("-y",)))),
     Command('.diff', 'clone', '.diff FILE [--exit-code] [--force]',
@@ -627,7 +646,11 @@ COMMANDS: tuple[Command, ...] = (
                      'equal values. Exits 0\n'
                      'either way; with --exit-code a difference is a failure (exit status '
                      '1). A backup of another\n'
-                     'module type is compared by parameter name only with --force.'),
+                     'module type is compared by parameter name only with --force; a '
+                     'parameter whose unit differs\n'
+                     '(pps there, rpm here) is skipped and named, never compared as a number '
+                     '(JSON: {"skipped",\n'
+                     '"why"} for each parameter not compared).'),
             options=(Option("--exit-code", help="exit 1 when there are differences"),
                      Option("--force", help="compare a backup of another module type",
                             aliases=("-f",)))),

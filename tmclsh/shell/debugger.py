@@ -514,7 +514,12 @@ def cmd_upload(session: Session, argtext: str) -> None:
 
 
 def _keep_source(prog: asm.Program, module: str, origin: int, path: Path) -> None:
-    """The source of an upload, for .dump later (sourcemap.py); never fails the upload."""
+    """The source of an upload, for .dump later (sourcemap.py); never fails the upload.
+    An image file is kept by name only, so that .dump names this upload and not an older
+    source of the same bytes."""
+    if prog.image:
+        sourcemap.save(prog.instructions, module, origin, path, "", image=True)
+        return
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError):
@@ -525,11 +530,15 @@ def _keep_source(prog: asm.Program, module: str, origin: int, path: Path) -> Non
 def _original_source(session: Session, image: list[Instruction], start: int,
                      header: str) -> tuple[str, sourcemap.SourceMap] | None:
     """The source this image was uploaded from, if tmclsh kept it and it still assembles
-    to exactly these bytes (an include file may have changed since)."""
+    to exactly these bytes (an include file may have changed since); for an upload from an
+    image file, its disassembly under a line naming that file."""
     module = session.module
     kept = sourcemap.lookup(image, module.name, start)
     if kept is None:
         return None
+    if kept.image:
+        return (header + f"// uploaded from the image {kept.file}, {kept.uploaded} (no labels "
+                "or comments: generated)\n" + asm.disassemble(image, module, start), kept)
     text = (header + f"// source: {kept.file}, uploaded {kept.uploaded} (labels and comments "
             "as written)\n" + kept.text)
     try:
@@ -924,8 +933,8 @@ def cmd_list(session: Session, argtext: str) -> None:
 def _listing(session: Session, center: int, pc: int | None, breaks: set[int]) -> list[dict]:
     dbg = state(session)
     prog = dbg.program
-    loc = prog.loc(center) if prog is not None else None
-    if prog is not None and loc is not None:
+    loc = prog.loc(center) if prog is not None and not prog.image else None
+    if prog is not None and loc is not None:  # (an image's file holds bytes, not lines)
         lines = _source_lines(session, loc.file)
         addr_of: dict[int, int] = {}
         for idx, sl in enumerate(prog.source):
@@ -947,7 +956,9 @@ def _listing(session: Session, center: int, pc: int | None, breaks: set[int]) ->
     rows = []
     for addr in range(lo, hi + 1):
         w = where(session, addr)
-        rows.append({"line": w.line, "address": addr, "text": w.text or "?",
+        line = None if prog is not None and prog.image else w.line  # (a record, not a line)
+        text = w.text or ("(no instruction stored)" if w.end else "?")
+        rows.append({"line": line, "address": addr, "text": text,
                      "current": addr == pc, "break": addr in breaks})
     return rows
 

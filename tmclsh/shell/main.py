@@ -80,6 +80,11 @@ def run_shell(args: argparse.Namespace) -> int:
                              tracer=tracer)
     except TmclError as exc:
         print(f"tmclsh: {exc}", file=sys.stderr)
+        if args.json:  # stdout stays JSON: the failure is a record there too
+            import json
+
+            print(json.dumps({"line": None, "error": str(exc), "exit": EXIT_CONNECT}),
+                  flush=True)
         return EXIT_CONNECT
     try:
         return _run(args, client, settings)

@@ -131,6 +131,10 @@ def render(log: Log, width: int = 60, height: int = 8, names: Sequence[str] | No
     return Group(*panels)
 
 
+def _time_of(column: str, header: Sequence[str]) -> bool:
+    return column.startswith("t(") and column.endswith(")") and column[2:-1] in header
+
+
 def read_csv(path: Path) -> Log:
     """A CSV with a ``t`` column (seconds; else the first numeric column) and value columns."""
     if not path.exists():
@@ -164,7 +168,8 @@ def read_csv(path: Path) -> Log:
         xi = numeric[0]
     else:
         raise ValidationError(f"{path}: no numeric column")
-    cols = [i for i in numeric if i != xi]
+    # (a watch's log: "t(pos)" is when pos was read, a time, not a series of its own)
+    cols = [i for i in numeric if i != xi and not _time_of(header[i], header)]
     if not cols:
         raise ValidationError(f"{path}: no value columns besides {header[xi]!r}")
     log = Log([header[i] for i in cols], source=str(path))

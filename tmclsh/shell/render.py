@@ -298,9 +298,11 @@ class Output:
     def warn(self, text: str) -> None:
         self._message(text, "tmcl.warn", stderr=True)
 
-    def error(self, line: str | None, message: str) -> None:
+    def error(self, line: str | None, message: str,
+              record: dict[str, object] | None = None) -> None:
+        """``record``: the fields a failed check (.expect, .wait) has in JSON, passed or not."""
         if self.json:
-            self.emit({"line": line, "error": message})
+            self.emit({"line": line, **(record or {}), "error": message})
         else:
             self._message(f"error: {message}", "tmcl.error", stderr=True)
 

@@ -31,8 +31,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..base import files, limits
-from ..base.errors import (EXIT_FAILED, EXIT_OK, EXIT_USAGE, AsmError, RangeError, TmclError,
-                           TmclTimeoutError, ValidationError)
+from ..base.errors import (EXIT_FAILED, EXIT_OK, EXIT_USAGE, AsmError, ChecksumError,
+                           FrameError, RangeError, TmclError, TmclTimeoutError, ValidationError)
 from ..client.ledger import CONFIRM_ROUNDS
 from . import commands, expr, options
 from .commands import command, options_of
@@ -547,8 +547,9 @@ def report(session: Session, node: Node, exc: TmclError) -> None:
     if session.out.json:
         if getattr(exc, "shown", False):
             session.out.warn(f"{where}{exc}")  # its result object already says "error"
-        else:
-            session.out.emit({"line": node.text, "error": f"{where}{exc}"})
+        else:  # (a check's record: its fields, then the error)
+            session.out.emit({"line": node.text, **getattr(exc, "record", {}),
+                              "error": f"{where}{exc}"})
     else:
         session.out.err.print(f"{where}{exc}", style="tmcl.error", markup=False)
 
@@ -891,6 +892,17 @@ class Judged:
     doubt: list[str]
     answered: dict[int, str]  # every reply the check took (Client.replies -> read)
     tries: int = 1  # times the condition was evaluated
+    values: dict[str, expr.Number] = field(default_factory=dict)  # each read, as read
+
+    def record(self, expression: expr.Expression, passed: bool) -> dict[str, object]:
+        """The JSON fields of a check (.expect, .wait): the same keys, passed or not; the
+        values read are left out while in doubt (not stated as read)."""
+        obj: dict[str, object] = {"check": expression.text, "passed": passed}
+        if self.doubt:
+            obj["in_doubt"] = list(self.doubt)
+        else:
+            obj["values"] = dict(self.values)
+        return obj
 
     def seen(self) -> str:
         return f"{self.left}{', ' + self.right if self.right else ''}"
@@ -922,7 +934,7 @@ def judge(session: Session, expression: expr.Expression, *, again: bool = True,
         if not doubt:
             break
     session.client.settle(answered)
-    return Judged(ok, left, right, sorted(doubt), answered, tries)
+    return Judged(ok, left, right, sorted(doubt), answered, tries, dict(ctx.trace))
 
 
 def _side(node: expr.Node, ctx: expr.SessionContext) -> str:
@@ -936,20 +948,26 @@ def cmd_expect(session: Session, args: str) -> None:
         raise ValidationError(".expect needs a condition: .expect GAP 1, 0 == 5000")
     expression = expr.parse(session.expand(args))
     judged = judge(session, expression)
-    if judged.doubt:  # judged on no certain value: neither a pass nor a stated value
+    if judged.doubt or not judged.ok:  # in doubt: judged on no certain value, not a pass
         session.stats.checks_failed += 1
-        raise CheckFailed(f"expectation in doubt: {expression.text} ({judged.in_doubt()})")
-    if not judged.ok:
-        session.stats.checks_failed += 1
-        raise CheckFailed(f"expectation failed: {expression.text} ({judged.seen()})")
+        err = CheckFailed(f"expectation in doubt: {expression.text} ({judged.in_doubt()})"
+                          if judged.doubt else
+                          f"expectation failed: {expression.text} ({judged.seen()})")
+        err.record = judged.record(expression, False)  # type: ignore[attr-defined]
+        raise err
     session.stats.checks_passed += 1
     if session.out.json:
-        session.out.emit({"line": f".expect {args}", "check": expression.text, "passed": True})
+        session.out.emit({"line": f".expect {args}", **judged.record(expression, True)})
     else:
         session.out.print(f"passed: {expression.text} ({judged.left})", style="tmcl.ok",
                           markup=False)
 
 
+
+
+# what a poll of .wait may meet and still poll again: no answer, or none intact (the module
+# refusing the read, a StatusError, is an answer and ends the wait)
+_UNREAD = (TmclTimeoutError, ChecksumError, FrameError)
 
 
 @command(".wait")
@@ -963,10 +981,18 @@ def cmd_wait(session: Session, args: str) -> None:
         raise ValidationError(".wait needs a condition: .wait GAP 8, 0 == 1")
     expression = expr.parse(session.expand(rest))
     last: Judged | None = None
+    start = time.monotonic()
+    last_at = 0.0  # seconds into the wait when ``last`` was read
+    unread: str | None = None  # why the polls since ``last`` read nothing
 
     def holds() -> bool:
-        nonlocal last
-        before, last = last, judge(session, expression, again=False, confirm=False)
+        nonlocal last, last_at, unread
+        try:
+            judged = judge(session, expression, again=False, confirm=False)
+        except _UNREAD as exc:  # no answer, or none intact: the next poll may get one
+            unread = str(exc)
+            return False
+        before, last, last_at, unread = last, judged, time.monotonic() - start, None
         if before is not None:  # (judged by this poll's requests)
             session.client.settle(before.answered)
         if not last.ok or last.doubt:
@@ -983,15 +1009,31 @@ def cmd_wait(session: Session, args: str) -> None:
         if capped:
             time.sleep(0.001)
             session.time_left()
-        seen = ""
-        if last is not None:
+        elapsed = time.monotonic() - start
+        record: dict[str, object] = {"check": expression.text, "passed": False,
+                                     "timed_out": True, "values": None}
+        if last is None:
+            seen = f"no value could be read: {unread}"
+        else:
             # the last answer judged, so it is not stated as read when it was in doubt
             doubt = sorted(session.client.in_doubt(last.answered, confirm=True)) or last.doubt
             session.client.settle(last.answered)
             last.doubt = doubt
             seen = last.in_doubt() if doubt else last.seen()
-        raise TmclTimeoutError(f"timed out after {timeout:g} s waiting for {expression.text} "
-                               f"({seen})") from None
+            record.update(last.record(expression, False), read_at=round(last_at, 3))
+            if unread is not None:
+                seen += (f", read at {last_at:.2f} s; the reads after it failed: {unread}")
+        if unread is not None:
+            record["read_error"] = unread
+        record["elapsed"] = round(elapsed, 3)
+        err = TmclTimeoutError(f"timed out after {timeout:g} s waiting for {expression.text} "
+                               f"({seen})")
+        err.record = record  # type: ignore[attr-defined]
+        raise err from None
+    if session.out.json:
+        assert last is not None
+        session.out.emit({"line": f".wait {args}", **last.record(expression, True),
+                          "elapsed": round(time.monotonic() - start, 3)})
 
 
 @command(".sleep")

@@ -215,7 +215,7 @@ class Session:
         where = ""
         if self.location is not None:
             where = f"{self.location[0]}:{self.location[1]}: "
-        self.out.error(line, f"{where}{exc}")
+        self.out.error(line, f"{where}{exc}", getattr(exc, "record", None))
 
     # -- confirmation -------------------------------------------------------------------
     def confirm(self, question: str) -> None:

@@ -1023,7 +1023,22 @@ def _show_mode(session: Session) -> None:
         session.out.print(f"mode: binary{extra}", markup=False)
 
 
-def _complete_config(session: Session, text: str) -> list[tuple[str, str]]:
+def _no_ascii_interface(session: Session) -> str | None:
+    """Why this module has no GP 67 to show or set, from its data (a module known by number
+    only is asked: the module decides), or None."""
+    module = session.client.module
+    if module is None or module.generic:
+        return None
+    if not module.ascii_mode:
+        return f"the {module.name} has no ASCII interface (its data: no GP 67, no command 139)"
+    if module.glob(GP_ASCII_MODE, GP_BANK) is None:
+        return f"the {module.name}'s data lists no GP 67 (ASCIIMode)"
+    return None
+
+
+def _complete_config(session: Session | None, text: str) -> list[tuple[str, str]]:
+    if session is not None and _no_ascii_interface(session) is not None:
+        return []  # nothing to offer: the module has no GP 67
     return [("startup=ascii", "start up in ASCII mode (GP 67 bit 0)"),
             ("startup=binary", "start up in binary mode"),
             ("echo=char", "echo each character (bits 5/4 = 00)"),
@@ -1045,6 +1060,9 @@ def cmd_ascii_config(session: Session, argtext: str) -> None:
         if key == "echo" and val not in ECHO_NAMES:
             raise ValidationError(f"echo must be one of {'|'.join(ECHO_NAMES)}, got {val!r}")
         changes[key] = val
+    lacking = _no_ascii_interface(session)
+    if lacking is not None:
+        raise ValidationError(f"{lacking}: nothing to show or set; nothing sent")
     client = session.client
     current = _read_gp67(session)
     if not changes:

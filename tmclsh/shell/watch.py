@@ -70,6 +70,7 @@ _NO_KEYS_HELP = "Ctrl-C: stop all and end"
 STOP_KEYS = "sS "  # stop the program and every motor, keep watching
 QUIT_KEYS = "qQ"  # end the watch quietly (so does Esc)
 RECONNECT_EVERY = 0.5  # s between reconnection attempts after the link was lost
+TOGETHER_SLACK = 0.01  # s a row's reads may lie apart beyond the line's own pace, "together"
 
 
 # -- what is watched ---------------------------------------------------------------------
@@ -128,17 +129,73 @@ def default_items(session: Session) -> list[Item]:
 
 @dataclass(frozen=True)
 class Sample:
-    t: float  # seconds since the watch started
+    t: float  # seconds since the watch started: when its first value was read
     values: dict[str, Number | None]
     errors: dict[str, str] = field(default_factory=dict)
     lost: str | None = None  # the link was lost during this sample: why
     suspect: tuple[str, ...] = ()  # values whose answer may have been another request's
+    times: dict[str, float] = field(default_factory=dict)  # name -> when its value was read
+    together: bool = True  # its values were read back to back (no retry, wait or read again)
+
+
+class SendClock:
+    """When the last request went out (a sent-only tracer: it leaves the receive path as it
+    is). A read's time is the sending of the request whose answer was taken: a retry's, not
+    the first attempt's; and not the answer's arrival, which a slow line holds back while
+    the module read its value at the request. ``fastest``: the quickest exchange seen (a
+    request sent to its answer taken), the measure of "back to back" on this line."""
+
+    def __init__(self) -> None:
+        self.sent = 0.0
+        self.fastest: float | None = None
+
+    def __call__(self, direction: str, raw: bytes, decoded: object) -> None:
+        self.sent = time.monotonic()
+
+    def took(self, sent: float, answered: float) -> None:
+        took = answered - sent
+        if self.fastest is None or took < self.fastest:
+            self.fastest = took
+
+    def together(self, times: Sequence[float]) -> bool:
+        """Whether reads sent at ``times`` followed one another as fast as this line goes:
+        within three of the fastest exchanges per read, plus 10 ms (scheduling)."""
+        if len(times) < 2:
+            return True
+        span = max(times) - min(times)
+        return span <= (len(times) - 1) * 3 * (self.fastest or 0.0) + TOGETHER_SLACK
+
+
+@dataclass
+class _TimedContext(expr.TrackedContext):
+    """A ``TrackedContext`` that notes when each read was made (``read_at``: text ->
+    monotonic time its answered request went out, per ``SendClock``)."""
+
+    clock: SendClock | None = None
+    read_at: dict[str, float] = field(default_factory=dict)
+
+    def read(self, node: expr.Read, text: str) -> Number:
+        if self.cache is not None and text in self.cache:
+            self.used.add(text)
+            return self.cache[text]
+        before = time.monotonic()
+        try:
+            return super().read(node, text)
+        finally:
+            clock = self.clock
+            sent = clock.sent if clock is not None and clock.sent >= before else before
+            if text in self.trace or clock is None:
+                self.read_at[text] = sent
+            if clock is not None and text in self.trace:
+                clock.took(sent, time.monotonic())
 
 
 def poll(session: Session, items: Sequence[Item], t: float) -> Sample:
     """One sample: every item evaluated once; a read failing shows as None plus its error.
     A lost link ends the sample at once (``Sample.lost``). Its answers are judged on what the
-    client knows so far and then once more after a 136 type 1 exchange (see ``_Reading``)."""
+    client knows so far and then once more after a 136 type 1 exchange (see ``_Reading``).
+    ``t``: seconds since the watch began, when this sample starts (its times count from
+    ``time.monotonic() - t``)."""
     reading = _Reading(session, items, t)
     reading.settle(confirm=True)
     return reading.sample()
@@ -148,9 +205,12 @@ class _Reading:
     """One sample's reads, with the reply that answered each (``expr.TrackedContext``), so
     a read whose answer is found in doubt can be read again or marked."""
 
-    def __init__(self, session: Session, items: Sequence[Item], t: float):
+    def __init__(self, session: Session, items: Sequence[Item], t: float,
+                 clock: SendClock | None = None, start: float | None = None):
+        """``t``: seconds since the watch began (``start``, monotonic), now."""
         self.session, self.items, self.t = session, items, t
-        self.ctx = expr.TrackedContext(session, cache={})
+        self.start = time.monotonic() - t if start is None else start
+        self.ctx = _TimedContext(session, cache={}, clock=clock)
         self.values: dict[str, Number | None] = {}
         self.errors: dict[str, str] = {}
         self.uses: dict[str, set[str]] = {}  # item name -> the reads it used
@@ -218,7 +278,19 @@ class _Reading:
     def sample(self) -> Sample:
         if self.lost is not None:
             return Sample(self.t, {i.name: None for i in self.items}, {}, lost=self.lost)
-        return Sample(self.t, dict(self.values), dict(self.errors), suspect=tuple(self.suspect))
+        read_at = self.ctx.read_at
+        times: dict[str, float] = {}
+        for item in self.items:  # (an expression of several reads: midway between them)
+            when = [read_at[r] for r in self.uses.get(item.name, ()) if r in read_at]
+            if when and self.values.get(item.name) is not None:
+                times[item.name] = (min(when) + max(when)) / 2 - self.start
+        used = [read_at[r] for r in set().union(*self.uses.values()) if r in read_at] \
+            if self.uses else []
+        clock = self.ctx.clock
+        together = clock.together(used) if clock is not None else True
+        t = min(times.values()) if times else self.t
+        return Sample(t, dict(self.values), dict(self.errors), suspect=tuple(self.suspect),
+                      times=times, together=together)
 
 
 @dataclass(frozen=True)
@@ -296,7 +368,7 @@ class WatchState:
             self.prev[n], self.last[n] = self.last[n], v
             self.min[n] = v if self.min[n] is None else min(self.min[n], v)  # type: ignore[type-var]
             self.max[n] = v if self.max[n] is None else max(self.max[n], v)  # type: ignore[type-var]
-            self.recent[n].append((sample.t, v))
+            self.recent[n].append((sample.times.get(n, sample.t), v))
         self.log.add(sample.t, sample.values)
         if len(self.log.t) > LOG_LIMIT:
             half = LOG_LIMIT // 2
@@ -569,20 +641,29 @@ class WatchResult:
 
 class _Csv:
     """The samples as CSV, written beside the file and put in its place when the watch
-    ends (a full disk stops the watch with an error and leaves the old file as it was)."""
+    ends (a full disk stops the watch with an error and leaves the old file as it was).
 
-    def __init__(self, path: Path, names: Sequence[str]):
+    A row: ``time`` (the clock when its first value was read) and ``t`` (the same in seconds
+    since the watch began), the values, ``together`` (yes: read back to back; no: a retry, a
+    slow answer or a read again came between them) and ``t(NAME)`` for each value, the
+    moment it was read (rows are written once judged, so never the moment of writing)."""
+
+    def __init__(self, path: Path, names: Sequence[str], wall_start: float):
         self.fh = files.atomic_writer(path, newline="")
         self.writer = csv.writer(self.fh)
-        self.writer.writerow(["time", "t", *names])
+        self.writer.writerow(["time", "t", *names, "together", *(f"t({n})" for n in names)])
         self.fh.flush()
         self.names = names
+        self.wall_start = wall_start  # time.time() at the watch's t = 0
 
     def write(self, sample: Sample) -> None:
-        self.writer.writerow([datetime.now().isoformat(timespec="milliseconds"),
-                              f"{sample.t:.4f}",
+        when = datetime.fromtimestamp(self.wall_start + sample.t)
+        self.writer.writerow([when.isoformat(timespec="milliseconds"), f"{sample.t:.4f}",
                               *("?" if n in sample.suspect else "" if sample.values.get(n) is None
-                                else sample.values[n] for n in self.names)])
+                                else sample.values[n] for n in self.names),
+                              "yes" if sample.together else "no",
+                              *(f"{sample.times[n]:.4f}" if n in sample.times else ""
+                                for n in self.names)])
         self.fh.flush()
 
     def close(self) -> None:
@@ -600,8 +681,10 @@ def run_watch(session: Session, items: Sequence[Item], *, interval: float = DEFA
     if live is None:
         live = not out.json and out.is_terminal
     w = _Watch(session, items, interval, count, until, emit or out.emit)
-    sink = _Csv(csv_path, [i.name for i in items]) if csv_path is not None else None
+    sink = (_Csv(csv_path, [i.name for i in items], w.wall_start) if csv_path is not None
+            else None)
     w.sink = sink
+    untrace = session.client.add_tracer(w.clock, sent_only=True)
     try:
         with (keys if keys is not None else Keys()) as w.keys, _Interrupt() as w.intr:
             w.state.keys = w.keys.active
@@ -613,6 +696,7 @@ def run_watch(session: Session, items: Sequence[Item], *, interval: float = DEFA
                 if w.view is not None:
                     w.view.close()
     finally:
+        untrace()
         if sink is not None:
             sink.close()
     w.result.samples = w.state.samples
@@ -658,7 +742,9 @@ class _Watch:
         self.pending: _Reading | None = None  # read, shown once its last answer is judged
         self.keys = Keys()
         self.intr = _Interrupt()
+        self.clock = SendClock()
         self.start = time.monotonic()
+        self.wall_start = time.time()  # (the CSV's clock column: the same moment)
 
     def run(self) -> str:
         """Returns why the watch ended: count, until, key, interrupt or pipe.
@@ -675,7 +761,8 @@ class _Watch:
                 if ended is not None:
                     return self._end(ended)
                 continue
-            reading = _Reading(self.session, self.items, time.monotonic() - self.start)
+            reading = _Reading(self.session, self.items, time.monotonic() - self.start,
+                               self.clock, self.start)
             if self.pending is not None:  # judged by this sample's requests
                 ended = self._deliver(self.pending, followed=True, until=False)
                 if ended is not None:
@@ -735,6 +822,9 @@ class _Watch:
             self.view.update()
         else:
             obj: dict[str, object] = {"t": round(sample.t, 4), "values": sample.values}
+            if not sample.together:  # (each value's own time, as the CSV gives it)
+                obj["together"] = False
+                obj["times"] = {n: round(v, 4) for n, v in sample.times.items()}
             if sample.suspect:
                 obj["suspect"] = list(sample.suspect)
             try:

@@ -8,7 +8,8 @@ Source syntax (the TMCL-IDE's, as the manuals print it):
 
 * ``CMD a, b, c`` with the operands the instruction set names for ``CMD`` (``ROR 0, 500``
   fills motor and value), or all three fields in type, motor, value order (``GAP 1, 0, 0``:
-  the don't-care value written out). A comma straight after the mnemonic is accepted
+  the don't-care value written out, as 0; anything else there is refused, since the command
+  does not use that field). A comma straight after the mnemonic is accepted
   (``EI, 255`` and ``SGP, 0, 2, 100`` as some manual examples print it).
 * ``Label:`` (alone or before a command), ``Name = expression`` (a constant),
   ``#include FILE`` and ``// comment``.
@@ -420,6 +421,7 @@ class _Encoder:
         self.param: Parameter | None = None
         self.label: str | None = None
         self.all_fields = False  # three operands for a command that names fewer
+        self.unused: dict[str, Expr] = {}  # those operands in fields the command does not use
 
     def fail(self, msg: str, expr: Expr | None = None, kind: str = "check") -> AsmError:
         """A well-formed line this module refuses; ``kind="range"`` for a value out of range."""
@@ -448,6 +450,7 @@ class _Encoder:
             given = dict(zip(FIELDS, ops))  # `GAP 1, 0, 0`: don't-care fields written out
             # (where that moves an operand to another field, a refusal says how it was read)
             self.all_fields = tuple(spec.fields) != FIELDS[:len(spec.fields)]
+            self.unused = {name: given.pop(name) for name in FIELDS if name not in spec.fields}
         else:
             raise self.fail(f"too many operands: {spec.syntax} (or all three fields: "
                             f"{spec.mnemonic} <type>, <motor>, <value>)", ops[len(spec.fields)],
@@ -458,6 +461,18 @@ class _Encoder:
         if "value" in spec.fields and "value" not in given:
             raise self.fail(f"{spec.mnemonic} needs a value: {spec.syntax}", kind="syntax")
         return given
+
+    def _unused(self, name: str, expr: Expr) -> None:
+        """An operand written into a field the instruction does not use: 0 is the manuals'
+        way of writing all three fields; anything else would be sent and ignored, or
+        silently dropped, so it is refused (the command number sends fields as written)."""
+        if self.number(expr) == 0:
+            return
+        spec = self.spec
+        self.all_fields = False
+        raise self.fail(f"too many operands: {spec.syntax} ({spec.mnemonic} does not use its "
+                        f"{name} field; the raw form {spec.opcode} <type>, <motor>, <value> "
+                        "sends every field as written)", expr, "syntax")
 
     def run(self) -> Encoded:
         spec = self.spec
@@ -480,6 +495,8 @@ class _Encoder:
             fields["motor"] = self.param.bank  # `GGP SerialAddress`: the parameter's bank
         if "value" in given:
             fields["value"] = self.value(given["value"], fields)
+        for name, expr in self.unused.items():  # don't-care fields written out
+            self._unused(name, expr)
         self.check_access()
         ins = Instruction(spec.opcode, fields["type"], fields["motor"], fields["value"])
         return Encoded(ins, spec, self.param, self.label)
@@ -700,6 +717,9 @@ class Program:
     source: list[SourceLoc]
     labels: dict[str, int]
     origin: int = 0
+    # read from an image (.bin/.hex), not assembled: its "source" is the disassembly, one
+    # line per instruction, and its file holds bytes, never lines to show
+    image: bool = False
 
     def __len__(self) -> int:
         return len(self.instructions)
@@ -997,7 +1017,7 @@ def read_image_file(path: str | Path, module: Module, origin: int = 0) -> Progra
     instructions = read_image_instructions(path, module)
     source = [SourceLoc(str(path), n, disassemble_instruction(ins, module)[0])
               for n, ins in enumerate(instructions, 1)]
-    return Program(module, instructions, source, {}, origin)
+    return Program(module, instructions, source, {}, origin, image=True)
 
 
 def load_program(path: str | Path, module: Module, origin: int = 0) -> Program:

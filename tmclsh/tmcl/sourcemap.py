@@ -8,6 +8,9 @@ convenience: a missing, unreadable or full cache directory never stops an upload
 
 The directory is platformdirs' ``user_cache_dir("tmclsh")`` (``$XDG_CACHE_HOME/tmclsh`` on
 Linux), in ``programs/``, one JSON file per image.
+
+An upload from an image file (``.bin``, ``.hex``) is kept too, without text (``image``): the
+last upload of an image names the file it came from, never an older source of the same bytes.
 """
 
 from __future__ import annotations
@@ -53,15 +56,16 @@ class SourceMap:
     file: str
     text: str
     uploaded: str  # local time, ``2026-12-01 19:50``
+    image: bool = False  # uploaded from an image file: no source text, no labels
 
 
 def save(instructions: Sequence[Instruction], module: str, origin: int, file: str | Path,
-         text: str) -> Path | None:
-    """Keep the source of an upload; the file written, or None if the cache cannot be
-    written (logged, not raised)."""
+         text: str, *, image: bool = False) -> Path | None:
+    """Keep the source of an upload (``image``: the file was an image, ``text`` empty); the
+    file written, or None if the cache cannot be written (logged, not raised)."""
     key = image_key(instructions)
-    entry = SourceMap(key, module, origin, len(instructions), str(Path(file).resolve()), text,
-                      time.strftime("%Y-%m-%d %H:%M"))
+    entry = SourceMap(key, module, origin, len(instructions), str(Path(file).resolve()),
+                      "" if image else text, time.strftime("%Y-%m-%d %H:%M"), image)
     folder = cache_dir()
     path = folder / f"{key}.json"
     try:
@@ -83,7 +87,8 @@ def lookup(instructions: Sequence[Instruction], module: str, origin: int) -> Sou
     key = image_key(instructions)
     try:
         data = json.loads((cache_dir() / f"{key}.json").read_text(encoding="utf-8"))
-        entry = SourceMap(**{k: data[k] for k in SourceMap.__dataclass_fields__})
+        entry = SourceMap(**{k: data[k] for k in SourceMap.__dataclass_fields__
+                             if k in data or k != "image"})
     except (OSError, ValueError, KeyError, TypeError):
         return None  # not kept, or a damaged file: generated labels, as without a cache
     if (data.get("version") != _VERSION or entry.key != key or entry.module != module
