@@ -66,8 +66,8 @@ _ECHO_WAIT = 0.05
 #: said once where ASCII mode is chosen (connect, .mode ascii, .ascii)
 NO_CHECKSUM = ("ASCII replies carry no checksum: a digit changed on the line gives a valid "
                "reply with a wrong value, which no single read can reveal. tmclsh reads every "
-               "setting twice and takes it only when both reads agree; motion state and "
-               "inputs are read once")
+               "setting twice and takes it only when both reads agree; motion state, "
+               "measurements and inputs are read once")
 
 GP_ASCII_MODE = 67  # bank 0
 GP_HOST_ADDRESS = 76  # bank 0
@@ -781,6 +781,11 @@ class AsciiLink:
             else:
                 self._copy = ledger.may_be_a_copy(req, reply)
                 ledger.took(req, reply, copy=self._copy)
+                if self._copy:
+                    # whatever is still on its way (the answer behind the copy, more copies)
+                    # is taken in before the next line: resynchronise first, as after a
+                    # reply nothing waited for (it stays evidence against this answer)
+                    ledger.out_of_step = True
             return reply
 
     def mark(self, timeout: float | None = None) -> Reply | None:
