@@ -54,7 +54,7 @@ complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modu
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan firmware monitor bridge' -l module-file -r -F -d 'a module data file of your own (same format as the built-in ones; files in the config directory\'s modules/ are read too)'
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan firmware monitor bridge' -s a -l address -x -d 'module address (default 1; 0..255)'
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan firmware monitor bridge' -l host-address -x -d 'host address (default 2; 0..255)'
-complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan firmware monitor bridge' -l ascii -d 'talk to the module through its ASCII mode instead of binary frames'
+complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan firmware monitor bridge' -l ascii -d 'talk to the module through its ASCII mode instead of binary frames (its replies carry no checksum: settings are read twice)'
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan firmware monitor bridge' -l json -d 'one JSON object per result on stdout'
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan firmware monitor bridge' -l trace -d 'every frame in hex, decoded, on stderr (the connect\'s own too)'
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan firmware monitor bridge' -l timeout -x -d 'reply timeout in seconds (default 1; 0.001..60 s)'

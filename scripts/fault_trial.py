@@ -17,6 +17,13 @@ shows is compared with the one the module holds:
 
 ``--load`` runs two busy processes beside it (the 2-core machine, loaded), as a CI box is.
 Not a test (it takes minutes); tests/client/test_judged_answers.py runs a short version.
+
+``--ascii`` measures the module's ASCII mode instead (``tmclsh --ascii -f``): a proxy between
+tmclsh and the simulator (tests/asciiproxy.py, which imports nothing of tmclsh) delays,
+duplicates and changes the module's reply lines (``--mix`` in the proxy's kinds: delay, dup,
+dup-late, flip); ``--echo`` sets the module's echo mode (GP 67). ASCII replies carry no
+checksum: a flipped digit is a valid reply, found out only by reading again.
+tests/client/test_ascii_proxy.py runs a short version.
 """
 
 from __future__ import annotations
@@ -47,6 +54,14 @@ MIXES = (
     "dup=0.1,dup-late=0.1",
     "drop=0.05,corrupt=0.05,dup=0.05,dup-late=0.05,delay=0.02,garbage=0.05,truncate=0.05",
 )
+ASCII_MIXES = (
+    "delay=0.1",
+    "dup=0.1,dup-late=0.1",
+    "flip=0.05",
+    "delay=0.03,dup=0.03,dup-late=0.05,flip=0.03",
+)
+ECHO = {"char": 0, "line": 16, "none": 32}  # GP 67 (bank 0) bits 5/4
+ARM = "GGP 255, 2"  # the run's first line: the proxy's faults begin with it
 VARIABLES = 24  # user variables read (GGP n, 2)
 AXIS = {4: 11111, 5: 22222, 6: 100, 7: 50}  # axis parameters read (GAP n, 0), with their values
 
@@ -70,9 +85,11 @@ def script(reads: int, rng: random.Random) -> list[str]:
     return out[:reads]
 
 
-def setup(path: str) -> None:
+def setup(path: str, gp67: int | None = None) -> None:
     c = LineClient(open_serial(path), module="TMCM-1311", timeout=0.5)
     try:
+        if gp67 is not None:
+            c.execute(f"SGP 67, 0, {gp67}")
         for line, value in truth().items():
             op, rest = line.split(" ", 1)
             c.execute(f"S{op[1:]} {rest}, {value}")
@@ -118,21 +135,50 @@ def judge(records: list[dict], values: dict[str, int]) -> dict[str, int]:
     return counts
 
 
-def trial(mix: str, reads: int, seed: int) -> tuple[dict[str, int], float]:
+def ascii_rates(text: str) -> dict[str, float]:
+    """``"delay=0.1,flip=0.05"`` -> the proxy's rates."""
+    from asciiproxy import KINDS
+
+    rates = {}
+    for part in filter(None, (p.strip() for p in text.split(","))):
+        kind, _, p = part.partition("=")
+        if kind not in KINDS:
+            raise SystemExit(f"{kind!r}: the proxy's kinds are {', '.join(KINDS)}")
+        rates[kind] = float(p)
+    return rates
+
+
+def trial(mix: str, reads: int, seed: int, *, ascii_echo: str | None = None,
+          tree: Path = ROOT) -> tuple[dict[str, int], float]:
+    """One run of ``reads`` reads under ``mix``; ``ascii_echo``: in ASCII mode through the
+    proxy, with that echo mode. ``tree``: the checkout whose tmclsh runs (before/after)."""
     sim = Simulator("TMCM-1311")
     server = serve_pty(sim)
+    proxy = None
     try:
-        setup(server.path)
-        sim.faults.rng = random.Random(seed)
-        sim.faults.rates = parse_rates(mix)
+        setup(server.path, None if ascii_echo is None else ECHO[ascii_echo])
+        port, extra = server.path, []
+        if ascii_echo is None:
+            sim.faults.rng = random.Random(seed)
+            sim.faults.rates = parse_rates(mix)
+        else:
+            sys.path.insert(0, str(ROOT / "tests"))
+            from asciiproxy import AsciiProxy
+
+            proxy = AsciiProxy(server.path, rates=ascii_rates(mix), seed=seed,
+                               arm_on=ARM.encode())
+            port, extra = proxy.path, ["--ascii"]
         with tempfile.TemporaryDirectory() as tmp:
             path = Path(tmp) / "reads.tmcl"
-            path.write_text("\n".join(script(reads, random.Random(seed))) + "\n")
-            env = dict(os.environ, PYTHONPATH=str(ROOT))
+            lines = script(reads, random.Random(seed))
+            if proxy is not None:
+                lines.insert(0, ARM)
+            path.write_text("\n".join(lines) + "\n")
+            env = dict(os.environ, PYTHONPATH=str(tree))
             start = time.monotonic()
             run = subprocess.run(
-                [sys.executable, "-m", "tmclsh", "--port", server.path, "-m", "TMCM-1311",
-                 "--timeout", "0.3", "-f", str(path), "--keep-going", "--json"],
+                [sys.executable, "-m", "tmclsh", "--port", port, "-m", "TMCM-1311",
+                 "--timeout", "0.3", *extra, "-f", str(path), "--keep-going", "--json"],
                 capture_output=True, text=True, env=env, cwd=tmp, timeout=3600)
             took = time.monotonic() - start
         records = []
@@ -142,6 +188,8 @@ def trial(mix: str, reads: int, seed: int) -> tuple[dict[str, int], float]:
         return judge(records, truth()), took
     finally:
         sim.faults.rates = {}
+        if proxy is not None:
+            proxy.close()
         server.close()
         sim.close()
 
@@ -165,11 +213,18 @@ def main() -> int:
     ap.add_argument("--mix", action="append", help="a fault mix (repeatable; default: four)")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--load", action="store_true", help="two busy processes beside it")
+    ap.add_argument("--ascii", action="store_true",
+                    help="the module's ASCII mode, through a proxy that mangles its replies")
+    ap.add_argument("--echo", choices=tuple(ECHO), default="char",
+                    help="with --ascii: the module's echo mode (default char)")
+    ap.add_argument("--tree", type=Path, default=ROOT,
+                    help="the checkout whose tmclsh runs (default this one)")
     args = ap.parse_args()
     worst = 0
     with loaded(args.load):
-        for mix in args.mix or MIXES:
-            counts, took = trial(mix, args.reads, args.seed)
+        for mix in args.mix or (ASCII_MIXES if args.ascii else MIXES):
+            counts, took = trial(mix, args.reads, args.seed,
+                                 ascii_echo=args.echo if args.ascii else None, tree=args.tree)
             worst = max(worst, counts["wrong, unflagged"])
             print(f"{mix}  ({took:.0f} s{', loaded' if args.load else ''})")
             print("    " + ", ".join(f"{k}: {v}" for k, v in counts.items()), flush=True)

@@ -64,7 +64,9 @@ def test_echo_modes(make, echo):
     for value in (-5000, 0, 123456):
         assert client.execute(f"SAP 1, 0, {value}").ok
         assert client.value("GAP 1, 0") == value
-    expected_echo_lines = 0 if echo == Echo.NONE else 6
+    # each GAP's answer is byte for byte the SAP's before it: on ASCII, where a reply names
+    # no command, that may be a late copy of it, so the GAP is read once more (Client._judge)
+    expected_echo_lines = 0 if echo == Echo.NONE else 9
     assert link.stats["echo_lines"] == expected_echo_lines
     assert link.stats["dropped_lines"] == 0
     client.close()

@@ -213,7 +213,8 @@ def add_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--host-address", type=_address, metavar="N",
                    help=f"host address (default 2; {_range('host_address')})")
     g.add_argument("--ascii", action="store_true", default=None,
-                   help="talk to the module through its ASCII mode instead of binary frames")
+                   help="talk to the module through its ASCII mode instead of binary frames "
+                        "(its replies carry no checksum: settings are read twice)")
     g.add_argument("--json", action="store_true", help="one JSON object per result on stdout")
     g.add_argument("--trace", action="store_true",
                    help="every frame in hex, decoded, on stderr (the connect's own too)")

@@ -63,6 +63,12 @@ _LINE_BYTES = frozenset(b"\r\n\x08\x7f")
 # within this time (then the module does not echo, whatever GP 67 said).
 _ECHO_WAIT = 0.05
 
+#: said once where ASCII mode is chosen (connect, .mode ascii, .ascii)
+NO_CHECKSUM = ("ASCII replies carry no checksum: a digit changed on the line gives a valid "
+               "reply with a wrong value, which no single read can reveal. tmclsh reads every "
+               "setting twice and takes it only when both reads agree; motion state, "
+               "measurements and inputs are read once")
+
 GP_ASCII_MODE = 67  # bank 0
 GP_HOST_ADDRESS = 76  # bank 0
 GP_BANK = 0
@@ -229,6 +235,8 @@ def parse_reply(line: bytes, opcode: int = 0) -> Reply | None:
                  int(m.group(3)), opcode, to_signed32(value))
 
 
+_REPLY_START = re.compile(rb"[\x40-\xff][\x40-\xff] *[0-9]")  # how a reply line begins
+_EOL_BYTES = frozenset(_EOL)
 _REPLY_AT_END = re.compile(rb"[\x40-\xff][\x40-\xff] *[0-9]{1,3}(?: +[-+]?[0-9]{1,10})? *$")
 
 
@@ -517,6 +525,8 @@ class AsciiLink:
         self.gp67 = gp67
         self._buf = bytearray()
         self._dirty = False
+        self._copy = False  # the last answer taken may be a copy (Ledger.may_be_a_copy)
+        self._pending: dict[int, int] = {}  # markers' answers still to come, by their value
         self._closed = False
         self.entered = False  # the last attach sent 139 (the module was in binary mode)
         self.stats = {"sent": 0, "timeouts": 0, "dropped_lines": 0, "echo_lines": 0}
@@ -584,12 +594,16 @@ class AsciiLink:
                 if link is None:
                     link = cls(client, found=entered_from, echo=echo, gp67=probe.gp67)
                     _LINKS[client] = link
+                    client.notice(NO_CHECKSUM)  # (once a session: the first time)
                 else:
                     link.echo, link.gp67, link._closed = echo, probe.gp67, False
                 link.entered = entered
                 link._buf.clear()
                 link._dirty = False
+                link._pending.clear()
                 client.clear_input()
+                client.ledger.forget()  # (what the binary link still expected cannot come)
+                client.ledger.by_command = False  # ASCII replies name no command
                 client.ascii_link = link
             except BaseException:
                 # interrupted (Ctrl-C, SIGTERM) between 139 and the link taking over: leave
@@ -653,6 +667,7 @@ class AsciiLink:
             if send_bin:
                 self._bin(client)
             client.ascii_link = None
+            client.ledger.by_command = True
             self._buf.clear()
         if send_bin and verify:
             try:
@@ -688,7 +703,24 @@ class AsciiLink:
     # -- the request path ---------------------------------------------------------------
     def transact(self, req: Request, timeout: float | None = None) -> Reply:
         """Send ``req`` as an ASCII command line and return the module's reply, parsed into
-        the same Reply a binary frame gives (opcode taken from the request)."""
+        the same Reply a binary frame gives (opcode taken from the request), judged by the
+        client's one rule (``Client._judge``) before anyone sees it: an answer that may be a
+        copy of the one before, and every reading of a setting (an ASCII reply carries no
+        checksum: a digit changed on the line is found out only by a second read)."""
+        client = self.client
+        timeout = client.timeout if timeout is None else timeout
+        reply = self.once(req, timeout)
+        if client._judging:  # (a judge's own exchange)
+            return reply
+        module = client.module
+        if self._copy or (module is not None and module.reads_setting(
+                isa.by_opcode(req.opcode), req.type, req.motor)):
+            return client._judge(req, reply, timeout, client.retries)
+        return reply
+
+    def once(self, req: Request, timeout: float | None = None) -> Reply:
+        """One answer to ``req``, retried on a timeout as the binary path retries (only a
+        command the instruction set calls idempotent), written in the client's ledger."""
         from .core import idempotent
 
         text = format_request(req, self.client.module)
@@ -710,48 +742,227 @@ class AsciiLink:
         raise last
 
     def command(self, text: str, timeout: float | None = None, *, opcode: int = 0,
-                address: int | None = None, request: Request | None = None) -> Reply:
+                address: int | None = None, request: Request | None = None,
+                marker: bool = False) -> Reply:
         """Send one command line (``"GAP 1, 0"``, ``"RUN"``; the address character is added)
-        and return the reply; echo is skipped, other modules' and stale lines dropped.
-        ``request``: the binary request the line stands for (told to sent-only tracers)."""
+        and return the reply; echo is skipped, other modules' lines dropped. What waits on
+        the line before it is sent cannot be its answer: a reply among it is a late one
+        (the ledger crosses it off, or makes the answers it may have displaced suspects,
+        as on the binary link); after an answer that never came, the line is first brought
+        back in step (``_resync``). ``request``: the binary request the line stands for
+        (told to sent-only tracers, written in the ledger); ``marker``: an in-step marker's
+        line (its answer numbers no reply)."""
         client = self.client
         timeout = client.timeout if timeout is None else timeout
         address = client.address if address is None else address
         line = command_bytes(address, text)
+        req = request or Request(address, opcode, 0, 0, 0)
+        ledger = client.ledger
         with client.lock:
+            ledger.by_command = False  # (the ledger is this line's while the link is on)
             t = _transport(client)
             self._clean(t)
+            if ledger.dirty(False):
+                self._resync(t, address, timeout)
             t.write(line)
             self.stats["sent"] += 1
             client.stats["sent"] += 1
             if client.tracing:
                 client.trace("tx", line, line.decode("latin-1").rstrip(), request=request)
             try:
-                return self._await(t, line, opcode, address, timeout)
+                reply = self._await(t, line, opcode, address, timeout)
             except BaseException:
                 self._dirty = True
+                ledger.expect_late(req, ReplyKind.NORMAL)  # its answer may still come
                 raise
+            if marker:
+                ledger.took_marker(req, reply)
+                self._copy = False
+            else:
+                self._copy = ledger.may_be_a_copy(req, reply)
+                ledger.took(req, reply, copy=self._copy)
+                if self._copy:
+                    # whatever is still on its way (the answer behind the copy, more copies)
+                    # is taken in before the next line: resynchronise first, as after a
+                    # reply nothing waited for (it stays evidence against this answer)
+                    ledger.out_of_step = True
+            return reply
+
+    def mark(self, timeout: float | None = None) -> Reply | None:
+        """The client's in-step marker on the ASCII line (``Client._judge``): a read whose
+        answer is known (``_markers``). An answer displaced behind a copy comes before it and
+        is taken in as late. None: no answer came."""
+        client = self.client
+        timeout = client.timeout if timeout is None else timeout
+        with client.lock:
+            t = _transport(client)
+            self._clean(t)
+            try:
+                return self._marker(t, client.address, timeout)
+            except TmclTimeoutError:
+                return None
+
+    def _resync(self, t: StreamTransport, address: int, timeout: float) -> None:
+        """An answer may still come that no request waits for (a timeout, an answer taken
+        for another): a marker is asked (``_marker``) and everything up to its answer taken
+        in as late replies; the module answers in order. Only then is the line in step
+        again. (The binary link's marker, 136, does not exist in ASCII mode.)"""
+        client = self.client
+        client.stats["resyncs"] += 1
+        if client.tracing:
+            client.trace("note", b"", "checking the line with a read whose answer is known, "
+                                      "after an answer that did not come")
+        try:
+            self._marker(t, address, timeout)
+        except TmclTimeoutError as exc:
+            raise TmclTimeoutError(f"address {address} stopped answering: after an answer "
+                                   "that did not come, a value whose answer is known was "
+                                   f"read to be sure which reply is which: {exc}") from None
+        client.ledger.forget()
+
+    def _markers(self) -> list[tuple[str, Request, int]]:
+        """The reads whose answers are known, as (line, request, value): GP 76 (the host
+        address every reply names) and GP 67 (read at attach), when it differs. Two, so that
+        one is asked whose answer cannot be a late answer of the other's (as the binary link
+        alternates 136 type 1 and type 0)."""
+        client = self.client
+        out = [(f"GGP {GP_HOST_ADDRESS}, {GP_BANK}",
+                Request(client.address, _GGP, GP_HOST_ADDRESS, GP_BANK, 0), client.host_address)]
+        if self.gp67 is not None and self.gp67 != client.host_address:
+            out.append((f"GGP {GP_ASCII_MODE}, {GP_BANK}",
+                        Request(client.address, _GGP, GP_ASCII_MODE, GP_BANK, 0), self.gp67))
+        return out
+
+    def _marker(self, t: StreamTransport, address: int, timeout: float) -> Reply:
+        """Ask a marker whose answer no earlier marker's late answer can be taken for (both
+        outstanding: wait for the line to go quiet first, then count them lost) and read up
+        to its answer; replies before it are late (``_late``), an earlier marker's answer
+        crossed off. TmclTimeoutError if it does not come (it is then outstanding)."""
+        client, ledger, buf = self.client, self.client.ledger, self._buf
+        markers = self._markers()
+        pending = self._pending
+        choice = next((m for m in markers if not pending.get(m[2])), None)
+        if choice is None:
+            self._buf += _read_quiet(t, max(0.05, timeout), 4 * timeout)
+            self._take_in()
+            pending.clear()
+            choice = markers[0]
+        text, req, value = choice
+        line = command_bytes(address, text)
+        t.write(line)
+        self.stats["sent"] += 1
+        client.stats["sent"] += 1
+        if client.tracing:
+            client.trace("tx", line, text, request=req)
+        deadline = time.monotonic() + timeout
+        while True:
+            while True:
+                used, got = next_line(buf)
+                if got is None:
+                    break
+                raw = bytes(buf[:used])
+                del buf[:used]
+                if not got:
+                    continue
+                kind, reply = classify_line(got, line, _GGP)
+                if kind == LineKind.ECHO:
+                    continue
+                if (kind == LineKind.REPLY and reply is not None and reply.module == address
+                        and reply.host == client.host_address):
+                    if reply.status == Status.OK and reply.value == value:
+                        if client.tracing:
+                            client.trace("rx", raw, reply)
+                        ledger.took_marker(req, reply)
+                        return reply
+                    if reply.status == Status.OK and pending.get(reply.value):
+                        pending[reply.value] -= 1  # an earlier marker's late answer
+                        self._drop(raw, "late answer to an earlier check")
+                        continue
+                    self._late(raw, reply)
+                    continue
+                self._drop(raw, "not a reply")
+            left = deadline - time.monotonic()
+            if left <= 0:
+                break
+            buf += t.read(1, left)
+            buf += t.read_available()
+        self.stats["timeouts"] += 1
+        client.stats["timeouts"] += 1
+        self._dirty = True
+        pending[value] = pending.get(value, 0) + 1
+        raise TmclTimeoutError(f"no answer to {text!r} within {timeout:g} s")
+
+    def absorb(self, *, watch: bool = False) -> None:
+        """Take in what waits on the line (nothing is sent): a reply among it is a late one,
+        judged as before a request. ``watch``: first wait until the line has been quiet a
+        moment (the end of a run: an answer displaced by the last one comes right behind
+        it). The caller holds the client's lock."""
+        t = _transport(self.client)
+        data = _read_quiet(t, 0.05, 0.5) if watch else t.read_available()
+        self._buf += data
+        self._take_in()
 
     def _clean(self, t: StreamTransport) -> None:
-        """Before a command: whatever is waiting is stale (after a timeout, wait for quiet)."""
+        """Before a command: whatever is waiting is stale (after a timeout, wait for quiet);
+        replies among it are late (``_late``), the rest dropped. A line half arrived is
+        waited for a moment, so that its end is not taken for the next command's answer."""
         if self._dirty:
-            data = _read_quiet(t, 0.03, max(0.2, self.client.timeout))
+            self._buf += _read_quiet(t, 0.03, max(0.2, self.client.timeout))
             self._dirty = False
         else:
-            data = t.read_available()
-        data = bytes(self._buf) + data
-        self._buf.clear()
-        if data:
-            self.client.stats["discarded"] += len(data)
-            self.client.trace("drop", data, "stale input")
+            self._buf += t.read_available()
+        if not self._buf:
+            return
+        self._take_in()
+        if self._buf:
+            self._buf += _read_quiet(t, 0.02, 0.2, stop=lambda d: bool(_EOL_BYTES & set(d)))
+            self._take_in()
+            if self._buf:
+                self._drop(bytes(self._buf), "stale input")
+                self._buf.clear()
+
+    def _take_in(self) -> None:
+        """The whole lines in the buffer, which no command waits for: replies are late,
+        other lines dropped (one that is no reply, after an answer: a damaged reply, possibly
+        the real answer to the last request). What is left is a line not ended yet."""
+        client, buf = self.client, self._buf
+        while True:
+            used, text = next_line(buf)
+            if text is None:
+                return
+            raw = bytes(buf[:used])
+            del buf[:used]
+            if not text:
+                continue
+            kind, reply = classify_line(text)
+            if kind == LineKind.REPLY and reply is not None:
+                if reply.host == client.host_address and reply.module == client.address:
+                    self._late(raw, reply)
+                else:
+                    self._drop(raw, "another module's reply")
+                continue
+            self._drop(raw, "stale input")
+            if _REPLY_START.match(text):  # (an echo of an earlier line starts otherwise)
+                client.noise_unsolicited()
+
+    def _late(self, raw: bytes, reply: Reply) -> None:
+        """A reply of this module that no command waits for: one the ledger expected (an
+        answer that had timed out) is crossed off; otherwise it makes the answers it may have
+        displaced suspects (Client.late, the binary link's rule)."""
+        if reply.status == Status.OK and self._pending.get(reply.value):
+            self._pending[reply.value] -= 1  # an earlier marker's late answer
+            self._drop(raw, "late answer to an earlier check")
+            return
+        self._drop(raw, "late reply to an earlier command")
+        self.client.late(reply.module, reply.opcode, reply)
 
     def _await(self, t: StreamTransport, sent: bytes, opcode: int, address: int,
                timeout: float) -> Reply:
         """The reply to the line just ``sent``. An ASCII reply names no command, so a late
         reply to an earlier line looks like this one's; but a module that echoes sends the
         echo of this line after every earlier reply. So while an echo is expected, a reply
-        that comes before it is held: if the echo follows, the reply was stale and is
-        dropped; if the line stays quiet (the module does not echo after all), it is taken."""
+        that comes before it is held: if the echo follows, the reply was late (``_late``);
+        if the line stays quiet (the module does not echo after all), it is taken."""
         client, buf = self.client, self._buf
         deadline = time.monotonic() + timeout
         echoed = self.echo not in (Echo.CHAR, Echo.LINE)
@@ -773,8 +984,7 @@ class AsciiLink:
                         client.trace("rx", raw, "echo")
                     echoed = True
                     if held is not None:
-                        self._drop(held[0], "late reply to an earlier command (it came "
-                                            "before the echo)")
+                        self._late(*held)  # (it came before the echo)
                         held = None
                     continue
                 if kind == LineKind.REPLY and reply is not None:
@@ -788,7 +998,7 @@ class AsciiLink:
                     if not echoed and parse_reply(text, opcode) is not None:
                         # (a reply the echo ran into is no candidate: it came after the echo)
                         if held is not None:
-                            self._drop(held[0], "late reply to an earlier command")
+                            self._late(*held)
                         held, held_until = (raw, reply), time.monotonic() + _ECHO_WAIT
                         continue
                     if client.tracing:

@@ -580,8 +580,14 @@ class Client:
         On a clean line this costs one exchange where two requests of one command in a row
         get the same answer (two parameters holding 0), and only there; nothing cheaper is
         sure: a copy whose own answer was lost leaves nothing else to see, and waiting for
-        the line to go quiet takes longer than the exchange."""
+        the line to go quiet takes longer than the exchange.
+
+        On the module's ASCII line the same rule holds, through the ASCII link's exchanges
+        (``AsciiLink.once``, ``AsciiLink.mark``); there every reading of a setting is judged,
+        copy or not: an ASCII reply has no checksum, and a digit changed on the line is
+        found out only by a second read that disagrees."""
         ledger = self.ledger
+        ascii_link = self.ascii_link
         first = ledger.replies
         self.stats["judged"] += 1
         self._judging = True
@@ -589,14 +595,17 @@ class Client:
             if not isa.reading(req.opcode, req.type):
                 marker = Request(req.address, _GET_VERSION, 1, 0, 0)
                 noise = self.stats["discarded"]
-                try:
-                    got = self.framing.exchange(marker, _NORMAL, timeout)
-                except (TmclTimeoutError, ChecksumError):
-                    ledger.expect_late(marker, _NORMAL)
-                    got = None
+                if ascii_link is not None:
+                    got = ascii_link.mark(timeout)
                 else:
-                    if got is not None:
-                        ledger.took_marker(marker, got)
+                    try:
+                        got = self.framing.exchange(marker, _NORMAL, timeout)
+                    except (TmclTimeoutError, ChecksumError):
+                        ledger.expect_late(marker, _NORMAL)
+                        got = None
+                    else:
+                        if got is not None:
+                            ledger.took_marker(marker, got)
                 # not judged (no answer to the marker), or bytes that were no frame came
                 # before it (the displaced answer, damaged?): in doubt, unless found already
                 if (got is None or self.stats["discarded"] > noise) and not any(
@@ -605,7 +614,8 @@ class Client:
                 return reply
             for _ in range(CONFIRM_ROUNDS):
                 found = ledger.found
-                again = self._request(req, timeout, retries)
+                again = (self._request(req, timeout, retries) if ascii_link is None
+                         else ascii_link.once(req, timeout))
                 if again is None:
                     break
                 if again == reply and ledger.found == found:
@@ -648,10 +658,14 @@ class Client:
         what waits is taken in, and one more exchange made (136 type 1) when the last answer
         may be such a copy (the module answers in order). Readers read those again
         (``CONFIRM_ROUNDS`` times at most) or say they are in doubt, then ``settle`` them.
-        Nothing is ever in doubt in ASCII mode (its replies are lines in order, no copies)."""
-        if not answered or self.ascii_link is not None:
+        In ASCII mode what waits is taken in (AsciiLink.absorb); its readings of settings
+        were judged as they were read."""
+        if not answered:
             return set()
-        if confirm:
+        if confirm and self.ascii_link is not None:
+            with self._lock:
+                self.ascii_link.absorb()
+        elif confirm:
             self.poll()  # what waits already is taken in (nothing is sent, nothing awaited)
             # the exchange only if the last answer may be the reply before it, taken again;
             # not on the simulator in process (whatever follows an answer waits already)
@@ -690,7 +704,10 @@ class Client:
         for two frames' wire time (nothing is sent); otherwise, or on the simulator, what is
         already waiting is taken in."""
         with self._lock:
-            if self.ascii_link is not None or not self.transport.is_open:
+            if not self.transport.is_open:
+                return
+            if self.ascii_link is not None:
+                self.ascii_link.absorb(watch=True)
                 return
             ledger = self.ledger
             quiet = self.framing.quiet_time()

@@ -10,7 +10,10 @@ reply that arrives when nothing waits for it makes the last answer given a *susp
 One ledger per client; everything that asks "is this answer certain?" asks it here:
 ``Client.in_doubt`` for a reader's own reads (``.watch``, ``.expect``, the safety stop's
 read-back, an upload's verify), ``take_suspects`` for the shell's report after a line.
-The framing (tmclsh.link.framing) writes to it as it reads the line; nothing here does I/O.
+The framing (tmclsh.link.framing) writes to it as it reads the line, and so does the ASCII
+link (tmclsh.client.ascii) on the module's ASCII command line, whose replies name no command
+(``by_command`` false): there any late reply may be taken for any request; nothing here does
+I/O.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ from ..tmcl.frames import Control, Reply, ReplyKind, Request
 
 _NORMAL, _VERSION, _NONE = ReplyKind.NORMAL, ReplyKind.VERSION_STRING, ReplyKind.NONE
 _GET_VERSION = int(Control.GET_VERSION)
+_ANY = -1  # the command of a reply that names none (an ASCII line)
 # how often a reader reads a value again whose answer is in doubt before it says so
 CONFIRM_ROUNDS = 3
 
@@ -42,6 +46,9 @@ class Ledger:
     """Bookkeeping of one line's answers (the client holds its lock around every use)."""
 
     def __init__(self) -> None:
+        # replies name their command (binary frames): a late reply is taken only for a
+        # request of its own command. False on the ASCII line, whose replies name none
+        self.by_command = True
         # how many normal-layout replies may still arrive, by (address, opcode)
         self.stale: Counter[tuple[int, int]] = Counter()
         self.stale_versions = 0  # 136 type 0 version strings that may still arrive
@@ -69,6 +76,17 @@ class Ledger:
         self.found = 0  # suspects found so far (a reader judging answers asks what came since)
         self.doubted: deque[int] = deque(maxlen=16)  # answers returned in doubt (``doubt``)
         self.confirmed = -1  # ``replies`` when the line was last watched for a late answer
+
+    def _key(self, address: int, opcode: int) -> tuple[int, int]:
+        """What a late reply could be taken for: its address and command (any on ASCII)."""
+        return (address, opcode if self.by_command else _ANY)
+
+    def _same(self, a: Reply | None, b: Reply | None) -> bool:
+        """The same answer on the wire (on ASCII the command is the request's, not the
+        reply's: it is not compared)."""
+        if self.by_command or a is None or b is None:
+            return a == b
+        return (a.host, a.module, a.status, a.value) == (b.host, b.module, b.status, b.value)
 
     @property
     def last(self) -> tuple[Request, Reply] | None:
@@ -108,14 +126,14 @@ class Ledger:
             # an error status, which is not counted here)
             self.stale_versions += 1
             return
-        self.stale[(req.address, req.opcode)] += 1
+        self.stale[self._key(req.address, req.opcode)] += 1
         if kind != _NORMAL:
             self.opaque = True
 
     def needs_sync(self, req: Request, kind: ReplyKind, downloading: bool) -> bool:
         """Could a late answer be taken for ``req``'s? (Then the line is resynchronised.)"""
         return (self.opaque or self.out_of_step or kind != _NORMAL
-                or (req.address, req.opcode) in self.stale or (self.drained and not downloading))
+                or self._key(req.address, req.opcode) in self.stale or (self.drained and not downloading))
 
     def marker(self, address: int) -> tuple[Request, ReplyKind] | None:
         """A harmless request whose reply cannot be taken for a late one: 136 type 1 (a
@@ -130,7 +148,7 @@ class Ledger:
     def late(self, address: int, opcode: int, reply: Reply | None = None) -> bool:
         """A late normal reply arrived: True if one of its kind was expected (one fewer
         now), False if none was (then it is unsolicited, see ``unsolicited``)."""
-        key = (address, opcode)
+        key = self._key(address, opcode)
         n = self.stale.get(key, 0)
         if n > 1:
             self.stale[key] = n - 1
@@ -165,13 +183,14 @@ class Ledger:
         if not self.recent:
             return False
         r, rep = self.recent[-1]
-        return rep == reply and r is not None and r != req
+        return self._same(rep, reply) and r is not None and r != req
 
     def took(self, req: Request, reply: Reply, *, copy: bool = False) -> None:
         """``reply`` was returned as ``req``'s answer (``copy``: ``may_be_a_copy`` said so)."""
         self.replies += 1
         run = self.run
-        if run and (run[-1][1].address, run[-1][1].opcode) != (req.address, req.opcode):
+        if run and self._key(run[-1][1].address, run[-1][1].opcode) != self._key(
+                req.address, req.opcode):
             self.in_step()  # (a late reply of the run before cannot be taken for this one)
         run.append((self.replies, req, reply))
         if copy:
@@ -197,9 +216,10 @@ class Ledger:
         0, then a copy of the 0 taken for the third while its 5000 comes late)."""
         self.out_of_step = True
         last = self.last
-        if last is None or extra == last[1] or (extra is not None and (
-                extra in self.crossed
-                or (extra.opcode == _GET_VERSION and any(r == extra for _, r in self.recent)))):
+        if last is None or self._same(extra, last[1]) or (extra is not None and (
+                any(self._same(extra, r) for r in self.crossed)
+                or (self.by_command and extra.opcode == _GET_VERSION
+                    and any(r == extra for _, r in self.recent)))):
             return []
         if self.copy_at:
             shifted = [e for e in self.run if e[0] >= self.copy_at and e[0] not in self.doubted]
@@ -230,8 +250,8 @@ class Ledger:
         reply with the same module address and command is taken for an answer. When it
         could not, no answer still to come can show it to be another request's."""
         recent = self.recent
-        return len(recent) >= 2 and (recent[-1][1].module, recent[-1][1].opcode) == (
-            recent[-2][1].module, recent[-2][1].opcode)
+        return len(recent) >= 2 and self._key(recent[-1][1].module, recent[-1][1].opcode) == (
+            self._key(recent[-2][1].module, recent[-2][1].opcode))
 
     def suspect_seqs(self) -> set[int]:
         return {s.seq for s in self.suspects}
@@ -249,5 +269,7 @@ class Ledger:
         return out
 
     def reset(self) -> None:
-        """The link was reopened: whatever comes now says nothing about answers before."""
+        """The link was reopened: whatever comes now says nothing about answers before (and
+        it starts in binary frames, until an ASCII link takes it again)."""
         self.forget()
+        self.by_command = True

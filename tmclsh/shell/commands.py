@@ -586,7 +586,8 @@ COMMANDS: tuple[Command, ...] = (
             "show or switch the link: binary frames or the module's ASCII mode",
             complete='_complete_mode', category='ascii',
             details=('ascii enters ASCII mode (command 139) unless the module is in it '
-                     'already; binary sends BIN. On exit tmclsh leaves the module in the '
+                     'already; its replies carry no checksum, so every setting read there is '
+                     'read twice and taken only when both reads agree; binary sends BIN. On exit tmclsh leaves the module in the '
                      'mode it found it in, unless --keep was given with the last switch.'),
             changes_link=True,
             options=(Option("--keep", help="the module keeps the mode after tmclsh exits"),)),

@@ -892,6 +892,7 @@ class Judged:
     doubt: list[str]
     answered: dict[int, str]  # every reply the check took (Client.replies -> read)
     tries: int = 1  # times the condition was evaluated
+    disagreed: bool = False  # (ASCII) two evaluations in a row never came out the same
     values: dict[str, expr.Number] = field(default_factory=dict)  # each read, as read
 
     def record(self, expression: expr.Expression, passed: bool) -> dict[str, object]:
@@ -908,8 +909,11 @@ class Judged:
         return f"{self.left}{', ' + self.right if self.right else ''}"
 
     def in_doubt(self) -> str:
-        reads = " and ".join(self.doubt)
         times = f" (read {self.tries} times)" if self.tries > 1 else ""
+        if self.disagreed:
+            return (f"it came out differently on every two evaluations in a row{times}, and "
+                    "an ASCII reply carries no checksum to tell a changed digit")
+        reads = " and ".join(self.doubt)
         return (f"the answer to {reads} is in doubt{times}: the line brought a reply nothing "
                 "was waiting for, so it may have been another request's")
 
@@ -924,17 +928,31 @@ def judge(session: Session, expression: expr.Expression, *, again: bool = True,
     The suspects a check dealt with are taken from the client (not reported again)."""
     answered: dict[int, str] = {}
     tries = 0
-    for tries in range(1, 2 + (CONFIRM_ROUNDS if again else 0)):
+    # ASCII replies carry no checksum: the client reads settings twice, but motion state and
+    # inputs once, so the condition itself must come out the same on two evaluations
+    twice = getattr(session.client, "mode", "binary") == "ascii"
+    outcome: bool | None = None
+    for tries in range(1, 2 + (CONFIRM_ROUNDS if again else 0) + twice):
         ctx = expr.TrackedContext(session)
         try:
             ok, left, right = check(expression, ctx)
         finally:
             answered.update(ctx.answered)
         doubt = session.client.in_doubt(ctx.answered, confirm=confirm)
-        if not doubt:
-            break
+        if doubt:
+            outcome = None
+            continue
+        if twice and outcome is not ok:
+            outcome = ok
+            continue
+        break
+    else:
+        if twice and not doubt:  # the evaluations never agreed twice in a row
+            session.client.settle(answered)
+            return Judged(ok, left, right, [expression.text], answered, tries,
+                          values=dict(ctx.trace), disagreed=True)
     session.client.settle(answered)
-    return Judged(ok, left, right, sorted(doubt), answered, tries, dict(ctx.trace))
+    return Judged(ok, left, right, sorted(doubt), answered, tries, values=dict(ctx.trace))
 
 
 def _side(node: expr.Node, ctx: expr.SessionContext) -> str:

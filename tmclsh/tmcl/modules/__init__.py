@@ -255,6 +255,21 @@ class Module:
     def banks(self) -> list[int]:
         return sorted({p.bank for p in self.global_params})
 
+    def reads_setting(self, spec: InstructionSpec | None, type_: int, motor: int) -> bool:
+        """Does this command read a setting: a writable parameter the data does not mark
+        ``state``, whose value holds still between two reads, so that two reads of it must
+        agree? (Motion state, read-only measurements and flags, inputs and counters change
+        by themselves.)"""
+        if spec is None or not spec.reads_with(type_, self):
+            return False
+        if spec.type_kind == "axis_param":
+            param = self.axis(type_)
+        elif spec.type_kind == "global_param":
+            param = self.glob(type_, motor)
+        else:
+            return False
+        return param is not None and param.writable and not param.state
+
     def _pool(self, kind: str) -> list[Parameter]:
         return self.axis_params if kind == "axis" else self.global_params
 
