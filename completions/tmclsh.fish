@@ -83,12 +83,13 @@ complete -c tmclsh -n '__fish_seen_subcommand_from disasm' -F
 # tmclsh sim
 complete -c tmclsh -n '__fish_seen_subcommand_from sim' -s h -l help -d 'show this help message and exit'
 complete -c tmclsh -n '__fish_seen_subcommand_from sim' -s m -l module -x -a '(__tmclsh_modules)' -d 'module to simulate (default TMCM-1311; \'tmclsh modules\' lists them)'
-complete -c tmclsh -n '__fish_seen_subcommand_from sim' -l address -x -d 'module address (default 1)'
+complete -c tmclsh -n '__fish_seen_subcommand_from sim' -l address -x -d 'module address (default 1); several (1,2,3 or 1-3): a module at each on one line, as on an RS485 bus (each answers its own address; an address given twice answers twice); --pty and --tcp only'
 complete -c tmclsh -n '__fish_seen_subcommand_from sim' -l host-address -x -d 'address its replies are sent to (default 2)'
 complete -c tmclsh -n '__fish_seen_subcommand_from sim' -l pty -d 'serve on a pseudo-terminal (path on the first line; Linux and macOS only: use --tcp on Windows)'
 complete -c tmclsh -n '__fish_seen_subcommand_from sim' -l tcp -x -d 'serve on TCP, for socket:// URLs'
 complete -c tmclsh -n '__fish_seen_subcommand_from sim' -l can -x -a '(__tmclsh_can)' -d 'serve on a python-can bus, IFACE:CHANNEL as the client reads it (socketcan:vcan0 to test on Linux; python-can\'s virtual interface cannot be reached from another process)'
 complete -c tmclsh -n '__fish_seen_subcommand_from sim' -l bitrate -x -d 'CAN bit rate in bit/s (10000..1000000)'
+complete -c tmclsh -n '__fish_seen_subcommand_from sim' -l baud -x -d 'pace the line at this baud rate, as a real serial line is: every byte, request or reply, takes 10 bits\' time (default: no pacing; --pty and --tcp only; 9600..1000000, a module baud rate)'
 complete -c tmclsh -n '__fish_seen_subcommand_from sim' -l faults -x -d 'misbehave at random: for each reply, the probability P (0..1) of each fault: drop (not sent), corrupt (a bit flipped), truncate (half sent), delay (held back 0.2..2 s), garbage (noise before it), dup (sent twice), dup-late (a copy after the next request); e.g. drop=0.1,corrupt=0.05,dup=0.05'
 complete -c tmclsh -n '__fish_seen_subcommand_from sim' -l faults-seed -x -d 'seed for --faults, so a run misbehaves the same way again'
 

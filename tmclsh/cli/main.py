@@ -52,7 +52,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
     return run(args.module, args.address, pty=args.pty, tcp=args.tcp, can=args.can,
                host_address=args.host_address, bitrate=args.bitrate, faults=args.faults,
-               seed=args.faults_seed)
+               seed=args.faults_seed, baud=args.baud)
 
 
 def cmd_ports(args: argparse.Namespace) -> int:

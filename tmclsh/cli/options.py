@@ -38,6 +38,18 @@ _address = setting("address")
 _baud = setting("baud")
 
 
+def settings(key: str):
+    """An argparse type for several values of setting ``key`` at once (``1,2,5``, ``1-8``;
+    ``limits.parse_list``): a tuple."""
+    def convert(text: str) -> tuple[int, ...]:
+        try:
+            return limits.parse_list(key, text)
+        except limits.SettingError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+    convert.__name__ = key
+    return convert
+
+
 def _faults(text: str) -> dict[str, float]:
     from ..sim.device import parse_rates  # only when --faults is given
 
@@ -166,7 +178,10 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("sim", help="serve a simulated module on a pty, TCP or CAN")
     s.add_argument("-m", "--module", metavar="NAME", default="TMCM-1311",
                    help="module to simulate (default TMCM-1311; 'tmclsh modules' lists them)")
-    s.add_argument("--address", type=_address, default=1, metavar="N", help="module address (default 1)")
+    s.add_argument("--address", type=settings("address"), default=(1,), metavar="N[,N...]",
+                   help="module address (default 1); several (1,2,3 or 1-3): a module at each "
+                        "on one line, as on an RS485 bus (each answers its own address; an "
+                        "address given twice answers twice); --pty and --tcp only")
     s.add_argument("--host-address", type=_address, default=2, metavar="N",
                    help="address its replies are sent to (default 2)")
     how = s.add_mutually_exclusive_group(required=True)
@@ -180,6 +195,10 @@ def build_parser() -> argparse.ArgumentParser:
                           "cannot be reached from another process)")
     s.add_argument("--bitrate", type=setting("bitrate"), metavar="N",
                    help=f"CAN bit rate in bit/s ({_range('bitrate')})")
+    s.add_argument("--baud", type=_baud, metavar="N",
+                   help="pace the line at this baud rate, as a real serial line is: every "
+                        "byte, request or reply, takes 10 bits' time (default: no pacing; "
+                        f"--pty and --tcp only; {_range('baud')})")
     s.add_argument("--faults", type=_faults, metavar="KIND=P,...",
                    help="misbehave at random: for each reply, the probability P (0..1) of each "
                         "fault: drop (not sent), corrupt (a bit flipped), truncate (half sent), "
