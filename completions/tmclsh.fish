@@ -114,4 +114,5 @@ complete -c tmclsh -n '__fish_seen_subcommand_from scan' -s h -l help -d 'show t
 complete -c tmclsh -n '__fish_seen_subcommand_from scan' -l from -x -d ''
 complete -c tmclsh -n '__fish_seen_subcommand_from scan' -l to -x -d ''
 complete -c tmclsh -n '__fish_seen_subcommand_from scan' -l timeout -x -d 'per-address timeout (default: from the link, the wire time of a request and its reply at the baud rate plus a margin; 0.001..60 s)'
+complete -c tmclsh -n '__fish_seen_subcommand_from scan' -l ascii -d 'also look for modules in ASCII mode at every address that did not answer in binary (without it, only when none did: the ASCII pass takes as long as the first)'
 complete -c tmclsh -n '__fish_seen_subcommand_from scan' -l json -d ''

@@ -369,7 +369,10 @@ _SUB_NOTES = {
                "is wrong.",
     "sim": "The first line on standard output is the pseudo-terminal's path or the endpoint; "
            "connect to it with --port PATH, --port socket://HOST:PORT or --can IFACE:CHANNEL. "
-           "Runs until interrupted. --pty needs Linux or macOS; --tcp and --can work on "
+           "Runs until interrupted. --address 1,2,3 serves a module at each address on one "
+           "line, as on an RS485 bus (an address given twice answers twice); --baud N paces "
+           "the line at that rate, 10 bits a byte both ways. "
+           "--pty needs Linux or macOS; --tcp and --can work on "
            "Windows too. Exit status 2 for a malformed argument, 3 when the server cannot "
            "start (address in use, no such CAN interface).",
     "ports": "The USB ids are shown; ports whose vendor is Trinamic (0x2A3C) are marked TRINAMIC.",
@@ -377,8 +380,13 @@ _SUB_NOTES = {
             "then a summary on standard error; a progress bar while it runs on a terminal. The "
             "wait per address comes from the link (the wire time of request and reply at the "
             "baud rate, plus a margin); addresses that answered late or garbled are asked again, "
-            "slower. --baud auto scans at each baud rate global parameter 65 can select. Exit "
-            "status 3 when nothing answers.",
+            "slower. When nothing answers in binary, the addresses are asked in ASCII mode "
+            "(--ascii: those silent in binary even when others answered); a module found so is "
+            "marked ASCII mode and left in it. An address where every reply comes twice is "
+            "said to have two modules on it (JSON: \"answers\": 2). --baud auto scans at "
+            "each baud rate global parameter 65 can select, and once only where the rate has "
+            "no effect (TCP, a module's own USB port, or modules found at one rate answering "
+            "at the next). Exit status 3 when nothing answers.",
 }
 
 

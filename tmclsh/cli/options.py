@@ -231,6 +231,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="per-address timeout (default: from the link, the wire time of a "
                          f"request and its reply at the baud rate plus a margin; "
                          f"{_range('scan_timeout')})")
+    sc.add_argument("--ascii", action="store_true", default=argparse.SUPPRESS,
+                    help="also look for modules in ASCII mode at every address that did not "
+                         "answer in binary (without it, only when none did: the ASCII pass "
+                         "takes as long as the first)")
     sc.add_argument("--json", action="store_true", default=argparse.SUPPRESS)
     return p
 
