@@ -859,7 +859,8 @@ def _show_variables(session: Session) -> None:
     if not session.variables:
         session.out.info("no variables (set one with .let NAME = EXPR)")
     for name, value in sorted(session.variables.items()):
-        session.out.print(f"{name} = {expr.format_number(value)}", markup=False)
+        shown = repr(value) if isinstance(value, str) else expr.format_number(value)
+        session.out.print(f"{name} = {shown}", markup=False)
 
 
 def check(expression: expr.Expression, ctx: expr.SessionContext) -> tuple[bool, str, str]:

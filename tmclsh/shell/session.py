@@ -118,7 +118,8 @@ class Session:
         self.yes = yes
         self.keep_going = keep_going
         self.settings = settings or {}
-        self.variables: dict[str, int | float] = {}
+        # numbers; text (a unit's ${port}) only goes into lines as ${name}
+        self.variables: dict[str, int | float | str] = {}
         self.history: list[str] = []
         self.stats = Stats()
         self.last_result: Result | None = None
@@ -230,7 +231,8 @@ class Session:
         def sub(m: re.Match) -> str:
             inner = m.group(1).strip()
             if inner in self.variables:
-                return format_number(self.variables[inner])
+                value = self.variables[inner]
+                return value if isinstance(value, str) else format_number(value)
             evaluate = self.state.evaluate
             if callable(evaluate):
                 return format_number(evaluate(self, inner))
@@ -335,6 +337,8 @@ class Session:
             raise ValidationError(unknown_command(line.word))
         if cmd is not None:
             args = line.args
+            if cmd.expands and "${" in args:
+                args = self.expand(args)
             if args and cmd.syntax == cmd.name:  # `.stopall now`: a usage error, nothing sent
                 raise ValidationError(f"{cmd.name} takes no arguments (got {args!r})")
             frames, lines = frames_sent(self.client), self.stats.commands
