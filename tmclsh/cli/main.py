@@ -331,6 +331,13 @@ def main(argv: list[str] | None = None) -> int:
                    "scan": cmd_scan, "modules": cmd_modules}.get(args.subcommand or "")
         if handler is not None:
             return handler(args)
+        from ..shell.units import plan_units
+
+        units = plan_units(args)  # several modules at once: a unit each (-c, -f)
+        if len(units) > 1:
+            from ..shell.units import run_units
+
+            return run_units(args, units)
         from ..shell.main import run_shell
 
         return run_shell(args)

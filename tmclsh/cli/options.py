@@ -78,9 +78,10 @@ def add_connection(p: argparse.ArgumentParser, *, auto_baud: bool = False,
     g = p.add_argument_group("connection (default: the one attached Trinamic USB module; "
                              "else --sim at the prompt, exit 3 elsewhere)")
     x = g.add_mutually_exclusive_group()
-    x.add_argument("--port", metavar="PORT",
+    x.add_argument("--port", metavar="PORT", action="append",
                    help="serial device (/dev/ttyACM0, COM3) or pyserial URL (socket://, "
-                        "rfc2217://, loop://, spy://, hwgrep://)")
+                        "rfc2217://, loop://, spy://, hwgrep://); give it again for more "
+                        "modules, each on its own port (-c and -f run on every one)")
     x.add_argument("--can", metavar="IFACE:CHANNEL", nargs="?", const=FROM_PYTHON_CAN,
                    help="python-can bus, e.g. socketcan:can0 (Linux; vcan0 for a virtual bus "
                         "other programs can join), pcan:PCAN_USBBUS1, kvaser:0, "
@@ -101,11 +102,16 @@ def add_connection(p: argparse.ArgumentParser, *, auto_baud: bool = False,
                    help="CAN bit rate in bit/s; the modules' factory setting is 1000000 "
                         "(GP 69 = 8); without it the adapter's own default or configuration "
                         f"applies, which is often lower ({_range('bitrate')})")
-    g.add_argument("--can-id", type=setting("can_id"), metavar="N",
-                   help=f"module's CAN id (GP 71, default 1; {_range('can_id')})")
-    g.add_argument("--reply-id", type=setting("reply_id"), metavar="N",
-                   help=f"module's CAN reply id (GP 70, default 2; {_range('reply_id')})")
+    g.add_argument("--can-id", type=settings("can_id"), metavar="N[,N...]",
+                   help=f"module's CAN id (GP 71, default 1; {_range('can_id')}); several "
+                        "(1,2,5 or 1-8): a module at each on the bus")
+    g.add_argument("--reply-id", type=settings("reply_id"), metavar="N[,N...]",
+                   help=f"module's CAN reply id (GP 70, default 2; {_range('reply_id')}); "
+                        "several: one for each --can-id, in the same order")
     g.add_argument("--profile", metavar="NAME", help="connection profile from the config file")
+    if not nested:  # (several modules at once: -c and -f, not a subcommand)
+        g.add_argument("--all", action="store_true", dest="all_modules",
+                       help="every Trinamic USB module attached, one unit each (-c, -f)")
     if nested:
         for action in p._actions[first:]:
             action.default = argparse.SUPPRESS
@@ -119,8 +125,9 @@ def add_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--module-file", metavar="PATH", action="append", dest="module_file",
                    help="a module data file of your own (same format as the built-in ones; "
                         "files in the config directory's modules/ are read too)")
-    g.add_argument("-a", "--address", type=_address, metavar="N",
-                   help=f"module address (default 1; {_range('address')})")
+    g.add_argument("-a", "--address", type=settings("address"), metavar="N[,N...]",
+                   help=f"module address (default 1; {_range('address')}); several (1,2,5 or "
+                        "1-8): a module at each on the line, one unit each (-c, -f)")
     g.add_argument("--host-address", type=_address, metavar="N",
                    help=f"host address (default 2; {_range('host_address')})")
     g.add_argument("--ascii", action="store_true", default=None,
@@ -133,6 +140,9 @@ def add_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--retries", type=setting("retries"), metavar="N",
                    help=f"retries of idempotent commands (default 2; {_range('retries')})")
     g.add_argument("--keep-going", action="store_true", help="scripts: continue after an error")
+    g.add_argument("--log-dir", metavar="DIR",
+                   help="several units: one transcript per unit in DIR (every frame sent and "
+                        "answered and every line shown, with times)")
     g.add_argument("-y", "--yes", action="store_true",
                    help="do not ask before EEPROM writes, factory reset or program download")
     g.add_argument("--debug", action="store_true", help="show tracebacks instead of one-line errors")

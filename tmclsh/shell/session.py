@@ -147,6 +147,9 @@ class Session:
         self.time_limit: float | None = None
         self._deadline: float | None = None
         self.state.evaluate = _evaluate
+        # told (lines done, lines in all) after each line of -c and of a -f script (a unit's
+        # live table, shell/units.py); None: nobody asks
+        self.progress: Callable[[int, int], None] | None = None
 
     def close(self) -> bool:
         """End the session: run the closers; a failing one is reported, the rest still run.
