@@ -201,7 +201,7 @@ def test_all_takes_every_attached_module(four, run, monkeypatch):
     (["--address", "1,1"], "--address 1 is given twice"),
     (["--can", "virtual:x", "--can-id", "1,2,3", "--reply-id", "5,6"],
      "--reply-id names 2 ids for 3 CAN ids"),
-    (["--address", "1-2"], "the prompt talks to one module; 2 units given"),
+    (["--address", "1-2"], "standard input is read once; 2 units given"),
     (["--address", "1-2", "-f", "-"], "-f - reads standard input once"),
 ])
 def test_what_cannot_be_is_a_usage_error(make_pty_sim, run, argv, says):
@@ -266,3 +266,17 @@ def test_the_live_table_in_a_terminal(make_pty_sim, terminal, tmp_path):
     assert re.search(r"│ +2 │.*│ TMCM-351 .*61/61 .*│ failed", screen)
     # what a unit says on stderr is above the table, with the unit in front
     assert f"[1 {slow[1]}] {script}:5: expectation failed" in screen.replace("\n", "")
+
+
+def test_the_prompt_takes_one_module(make_pty_sim, terminal):
+    from tmux import needs_tmux
+
+    if needs_tmux.args[0]:
+        pytest.skip("tmux is not installed")
+    _, path = make_pty_sim()
+    term = terminal()
+    term.start("--port", path, "--address", "1,2")
+    screen = term.wait("EXIT=")
+    assert "EXIT=2" in screen
+    assert f"the prompt talks to one module; 2 units given ({path} @1, {path} @2)" in \
+        screen.replace("\n", "")

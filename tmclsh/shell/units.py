@@ -179,9 +179,12 @@ def run_units(args: argparse.Namespace, units: list[Unit]) -> int:
     every unit passed, 3 when a unit had no module (they are named), else 1 (2 when every
     unit refused the lines before anything was sent; the signal's status when stopped)."""
     if args.command is None and args.script is None:
-        raise UsageError(f"the prompt talks to one module; {len(units)} units given "
-                         f"({', '.join(u.where for u in units)}): run -c or -f on them all, "
-                         "or give one")
+        given = f"{len(units)} units given ({', '.join(u.where for u in units)})"
+        if sys.stdin.isatty():
+            raise UsageError(f"the prompt talks to one module; {given}: run -c or -f on them "
+                             "all, or give one")
+        raise UsageError(f"standard input is read once; {given}: give the lines with -c or "
+                         "a script file with -f")
     if args.script == "-":
         raise UsageError("-f - reads standard input once; several units need a script file "
                          "(or -c)")
@@ -208,7 +211,8 @@ class _Line:
 
     units: list[Unit]
     thread: threading.Thread | None = None
-    current: Unit | None = None
+    current: Unit | None = None  # the unit running (a stop is raised in its thread)
+    raised: bool = False  # a stop was raised in the thread and may not have landed yet
     lock: threading.Lock = field(default_factory=threading.Lock)
 
 
@@ -259,6 +263,7 @@ class Run:
         for line in self.lines:
             with line.lock:
                 if line.current is not None and line.thread is not None:
+                    line.raised = True
                     _raise_in(line.thread, KeyboardInterrupt)
 
     def _line(self, line: _Line) -> None:
@@ -270,35 +275,32 @@ class Run:
                         record.not_run(self.stopping)
                         continue
                     line.current = unit
-                try:
-                    self._unit(unit, record)
-                finally:
-                    with line.lock:
-                        line.current = None
-        except KeyboardInterrupt:  # (raised as the unit had just ended: it is stopped already
-            pass                    # or was done; the units after it are not started)
+                self._unit(line, unit, record)
         finally:
             for unit in line.units:
                 self.view.record(unit).not_run(self.stopping or "not reached")
 
-    def _unit(self, unit: Unit, record: Record) -> None:
+    def _unit(self, line: _Line, unit: Unit, record: Record) -> None:
         from ..client.connect import connection_settings, open_client
         from .main import run_connected, stop_on_interrupt
 
         args = unit.args(self.args)
         client = None
+        stopped = False
         with record.attached():  # what this thread writes goes to the unit's view
             try:
-                record.begin()
-                settings = connection_settings(args)
-                client = open_client(settings, notice=record.notice, tracer=record.tracer)
-                record.connected(client)
-                status = run_connected(args, client, settings,
-                                       prepare=lambda session: self._prepare(unit, record,
-                                                                             session))
+                try:
+                    record.begin()
+                    settings = connection_settings(args)
+                    client = open_client(settings, notice=record.notice, tracer=record.tracer)
+                    record.connected(client)
+                    status = run_connected(args, client, settings,
+                                           prepare=lambda session: self._prepare(
+                                               unit, record, session))
+                finally:
+                    self._leave(line)  # from here on no stop is raised in this thread
             except KeyboardInterrupt:
-                if client is not None:
-                    stop_on_interrupt(client, self.stopping or "interrupted")
+                stopped = True
                 status = self.stop_status
             except (TmclError, OSError) as exc:  # no module (or no link) for this unit
                 print(f"tmclsh: {exc}", file=sys.stderr)
@@ -308,10 +310,24 @@ class Run:
                 print(f"tmclsh: internal error: {exc!r}", file=sys.stderr)
                 record.error(repr(exc))
                 status = EXIT_FAILED
+            try:
+                if client is not None and self.stopping is not None:
+                    # interrupted, or it ended just as the stop came: stopped all the same
+                    stop_on_interrupt(client, self.stopping)
+                    stopped = True
             finally:
                 if client is not None:
                     client.close()
-            record.end(status, interrupted=self.stopping)
+            record.end(status if not stopped else self.stop_status, interrupted=self.stopping)
+
+    def _leave(self, line: _Line) -> None:
+        """The unit's run is over: the stop is no longer raised in this thread, and one that
+        was raised but has not landed yet is taken back (the unit is stopped by hand)."""
+        with line.lock:
+            line.current = None
+            if line.raised:
+                line.raised = False
+                _raise_in(threading.current_thread(), None)
 
     def _prepare(self, unit: Unit, record: Record, session: Session) -> None:
         """The unit's own session: its variables, its tag on every JSON object, its view told
@@ -334,9 +350,10 @@ class Run:
         if missing:
             self.view.note("no module for unit " + ", unit ".join(r.unit.label
                                                                   for r in missing))
-            return EXIT_CONNECT
         if self.stopping is not None:
             return self.stop_status
+        if missing:
+            return EXIT_CONNECT
         if all(r.status == EXIT_OK for r in records):
             return EXIT_OK
         if all(r.status == EXIT_USAGE for r in records):
@@ -344,13 +361,14 @@ class Run:
         return EXIT_FAILED
 
 
-def _raise_in(thread: threading.Thread, exc_type: type[BaseException]) -> None:
+def _raise_in(thread: threading.Thread, exc_type: type[BaseException] | None) -> None:
     """Raise ``exc_type`` in ``thread`` at its next bytecode (what Ctrl-C does to the main
-    thread), so a unit unwinds and stops its module as a run of one module does."""
+    thread), so a unit unwinds and stops its module as a run of one module does; None takes
+    back one raised that has not landed yet."""
     import ctypes
 
     if thread.ident is None:
         return
-    ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(thread.ident),
-                                               ctypes.py_object(exc_type))
+    ctypes.pythonapi.PyThreadState_SetAsyncExc(
+        ctypes.c_ulong(thread.ident), None if exc_type is None else ctypes.py_object(exc_type))
 
