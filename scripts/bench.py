@@ -890,9 +890,10 @@ def bench_units(args: argparse.Namespace) -> dict:
     per exchange) over that of ``tmclsh --port P1 -f SCRIPT`` (one unit), whole processes,
     output to a file; and the CPU time per line per unit of each, start-up subtracted with a
     1-line run of the same (children's rusage: (long - short) / lines, over eight for the
-    eight). Each round runs the four in an order that turns round every round; the figures
-    are the medians of the rounds' ratios. The simulators' own CPU is not in either figure
-    (they are the modules)."""
+    eight). Each round runs the four in an order that turns round every round; the wall
+    figure is the median of the rounds' ratios, the CPU figures come from the medians of
+    each run's CPU over the rounds (see below). The simulators' own CPU is not in either
+    figure (they are the modules)."""
     import resource
 
     rounds = args.rounds
@@ -926,29 +927,35 @@ def bench_units(args: argparse.Namespace) -> dict:
             f"scripts, simulators paced at {BAUD} baud; {load_note()}")
         run(paths, short_script)  # warm the caches
         run(paths[:1], short_script)
-        walls, per_ones, per_alls = [], [], []
+        walls: list[float] = []
         jobs = [("one", long_script), ("all", long_script), ("one", short_script),
                 ("all", short_script)]
+        cpu_of: dict[tuple[str, Path], list[float]] = {job: [] for job in jobs}
         for rnd in range(rounds):
             got = {}
             for who, script in (jobs if rnd % 2 == 0 else jobs[::-1]):
                 got[(who, script)] = run(paths if who == "all" else paths[:1], script)
             one, all_ = got[("one", long_script)], got[("all", long_script)]
             walls.append(all_[0] / one[0])
+            for job, (_, used) in got.items():
+                cpu_of[job].append(used)
             per_one = (one[1] - got[("one", short_script)][1]) / (UNIT_LINES - 1)
             per_all = (all_[1] - got[("all", short_script)][1]) / (UNIT_LINES - 1) / UNITS
-            per_ones.append(per_one)
-            per_alls.append(per_all)
             if args.verbose:
                 say(f"  round {rnd + 1}: one {one[0]:.3f} s, {UNITS} units {all_[0]:.3f} s "
                     f"({walls[-1]:.2f}x); CPU per line per unit {per_one * 1e6:.1f} us vs "
-                    f"{per_all * 1e6:.1f} us")
+                    f"{per_all * 1e6:.1f} us (CPU of the runs: one {one[1]:.3f}/"
+                    f"{got[('one', short_script)][1]:.3f} s, {UNITS} units {all_[1]:.3f}/"
+                    f"{got[('all', short_script)][1]:.3f} s)")
     finally:
         for s in sims:
             s.close()
-    # (a difference of two process runs swings by tens of microseconds a line from round to
-    # round: the ratio is of the medians)
-    one_cpu, all_cpu = statistics.median(per_ones), statistics.median(per_alls)
+    # A process's start-up CPU swings by tens of milliseconds from run to run, as much as one
+    # unit's 500 lines take: a round's own difference is mostly that noise. The figure is the
+    # difference of the medians of the long and the short runs over the rounds.
+    med = {job: statistics.median(v) for job, v in cpu_of.items()}
+    one_cpu = (med[("one", long_script)] - med[("one", short_script)]) / (UNIT_LINES - 1)
+    all_cpu = (med[("all", long_script)] - med[("all", short_script)]) / (UNIT_LINES - 1) / UNITS
     wall, cpu = statistics.median(walls), all_cpu / one_cpu
     say(f"  {UNITS} units over one unit, wall: {wall:.2f}x (rounds {min(walls):.2f}.."
         f"{max(walls):.2f}); CPU per line per unit: one unit {one_cpu * 1e6:.1f} us, "
