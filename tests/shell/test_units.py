@@ -266,6 +266,9 @@ def test_the_live_table_in_a_terminal(make_pty_sim, terminal, tmp_path):
     assert re.search(r"│ +2 │.*│ TMCM-351 .*61/61 .*│ failed", screen)
     # what a unit says on stderr is above the table, with the unit in front
     assert f"[1 {slow[1]}] {script}:5: expectation failed" in screen.replace("\n", "")
+    # the results themselves are not on the screen: where to find them is
+    assert "ActualPosition =" not in screen and "results are not shown beside the table" in \
+        screen.replace("\n", "")
 
 
 def test_the_prompt_takes_one_module(make_pty_sim, terminal):

@@ -285,6 +285,7 @@ class View:
     """What every view does; subclasses show the lines and the rows their way."""
 
     def __init__(self, units: list[Unit], log_dir: Path | None):
+        self.log_dir = log_dir
         self.records = {u.number: Record(u, self, log_dir) for u in units}
         self.out, self.err = sys.stdout, sys.stderr  # the real streams
         self._lock = threading.Lock()
@@ -363,6 +364,8 @@ class JsonView(View):
 class TableView(View):
     """A terminal: a live table of the units, their stderr above it, a summary table."""
 
+    hidden = False  # a unit's results were kept out of the table (said at the end)
+
     def start(self) -> None:
         from rich.console import Console
         from rich.live import Live
@@ -386,7 +389,8 @@ class TableView(View):
 
     def lines(self, record: Record, stream: str, lines: list[str]) -> None:
         if stream == "out":
-            return  # results: the table shows how far each unit is (--log-dir keeps them)
+            self.hidden = True  # results: the table shows how far each unit is
+            return
         for line in lines:
             self._above(f"[{record.unit.label}] {line}", "")
 
@@ -400,12 +404,15 @@ class TableView(View):
 
     def finish(self, records: list[Record]) -> None:
         self.console.print(self._table(final=True))
+        if self.hidden and not self.log_dir:
+            self.note("results are not shown beside the table: --log-dir DIR keeps each "
+                      "unit's; in a pipe (| cat) every line is shown with its unit")
 
     def _table(self, final: bool = False):
         from rich.table import Table
 
         table = Table(title="units" if not final else "summary", title_justify="left",
-                      expand=False, pad_edge=False)
+                      expand=False)
         for name, justify in (("unit", "right"), ("link", "left"), ("module", "left"),
                               ("firmware", "left"), ("line", "right"), ("checks ok", "right"),
                               ("checks failed", "right"), ("errors", "right"),
