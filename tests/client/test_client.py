@@ -302,7 +302,9 @@ def test_idempotent_commands():
     assert not idempotent(Request(1, 19, 0, 0, 1))  # CALC changes the accumulator
     assert not idempotent(Request(1, Control.RUN_APPLICATION))
     assert not idempotent(Request(1, Control.TARGET_REACHED_EVENT))
-    assert not idempotent(Request(1, 200))  # unknown: never repeated
+    assert not idempotent(Request(1, 199))  # unknown: never repeated
+    assert idempotent(Request(1, 201, 3, 0, 7))  # the bootloader's write buffer: same word
+    assert not idempotent(Request(1, 242, 0x81, 0x92, 0xA3B4C5D6))  # no reply to wait for
     assert not idempotent(Request(1, GAP, 1, 0), downloading=True)
 
 

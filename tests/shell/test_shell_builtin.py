@@ -192,7 +192,9 @@ def test_params_reads_each_readable_parameter_once(session, capsys):
     out = capsys.readouterr().out
     mod = session.module
     readable = [p for p in mod.axis_params if p.readable]
-    assert len(frames.tx) == len(readable)
+    # (and once more where an answer was the one before it, byte for byte: Client._judge)
+    assert len(frames.tx) == len(readable) + session.client.stats["judged"]
+    assert {f.type for f in frames.tx} == {p.number for p in readable}
     assert all(f.opcode == 6 for f in frames.tx)
     assert "MaxPositioningSpeed" in out and "(write-only)" in out
 

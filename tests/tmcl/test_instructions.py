@@ -61,7 +61,12 @@ def test_opcodes_and_mnemonics() -> None:
     assert [s.mnemonic for s in specs if 64 <= s.opcode <= 71] == [f"UF{n}" for n in range(8)]
     assert isa.by_mnemonic("NOPE") is None and isa.by_opcode(99) is None
     assert isa.Opcode.MVP == 4 and isa.Opcode.GET_VERSION == 136
-    assert set(isa.controls()) == set(range(128, 140)) == {int(c) for c in Control}
+    application = {op for op, c in isa.controls().items() if c.boot is None}
+    assert application == set(range(128, 140)) == {int(c) for c in Control}
+    # the bootloader's (PyTrinamic's tmcl.py: BOOT_ERASE_ALL = 200 ... BOOT = 242)
+    assert {op: c.boot for op, c in isa.controls().items() if c.boot} == {
+        200: "erase", 201: "write_word", 202: "write_page", 203: "checksum", 204: "read",
+        205: "start", 206: "info", 208: "length", 242: "enter"}
 
 
 def test_per_module_command_sets() -> None:

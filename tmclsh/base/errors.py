@@ -68,6 +68,15 @@ class ConnectError(TmclError):
     (exit status 3)."""
 
 
+class InBootloaderError(ConnectError):
+    """The module answers from its bootloader (136 says ``1311B100``): a firmware update did
+    not complete, and it runs no firmware until one does (``tmclsh firmware``)."""
+
+    def __init__(self, message: str, version: str = ""):
+        self.version = version
+        super().__init__(message)
+
+
 class NoAnswerError(ConnectError, TmclTimeoutError):
     """Nothing answered at connect (or only garbled replies came): the message says what was
     tried and what to try next."""

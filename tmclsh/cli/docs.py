@@ -82,6 +82,7 @@ class Group:
     title: str
     options: list[Option]
     default: bool  # argparse's own options group (not one the program made)
+    copy: bool = False  # a subcommand's copy of a group of tmclsh's own (the connection)
 
 
 @dataclass
@@ -169,6 +170,10 @@ def describe(parser: argparse.ArgumentParser | None = None) -> tuple[CommandLine
                 if helps.get(name) == argparse.SUPPRESS:
                     continue
                 subs.append(_read(sub, name, helps.get(name, "")))
+    own = {g.title for g in top.groups if not g.default}
+    for cmd in subs:
+        for g in cmd.groups:
+            g.copy = not g.default and g.title in own
     return top, subs
 
 
@@ -279,8 +284,9 @@ def _sentence(text: str) -> str:
 
 
 def _summarised(g: Group) -> bool:
-    """A subcommand's big option group of its own (the connection options) is named, not listed."""
-    return not g.default and len(g.options) > 4
+    """A subcommand's copy of a group of tmclsh's own options (the connection options) is
+    named, not listed; a group the subcommand has for itself is listed."""
+    return g.copy
 
 
 def _usage(cmd: CommandLine) -> str:
@@ -386,7 +392,65 @@ _SUB_NOTES = {
             "said to have two modules on it (JSON: \"answers\": 2). --baud auto scans at "
             "each baud rate global parameter 65 can select, and once only where the rate has "
             "no effect (TCP, a module's own USB port, or modules found at one rate answering "
-            "at the next). Exit status 3 when nothing answers.",
+            "at the next). A module in its bootloader (a firmware update did not "
+            "complete) is marked, with the tmclsh firmware command that completes it. Exit "
+            "status 3 when nothing answers.",
+    "firmware": "Writes the firmware image FILE.hex (Intel HEX, as the vendor ships it) to the "
+                "module over its TMCL bootloader. The image is refused before anything is "
+                "sent when it cannot be read, and before anything is written when its version "
+                "string (such as 1311V112) names another module type than the module's own. "
+                "Then, after the question (or --yes; without a terminal to answer, --yes is "
+                "needed), a running program and turning motors are stopped (the safety stop), "
+                "and command 242 restarts the module into its bootloader, which "
+                "answers at address 1, 115200 baud (a USB module leaves the bus and comes back "
+                "under the same port name); 206 asks its memory, and an image that does not "
+                "start where the memory does or does not fit is refused before the erase (the "
+                "module is sent back to its firmware); 200 erases, 201 and 202 write the image "
+                "page by page, 203 compares the memory's checksum with the image's, 208 writes "
+                "length and checksum, 205 starts the new firmware, whose version is read back. "
+                "On a terminal a bar shows the bytes written, the rate and the time left; with "
+                "--json each step is one object on standard output and the result one more. "
+                "The last line names the old and the new version. --check says what would "
+                "happen and writes nothing (whether the image fits is known from the "
+                "bootloader only: --check does not restart a running module to ask). "
+                "Interrupted anywhere (Ctrl-C, SIGTERM, a lost link, a module that stops "
+                "answering), tmclsh says where the module stands and, unless it runs its "
+                "firmware, the exact command that completes the update; before the erase, a "
+                "module it restarted is sent back to its firmware first. Run again, the same "
+                "command finds the module in its bootloader (also at address 1, 115200 baud "
+                "when it does not answer where asked) and completes the update: when the "
+                "memory already holds the image (203 agrees) it only finishes it, otherwise it "
+                "erases and writes again. A module that already runs the image's version is "
+                "left alone. Exit status 0 when updated (or nothing to do), 1 when refused or "
+                "stopped, 2 for an unreadable image or a missing --yes (nothing sent), 3 when "
+                "no module answers, 130 when interrupted.",
+    "monitor": "Listens and sends nothing, ever. One line per exchange (time, address or CAN "
+               "id, the request with parameter names, the reply with its status in words, "
+               "the time between them), one line for each event, reply without its request, "
+               "run of noise, partial frame, ASCII text line and other CAN frame; with "
+               "--json one object per frame. Replies are paired with their requests by "
+               "module address and command (on CAN by the reply id); a request unanswered "
+               "after --timeout is shown so. Each module's type is learnt from its 136 "
+               "answers in the traffic, so parameter names appear once a master asked for "
+               "it (or at once with -m). On a serial tap the frames are found by their "
+               "checksum as tmclsh finds its own; after noise a frame is taken only if it "
+               "fits the traffic so far, and bytes left when the line goes quiet are a "
+               "partial frame. Commands tmclsh has no data for are shown by number, never "
+               "dropped. Ctrl-C or SIGTERM ends it with a summary (frames, errors, status "
+               "counts, the slowest exchange) on standard error, or a last {\"summary\": "
+               "...} object. Exit status 0; 1 when the adapter goes away or a log cannot "
+               "be read on (after the summary of what came before); 3 when the port or bus "
+               "cannot be opened.",
+    "bridge": "Another program connects to the pseudo-terminal or TCP port as to the module; "
+              "every frame it sends and every byte the module answers is forwarded unchanged "
+              "(on --can: the request's seven instruction bytes to the module's CAN id, the "
+              "reply back as a serial frame) and shown as monitor shows it, ASCII mode as "
+              "text lines. The first line on standard output is the pseudo-terminal's path "
+              "or HOST:PORT, as for sim. It runs until interrupted; then, as tmclsh does "
+              "for its own commands, it stops a motor or stored program the traffic "
+              "started, ends download mode and leaves ASCII mode the traffic entered, and "
+              "prints the summary. Exit status 0; 1 when the module's link goes away; 3 "
+              "when the module's port or bus cannot be opened or the bridge cannot serve.",
 }
 
 
@@ -669,6 +733,35 @@ Assemble a program and look at the result; find the modules on a bus:
 {_b("tmclsh asm blink.tmc --hex -o blink.hex")}
 {_b("tmclsh disasm blink.hex")}
 {_b("tmclsh scan --port /dev/ttyUSB0")}
+.fi
+.RE
+.PP
+Update the firmware of the module on a USB port, asking before the erase; run the same
+command again to complete an update that broke off:
+.PP
+.RS 4
+.nf
+{_b("tmclsh firmware TMCM-1311_V1.12.hex --port /dev/ttyACM0")}
+{_b("tmclsh firmware TMCM-1311_V1.12.hex --port /dev/ttyACM0 --check")}
+.fi
+.RE
+.PP
+What is my PLC sending? Listen to the CAN bus, or to an RS485 adapter on the line, and keep
+a log; read it again later, only the position reads:
+.PP
+.RS 4
+.nf
+{_b("tmclsh monitor --can socketcan:can0 -o plc.blf")}
+{_b("tmclsh monitor --port /dev/ttyUSB1 --baud 115200 -m TMCM-1311")}
+{_b("tmclsh monitor --log plc.blf --param ActualPosition")}
+.fi
+.RE
+.PP
+Put tmclsh between the TMCL-IDE (or any program) and the module, and watch every frame:
+.PP
+.RS 4
+.nf
+{_b("tmclsh bridge --tcp 127.0.0.1:7000 --port /dev/ttyACM0")}
 .fi
 .RE
 .PP

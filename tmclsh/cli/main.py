@@ -52,7 +52,20 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
     return run(args.module, args.address, pty=args.pty, tcp=args.tcp, can=args.can,
                host_address=args.host_address, bitrate=args.bitrate, faults=args.faults,
-               seed=args.faults_seed, baud=args.baud)
+               seed=args.faults_seed, bootloader=args.bootloader,
+               baud=args.baud)
+
+
+def cmd_monitor(args: argparse.Namespace) -> int:
+    from ..shell.monitor import run_monitor
+
+    return run_monitor(args)
+
+
+def cmd_bridge(args: argparse.Namespace) -> int:
+    from ..shell.bridge import run_bridge
+
+    return run_bridge(args)
 
 
 def cmd_ports(args: argparse.Namespace) -> int:
@@ -152,8 +165,13 @@ def cmd_scan(args: argparse.Namespace) -> int:
                     mode = "  ASCII mode" if hit.ascii else ""
                     twice = ("  TWO MODULES answer at this address (every reply came twice)"
                              if hit.answers > 1 else "")
+                    if hit.bootloader:
+                        at += (f"  IN ITS BOOTLOADER (a firmware update did not complete: "
+                               f"'tmclsh firmware FILE.hex{_connection_words(args)}' "
+                               "completes it)")
+                    what = "bootloader" if hit.bootloader else "firmware"
                     print(f"address {hit.address:3d}  {hit.module or 'unknown module':<10}  "
-                          f"firmware {hit.version or '?'}{at}{mode}{twice}", flush=True)
+                          f"{what} {hit.version or '?'}{at}{mode}{twice}", flush=True)
 
             options = {"ascii": ascii, "ascii_timeout": ascii_timeout}
             if show_progress:
@@ -196,6 +214,18 @@ def cmd_scan(args: argparse.Namespace) -> int:
                   "address (one at a time on the line: SGP 66, 0, N), or take one off the line",
                   file=sys.stderr)
     return EXIT_OK
+
+
+def _connection_words(args: argparse.Namespace) -> str:
+    """The link options of this run again, as ``tmclsh firmware`` takes them."""
+    port = getattr(args, "port", None)
+    if port:
+        return f" --port {port[0] if isinstance(port, list) else port}"  # (one: scan takes one)
+    if getattr(args, "can", None):
+        from ..base.canspec import FROM_PYTHON_CAN
+
+        return " --can" if args.can == FROM_PYTHON_CAN else f" --can {args.can}"
+    return ""
 
 
 def _is_usb(port: str) -> bool:
@@ -275,6 +305,12 @@ def cmd_modules(args: argparse.Namespace) -> int:
     return EXIT_FAILED if modules.problems() else EXIT_OK
 
 
+def cmd_firmware(args: argparse.Namespace) -> int:
+    from .firmware import cmd_firmware as run
+
+    return run(args)
+
+
 # -- entry point -------------------------------------------------------------------------
 
 def show_manual(parser: argparse.ArgumentParser) -> int:
@@ -328,7 +364,8 @@ def main(argv: list[str] | None = None) -> int:
             return EXIT_OK
         _user_modules(args)
         handler = {"asm": cmd_asm, "disasm": cmd_disasm, "sim": cmd_sim, "ports": cmd_ports,
-                   "scan": cmd_scan, "modules": cmd_modules}.get(args.subcommand or "")
+                   "scan": cmd_scan, "modules": cmd_modules, "firmware": cmd_firmware,
+                   "monitor": cmd_monitor, "bridge": cmd_bridge}.get(args.subcommand or "")
         if handler is not None:
             return handler(args)
         from ..shell.units import plan_units

@@ -15,7 +15,8 @@ from ..base import limits
 from ..base.canspec import FROM_PYTHON_CAN
 
 
-SUBCOMMANDS = ("asm", "disasm", "sim", "ports", "scan", "modules")
+SUBCOMMANDS = ("asm", "disasm", "sim", "ports", "scan", "modules", "firmware", "monitor",
+               "bridge")
 
 
 def setting(key: str):
@@ -38,18 +39,6 @@ _address = setting("address")
 _baud = setting("baud")
 
 
-def settings(key: str):
-    """An argparse type for several values of setting ``key`` at once (``1,2,5``, ``1-8``;
-    ``limits.parse_list``): a tuple."""
-    def convert(text: str) -> tuple[int, ...]:
-        try:
-            return limits.parse_list(key, text)
-        except limits.SettingError as exc:
-            raise argparse.ArgumentTypeError(str(exc)) from None
-    convert.__name__ = key
-    return convert
-
-
 def _faults(text: str) -> dict[str, float]:
     from ..sim.device import parse_rates  # only when --faults is given
 
@@ -64,6 +53,94 @@ def _seed(text: str) -> int:
         return int(text, 0)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+
+
+def id_list(key: str):
+    """An argparse type for several values of setting ``key`` at once: ``1,2,5``, ranges
+    ``1-8``, or both (``limits.parse_list``, each checked against ``limits.LIMITS[key]``)."""
+    def convert(text: str) -> tuple[int, ...]:
+        try:
+            return limits.parse_list(key, text)
+        except limits.SettingError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+    convert.__name__ = f"{key} list"
+    return convert
+
+
+def _ops(text: str) -> list[int]:
+    """``--op GAP,SAP,136``: mnemonics the instruction set knows, or command numbers."""
+    from ..tmcl import instructions as isa
+
+    out = []
+    for word in (w.strip() for w in text.split(",")):
+        spec = isa.by_mnemonic(word) if word else None
+        if spec is not None:
+            out.append(spec.opcode)
+            continue
+        try:
+            number = int(word, 0)
+        except ValueError:
+            number = -1
+        if not 0 <= number <= 255:
+            raise argparse.ArgumentTypeError(
+                f"{word!r} is no command: a mnemonic (GAP, SAP, MVP, ...) or a command "
+                "number 0..255 (136)")
+        out.append(number)
+    return out
+
+
+def _params(text: str) -> list[str | int]:
+    """``--param ActualPosition,4``: parameter names (checked against the module data) or
+    numbers."""
+    from ..ops.monitor import parameter_known
+
+    out: list[str | int] = []
+    for word in (w.strip() for w in text.split(",")):
+        if word.isdigit():
+            out.append(int(word))
+        elif word and parameter_known(word):
+            out.append(word)
+        else:
+            raise argparse.ArgumentTypeError(
+                f"{word!r} is no parameter name of any module tmclsh has data for "
+                "('tmclsh -c \".params\"' lists them); or give the number")
+    return out
+
+
+def _host_port(text: str) -> tuple[str, int]:
+    host, sep, port = text.rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 <= int(port) <= 65535:
+        raise argparse.ArgumentTypeError(f"--tcp wants HOST:PORT (PORT 0..65535; 0: any free "
+                                         f"port), got {text!r}")
+    return host, int(port)
+
+
+def _add_view(p: argparse.ArgumentParser) -> None:
+    """What monitor and bridge show, and how long they run."""
+    g = p.add_argument_group("what is shown")
+    g.add_argument("-m", "--module", metavar="NAME", default=argparse.SUPPRESS,
+                   help="module type for parameter names at every address (default: learnt "
+                        "from each module's 136 answers in the traffic; numbers until then)")
+    g.add_argument("--json", action="store_true", default=argparse.SUPPRESS,
+                   help="one JSON object per frame (op, type, motor, value; status and "
+                        "latency on replies), a summary object at the end")
+    g.add_argument("--hex", action="store_true", help="also the bytes of every frame")
+    g.add_argument("--address", type=id_list("can_id"), metavar="LIST",
+                   help="only these module addresses or CAN ids (1,2,5 or 1-8)")
+    g.add_argument("--op", type=_ops, metavar="LIST",
+                   help="only these commands (GAP,SAP or numbers: 136)")
+    g.add_argument("--param", type=_params, metavar="LIST",
+                   help="only these parameters (ActualPosition, or numbers)")
+    g.add_argument("--count", type=setting("count"), metavar="N",
+                   help=f"stop after N lines or objects shown ({_range('count')})")
+    g.add_argument("--duration", type=setting("duration"), metavar="S",
+                   help="stop after S seconds (of the log's own time when reading a log)")
+    g.add_argument("--timeout", type=setting("timeout"), metavar="S", default=argparse.SUPPRESS,
+                   help="a request with no reply after S seconds is unanswered (default 1)")
+    g.add_argument("-o", "--output", metavar="FILE",
+                   help="also write every frame heard, as heard: a python-can log on CAN "
+                        "(its format from the suffix: .asc, .blf, .trc, .log, .csv), hex "
+                        "lines on serial; 'tmclsh monitor --log FILE' replays it")
 
 
 def _baud_or_auto(text: str) -> int | str:
@@ -102,10 +179,10 @@ def add_connection(p: argparse.ArgumentParser, *, auto_baud: bool = False,
                    help="CAN bit rate in bit/s; the modules' factory setting is 1000000 "
                         "(GP 69 = 8); without it the adapter's own default or configuration "
                         f"applies, which is often lower ({_range('bitrate')})")
-    g.add_argument("--can-id", type=settings("can_id"), metavar="N[,N...]",
+    g.add_argument("--can-id", type=id_list("can_id"), metavar="N[,N...]",
                    help=f"module's CAN id (GP 71, default 1; {_range('can_id')}); several "
                         "(1,2,5 or 1-8): a module at each on the bus")
-    g.add_argument("--reply-id", type=settings("reply_id"), metavar="N[,N...]",
+    g.add_argument("--reply-id", type=id_list("reply_id"), metavar="N[,N...]",
                    help=f"module's CAN reply id (GP 70, default 2; {_range('reply_id')}); "
                         "several: one for each --can-id, in the same order")
     g.add_argument("--profile", metavar="NAME", help="connection profile from the config file")
@@ -125,7 +202,7 @@ def add_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--module-file", metavar="PATH", action="append", dest="module_file",
                    help="a module data file of your own (same format as the built-in ones; "
                         "files in the config directory's modules/ are read too)")
-    g.add_argument("-a", "--address", type=settings("address"), metavar="N[,N...]",
+    g.add_argument("-a", "--address", type=id_list("address"), metavar="N[,N...]",
                    help=f"module address (default 1; {_range('address')}); several (1,2,5 or "
                         "1-8): a module at each on the line, one unit each (-c, -f)")
     g.add_argument("--host-address", type=_address, metavar="N",
@@ -152,7 +229,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="tmclsh",
         description="Interactive shell for Trinamic TMCL modules (TMCM-1311, TMCM-351, TMCM-1640).",
-        epilog="Subcommands: asm, disasm, sim, ports, scan, modules ('tmclsh SUBCOMMAND --help').")
+        epilog="Subcommands: asm, disasm, sim, ports, scan, modules, firmware, monitor, "
+               "bridge ('tmclsh SUBCOMMAND --help').")
     add_connection(p)
     add_options(p)
     run = p.add_mutually_exclusive_group()
@@ -188,7 +266,7 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("sim", help="serve a simulated module on a pty, TCP or CAN")
     s.add_argument("-m", "--module", metavar="NAME", default="TMCM-1311",
                    help="module to simulate (default TMCM-1311; 'tmclsh modules' lists them)")
-    s.add_argument("--address", type=settings("address"), default=(1,), metavar="N[,N...]",
+    s.add_argument("--address", type=id_list("address"), default=(1,), metavar="N[,N...]",
                    help="module address (default 1); several (1,2,3 or 1-3): a module at each "
                         "on one line, as on an RS485 bus (each answers its own address; an "
                         "address given twice answers twice); --pty and --tcp only")
@@ -217,6 +295,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "drop=0.1,corrupt=0.05,dup=0.05")
     s.add_argument("--faults-seed", type=_seed, metavar="N",
                    help="seed for --faults, so a run misbehaves the same way again")
+    s.add_argument("--bootloader", action="store_true",
+                   help="start in the module's bootloader with no valid firmware, as after a "
+                        "firmware update that broke off (it answers at address 1; 'tmclsh "
+                        "firmware FILE.hex' completes the update)")
 
     po = sub.add_parser("ports", help="list serial ports (Trinamic USB devices marked)")
     # SUPPRESS: `tmclsh --json ports` and `tmclsh ports --json` both work
@@ -246,6 +328,85 @@ def build_parser() -> argparse.ArgumentParser:
                          "answer in binary (without it, only when none did: the ASCII pass "
                          "takes as long as the first)")
     sc.add_argument("--json", action="store_true", default=argparse.SUPPRESS)
+
+    fw = sub.add_parser("firmware", help="update the module's firmware over its TMCL "
+                                         "bootloader; completes an update that broke off")
+    fw.add_argument("file", metavar="FILE.hex",
+                    help="the firmware image, an Intel HEX file as the vendor ships it")
+    add_connection(fw, nested=True)
+    fw.add_argument("-a", "--address", type=_address, metavar="N", default=argparse.SUPPRESS,
+                    help=f"module address (default 1; {_range('address')}); a module in its "
+                         "bootloader is also looked for at address 1, 115200 baud")
+    fw.add_argument("--timeout", type=setting("timeout"), metavar="S",
+                    default=argparse.SUPPRESS,
+                    help=f"reply timeout in seconds (default 1; {_range('timeout')})")
+    fw.add_argument("--check", action="store_true",
+                    help="say what would happen (module type and firmware now, image type and "
+                         "version, whether it fits) and write nothing")
+    fw.add_argument("-y", "--yes", action="store_true", default=argparse.SUPPRESS,
+                    help="do not ask before erasing (needed where nobody can answer)")
+    fw.add_argument("--json", action="store_true", default=argparse.SUPPRESS,
+                    help="one JSON object per step, then the result")
+
+    mon = sub.add_parser("monitor", help="decode TMCL traffic tmclsh does not send: a CAN "
+                                         "bus, a serial tap, a log file (sends nothing)")
+    src = mon.add_argument_group("where to listen (one of)")
+    where = src.add_mutually_exclusive_group(required=True)
+    where.add_argument("--can", metavar="IFACE:CHANNEL", nargs="?", const=FROM_PYTHON_CAN,
+                       default=argparse.SUPPRESS,
+                       help="a python-can bus, as for the shell (alone: python-can's own "
+                            "configuration); every frame on it")
+    where.add_argument("--log", metavar="FILE",
+                       help="a python-can log of any format it reads (.asc, .blf, .trc, .log, "
+                            ".csv, .db, ...), or a serial capture written by -o")
+    where.add_argument("--port", metavar="TAP", default=argparse.SUPPRESS,
+                       help="a serial port that hears a bus (an RS485 adapter on the line): "
+                            "the master's requests and the modules' replies")
+    src.add_argument("--baud", type=setting("baud"), metavar="N", default=argparse.SUPPRESS,
+                     help=f"the tap's baud rate (default 9600; {_range('baud')})")
+    src.add_argument("--bitrate", type=setting("bitrate"), metavar="N",
+                     default=argparse.SUPPRESS, help=f"CAN bit rate ({_range('bitrate')})")
+    src.add_argument("--can-id", type=id_list("can_id"), metavar="LIST",
+                     help="CAN ids requests go to (GP 71; default 1, and ids learnt from "
+                          "frames that answer each other)")
+    src.add_argument("--reply-id", type=id_list("reply_id"), metavar="LIST",
+                     help="CAN ids replies come on (GP 70; default 2, and learnt)")
+    src.add_argument("--host-address", type=id_list("host_address"), metavar="LIST",
+                     default=argparse.SUPPRESS,
+                     help="serial host addresses replies go to (GP 76; default 2, and any "
+                          "that answers a request)")
+    _add_view(mon)
+
+    br = sub.add_parser("bridge", help="forward another program's frames to a module, "
+                                       "decoding each")
+    side = br.add_argument_group("where the other program connects (one of)")
+    serve = side.add_mutually_exclusive_group(required=True)
+    serve.add_argument("--pty", action="store_true",
+                       help="a pseudo-terminal (its path is the first line on stdout; Linux "
+                            "and macOS)")
+    serve.add_argument("--tcp", type=_host_port, metavar="HOST:PORT",
+                       help="a TCP port, for socket:// URLs (the endpoint is the first line)")
+    mod = br.add_argument_group("the module (one of)")
+    link = mod.add_mutually_exclusive_group(required=True)
+    link.add_argument("--port", metavar="PORT", default=argparse.SUPPRESS,
+                      help="the module's serial port or pyserial URL: bytes forwarded "
+                           "unchanged")
+    link.add_argument("--can", metavar="IFACE:CHANNEL", nargs="?", const=FROM_PYTHON_CAN,
+                      default=argparse.SUPPRESS,
+                      help="the module on a python-can bus: the program's serial frames go "
+                           "to it as CAN frames, its replies come back as serial frames")
+    mod.add_argument("--baud", type=setting("baud"), metavar="N", default=argparse.SUPPRESS,
+                     help=f"the module's baud rate (default 9600; {_range('baud')})")
+    mod.add_argument("--bitrate", type=setting("bitrate"), metavar="N",
+                     default=argparse.SUPPRESS, help=f"CAN bit rate ({_range('bitrate')})")
+    mod.add_argument("--can-id", type=setting("can_id"), metavar="N", default=argparse.SUPPRESS,
+                     help="CAN id every request goes to (default: each request's address)")
+    mod.add_argument("--reply-id", type=setting("reply_id"), metavar="N",
+                     default=argparse.SUPPRESS,
+                     help=f"CAN id replies come on (GP 70, default 2; {_range('reply_id')})")
+    mod.add_argument("--host-address", type=_address, metavar="N", default=argparse.SUPPRESS,
+                     help="on CAN: the address byte of the serial replies (default 2)")
+    _add_view(br)
     return p
 
 

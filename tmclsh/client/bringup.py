@@ -13,6 +13,9 @@ It checks rather than assumes:
 * a serial module that answers only in its ASCII mode is driven through it, with a notice;
   one driven in ASCII mode before a reconnect is found again in whichever mode it is in;
 * a module found in download mode (an upload cut short) is brought out of it with 133;
+* a module that answers from its bootloader (``1311B100``: a firmware update broke off) runs
+  no firmware to talk to: an ``InBootloaderError`` says so and names ``tmclsh firmware``,
+  which completes the update (the string is asked twice first: it carries no checksum);
 * when nothing answers, a ``NoAnswerError`` says what was tried and what to try next.
 """
 
@@ -20,11 +23,13 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from ..base.errors import (ChecksumError, ConnectError, DownloadModeError, NoAnswerError,
-                           StatusError, TmclError, TmclTimeoutError, ValidationError)
+from ..base.errors import (ChecksumError, ConnectError, DownloadModeError, InBootloaderError,
+                           NoAnswerError, StatusError, TmclError, TmclTimeoutError,
+                           ValidationError)
 from ..tmcl import instructions as isa
 from ..tmcl.frames import Control, Request
 from ..tmcl.modules import Module, baud_rates, by_type1, generic_for, identify as named_by
+from ..tmcl.version import parse_string
 
 if TYPE_CHECKING:
     from .core import Client
@@ -192,7 +197,8 @@ def _bring_up_binary(client: Client, expected: Module | None, strict: bool) -> N
         reply = None
     try:
         if reply is not None and reply.version is not None:
-            _adopt_version(client, *_confirmed_version(client, reply.version))
+            version = confirmed_bootloader(client, reply.version)
+            _adopt_version(client, *_confirmed_version(client, version))
         else:
             try:
                 identify(client)
@@ -247,8 +253,44 @@ def _confirmed_version(client: Client, version: str) -> tuple[str, Module | None
     return version, known
 
 
+def confirmed_bootloader(client: Client, version: str) -> str:
+    """A string that says bootloader (``1311B100``) is asked once more before it is taken
+    for one: it carries no checksum, and ``V`` and ``B`` are two bits apart."""
+    parsed = parse_string(version)
+    if parsed is None or not parsed.bootloader:
+        return version
+    try:
+        again_ = client.request(Request(client.address, _GET_VERSION, 0, 0, 0))
+    except (TmclTimeoutError, ChecksumError):
+        return version
+    return again_.version if again_ is not None and again_.version is not None else version
+
+
+def in_bootloader_message(client: Client, version: str) -> str:
+    """What a module answering from its bootloader means, and the command that ends it."""
+    return (f"the module at address {client.address} on {client.describe()} is in its "
+            f"bootloader (it answers {version!r}): a firmware update did not complete, and it "
+            f"runs no firmware until one does; 'tmclsh firmware FILE.hex"
+            f"{connection_words(client)}' writes the firmware and starts it")
+
+
+def connection_words(client: Client) -> str:
+    """The connection options that reach this client's link again (`` --port PATH``)."""
+    t = client.transport
+    if t.simulated:
+        return ""
+    if client.is_can:
+        ids = "" if client.can_id == 1 else f" --can-id {client.can_id}"
+        return f" --can {t.url}{ids}"
+    return f" --port {t.url}"
+
+
 def _adopt_version(client: Client, version: str, by_binary: Module | None = None) -> None:
     client.version = version
+    parsed = parse_string(version)
+    if parsed is not None and parsed.bootloader:
+        client.module = None
+        raise InBootloaderError(in_bootloader_message(client, version), version)
     mod = named_by(version)  # data if tmclsh has it, else numbers only
     if by_binary is not None and (mod is None or mod.generic):
         # the string names no type tmclsh knows, the checksummed binary version does
@@ -347,6 +389,15 @@ def _is_usb_module(client: Client) -> bool:
         return False
 
 
+def _bootloader_hint(url: str) -> str:
+    from ..tmcl.bootloader import facts
+
+    boot = facts()
+    return (f"a module left in its bootloader by a firmware update that broke off answers at "
+            f"{boot.baud} baud, address {boot.address}: 'tmclsh firmware FILE.hex --port "
+            f"{url}' finds it there and completes the update")
+
+
 def _times(n: int) -> str:
     return {1: "once", 2: "twice"}.get(n, f"{n} times")
 
@@ -401,7 +452,7 @@ def no_answer_message(client: Client, exc: BaseException, *, ascii: bool = False
         others = ", ".join(str(r) for r in baud_rates() if r != baud)
         lines.append(f"  - baud rate: the module may be set to another rate than {baud} (GP 65 "
                      f"allows {others}); try --baud 115200, or 'tmclsh scan --port {url} "
-                     "--baud auto' tries each")
+                     f"--baud auto' tries each; {_bootloader_hint(url)}")
     lines.append(f"  - address: the module may have another address than {addr} (GP 66, "
                  f"factory 1): 'tmclsh scan --port {url}' lists who answers; then -a N")
     if not ascii and not ascii_tried:

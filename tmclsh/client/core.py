@@ -104,6 +104,8 @@ class Client:
         self.retries = retries
         self.can_id = can_id if can_id is not None else 1
         self.reply_id = reply_id if reply_id is not None else 2
+        # CAN ids besides reply_id whose messages are replies too (a bootloader's 0x7FF)
+        self.other_reply_ids: frozenset[int] = frozenset()
         self.module: Module | None = load_module(module) if isinstance(module, str) else module
         self.version: str | None = None
         self.downloading = False  # set by tmclsh.ops.program between 132 and 133
@@ -132,6 +134,8 @@ class Client:
         # set when a 133 may not have been answered: before the next command, download mode
         # is checked (and ended)
         self._check_download = False
+        self._judging = False  # an answer that may be a copy is being judged (_judge)
+        self._answered_at = 0.0  # when the last answer was taken (time.monotonic())
         # one-line notices about what the client did on its own (ended download mode); the
         # shell points it at its output, else they are logged
         self.on_notice: Callable[[str], None] | None = None
@@ -149,7 +153,8 @@ class Client:
         self._poller_stop = threading.Event()
         self.stats = {"sent": 0, "timeouts": 0, "checksum_errors": 0, "resyncs": 0,
                       "discarded": 0, "events": 0, "retries": 0, "reconnects": 0,
-                      "flushed": 0, "unsolicited": 0, "suspect": 0}
+                      "flushed": 0, "unsolicited": 0, "suspect": 0,
+                      "judged": 0}
         self.framing: SerialFraming | CanFraming = transport.framing(self)
 
     # -- subscriptions ------------------------------------------------------------------
@@ -225,7 +230,7 @@ class Client:
         """A reply arrived that no request waits for: True if one like it was expected
         (``Ledger.late``), or the line may carry anything; else it is unsolicited."""
         ledger = self.ledger
-        if ledger.late(address, opcode) or ledger.opaque or self.downloading:
+        if ledger.late(address, opcode, reply) or ledger.opaque or self.downloading:
             return True
         self._unsolicited(reply)
         return False
@@ -257,13 +262,11 @@ class Client:
     def _unsolicited(self, extra: Reply | None) -> None:
         self.stats["unsolicited"] += 1
         raw = b"" if extra is None else extra.to_can() if self.is_can else extra.to_bytes()
-        suspect = self.ledger.unsolicited(extra, raw)
-        if suspect is None:
-            return
-        self.stats["suspect"] += 1
-        if self.tracers:
-            _tell(self.tracers, "note", b"", f"the reply to {name_of(suspect.request)} may "
-                  "have been another request's: a reply came that nothing was waiting for")
+        for suspect in self.ledger.unsolicited(extra, raw):
+            self.stats["suspect"] += 1
+            if self.tracers:
+                _tell(self.tracers, "note", b"", f"the reply to {name_of(suspect.request)} may "
+                      "have been another request's: a reply came that nothing was waiting for")
 
     def _deliver_events(self) -> None:
         # One deliverer at a time (the request's thread or the event poller's), so events
@@ -431,7 +434,7 @@ class Client:
         if not self.transport.is_open:
             raise TransportError(f"{self.transport.describe()} is not connected "
                                  "(the link was closed or lost; reconnect first)")
-        kind = _NORMAL if req.opcode < _FIRST_CONTROL else req.reply_kind
+        kind = _NORMAL if req.opcode < _FIRST_CONTROL else isa.reply_kind(req.opcode, req.type)
         framing = self.framing
         ledger = self.ledger
         attempt = 0
@@ -443,10 +446,14 @@ class Client:
                 if framing.waiting():
                     self._flush_input()
                 synced = False
-                if ledger.dirty(self.downloading) and ledger.needs_sync(
-                        req, kind, self.downloading):
-                    self._resync(req.address, timeout)
-                    synced = True
+                if ledger.dirty(self.downloading):
+                    if ledger.needs_sync(req, kind, self.downloading):
+                        self._resync(req.address, timeout)
+                        synced = True
+                elif ledger.run and time.monotonic() - self._answered_at >= timeout:
+                    # quiet for a whole timeout, nothing expected: an answer displaced
+                    # before now would have come (it counts as lost after a timeout)
+                    ledger.in_step()
                 sent = went = True
                 # (the line was found clear just now, unless a resynchronisation ran since)
                 reply = framing.exchange(req, kind, timeout, absorb=synced)
@@ -470,8 +477,13 @@ class Client:
                         _tell(self.tracers, "note", b"",
                               "module saw a bad checksum; sending again")
                     continue
-                if reply is not None:
-                    ledger.took(req, reply)
+                if reply is None:
+                    return None
+                copy = not self.downloading and ledger.may_be_a_copy(req, reply)
+                ledger.took(req, reply, copy=copy)
+                self._answered_at = time.monotonic()
+                if copy and not self._judging:
+                    return self._judge(req, reply, timeout, retries)
                 return reply
             if sent:
                 ledger.expect_late(req, kind)
@@ -527,7 +539,7 @@ class Client:
         try:
             got = framing.exchange(marker, kind, timeout)
             if got is not None:
-                ledger.recent.append(got)
+                ledger.took_marker(marker, got)
         except (TmclTimeoutError, ChecksumError) as exc:
             ledger.expect_late(marker, kind)
             raise type(exc)(f"address {address} stopped answering: after a reply that went "
@@ -537,6 +549,60 @@ class Client:
             ledger.expect_late(marker, kind)
             raise
         ledger.forget()
+
+    def _judge(self, req: Request, reply: Reply, timeout: float, retries: int) -> Reply:
+        """``reply`` is byte for byte one taken lately for another request: it may be a copy
+        of that reply (a line that repeats replies, late), taken for ``req``'s own answer,
+        which then comes behind it. So it is judged before anyone sees it. A reading is
+        asked again until two answers agree (``CONFIRM_ROUNDS`` more at most; else the last
+        one is returned as a suspect): that also holds when the answer behind the copy was
+        lost. Any other command (not sent twice) is followed by a marker, 136, whose reply
+        comes after the displaced answer, which then makes this one a suspect.
+
+        On a clean line this costs one exchange where two requests of one command in a row
+        get the same answer (two parameters holding 0), and only there; nothing cheaper is
+        sure: a copy whose own answer was lost leaves nothing else to see, and waiting for
+        the line to go quiet takes longer than the exchange."""
+        ledger = self.ledger
+        first = ledger.replies
+        self.stats["judged"] += 1
+        self._judging = True
+        try:
+            if not isa.reading(req.opcode, req.type):
+                marker = Request(req.address, _GET_VERSION, 1, 0, 0)
+                noise = self.stats["discarded"]
+                try:
+                    got = self.framing.exchange(marker, _NORMAL, timeout)
+                except (TmclTimeoutError, ChecksumError):
+                    ledger.expect_late(marker, _NORMAL)
+                    got = None
+                else:
+                    if got is not None:
+                        ledger.took_marker(marker, got)
+                # not judged (no answer to the marker), or bytes that were no frame came
+                # before it (the displaced answer, damaged?): in doubt, unless found already
+                if (got is None or self.stats["discarded"] > noise) and not any(
+                        s.seq == first for s in ledger.suspects):
+                    ledger.doubt(req, reply, first)
+                return reply
+            for _ in range(CONFIRM_ROUNDS):
+                found = ledger.found
+                again = self._request(req, timeout, retries)
+                if again is None:
+                    break
+                if again == reply and ledger.found == found:
+                    # two answers agree, and nothing that came meanwhile speaks against
+                    # them (a line that brings the same copy first every time would agree
+                    # with itself): the doubts cast on this request's answers are met
+                    ledger.clear_suspects(first, ledger.replies)
+                    ledger.in_step()
+                    return again
+                reply = again
+            ledger.clear_suspects(first, ledger.replies)
+            ledger.doubt(req, reply, ledger.replies)
+            return reply
+        finally:
+            self._judging = False
 
     # -- answers in doubt ---------------------------------------------------------------
     def last_may_be_a_copy(self) -> bool:
@@ -678,17 +744,19 @@ class Client:
             clock.sleep(interval if deadline is None else min(interval, deadline - now))
 
     # -- the link -----------------------------------------------------------------------
-    def reconnect(self, wait: float = 0.0) -> None:
+    def reconnect(self, wait: float = 0.0, *, bring_up: bool = True) -> None:
         """Close and reopen the transport (after the port was lost, e.g. USB unplugged).
 
         ``wait``: keep trying for that many seconds while the port is not back yet. Raises
         ``TransportError`` if it cannot be opened. Before the next command the module is
         brought up again as at connect (tmclsh.client.bringup): what answers now (another
-        module type is taken, with a notice), in which mode, whether in download mode.
+        module type is taken, with a notice), in which mode, whether in download mode;
+        unless ``bring_up`` is false (a firmware update, which expects the module to have
+        restarted into its bootloader and asks it itself).
         """
         with self._lock:
             self._reopen(wait)
-            self._bring_up_next = True
+            self._bring_up_next = bring_up
             self.stats["reconnects"] += 1
             if self.tracers:
                 _tell(self.tracers, "note", b"", f"reconnected to {self.describe()}")

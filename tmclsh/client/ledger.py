@@ -46,21 +46,39 @@ class Ledger:
         self.stale: Counter[tuple[int, int]] = Counter()
         self.stale_versions = 0  # 136 type 0 version strings that may still arrive
         # a reply that could look like anything (134) may still arrive, or something else
-        # used the line: the next request resynchronises whatever it is
+        # used the line: whatever arrives says nothing, the next request resynchronises
         self.opaque = False
+        # a reply came that nothing waited for: the next request resynchronises, and what
+        # arrives meanwhile is still evidence (a copy of the last answer, arriving first,
+        # must not hide the real answer behind it)
+        self.out_of_step = False
         # download mode only waited for a quiet line (no marker): one follows after it
         self.drained = False
         self.replies = 0  # replies returned so far (Suspect.seq numbers them)
-        self.last: tuple[Request, Reply] | None = None  # what a late reply may displace
-        self.recent: deque[Reply] = deque(maxlen=4)  # replies taken lately, markers too
+        # the answers given since the last point where requests and replies were known to
+        # be in step, all to one (address, command): a displaced reply is taken for the next
+        # request only when it has the same address and command, so a run of them is how
+        # far one late reply can shift the answers. (seq, request, reply), newest last.
+        self.run: deque[tuple[int, Request, Reply]] = deque(maxlen=64)
+        self.copy_at = 0  # the seq in the run of the latest answer that may be a copy
+        # replies taken lately, markers too, with the request each answered (None: a marker)
+        self.recent: deque[tuple[Request | None, Reply]] = deque(maxlen=4)
+        self.crossed: deque[Reply] = deque(maxlen=4)  # late replies lately crossed off
         # replies returned earlier that may have answered another request
         self.suspects: deque[Suspect] = deque(maxlen=64)
+        self.found = 0  # suspects found so far (a reader judging answers asks what came since)
+        self.doubted: deque[int] = deque(maxlen=16)  # answers returned in doubt (``doubt``)
         self.confirmed = -1  # ``replies`` when the line was last watched for a late answer
+
+    @property
+    def last(self) -> tuple[Request, Reply] | None:
+        """The last answer given, while a late reply may still show it to be displaced."""
+        return self.run[-1][1:] if self.run else None
 
     # -- what may still arrive --------------------------------------------------------------
     def dirty(self, downloading: bool) -> bool:
         """Something may still arrive that is no answer to the next request."""
-        return bool(self.stale or self.stale_versions or self.opaque
+        return bool(self.stale or self.stale_versions or self.opaque or self.out_of_step
                     or (self.drained and not downloading))
 
     def mark_dirty(self) -> None:
@@ -71,8 +89,15 @@ class Ledger:
         """Nothing sent before can still arrive (resynchronised, or the line was reset)."""
         self.stale.clear()
         self.stale_versions = 0
-        self.opaque = False
+        self.opaque = self.out_of_step = False
         self.drained = False
+        self.in_step()
+
+    def in_step(self) -> None:
+        """Requests and replies are known to be in step (a marker's reply came, or two reads
+        agreed): no later reply can show an answer before this point to be displaced."""
+        self.run.clear()
+        self.copy_at = 0
 
     def expect_late(self, req: Request, kind: ReplyKind) -> None:
         """``req`` went out and its answer did not come (in time, or whole): it may still."""
@@ -89,8 +114,8 @@ class Ledger:
 
     def needs_sync(self, req: Request, kind: ReplyKind, downloading: bool) -> bool:
         """Could a late answer be taken for ``req``'s? (Then the line is resynchronised.)"""
-        return (self.opaque or kind != _NORMAL or (req.address, req.opcode) in self.stale
-                or (self.drained and not downloading))
+        return (self.opaque or self.out_of_step or kind != _NORMAL
+                or (req.address, req.opcode) in self.stale or (self.drained and not downloading))
 
     def marker(self, address: int) -> tuple[Request, ReplyKind] | None:
         """A harmless request whose reply cannot be taken for a late one: 136 type 1 (a
@@ -102,7 +127,7 @@ class Ledger:
             return Request(address, _GET_VERSION, 0, 0, 0), _VERSION
         return None
 
-    def late(self, address: int, opcode: int) -> bool:
+    def late(self, address: int, opcode: int, reply: Reply | None = None) -> bool:
         """A late normal reply arrived: True if one of its kind was expected (one fewer
         now), False if none was (then it is unsolicited, see ``unsolicited``)."""
         key = (address, opcode)
@@ -113,6 +138,8 @@ class Ledger:
             del self.stale[key]
         else:
             return False
+        if reply is not None:
+            self.crossed.append(reply)  # (a copy of it may follow: it proves nothing)
         return True
 
     def late_version(self) -> bool:
@@ -125,41 +152,86 @@ class Ledger:
 
     def is_version_copy(self, text: str) -> bool:
         """Is ``text`` a version string taken lately (a duplicated 136 reply)?"""
-        return any(r.version == text for r in self.recent)
+        return any(r.version == text for _, r in self.recent)
 
     # -- what was given -----------------------------------------------------------------
-    def took(self, req: Request, reply: Reply) -> None:
-        """``reply`` was returned as ``req``'s answer."""
-        self.replies += 1
-        self.last = (req, reply)
-        self.recent.append(reply)
+    def may_be_a_copy(self, req: Request, reply: Reply) -> bool:
+        """Is ``reply``, about to be returned for ``req``, byte for byte the reply taken just
+        before, for another request (same module and command, other type, motor or value)?
+        Then it may be a copy of that one (a line that repeats replies, late), and ``req``'s
+        own answer is behind it. Only the last: a copy comes right behind its reply, and one
+        of an older reply would have come during the exchange between. A copy of the same
+        request's answer is no such doubt: it answers the same question."""
+        if not self.recent:
+            return False
+        r, rep = self.recent[-1]
+        return rep == reply and r is not None and r != req
 
-    def unsolicited(self, extra: Reply | None, raw: bytes) -> Suspect | None:
+    def took(self, req: Request, reply: Reply, *, copy: bool = False) -> None:
+        """``reply`` was returned as ``req``'s answer (``copy``: ``may_be_a_copy`` said so)."""
+        self.replies += 1
+        run = self.run
+        if run and (run[-1][1].address, run[-1][1].opcode) != (req.address, req.opcode):
+            self.in_step()  # (a late reply of the run before cannot be taken for this one)
+        run.append((self.replies, req, reply))
+        if copy:
+            self.copy_at = self.replies
+        self.recent.append((req, reply))
+
+    def took_marker(self, marker: Request, reply: Reply) -> None:
+        """A marker's reply came: everything sent before it was answered before it."""
+        self.recent.append((None, reply))
+
+    def unsolicited(self, extra: Reply | None, raw: bytes) -> list[Suspect]:
         """A reply came when none was outstanding (``extra``; None: bytes that are no frame,
-        a damaged reply): a duplicate, or the real answer to the last request, which then
-        took another one. The line is dirty and, unless ``extra`` is a copy of the last
-        request's reply (the value shown is the one it carries anyway) or of a marker's, the
-        last answer is a suspect (returned, once). A copy of an older request's reply proves
-        nothing: it may as well be the last request's own answer, displaced by a late copy
-        of the one before (GAP 3 of three motors: 5000, 0, then a copy of the 0 taken for
-        the third while its 5000 comes late)."""
-        self.opaque = True
+        a damaged reply): a duplicate, or the real answer to a request that took another
+        reply. The line is out of step (resynchronised before the next request). Unless
+        ``extra`` is a copy of the last answer, of a late reply crossed off, or of a
+        marker's (the values shown carry what they carry anyway), the answers it may have
+        displaced are suspects, each returned once: from the latest that may be a copy
+        (``may_be_a_copy``) on, else every answer since requests and replies were last known
+        to be in step (one late reply shifts a whole run of the same command). A damaged
+        reply names only the last answer, or those from a possible copy on. A copy of an
+        older request's reply proves nothing by itself: it may as well be the last one's
+        own answer, displaced by a late copy of the one before (GAP 3 of three motors: 5000,
+        0, then a copy of the 0 taken for the third while its 5000 comes late)."""
+        self.out_of_step = True
         last = self.last
-        if last is None or extra == last[1] or (
-                extra is not None and extra.opcode == _GET_VERSION and extra in self.recent):
-            return None
-        self.last = None  # reported once
-        suspect = Suspect(last[0], last[1], self.replies, raw)
-        self.suspects.append(suspect)
-        return suspect
+        if last is None or extra == last[1] or (extra is not None and (
+                extra in self.crossed
+                or (extra.opcode == _GET_VERSION and any(r == extra for _, r in self.recent)))):
+            return []
+        if self.copy_at:
+            shifted = [e for e in self.run if e[0] >= self.copy_at and e[0] not in self.doubted]
+        elif extra is None:
+            shifted = [self.run[-1]]
+        else:
+            shifted = [e for e in self.run if e[0] not in self.doubted]
+        self.in_step()  # (reported once; the next request resynchronises)
+        out = [Suspect(r, rep, seq, raw) for seq, r, rep in shifted]
+        self.suspects.extend(out)
+        self.found += len(out)
+        return out
+
+    def doubt(self, req: Request, reply: Reply, seq: int) -> None:
+        """An answer its reader could not make certain (two reads never agreed)."""
+        self.suspects.append(Suspect(req, reply, seq, b""))
+        self.doubted.append(seq)  # (said with the answer: not again when more evidence comes)
+        self.found += 1
+
+    def clear_suspects(self, first: int, last: int) -> None:
+        """The suspects numbered ``first`` ..``last`` were settled by the one who asked."""
+        keep = [s for s in self.suspects if not first <= s.seq <= last]
+        self.suspects.clear()
+        self.suspects.extend(keep)
 
     def last_may_be_a_copy(self) -> bool:
         """Whether the last reply taken could be a late copy of the one before it: only a
         reply with the same module address and command is taken for an answer. When it
         could not, no answer still to come can show it to be another request's."""
         recent = self.recent
-        return len(recent) >= 2 and (recent[-1].module, recent[-1].opcode) == (
-            recent[-2].module, recent[-2].opcode)
+        return len(recent) >= 2 and (recent[-1][1].module, recent[-1][1].opcode) == (
+            recent[-2][1].module, recent[-2][1].opcode)
 
     def suspect_seqs(self) -> set[int]:
         return {s.seq for s in self.suspects}
@@ -179,4 +251,3 @@ class Ledger:
     def reset(self) -> None:
         """The link was reopened: whatever comes now says nothing about answers before."""
         self.forget()
-        self.last = None

@@ -33,6 +33,9 @@ class Result(NamedTuple):
     line: str
     encoded: asm.Encoded
     reply: Reply | None
+    # the answer may have been another request's, and reading again did not settle it (the
+    # client judges an answer that may be a copy before returning it: Client._judge)
+    in_doubt: bool = False
 
     @property
     def request(self):

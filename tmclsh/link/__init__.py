@@ -38,11 +38,15 @@ def port_class(port: str) -> type[StreamTransport]:
     return getattr(importlib.import_module(f"{__name__}.{module}"), name)
 
 
-def open_serial(port: str, baudrate: int = 9600) -> StreamTransport:
+def open_serial(port: str, baudrate: int = 9600, *, listen_only: bool = False
+                ) -> StreamTransport:
     """What ``--port`` names, opened: a serial device path (``/dev/ttyACM0``, ``COM3``) or a
     URL (``socket://host:port``, ``rfc2217://host:port``, ``loop://``, ``spy://...``,
-    ``hwgrep://2a3c``, and whatever ``PORT_SCHEMES`` adds)."""
+    ``hwgrep://2a3c``, and whatever ``PORT_SCHEMES`` adds). ``listen_only``: a tap on a
+    bus, which must never drive it (RTS and DTR stay inactive)."""
     t = port_class(port)(port, baudrate)
+    if listen_only:
+        t.listen_only = True  # type: ignore[attr-defined]
     t.open()
     return t
 

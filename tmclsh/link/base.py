@@ -11,10 +11,22 @@ Timeouts are float seconds with pyserial's meanings: None waits forever, 0 never
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 if TYPE_CHECKING:
     from .framing import CanFraming, Owner, SerialFraming
+
+
+class CanFrame(NamedTuple):
+    """A CAN frame as a listener hears it (a bus, a log file): when (the bus's or the log's
+    timestamp, in seconds), on which id, its data, and what kind of frame it is."""
+
+    t: float
+    arbitration_id: int
+    data: bytes
+    extended: bool = False
+    error: bool = False
+    remote: bool = False
 
 
 class Transport(ABC):
@@ -77,6 +89,12 @@ class StreamTransport(Transport):
     def read_available(self) -> bytes:
         n = self.pending()
         return self.read(n, 0) if n else b""
+
+    def read_some(self, timeout: float | None) -> bytes:
+        """Whatever comes first, as soon as it comes: at least a byte, or b"" after
+        ``timeout`` (a reader that forwards bytes as they arrive: the bridge)."""
+        data = self.read(1, timeout)
+        return data + self.read_available() if data else data
 
     def set_baudrate(self, baud: int) -> None:  # pragma: no cover - only real ports
         raise NotImplementedError

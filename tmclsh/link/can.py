@@ -7,7 +7,7 @@ for its import (about 0.1 s).
 from __future__ import annotations
 
 from ..base.errors import TransportError, ValidationError
-from .base import CanTransport
+from .base import CanFrame, CanTransport
 
 
 def python_can_config() -> tuple[str, str, int | None]:
@@ -103,5 +103,31 @@ class PythonCanTransport(CanTransport):
             return msg.arbitration_id, b""
         return msg.arbitration_id, bytes(msg.data)
 
+    def listen(self, timeout: float | None) -> CanFrame | None:
+        """The next frame on the bus, whatever its id or kind, with the bus's timestamp
+        (a listener's receive: ``recv`` keeps what a client needs, this keeps everything)."""
+        bus, can = self._bus, self._can
+        if bus is None or can is None:
+            raise TransportError(f"CAN {self.url} is not open")
+        try:
+            msg = bus.recv(timeout)
+        except (can.CanError, OSError) as exc:
+            raise self._lost("receive", exc) from exc
+        return None if msg is None else frame_of(msg)
+
     def describe(self) -> str:
         return f"CAN {self.url}"
+
+
+def frame_of(msg) -> CanFrame:
+    """A python-can ``Message`` as a ``CanFrame``."""
+    return CanFrame(msg.timestamp, msg.arbitration_id, bytes(msg.data), msg.is_extended_id,
+                    msg.is_error_frame, msg.is_remote_frame)
+
+
+def message_of(can, frame: CanFrame):
+    """A ``CanFrame`` as a python-can ``Message`` (``can``: the python-can module)."""
+    return can.Message(timestamp=frame.t, arbitration_id=frame.arbitration_id,
+                       data=frame.data, is_extended_id=frame.extended,
+                       is_error_frame=frame.error, is_remote_frame=frame.remote,
+                       dlc=len(frame.data))

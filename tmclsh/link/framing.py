@@ -54,6 +54,7 @@ class Owner(Protocol):
     also_from: int | None  # (client/reach.py: an answer from the new address is the answer)
     also_host: int | None
     also_reply_id: int | None
+    other_reply_ids: frozenset[int]  # more ids replies come on (a CAN bootloader's 0x7FF)
     stats: dict[str, int]
     tracers: list  # (a framing asks whether any is there before it builds a trace's words)
     sent_tracers: list  # tracers of requests only (add_tracer(sent_only=True))
@@ -396,7 +397,8 @@ class CanFraming:
 
     def _take(self, req: Request, kind: ReplyKind, arb: int, data: bytes) -> Reply | None:
         o = self.owner
-        if arb != o.reply_id and (o.also_reply_id is None or arb != o.also_reply_id):
+        if arb != o.reply_id and arb not in o.other_reply_ids and (
+                o.also_reply_id is None or arb != o.also_reply_id):
             return None  # other traffic on the bus
         host = o.host_address
         if kind == _VERSION and len(data) == _VERSION_LEN and all(32 <= b < 127 for b in data):
@@ -431,10 +433,11 @@ class CanFraming:
             return False
         arb, data = msg
         data = _seven(data)
-        if arb == o.reply_id and len(data) == _CAN_REPLY_LEN and data[1] == _EVENT \
+        ours = arb == o.reply_id or arb in o.other_reply_ids
+        if ours and len(data) == _CAN_REPLY_LEN and data[1] == _EVENT \
                 and data[2] == _TARGET_REACHED:
             o.event(data, Reply.from_can(o.host_address, data))
-        elif arb == o.reply_id:
+        elif ours:
             if len(data) == _CAN_REPLY_LEN:
                 o.late(data[0], data[2], Reply.from_can(o.host_address, data))
             o.discard(data, "stale reply")

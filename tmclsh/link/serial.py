@@ -42,6 +42,10 @@ def is_url(port: str) -> bool:
 
 
 class SerialTransport(StreamTransport):
+    # a listener (a tap on a bus): RTS and DTR are left inactive when the port opens, so an
+    # RS485 adapter that switches its driver on RTS never drives the line
+    listen_only = False
+
     def __init__(self, port: str, baudrate: int = 9600):
         super().__init__(port)
         if not isinstance(baudrate, int) or baudrate <= 0:
@@ -60,11 +64,11 @@ class SerialTransport(StreamTransport):
             kw["exclusive"] = True
         try:
             try:
-                self._ser = ser = pyserial.serial_for_url(self.url, **kw)
+                self._ser = ser = self._open(kw)
             except NotImplementedError:
                 # rfc2217:// has no write timeout; its writes are bounded by the TCP socket
                 del kw["write_timeout"]
-                self._ser = ser = pyserial.serial_for_url(self.url, **kw)
+                self._ser = ser = self._open(kw)
         except (pyserial.SerialException, OSError, ValueError) as exc:
             raise TransportError(_friendly(self.url, exc)) from exc
         self._timeout = 0
@@ -72,6 +76,14 @@ class SerialTransport(StreamTransport):
         fd = getattr(ser, "fd", None)
         self._fd = fd if os.name == "posix" and type(ser) is pyserial.Serial \
             and isinstance(fd, int) else None
+
+    def _open(self, kw: dict) -> pyserial.SerialBase:
+        if not self.listen_only or is_url(self.url):
+            return pyserial.serial_for_url(self.url, **kw)
+        ser = pyserial.serial_for_url(self.url, do_not_open=True, **kw)
+        ser.rts = ser.dtr = False  # (applied as the port opens)
+        ser.open()
+        return ser
 
     def close(self) -> None:
         ser, self._ser = self._ser, None
@@ -195,6 +207,27 @@ class SerialTransport(StreamTransport):
                     if not chunk:
                         return data  # timed out
                     wait = 0  # one more look at what is there already
+
+    def read_some(self, timeout: float | None) -> bytes:
+        fd = self._fd
+        if fd is None:
+            return super().read_some(timeout)
+        try:
+            ready = select.select((fd,), (), (), timeout)[0]
+        except (OSError, ValueError) as exc:
+            raise self._lost("read", exc) from exc
+        if not ready:
+            return b""
+        try:
+            data = os.read(fd, 4096)
+        except BlockingIOError:
+            return b""
+        except OSError as exc:
+            raise self._lost("read", exc) from exc
+        if not data:  # (as _read_fd: a vanished USB device stays readable, reads nothing)
+            raise self._lost("read", OSError("device reports readiness to read but "
+                                             "returned no data"))
+        return data
 
     def pending(self) -> int:
         fd = self._fd

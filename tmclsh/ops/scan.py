@@ -5,6 +5,10 @@ so a slow module's late answer is never credited to the next address (the 136 ty
 reply names neither), and is recognised as that module's: a late or garbled answer puts its
 address on a second, slower pass. A module that answered is then asked for its version string.
 
+A module that answers from its bootloader (``1311B100``: a firmware update broke off) is found
+like any other and marked (``Found.bootloader``): it runs no firmware until ``tmclsh
+firmware`` completes the update. It answers at address 1 and 115200 baud only.
+
 Silent addresses are most of a scan, so the wait for each is derived from the link: the wire
 time of a request and its reply at the baud rate, plus a margin for the operating system and
 the module (short on a pty, a module's own USB port or TCP; an RS485 adapter's latency timer
@@ -67,6 +71,7 @@ class Found:
     baud: int | None = None
     ascii: bool = False  # found in its ASCII mode (and left in it)
     answers: int = 1  # 2: every reply came twice, two modules answer at this address
+    bootloader: bool = False  # it answers from its bootloader: an update did not complete
 
     def as_json(self) -> dict:
         row: dict = {"address": self.address, "module": self.module, "version": self.version}
@@ -76,6 +81,8 @@ class Found:
             row["mode"] = "ascii"
         if self.answers > 1:
             row["answers"] = self.answers
+        if self.bootloader:
+            row["bootloader"] = True
         return row
 
 
@@ -170,7 +177,8 @@ def _late_answerer(raw: bytes, host: int) -> int | None:
 
 
 def _identify(client: Client, addr: int, binary, timeout: float) -> Found:
-    from ..tmcl.modules import identify
+    from ..tmcl.modules import by_firmware_id, identify
+    from ..tmcl.version import parse_string
 
     version = None
     try:  # it is there: give it time and a retry for the string
@@ -180,8 +188,12 @@ def _identify(client: Client, addr: int, binary, timeout: float) -> Found:
     except TmclError:
         pass
     mod = identify(version, binary.value if binary.status == Status.OK else None)
+    parsed = parse_string(version)
+    boot = parsed is not None and parsed.bootloader
+    if boot and (mod is None or mod.generic):
+        mod = by_firmware_id(parsed.type_number)  # (its type, as its bootloader names it)
     name = mod.name if mod is not None and not mod.generic else None
-    return Found(addr, name, version, line_baud(client.transport))
+    return Found(addr, name, version, line_baud(client.transport), boot)
 
 
 def _probe(client: Client, addr: int, timeout: float, retries: int):

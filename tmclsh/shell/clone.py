@@ -19,6 +19,7 @@ import re
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
+from itertools import zip_longest
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -121,6 +122,16 @@ def readable_slots(module: Module) -> Iterator[tuple[str, Parameter, int, int]]:
             continue
         for n in range(p.number, p.number + p.count):
             yield "global", p, n, p.bank
+
+
+def read_order(kinds: list[str]) -> list[int]:
+    """The order to read a backup's slots in (indexes into ``kinds``): axis and global
+    parameters in turn. The client reads an answer again when it is byte for byte the one
+    before it for another request of the same command (it may be a copy: Client._judge),
+    and many parameters hold 0; a GAP's answer is never a GGP's."""
+    axis = [i for i, k in enumerate(kinds) if k == "axis"]
+    other = [i for i, k in enumerate(kinds) if k != "axis"]
+    return [i for pair in zip_longest(axis, other) for i in pair if i is not None]
 
 
 def _request(session: Session, opcode: int, slot: Slot | tuple[str, int, int],
@@ -234,42 +245,46 @@ def save_lines(session: Session, path: Path, with_program: Path | None
     saved = 0
     outside: list[str] = []
     last_section = None
+    replies: list = [None] * len(slots)
     with _Progress(session, "reading", len(slots)) as advance:
-        for kind, p, number, index in slots:
-            section = (kind, index)
-            if section != last_section:
-                where = f"motor {index}" if kind == "axis" else f"bank {index}"
-                body.append("")
-                body.append(f"// -- {'axis' if kind == 'axis' else 'global'} parameters, {where}")
-                last_section = section
-            slot = Slot(kind, number, index, 0, p)
-            reply = _request(session, READ[kind], slot)
+        for i in read_order([kind for kind, *_ in slots]):
+            kind, p, number, index = slots[i]
+            replies[i] = _request(session, READ[kind], Slot(kind, number, index, 0, p))
             advance()
-            name = slot.name or slot.label
-            comment = _comment(p, number)
-            if reply is None or not status_ok(reply.status):
-                status = reply.status if reply is not None else 0
-                body.append(f"// {name}: not read, the module answered status {status} "
-                            f"({status_text(status)})")
-                continue
-            value = _shown(reply.value, p)
-            if p.state or not p.writable:
-                why = "state, not restored" if p.state else "read-only"
-                body.append(f"// {name} = {_with_unit(value, p)} ({why}; {comment})")
-                continue
-            mn = isa.parameter_command(kind, "write").mnemonic
-            target = p.name if p.count == 1 else str(number)  # a run is addressed by number
-            if p.count > 1:
-                comment = f"GP {number}: {p.name} #{number - p.number}"
-            beyond = p.outside(value)
-            mark = ""
-            if beyond is not None:  # the module holds it: kept, and restorable as it is
-                mark = AS_TYPED
-                comment = f"{comment} (outside the manual's range {beyond}: as the module held it)"
-                outside.append(f"{name} = {_with_unit(value, p)} ({'motor' if kind == 'axis' else 'bank'} "
-                               f"{index}; the manual says {beyond})")
-            body.append(f"{mark}{mn} {target}, {index}, {value}  // {comment}")
-            saved += 1
+    # (written in the file's own order)
+    for (kind, p, number, index), reply in zip(slots, replies):
+        section = (kind, index)
+        if section != last_section:
+            where = f"motor {index}" if kind == "axis" else f"bank {index}"
+            body.append("")
+            body.append(f"// -- {'axis' if kind == 'axis' else 'global'} parameters, {where}")
+            last_section = section
+        slot = Slot(kind, number, index, 0, p)
+        name = slot.name or slot.label
+        comment = _comment(p, number)
+        if reply is None or not status_ok(reply.status):
+            status = reply.status if reply is not None else 0
+            body.append(f"// {name}: not read, the module answered status {status} "
+                        f"({status_text(status)})")
+            continue
+        value = _shown(reply.value, p)
+        if p.state or not p.writable:
+            why = "state, not restored" if p.state else "read-only"
+            body.append(f"// {name} = {_with_unit(value, p)} ({why}; {comment})")
+            continue
+        mn = isa.parameter_command(kind, "write").mnemonic
+        target = p.name if p.count == 1 else str(number)  # a run is addressed by number
+        if p.count > 1:
+            comment = f"GP {number}: {p.name} #{number - p.number}"
+        beyond = p.outside(value)
+        mark = ""
+        if beyond is not None:  # the module holds it: kept, and restorable as it is
+            mark = AS_TYPED
+            comment = f"{comment} (outside the manual's range {beyond}: as the module held it)"
+            outside.append(f"{name} = {_with_unit(value, p)} ({'motor' if kind == 'axis' else 'bank'} "
+                           f"{index}; the manual says {beyond})")
+        body.append(f"{mark}{mn} {target}, {index}, {value}  // {comment}")
+        saved += 1
     when = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
     head = [
         f"// tmclsh configuration backup of a {module.name} (.save); format: man tmclsh, CONFIGURATION BACKUPS",
@@ -638,10 +653,11 @@ class Difference:
 
 def compare(session: Session, backup: Backup) -> list[Difference]:
     """Read each saved parameter from the module (one request each); the ones that differ."""
-    diffs: list[Difference] = []
+    diffs: list[tuple[int, Difference]] = []
     slots = list(backup.slots.values())
     with _Progress(session, "comparing", len(slots)) as advance:
-        for slot in slots:
+        for i in read_order([slot.kind for slot in slots]):
+            slot = slots[i]
             reply = _request(session, READ[slot.kind], slot)
             advance()
             if reply is None or not status_ok(reply.status):
@@ -650,8 +666,8 @@ def compare(session: Session, backup: Backup) -> list[Difference]:
                                  f"status {status} ({status_text(status)})")
             live = _shown(reply.value, slot.param)
             if not _same(live, slot.value):
-                diffs.append(Difference(slot, live))
-    return diffs
+                diffs.append((i, Difference(slot, live)))
+    return [d for _, d in sorted(diffs, key=lambda x: x[0])]
 
 
 def _notes(session: Session, backup: Backup, live: Module) -> None:

@@ -240,17 +240,22 @@ COMMANDS: tuple[Command, ...] = (
             details=('Without an argument it toggles. Lines show time, direction (tx> / '
                      '<rx), the bytes and what they mean. --trace does the same from the '
                      'start.')),
-    Command('.decode', 'builtin', '.decode [request|reply|memory|version] HEX',
-            'decode bytes pasted from elsewhere: request or reply, checksum, 134/136 layouts',
+    Command('.decode', 'builtin', '.decode [request|reply|memory|version] HEX|CANLINE',
+            'decode bytes or a CAN log line pasted from elsewhere: request or reply, '
+            'checksum, 134/136 layouts',
             complete=[('request', 'read the bytes as a request'),
                       ('reply', 'read the bytes as a reply'),
                       ('memory', 'a 134 (read program memory) reply'),
                       ('version', 'a 136 version string reply')],
             category='protocol', owns_line=True,
             details=('HEX: `01 06 04 00 00 00 00 00 0b`, `$01 $06 ...`, `0x01,0x06,...` or '
-                     '`0106040000...`; several 9-byte frames at once are fine. Without a '
-                     'hint every plausible reading is shown. It takes the rest of its line '
-                     "(pasted bytes may be separated by ';').")),
+                     '`0106040000...`; several 9-byte frames at once are fine. CANLINE: one '
+                     'CAN frame as candump prints it (`can0  001   [7]  06 01 00 00 00 00 '
+                     '00`), a candump -L line (`(1.0) can0 001#06010000000000`) or a '
+                     'Vector .asc line (`0.0012 1 1 Rx d 7 06 01 00 00 00 00 00`). '
+                     'Without a hint every plausible reading is shown. It takes the rest '
+                     "of its line (pasted bytes may be separated by ';'). tmclsh monitor "
+                     'decodes whole logs and live buses.')),
     Command('.connect', 'builtin', '.connect [PORT | sim [MODULE] | can [IFACE:CHANNEL]]',
             'reconnect, or switch to another port, simulator or CAN bus',
             complete='complete_connect', category='connection',

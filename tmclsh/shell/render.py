@@ -331,7 +331,7 @@ class Output:
         stream = self.stdout or sys.stdout
         reply = result.reply
         key = None
-        if reply is not None:
+        if reply is not None and not result.in_doubt:
             key = (result.line, reply.value, reply.status, reply.opcode)
             hit = self._memo.get(key)
             if (hit is not None and hit[5] is stream and hit[0] is result.encoded
@@ -362,6 +362,8 @@ class Output:
             self._write_json(line)
         else:
             text = render_result(result, module)
+            if result.in_doubt:
+                text.append(f"  ({IN_DOUBT})", style="tmcl.status.error")
             if stream is None:
                 self.console.print(text)
                 return
@@ -476,6 +478,10 @@ def _message(console, text: str, style: str) -> None:
     console.print(text, style=style, markup=False, soft_wrap=not console.is_terminal)
 
 
+IN_DOUBT = ("in doubt: this answer may have been another request's, and reading again "
+            "did not settle it; run it again to be sure")
+
+
 def result_json(result: Result) -> dict[str, Any]:
     """``{"line", "op", "type", "motor", "value", "status", "reply"}`` (DESIGN.md), plus
     ``"error"`` when the module refused."""
@@ -493,6 +499,9 @@ def result_json(result: Result) -> dict[str, Any]:
                          "motor": reply.stored.motor, "value": reply.stored.signed_value}
     if reply is not None and reply.status not in (Status.OK, Status.LOADED, Status.EVENT):
         obj["error"] = status_text(reply.status)
+    if result.in_doubt:
+        obj["in_doubt"] = True
+        obj["warning"] = IN_DOUBT
     param = result.encoded.parameter
     if param is not None and reply is not None and reply.ok and result.encoded.spec is not None \
             and result.encoded.spec.reads:

@@ -391,6 +391,11 @@ class Session:
         if reply is not None:
             seq = client.replies
             self._answered[seq % ANSWERED] = (seq, text, self.location)
+            suspects = getattr(client, "suspects", None)
+            if suspects and suspects[-1].seq == seq:  # judged, and not settled: said in line
+                client.take_suspects((seq,))
+                self.stats.suspects += 1
+                result = result._replace(in_doubt=True)
         self.last_result = result
         self.stats.commands += 1
         if show:

@@ -235,12 +235,52 @@ def _parse_hex(text: str) -> bytes:
         raise FrameError(f"not hex bytes: {text.strip()!r}") from None
 
 
+def decode_can(frame, module: Module | None, hint: str | None = None) -> list[Reading]:
+    """The readings of one CAN frame (a pasted log line): a request to its id, a reply on
+    it, or a version string; the factory's reply id (GP 70 = 2) puts the reply first."""
+    can_id, data = frame.arbitration_id, frame.data
+    where = f"id {can_id:#x}" if frame.extended else f"id {can_id}"
+    if frame.error or frame.remote:
+        kind = "error frame" if frame.error else "remote frame"
+        return [Reading(f"CAN {kind}", f"on {where}: no TMCL frame", plausible=False)]
+    if len(data) == VERSION_STRING_LEN and all(32 <= b < 127 for b in data) \
+            and hint in (None, "version", "reply"):
+        return [Reading(f"CAN reply on {where} (136 version string)", repr(data.decode()))]
+    if len(data) != INSTRUCTION_LEN:
+        return [Reading(f"CAN frame on {where}", f"{len(data)} data bytes: no TMCL frame (7, "
+                        "or 8 for a version string)", plausible=False)]
+    ins = Instruction.from_bytes(data)
+    request = Reading(f"CAN request to {where}", describe_instruction(ins, module), "",
+                      _instruction_plausible(ins, module))
+    value = to_signed32(int.from_bytes(data[3:7], "big"))
+    reply = Reply(0, data[0], data[1], data[2], value)
+    answer = Reading(f"CAN reply on {where}",
+                     f"from address {data[0]}: {describe_reply(reply, module)}", "",
+                     data[1] in {int(s) for s in Status} and _known_opcode(data[2]))
+    if hint == "request":
+        return [request]
+    if hint == "reply":
+        return [answer]
+    readings = [answer, request] if can_id == _FACTORY_REPLY_ID else [request, answer]
+    return [r for r in readings if r.plausible] or readings
+
+
+_FACTORY_REPLY_ID = 2  # GP 70 as modules leave the factory
+
+
 def decode_hex(text: str, module: Module | None) -> list[tuple[bytes, list[Reading]]]:
-    """``.decode [request|reply|memory|version] HEX``: every frame in the pasted bytes."""
+    """``.decode [request|reply|memory|version] HEX``: every frame in the pasted bytes; or
+    one CAN frame pasted as a log line (candump's output, a candump ``-L`` or ``.asc``
+    line, read by python-can where it has a reader)."""
     words = text.split()
     hint = HINTS.get(words[0].lower()) if words else None
     if hint is not None:
         text = text.split(None, 1)[1] if len(words) > 1 else ""
+    from ..link.canlog import parse_line
+
+    can = parse_line(text)
+    if can is not None:
+        return [(can.data, decode_can(can, module, hint))]
     data = _parse_hex(text)
     if not data:
         raise FrameError("no bytes given: .decode 01 06 04 00 00 00 00 00 0b")

@@ -24,12 +24,15 @@ from dataclasses import dataclass, field
 from ..tmcl import instructions as isa
 from ..tmcl.asm import Line, encode, parse_line
 from ..base.errors import AsmError
-from ..tmcl.modules import Module, load
+from ..tmcl.bootloader import bootloader_string
+from ..tmcl.bootloader import facts as boot_facts
+from ..tmcl.modules import Module, by_firmware_id, load
 from ..tmcl.decoder import NOISE, WHOLE, FrameDecoder, is_frame
 from ..tmcl.frames import (FACTORY_DEFAULT_KEY, SERIAL_FRAME_LEN, Control, Instruction, Reply,
                            Request, Status, to_signed32)
 from ..tmcl.version import encode_type1
 from .ascii import Echo, LineDiscipline, address_char, echo_mode, reply_line
+from .boot import Bootloader
 from .commands import Commands
 from .model import AXIS, EEPROM_MAGIC, GLOBAL, Coordinates, IoState, Live, ParamStore
 from .motion import SWITCHES, Axis
@@ -46,6 +49,8 @@ RUN_FROM_CURRENT, RUN_FROM_ADDRESS = 0, 1  # command 129 types
 VERSION_STRING, VERSION_BINARY = 0, 1  # command 136 types
 # Control commands whose reply value is a result; the others echo the request's value field.
 RANDOM_DELAY = (0.2, 2.0)  # s a reply hit by the random "delay" fault is held back
+ENTER_BOOTLOADER = isa.boot_command("enter")  # 242
+BOOT = boot_facts()
 RESULT_CONTROLS = frozenset({Control.READ_MEMORY, Control.GET_STATUS, Control.GET_VERSION,
                              Control.TARGET_REACHED_EVENT})
 
@@ -156,7 +161,7 @@ class Simulator:
 
     def __init__(self, module: str | Module = "TMCM-1311", address: int = 1, *,
                  host_address: int = 2, ascii_startup: bool | None = None,
-                 autostart: bool = True, speed: float = 1.0):
+                 autostart: bool = True, speed: float = 1.0, bootloader: bool = False):
         self.module = load(module) if isinstance(module, str) else module
         if self.module.generic:  # a simulated module is its data: there is nothing to simulate
             from ..base.errors import ValidationError
@@ -175,12 +180,14 @@ class Simulator:
         if ascii_startup is not None:
             overrides["ASCIIMode"] = int(ascii_startup)
         self._default_address, self._default_host = address, host_address
-        self.store = ParamStore(self.module, overrides)
-        self.io = IoState(self.module)
-        self.coords = Coordinates(self.module.motors, self.module.coordinates)
-        self.axes = [Axis() for _ in range(self.module.motors)]
-        self.commands = Commands(self.module, self.store, self.io, self.coords, self.axes)
-        self.vm = Vm(self.module.program_memory, self, self.module.interrupts)
+        self._overrides = overrides
+        self._build(self.module)
+        # the firmware it runs: the module data's, until an update writes another
+        self.version_string = self.module.version_string
+        self.firmware_version = self.module.firmware_version
+        self.boot = Bootloader()
+        if not bootloader:  # (in it: as after an update that broke off, nothing to start)
+            self.boot.install(self.version_string)
         self.faults = Faults()
         self.on_output: Callable[[bytes], None] | None = None
         self.on_can_output: Callable[[int, bytes], None] | None = None
@@ -209,9 +216,10 @@ class Simulator:
         self._prev: dict[str, object] = {}
         self._last_command = time.monotonic()
         self._heartbeat_fired = False
-        self._register_global_live()
         with self._lock:
-            self._power_up(autostart)
+            self._power_up(autostart and not bootloader)
+            if bootloader:
+                self._enter_bootloader()
 
         self._closed = threading.Event()
         self._wake = threading.Event()
@@ -219,6 +227,18 @@ class Simulator:
         self._thread = threading.Thread(target=self._run, name=f"sim-{self.module.name}",
                                         daemon=True)
         self._thread.start()
+
+    def _build(self, module: Module) -> None:
+        """The module's state from its data: parameters, I/O, coordinates, motors, program
+        memory (at construction, and when an update starts another module type)."""
+        self.module = module
+        self.store = ParamStore(module, self._overrides)
+        self.io = IoState(module)
+        self.coords = Coordinates(module.motors, module.coordinates)
+        self.axes = [Axis() for _ in range(module.motors)]
+        self.commands = Commands(module, self.store, self.io, self.coords, self.axes)
+        self.vm = Vm(module.program_memory, self, module.interrupts)
+        self._register_global_live()
 
     def __repr__(self) -> str:
         return f"Simulator({self.module.name!r}, address={self.address})"
@@ -232,11 +252,20 @@ class Simulator:
     # -- public state ---------------------------------------------------------------------------
     @property
     def address(self) -> int:
+        if self.boot.active:
+            return BOOT.address
         return self.store.get(GLOBAL, "SerialAddress", default=self._default_address)
 
     @property
     def host_address(self) -> int:
+        if self.boot.active:
+            return BOOT.host_address
         return self.store.get(GLOBAL, "SerialHostAddress", default=self._default_host)
+
+    @property
+    def in_bootloader(self) -> bool:
+        """It runs its bootloader (after 242, or an update that did not complete)."""
+        return self.boot.active
 
     @property
     def ascii_active(self) -> bool:
@@ -298,17 +327,21 @@ class Simulator:
     # -- CAN --------------------------------------------------------------------------------------
     @property
     def can_id(self) -> int:
+        if self.boot.active:
+            return BOOT.can_id
         return self.store.get(GLOBAL, "CANID", default=self.address)
 
     @property
     def can_reply_id(self) -> int:
+        if self.boot.active:
+            return BOOT.can_reply_id
         return self.store.get(GLOBAL, "CANReplyID", default=self.host_address)
 
     def can_write(self, arbitration_id: int, data: bytes) -> None:
         """A CAN frame from the bus; frames for other ids (or shorter than 7 bytes) are ignored."""
         with self._lock:
             self._advance()
-            second = self.store.get(GLOBAL, "CANSecondaryAddress")
+            second = None if self.boot.active else self.store.get(GLOBAL, "CANSecondaryAddress")
             if arbitration_id != self.can_id and not (second and arbitration_id == second):
                 return
             if len(data) < 7:
@@ -409,9 +442,13 @@ class Simulator:
 
     def reset(self) -> None:
         """Power cycle: RAM from EEPROM, program stopped (GP 77 auto start honoured), mode
-        from GP 67 bit 0, pending replies and events gone."""
+        from GP 67 bit 0, pending replies and events gone. In the bootloader: the
+        application starts if the memory holds a valid one (else it stays there)."""
         with self._lock:
-            self._power_up(True)
+            if self.boot.active:
+                self._start_application()
+            else:
+                self._power_up(True)
         self._wake.set()
 
     def close(self) -> None:
@@ -658,7 +695,7 @@ class Simulator:
             ans.after()
 
     def _suppressed(self) -> bool:
-        return self.store.get(GLOBAL, "SuppressReply") == 1
+        return not self.boot.active and self.store.get(GLOBAL, "SuppressReply") == 1
 
     def _send_reply(self, channel: str, module: int, opcode: int, ans: Answer) -> None:
         if self._suppressed():
@@ -674,6 +711,8 @@ class Simulator:
         """Execute one request; the reply value is the request's value field unless the
         command answers with a result (the firmware fills the reply with the request first:
         TMCM-1311 §5.7.16 shows ``CALC MUL, -5000`` answered with -5000)."""
+        if self.boot.active:
+            return self._boot_dispatch(ins)
         ans = self._execute(ins, channel)
         if not (ans.status == Status.OK and self._answers_value(ins)):
             ans.value = ins.signed_value
@@ -750,10 +789,15 @@ class Simulator:
             return Answer(value=int(vm.state))
         elif op == Control.GET_VERSION:
             if ins.type == VERSION_STRING:
-                return Answer(version=self.module.version_string)
+                return Answer(version=self.version_string)
             if ins.type == VERSION_BINARY:
                 return Answer(value=self._version_binary())
             return Answer(Status.WRONG_TYPE)
+        elif op == ENTER_BOOTLOADER:
+            # the key or nothing: anything else is ignored; no reply, the module restarts
+            if (ins.type, ins.motor, ins.value & 0xFFFFFFFF) != BOOT.key:
+                return Answer(silent=True)
+            return Answer(silent=True, after=self._enter_bootloader)
         elif op == Control.FACTORY_DEFAULT:
             if value != FACTORY_DEFAULT_KEY:
                 return Answer(Status.INVALID_VALUE)
@@ -776,7 +820,51 @@ class Simulator:
     def _version_binary(self) -> int:
         """136 type 1, in the byte order the module's data file gives (``version_layout``)."""
         mod = self.module
-        return encode_type1(mod.firmware_id, mod.firmware_version, mod.version_layout)
+        return encode_type1(mod.firmware_id, self.firmware_version, mod.version_layout)
+
+    # -- the bootloader (boot.py) -----------------------------------------------------------
+    def _enter_bootloader(self) -> None:
+        """242: the module restarts into its bootloader: motors and program stop, the
+        application's settings no longer apply (it answers at the bootloader's address)."""
+        self.boot.active = True
+        for axis in self.axes:
+            axis.power_cycle()
+        self.vm.power_up()
+        self._events.clear()
+        self._ascii = False
+        self._line.clear()
+        self._rx.clear()
+
+    def _boot_dispatch(self, ins: Instruction) -> Answer:
+        if ins.opcode == Control.GET_VERSION:
+            if ins.type == VERSION_STRING:
+                return Answer(version=bootloader_string(self.module.firmware_id,
+                                                        self.boot.VERSION))
+            if ins.type == VERSION_BINARY:
+                mod = self.module
+                return Answer(value=encode_type1(mod.firmware_id, self.boot.VERSION,
+                                                 mod.version_layout))
+            return Answer(Status.WRONG_TYPE, ins.signed_value)
+        got = self.boot.execute(ins)
+        return Answer(got.status, got.value, silent=got.silent,
+                      after=self._start_application if got.start else None)
+
+    def _start_application(self) -> None:
+        """205 (or a power cycle in the bootloader): run the application the memory holds,
+        as the module type and version its version string names; with no valid one, or one
+        for a type the simulator has no data for, stay in the bootloader."""
+        found = self.boot.application()
+        module = by_firmware_id(found.type_number) if found is not None else None
+        if found is None or module is None:
+            log.info("no valid application to start: staying in the bootloader")
+            return
+        with self._lock:
+            self.boot.active = False
+            if module.name != self.module.name:
+                self._build(module)
+            self.version_string = f"{found.text:<8.8}"
+            self.firmware_version = found.number or 0
+            self._power_up(True)
 
     # -- VM host --------------------------------------------------------------------------------
     def clock(self) -> float:
@@ -939,7 +1027,7 @@ class Simulator:
                 return
             payload = self._apply_faults(channel, payload)
             delay = f.delay
-            if channel == SERIAL:
+            if channel == SERIAL and not self.boot.active:
                 delay += self.store.get(GLOBAL, "TelegramPauseTime") / 1000.0
             if faulty:
                 if f.rates and f.roll("delay"):

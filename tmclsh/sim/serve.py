@@ -325,16 +325,20 @@ def _split(spec: str, what: str) -> tuple[str, str]:
 def run(module: str, address: int | Sequence[int], *, pty: bool = False, tcp: str | None = None,
         can: str | None = None, host_address: int = 2, bitrate: int | None = None,
         faults: dict[str, float] | None = None, seed: int | None = None,
-        baud: int | None = None) -> int:
+        baud: int | None = None, bootloader: bool = False) -> int:
     """Serve a simulated module until SIGINT/SIGTERM; the first stdout line is the endpoint.
 
     Several addresses (``[1, 2, 3]``) serve a module at each on one line, as on an RS485
     bus (a pty or TCP): each answers its own address, and an address given twice answers
-    twice. ``baud`` paces the line at that rate (``Wire``). ``faults``: probabilities per
-    reply by kind (``Faults.rates``), drawn from a generator seeded with ``seed`` (None: a
-    different run each time). Exit status 0 after a signal, 2 for bad arguments, 3 when the
-    server cannot start (the port is taken, the CAN interface is missing, no pty on this
-    system).
+    twice. ``baud`` paces the line at that rate (``Wire``). ``bootloader``: the module
+    starts in its bootloader with no valid application, as after a firmware update that
+    broke off (``tmclsh firmware`` completes it); one module only (a bootloader answers at
+    address 1 whatever its firmware's address was).
+
+    ``faults``: probabilities per reply by kind (``Faults.rates``), drawn from a generator
+    seeded with ``seed`` (None: a different run each time). Exit status 0 after a signal, 2
+    for bad arguments, 3 when the server cannot start (the port is taken, the CAN interface
+    is missing, no pty on this system).
     """
     from ..base.canspec import parse_can
     from ..base.errors import EXIT_CONNECT, EXIT_USAGE, ValidationError
@@ -347,6 +351,9 @@ def run(module: str, address: int | Sequence[int], *, pty: bool = False, tcp: st
     if not addresses:
         log.error("no address given")
         return EXIT_USAGE
+    if bootloader and len(addresses) > 1:
+        log.error("--bootloader serves one module (a bootloader answers at address 1)")
+        return EXIT_USAGE
     if can and (len(addresses) > 1 or baud):
         log.error("several addresses and --baud are for a serial line (--pty, --tcp); on a "
                   "CAN bus each module has its own CAN id: serve one module per id")
@@ -354,7 +361,8 @@ def run(module: str, address: int | Sequence[int], *, pty: bool = False, tcp: st
     sims: list[Simulator] = []
     try:
         for addr in addresses:
-            sims.append(Simulator(module, addr, host_address=host_address).bench_layout())
+            sims.append(Simulator(module, addr, host_address=host_address,
+                                  bootloader=bootloader).bench_layout())
     except ValueError as exc:
         for made in sims:
             made.close()
@@ -406,8 +414,13 @@ def run(module: str, address: int | Sequence[int], *, pty: bool = False, tcp: st
     try:
         sys.stdout.write(endpoint + "\n")
         sys.stdout.flush()
-        log.info("simulated %s at address %s on %s%s", sims[0].module.name,
-                 ", ".join(map(str, addresses)), endpoint, f" at {baud} baud" if baud else "")
+        if bootloader:
+            log.info("simulated %s in its bootloader, at address %d on %s%s",
+                     sims[0].module.name, sims[0].address, endpoint,
+                     f" at {baud} baud" if baud else "")
+        else:
+            log.info("simulated %s at address %s on %s%s", sims[0].module.name,
+                     ", ".join(map(str, addresses)), endpoint, f" at {baud} baud" if baud else "")
         if faults:
             log.warning("misbehaving on purpose: %s",
                         ", ".join(f"{k}={v:g}" for k, v in faults.items()))

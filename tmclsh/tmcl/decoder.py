@@ -15,6 +15,11 @@ Two refinements keep noise from being taken for a frame, which matters for repli
   for more noise, not for another host's frame: noise that happens to add up (1 in 256) is
   likelier, and taking it whole would swallow the start of the reply behind it.
 
+A reader that hears every host (a tap on a bus, a bridge: ``host`` None) has no address to
+tell noise from a frame after it lost its place; it may say which windows are plausible
+there instead (``resync``: a known command to a module, a status to a host), which keeps
+noise that happens to add up from being shown as a frame.
+
 A window the sum rejects may still be taken whole when the reader says so (``whole``): a
 version string (136 type 0 answers eight ASCII characters and no checksum), or a damaged
 request a module answers with status 1. Garbage that happens to form a valid frame cannot be
@@ -58,13 +63,18 @@ class FrameDecoder:
     ``host``: replies to this host address are read (see the module docstring); None reads
     every window that adds up as a frame (requests, a tap on a bus, pasted bytes).
     ``buf`` holds what is not read yet; callers that read the wire append to it (``feed``).
+    ``resync``: after bytes that were no frame, a window that adds up is taken only if
+    ``resync(window)`` says it is plausible (a reader of every host's frames; see the module
+    docstring); None takes every such window, as before.
     """
 
-    __slots__ = ("buf", "host", "_after_noise", "_taken")
+    __slots__ = ("buf", "host", "resync", "_after_noise", "_taken")
 
-    def __init__(self, host: int | None = None):
+    def __init__(self, host: int | None = None,
+                 resync: Callable[[bytes | bytearray], bool] | None = None):
         self.buf = bytearray()
         self.host = host
+        self.resync = resync
         self._after_noise = False
         # ``whole`` accepted the window now at the head while noise came first: it is
         # returned next without asking again (``whole`` may count what it accepts)
@@ -104,9 +114,10 @@ class FrameDecoder:
         n = len(buf)
         while n - start >= FRAME:
             window = buf[start:start + FRAME]
+            suspect = self._after_noise or start  # (bytes that were no frame came first)
             if is_frame(window, host, memory) and (
-                    host is None or window[0] == host
-                    or not (self._after_noise or start)):
+                    host is None or window[0] == host or not suspect) and (
+                    self.resync is None or not suspect or self.resync(window)):
                 kind = FRAME_PIECE
             elif whole is not None and whole(buf[start:start + 2 * FRAME]):
                 kind = WHOLE

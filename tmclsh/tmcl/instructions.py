@@ -12,7 +12,8 @@ from functools import cache
 from typing import Protocol, Union
 
 from ..base.datafiles import load_toml
-from .frames import Control
+from .frames import Control, ReplyKind
+from .frames import reply_kind as frame_reply_kind
 
 
 class HasCommands(Protocol):
@@ -157,6 +158,8 @@ class ControlSpec:
     not_a_line: str | None = None  # never sent as a typed line: why
     ascii_word: str | None = None  # the module's ASCII mode calls it this (RUN, STOP)
     download: str | None = None  # enter | leave: it starts or ends download mode
+    reply: str | None = None  # "none": no reply comes (137, 205, 242)
+    boot: str | None = None  # its role in a firmware update (bootloader.toml)
 
     def on(self, module: ModuleRef) -> bool:
         return _offered(self.modules, module)
@@ -207,7 +210,7 @@ def _tables() -> tuple[dict[int, InstructionSpec], dict[int, ControlSpec], dict[
                                          c.get("idempotent", False),
                                          c.get("starts_motion", False), c.get("confirm"),
                                          c.get("not_a_line"), c.get("ascii_word"),
-                                         c.get("download"))
+                                         c.get("download"), c.get("reply"), c.get("boot"))
                 for c in data["control"]}
     return by_opcode, controls, dict(data["interrupts"])
 
@@ -268,6 +271,15 @@ def repeatable(opcode: int, type_: int) -> bool:
 
 
 @cache
+def reading(opcode: int, type_: int) -> bool:
+    """Is the reply to this request a reading of what its type names (GAP, GGP, GIO, RFS
+    STATUS)? Asking again then changes nothing on the module: an answer in doubt is read
+    again."""
+    spec = _tables()[0].get(opcode)
+    return spec is not None and spec.reads_with(type_)
+
+
+@cache
 def starting_opcodes() -> frozenset[int]:
     """The commands that can start a motor or the stored program (``starts_motion``)."""
     return frozenset(op for op in (*_tables()[0], *_tables()[1]) if spec_of(op).starts_motion)
@@ -293,6 +305,26 @@ def parameter_command(kind: str, access: str) -> InstructionSpec:
                 access != "write" or spec.sets_parameter):
             return spec
     raise LookupError(f"no {access} command for {kind} parameters")
+
+
+@cache
+def reply_kind(opcode: int, type_: int) -> ReplyKind:
+    """How the answer to a request is laid out: the frame layer's reading (136 type 0, 134),
+    or none at all where the instruction set says none comes (137, 205, 242)."""
+    ctl = _tables()[1].get(opcode)
+    if ctl is not None and ctl.reply == "none":
+        return ReplyKind.NONE
+    return frame_reply_kind(opcode, type_)
+
+
+@cache
+def boot_command(role: str) -> int:
+    """The command that plays ``role`` in a firmware update (``enter``: 242, ``erase``:
+    200, ... as ``boot`` in instructions.toml says)."""
+    for op, c in _tables()[1].items():
+        if c.boot == role:
+            return op
+    raise LookupError(f"no bootloader command for {role!r}")
 
 
 @cache

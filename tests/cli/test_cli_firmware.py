@@ -1,0 +1,302 @@
+"""``tmclsh firmware`` as a user runs it: a process on a pty-served module, interrupted at
+every phase (Ctrl-C as the module is reached there) and resumed with the very command it
+printed; killed mid-write; --check, --json, refusals; connect and scan meeting a module in
+its bootloader."""
+
+from __future__ import annotations
+
+import json
+import shlex
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from bootmodel import START, BootModule, hex_image
+from conftest import ROOT, tmclsh_env
+from tmclsh.sim import Simulator
+from tmclsh.sim.boot import Bootloader
+from tmclsh.sim.serve import serve_pty
+
+
+@pytest.fixture
+def model_hex(tmp_path):
+    def make(version: str = "1311V112", size: int = 5000, start: int = START) -> str:
+        path = tmp_path / f"{version}-{size}-{start:x}.hex"
+        path.write_text(hex_image(version, size, start))
+        return str(path)
+    return make
+
+
+@pytest.fixture
+def sim_hex(model_hex):
+    return lambda version="1311V112", size=20000: model_hex(version, size, Bootloader.START)
+
+
+def tmclsh(*args: str, **kw) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "tmclsh", *args], cwd=str(ROOT),
+                            env=tmclsh_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            stdin=subprocess.DEVNULL, text=True, **kw)
+
+
+def finish(p: subprocess.Popen, timeout: float = 60) -> tuple[int, str, str]:
+    out, err = p.communicate(timeout=timeout)
+    return p.returncode, out, err
+
+
+def resume_line(err: str) -> list[str]:
+    """The command the interrupted run printed, as argv for this checkout."""
+    line = next(ln for ln in err.splitlines() if "to complete the update, run:" in ln)
+    words = shlex.split(line.split("run:", 1)[1])
+    assert words[:2] == ["tmclsh", "firmware"]
+    return words[1:]
+
+
+# -- interrupted at every phase, then the command it printed -------------------------------
+
+def interrupt_on(module: BootModule, command: int, nth: int = 1):
+    """Ctrl-C to the update when the module gets its ``nth`` request ``command``, before it
+    answers it."""
+    holder: dict = {}
+
+    def hook(m):
+        if m.commands().count(command) == nth and "p" in holder:
+            holder["p"].send_signal(signal.SIGINT)
+            time.sleep(0.2)  # (the signal lands while the update waits for this answer)
+    module.hooks[command] = hook
+    return holder
+
+
+@pytest.mark.parametrize("phase, command, nth", [
+    ("before erase", 206, 1), ("after erase", 200, 1), ("mid-write", 201, 700),
+    ("before 208", 203, 1), ("after 205", 205, 1)])
+def test_interrupted_then_resumed(model_hex, phase, command, nth):
+    module = BootModule()
+    image = model_hex(size=5000)
+    try:
+        holder = interrupt_on(module, command, nth)
+        p = holder["p"] = tmclsh("firmware", image, "--port", module.path, "--yes",
+                                 "--timeout", "0.2")
+        rc, out, err = finish(p)
+        assert rc == 130, err
+        assert "interrupted" in err and "Traceback" not in err
+        module.hooks.clear()
+        same = ["firmware", image, "--port", module.path, "--timeout", "0.2", "--yes"]
+        if phase == "before erase":
+            # nothing erased: the module was sent back to its firmware, nothing to resume
+            assert "nothing was erased: the module runs its firmware 1311V111 again" in err
+            assert "to complete the update" not in err
+            assert not module.in_bootloader and module.erases == 0
+            argv = same  # the user runs it again
+        elif phase == "after 205":
+            assert "the new firmware was started (205) and has not answered yet" in err
+            argv = resume_line(err)
+            assert argv == same
+        else:
+            assert module.in_bootloader
+            assert "the module is in its bootloader and its firmware is erased" in err
+            argv = resume_line(err)
+            assert argv == same
+        before = len(module.heard)
+        rc, out, err = finish(tmclsh(*argv))
+        assert rc == 0, err
+        again = [h[0] for h in module.heard[before:]]
+        assert module.app_version == "1311V112" and not module.in_bootloader
+        if phase == "after 205":
+            assert "runs 1311V112 already: nothing to do" in out
+            assert 200 not in again
+        elif phase == "before 208":
+            assert 200 not in again and 201 not in again  # written already: only finished
+            assert again.count(208) == 2 and 205 in again
+            assert "updated the TMCM-1311 from its bootloader" in out
+        else:
+            assert again.count(200) == 1 and 205 in again
+            assert out.startswith("updated the TMCM-1311 from ")
+    finally:
+        module.close()
+
+
+def test_killed_mid_write_then_the_same_command_completes(sim_hex):
+    """SIGKILL: nothing is said; the module stays in its bootloader, and the same command
+    finds it there and completes."""
+    class Watched(Simulator):
+        writes = 0
+
+        def _boot_dispatch(self, ins):
+            if ins.opcode == 201:
+                Watched.writes += 1
+            return super()._boot_dispatch(ins)
+
+    sim = Watched("TMCM-1311")
+    server = serve_pty(sim)
+    image = sim_hex(size=60000)
+    try:
+        argv = ("firmware", image, "--port", server.path, "--yes")
+        p = tmclsh(*argv)
+        deadline = time.monotonic() + 30
+        while Watched.writes < 3000 and time.monotonic() < deadline:
+            time.sleep(0.005)
+        p.kill()
+        p.wait(10)
+        assert sim.in_bootloader and sim.boot.length == 0
+        rc, out, err = finish(tmclsh(*argv))
+        assert rc == 0, err
+        assert "in its bootloader (1311B100)" in err
+        assert "updated the TMCM-1311 from its bootloader" in out
+        assert not sim.in_bootloader and sim.version_string == "1311V112"
+    finally:
+        server.close()
+        sim.close()
+
+
+def test_sigterm_mid_write_says_where_the_module_stands(sim_hex):
+    sim = Simulator("TMCM-1311")
+    sim.faults.delay = 0.002  # every reply late: the write takes a few seconds
+    server = serve_pty(sim)
+    try:
+        p = tmclsh("firmware", sim_hex(size=40000), "--port", server.path, "--yes", "--json")
+        deadline = time.monotonic() + 20
+        while not (sim.in_bootloader and sim.boot.length == 0) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        time.sleep(0.5)
+        p.send_signal(signal.SIGTERM)
+        rc, out, err = finish(p)
+        assert rc == 128 + signal.SIGTERM
+        last = json.loads(out.splitlines()[-1])
+        assert last["state"] == "writing" and last["error"] == "stopped by a signal (exit status 143)"
+        assert last["resume"].startswith("tmclsh firmware ") and "--yes" in last["resume"]
+    finally:
+        server.close()
+        sim.close()
+
+
+# -- what a user sees -----------------------------------------------------------------------
+
+def test_json_steps_then_the_result(make_pty_sim, sim_hex):
+    sim, path = make_pty_sim()
+    rc, out, err = finish(tmclsh("firmware", sim_hex(), "--port", path, "--yes", "--json"))
+    assert rc == 0, err
+    objs = [json.loads(line) for line in out.splitlines()]
+    steps = [o["step"] for o in objs if "step" in o]
+    assert steps[0] == "found" and steps[-1] == "done"
+    assert {"enter", "info", "erase", "write", "verify", "finish", "start"} <= set(steps)
+    writes = [o for o in objs if o.get("step") == "write"]
+    assert writes[-1]["done"] == writes[-1]["total"] == 20000
+    assert objs[-1] == {"updated": True, "module": "TMCM-1311", "old_version": "1311V111",
+                        "new_version": "1311V112", "written": 20000,
+                        "seconds": objs[-1]["seconds"], "resumed": False}
+
+
+def test_check_says_what_would_happen_and_writes_nothing(model_hex):
+    module = BootModule()
+    try:
+        rc, out, err = finish(tmclsh("firmware", model_hex(), "--port", module.path, "--check"))
+        assert rc == 0, err
+        assert "module  TMCM-1311, running its firmware: 1311V111" in out
+        assert "image   " in out and "1311V112, 5000 bytes at 0x00004000" in out
+        assert "would   restart it into its bootloader, erase, write 5000 bytes" in out
+        assert 242 not in module.commands()
+    finally:
+        module.close()
+
+
+def test_check_in_the_bootloader_says_whether_it_fits(model_hex):
+    module = BootModule(in_bootloader=True)
+    try:
+        from bootmodel import SIZE
+
+        rc, out, err = finish(tmclsh("firmware", model_hex(size=SIZE + 8), "--port",
+                                     module.path, "--check", "--json", "--timeout", "0.1"))
+        assert rc == 1, err
+        plan = json.loads(out.splitlines()[-1])
+        assert plan["bootloader"] is True and plan["fits"] is False
+        assert "does not fit" in plan["problem"]
+        assert plan["memory"] == {"page_size": 256, "start": START, "size": SIZE}
+        assert set(module.commands()) <= {136, 206} and module.erases == 0
+    finally:
+        module.close()
+
+
+def test_an_image_for_another_module_is_one_clear_line(model_hex):
+    module = BootModule()
+    try:
+        rc, out, err = finish(tmclsh("firmware", model_hex("1640V211"), "--port",
+                                     module.path, "--yes"))
+        assert rc == 1 and out == ""
+        assert ("is firmware for the TMCM-1640 (its version string 1640V211), not for this "
+                "TMCM-1311: refused, nothing was written") in err
+        assert "Traceback" not in err and 242 not in module.commands()
+    finally:
+        module.close()
+
+
+def test_no_answer_possible_needs_yes_and_nothing_is_sent(model_hex):
+    module = BootModule()
+    try:
+        rc, out, err = finish(tmclsh("firmware", model_hex(), "--port", module.path))
+        assert rc == 2 and "give --yes" in err and "nothing was sent" in err
+        assert module.heard == []
+    finally:
+        module.close()
+
+
+def test_a_hex_file_with_a_bad_record_checksum_is_refused_before_anything_is_sent(tmp_path):
+    module = BootModule()
+    bad = tmp_path / "bad.hex"
+    text = hex_image("1311V112", 64).splitlines()
+    text[1] = text[1][:-2] + ("00" if text[1][-2:] != "00" else "01")
+    bad.write_text("\n".join(text) + "\n")
+    binary = tmp_path / "fw.bin"
+    binary.write_bytes(bytes(range(256)))
+    try:
+        rc, out, err = finish(tmclsh("firmware", str(bad), "--port", module.path, "--yes"))
+        assert rc == 2 and "not a valid Intel HEX file" in err and "checksum" in err
+        rc, out, err = finish(tmclsh("firmware", str(binary), "--port", module.path, "--yes"))
+        assert rc == 2 and "not an Intel HEX file" in err
+        assert module.heard == []
+    finally:
+        module.close()
+
+
+# -- meeting a module in its bootloader ---------------------------------------------------
+
+def test_connect_to_a_module_in_its_bootloader_points_at_tmclsh_firmware(run_tmclsh):
+    sim = Simulator("TMCM-1311", bootloader=True)
+    server = serve_pty(sim)
+    try:
+        p = run_tmclsh("--port", server.path, "-c", "GAP 1, 0")
+        assert p.returncode == 3
+        assert ("is in its bootloader (it answers '1311B100'): a firmware update did not "
+                "complete") in p.stderr
+        assert f"'tmclsh firmware FILE.hex --port {server.path}'" in p.stderr
+        assert "unknown module type" not in p.stderr
+    finally:
+        server.close()
+        sim.close()
+
+
+def test_scan_marks_a_module_in_its_bootloader(run_tmclsh):
+    sim = Simulator("TMCM-351", bootloader=True)
+    server = serve_pty(sim)
+    try:
+        p = run_tmclsh("scan", "--port", server.path, "--to", "3")
+        assert p.returncode == 0, p.stderr
+        assert "address   1  TMCM-351    bootloader 351B1.00  IN ITS BOOTLOADER" in p.stdout
+        assert f"'tmclsh firmware FILE.hex --port {server.path}'" in p.stdout
+        p = run_tmclsh("scan", "--port", server.path, "--to", "3", "--json")
+        assert json.loads(p.stdout) == {"address": 1, "module": "TMCM-351",
+                                        "version": "351B1.00", "bootloader": True}
+    finally:
+        server.close()
+        sim.close()
+
+
+def test_242_has_help_and_is_not_sent_as_a_line(run_tmclsh):
+    p = run_tmclsh("--sim", "-c", "help 242")
+    assert "(command 242: enter the bootloader" in p.stdout + p.stderr
+    p = run_tmclsh("--sim", "-c", "242 $81, $92, $A3B4C5D6")
+    assert p.returncode == 1
+    assert "242 (enter the bootloader" in p.stderr and "is not sent as a line" in p.stderr
+    assert "'tmclsh firmware FILE.hex' updates the firmware" in p.stderr

@@ -1,0 +1,210 @@
+"""``tmclsh bridge``: a program tmclsh did not write (PyTrinamic, raw pyserial) talks to the
+simulator through the bridge; every frame arrives unchanged and is seen and decoded."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+import serial
+
+from conftest import ROOT, tmclsh_env
+from tmclsh.cli import main as cli
+from tmclsh.sim import Simulator
+from tmclsh.sim.serve import serve_can
+
+
+def request(addr: int, cmd: int, typ: int = 0, motor: int = 0, value: int = 0) -> bytes:
+    body = struct.pack(">BBBBi", addr, cmd, typ, motor, value)
+    return body + bytes([sum(body) & 0xFF])
+
+
+class Bridge:
+    """``tmclsh bridge ... --json`` in its own process: ``endpoint`` is its first line."""
+
+    def __init__(self, *args: str):
+        self.proc = subprocess.Popen([sys.executable, "-m", "tmclsh", "bridge", *args,
+                                      "--json"], stdout=subprocess.PIPE,
+                                     stderr=subprocess.PIPE, text=True, env=tmclsh_env(),
+                                     cwd=str(ROOT))
+        self.endpoint = self.proc.stdout.readline().strip()
+        assert self.endpoint, self.proc.stderr.read()
+
+    def stop(self, sig: int = signal.SIGINT) -> tuple[list[dict], str]:
+        time.sleep(0.3)  # (what was forwarded last is read before the signal)
+        self.proc.send_signal(sig)
+        out, err = self.proc.communicate(timeout=20)
+        assert self.proc.returncode == 0, err
+        return [json.loads(line) for line in out.splitlines()], err
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.communicate()
+
+
+def test_pytrinamic_through_the_bridge(make_pty_sim):
+    pytest.importorskip("pytrinamic")
+    from pytrinamic.connections import ConnectionManager
+
+    sim, path = make_pty_sim()
+    bridge = Bridge("--pty", "--port", path)
+    try:
+        iface = ConnectionManager(
+            f"--interface serial_tmcl --port {bridge.endpoint} --data-rate 9600").connect()
+        try:
+            assert iface.get_version_string() == "1311V111"
+            assert iface.get_axis_parameter(4, 0) == 51200
+            iface.set_axis_parameter(4, 0, 1000)
+            assert iface.get_axis_parameter(4, 0) == 1000
+            iface.set_global_parameter(0, 2, -42)
+            assert iface.get_global_parameter(0, 2, signed=True) == -42
+            assert iface.get_digital_output(3) == 0
+        finally:
+            iface.close()
+        objs, err = bridge.stop()
+    finally:
+        bridge.kill()
+    assert sim.param("axis", 4) == 1000
+    got = [o for o in objs if "frame" in o]
+    assert [o["frame"] for o in got] == ["request", "reply"] * 7, "\n".join(
+        f'{o["frame"]} {o.get("line")} {o["bytes"]} {o["t"]}' for o in got)
+    assert [(o["op"], o["type"], o["motor"], o["value"]) for o in got[::2]] == [
+        (136, 0, 0, 0), (6, 4, 0, 0), (5, 4, 0, 1000), (6, 4, 0, 0), (9, 0, 2, -42),
+        (10, 0, 2, 0), (15, 3, 2, 0)]
+    assert all(o["direction"] == "tx" for o in got[::2])
+    assert all(o["direction"] == "rx" and o["latency"] > 0 for o in got[1::2])
+    assert got[1]["version"] == "1311V111"
+    assert (got[3]["param"], got[3]["value"]) == ("MaxPositioningSpeed", 51200)
+    assert got[7]["value"] == 1000 and got[11]["value"] == -42
+    assert got[8]["line"] == "SGP 0, 2, -42"
+    assert objs[-1]["summary"]["requests"] == 7 and objs[-1]["summary"]["errors"] == 0
+
+
+def test_bytes_pass_unchanged_noise_too_and_a_motor_left_turning_is_stopped(make_pty_sim):
+    sim, path = make_pty_sim()
+    bridge = Bridge("--tcp", "127.0.0.1:0", "--port", path)
+    try:
+        with serial.serial_for_url(f"socket://{bridge.endpoint}", timeout=2) as port:
+            port.write(b"\x55\x13" + request(1, 6, 4))  # noise before the frame: forwarded
+            assert port.read(9) == bytes.fromhex("02 01 64 06 00 00 c8 00 35")
+            port.write(request(1, 1, 0, 0, 800))  # ROR 0, 800: and then the bridge closes
+            assert port.read(9)[2] == 100
+            time.sleep(0.2)
+            assert sim.param("axis", 3) != 0
+            objs, err = bridge.stop(signal.SIGTERM)
+    finally:
+        bridge.kill()
+    got = [o for o in objs if "frame" in o]
+    assert got[0] == {"t": got[0]["t"], "frame": "noise", "direction": "tx",
+                      "note": "2 bytes that are no frame", "bytes": "55 13"}
+    assert [o["line"] for o in got if o["frame"] == "request"] == ["GAP 4, 0", "ROR 0, 800"]
+    assert "left a motor or the stored program started at address 1" in err
+    assert "stopped motor 0" in err
+    assert sim.param("axis", 3) == 0
+
+
+def test_ascii_mode_through_the_bridge_is_shown_as_text_and_left_at_the_end(make_pty_sim):
+    sim, path = make_pty_sim()
+    bridge = Bridge("--pty", "--port", path)
+    try:
+        with serial.Serial(bridge.endpoint, timeout=1) as port:
+            port.write(request(1, 139))
+            assert port.read(9)[2] == 100
+            port.write(b"AGAP 4, 0\r")
+            deadline = time.monotonic() + 2
+            got = b""
+            while b"BA 100 51200" not in got and time.monotonic() < deadline:
+                got += port.read(1)
+            assert b"BA 100 51200" in got
+            objs, err = bridge.stop()
+    finally:
+        bridge.kill()
+    texts = [(o["direction"], o["text"]) for o in objs if o.get("frame") == "text"]
+    assert ("tx", "AGAP 4, 0") in texts and ("rx", "BA 100 51200") in texts
+    assert "left the module in ASCII mode at address 1" in err
+    # the module is back in binary mode: it answers a frame
+    with serial.Serial(path, timeout=1) as port:
+        port.write(request(1, 6, 4))
+        assert port.read(9)[:4] == bytes([2, 1, 100, 6])
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_a_serial_program_reaches_a_can_module(capsys):
+    channel = "bridge-can"
+    sim = Simulator("TMCM-1311")
+    server = serve_can(sim, "virtual", channel)
+    port_no = _free_port()
+    rc: list[int] = []
+    thread = threading.Thread(target=lambda: rc.append(cli.main(
+        ["bridge", "--tcp", f"127.0.0.1:{port_no}", "--can", f"virtual:{channel}", "--json",
+         "--count", "4"])))
+    thread.start()
+    try:
+        deadline = time.monotonic() + 5
+        while True:
+            try:
+                port = serial.serial_for_url(f"socket://127.0.0.1:{port_no}", timeout=2)
+                break
+            except serial.SerialException:
+                assert time.monotonic() < deadline
+                time.sleep(0.05)
+        with port:
+            port.write(request(1, 136))
+            assert port.read(9) == b"\x021311V111"
+            port.write(request(1, 6, 4))
+            reply = port.read(9)
+            assert reply[:4] == bytes([2, 1, 100, 6]) and sum(reply[:8]) & 0xFF == reply[8]
+        thread.join(10)
+    finally:
+        server.close()
+        sim.close()
+    assert rc == [0]
+    objs = [json.loads(line) for line in capsys.readouterr().out.splitlines()[1:]]
+    got = [o for o in objs if "frame" in o]
+    assert [(o["frame"], o["can_id"]) for o in got] == [("request", 1), ("reply", 2)] * 2
+    assert got[1]["version"] == "1311V111" and got[3]["param"] == "MaxPositioningSpeed"
+
+
+def test_the_bridge_refuses_what_it_cannot_do(run_tmclsh):
+    r = run_tmclsh("bridge", "--pty")
+    assert r.returncode == 2 and "one of the arguments --port --can is required" in r.stderr
+    r = run_tmclsh("bridge", "--pty", "--port", "/nonexistent/tty")
+    assert r.returncode == 3 and "no such port" in r.stderr
+    assert "Traceback" not in r.stderr
+    r = run_tmclsh("bridge", "--tcp", "nowhere", "--port", "x")
+    assert r.returncode == 2 and "HOST:PORT" in r.stderr
+    assert not os.path.exists("x")
+
+
+def test_a_module_that_goes_away_ends_the_bridge():
+    from responder import PtyModule
+
+    module = PtyModule(version="1311V111")
+    bridge = Bridge("--pty", "--port", module.path)
+    try:
+        with serial.Serial(bridge.endpoint, timeout=1) as port:
+            port.write(request(1, 6, 1))
+            assert len(port.read(9)) == 9
+            module.close()  # unplugged
+            out, err = bridge.proc.communicate(timeout=10)
+    finally:
+        bridge.kill()
+    assert bridge.proc.returncode == 1, err
+    assert "bridge: lost " in err and "Traceback" not in err
+    objs = [json.loads(line) for line in out.splitlines()]  # (the endpoint line was read)
+    assert [o.get("frame") for o in objs] == ["request", "reply", None]
+    assert objs[-1]["summary"]["frames"] == 2

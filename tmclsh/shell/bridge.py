@@ -1,0 +1,209 @@
+"""``tmclsh bridge``: another program talks to the module through tmclsh, every frame
+forwarded unchanged (ops/bridge.py) and shown as ``tmclsh monitor`` shows it.
+
+Like ``tmclsh sim``, the first line on stdout is where the program connects (the pty's path
+or HOST:PORT); the traffic follows, one line per exchange (or one JSON object per frame),
+until Ctrl-C or SIGTERM, then the summary.
+
+When the bridge closes, the program on the other side loses the module: what its exchanges
+left behind is ended then, as tmclsh ends its own (the one safety stop, shell/stop.py): a
+motor or the stored program it started is stopped, download mode it entered is left (133),
+and ASCII mode it entered is left for binary mode.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import threading
+import time
+from typing import Any
+
+from ..base.errors import (EXIT_FAILED, EXIT_OK, ConnectError, TmclError, TransportError, UsageError,
+                           ValidationError)
+from ..ops.bridge import CAN_RX, CAN_TX, LOST, TICK, CanBridge, Left, SerialBridge
+from ..ops.monitor import DEFAULT_HOST, RX, TX, CanReader, Filter, Monitor, SerialPair
+from .monitor import Limits, View, _capture, interruptible, load_module, restore, show_items
+
+
+def run_bridge(args) -> int:
+    module = load_module(getattr(args, "module", None))
+    monitor = Monitor(module, timeout=getattr(args, "timeout", None) or 1.0)
+    filt = Filter(args.address or (), args.op or (), args.param or (), monitor)
+    port, can_spec = getattr(args, "port", None), getattr(args, "can", None)
+    if (port is None) == (can_spec is None):
+        raise UsageError("bridge forwards to one module: give --port PORT or "
+                         "--can [IFACE:CHANNEL]")
+    if args.pty and not hasattr(os, "openpty"):
+        raise UsageError("a pseudo-terminal needs Linux or macOS; use --tcp HOST:PORT")
+    is_can = can_spec is not None
+    can_id = getattr(args, "can_id", None)
+    reply_id = getattr(args, "reply_id", None) or 2
+    host = getattr(args, "host_address", None)
+    host = DEFAULT_HOST if host is None else host
+    transport = _open_module(args, port, can_spec)
+    view = View(monitor, json_mode=bool(getattr(args, "json", False)), hex_bytes=args.hex)
+    try:
+        capture, close_capture = _capture(args.output, is_can)
+    except BaseException:
+        transport.close()
+        raise
+    serve: dict[str, Any] = {"pty": True} if args.pty else {"tcp": args.tcp}
+    if is_can:
+        reader: Any = CanReader(monitor, [can_id] if can_id is not None else None,
+                                [reply_id], learn=False)
+    else:
+        reader = SerialPair(monitor)
+    told = _Told(reader, view, filt, monitor, capture, Limits(args.count, args.duration, False))
+    try:
+        if is_can:
+            bridge: Any = CanBridge(transport, told, can_id=can_id, reply_id=reply_id,
+                                    host=host, **serve)
+        else:
+            bridge = SerialBridge(transport, told, **serve)
+    except OSError as exc:
+        transport.close()
+        close_capture()
+        raise ConnectError(f"cannot serve the bridge: {exc}") from exc
+    sys.stdout.write(bridge.endpoint + "\n")
+    sys.stdout.flush()
+    print(f"bridging {bridge.endpoint} <-> {transport.describe()}; Ctrl-C ends",
+          file=sys.stderr, flush=True)
+    try:
+        _forward(bridge, told)
+    finally:
+        close_capture()
+        try:
+            if told.left:
+                _put_right(transport, told.left, monitor, args, is_can, told.lost)
+        finally:
+            transport.close()
+    view.summary(monitor.summary)
+    return EXIT_OK if told.lost is None else EXIT_FAILED
+
+
+def _open_module(args, port: str | None, can_spec: str | None):
+    try:
+        if port is not None:
+            from ..link import open_serial
+
+            return open_serial(port, getattr(args, "baud", None) or 9600)
+        from ..link import open_can
+
+        return open_can(can_spec, getattr(args, "bitrate", None))
+    except (TransportError, ValidationError) as exc:
+        raise ConnectError(str(exc)) from exc
+
+
+class _Told:
+    """What the bridge tells (on its forwarding threads, in the wire's order, under its
+    lock): read into items, shown, and what they leave behind kept (``left``)."""
+
+    def __init__(self, reader, view: View, filt: Filter, monitor: Monitor, capture,
+                 limits: Limits):
+        self.reader, self.view, self.filt, self.monitor = reader, view, filt, monitor
+        self.capture, self.limits = capture, limits
+        self.left = Left()
+        self.lost: str | None = None
+        self.done = threading.Event()  # a limit reached or the module's link lost
+
+    def __call__(self, event: tuple) -> None:
+        items, lost = _read(event, self.reader, self.monitor, self.capture)
+        if lost is not None and self.lost is None:
+            self.lost = lost
+            self.done.set()
+        self.show(items)
+
+    def show(self, items: list) -> None:
+        for item in items:
+            self.left.take(item)
+        if self.done.is_set() and self.lost is None:
+            return  # (the count was reached: still read and counted, not shown)
+        summary = self.monitor.summary
+        if show_items(items, self.view, self.filt, summary, self.limits) \
+                or self.limits.reached(summary.shown, summary):
+            self.done.set()
+        self.view.flush()
+
+
+def _forward(bridge, told: _Told) -> None:
+    """Forward until Ctrl-C, SIGTERM, a limit, or the module's link is lost; in between,
+    a silence ends partial frames and requests wait no longer than their timeout."""
+    previous = interruptible()
+    try:
+        try:
+            while not told.done.wait(TICK):
+                with bridge.lock:
+                    told.show(told.reader.quiet(time.time()))
+        except KeyboardInterrupt:
+            pass
+        finally:
+            bridge.close()  # (what was forwarded before is told)
+        with bridge.lock:
+            told.show(told.reader.end(time.time()))
+        if told.lost is not None:
+            print(f"bridge: {told.lost}", file=sys.stderr)
+    finally:
+        restore(previous)
+        told.view.flush()
+
+
+def _read(event: tuple, reader, monitor: Monitor, capture) -> tuple[list, str | None]:
+    """One thing the bridge told, read: (the items, why the module's link was lost)."""
+    kind = event[0]
+    if kind == LOST:
+        return [], event[1]
+    if kind in (TX, RX):
+        _, data, t = event
+        if capture is not None:
+            capture(t, data, kind)
+        return reader.feed(kind, data, t), None
+    if kind in (CAN_TX, CAN_RX):
+        f = event[1]
+        if capture is not None:
+            capture(f)
+        if kind == CAN_TX:
+            reader.request_ids.add(f.arbitration_id)
+        return reader.feed(f.t, f.arbitration_id, f.data, extended=f.extended, error=f.error,
+                           remote=f.remote), None
+    _, data, t = event  # NOISE: the master's bytes no frame could be made of
+    return monitor.noise(t, data, f"{len(data)} bytes of the program's that are no frame: "
+                                  "not forwarded to CAN", TX), None
+
+
+def _put_right(transport, left: Left, monitor: Monitor, args, is_can: bool,
+               lost: str | None) -> None:
+    """The program can no longer reach the module: end what its exchanges left behind."""
+    from ..client import bringup
+    from ..client.ascii import Mode
+    from ..client.core import Client
+    from .stop import ToStderr, stop_all
+
+    for address in left.addresses:
+        what = left.describe(address)
+        if lost is not None:
+            print(f"bridge closed: the traffic through it left {what} at address "
+                  f"{address}, and the link to the module is lost: check the module",
+                  file=sys.stderr)
+            continue
+        print(f"bridge closed: the traffic through it left {what} at address {address}; "
+              "ending that", file=sys.stderr)
+        if not transport.is_open:
+            transport.open()
+        can_id = getattr(args, "can_id", None)
+        client = Client(transport, address=address if address <= 0xFF else 1,
+                        host_address=monitor.host_of.get(address, DEFAULT_HOST),
+                        module=monitor.module_for(address), timeout=0.5,
+                        can_id=(can_id if can_id is not None else address) if is_can else None,
+                        reply_id=getattr(args, "reply_id", None))
+        try:
+            bringup.bring_up(client, strict=False)  # (leaves download mode, finds ASCII)
+            if client.ascii_link is not None and address in left.ascii:
+                client.ascii_link.on_exit = Mode.BINARY
+            if address in left.started:
+                stop_all(client, ToStderr(), "bridge closed")
+        except TmclError as exc:
+            print(f"bridge closed: could not end it at address {address}: {exc}",
+                  file=sys.stderr)
+        finally:
+            client.close()
