@@ -193,7 +193,7 @@ def _identify(client: Client, addr: int, binary, timeout: float) -> Found:
     if boot and (mod is None or mod.generic):
         mod = by_firmware_id(parsed.type_number)  # (its type, as its bootloader names it)
     name = mod.name if mod is not None and not mod.generic else None
-    return Found(addr, name, version, line_baud(client.transport), boot)
+    return Found(addr, name, version, line_baud(client.transport), bootloader=boot)
 
 
 def _probe(client: Client, addr: int, timeout: float, retries: int):
