@@ -109,7 +109,8 @@ def test_two_usb_modules_exit_3_naming_them_in_every_mode(monkeypatch, capsys, a
     assert cli.main(args) == 3
     err = capsys.readouterr().err
     assert one_line(err) == ("tmclsh: 2 Trinamic USB modules attached: /dev/ttyACM0 (TMCM-1311, "
-                             "serial A), /dev/ttyACM1 (TMCM-1311, serial B); pick one with --port")
+                             "serial A), /dev/ttyACM1 (TMCM-1311, serial B); pick one with --port "
+                             "(-c and -f: --all runs on every one)")
 
 
 @needs_tmux

@@ -68,7 +68,7 @@ def attached_module_port() -> str | None:
     if len(found) > 1:
         raise ConnectError(f"{len(found)} Trinamic USB modules attached: "
                            f"{', '.join(_port_label(p) for p in found)}; "
-                           "pick one with --port")
+                           "pick one with --port (-c and -f: --all runs on every one)")
     return found[0].device if found else None
 
 
