@@ -243,6 +243,37 @@ def test_a_signal_stops_every_unit(make_pty_sim, tmp_path, sig, status, why):
     assert re.search(r"^ +1 .* 2/2 .* stopped .*" + re.escape(why), out, re.M), out
 
 
+def test_ctrl_c_on_a_shared_line_stops_the_unit_running_and_starts_no_other(make_pty_sim,
+                                                                           tmp_path):
+    """One thread runs the three units of one line in turn: Ctrl-C while the first runs
+    stops its motor, and the run waits for that stop before it ends (the others never
+    start)."""
+    bus, path = make_pty_sim(target=SimBus([Simulator("TMCM-1311", a) for a in (1, 2, 3)]))
+    script = tmp_path / "turn.tmcl"
+    script.write_text("ROR 0, 500\n.repeat 300\nGAP 1, 0\n.sleep 0.1\n.end\n")
+    proc = subprocess.Popen([sys.executable, "-m", "tmclsh", "--port", path, "--address",
+                             "1-3", "--json", "-f", str(script)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=tmclsh_env(), cwd=str(ROOT))
+    first = bus.simulators[0]
+    try:
+        deadline = time.monotonic() + 15
+        while not first.param(AXIS, 3):
+            assert time.monotonic() < deadline and proc.poll() is None
+            time.sleep(0.05)
+        time.sleep(0.3)  # (in the loop: the main thread waits for the line's thread)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=15)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err
+    assert first.param(AXIS, 3) == 0
+    assert f"[1 {path} @1] interrupted: stopped motor 0" in err, err
+    summaries = {o["unit"]: o for o in _objects(out) if o.get("summary")}
+    assert [summaries[n]["result"] for n in (1, 2, 3)] == ["stopped", "not run", "not run"]
+    assert all(sim.param(AXIS, 3) == 0 for sim in bus.simulators[1:])
+
+
 # -- on a terminal: the live table ---------------------------------------------------------------
 
 def test_the_live_table_in_a_terminal(make_pty_sim, terminal, tmp_path):

@@ -211,6 +211,10 @@ class _Line:
 
     units: list[Unit]
     thread: threading.Thread | None = None
+    # set as the thread ends; the main thread waits on it, not on Thread.join: a
+    # KeyboardInterrupt landing in join(timeout) can mark a running thread as ended
+    # (CPython's bpo-45274 handling), and the run would end with a unit still running
+    finished: threading.Event = field(default_factory=threading.Event)
     current: Unit | None = None  # the unit running (a stop is raised in its thread)
     raised: bool = False  # a stop was raised in the thread and may not have landed yet
     lock: threading.Lock = field(default_factory=threading.Lock)
@@ -248,9 +252,7 @@ class Run:
 
     def _wait(self) -> None:
         for line in self.lines:
-            assert line.thread is not None
-            while line.thread.is_alive():
-                line.thread.join(0.1)
+            while not line.finished.wait(0.1):
                 self.view.tick()
 
     def _stop(self, why: str, status: int) -> None:
@@ -277,8 +279,11 @@ class Run:
                     line.current = unit
                 self._unit(line, unit, record)
         finally:
-            for unit in line.units:
-                self.view.record(unit).not_run(self.stopping or "not reached")
+            try:
+                for unit in line.units:
+                    self.view.record(unit).not_run(self.stopping or "not reached")
+            finally:
+                line.finished.set()
 
     def _unit(self, line: _Line, unit: Unit, record: Record) -> None:
         from ..client.connect import connection_settings, open_client
