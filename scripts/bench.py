@@ -1081,20 +1081,28 @@ def bench_units(args: argparse.Namespace) -> dict:
     """Wall time of ``tmclsh --port P1 ... --port P8 -f SCRIPT`` (eight units, each its own
     pty-served simulator in its own process, every line paced at 115200 baud: 1.6 ms of wire
     per exchange) over that of ``tmclsh --port P1 -f SCRIPT`` (one unit), whole processes,
-    output to a file; and the CPU time per line per unit of each, start-up subtracted with a
-    1-line run of the same (children's rusage: (long - short) / lines, over eight for the
-    eight). Each round runs the four in an order that turns round every round; the wall
-    figure is the median of the rounds' ratios, the CPU figures come from the medians of
-    each run's CPU over the rounds (see below). The simulators' own CPU is not in either
-    figure (they are the modules)."""
+    output to a file; and the CPU time per line per unit of the eight beside that of one
+    unit running as many lines (8 x 500) alone, start-up subtracted with a 1-line run of
+    the same (children's rusage: (long - short) / lines, over eight for the eight). Both CPU
+    figures are differences of the same size: a process's start-up CPU swings by tens of
+    milliseconds from run to run, as much as one unit's 500 lines take, so a 500-line run
+    alone would measure mostly that noise. Each round runs the five in an order that turns
+    round every round; the wall figure is the median of the rounds' ratios, the CPU figures
+    the differences of the medians of each run's CPU over the rounds. The simulators' own
+    CPU is not in either figure (they are the modules)."""
     import resource
 
     rounds = args.rounds
     tmp = Path(args.state_dir)
-    long_script, short_script = tmp / "units-long.tmcl", tmp / "units-short.tmcl"
-    long_script.write_text("".join(SCRIPT_LINES[i % len(SCRIPT_LINES)][0] + "\n"
-                                   for i in range(UNIT_LINES)))
-    short_script.write_text(SCRIPT_LINES[0][0] + "\n")
+
+    def script(name: str, lines: int) -> Path:
+        path = tmp / f"units-{name}.tmcl"
+        path.write_text("".join(SCRIPT_LINES[i % len(SCRIPT_LINES)][0] + "\n"
+                                for i in range(lines)))
+        return path
+
+    long_script, short_script = script("long", UNIT_LINES), script("short", 1)
+    alone_script = script("alone", UNITS * UNIT_LINES)  # one unit, the eight's lines
     out_file = tmp / "units.out"
 
     def children_cpu() -> float:
@@ -1116,39 +1124,35 @@ def bench_units(args: argparse.Namespace) -> dict:
     sims = [SimProcess(args.module, baud=BAUD) for _ in range(UNITS)]
     try:
         paths = [s.path for s in sims]
-        say(f"units: {rounds} rounds of {UNITS} units and 1 unit, {UNIT_LINES}-line and 1-line "
-            f"scripts, simulators paced at {BAUD} baud; {load_note()}")
+        say(f"units: {rounds} rounds of {UNITS} units and 1 unit, {UNIT_LINES}-line, "
+            f"{UNITS * UNIT_LINES}-line (1 unit) and 1-line scripts, simulators paced at "
+            f"{BAUD} baud; {load_note()}")
         run(paths, short_script)  # warm the caches
         run(paths[:1], short_script)
+        jobs = [("one", long_script), ("all", long_script), ("one", alone_script),
+                ("one", short_script), ("all", short_script)]
         walls: list[float] = []
-        jobs = [("one", long_script), ("all", long_script), ("one", short_script),
-                ("all", short_script)]
         cpu_of: dict[tuple[str, Path], list[float]] = {job: [] for job in jobs}
         for rnd in range(rounds):
             got = {}
-            for who, script in (jobs if rnd % 2 == 0 else jobs[::-1]):
-                got[(who, script)] = run(paths if who == "all" else paths[:1], script)
+            for who, script_ in (jobs if rnd % 2 == 0 else jobs[::-1]):
+                got[(who, script_)] = run(paths if who == "all" else paths[:1], script_)
             one, all_ = got[("one", long_script)], got[("all", long_script)]
             walls.append(all_[0] / one[0])
             for job, (_, used) in got.items():
                 cpu_of[job].append(used)
-            per_one = (one[1] - got[("one", short_script)][1]) / (UNIT_LINES - 1)
-            per_all = (all_[1] - got[("all", short_script)][1]) / (UNIT_LINES - 1) / UNITS
             if args.verbose:
                 say(f"  round {rnd + 1}: one {one[0]:.3f} s, {UNITS} units {all_[0]:.3f} s "
-                    f"({walls[-1]:.2f}x); CPU per line per unit {per_one * 1e6:.1f} us vs "
-                    f"{per_all * 1e6:.1f} us (CPU of the runs: one {one[1]:.3f}/"
-                    f"{got[('one', short_script)][1]:.3f} s, {UNITS} units {all_[1]:.3f}/"
-                    f"{got[('all', short_script)][1]:.3f} s)")
+                    f"({walls[-1]:.2f}x); CPU of the runs: one alone "
+                    f"{got[('one', alone_script)][1]:.3f}/{got[('one', short_script)][1]:.3f} s, "
+                    f"{UNITS} units {all_[1]:.3f}/{got[('all', short_script)][1]:.3f} s")
     finally:
         for s in sims:
             s.close()
-    # A process's start-up CPU swings by tens of milliseconds from run to run, as much as one
-    # unit's 500 lines take: a round's own difference is mostly that noise. The figure is the
-    # difference of the medians of the long and the short runs over the rounds.
     med = {job: statistics.median(v) for job, v in cpu_of.items()}
-    one_cpu = (med[("one", long_script)] - med[("one", short_script)]) / (UNIT_LINES - 1)
-    all_cpu = (med[("all", long_script)] - med[("all", short_script)]) / (UNIT_LINES - 1) / UNITS
+    lines = UNITS * UNIT_LINES - 1  # (lines beyond the short run's one, either way)
+    one_cpu = (med[("one", alone_script)] - med[("one", short_script)]) / lines
+    all_cpu = (med[("all", long_script)] - med[("all", short_script)]) / (UNITS * (UNIT_LINES - 1))
     wall, cpu = statistics.median(walls), all_cpu / one_cpu
     say(f"  {UNITS} units over one unit, wall: {wall:.2f}x (rounds {min(walls):.2f}.."
         f"{max(walls):.2f}); CPU per line per unit: one unit {one_cpu * 1e6:.1f} us, "
