@@ -123,11 +123,11 @@ class SimProcess:
     """``tmclsh sim --pty`` of this checkout in a subprocess (its own interpreter, so it does
     not share the benchmark's GIL); ``path`` is the pty to open."""
 
-    def __init__(self, module: str = "TMCM-1311", address: int = 1):
+    def __init__(self, module: str = "TMCM-1311", address: int = 1, baud: int | None = None):
         env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "tmclsh", "sim", "--pty", "-m", module,
-             "--address", str(address)],
+             "--address", str(address), *(["--baud", str(baud)] if baud else [])],
             stdout=subprocess.PIPE, text=True, env=env, cwd=str(ROOT))
         assert self.proc.stdout is not None
         self.path = self.proc.stdout.readline().strip()
@@ -1069,6 +1069,105 @@ def bench_scan(args: argparse.Namespace) -> dict:
                "s", 5.0)
 
 
+# -- many modules at once ------------------------------------------------------------------------
+
+UNITS = 8
+UNIT_LINES = 500
+
+
+@benchmark("units", f"{UNITS} units on {UNITS} ptys vs one unit, a {UNIT_LINES}-line script, "
+                    f"the simulator paced at {BAUD} baud")
+def bench_units(args: argparse.Namespace) -> dict:
+    """Wall time of ``tmclsh --port P1 ... --port P8 -f SCRIPT`` (eight units, each its own
+    pty-served simulator in its own process, every line paced at 115200 baud: 1.6 ms of wire
+    per exchange) over that of ``tmclsh --port P1 -f SCRIPT`` (one unit), whole processes,
+    output to a file; and the CPU time per line per unit of the eight beside that of one
+    unit running as many lines (8 x 500) alone, start-up subtracted with a 1-line run of
+    the same (children's rusage: (long - short) / lines, over eight for the eight). Both CPU
+    figures are differences of the same size: a process's start-up CPU swings by tens of
+    milliseconds from run to run, as much as one unit's 500 lines take, so a 500-line run
+    alone would measure mostly that noise. Each round runs the five in an order that turns
+    round every round; the wall figure is the median of the rounds' ratios, the CPU figures
+    the differences of the medians of each run's CPU over the rounds. The simulators' own
+    CPU is not in either figure (they are the modules)."""
+    import resource
+
+    rounds = args.rounds
+    tmp = Path(args.state_dir)
+
+    def script(name: str, lines: int) -> Path:
+        path = tmp / f"units-{name}.tmcl"
+        path.write_text("".join(SCRIPT_LINES[i % len(SCRIPT_LINES)][0] + "\n"
+                                for i in range(lines)))
+        return path
+
+    long_script, short_script = script("long", UNIT_LINES), script("short", 1)
+    alone_script = script("alone", UNITS * UNIT_LINES)  # one unit, the eight's lines
+    out_file = tmp / "units.out"
+
+    def children_cpu() -> float:
+        kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return kids.ru_utime + kids.ru_stime
+
+    def run(paths: list[str], script: Path) -> tuple[float, float]:
+        argv = tmclsh_cmd(*(a for p in paths for a in ("--port", p)), "-m", args.module,
+                          "-f", str(script))
+        with open(out_file, "w") as out:
+            c0, t0 = children_cpu(), time.perf_counter()
+            proc = subprocess.run(argv, stdout=out, stderr=subprocess.PIPE, text=True,
+                                  env=tree_env(args), cwd=args.state_dir, timeout=300)
+            took, used = time.perf_counter() - t0, children_cpu() - c0
+        if proc.returncode != 0:
+            raise RuntimeError(f"units run failed: {proc.stderr[-500:]}")
+        return took, used
+
+    sims = [SimProcess(args.module, baud=BAUD) for _ in range(UNITS)]
+    try:
+        paths = [s.path for s in sims]
+        say(f"units: {rounds} rounds of {UNITS} units and 1 unit, {UNIT_LINES}-line, "
+            f"{UNITS * UNIT_LINES}-line (1 unit) and 1-line scripts, simulators paced at "
+            f"{BAUD} baud; {load_note()}")
+        run(paths, short_script)  # warm the caches
+        run(paths[:1], short_script)
+        jobs = [("one", long_script), ("all", long_script), ("one", alone_script),
+                ("one", short_script), ("all", short_script)]
+        walls: list[float] = []
+        cpu_of: dict[tuple[str, Path], list[float]] = {job: [] for job in jobs}
+        for rnd in range(rounds):
+            got = {}
+            for who, script_ in (jobs if rnd % 2 == 0 else jobs[::-1]):
+                got[(who, script_)] = run(paths if who == "all" else paths[:1], script_)
+            one, all_ = got[("one", long_script)], got[("all", long_script)]
+            walls.append(all_[0] / one[0])
+            for job, (_, used) in got.items():
+                cpu_of[job].append(used)
+            if args.verbose:
+                say(f"  round {rnd + 1}: one {one[0]:.3f} s, {UNITS} units {all_[0]:.3f} s "
+                    f"({walls[-1]:.2f}x); CPU of the runs: one alone "
+                    f"{got[('one', alone_script)][1]:.3f}/{got[('one', short_script)][1]:.3f} s, "
+                    f"{UNITS} units {all_[1]:.3f}/{got[('all', short_script)][1]:.3f} s")
+    finally:
+        for s in sims:
+            s.close()
+    med = {job: statistics.median(v) for job, v in cpu_of.items()}
+    lines = UNITS * UNIT_LINES - 1  # (lines beyond the short run's one, either way)
+    one_cpu = (med[("one", alone_script)] - med[("one", short_script)]) / lines
+    all_cpu = (med[("all", long_script)] - med[("all", short_script)]) / (UNITS * (UNIT_LINES - 1))
+    wall, cpu = statistics.median(walls), all_cpu / one_cpu
+    say(f"  {UNITS} units over one unit, wall: {wall:.2f}x (rounds {min(walls):.2f}.."
+        f"{max(walls):.2f}); CPU per line per unit: one unit {one_cpu * 1e6:.1f} us, "
+        f"{UNITS} units {all_cpu * 1e6:.1f} us: {cpu:.2f}x")
+    result = {"benchmark": "units", "units": UNITS, "lines": UNIT_LINES, "rounds": rounds,
+              "wall_ratio": round(wall, 3), "cpu_ratio": round(cpu, 3),
+              "cpu_us_one": round(one_cpu * 1e6, 1), "cpu_us_each_of_all": round(all_cpu * 1e6, 1),
+              "load": round(os.getloadavg()[0], 2)}
+    row(result, f"{UNITS} units on {UNITS} ptys, {UNIT_LINES} lines at {BAUD} baud, wall",
+        wall, "x one unit", 1.25)
+    result["rows"] = [row({}, f"{UNITS} units, CPU per line per unit", cpu,
+                          "x one unit's", 1.0)]
+    return result
+
+
 # -- configuration backup -----------------------------------------------------------------------
 
 @benchmark("save", ".save of a whole module (one GAP/GGP per parameter) vs the same reads raw")
@@ -1321,7 +1420,7 @@ def bench_bridge(args: argparse.Namespace) -> dict:
 # -- entry point ------------------------------------------------------------------------------
 
 def print_table(results: list[dict], tree: Path) -> None:
-    rows = [r for r in results if "row" in r]
+    rows = [x for r in results if "row" in r for x in (r, *r.get("rows", ()))]
     if not rows:
         return
     width = max(len(r["row"]) for r in rows)

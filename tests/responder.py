@@ -305,3 +305,54 @@ class CanModule(Module):
         self._stop.set()
         self._thread.join(1)
         self.bus.shutdown()
+
+
+class AsciiModeModule(Responder):
+    """A module that starts in its ASCII mode (GP 67 bit 0 set; §4.4): it ignores binary
+    frames there; a line ``<address char><command>`` CR is answered ``<host char><module
+    char> <status> <value>`` CR, without echo (GP 67 = 0x21). ``BIN`` returns it to binary
+    mode (answered like any line), binary 139 puts it back into ASCII mode (no reply).
+    ``modes`` records each mode it entered, so a test sees whether it was left as found."""
+
+    def __init__(self, version: str = "1311V111", address: int = 1, **kw):
+        self.version, self.addresses = version, frozenset({address})
+        self.char = chr(0x40 + address)
+        self.modes: list[str] = ["ascii"]
+        super().__init__(ascii=True, **kw)
+
+    def answer(self, raw: bytes) -> bytes | None:
+        if raw[0] in self.addresses and raw[1] == 139:
+            self.ascii = True
+            self.modes.append("ascii")
+            return None
+        return super().answer(raw)
+
+    def line(self, text: str) -> str | None:
+        if not text.startswith(self.char):
+            return None  # another address's line, or the bytes of binary frames
+        word = text[1:].strip().upper().replace(" ", "")
+        host = chr(0x40 + self.host)
+        if word == "BIN":
+            self.ascii = False
+            self.modes.append("binary")
+            return f"{host}{self.char} {OK} 0"
+        if word == "GGP67,0":
+            return f"{host}{self.char} {OK} 33"
+        return f"{host}{self.char} {INVALID_COMMAND} 0"
+
+
+class TwoAtOneAddress(Responder):
+    """Two modules given the same address on one line (both arrived at address 1): every
+    frame to that address is answered by each, one reply after the other, each with its own
+    version (a TMCM-1311 and a TMCM-1161)."""
+
+    versions = ("1311V111", "1161V130")
+
+    def answer(self, raw: bytes) -> bytes | None:
+        replies = []
+        for version in self.versions:
+            self.version = version
+            one = super().answer(raw)
+            if one is not None:
+                replies.append(one)
+        return b"".join(replies) or None

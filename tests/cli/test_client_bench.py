@@ -77,3 +77,12 @@ def test_benchmarks_are_listed_and_unknown_names_refused():
     p = subprocess.run([sys.executable, bench, "nosuch"], capture_output=True, text=True,
                        env=tmclsh_env(), timeout=30)
     assert p.returncode == 2 and "unknown benchmark" in p.stderr
+
+
+def test_units_benchmark_has_both_rows():
+    (result,), stderr = run_bench("units", "--rounds", "1")
+    assert result["benchmark"] == "units" and result["units"] == 8 and result["lines"] == 500
+    assert result["value"] == result["wall_ratio"] > 0 and result["target"] == 1.25
+    (cpu,) = result["rows"]
+    assert cpu["value"] == result["cpu_ratio"] and cpu["target"] == 1.0
+    assert "8 units over one unit, wall" in stderr

@@ -123,7 +123,7 @@ def test_every_command_line_in_the_readme_parses(line):
 
 # -- shell commands and TMCL lines ----------------------------------------------------------
 
-DOT = re.compile(r"(?<![\w/.~-])(\.[a-z][\w-]*)(?![\w/.-])")
+DOT = re.compile(r"(?<![\w/.~}-])(\.[a-z][\w-]*)(?![\w/.-])")
 
 
 def dot_commands() -> set[str]:

@@ -224,3 +224,105 @@ def test_open_client_uses_the_settings(pty_sim):
         assert client.describe() == f"{path} @ 115200"
     finally:
         client.close()
+
+
+# -- what a scan must not miss or miscount (issue 23) ---------------------------------------
+
+@pytest.fixture
+def responders():
+    from responder import Responder
+
+    made: list[Responder] = []
+
+    def make(cls, **kw):
+        made.append(cls(**kw))
+        return made[-1]
+
+    yield make
+    for m in made:
+        m.close()
+
+
+def test_scan_finds_a_module_in_ascii_mode_and_leaves_it_so(run_tmclsh, responders):
+    """A module that starts in ASCII mode ignores the binary probes: nothing answered in
+    binary, so the addresses are asked on the ASCII command line (the bring-up's probe)."""
+    from responder import AsciiModeModule
+
+    m = responders(AsciiModeModule, address=2)
+    p = run_tmclsh("scan", "--port", m.path, "--to", "4", "--json")
+    assert p.returncode == 0, p.stderr
+    assert [json.loads(line) for line in p.stdout.splitlines()] == [
+        {"address": 2, "module": "TMCM-1311", "version": "1311V111", "mode": "ascii"}]
+    assert m.ascii and m.modes[-1] == "ascii"  # stepped out for 136, and back
+
+
+def test_ascii_scan_on_a_mixed_line(make_pty_sim, run_tmclsh):
+    """`tmclsh --ascii scan` also asks the addresses silent in binary when others answered."""
+    bus = SimBus([Simulator("TMCM-1311", 1, ascii_startup=True), Simulator("TMCM-351", 3)])
+    _, path = make_pty_sim(target=bus)
+    plain = run_tmclsh("scan", "--port", path, "--to", "4")
+    assert plain.returncode == 0 and plain.stdout.split()[:2] == ["address", "3"], plain.stderr
+    p = run_tmclsh("scan", "--ascii", "--port", path, "--to", "4")
+    assert p.returncode == 0, p.stderr
+    assert [line.split() for line in p.stdout.splitlines()] == [
+        ["address", "3", "TMCM-351", "firmware", "0351V103"],
+        ["address", "1", "TMCM-1311", "firmware", "1311V111", "ASCII", "mode"]]
+    assert bus.simulators[0].ascii_active
+
+
+def test_two_modules_at_one_address_are_said(run_tmclsh, responders):
+    from responder import TwoAtOneAddress
+
+    m = responders(TwoAtOneAddress)
+    p = run_tmclsh("scan", "--port", m.path, "--to", "3", "--json")
+    assert p.returncode == 0, p.stderr
+    rows = [json.loads(line) for line in p.stdout.splitlines()]
+    assert [(r["address"], r.get("answers")) for r in rows] == [(1, 2)]
+    assert "two modules answer at address 1" in p.stderr
+
+
+def test_the_simulated_bus_with_a_shared_address(run_tmclsh):
+    """`tmclsh sim --pty --address 1,2,2` as the second witness: 2 is shared, 1 is not."""
+    import subprocess
+    import sys
+
+    from conftest import ROOT, tmclsh_env
+
+    sim = subprocess.Popen([sys.executable, "-m", "tmclsh", "sim", "--pty", "--address",
+                            "1,2,2"], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                           stdin=subprocess.DEVNULL, text=True, env=tmclsh_env(), cwd=str(ROOT))
+    try:
+        path = sim.stdout.readline().strip()
+        p = run_tmclsh("scan", "--port", path, "--to", "3")
+    finally:
+        sim.terminate()
+        sim.wait(5)
+    assert p.returncode == 0, p.stderr
+    assert [line.split()[1] for line in p.stdout.splitlines()] == ["1", "2"]
+    assert "TWO MODULES" in p.stdout.splitlines()[1]
+    assert "TWO MODULES" not in p.stdout.splitlines()[0]
+
+
+def test_baud_auto_where_the_rate_has_no_effect_reports_each_module_once(make_pty_sim,
+                                                                         run_tmclsh):
+    """The simulator on a pty answers at any rate the port is set to: found at 9600 and
+    answering at 14400 too, it is reported once and the other rates are not scanned."""
+    _, path = make_pty_sim(target=SimBus([Simulator("TMCM-1311", 1),
+                                          Simulator("TMCM-351", 3)]))
+    p = run_tmclsh("scan", "--port", path, "--baud", "auto", "--to", "4", "--json")
+    assert p.returncode == 0, p.stderr
+    rows = [json.loads(line) for line in p.stdout.splitlines()]
+    assert [(r["address"], r["baud"]) for r in rows] == [(1, 9600), (3, 9600)]
+    assert "answer at 14400 too: the baud rate has no effect" in p.stderr
+    assert sum(line.startswith("scanning") for line in p.stderr.splitlines()) == 1
+
+
+def test_baud_auto_over_tcp_scans_once(run_tmclsh, responders):
+    from responder import TcpModule
+
+    m = responders(TcpModule, version="1311V111", address=2)
+    p = run_tmclsh("scan", "--port", m.url, "--baud", "auto", "--to", "3")
+    assert p.returncode == 0, p.stderr
+    assert [line.split()[:3] for line in p.stdout.splitlines()] == [["address", "2",
+                                                                     "TMCM-1311"]]
+    assert "bytes over TCP carry no baud rate): one pass" in p.stderr

@@ -180,3 +180,45 @@ def test_run_rejects_bad_arguments():
     assert run("TMCM-1311", 1, pty=True, tcp="x:1") == 2
     assert run("TMCM-1311", 1, tcp="nonsense") == 2
     assert run("TMCM-1311", 300, pty=True) == 2
+
+
+def _frame(address: int, opcode: int, type_: int = 0, value: int = 0) -> bytes:
+    """A request built here from the manual's table, not by tmclsh."""
+    body = bytes([address, opcode, type_, 0]) + (value & 0xFFFFFFFF).to_bytes(4, "big")
+    return body + bytes([sum(body) & 0xFF])
+
+
+def test_sim_serves_a_bus_paced_at_its_baud_rate(run_tmclsh):
+    """`tmclsh sim --pty --address 1,2,2 --baud 19200`: each address answers its own frames,
+    the address given twice answers twice, and the line carries 10 bits a byte: a request
+    and its reply (18 bytes) take at least 9.4 ms at 19200 baud."""
+    proc = subprocess.Popen([sys.executable, "-m", "tmclsh", "sim", "--pty", "--address", "1,2,2",
+                             "--baud", "19200"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            stdin=subprocess.DEVNULL, cwd=ROOT, text=True)
+    try:
+        path = proc.stdout.readline().strip()
+        with serial.Serial(path, timeout=0.3) as port:
+            replies = {}
+            for address in (1, 2, 3):
+                port.write(_frame(address, 136, 1))
+                replies[address] = port.read(27)
+            assert [len(replies[a]) for a in (1, 2, 3)] == [9, 18, 0]
+            assert replies[2][:9] == replies[2][9:] and replies[2][1] == 2
+            start = time.perf_counter()
+            for _ in range(40):
+                port.write(_frame(1, 6, 4))
+                assert len(port.read(9)) == 9
+            took = time.perf_counter() - start
+        assert took >= 40 * 18 * 10 / 19200
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(5) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+
+
+def test_sim_refuses_a_bus_on_can():
+    from tmclsh.sim.serve import run
+
+    assert run("TMCM-1311", [1, 2], can="virtual:x") == 2
+    assert run("TMCM-1311", 1, can="virtual:x", baud=9600) == 2

@@ -150,3 +150,32 @@ def parse(key: str, text: str, where: str = "") -> int | float:
         prefix = f"{where}: " if where else ""
         raise SettingError(f"{prefix}must be {lim.describe()}, got {shown!r}")
     return check(key, value, where, repr(shown))
+
+
+MAX_LIST = 256  # settings one list may name (``1-255`` is the widest useful one)
+
+
+def parse_list(key: str, text: str, where: str = "") -> tuple[int, ...]:
+    """Several values of the whole-number setting ``key`` typed at once: ``1,2,5``, a range
+    ``1-8``, or both (``1-3,7``), in the order given; each checked as ``parse`` checks one.
+    Duplicates are kept (the simulator serves two modules at one address so); whoever cannot
+    use them says so."""
+    prefix = f"{where}: " if where else ""
+    values: list[int] = []
+    for part in str(text).split(","):
+        part = part.strip()
+        if not part:
+            raise SettingError(f"{prefix}an empty item in {str(text).strip()!r} (write 1,2,5 "
+                               "or 1-8)")
+        low, dash, high = part.partition("-")
+        if dash and low.strip():  # (a leading '-' is a sign: parse refuses it with the range)
+            first, last = int(parse(key, low, where)), int(parse(key, high, where))
+            if first > last:
+                raise SettingError(f"{prefix}the range {part!r} runs backwards; write "
+                                   f"{last}-{first}")
+            values.extend(range(first, last + 1))
+        else:
+            values.append(int(parse(key, part, where)))
+        if len(values) > MAX_LIST:
+            raise SettingError(f"{prefix}more than {MAX_LIST} values in {str(text).strip()!r}")
+    return tuple(values)

@@ -388,7 +388,10 @@ _SUB_NOTES = {
                "answers.",
     "sim": "The first line on standard output is the pseudo-terminal's path or the endpoint; "
            "connect to it with --port PATH, --port socket://HOST:PORT or --can IFACE:CHANNEL. "
-           "Runs until interrupted. --pty needs Linux or macOS; --tcp and --can work on "
+           "Runs until interrupted. --address 1,2,3 serves a module at each address on one "
+           "line, as on an RS485 bus (an address given twice answers twice); --baud N paces "
+           "the line at that rate, 10 bits a byte both ways. "
+           "--pty needs Linux or macOS; --tcp and --can work on "
            "Windows too. Exit status 2 for a malformed argument, 3 when the server cannot "
            "start (address in use, no such CAN interface).",
     "ports": "The USB ids are shown; ports whose vendor is Trinamic (0x2A3C) are marked TRINAMIC.",
@@ -396,10 +399,15 @@ _SUB_NOTES = {
             "then a summary on standard error; a progress bar while it runs on a terminal. The "
             "wait per address comes from the link (the wire time of request and reply at the "
             "baud rate, plus a margin); addresses that answered late or garbled are asked again, "
-            "slower. --baud auto scans at each baud rate global parameter 65 can select. A "
-            "module in its bootloader (a firmware update did not complete) is marked, with the "
-            "tmclsh firmware command that completes the update. Exit status 3 when nothing "
-            "answers.",
+            "slower. When nothing answers in binary, the addresses are asked in ASCII mode "
+            "(--ascii: those silent in binary even when others answered); a module found so is "
+            "marked ASCII mode and left in it. An address where every reply comes twice is "
+            "said to have two modules on it (JSON: \"answers\": 2). --baud auto scans at "
+            "each baud rate global parameter 65 can select, and once only where the rate has "
+            "no effect (TCP, a module's own USB port, or modules found at one rate answering "
+            "at the next). A module in its bootloader (a firmware update did not "
+            "complete) is marked, with the tmclsh firmware command that completes it. Exit "
+            "status 3 when nothing answers.",
     "firmware": "Writes the firmware image FILE.hex (Intel HEX, as the vendor ships it) to the "
                 "module over its TMCL bootloader. The image is refused before anything is "
                 "sent when it cannot be read, and before anything is written when its version "
@@ -834,7 +842,9 @@ def _exit_status() -> list[str]:
                        "opened; nothing answers at connect (command 136) or scan finds no "
                        "module; -m names another type than the module reports; or tmclsh "
                        "sim cannot start its server."),
-        (130, "Interrupted with Ctrl-C (the program and the motors were stopped first)."),
+        (130, "Interrupted with Ctrl-C (the program and the motors were stopped first). "
+              "With several units (SEVERAL MODULES): 0 when every unit passed, 1 when any "
+              "failed, 3 when a unit had no module."),
         (129, "Hung up (SIGHUP: the terminal or SSH session went away)."),
         (143, "Terminated (SIGTERM). On both signals tmclsh still ends download mode and "
               "leaves ASCII mode if it had entered it, before exiting."),
@@ -960,6 +970,53 @@ Replaying the file with {_b("tmclsh -f")} {_i("FILE")} {_b("--yes")} writes ever
 writes only what differs. With {_b("--program")} the stored program is read back and written
 as source to {_i("FILE")}{_b(".program.tmcl")} (the suffix of {_i("FILE")} replaced), which
 {_b(".upload")} puts back; {_b(".restore")} does not upload it.
+"""
+
+
+_UNITS = f"""\
+.SH SEVERAL MODULES
+A test jig or a production line runs the same {_b("-c")} lines or {_b("-f")} script on every
+module it holds. Each (link, address) pair is a unit: {_b("--port")} given again (modules on
+their own ports), {_b("--all")} (every Trinamic USB module attached), {_b("--address")}
+{_i("LIST")} (modules on one RS485 line), {_b("--can-id")} {_i("LIST")} (modules on one CAN
+bus; {_b("--reply-id")} one for all or one each); a {_i("LIST")} is {_b("1,2,5")}, a range
+{_b("1-8")} or both. Several ports with several addresses make every pair a unit. The prompt
+takes one module; {_b("-f -")} is read once, so several units need a script file.
+.PP
+Units on different links run at the same time; units on one line or bus take turns (it
+carries one exchange at a time), in the order given. Each unit has its own session: its own
+variables, among them {_b("unit")} (1, 2, ...), {_b("port")} (the port, CAN bus or simulated
+module, text: {_b("${port}")} puts it into a line) and {_b("address")} (the CAN id on CAN),
+which a run of one module has too; its own checks and counts; its lines checked against its
+own module type before anything is sent to it (a line its type refuses fails that unit
+before its run). A unit that has no module, loses its link or fails a line fails alone;
+{_b("--keep-going")} works for each as for one module.
+.PP
+On a terminal a live table shows every unit: link and address, module and firmware, the
+line reached of how many, checks passed and failed, errors, the result, the time and the last
+error; what a unit says on standard error is printed above it, with the unit in front; its
+results are not (see {_b("--log-dir")}). In a pipe or a file every line starts with its unit,
+{_b("[2 /dev/ttyACM1]")} or {_b("[3 /dev/ttyUSB0 @3]")}. With {_b("--json")} every object
+starts with {_b('"unit"')} and {_b('"port"')} and {_b('"address"')} (on CAN
+{_b('"can"')} and {_b('"can_id"')}, for a simulated module {_b('"sim"')}), and
+each unit ends with a summary object: {_b('"summary": true')}, {_b('"result"')}
+(passed, failed, refused, no module, stopped, not run), {_b('"exit"')} (the exit status
+of the unit alone), {_b('"module"')}, {_b('"firmware"')}, {_b('"line"')},
+{_b('"of"')}, {_b('"commands"')}, {_b('"checks_passed"')},
+{_b('"checks_failed"')}, {_b('"errors"')}, {_b('"error"')} (the last one) and
+{_b('"seconds"')}. One summary table ends the run (on standard error under
+{_b("--json")}). {_b("--log-dir")} {_i("DIR")} writes one transcript per unit,
+{_b("unit-01-dev-ttyACM0.log")}: every frame sent and answered as {_b("--trace")} shows it and
+every line the unit showed, each with the time.
+.PP
+Exit status: 0 when every unit passed, 1 when any failed, 3 when a unit had no module (the
+last line on standard error names them), 2 when every unit refused the lines before anything
+was sent. Ctrl\\-C, SIGTERM and SIGHUP stop every unit that runs, each stopping its module's
+program and motors as one run does and saying so; units not started yet are not started.
+.PP
+Fresh modules all answer at address 1: on a shared line give them their addresses one at a
+time (plug one in, {_b("SGP 66, 0,")} {_i("N")}, plug in the next); {_b("tmclsh scan")} then
+says if two still answer at one address.
 """
 
 
@@ -1139,6 +1196,7 @@ def manpage(parser: argparse.ArgumentParser | None = None) -> str:
     out += _instructions_section()
     out += _configuration()
     out.append(_BACKUPS.rstrip("\n"))
+    out.append(_UNITS.rstrip("\n"))
     out += _limits()
     out.append(_PYTHON.rstrip("\n"))
     out.append(_FILES.rstrip("\n"))

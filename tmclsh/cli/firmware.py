@@ -30,6 +30,8 @@ def resume_command(args: argparse.Namespace) -> str:
                      ("--reply-id", "reply_id"), ("-a", "address"),
                      ("--host-address", "host_address"), ("--timeout", "timeout")):
         value = getattr(args, key, None)
+        if isinstance(value, (list, tuple)):  # (--port, -a, --can-id, --reply-id take several)
+            value = ",".join(map(str, value)) if value else None
         if value == "" and key == "sim":  # a bare --sim (the -m module, else a TMCM-1311)
             words.append(opt)
         elif value is not None:

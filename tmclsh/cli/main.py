@@ -52,7 +52,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
     return run(args.module, args.address, pty=args.pty, tcp=args.tcp, can=args.can,
                host_address=args.host_address, bitrate=args.bitrate, faults=args.faults,
-               seed=args.faults_seed, bootloader=args.bootloader)
+               seed=args.faults_seed, bootloader=args.bootloader,
+               baud=args.baud)
 
 
 def cmd_monitor(args: argparse.Namespace) -> int:
@@ -106,7 +107,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
     from ..client.connect import connection_settings, open_transport
     from ..tmcl.modules import baud_rates
     from ..base.errors import ConnectError, TransportError, ValidationError
-    from ..ops.scan import address_timeout, line_baud, scan
+    from ..ops.scan import ASCII_WIRE_BYTES, address_timeout, answer_at, rate_matters, scan
 
     if args.first > args.last:
         raise ValidationError(f"--from {args.first} is above --to {args.last}")
@@ -122,23 +123,32 @@ def cmd_scan(args: argparse.Namespace) -> int:
                     timeout=1.0, retries=0, can_id=settings.get("can_id"),
                     reply_id=settings.get("reply_id"))
     ids = "CAN ids" if client.is_can else "addresses"
+    usb = bool(settings.get("port") and _is_usb(settings["port"]))
     rates: list[int | None] = [None]
     if auto:
-        if line_baud(transport) is None:
-            raise ValidationError("--baud auto needs a serial port (a CAN bus, a simulator or "
-                                  "a socket:// URL has no baud rate)")
-        rates = list(baud_rates())
+        no_rate = rate_matters(transport, usb=usb)
+        if client.is_can:
+            raise ValidationError("--baud auto is for a serial line; a CAN bus has a bit "
+                                  "rate (--bitrate)")
+        if no_rate is None:
+            rates = list(baud_rates())
+        else:  # every rate would find the same modules again
+            auto = False
+            print(f"--baud auto: the baud rate has no effect on {client.describe()} "
+                  f"({no_rate}): one pass", file=sys.stderr)
+    ascii = True if getattr(args, "ascii", None) else None  # (tmclsh --ascii scan: always)
     addresses = range(args.first, args.last + 1)
     found = []
     tried = []
     show_progress = not args.json and sys.stderr.isatty()
     try:
-        for rate in rates:
+        for i, rate in enumerate(rates):
             if rate is not None:
                 transport.set_baudrate(rate)
                 client.forget_stale()  # nothing sent at another rate can still arrive
-            timeout = args.timeout or address_timeout(transport, usb=bool(
-                settings.get("port") and _is_usb(settings["port"])))
+            timeout = args.timeout or address_timeout(transport, usb=usb)
+            ascii_timeout = args.timeout or address_timeout(transport, usb=usb,
+                                                            nbytes=ASCII_WIRE_BYTES)
             where = client.describe()
             tried.append(f"{ids} {args.first}..{args.last} on {where} "
                          f"({timeout * 1000:.0f} ms each)")
@@ -152,47 +162,65 @@ def cmd_scan(args: argparse.Namespace) -> int:
                           flush=True)
                 else:
                     at = f"  {hit.baud} baud" if auto else ""
+                    mode = "  ASCII mode" if hit.ascii else ""
+                    twice = ("  TWO MODULES answer at this address (every reply came twice)"
+                             if hit.answers > 1 else "")
                     if hit.bootloader:
                         at += (f"  IN ITS BOOTLOADER (a firmware update did not complete: "
                                f"'tmclsh firmware FILE.hex{_connection_words(args)}' "
                                "completes it)")
                     what = "bootloader" if hit.bootloader else "firmware"
                     print(f"address {hit.address:3d}  {hit.module or 'unknown module':<10}  "
-                          f"{what} {hit.version or '?'}{at}", flush=True)
+                          f"{what} {hit.version or '?'}{at}{mode}{twice}", flush=True)
 
+            options = {"ascii": ascii, "ascii_timeout": ascii_timeout}
             if show_progress:
                 hits = _scan_with_progress(client, addresses, timeout,
-                                           f"{ids} {args.first}..{args.last} on {where}", row)
+                                           f"{ids} {args.first}..{args.last} on {where}", row,
+                                           **options)
             else:
-                shown: set[int] = set()
+                shown: set[tuple[int, int]] = set()
 
                 def as_found(addr: int, hit) -> None:
                     if hit is not None:
-                        shown.add(addr)
+                        shown.add((addr, hit.answers))
                         row(hit)
 
-                hits = scan(client, addresses, timeout=timeout, progress=as_found)
+                hits = scan(client, addresses, timeout=timeout, progress=as_found, **options)
                 for hit in hits:
-                    if hit.address not in shown:  # found on the second, slower pass
+                    if (hit.address, hit.answers) not in shown:  # found on a later pass
                         row(hit)
             found += hits
+            if hits and auto and i + 1 < len(rates) and answer_at(
+                    client, [h.address for h in hits], rates[i + 1], timeout):  # type: ignore[arg-type]
+                print(f"--baud auto: the modules found at {rate} baud answer at {rates[i + 1]} "
+                      f"too: the baud rate has no effect on {transport.url}; stopped",
+                      file=sys.stderr)
+                break
     finally:
         client.close()
     if not found:
         _say_error(args, f"nothing answered; tried {'; '.join(tried)}"
+                   + ("" if client.is_can else ", in binary and in ASCII mode")
                    + ("" if auto or client.is_can else "; other baud rates: --baud auto"),
                    EXIT_CONNECT, prefix="")
         return EXIT_CONNECT
     where = ", ".join(str(f.address) + (f" ({f.baud} baud)" if auto else "") for f in found)
     n = len(found)
     print(f"{n} module{'s' if n != 1 else ''} found at {where}", file=sys.stderr)
+    for hit in found:
+        if hit.answers > 1:
+            print(f"tmclsh: two modules answer at address {hit.address}: give each its own "
+                  "address (one at a time on the line: SGP 66, 0, N), or take one off the line",
+                  file=sys.stderr)
     return EXIT_OK
 
 
 def _connection_words(args: argparse.Namespace) -> str:
     """The link options of this run again, as ``tmclsh firmware`` takes them."""
-    if getattr(args, "port", None):
-        return f" --port {args.port}"
+    port = getattr(args, "port", None)
+    if port:
+        return f" --port {port[0] if isinstance(port, list) else port}"  # (one: scan takes one)
     if getattr(args, "can", None):
         from ..base.canspec import FROM_PYTHON_CAN
 
@@ -206,7 +234,8 @@ def _is_usb(port: str) -> bool:
     return any(p.device == port for p in trinamic_ports())
 
 
-def _scan_with_progress(client, addresses: range, timeout: float, what: str, row) -> list:
+def _scan_with_progress(client, addresses: range, timeout: float, what: str, row,
+                        **options) -> list:
     """``scan`` under a rich progress bar (stderr is a terminal): addresses done and found so
     far; rows appear above the bar as modules are found (those of the second, slower pass at
     the end). The bar goes where the rows go when stdout is the terminal too."""
@@ -216,7 +245,7 @@ def _scan_with_progress(client, addresses: range, timeout: float, what: str, row
     from ..ops.scan import scan
 
     found: list[int] = []
-    shown: set[int] = set()
+    shown: set[tuple[int, int]] = set()
     same_terminal = sys.stdout.isatty()
     with Progress(TextColumn("scanning {task.description}"), BarColumn(),
                   MofNCompleteColumn(), TextColumn("{task.fields[found]}"),
@@ -227,14 +256,14 @@ def _scan_with_progress(client, addresses: range, timeout: float, what: str, row
         def progress(addr: int, hit) -> None:
             if hit is not None:
                 found.append(addr)
-                shown.add(addr)
+                shown.add((addr, hit.answers))
                 row(hit)
             bar.update(task, advance=1, found=("found " + ", ".join(map(str, found)))
                        if found else "")
 
-        hits = scan(client, addresses, timeout=timeout, progress=progress)
+        hits = scan(client, addresses, timeout=timeout, progress=progress, **options)
     for hit in hits:
-        if hit.address not in shown:
+        if (hit.address, hit.answers) not in shown:
             row(hit)
     return hits
 
@@ -361,6 +390,13 @@ def main(argv: list[str] | None = None) -> int:
                    "monitor": cmd_monitor, "bridge": cmd_bridge}.get(args.subcommand or "")
         if handler is not None:
             return handler(args)
+        from ..shell.units import plan_units
+
+        units = plan_units(args)  # several modules at once: a unit each (-c, -f)
+        if len(units) > 1:
+            from ..shell.units import run_units
+
+            return run_units(args, units)
         from ..shell.main import run_shell
 
         return run_shell(args)

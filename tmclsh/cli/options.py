@@ -56,23 +56,13 @@ def _seed(text: str) -> int:
 
 
 def id_list(key: str):
-    """An argparse type for a list of ids or addresses: ``1,2,5`` and ranges ``1-8``, each
-    checked against ``limits.LIMITS[key]``."""
-    def convert(text: str) -> list[int]:
-        out: list[int] = []
+    """An argparse type for several values of setting ``key`` at once: ``1,2,5``, ranges
+    ``1-8``, or both (``limits.parse_list``, each checked against ``limits.LIMITS[key]``)."""
+    def convert(text: str) -> tuple[int, ...]:
         try:
-            for part in text.split(","):
-                low, sep, high = part.strip().partition("-")
-                if sep and low.strip():
-                    a, b = limits.parse(key, low), limits.parse(key, high)
-                    if b < a:
-                        raise limits.SettingError(f"the range {part.strip()!r} runs backwards")
-                    out += range(int(a), int(b) + 1)
-                else:
-                    out.append(int(limits.parse(key, part)))
+            return limits.parse_list(key, text)
         except limits.SettingError as exc:
             raise argparse.ArgumentTypeError(str(exc)) from None
-        return out
     convert.__name__ = f"{key} list"
     return convert
 
@@ -165,9 +155,10 @@ def add_connection(p: argparse.ArgumentParser, *, auto_baud: bool = False,
     g = p.add_argument_group("connection (default: the one attached Trinamic USB module; "
                              "else --sim at the prompt, exit 3 elsewhere)")
     x = g.add_mutually_exclusive_group()
-    x.add_argument("--port", metavar="PORT",
+    x.add_argument("--port", metavar="PORT", action="append",
                    help="serial device (/dev/ttyACM0, COM3) or pyserial URL (socket://, "
-                        "rfc2217://, loop://, spy://, hwgrep://)")
+                        "rfc2217://, loop://, spy://, hwgrep://); give it again for more "
+                        "modules, each on its own port (-c and -f run on every one)")
     x.add_argument("--can", metavar="IFACE:CHANNEL", nargs="?", const=FROM_PYTHON_CAN,
                    help="python-can bus, e.g. socketcan:can0 (Linux; vcan0 for a virtual bus "
                         "other programs can join), pcan:PCAN_USBBUS1, kvaser:0, "
@@ -190,11 +181,16 @@ def add_connection(p: argparse.ArgumentParser, *, auto_baud: bool = False,
                    help="CAN bit rate in bit/s; the modules' factory setting is 1000000 "
                         "(GP 69 = 8); without it the adapter's own default or configuration "
                         f"applies, which is often lower ({_range('bitrate')})")
-    g.add_argument("--can-id", type=setting("can_id"), metavar="N",
-                   help=f"module's CAN id (GP 71, default 1; {_range('can_id')})")
-    g.add_argument("--reply-id", type=setting("reply_id"), metavar="N",
-                   help=f"module's CAN reply id (GP 70, default 2; {_range('reply_id')})")
+    g.add_argument("--can-id", type=id_list("can_id"), metavar="N[,N...]",
+                   help=f"module's CAN id (GP 71, default 1; {_range('can_id')}); several "
+                        "(1,2,5 or 1-8): a module at each on the bus")
+    g.add_argument("--reply-id", type=id_list("reply_id"), metavar="N[,N...]",
+                   help=f"module's CAN reply id (GP 70, default 2; {_range('reply_id')}); "
+                        "several: one for each --can-id, in the same order")
     g.add_argument("--profile", metavar="NAME", help="connection profile from the config file")
+    if not nested:  # (several modules at once: -c and -f, not a subcommand)
+        g.add_argument("--all", action="store_true", dest="all_modules",
+                       help="every Trinamic USB module attached, one unit each (-c, -f)")
     if nested:
         for action in p._actions[first:]:
             action.default = argparse.SUPPRESS
@@ -208,8 +204,9 @@ def add_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--module-file", metavar="PATH", action="append", dest="module_file",
                    help="a module data file of your own (same format as the built-in ones; "
                         "files in the config directory's modules/ are read too)")
-    g.add_argument("-a", "--address", type=_address, metavar="N",
-                   help=f"module address (default 1; {_range('address')})")
+    g.add_argument("-a", "--address", type=id_list("address"), metavar="N[,N...]",
+                   help=f"module address (default 1; {_range('address')}); several (1,2,5 or "
+                        "1-8): a module at each on the line, one unit each (-c, -f)")
     g.add_argument("--host-address", type=_address, metavar="N",
                    help=f"host address (default 2; {_range('host_address')})")
     g.add_argument("--ascii", action="store_true", default=None,
@@ -223,6 +220,9 @@ def add_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--retries", type=setting("retries"), metavar="N",
                    help=f"retries of idempotent commands (default 2; {_range('retries')})")
     g.add_argument("--keep-going", action="store_true", help="scripts: continue after an error")
+    g.add_argument("--log-dir", metavar="DIR",
+                   help="several units: one transcript per unit in DIR (every frame sent and "
+                        "answered and every line shown, with times)")
     g.add_argument("-y", "--yes", action="store_true",
                    help="do not ask before EEPROM writes, factory reset or program download")
     g.add_argument("--debug", action="store_true", help="show tracebacks instead of one-line errors")
@@ -269,7 +269,10 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("sim", help="serve a simulated module on a pty, TCP or CAN")
     s.add_argument("-m", "--module", metavar="NAME", default="TMCM-1311",
                    help="module to simulate (default TMCM-1311; 'tmclsh modules' lists them)")
-    s.add_argument("--address", type=_address, default=1, metavar="N", help="module address (default 1)")
+    s.add_argument("--address", type=id_list("address"), default=(1,), metavar="N[,N...]",
+                   help="module address (default 1); several (1,2,3 or 1-3): a module at each "
+                        "on one line, as on an RS485 bus (each answers its own address; an "
+                        "address given twice answers twice); --pty and --tcp only")
     s.add_argument("--host-address", type=_address, default=2, metavar="N",
                    help="address its replies are sent to (default 2)")
     how = s.add_mutually_exclusive_group(required=True)
@@ -283,6 +286,10 @@ def build_parser() -> argparse.ArgumentParser:
                           "cannot be reached from another process)")
     s.add_argument("--bitrate", type=setting("bitrate"), metavar="N",
                    help=f"CAN bit rate in bit/s ({_range('bitrate')})")
+    s.add_argument("--baud", type=_baud, metavar="N",
+                   help="pace the line at this baud rate, as a real serial line is: every "
+                        "byte, request or reply, takes 10 bits' time (default: no pacing; "
+                        f"--pty and --tcp only; {_range('baud')})")
     s.add_argument("--faults", type=_faults, metavar="KIND=P,...",
                    help="misbehave at random: for each reply, the probability P (0..1) of each "
                         "fault: drop (not sent), corrupt (a bit flipped), truncate (half sent), "
@@ -331,6 +338,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="per-address timeout (default: from the link, the wire time of a "
                          f"request and its reply at the baud rate plus a margin; "
                          f"{_range('scan_timeout')})")
+    sc.add_argument("--ascii", action="store_true", default=argparse.SUPPRESS,
+                    help="also look for modules in ASCII mode at every address that did not "
+                         "answer in binary (without it, only when none did: the ASCII pass "
+                         "takes as long as the first)")
     sc.add_argument("--json", action="store_true", default=argparse.SUPPRESS)
 
     fw = sub.add_parser("firmware", help="update the module's firmware over its TMCL "

@@ -442,15 +442,23 @@ def probe_mode(client: Client, timeout: float | None = None) -> Probe:
             return Probe(Mode.BINARY, host=reply.host)
         if data:
             client.trace("drop", data, "no binary answer to the mode probe")
-        # end the (unaddressed) line the binary bytes started and let any answer to it pass
-        t.write(CR)
-        late = _read_quiet(t, 0.05, timeout)
-        if late:
-            client.trace("drop", late, "after ending the probe line")
-            if _binary_answer(late, addr, Control.GET_VERSION) is not None:
-                client.resync_next()  # a slow binary module: resynchronise before its next use
-                return Probe(Mode.BINARY, host=host)
+        late = end_line(client, timeout)
+        if _binary_answer(late, addr, Control.GET_VERSION) is not None:
+            client.resync_next()  # a slow binary module: resynchronise before its next use
+            return Probe(Mode.BINARY, host=host)
         return probe_ascii(client, timeout)
+
+
+def end_line(client: Client, timeout: float) -> bytes:
+    """End the unaddressed line that binary bytes (a probe, a scan's probes) started on a
+    module in ASCII mode, with a lone CR, and let any answer to it pass: what came is
+    returned (and traced as dropped). Callers hold ``client.lock``."""
+    t = _transport(client)
+    t.write(CR)
+    late = _read_quiet(t, 0.05, timeout)
+    if late:
+        client.trace("drop", late, "after ending the probe line")
+    return late
 
 
 def probe_ascii(client: Client, timeout: float | None = None) -> Probe:
@@ -699,6 +707,14 @@ class AsciiLink:
 
     def _on_client_close(self) -> None:
         self.close()
+
+    def let_go(self) -> None:
+        """Stop using the link and leave the module in ASCII mode, where it was found (a
+        scan looked at it and goes on to the next address)."""
+        self.on_exit = Mode.ASCII
+        self.close()  # (active and to stay in ASCII mode: nothing is sent)
+        self.client.ascii_link = None
+        self._buf.clear()
 
     # -- the request path ---------------------------------------------------------------
     def transact(self, req: Request, timeout: float | None = None) -> Reply:

@@ -30,6 +30,8 @@ def connection_settings(args: argparse.Namespace) -> dict:
     cli = {k: getattr(args, k, None) for k in
            ("port", "baud", "can", "bitrate", "sim", "can_id", "reply_id", "module", "address",
             "host_address", "ascii", "timeout", "retries", "profile")}
+    for key in ("port", "address", "can_id", "reply_id"):
+        cli[key] = _one(key, cli[key])
     given = [f"--{k}" for k in ("port", "can", "sim") if cli[k] is not None]
     if len(given) > 1:  # one before a subcommand, one after it (argparse sees two parsers)
         raise UsageError(f"{given[0]} and {given[1]} both name the link; give one of them")
@@ -40,6 +42,18 @@ def connection_settings(args: argparse.Namespace) -> dict:
     if settings.get("can") and settings["can"] != FROM_PYTHON_CAN:
         parse_can(settings["can"])  # a malformed --can is a usage error, before opening anything
     return settings
+
+
+def _one(key: str, value):
+    """One value of an option that takes several (``--port`` repeated, ``--address 1,2``):
+    several name units, which only ``-c`` and ``-f`` run (``shell/units.py``)."""
+    if not isinstance(value, (list, tuple)):
+        return value
+    if len(value) > 1:
+        flag = "--" + key.replace("_", "-")
+        raise UsageError(f"{flag} {', '.join(map(str, value))}: one is needed here (several "
+                         "modules are units of a -c or -f run)")
+    return value[0] if value else None
 
 
 def _setting(settings: dict, key: str, default):
@@ -60,7 +74,7 @@ def attached_module_port() -> str | None:
     if len(found) > 1:
         raise ConnectError(f"{len(found)} Trinamic USB modules attached: "
                            f"{', '.join(_port_label(p) for p in found)}; "
-                           "pick one with --port")
+                           "pick one with --port (-c and -f: --all runs on every one)")
     return found[0].device if found else None
 
 

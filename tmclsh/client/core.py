@@ -48,6 +48,7 @@ from collections import deque
 from collections.abc import Callable, Container, Iterable, Mapping
 from typing import TYPE_CHECKING, TypeVar
 
+from ..base import clock
 from ..base.errors import (ChecksumError, DownloadModeError, TmclTimeoutError, TransportError,
                            ValidationError)
 from ..link.base import Transport
@@ -776,7 +777,7 @@ class Client:
             if deadline is not None and now >= deadline:
                 raise TmclTimeoutError(f"condition not met within {timeout:g} s")
             # a long interval never sleeps past the deadline
-            time.sleep(interval if deadline is None else min(interval, deadline - now))
+            clock.sleep(interval if deadline is None else min(interval, deadline - now))
 
     # -- the link -----------------------------------------------------------------------
     def reconnect(self, wait: float = 0.0, *, bring_up: bool = True) -> None:

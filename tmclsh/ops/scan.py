@@ -16,6 +16,22 @@ on a real line). On CAN the ids are scanned (GP 71) and every module answers on 
 id; a CAN reply names no sender the client can rely on, so there the wait stays long enough
 to outlast the modules' answer time.
 
+A module in its ASCII mode ignores binary frames: the addresses nothing answered are asked
+again on the ASCII command line, with the bring-up's own probe (``client.ascii.probe_ascii``),
+and a module found so is identified and left in ASCII mode. That pass costs as much as the
+first, so by default it is made only when nothing answered in binary (``ascii=True``: always).
+
+Two modules at one address both answer every request (on an RS485 line they may collide,
+on a simulated bus each reply comes twice): an address whose presence probe brought a second
+answer is asked once more, and if that is answered twice as well the address is reported as
+shared (``Found.answers``).
+
+Whether the baud rate matters on a link: a module's own USB port (CDC) and TCP carry bytes
+at any rate (``rate_matters``), so ``scan --baud auto`` there scans once; elsewhere it stops
+once modules found at one rate answer at the next (``answer_at``): a UART module answers at
+one rate only, so the rate has no effect on that link (a pty a simulator serves, a USB
+module of another vendor) and every further pass would find the same modules again.
+
 Nothing here prints: ``progress`` callbacks report, the CLI renders.
 """
 
@@ -24,10 +40,11 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from ..client.core import Client
-from ..base.errors import ChecksumError, DownloadModeError, TmclError, TmclTimeoutError
+from ..base.errors import (ChecksumError, DownloadModeError, TmclError, TmclTimeoutError,
+                           ValidationError)
 from ..tmcl.decoder import is_frame
 from ..tmcl.frames import SERIAL_FRAME_LEN, Control, Request, Status
 from ..link.base import Transport
@@ -38,6 +55,9 @@ MARGIN_LOCAL = 0.004  # a pty, the in-process simulator: only scheduling
 MARGIN_USB = 0.006  # the module's own USB port (CDC), TCP: a USB frame or a network hop
 MARGIN_RS485 = 0.025  # a USB-RS485 adapter (FTDI latency timer up to 16 ms) + the module
 CAN_TIMEOUT = 0.05  # see the module docstring
+# what crosses the line for one address in the ASCII pass: the probe line (AGGP 67, 0 CR),
+# its echo (a module may echo every character) and the reply (BA 100 0 CR, a longer value)
+ASCII_WIRE_BYTES = 36
 SLOW_TIMEOUT = 0.25  # the second pass: addresses that answered late or garbled
 
 Progress = Callable[[int, "Found | None"], None]
@@ -49,12 +69,18 @@ class Found:
     module: str | None
     version: str | None
     baud: int | None = None
+    ascii: bool = False  # found in its ASCII mode (and left in it)
+    answers: int = 1  # 2: every reply came twice, two modules answer at this address
     bootloader: bool = False  # it answers from its bootloader: an update did not complete
 
     def as_json(self) -> dict:
         row: dict = {"address": self.address, "module": self.module, "version": self.version}
         if self.baud is not None:
             row["baud"] = self.baud
+        if self.ascii:
+            row["mode"] = "ascii"
+        if self.answers > 1:
+            row["answers"] = self.answers
         if self.bootloader:
             row["bootloader"] = True
         return row
@@ -89,8 +115,11 @@ def _is_rfc2217(url: str) -> bool:
     return url.lower().startswith("rfc2217://")
 
 
-def address_timeout(transport: Transport, *, usb: bool = False) -> float:
-    """How long to wait for each address in the first pass (see the module docstring)."""
+def address_timeout(transport: Transport, *, usb: bool = False,
+                    nbytes: int = 2 * SERIAL_FRAME_LEN) -> float:
+    """How long to wait for each address in the first pass (see the module docstring);
+    ``nbytes``: what crosses the line for one address (the ASCII pass's probe line, its echo
+    and the reply are longer than two frames)."""
     if transport.kind == "can":
         return CAN_TIMEOUT
     if transport.simulated:
@@ -99,9 +128,38 @@ def address_timeout(transport: Transport, *, usb: bool = False) -> float:
     if baud is None:
         return MARGIN_USB * 2  # socket://: no baud rate, a network hop
     if _is_rfc2217(transport.url):  # the network hop, then the server's serial line
-        return wire_time(baud) + MARGIN_USB + MARGIN_RS485
+        return wire_time(baud, nbytes) + MARGIN_USB + MARGIN_RS485
     margin = MARGIN_LOCAL if _is_pty(transport.url) else MARGIN_USB if usb else MARGIN_RS485
-    return wire_time(baud) + margin
+    return wire_time(baud, nbytes) + margin
+
+
+def rate_matters(transport: Transport, *, usb: bool = False) -> str | None:
+    """None if the baud rate decides what the module hears on this link; else why it does
+    not (a module's own USB port, a pty, TCP, the simulator), in words for users."""
+    if transport.kind != "stream":
+        return "a CAN bus has no baud rate"
+    if transport.simulated:
+        return "the built-in simulator has no baud rate"
+    url = transport.url
+    if "://" in url and not _is_rfc2217(url):
+        return "bytes over TCP carry no baud rate"
+    if usb:
+        return "a module's own USB port (CDC) takes any rate"
+    return None
+
+
+def answer_at(client: Client, addresses: Iterable[int], baud: int, timeout: float) -> bool:
+    """Does any module at ``addresses`` answer at ``baud``? (``--baud auto``: a module that
+    answers at two rates is on a link where the rate has no effect.)"""
+    client.transport.set_baudrate(baud)  # type: ignore[attr-defined]
+    client.forget_stale()
+    for addr in addresses:
+        try:
+            if _probe(client, addr, max(timeout, 0.05), 1) is not None:
+                return True
+        except (ChecksumError, TmclTimeoutError):
+            continue
+    return False
 
 
 def _late_answerer(raw: bytes, host: int) -> int | None:
@@ -135,7 +193,7 @@ def _identify(client: Client, addr: int, binary, timeout: float) -> Found:
     if boot and (mod is None or mod.generic):
         mod = by_firmware_id(parsed.type_number)  # (its type, as its bootloader names it)
     name = mod.name if mod is not None and not mod.generic else None
-    return Found(addr, name, version, line_baud(client.transport), boot)
+    return Found(addr, name, version, line_baud(client.transport), bootloader=boot)
 
 
 def _probe(client: Client, addr: int, timeout: float, retries: int):
@@ -149,17 +207,73 @@ def _probe(client: Client, addr: int, timeout: float, retries: int):
         return exc.reply
 
 
+def _copy_of_probe(raw: bytes, host: int) -> int | None:
+    """The address a dropped frame is a second answer to 136 type 1 from, if it is one."""
+    if len(raw) == SERIAL_FRAME_LEN and raw[3] == Control.GET_VERSION and is_frame(raw, host):
+        return raw[1]
+    return None
+
+
+def _answers_twice(client: Client, addr: int, timeout: float, copies: dict[int, int]) -> bool:
+    """Ask ``addr`` once more and give a second answer the time to come: two modules at one
+    address answer every request (a reply copied once on a bad line does not again)."""
+    before = copies.get(addr, 0)
+    try:
+        _probe(client, addr, max(timeout, 0.05), 1)
+    except (ChecksumError, TmclTimeoutError):
+        return False
+    time.sleep(min(SLOW_TIMEOUT, 4 * timeout))
+    client.absorb()
+    return copies.get(addr, 0) > before
+
+
+def _in_ascii_mode(client: Client, addr: int, timeout: float) -> Found | None:
+    """The module at ``addr`` if it answers on the ASCII command line (the bring-up's probe);
+    identified (it is stepped out of ASCII mode for the 136 that names it, and back) and left
+    in ASCII mode."""
+    from ..client.ascii import AsciiLink, Mode, probe_ascii
+
+    client.address = addr
+    try:
+        probe = probe_ascii(client, timeout)
+    except (TmclTimeoutError, ValidationError):  # silence, or another host address
+        return None
+    if probe.mode != Mode.ASCII:
+        return None
+    client.module, client.version = None, None
+    baud = line_baud(client.transport)
+    try:
+        link = AsciiLink.attach(client, found=probe, timeout=max(timeout, 0.05))
+    except TmclError:
+        return Found(addr, None, None, baud, ascii=True)
+    try:
+        mod = client.module
+        name = mod.name if mod is not None and not mod.generic else None
+        return Found(addr, name, client.version, baud, ascii=True)
+    finally:
+        link.let_go()
+
+
 def scan(client: Client, addresses: Iterable[int], *, timeout: float,
-         slow_timeout: float = SLOW_TIMEOUT, progress: Progress | None = None) -> list[Found]:
+         slow_timeout: float = SLOW_TIMEOUT, progress: Progress | None = None,
+         ascii: bool | None = None, ascii_timeout: float | None = None) -> list[Found]:
     """Probe every address; ``progress(address, found_or_None)`` after each of the first
-    pass. Addresses that answered late or garbled are probed again with ``slow_timeout``."""
+    pass. Addresses that answered late or garbled are probed again with ``slow_timeout``;
+    an address that answered twice is asked once more (``Found.answers``). On a serial
+    line the addresses still silent are then asked in ASCII mode (``ascii``: None when
+    nothing answered in binary, True always, False never), waiting ``ascii_timeout`` each."""
     addresses = list(addresses)
     found: dict[int, Found] = {}
     again: set[int] = set()
+    copies: dict[int, int] = {}  # second answers to the presence probe, by address
+    checked: set[int] = set()
     host = client.host_address
 
     def tracer(direction: str, raw: bytes, decoded: object) -> None:
         if direction == "drop" and not client.is_can:
+            copy = _copy_of_probe(raw, host)
+            if copy is not None:
+                copies[copy] = copies.get(copy, 0) + 1
             addr = _late_answerer(raw, host)
             if addr is not None:
                 again.add(addr)
@@ -177,6 +291,10 @@ def scan(client: Client, addresses: Iterable[int], *, timeout: float,
             else:
                 if binary is not None:
                     hit = found[addr] = _identify(client, addr, binary, timeout)
+                    if copies.get(addr):  # (the copy came while the string was asked)
+                        checked.add(addr)
+                        if _answers_twice(client, addr, timeout, copies):
+                            hit = found[addr] = replace(hit, answers=2)
             if progress is not None:
                 progress(addr, hit)
         if not client.is_can and addresses:
@@ -190,6 +308,33 @@ def scan(client: Client, addresses: Iterable[int], *, timeout: float,
                 continue
             if binary is not None:
                 found[addr] = _identify(client, addr, binary, slow_timeout)
+        for addr in sorted(a for a in found if copies.get(a) and a not in checked):
+            if _answers_twice(client, addr, timeout, copies):  # (a copy that came later)
+                found[addr] = replace(found[addr], answers=2)
+        if ascii is not False and (ascii or not found) and _has_ascii_mode(client):
+            found.update(_ascii_pass(client, [a for a in addresses if a not in found],
+                                     ascii_timeout or timeout))
     finally:
         unsubscribe()
     return [found[a] for a in sorted(found)]
+
+
+def _has_ascii_mode(client: Client) -> bool:
+    return client.transport.kind == "stream"
+
+
+def _ascii_pass(client: Client, addresses: list[int], timeout: float) -> dict[int, Found]:
+    from ..client.ascii import MAX_ADDRESS, end_line
+
+    found: dict[int, Found] = {}
+    addresses = [a for a in addresses if 1 <= a <= MAX_ADDRESS]
+    if not addresses:
+        return found
+    with client.lock:
+        end_line(client, timeout)  # the binary probes were one long line to such a module
+    for addr in addresses:
+        hit = _in_ascii_mode(client, addr, timeout)
+        if hit is not None:
+            found[addr] = hit
+    client.resync_next()  # (binary frames after ASCII lines start from a clean line)
+    return found

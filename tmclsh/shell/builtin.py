@@ -945,13 +945,25 @@ def cmd_address(session: Session, arg: str) -> None:
         session.out.info(f"address {client.address}" + (f" (CAN id {client.can_id})"
                                                          if client.is_can else ""))
         return
-    n = int(limits.parse("address", text, ".address"))  # as -a and TMCLSH_ADDRESS take it
+    n = _address_value(session, text)
     from ..client.bringup import switch_address
 
     switch_address(client, n)  # brought up as at connect; the old one kept if it fails
     mod, version = client.module, client.version
     session.out.ok(f"address {n}: {mod.label if mod else 'unknown module type'}"
                    + (f", firmware {version}" if version else ""))
+
+
+def _address_value(session: Session, text: str) -> int:
+    """A number as -a takes it (``3``, ``$1F``), else an expression (``base + ${unit}``),
+    so one script can walk a bus; either is checked against the address range."""
+    try:
+        return int(limits.parse("address", text, ".address"))
+    except limits.SettingError:
+        from .expr import evaluate
+
+        value = evaluate(session, text)  # (its error names what is wrong: a variable, ...)
+        return int(limits.check("address", value, ".address"))
 
 
 @command(".module")

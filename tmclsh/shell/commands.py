@@ -63,6 +63,10 @@ class Command:
     check: str = ""
     # its options (shell/options.py reads them; the completer offers them)
     options: tuple[Option, ...] = ()
+    # ``${...}`` in its arguments is replaced before the handler runs (a port, a file name,
+    # an address from a variable: ``.connect ${port}``, ``.save unit-${unit}.tmcl``); the
+    # others take ``${`` as it stands or expand it themselves where it belongs
+    expands: bool = False
     _handler: Handler | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
@@ -260,20 +264,25 @@ COMMANDS: tuple[Command, ...] = (
                      "'can' alone takes the bus from python-can's configuration, as --can "
                      "does; the bit rate is --bitrate's."),
             changes_link=True,
-            reconnects=False),
+            reconnects=False,
+            expands=True),
     Command('.address', 'builtin', '.address [N]',
             'talk to the module with address N on the same bus',
             complete='complete_address', category='connection',
             details=('The new address is checked with a 136 (version) request; if nothing '
-                     "answers, the old address stays. On CAN, N is the module's CAN id."),
-            changes_link=True),
+                     "answers, the old address stays. On CAN, N is the module's CAN id. N "
+                     'may be an expression or hold variables, so one script walks a bus: '
+                     '.repeat 3 as i / .address i + 1 / GAP 1, 0 / .end.'),
+            changes_link=True,
+            expands=True),
     Command('.module', 'builtin', '.module [NAME]',
             'show the module type, or override it',
             complete='complete_module', category='connection',
             details=('The type normally comes from the 136 version string. Overriding it '
                      'changes which parameters, ranges and commands the shell checks '
                      'against.'),
-            changes_link=True),
+            changes_link=True,
+            expands=True),
     Command('.version', 'builtin', '.version',
             'ask the module for its firmware version (command 136)',
             category='connection'),
@@ -377,7 +386,8 @@ COMMANDS: tuple[Command, ...] = (
                      "comments); replay it with tmclsh -f FILE. '.record off' stops; "
                      "'.record' shows the state. FILE is replaced when the recording ends "
                      "('.record off' or leaving the shell); if it cannot be written, the old "
-                     'FILE stays as it was.')),
+                     'FILE stays as it was.'),
+            expands=True),
     Command('.history', 'script', '.history [N]',
             'show the lines of this session (the last N)',
             category='script'),
@@ -439,7 +449,8 @@ COMMANDS: tuple[Command, ...] = (
                      'mode.'),
             options=(Option("--at", "ADDR", "store it from this address"),
                      Option("--yes", help="overwrite a program that is there", aliases=("-y",)),
-                     Option("--no-verify", help="do not read it back"))),
+                     Option("--no-verify", help="do not read it back")),
+            expands=True),
     Command('.dump', 'debugger', '.dump [[-o] FILE] [--at ADDR] [--count N]',
             'read the stored program back (134) and show it as source, or write it to FILE',
             aliases=('.disasm',), complete='complete_file', category='program',
@@ -462,7 +473,8 @@ COMMANDS: tuple[Command, ...] = (
                      'mode.'),
             options=(Option("-o", help="(the FILE that follows is written)"),
                      Option("--at", "ADDR", "from this address"),
-                     Option("--count", "N", "this many instructions"))),
+                     Option("--count", "N", "this many instructions")),
+            expands=True),
     Command('.source-map', 'debugger', '.source-map [FILE [--at ADDR] | --off]',
             'use FILE as the source of the stored program (lines and labels in the debugger)',
             complete='complete_file', category='program',
@@ -629,7 +641,8 @@ COMMANDS: tuple[Command, ...] = (
                      'to read: .save refuses it (a failure in -c/-f) and says what to do '
                      'instead.'),
             options=(Option("--program", help="also the stored program"),
-                     Option("--yes", help="replace a file that exists", aliases=("-y",)))),
+                     Option("--yes", help="replace a file that exists", aliases=("-y",))),
+            expands=True),
     Command('.diff', 'clone', '.diff FILE [--exit-code] [--force]',
             'compare the module with a backup (or any script of SAP/SGP lines)',
             complete='complete_file', category='configuration',
@@ -654,7 +667,8 @@ COMMANDS: tuple[Command, ...] = (
                      '"why"} for each parameter not compared).'),
             options=(Option("--exit-code", help="exit 1 when there are differences"),
                      Option("--force", help="compare a backup of another module type",
-                            aliases=("-f",)))),
+                            aliases=("-f",))),
+            expands=True),
     Command('.restore', 'clone', '.restore FILE [--yes] [--store] [--force]',
             'write the parameters that differ from a backup back to the module',
             complete='complete_file', category='configuration',
@@ -679,7 +693,8 @@ COMMANDS: tuple[Command, ...] = (
             options=(Option("--yes", help="do not ask", aliases=("-y",)),
                      Option("--store", help="also store in EEPROM (STAP/STGP)"),
                      Option("--force", help="restore a backup of another module type",
-                            aliases=("-f",)))),
+                            aliases=("-f",))),
+            expands=True),
 )
 
 REGISTRY: dict[str, Command] = {}

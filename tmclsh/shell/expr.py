@@ -576,7 +576,11 @@ class SessionContext:
         if name in self.extra:
             return self.extra[name]
         if name in self.session.variables:
-            return self.session.variables[name]
+            value = self.session.variables[name]
+            if isinstance(value, str):
+                raise ExprError(f"{name} is text ({value!r}), not a number: ${{{name}}} puts "
+                                "it into a line as it is")
+            return value
         raise ExprError(f"unknown variable {name!r} (set it with .let {name} = ...)")
 
     def read(self, node: Read, text: str) -> Number:

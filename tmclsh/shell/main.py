@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
 
 from ..base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE,
                            TmclError)
@@ -48,7 +49,10 @@ def run_lines(session: Session, lines: list[str]) -> int:
         return EXIT_USAGE
     refused = True  # every error so far was a file refused whole (exit_status 2)
     sent = frames_sent(session.client)
-    for line in lines:
+    progress = session.progress
+    if progress is not None:
+        progress(0, len(lines))
+    for done, line in enumerate(lines, 1):
         try:
             session.ensure_link()  # the link was lost on an earlier line (--keep-going)
             session.run_line(line)
@@ -60,6 +64,9 @@ def run_lines(session: Session, lines: list[str]) -> int:
             session.report_error(line, exc)
             if not session.keep_going:
                 break
+        finally:
+            if progress is not None:
+                progress(done, len(lines))
     if failed and refused and frames_sent(session.client) == sent:
         return EXIT_USAGE  # a file refused before anything was sent, as -f says of a script
     return EXIT_FAILED if failed or session.stats.suspects > suspects else EXIT_OK
@@ -68,7 +75,7 @@ def run_lines(session: Session, lines: list[str]) -> int:
 def run_shell(args: argparse.Namespace) -> int:
     from ..client.connect import connection_settings, open_client
 
-    _exit_cleanly_on_signals()
+    exit_cleanly_on_signals()
     settings = connection_settings(args)
     # only a person at the prompt may be given the simulator for want of a module: a run
     # nobody watches (-c, -f, piped input) fails instead (exit 3)
@@ -87,13 +94,13 @@ def run_shell(args: argparse.Namespace) -> int:
                   flush=True)
         return EXIT_CONNECT
     try:
-        return _run(args, client, settings)
+        return run_connected(args, client, settings)
     except KeyboardInterrupt:
         print(file=sys.stderr)
-        _stop_on_interrupt(client)
+        stop_on_interrupt(client)
         return EXIT_INTERRUPTED
     except Terminated as exc:  # SIGTERM (a CI job's timeout), SIGHUP (the terminal went)
-        _stop_on_interrupt(client, exc.why)
+        stop_on_interrupt(client, exc.why)
         return exc.code
     except BrokenPipeError:
         # whoever read our output has gone (`tmclsh -c ... | head`): stop quietly, as other
@@ -104,7 +111,7 @@ def run_shell(args: argparse.Namespace) -> int:
         client.close()  # leaves ASCII mode if tmclsh entered it, whatever happened
 
 
-def _stop_on_interrupt(client, why: str = "interrupted") -> None:
+def stop_on_interrupt(client, why: str = "interrupted") -> None:
     """Ctrl-C, SIGTERM or SIGHUP in -c/-f (and SIGTERM/SIGHUP at the prompt): the one stop
     (stop.py), said on stderr."""
     from .stop import ToStderr, stop_all
@@ -131,7 +138,11 @@ def _silence_stdout() -> None:
         pass
 
 
-def _run(args: argparse.Namespace, client, settings: dict) -> int:
+def run_connected(args: argparse.Namespace, client, settings: dict, *,
+                  prepare: Callable[[Session], None] | None = None) -> int:
+    """The session on a connected client: ``-c``, ``-f``, or the prompt; ``prepare(session)``
+    before the first line (a unit of several gives its session its own variables and view,
+    shell/units.py). Exit status."""
     from ..base.config import load_settings
 
     shell_settings = load_settings()
@@ -144,6 +155,11 @@ def _run(args: argparse.Namespace, client, settings: dict) -> int:
     if client.module is not None and client.module.generic:
         out.warn(f"{client.module.type_name}: {client.module.NOTICE}")  # once, at the start
     client.on_notice = out.warn  # what the client does on its own (ends download mode)
+    if not interactive:  # who and where, for scripts run on several (shell/units.py sets them)
+        address = client.can_id if client.is_can else client.address
+        session.variables.update(unit=1, address=address, port=_link_text(settings))
+    if prepare is not None:
+        prepare(session)
     if args.trace:
         from .trace import enable_trace
 
@@ -161,6 +177,14 @@ def _run(args: argparse.Namespace, client, settings: dict) -> int:
     if not session.close():  # a recording that could not be put in place
         status = status or EXIT_FAILED
     return status
+
+
+def _link_text(settings: dict) -> str:
+    """What ``${port}`` says: the port, CAN bus or simulated module the run talks to."""
+    for key in ("port", "can", "sim"):
+        if settings.get(key):
+            return str(settings[key])
+    return ""
 
 
 def _run_unattended(args: argparse.Namespace, session: Session) -> int:
@@ -275,7 +299,7 @@ class Terminated(SystemExit):
         self.why = {signal.SIGTERM: "terminated (SIGTERM)"}.get(signum, "hung up (SIGHUP)")
 
 
-def _exit_cleanly_on_signals() -> None:
+def exit_cleanly_on_signals() -> None:
     """SIGTERM (kill, systemd, a CI job's timeout) and SIGHUP (the terminal or SSH session
     went away) unwind like an exception: the motors and the stored program are stopped as
     for Ctrl-C and ``client.close()`` runs, so a module is never left moving, or in ASCII or

@@ -126,7 +126,7 @@ HOLD_SECONDS = 0.05  # Output.hold: results wait at most this long for the next 
 MEMO_LINES = 4096  # Output.result: formatted lines kept
 
 
-def _console(stderr: bool = False, color: str = "auto"):
+def _console(stderr: bool = False, color: str = "auto", file: Any = None):
     """A rich console that writes to whatever sys.stdout/sys.stderr is *now* (so output from
     other threads goes through prompt_toolkit's ``patch_stdout`` while the prompt runs).
 
@@ -151,6 +151,8 @@ def _console(stderr: bool = False, color: str = "auto"):
     # markup=False: every string printed, in a table cell or title too, is shown as it is;
     # user text ('.param [/]', a file name '[bold]x') is never read as rich markup. Styles
     # are given as style= or Text spans, never as [tags] inside strings.
+    if file is not None:  # (a unit's own stream, Output.stdout)
+        kw["file"] = file
     return TrimmedConsole(stderr=stderr, theme=rich_theme(), highlight=False, soft_wrap=True,
                           markup=False, **kw)
 
@@ -183,13 +185,21 @@ class Output:
         self._held_lines: list[str] = []
         self._held_at = 0.0
         self._memo: dict[tuple, tuple] = {}  # see result
+        # a unit of several (shell/units.py): the fields every JSON object starts with
+        # ({"unit": 2, "port": ..., "address": ...}), and who is told of each error said
+        self.tag: dict[str, Any] | None = None
+        self.on_error: Callable[[str], None] | None = None
+        # where this output goes when not to whatever sys.stdout/sys.stderr is at the time: a
+        # unit's own streams, so what other threads write for it (the event poller) is its too
+        self.stdout: Any = None
+        self.stderr: Any = None
 
     # the rich consoles, made when first needed (a test may put its own in place)
     @property
     def console(self):
         self.flush()  # results held back go out before what rich writes
         if self._console is None:
-            self._console = _console(color=self._color)
+            self._console = _console(color=self._color, file=self.stdout)
         return self._console
 
     @console.setter
@@ -227,14 +237,14 @@ class Output:
                 self.flush()
 
     def _write_json(self, line: str) -> None:
-        stream = sys.stdout
+        stream = self.stdout or sys.stdout
         self._write(stream, line, not self._is_terminal(stream))
 
     @property
     def err(self):
         self.flush()  # stdout held back goes out before what goes to stderr
         if self._err is None:
-            self._err = _console(stderr=True, color=self._color)
+            self._err = _console(stderr=True, color=self._color, file=self.stderr)
         return self._err
 
     @err.setter
@@ -246,7 +256,7 @@ class Output:
         """Whether results go to a terminal (colour, live views, progress bars)."""
         if self._console is not None or self._color == "always":
             return self.console.is_terminal
-        return self._is_terminal(sys.stdout)
+        return self._is_terminal(self.stdout or sys.stdout)
 
     def _is_terminal(self, stream) -> bool:
         """is_terminal(stream), asked once per stream (isatty is a system call per line)."""
@@ -261,13 +271,15 @@ class Output:
         if self._color == "always":
             return None
         if stderr:
-            stream = sys.stderr
+            stream = self.stderr or sys.stderr
             return stream if self._err is None and not self._is_terminal(stream) else None
-        stream = sys.stdout
+        stream = self.stdout or sys.stdout
         return stream if self._console is None and not self._is_terminal(stream) else None
 
     # -- JSON ---------------------------------------------------------------------------
     def emit(self, obj: dict[str, Any]) -> None:
+        if self.tag is not None:
+            obj = {**self.tag, **obj}
         if self.simulated():
             obj = {**obj, "simulated": True}
         self._write_json(json.dumps(obj, ensure_ascii=False) + "\n")
@@ -298,9 +310,15 @@ class Output:
     def warn(self, text: str) -> None:
         self._message(text, "tmcl.warn", stderr=True)
 
+    def saw_error(self, text: str) -> None:
+        """An error is being said (whichever way): tell ``on_error``."""
+        if self.on_error is not None:
+            self.on_error(text)
+
     def error(self, line: str | None, message: str,
               record: dict[str, object] | None = None) -> None:
         """``record``: the fields a failed check (.expect, .wait) has in JSON, passed or not."""
+        self.saw_error(message)
         if self.json:
             self.emit({"line": line, **(record or {}), "error": message})
         else:
@@ -312,7 +330,7 @@ class Output:
         # reply says more): each line made is kept, so a script repeating its lines formats
         # each once. Whatever else result_json or render_result come to read goes into the key.
         json_mode = self.json
-        stream = sys.stdout
+        stream = self.stdout or sys.stdout
         reply = result.reply
         key = None
         if reply is not None and not result.in_doubt:
@@ -338,6 +356,8 @@ class Output:
             key = None  # not kept: rich writes it, or the reply says more than the key
         if json_mode:
             obj = result_json(result)
+            if self.tag is not None:
+                obj = {**self.tag, **obj}
             if self.simulated():
                 obj["simulated"] = True
             line = json.dumps(obj, ensure_ascii=False) + "\n"

@@ -30,7 +30,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ..base import files, limits
+from ..base import clock, files, limits
 from ..base.errors import (EXIT_FAILED, EXIT_OK, EXIT_USAGE, AsmError, ChecksumError,
                            FrameError, RangeError, TmclError, TmclTimeoutError, ValidationError)
 from ..client.ledger import CONFIRM_ROUNDS
@@ -544,6 +544,7 @@ def repeat_count(session: Session, count: expr.Expression | None) -> int:
 def report(session: Session, node: Node, exc: TmclError) -> None:
     """``FILE:LINE: message``; under --json an error object (once per error)."""
     where = f"{node.file}:{node.line}: "
+    session.out.saw_error(f"{where}{exc}")
     if session.out.json:
         if getattr(exc, "shown", False):
             session.out.warn(f"{where}{exc}")  # its result object already says "error"
@@ -602,6 +603,19 @@ def _progress(session: Session, name: str, nodes: list[Node]):
     return progress, advance
 
 
+def _counter(progress: Callable[[int, int], None], total: int) -> Callable[[], None]:
+    """A runner's ``on_step`` telling ``progress`` (steps done, steps in all), told the
+    total at once."""
+    done = 0
+    progress(0, total)
+
+    def step() -> None:
+        nonlocal done
+        done += 1
+        progress(done, max(total, done))
+    return step
+
+
 def run_file(session: Session, path: str) -> int:
     """Run a script file (``-`` = stdin) in ``session``; returns the exit status."""
     start = time.monotonic()
@@ -618,6 +632,8 @@ def run_file(session: Session, path: str) -> int:
             lines = read_lines(file, ScriptError)
             nodes = list(Parser(session, path, file.resolve().parent).nodes(lines))
             bar = _progress(session, path, nodes)
+            if bar is None and session.progress is not None:
+                runner.on_step = _counter(session.progress, count_steps(nodes)[0])
             if bar is None:
                 # results are written in batches, not flushed line by line (see Output.hold);
                 # not for stdin, whose writer may wait for each result before the next line
@@ -679,6 +695,7 @@ def _stdin_lines() -> Iterator[str]:
 
 
 def _report_plain(session: Session, exc: TmclError) -> None:
+    session.out.saw_error(str(exc))
     if session.out.json:
         # (the line refused; null when no one line is to blame: an unreadable file)
         session.out.emit({"line": getattr(exc, "text", None), "error": str(exc)})
@@ -860,7 +877,8 @@ def _show_variables(session: Session) -> None:
     if not session.variables:
         session.out.info("no variables (set one with .let NAME = EXPR)")
     for name, value in sorted(session.variables.items()):
-        session.out.print(f"{name} = {expr.format_number(value)}", markup=False)
+        shown = repr(value) if isinstance(value, str) else expr.format_number(value)
+        session.out.print(f"{name} = {shown}", markup=False)
 
 
 def check(expression: expr.Expression, ctx: expr.SessionContext) -> tuple[bool, str, str]:
@@ -1061,9 +1079,9 @@ def cmd_sleep(session: Session, args: str) -> None:
     seconds = expr.seconds("sleep", expr.evaluate(session, args), ".sleep")
     left = session.time_left()
     if left is not None and seconds > left:
-        time.sleep(left)
+        clock.sleep(left)
         session.time_left()  # raises: the time is up
-    time.sleep(seconds)
+    clock.sleep(seconds)
 
 
 def _split_redirect(text: str) -> tuple[str, str | None, str]:

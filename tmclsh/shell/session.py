@@ -120,7 +120,8 @@ class Session:
         if keep_going:  # a line that needs the module waits for a lost link to come back
             client.on_link_lost = self.relink
         self.settings = settings or {}
-        self.variables: dict[str, int | float] = {}
+        # numbers; text (a unit's ${port}) only goes into lines as ${name}
+        self.variables: dict[str, int | float | str] = {}
         self.history: list[str] = []
         self.stats = Stats()
         self.last_result: Result | None = None
@@ -148,6 +149,9 @@ class Session:
         self.time_limit: float | None = None
         self._deadline: float | None = None
         self.state.evaluate = _evaluate
+        # told (lines done, lines in all) after each line of -c and of a -f script (a unit's
+        # live table, shell/units.py); None: nobody asks
+        self.progress: Callable[[int, int], None] | None = None
 
     def close(self) -> bool:
         """End the session: run the closers; a failing one is reported, the rest still run.
@@ -244,7 +248,8 @@ class Session:
         def sub(m: re.Match) -> str:
             inner = m.group(1).strip()
             if inner in self.variables:
-                return format_number(self.variables[inner])
+                value = self.variables[inner]
+                return value if isinstance(value, str) else format_number(value)
             evaluate = self.state.evaluate
             if callable(evaluate):
                 return format_number(evaluate(self, inner))
@@ -349,6 +354,8 @@ class Session:
             raise ValidationError(unknown_command(line.word))
         if cmd is not None:
             args = line.args
+            if cmd.expands and "${" in args:
+                args = self.expand(args)
             if args and cmd.syntax == cmd.name:  # `.stopall now`: a usage error, nothing sent
                 raise ValidationError(f"{cmd.name} takes no arguments (got {args!r})")
             frames, lines = frames_sent(self.client), self.stats.commands

@@ -45,7 +45,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
-from ..base import files
+from ..base import clock, files
 from ..base.errors import TmclError, TransportError, ValidationError
 from ..client.ledger import CONFIRM_ROUNDS
 from . import expr, lines, plot, script
@@ -531,8 +531,7 @@ class Keys:
         """Wait up to ``timeout`` seconds; return the keys pressed (possibly several): single
         characters, "\x1b" for Esc; arrows and other sequences are left out."""
         if self._input is None:
-            if timeout > 0:
-                time.sleep(timeout)
+            clock.sleep(timeout)  # (in slices: a unit's stop lands within one)
             return ""
         from prompt_toolkit.keys import Keys as Key
 

@@ -4,6 +4,11 @@ python-can bus. ``run`` is the blocking entry behind ``tmclsh sim``.
 Each server is one thread that blocks in ``select``/``recv`` and hands bytes to the
 simulator; replies are pushed back through the simulator's ``on_output`` callback on the
 thread that produced them, so a request/reply round trip involves no polling and no sleeps.
+
+With a baud rate (``tmclsh sim --baud N``) a pty or TCP server paces the line as a real one
+is paced (``Wire``): every byte, the host's and the module's, takes ten bits' time, and a
+reply is handed over when its last byte would have arrived; so a test or a benchmark sees
+the timing of a real line, and several modules on one line (a ``SimBus``) share its time.
 """
 
 from __future__ import annotations
@@ -17,6 +22,8 @@ import signal
 import socket
 import sys
 import threading
+import time
+from collections.abc import Sequence
 from typing import Any
 
 from .device import SimBus, Simulator
@@ -35,7 +42,38 @@ def _feed(write: Any, *args: Any) -> None:
         log.exception("the simulator failed on received data")
 
 
+BITS_PER_BYTE = 10  # 8N1: a start bit, eight data bits, a stop bit
+
+
+class Wire:
+    """A half-duplex serial line at ``baud``: one byte at a time in either direction, each
+    taking ``BITS_PER_BYTE / baud`` seconds. The host's bytes reach the server at once (a pty
+    or a socket carries them in no time), so they are counted as arriving from then on; the
+    module's reply starts when the line is free and is handed over when its last byte would
+    have arrived."""
+
+    def __init__(self, baud: int):
+        if baud <= 0:
+            raise ValueError(f"baud rate must be positive, got {baud}")
+        self.byte_time = BITS_PER_BYTE / baud
+        self._free = 0.0  # time.monotonic() at which the line falls silent
+
+    def heard(self, nbytes: int) -> None:
+        """The host sent ``nbytes`` just now: the line carries them until they are through."""
+        self._free = max(self._free, time.monotonic()) + nbytes * self.byte_time
+
+    def wait_to_send(self, nbytes: int) -> None:
+        """Block until ``nbytes`` the module sends now would have crossed the line."""
+        due = max(self._free, time.monotonic()) + nbytes * self.byte_time
+        self._free = due
+        left = due - time.monotonic()
+        if left > 0:
+            time.sleep(left)
+
+
 class _Server:
+    wire: Wire | None = None
+
     def __init__(self, target: Target):
         self.target = target
         self._closed = threading.Event()
@@ -75,10 +113,12 @@ class _Server:
 
 
 class PtyServer(_Server):
-    """A pseudo-terminal whose slave end (``path``) behaves like the module's serial port."""
+    """A pseudo-terminal whose slave end (``path``) behaves like the module's serial port;
+    ``baud``: paced as a line at that rate (``Wire``)."""
 
-    def __init__(self, target: Target):
+    def __init__(self, target: Target, baud: int | None = None):
         super().__init__(target)
+        self.wire = Wire(baud) if baud else None
         import tty  # POSIX only, like the pty itself: the TCP and CAN servers run anywhere
 
         self.master, self._slave = os.openpty()
@@ -92,6 +132,8 @@ class PtyServer(_Server):
 
     def _output(self, data: bytes) -> None:
         with self._write_lock:
+            if self.wire is not None:
+                self.wire.wait_to_send(len(data))
             view = memoryview(data)
             while view:
                 try:
@@ -125,6 +167,9 @@ class PtyServer(_Server):
                     continue
                 return
             if data:
+                if self.wire is not None:
+                    with self._write_lock:
+                        self.wire.heard(len(data))
                 _feed(self.target.write, data)
 
     def _shutdown(self) -> None:
@@ -138,10 +183,12 @@ class PtyServer(_Server):
 
 
 class TcpServer(_Server):
-    """A TCP port for ``socket://HOST:PORT`` URLs; one client at a time."""
+    """A TCP port for ``socket://HOST:PORT`` URLs; one client at a time; ``baud``: paced as a
+    serial line at that rate behind a serial server (``Wire``)."""
 
-    def __init__(self, target: Target, host: str, port: int):
+    def __init__(self, target: Target, host: str, port: int, baud: int | None = None):
         super().__init__(target)
+        self.wire = Wire(baud) if baud else None
         self._sock = socket.create_server((host, port))
         self.address: tuple[str, int] = self._sock.getsockname()[:2]
         self._client: socket.socket | None = None
@@ -154,6 +201,8 @@ class TcpServer(_Server):
             client = self._client
             if client is None:
                 return  # nobody connected: bytes go nowhere, as on an unplugged line
+            if self.wire is not None:
+                self.wire.wait_to_send(len(data))
             try:
                 client.sendall(data)
             except OSError as exc:
@@ -174,6 +223,9 @@ class TcpServer(_Server):
                     data = client.recv(4096)
                     if not data:
                         break
+                    if self.wire is not None:
+                        with self._send_lock:
+                            self.wire.heard(len(data))
                     _feed(self.target.write, data)
             except OSError:
                 pass
@@ -250,12 +302,12 @@ class CanServer(_Server):
         self.bus.shutdown()
 
 
-def serve_pty(target: Target) -> PtyServer:
-    return PtyServer(target)
+def serve_pty(target: Target, baud: int | None = None) -> PtyServer:
+    return PtyServer(target, baud)
 
 
-def serve_tcp(target: Target, host: str, port: int) -> TcpServer:
-    return TcpServer(target, host, port)
+def serve_tcp(target: Target, host: str, port: int, baud: int | None = None) -> TcpServer:
+    return TcpServer(target, host, port, baud)
 
 
 def serve_can(target: Simulator, interface: str, channel: str, **kw: Any) -> CanServer:
@@ -270,14 +322,18 @@ def _split(spec: str, what: str) -> tuple[str, str]:
     return head, tail
 
 
-def run(module: str, address: int, *, pty: bool = False, tcp: str | None = None,
+def run(module: str, address: int | Sequence[int], *, pty: bool = False, tcp: str | None = None,
         can: str | None = None, host_address: int = 2, bitrate: int | None = None,
         faults: dict[str, float] | None = None, seed: int | None = None,
-        bootloader: bool = False) -> int:
-    """Serve one simulated module until SIGINT/SIGTERM; the first stdout line is the endpoint.
+        baud: int | None = None, bootloader: bool = False) -> int:
+    """Serve a simulated module until SIGINT/SIGTERM; the first stdout line is the endpoint.
 
-    ``bootloader``: the module starts in its bootloader with no valid application, as after
-    a firmware update that broke off (``tmclsh firmware`` completes it).
+    Several addresses (``[1, 2, 3]``) serve a module at each on one line, as on an RS485
+    bus (a pty or TCP): each answers its own address, and an address given twice answers
+    twice. ``baud`` paces the line at that rate (``Wire``). ``bootloader``: the module
+    starts in its bootloader with no valid application, as after a firmware update that
+    broke off (``tmclsh firmware`` completes it); one module only (a bootloader answers at
+    address 1 whatever its firmware's address was).
 
     ``faults``: probabilities per reply by kind (``Faults.rates``), drawn from a generator
     seeded with ``seed`` (None: a different run each time). Exit status 0 after a signal, 2
@@ -291,15 +347,32 @@ def run(module: str, address: int, *, pty: bool = False, tcp: str | None = None,
     if len(chosen) != 1:
         log.error("choose exactly one of --pty, --tcp HOST:PORT, --can IFACE:CHANNEL")
         return EXIT_USAGE
+    addresses = [address] if isinstance(address, int) else list(address)
+    if not addresses:
+        log.error("no address given")
+        return EXIT_USAGE
+    if bootloader and len(addresses) > 1:
+        log.error("--bootloader serves one module (a bootloader answers at address 1)")
+        return EXIT_USAGE
+    if can and (len(addresses) > 1 or baud):
+        log.error("several addresses and --baud are for a serial line (--pty, --tcp); on a "
+                  "CAN bus each module has its own CAN id: serve one module per id")
+        return EXIT_USAGE
+    sims: list[Simulator] = []
     try:
-        sim = Simulator(module, address, host_address=host_address,
-                        bootloader=bootloader).bench_layout()
+        for addr in addresses:
+            sims.append(Simulator(module, addr, host_address=host_address,
+                                  bootloader=bootloader).bench_layout())
     except ValueError as exc:
+        for made in sims:
+            made.close()
         log.error("%s", exc)
         return EXIT_USAGE
     if faults:
-        sim.faults.rng = random.Random(seed)
-        sim.faults.rates = dict(faults)
+        for i, made in enumerate(sims):
+            made.faults.rng = random.Random(None if seed is None else seed + i)
+            made.faults.rates = dict(faults)
+    sim: Target = sims[0] if len(sims) == 1 else SimBus(sims)
     server: _Server
     try:  # the arguments first: a malformed one is a usage error, before anything is opened
         if tcp:
@@ -319,14 +392,14 @@ def run(module: str, address: int, *, pty: bool = False, tcp: str | None = None,
         return EXIT_CONNECT
     try:
         if pty:
-            server = serve_pty(sim)
+            server = serve_pty(sim, baud)
             endpoint = server.path  # type: ignore[attr-defined]
         elif tcp:
-            server = serve_tcp(sim, host, port)
+            server = serve_tcp(sim, host, port, baud)
             bound_host, bound_port = server.address  # type: ignore[attr-defined]
             endpoint = f"{bound_host}:{bound_port}"
         else:
-            server = serve_can(sim, iface, channel,
+            server = serve_can(sims[0], iface, channel,
                                **({"bitrate": bitrate} if bitrate is not None else {}))
             endpoint = f"{iface}:{channel}"
     except Exception as exc:  # OSError, python-can's own errors for unknown interfaces, ...
@@ -342,10 +415,12 @@ def run(module: str, address: int, *, pty: bool = False, tcp: str | None = None,
         sys.stdout.write(endpoint + "\n")
         sys.stdout.flush()
         if bootloader:
-            log.info("simulated %s in its bootloader, at address %d on %s",
-                     sim.module.name, sim.address, endpoint)
+            log.info("simulated %s in its bootloader, at address %d on %s%s",
+                     sims[0].module.name, sims[0].address, endpoint,
+                     f" at {baud} baud" if baud else "")
         else:
-            log.info("simulated %s at address %d on %s", sim.module.name, address, endpoint)
+            log.info("simulated %s at address %s on %s%s", sims[0].module.name,
+                     ", ".join(map(str, addresses)), endpoint, f" at {baud} baud" if baud else "")
         if faults:
             log.warning("misbehaving on purpose: %s",
                         ", ".join(f"{k}={v:g}" for k, v in faults.items()))

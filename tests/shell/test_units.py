@@ -1,0 +1,316 @@
+"""Many modules at once (issue 25): units on their own ports, on one RS485 line, on a CAN
+bus; what each says, how they fail alone, and how Ctrl-C stops them all. Through real bytes:
+simulated modules served on ptys (each its own line) and on python-can's virtual bus."""
+
+from __future__ import annotations
+
+import json
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+import uuid
+
+import pytest
+
+from conftest import ROOT, tmclsh_env
+from tmclsh.cli import main as cli
+from tmclsh.sim import SimBus, Simulator
+from tmclsh.sim.model import AXIS
+
+TYPES = ("TMCM-1311", "TMCM-351", "TMCM-1640", "TMCM-1311")
+
+
+@pytest.fixture
+def run(capsys, monkeypatch):
+    """``run(*argv)`` -> (exit status, stdout, stderr) of tmclsh's main in this process (the
+    virtual CAN bus reaches no other)."""
+    monkeypatch.setenv("TMCLSH_CONFIG", "/dev/null")
+    for var in ("TMCLSH_PORT", "TMCLSH_CAN", "TMCLSH_PROFILE", "TMCLSH_ADDRESS"):
+        monkeypatch.delenv(var, raising=False)
+
+    def go(*argv: str) -> tuple[int, str, str]:
+        capsys.readouterr()
+        rc = cli.main(list(argv))
+        out, err = capsys.readouterr()
+        return rc, out, err
+    return go
+
+
+@pytest.fixture
+def four(make_pty_sim):
+    """Four modules, each on its own pty: a TMCM-1311, a TMCM-351, a TMCM-1640, a TMCM-1311."""
+    return [make_pty_sim(module) for module in TYPES]
+
+
+def _ports(sims) -> list[str]:
+    return [arg for _, path in sims for arg in ("--port", path)]
+
+
+def _objects(out: str) -> list[dict]:
+    return [json.loads(line) for line in out.splitlines()]
+
+
+def test_four_units_on_four_ports_each_its_own_session(four, run, tmp_path):
+    script = tmp_path / "check.tmcl"
+    script.write_text(".let mine = ${unit} * 10\n"
+                      "GGP 66, 0\n"
+                      ".expect GGP 66, 0 == ${address}\n"
+                      ".echo unit ${unit} on ${port}: ${mine}\n")
+    rc, out, err = run(*_ports(four), "--json", "-f", str(script))
+    assert rc == 0, err
+    objects = _objects(out)
+    paths = [path for _, path in four]
+    for obj in objects:  # every object says which unit, port and address it is
+        assert obj["port"] == paths[obj["unit"] - 1] and obj["address"] == 1, obj
+    summaries = {o["unit"]: o for o in objects if o.get("summary")}
+    assert sorted(summaries) == [1, 2, 3, 4]
+    assert [summaries[n]["module"] for n in (1, 2, 3, 4)] == list(TYPES)
+    assert all(s["result"] == "passed" and s["exit"] == 0 and s["checks_passed"] == 1
+               and s["line"] == s["of"] == 4 for s in summaries.values())
+    echoes = sorted(o["echo"] for o in objects if "echo" in o)
+    assert echoes == [f"unit {n} on {paths[n - 1]}: {n * 10}" for n in (1, 2, 3, 4)]
+    # each unit's summary object comes after its own results
+    for n in (1, 2, 3, 4):
+        mine = [i for i, o in enumerate(objects) if o["unit"] == n]
+        assert objects[mine[-1]].get("summary")
+    assert "summary" not in out.splitlines()[0]
+    assert re.search(r"^ +4 +\S+ +TMCM-1311 +1311V111 +4/4 .* passed", err, re.M), err
+
+
+def test_a_line_one_type_refuses_fails_that_unit_before_its_run(four, run):
+    """AP 17 (VelocityReachedWindow) exists on the TMCM-1311 only here: the other types
+    refuse the line before anything is sent to them; the 1311s run it."""
+    sims = [sim for sim, _ in four]
+    before = [sim.param(AXIS, 17) if sim.module.name == "TMCM-1311" else None for sim in sims]
+    rc, out, err = run(*_ports(four), "-c", "SAP 17, 0, 1234; GAP 17, 0")
+    assert rc == 1
+    lines = out.splitlines()
+    assert "[1 " in out and "[4 " in out
+    for n, sim in enumerate(sims, 1):
+        mine = [line for line in lines if line.startswith(f"[{n} ")]
+        if sim.module.name == "TMCM-1311":
+            assert sim.param(AXIS, 17) == 1234 != before[n - 1]
+            assert re.search(rf"^ +{n} .* 2/2 .* passed", err + out, re.M)
+        else:
+            assert not [m for m in mine if "= 1234" in m]
+            assert re.search(rf"^ +{n} .* refused", out, re.M), out
+    assert "nothing was sent" in err
+
+
+def test_three_addresses_on_one_line_take_turns(make_pty_sim, run):
+    bus, path = make_pty_sim(target=SimBus([Simulator("TMCM-1311", a) for a in (1, 2, 3)]))
+    rc, out, err = run("--port", path, "--address", "1-3", "-c",
+                       "SAP 4, 0, ${address} * 100; GAP 4, 0")
+    assert rc == 0, err
+    results = [line.split("] ", 1) for line in out.splitlines() if line.startswith("[")]
+    assert results == [[f"[{a} {path} @{a}", text] for a in (1, 2, 3) for text in (
+        f"ok: MaxPositioningSpeed set to {a * 100} pps", f"MaxPositioningSpeed = {a * 100} pps")]
+    # in turn: each unit's lines before the next unit's
+    assert [sim.param(AXIS, 4) for sim in bus.simulators] == [100, 200, 300]
+
+
+def test_units_on_a_python_can_virtual_bus(run):
+    from tmclsh.sim.serve import serve_can
+    from tmclsh.tmcl.frames import Reply, Request
+
+    channel = f"units-{uuid.uuid4().hex[:8]}"
+    sims = [Simulator("TMCM-1311", 1), Simulator("TMCM-351", 1)]
+    sims[1].write(Request(1, 9, 71, 0, 3).to_bytes())  # its own CAN id first (GP 71 = 3)
+    assert Reply.from_bytes(sims[1].read(1.0)).ok
+    servers = [serve_can(s, "virtual", channel) for s in sims]
+    try:
+        rc, out, err = run("--can", f"virtual:{channel}", "--can-id", "1,3", "--json", "-c",
+                           "GGP 71, 0")
+    finally:
+        for server, sim in zip(servers, sims):
+            server.close()
+            sim.close()
+    assert rc == 0, err
+    reads = [o for o in _objects(out) if "reply" in o]
+    assert [(o["unit"], o["can"], o["can_id"], o["reply"]) for o in reads] == [
+        (1, f"virtual:{channel}", 1, 1), (2, f"virtual:{channel}", 3, 3)]
+
+
+def test_a_unit_unplugged_mid_run_fails_alone(make_pty_sim, run, tmp_path):
+    from tmclsh.sim.serve import serve_pty
+
+    keep = make_pty_sim("TMCM-1311")
+    gone_sim = Simulator("TMCM-351")
+    gone = serve_pty(gone_sim)
+    script = tmp_path / "long.tmcl"
+    script.write_text(".repeat 40\nGAP 1, 0\n.sleep 0.01\n.end\n")
+    threading.Timer(0.3, gone.close).start()  # the cable pulled out
+    try:
+        rc, out, err = run("--port", keep[1], "--port", gone.path, "-f", str(script))
+    finally:
+        gone.close()
+        gone_sim.close()
+    assert rc == 1
+    assert re.search(r"^ +1 .* 80/80 .* passed", out, re.M), out
+    assert re.search(r"^ +2 .* failed +[0-9.]+ s  long.tmcl:2: lost ", out, re.M), out
+    assert f"[2 {gone.path}] " in err and "lost" in err
+
+
+def test_no_module_at_a_unit_is_exit_3_naming_it(make_pty_sim, run):
+    _, path = make_pty_sim("TMCM-1311")
+    rc, out, err = run("--port", path, "--address", "1,4", "--timeout", "0.1", "--retries", "0",
+                       "--json", "-c", "GAP 1, 0")
+    assert rc == 3
+    summaries = {o["unit"]: o for o in _objects(out) if o.get("summary")}
+    assert summaries[1]["result"] == "passed" and summaries[2]["result"] == "no module"
+    assert summaries[2]["exit"] == 3 and "address 4" in summaries[2]["error"]
+    assert err.splitlines()[-1] == f"tmclsh: no module for unit 2 {path} @4"
+
+
+def test_the_log_dir_keeps_a_transcript_per_unit(four, run, tmp_path):
+    logs = tmp_path / "logs"
+    rc, out, err = run(*_ports(four[:2]), "--log-dir", str(logs), "-c", "GAP 4, 0")
+    assert rc == 0, err
+    files = sorted(p.name for p in logs.iterdir())
+    assert [f[:8] for f in files] == ["unit-01-", "unit-02-"]
+    text = (logs / files[1]).read_text()
+    stamp = r"\d\d:\d\d:\d\d\.\d{3}"
+    assert re.search(rf"^{stamp} tx> 01 88 00 00 00 00 00 00 89", text, re.M)  # 136, at connect
+    assert re.search(rf"^{stamp} tx> 01 06 04 00 .*GAP 4, 0", text, re.M)
+    assert re.search(rf"^{stamp} <rx 02 01 64 06 ", text, re.M)
+    assert re.search(rf"^{stamp} out +MaxPositioningSpeed = ", text, re.M)
+    assert "passed (exit status 0)" in text.splitlines()[-1]
+
+
+def test_all_takes_every_attached_module(four, run, monkeypatch):
+    import tmclsh.link as link
+
+    class Port:
+        def __init__(self, device):
+            self.device = device
+
+    monkeypatch.setattr(link, "trinamic_ports", lambda: [Port(p) for _, p in four[:3]])
+    rc, out, err = run("--all", "--json", "-c", "GGP 66, 0")
+    assert rc == 0, err
+    assert sorted(o["port"] for o in _objects(out) if o.get("summary")) == sorted(
+        p for _, p in four[:3])
+    monkeypatch.setattr(link, "trinamic_ports", lambda: [])
+    rc, out, err = run("--all", "-c", "GGP 66, 0")
+    assert rc == 3 and "--all: no Trinamic USB module is attached" in err
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["--address", "1,1"], "--address 1 is given twice"),
+    (["--can", "virtual:x", "--can-id", "1,2,3", "--reply-id", "5,6"],
+     "--reply-id names 2 ids for 3 CAN ids"),
+    (["--address", "1-2"], "standard input is read once; 2 units given"),
+    (["--address", "1-2", "-f", "-"], "-f - reads standard input once"),
+])
+def test_what_cannot_be_is_a_usage_error(make_pty_sim, run, argv, says):
+    _, path = make_pty_sim()
+    if "--can" not in argv:
+        argv = ["--port", path, *argv]
+    if "-f" not in argv and "--reply-id" in argv:
+        argv = [*argv, "-c", "GAP 1, 0"]
+    rc, out, err = run(*argv)
+    assert rc == 2 and says in err, err
+
+
+# -- Ctrl-C and signals stop every unit --------------------------------------------------------
+
+@pytest.mark.parametrize("sig, status, why", [(signal.SIGINT, 130, "interrupted"),
+                                              (signal.SIGTERM, 143, "terminated (SIGTERM)")])
+def test_a_signal_stops_every_unit(make_pty_sim, tmp_path, sig, status, why):
+    sims = [make_pty_sim(m) for m in ("TMCM-1311", "TMCM-351")]
+    script = tmp_path / "turn.tmcl"
+    script.write_text("ROR 0, 500\n.sleep 30\n")
+    proc = subprocess.Popen([sys.executable, "-m", "tmclsh", *_ports(sims), "-f", str(script)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=tmclsh_env(), cwd=str(ROOT))
+    try:
+        turning = [sim for sim, _ in sims]
+        deadline = time.monotonic() + 15
+        while not all(s.param(AXIS, 3) for s in turning):
+            assert time.monotonic() < deadline and proc.poll() is None
+            time.sleep(0.05)
+        proc.send_signal(sig)
+        out, err = proc.communicate(timeout=15)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == status, err
+    assert all(s.param(AXIS, 3) == 0 for s in turning)
+    for n, (_, path) in enumerate(sims, 1):
+        assert f"[{n} {path}] {why}: stopped motor" in err, err
+    assert re.search(r"^ +1 .* 2/2 .* stopped .*" + re.escape(why), out, re.M), out
+
+
+def test_ctrl_c_on_a_shared_line_stops_the_unit_running_and_starts_no_other(make_pty_sim,
+                                                                           tmp_path):
+    """One thread runs the three units of one line in turn: Ctrl-C while the first runs
+    stops its motor, and the run waits for that stop before it ends (the others never
+    start)."""
+    bus, path = make_pty_sim(target=SimBus([Simulator("TMCM-1311", a) for a in (1, 2, 3)]))
+    script = tmp_path / "turn.tmcl"
+    script.write_text("ROR 0, 500\n.repeat 300\nGAP 1, 0\n.sleep 0.1\n.end\n")
+    proc = subprocess.Popen([sys.executable, "-m", "tmclsh", "--port", path, "--address",
+                             "1-3", "--json", "-f", str(script)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=tmclsh_env(), cwd=str(ROOT))
+    first = bus.simulators[0]
+    try:
+        deadline = time.monotonic() + 15
+        while not first.param(AXIS, 3):
+            assert time.monotonic() < deadline and proc.poll() is None
+            time.sleep(0.05)
+        time.sleep(0.3)  # (in the loop: the main thread waits for the line's thread)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=15)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err
+    assert first.param(AXIS, 3) == 0
+    assert f"[1 {path} @1] interrupted: stopped motor 0" in err, err
+    summaries = {o["unit"]: o for o in _objects(out) if o.get("summary")}
+    assert [summaries[n]["result"] for n in (1, 2, 3)] == ["stopped", "not run", "not run"]
+    assert all(sim.param(AXIS, 3) == 0 for sim in bus.simulators[1:])
+
+
+# -- on a terminal: the live table ---------------------------------------------------------------
+
+def test_the_live_table_in_a_terminal(make_pty_sim, terminal, tmp_path):
+    from tmux import needs_tmux
+
+    if needs_tmux.args[0]:
+        pytest.skip("tmux is not installed")
+    slow = make_pty_sim("TMCM-1311")
+    fast = make_pty_sim("TMCM-351")
+    script = tmp_path / "line.tmcl"
+    script.write_text(".repeat 30\nGAP 1, 0\n.sleep (2 - ${unit}) * 0.05\n.end\n"
+                      ".expect GGP 66, 0 == 2\n")
+    term = terminal(width=150)
+    term.start("--port", slow[1], "--port", fast[1], "-f", str(script))
+    live = term.wait_for(re.compile(r"│ +1 │.*running.*\n.*│ +2 │.*(passed|failed)"), timeout=20)
+    assert re.search(r"│ +1 │ \S+ +│ TMCM-1311 │ 1311V111 │ +\d+/61 │", live), live
+    screen = term.wait("EXIT=", timeout=30)
+    assert "EXIT=1" in screen
+    assert "summary" in screen and "units" not in screen  # the live table made way for it
+    assert re.search(r"│ +1 │.*61/61 .*│ failed .*│ line.tmcl:5: expectation failed", screen)
+    assert re.search(r"│ +2 │.*│ TMCM-351 .*61/61 .*│ failed", screen)
+    # what a unit says on stderr is above the table, with the unit in front
+    assert f"[1 {slow[1]}] {script}:5: expectation failed" in screen.replace("\n", "")
+    # the results themselves are not on the screen: where to find them is
+    assert "ActualPosition =" not in screen and "results are not shown beside the table" in \
+        screen.replace("\n", "")
+
+
+def test_the_prompt_takes_one_module(make_pty_sim, terminal):
+    from tmux import needs_tmux
+
+    if needs_tmux.args[0]:
+        pytest.skip("tmux is not installed")
+    _, path = make_pty_sim()
+    term = terminal()
+    term.start("--port", path, "--address", "1,2")
+    screen = term.wait("EXIT=")
+    assert "EXIT=2" in screen
+    assert f"the prompt talks to one module; 2 units given ({path} @1, {path} @2)" in \
+        screen.replace("\n", "")
