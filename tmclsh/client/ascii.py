@@ -37,7 +37,7 @@ import logging
 import re
 import time
 import weakref
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from enum import Enum, IntEnum
 from typing import TYPE_CHECKING
 
@@ -259,6 +259,19 @@ def next_line(buf: bytes | bytearray) -> tuple[int, bytes | None]:
                 end += 1
             return end, bytes(buf[:i])
     return 0, None
+
+
+def take_lines(buf: bytearray) -> Iterator[tuple[bytes, bytes]]:
+    """The whole non-empty lines of a receive buffer, each ``(raw, line)``, each taken off
+    the buffer before it is given (a reader that stops early leaves the rest there)."""
+    while True:
+        used, text = next_line(buf)
+        if text is None:
+            return
+        raw = bytes(buf[:used])
+        del buf[:used]
+        if text:
+            yield raw, text
 
 
 def decode_line(buf: bytes | bytearray, opcode: int = 0) -> tuple[int, Reply | None]:
@@ -872,14 +885,7 @@ class AsciiLink:
             client.trace("tx", line, text, request=req)
         deadline = time.monotonic() + timeout
         while True:
-            while True:
-                used, got = next_line(buf)
-                if got is None:
-                    break
-                raw = bytes(buf[:used])
-                del buf[:used]
-                if not got:
-                    continue
+            for raw, got in take_lines(buf):
                 kind, reply = classify_line(got, line, _GGP)
                 if kind == LineKind.ECHO:
                     continue
@@ -942,14 +948,7 @@ class AsciiLink:
         other lines dropped (one that is no reply, after an answer: a damaged reply, possibly
         the real answer to the last request). What is left is a line not ended yet."""
         client, buf = self.client, self._buf
-        while True:
-            used, text = next_line(buf)
-            if text is None:
-                return
-            raw = bytes(buf[:used])
-            del buf[:used]
-            if not text:
-                continue
+        for raw, text in take_lines(buf):
             kind, reply = classify_line(text)
             if kind == LineKind.REPLY and reply is not None:
                 if reply.host == client.host_address and reply.module == client.address:
@@ -985,14 +984,7 @@ class AsciiLink:
         held: tuple[bytes, Reply] | None = None  # a reply that came before the echo
         held_until = 0.0
         while True:
-            while True:
-                used, text = next_line(buf)
-                if text is None:
-                    break
-                raw = bytes(buf[:used])
-                del buf[:used]
-                if not text:
-                    continue  # the LF of a CRLF, or an empty line
+            for raw, text in take_lines(buf):
                 kind, reply = classify_line(text, sent, opcode)
                 if kind == LineKind.ECHO:
                     self.stats["echo_lines"] += 1
