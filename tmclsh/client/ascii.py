@@ -896,11 +896,7 @@ class AsciiLink:
                             client.trace("rx", raw, reply)
                         ledger.took_marker(req, reply)
                         return reply
-                    if reply.status == Status.OK and pending.get(reply.value):
-                        pending[reply.value] -= 1  # an earlier marker's late answer
-                        self._drop(raw, "late answer to an earlier check")
-                        continue
-                    self._late(raw, reply)
+                    self._late(raw, reply)  # (an earlier check's, crossed off)
                     continue
                 self._drop(raw, "not a reply")
             left = deadline - time.monotonic()
