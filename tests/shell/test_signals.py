@@ -94,3 +94,25 @@ def test_killed_with_a_motor_turning_stops_it_and_says_so(served, tmp_path, sig,
     assert p.returncode == 128 + sig, err
     assert f"{words}: stopped motor 0 (MST; speed reads 0)" in err, err
     assert sim.param("axis", 3, 0) == 0
+
+
+def test_a_signal_wrapped_in_another_error_is_still_the_stop(monkeypatch, capsys):
+    """A SIGTERM that lands while a command's module is first imported comes out wrapped
+    (a dataclass being built raises RuntimeError from it; seen in CI: a traceback and exit 1
+    with the motor turning). It is still the signal: the one stop, its exit status."""
+    from tmclsh.cli.main import main
+    from tmclsh.shell import main as shell_main
+
+    def killed_mid_import(args, client, settings):
+        client.execute("ROR 0, 30000")
+        try:
+            raise shell_main.Terminated(signal.SIGTERM)
+        except shell_main.Terminated as exc:
+            raise RuntimeError("Error calling __set_name__ on 'Field' instance") from exc
+
+    monkeypatch.setattr(shell_main, "run_connected", killed_mid_import)
+    status = main(["--sim", "-c", "GAP 1, 0"])
+    err = capsys.readouterr().err
+    assert status == 128 + signal.SIGTERM, err
+    assert "terminated (SIGTERM): stopped motor 0 (MST; speed reads 0)" in err
+    assert "Traceback" not in err

@@ -37,7 +37,9 @@ def speed(sim) -> int:
 
 def run_program(term, sim, prog) -> None:
     term.run(f".upload {prog} --yes", "uploaded")
-    term.run(".run", "TMCM-1311:1")
+    term.line(".run")
+    # the prompt back after the .run line (a count of prompts races the one after .upload)
+    term.wait_for(re.compile(r"> \.run *\n(?:[^\n]*\n)*?TMCM-1311:1[^>\n]*>"))
     deadline = time.monotonic() + 5
     while speed(sim) == 0 and time.monotonic() < deadline:
         time.sleep(0.05)

@@ -95,13 +95,16 @@ def run_shell(args: argparse.Namespace) -> int:
         return EXIT_CONNECT
     try:
         return run_connected(args, client, settings)
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, Terminated, RuntimeError) as exc:
+        signalled = _signal_behind(exc)
+        if signalled is None:
+            raise
+        if isinstance(signalled, Terminated):  # SIGTERM (a CI job's timeout), SIGHUP
+            stop_on_interrupt(client, signalled.why)
+            return signalled.code
         print(file=sys.stderr)
         stop_on_interrupt(client)
         return EXIT_INTERRUPTED
-    except Terminated as exc:  # SIGTERM (a CI job's timeout), SIGHUP (the terminal went)
-        stop_on_interrupt(client, exc.why)
-        return exc.code
     except BrokenPipeError:
         # whoever read our output has gone (`tmclsh -c ... | head`): stop quietly, as other
         # command-line tools do, instead of `tmclsh: [Errno 32] Broken pipe`
@@ -109,6 +112,20 @@ def run_shell(args: argparse.Namespace) -> int:
         return EXIT_FAILED
     finally:
         client.close()  # leaves ASCII mode if tmclsh entered it, whatever happened
+
+
+def _signal_behind(exc: BaseException) -> BaseException | None:
+    """The Ctrl-C or SIGTERM/SIGHUP an exception stands for: itself, or the one it was
+    raised from. A signal that lands while a module is first imported (a command's feature
+    is imported when first used) comes out wrapped in another error (a dataclass being
+    built raises RuntimeError from it); it is still the user's interrupt, not a failure."""
+    seen = 0
+    while exc is not None and seen < 8:
+        if isinstance(exc, (KeyboardInterrupt, Terminated)):
+            return exc
+        exc = exc.__cause__ or exc.__context__
+        seen += 1
+    return None
 
 
 def stop_on_interrupt(client, why: str = "interrupted") -> None:
