@@ -264,3 +264,16 @@ def test_a_line_check_is_not_answered_by_an_earlier_checks_late_reply(pty_sim):
     finally:
         sim._send_reply = send
         c.close()
+
+
+def test_on_the_ascii_line_a_copy_of_a_line_checks_answer_may_be_taken_for_any_read():
+    """A line check's answer (GGP 76: the host address) names no command in ASCII: a copy of
+    it, arriving first, is taken for the next read (ActualSpeed = 2 on a stopped motor, seen
+    in a trial). On the binary link the check is a 136, which no other request takes."""
+    led = Ledger()
+    led.took_marker(Request(1, 136, 1, 0, 0), _reply(2, 136))
+    assert not led.may_be_a_copy(Request(1, 6, 3, 0, 0), _reply(2, 6))
+    led.by_command = False
+    led.took_marker(Request(1, GGP, 76, 0, 0), _reply(2))
+    assert led.may_be_a_copy(Request(1, 6, 3, 0, 0), _reply(2, 6))
+    assert not led.may_be_a_copy(Request(1, 6, 3, 0, 0), _reply(0, 6))

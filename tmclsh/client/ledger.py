@@ -183,7 +183,9 @@ class Ledger:
         if not self.recent:
             return False
         r, rep = self.recent[-1]
-        return self._same(rep, reply) and r is not None and r != req
+        # (a marker's reply, r None, names its command on the binary link, and no other
+        # request takes it; an ASCII reply names none: a copy of it is taken for anything)
+        return self._same(rep, reply) and (r is not None or not self.by_command) and r != req
 
     def took(self, req: Request, reply: Reply, *, copy: bool = False) -> None:
         """``reply`` was returned as ``req``'s answer (``copy``: ``may_be_a_copy`` said so)."""
