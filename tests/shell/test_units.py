@@ -314,3 +314,31 @@ def test_the_prompt_takes_one_module(make_pty_sim, terminal):
     assert "EXIT=2" in screen
     assert f"the prompt talks to one module; 2 units given ({path} @1, {path} @2)" in \
         screen.replace("\n", "")
+
+
+def test_ctrl_c_stops_the_motor_a_unit_that_had_ended_left_turning(make_pty_sim, tmp_path):
+    """A unit's script may end with its motor turning (said, "left running"); Ctrl-C while
+    the next unit runs stops every motor of the run, that one too (it was left turning)."""
+    bus, path = make_pty_sim(target=SimBus([Simulator("TMCM-1311", a) for a in (1, 2, 3)]))
+    script = tmp_path / "turn.tmcl"
+    script.write_text("ROR 0, 500\n.sleep 1.5\n")
+    proc = subprocess.Popen([sys.executable, "-m", "tmclsh", "--port", path, "--address",
+                             "1-3", "-f", str(script)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=tmclsh_env(), cwd=str(ROOT))
+    first, second = bus.simulators[:2]
+    try:
+        deadline = time.monotonic() + 20
+        while not second.param(AXIS, 3):
+            assert time.monotonic() < deadline and proc.poll() is None
+            time.sleep(0.05)
+        assert first.param(AXIS, 3)  # unit 1 ended with its motor turning
+        time.sleep(0.3)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err
+    assert [sim.param(AXIS, 3) for sim in bus.simulators] == [0, 0, 0], err
+    assert f"[1 {path} @1] interrupted: stopped motor 0" in err, err
+    assert f"[2 {path} @2] interrupted: stopped motor 0" in err, err

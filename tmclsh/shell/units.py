@@ -218,6 +218,9 @@ class _Line:
     current: Unit | None = None  # the unit running (a stop is raised in its thread)
     raised: bool = False  # a stop was raised in the thread and may not have landed yet
     lock: threading.Lock = field(default_factory=threading.Lock)
+    # the units whose run ended before any stop (a motor may still turn: a stop of the
+    # whole run reaches them too)
+    done: list[Unit] = field(default_factory=list)
 
 
 class Run:
@@ -248,7 +251,39 @@ class Run:
                     self._stop("interrupted", EXIT_INTERRUPTED)
                 except Terminated as exc:
                     self._stop(exc.why, exc.code)
+            if self.stopping is not None:
+                self._stop_finished()
         return self._status()
+
+    def _stop_finished(self) -> None:
+        """A stop of the run reaches the units that had already ended too: a script may end
+        with a motor turning ("left running"), and Ctrl-C stops every motor of the run."""
+        for line in self.lines:
+            for unit in line.done:
+                record = self.view.record(unit)
+                for _ in range(3):  # (Ctrl-C again while it stops: it stops all the same)
+                    try:
+                        self._stop_one(unit, record)
+                        break
+                    except KeyboardInterrupt:
+                        self.view.note("stopping every unit; the stops are under way")
+
+    def _stop_one(self, unit: Unit, record: Record) -> None:
+        from ..client.connect import connection_settings, open_client
+        from .main import stop_on_interrupt
+
+        with record.attached():
+            client = None
+            try:
+                client = open_client(connection_settings(unit.args(self.args)),
+                                     notice=record.notice)
+                stop_on_interrupt(client, self.stopping or "interrupted")
+            except (TmclError, OSError) as exc:
+                print(f"tmclsh: could not stop unit {unit.label}: {exc}", file=sys.stderr)
+                record.error(f"not stopped: {exc}")
+            finally:
+                if client is not None:
+                    client.close()
 
     def _wait(self) -> None:
         for line in self.lines:
@@ -323,6 +358,8 @@ class Run:
             finally:
                 if client is not None:
                     client.close()
+            if client is not None and not stopped:
+                line.done.append(unit)
             record.end(status if not stopped else self.stop_status, interrupted=self.stopping)
 
     def _leave(self, line: _Line) -> None:
