@@ -7,12 +7,14 @@ from __future__ import annotations
 
 import io
 import json
+import subprocess
 import sys
 import textwrap
 import time
 
 import pytest
 
+from conftest import ROOT, tmclsh_env
 from tmclsh.cli import main as cli
 from tmclsh.client.text import LineClient
 from tmclsh.base.errors import ValidationError
@@ -471,3 +473,25 @@ def test_progress_only_for_long_scripts_on_a_terminal(session, tmp_path):
     watch = list(script.Parser(session, "w", tmp_path).nodes(
         ["GAP 1, 0"] * 30 + [".watch GAP 1, 0 --count 1"]))
     assert script._progress(session, "w", watch) is None  # a live view inside: no bar
+
+
+def test_c_checks_a_commands_arguments_before_anything_is_sent(tmp_path):
+    """-c checks every line before the first is sent, shell commands' arguments included:
+    a watch that swallows the line after it (its ';' separates expressions) must not leave
+    the motor of the line before it turning (it did: ROR ran, then the watch failed)."""
+    from tmclsh.sim import Simulator
+    from tmclsh.sim.serve import serve_pty
+
+    sim = Simulator("TMCM-1311")
+    server = serve_pty(sim)
+    try:
+        p = subprocess.run([sys.executable, "-m", "tmclsh", "--port", server.path, "-c",
+                            "ROR 0, 3000; .watch pos=GAP 1, 0 --count 3; MST 0"],
+                           capture_output=True, text=True, timeout=60, env=tmclsh_env(),
+                           cwd=str(ROOT))
+        assert p.returncode == 2, p.stderr
+        assert "nothing was sent" in p.stderr and "ok:" not in p.stdout
+        assert sim.param("axis", 3, 0) == 0
+    finally:
+        server.close()
+        sim.close()

@@ -26,6 +26,12 @@ def refused_line(session: Session, lines: list[str]) -> tuple[str, TmclError] | 
         if line.unknown:
             return raw, ValidationError(unknown_command(line.word))
         if line.command is not None:
+            check = line.command.checker()  # (its arguments, as a script's are checked)
+            if check is not None:
+                try:
+                    check(session, line.args)
+                except TmclError as exc:
+                    return raw, exc
             if line.command.changes_link:
                 return None
             continue
