@@ -232,6 +232,21 @@ def test_an_image_for_another_module_is_one_clear_line(model_hex):
         module.close()
 
 
+def test_an_image_refused_by_a_module_in_its_bootloader_is_not_offered_again(model_hex):
+    """The module waits in its bootloader (an earlier update broke off): the way out names an
+    image for this module, not the refused one again (it said to run the same command)."""
+    module = BootModule(in_bootloader=True)
+    try:
+        image = model_hex("1640V211")
+        rc, out, err = finish(tmclsh("firmware", image, "--port", module.path, "--yes"))
+        assert rc == 1 and "not for this TMCM-1311" in err
+        (resume,) = [line for line in err.splitlines() if "to complete the update" in line]
+        assert image not in resume
+        assert "tmclsh firmware IMAGE.hex" in resume and "for the TMCM-1311" in resume
+    finally:
+        module.close()
+
+
 def test_no_answer_possible_needs_yes_and_nothing_is_sent(model_hex):
     module = BootModule()
     try:

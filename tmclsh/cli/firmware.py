@@ -172,8 +172,14 @@ def cmd_firmware(args: argparse.Namespace) -> int:
 def _stopped(report: Report, update, args: argparse.Namespace, what: str,
              exc: BaseException | None) -> None:
     """What stopped the update, where the module stands, and how to complete it."""
+    from ..ops.firmware import ImageRefused
+
     situation = update.situation()
     resume = resume_command(args) if update.resumable else None
+    if resume and isinstance(exc, ImageRefused):
+        # (the same image again would be refused again: the module needs its own)
+        resume = resume.replace(shlex.quote(args.file), "IMAGE.hex", 1)
+        resume += f"   (IMAGE.hex: an image for the {update.module})"
     if report.json:
         obj = {"error": what, "state": update.state, "situation": situation}
         if resume:
