@@ -176,7 +176,7 @@ def test_restore_onto_independent_responder_with_one_refusal(pty_client, respond
     other = LineClient(open_serial(responder.path), module="TMCM-1311", timeout=0.5, retries=0)
     try:
         s = shell(other, json_mode=True)
-        with pytest.raises(CloneError, match="1 of 3 parameters were not restored"):
+        with pytest.raises(CloneError, match="1 of 3 parameters was not restored"):
             s.run_line(f".restore {path} --yes")
         out = json_lines(capsys.readouterr().out)[0]
         assert [(w["name"], w["old"], w["new"]) for w in out["restored"]] == [

@@ -823,7 +823,9 @@ def _exit_status() -> list[str]:
     rows = [
         (EXIT_OK, "Success."),
         (EXIT_FAILED, "A TMCL or shell command failed (a rejected line, an error status from "
-                     "the module, a timeout), a script stopped at an error, asm or disasm "
+                     "the module, a timeout), an answer of -c or -f stayed in doubt (the line "
+                     "and a warning say which; the run goes on), a script stopped at an "
+                     "error, asm or disasm "
                      "failed, a file could not be written (the message names it and why), "
                      "scan found no module, or a module file that cannot be used (tmclsh "
                      "modules)."),
@@ -832,8 +834,8 @@ def _exit_status() -> list[str]:
                      "(each checked against the same LIMITS); or a script given with -f that "
                      "was not run (nothing was sent): it cannot be read, no such file, a "
                      "syntax error, a value out of range or another line the module would "
-                     "refuse; the same for the lines of -c (each TMCL line is checked before "
-                     "the first is sent) and for the file of a .diff or .restore in -c "
+                     "refuse; the same for the lines of -c (each TMCL line, and each shell "
+                     "command's arguments, checked before the first is sent) and for the file of a .diff or .restore in -c "
                      "(CONFIGURATION BACKUPS) when nothing else of the run was sent."),
         (EXIT_CONNECT, "No module to talk to: a run that is not interactive (-c, -f, standard "
                        "input not a terminal, scan) was given no connection and found no "

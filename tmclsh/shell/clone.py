@@ -864,7 +864,8 @@ def cmd_restore(session: Session, argtext: str) -> None:
     restored = [w for w in done if w.error is None]
     _report_restore(session, backup, restored, failed, link_changed, stored)
     if failed:
-        err = CloneError(f"{len(failed)} of {_count(len(done))} were not restored")
+        err = CloneError(f"{len(failed)} of {_count(len(done))} "
+                         f"{'was' if len(failed) == 1 else 'were'} not restored")
         err.shown = session.out.json  # type: ignore[attr-defined]  # the JSON object said it
         raise err
 

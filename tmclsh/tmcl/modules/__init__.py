@@ -531,7 +531,8 @@ def load(name: str) -> Module:
     module = _find_user(name) or _load(_file_name(name))
     if module is None:
         raise ValidationError(f"unknown module {name!r}; known: {', '.join(available())}, "
-                              "or generic (numbers only)")
+                              "or generic (numbers only); for a module PyTrinamic knows, "
+                              "make its file first: tmclsh modules import pytrinamic NAME")
     return module
 
 
