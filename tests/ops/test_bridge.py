@@ -173,7 +173,9 @@ def test_a_serial_program_reaches_a_can_module(capsys):
         server.close()
         sim.close()
     assert rc == [0]
-    objs = [json.loads(line) for line in capsys.readouterr().out.splitlines()[1:]]
+    lines = capsys.readouterr().out.splitlines()
+    assert f"127.0.0.1:{port_no}" in lines  # the endpoint, for a program to connect to
+    objs = [json.loads(line) for line in lines if line.startswith("{")]
     got = [o for o in objs if "frame" in o]
     assert [(o["frame"], o["can_id"]) for o in got] == [("request", 1), ("reply", 2)] * 2
     assert got[1]["version"] == "1311V111" and got[3]["param"] == "MaxPositioningSpeed"

@@ -180,7 +180,7 @@ def test_every_command_says_whether_it_owns_its_line():
 
 def test_watch_error_caused_by_a_semicolon_shows_how_to_split(run_tmclsh):
     out = run_tmclsh("--sim", "TMCM-1311", "-c", ".watch GAP 1, 0; MST 0")
-    assert out.returncode == 1
+    assert out.returncode == 2  # (checked before anything is sent, as a script's lines)
     assert "after ';'" in out.stderr and ".watch takes the rest of its line" in out.stderr
     assert "  .watch GAP 1, 0\n" in out.stderr and "  MST 0" in out.stderr
 
@@ -192,7 +192,7 @@ def test_semicolon_after_the_watch_options_shows_how_to_split(run_tmclsh, tmp_pa
     csv = tmp_path / "x.csv"
     opts = options.format(csv=csv)
     out = run_tmclsh("--sim", "TMCM-1311", "-c", f".watch pos=GAP 1, 0 {opts}; GAP 3, 0")
-    assert out.returncode == 1
+    assert out.returncode == 2
     assert "'GAP 3, 0' after ';' follows the watch's options" in out.stderr
     assert f"  .watch pos=GAP 1, 0 {opts}\n  GAP 3, 0" in out.stderr
     assert out.stdout == "" and [p for p in tmp_path.iterdir() if p.name != "cache"] == []  # nothing watched or written
