@@ -20,11 +20,12 @@ from ..base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK,
                            ConnectError, TmclError)
 
 
-def resume_command(args: argparse.Namespace) -> str:
-    """This run's command again: what completes an update that broke off."""
+def resume_command(args: argparse.Namespace, image: str | None = None) -> str:
+    """This run's command again (with ``image`` in place of its file): what completes an
+    update that broke off."""
     from ..base.canspec import FROM_PYTHON_CAN
 
-    words = ["tmclsh", "firmware", args.file]
+    words = ["tmclsh", "firmware", image or args.file]
     for opt, key in (("--port", "port"), ("--sim", "sim"), ("--profile", "profile"),
                      ("--baud", "baud"), ("--bitrate", "bitrate"), ("--can-id", "can_id"),
                      ("--reply-id", "reply_id"), ("-a", "address"),
@@ -175,11 +176,14 @@ def _stopped(report: Report, update, args: argparse.Namespace, what: str,
     from ..ops.firmware import ImageRefused
 
     situation = update.situation()
-    resume = resume_command(args) if update.resumable else None
-    if resume and isinstance(exc, ImageRefused):
-        # (the same image again would be refused again: the module needs its own)
-        resume = resume.replace(shlex.quote(args.file), "IMAGE.hex", 1)
-        resume += f"   (IMAGE.hex: an image for the {update.module})"
+    resume = None
+    if update.resumable:
+        if isinstance(exc, ImageRefused):
+            # (the same image again would be refused again: the module needs its own)
+            resume = (resume_command(args, "IMAGE.hex")
+                      + f"   (IMAGE.hex: an image for the {update.module})")
+        else:
+            resume = resume_command(args)
     if report.json:
         obj = {"error": what, "state": update.state, "situation": situation}
         if resume:

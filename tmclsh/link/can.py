@@ -89,14 +89,18 @@ class PythonCanTransport(CanTransport):
         except (can.CanError, OSError) as exc:
             raise self._lost("send", exc) from exc
 
-    def recv(self, timeout: float | None) -> tuple[int, bytes] | None:
+    def _next(self, timeout: float | None):
+        """The bus's next message (None after ``timeout``); a failing bus is a lost link."""
         bus, can = self._bus, self._can
         if bus is None or can is None:
             raise TransportError(f"CAN {self.url} is not open")
         try:
-            msg = bus.recv(timeout)
+            return bus.recv(timeout)
         except (can.CanError, OSError) as exc:
             raise self._lost("receive", exc) from exc
+
+    def recv(self, timeout: float | None) -> tuple[int, bytes] | None:
+        msg = self._next(timeout)
         if msg is None:
             return None
         if msg.is_error_frame or msg.is_remote_frame:
@@ -106,13 +110,7 @@ class PythonCanTransport(CanTransport):
     def listen(self, timeout: float | None) -> CanFrame | None:
         """The next frame on the bus, whatever its id or kind, with the bus's timestamp
         (a listener's receive: ``recv`` keeps what a client needs, this keeps everything)."""
-        bus, can = self._bus, self._can
-        if bus is None or can is None:
-            raise TransportError(f"CAN {self.url} is not open")
-        try:
-            msg = bus.recv(timeout)
-        except (can.CanError, OSError) as exc:
-            raise self._lost("receive", exc) from exc
+        msg = self._next(timeout)
         return None if msg is None else frame_of(msg)
 
     def describe(self) -> str:
