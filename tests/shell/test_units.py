@@ -243,6 +243,28 @@ def test_a_signal_stops_every_unit(make_pty_sim, tmp_path, sig, status, why):
     assert re.search(r"^ +1 .* 2/2 .* stopped .*" + re.escape(why), out, re.M), out
 
 
+def _interrupt_once_turning(script, path: str, sim, *extra: str,
+                            then=lambda: None, timeout: float = 20) -> tuple[int, str, str]:
+    """Run ``script`` on the units at 1-3 on ``path``; once ``sim``'s motor turns, ``then()``
+    and Ctrl-C (SIGINT); returns (status, stdout, stderr)."""
+    proc = subprocess.Popen([sys.executable, "-m", "tmclsh", "--port", path, "--address",
+                             "1-3", *extra, "-f", str(script)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=tmclsh_env(), cwd=str(ROOT))
+    try:
+        deadline = time.monotonic() + timeout
+        while not sim.param(AXIS, 3):
+            assert time.monotonic() < deadline and proc.poll() is None
+            time.sleep(0.05)
+        then()
+        time.sleep(0.3)  # (in the loop: the main thread waits for the line's thread)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=timeout)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    return proc.returncode, out, err
+
+
 def test_ctrl_c_on_a_shared_line_stops_the_unit_running_and_starts_no_other(make_pty_sim,
                                                                            tmp_path):
     """One thread runs the three units of one line in turn: Ctrl-C while the first runs
@@ -251,22 +273,9 @@ def test_ctrl_c_on_a_shared_line_stops_the_unit_running_and_starts_no_other(make
     bus, path = make_pty_sim(target=SimBus([Simulator("TMCM-1311", a) for a in (1, 2, 3)]))
     script = tmp_path / "turn.tmcl"
     script.write_text("ROR 0, 500\n.repeat 300\nGAP 1, 0\n.sleep 0.1\n.end\n")
-    proc = subprocess.Popen([sys.executable, "-m", "tmclsh", "--port", path, "--address",
-                             "1-3", "--json", "-f", str(script)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env=tmclsh_env(), cwd=str(ROOT))
     first = bus.simulators[0]
-    try:
-        deadline = time.monotonic() + 15
-        while not first.param(AXIS, 3):
-            assert time.monotonic() < deadline and proc.poll() is None
-            time.sleep(0.05)
-        time.sleep(0.3)  # (in the loop: the main thread waits for the line's thread)
-        proc.send_signal(signal.SIGINT)
-        out, err = proc.communicate(timeout=15)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    assert proc.returncode == 130, err
+    status, out, err = _interrupt_once_turning(script, path, first, "--json", timeout=15)
+    assert status == 130, err
     assert first.param(AXIS, 3) == 0
     assert f"[1 {path} @1] interrupted: stopped motor 0" in err, err
     summaries = {o["unit"]: o for o in _objects(out) if o.get("summary")}
@@ -322,23 +331,14 @@ def test_ctrl_c_stops_the_motor_a_unit_that_had_ended_left_turning(make_pty_sim,
     bus, path = make_pty_sim(target=SimBus([Simulator("TMCM-1311", a) for a in (1, 2, 3)]))
     script = tmp_path / "turn.tmcl"
     script.write_text("ROR 0, 500\n.sleep 1.5\n")
-    proc = subprocess.Popen([sys.executable, "-m", "tmclsh", "--port", path, "--address",
-                             "1-3", "-f", str(script)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env=tmclsh_env(), cwd=str(ROOT))
     first, second = bus.simulators[:2]
-    try:
-        deadline = time.monotonic() + 20
-        while not second.param(AXIS, 3):
-            assert time.monotonic() < deadline and proc.poll() is None
-            time.sleep(0.05)
+
+    def unit_1_left_it_turning() -> None:
         assert first.param(AXIS, 3)  # unit 1 ended with its motor turning
-        time.sleep(0.3)
-        proc.send_signal(signal.SIGINT)
-        out, err = proc.communicate(timeout=20)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    assert proc.returncode == 130, err
+
+    status, out, err = _interrupt_once_turning(script, path, second,
+                                               then=unit_1_left_it_turning)
+    assert status == 130, err
     assert [sim.param(AXIS, 3) for sim in bus.simulators] == [0, 0, 0], err
     assert f"[1 {path} @1] interrupted: stopped motor 0" in err, err
     assert f"[2 {path} @2] interrupted: stopped motor 0" in err, err
