@@ -8,7 +8,11 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 from conftest import ROOT, tmclsh_env
+
+pytestmark = pytest.mark.slow  # benchmark smoke runs: .ci/run runs them after the README's command
 
 
 def run_bench(*argv: str) -> tuple[list[dict], str]:

@@ -24,7 +24,7 @@ CI = (ROOT / ".ci" / "run").read_text(encoding="utf-8")
 
 INSTALL_AND_START = "python3 -m venv .venv && .venv/bin/pip install -e . && .venv/bin/tmclsh"
 INSTALL_AND_TEST = ("python3 -m venv .venv && .venv/bin/pip install -e '.[test]' && "
-                    ".venv/bin/python -m pytest")
+                    ".venv/bin/python -m pytest -n 4")
 
 
 def code_blocks(text: str = README) -> list[str]:

@@ -33,6 +33,7 @@ import os
 import random
 import time
 
+import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
@@ -45,6 +46,8 @@ from tmclsh.ops.program import UploadError
 from tmclsh.tmcl.frames import Control, Instruction, Request, Status, checksum
 from tmclsh.sim import Simulator
 from tmclsh.link.sim import SimTransport
+
+pytestmark = pytest.mark.slow  # a fuzzer: .ci/run runs it after the README's command
 
 MVP, SAP, GAP, SGP, GGP, WAIT = 4, 5, 6, 9, 10, 27
 HOST, ADDR = 2, 1

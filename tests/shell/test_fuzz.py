@@ -24,6 +24,8 @@ from hypothesis import strategies as st
 from tmclsh.tmcl import instructions as isa
 from tmclsh.tmcl.asm import assemble, disassemble, parse_line, read_image
 from tmclsh.client.text import LineClient
+
+pytestmark = pytest.mark.slow  # a fuzzer: .ci/run runs it after the README's command
 from tmclsh.base.errors import TmclError
 from tmclsh.tmcl.modules import load
 from tmclsh.tmcl.frames import Control
