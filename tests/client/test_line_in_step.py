@@ -50,7 +50,7 @@ def untouched(ascii_module, before: list[bytes]) -> None:
 RUNS = {
     "absent address": ["-a", "1", "--timeout", "0.3", "-c", "GAP 1, 0"],
     "absent address, --ascii": ["-a", "1", "--ascii", "--timeout", "0.3", "-c", "GAP 1, 0"],
-    "scan": ["scan", "--to", "8"],
+    "scan": ["scan", "--to", "8", "--timeout", "0.3"],  # (a busy machine: a long wait)
 }
 
 
@@ -72,7 +72,8 @@ def test_scan_ascii_pass_leaves_both_modules_as_they_were(run_tmclsh, line):
     """The ASCII pass finds the module at 3 (it steps out of ASCII mode for the 136 that
     names it, and back) and the one at 5 stays in step."""
     bus, binary, ascii_module = line
-    p = run_tmclsh("scan", "--ascii", "--port", bus.path, "--to", "8", "--json")
+    p = run_tmclsh("scan", "--ascii", "--port", bus.path, "--to", "8", "--timeout", "0.3",
+                   "--json")
     assert p.returncode == 0, p.stderr
     rows = {r["address"]: r for r in map(json.loads, p.stdout.splitlines())}
     assert sorted(rows) == [3, 5] and rows[3]["mode"] == "ascii"
