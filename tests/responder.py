@@ -12,7 +12,16 @@ reply id (the version string: its 8 characters).
 
 ``Responder`` is the line (framing, pty or TCP, what it heard); a test's module is a small
 subclass that says what it answers (``answer`` for a binary frame, ``line`` for an ASCII
-line). ``Module`` is a module with a value store for SAP/GAP/SGP/GGP.
+line). ``Module`` is a module with a value store for SAP/GAP/SGP/GGP. ``SharedLine`` puts
+several modules on one pty (an RS485 bus): each hears every byte the host sends.
+
+How a module finds frames in what it hears, the manuals do not say; they describe no receive
+timeout. By default a responder searches: a frame with a wrong checksum is no frame, and it
+looks one byte further. With ``nines=True`` it does what a module without a receive timeout
+and without a search does: every nine bytes from the first it heard are a frame, whatever
+they are; nine with a wrong checksum are answered status 1 (wrong checksum, §4.2.1) when
+they start with the module's address, else dropped (``bad`` holds them). Such a module
+stays out of step after any byte count that is not a multiple of nine.
 """
 
 from __future__ import annotations
@@ -26,7 +35,7 @@ import threading
 import time
 import tty
 
-OK, LOADED, INVALID_VALUE, INVALID_COMMAND = 100, 101, 4, 2
+OK, LOADED, INVALID_VALUE, INVALID_COMMAND, WRONG_CHECKSUM = 100, 101, 4, 2, 1
 
 
 def reply(command: int, value: int, status: int = OK, module: int = 1, host: int = 2) -> bytes:
@@ -55,7 +64,8 @@ class Responder:
     module hears noise, it does not answer it). ``log`` holds every frame (bytes) and ASCII
     line (bytes, without CR) it got. ``speed``: answer only while the pty is set to this
     termios speed (at another baud rate a module hears noise). ``delay``: seconds before
-    each answer.
+    each answer. ``nines``: frame in nines, without search (see the module docstring).
+    ``line``: a ``SharedLine`` this module sits on (it then opens nothing of its own).
 
     This one is a plain binary TMCM-1311 at address 1: the version string, 136 type 1, and
     status 100 with value 0 for everything else."""
@@ -65,11 +75,17 @@ class Responder:
     host = 2
 
     def __init__(self, *, tcp: bool = False, ascii: bool = False, speed: int | None = None,
-                 delay: float = 0.0):
-        self.ascii, self.speed, self.delay = ascii, speed, delay
+                 delay: float = 0.0, nines: bool = False, line: SharedLine | None = None):
+        self.ascii, self.speed, self.delay, self.nines = ascii, speed, delay, nines
         self.log: list[bytes] = []
+        self.bad: list[bytes] = []  # nines with a wrong checksum (nines=True)
+        self.held = b""  # what it heard of a frame or line not yet complete
         self._stop = threading.Event()
         self._conn: socket.socket | None = None
+        self._line = line
+        if line is not None:
+            line.modules.append(self)
+            return
         if tcp:
             self.server = socket.create_server(("127.0.0.1", 0))
             self.url = f"socket://127.0.0.1:{self.server.getsockname()[1]}"
@@ -101,7 +117,9 @@ class Responder:
     # -- the line ----------------------------------------------------------------------------
 
     def write(self, data: bytes) -> None:
-        if self._conn is not None:
+        if self._line is not None:
+            self._line.write(data)
+        elif self._conn is not None:
             self._conn.sendall(data)
         else:
             os.write(self.master, data)
@@ -126,7 +144,13 @@ class Responder:
             if len(buf) < 9:
                 break
             if not valid(buf[:9]):
-                buf = buf[1:]  # no frame starts here
+                if not self.nines:
+                    buf = buf[1:]  # no frame starts here
+                    continue
+                raw, buf = buf[:9], buf[9:]  # nine bytes, frame or not
+                self.bad.append(raw)
+                if raw[0] in self.addresses:
+                    self.send(reply(raw[1], 0, WRONG_CHECKSUM, raw[0], self.host))
                 continue
             raw, buf = buf[:9], buf[9:]
             self.log.append(raw)
@@ -136,7 +160,6 @@ class Responder:
         return buf
 
     def _serve_pty(self) -> None:
-        buf = b""
         while not self._stop.is_set():
             ready, _, _ = select.select([self.master], [], [], 0.02)
             if not ready:
@@ -147,7 +170,11 @@ class Responder:
                 return
             if self.speed is not None and termios.tcgetattr(self.master)[4] != self.speed:
                 continue  # framing errors at the wrong rate: nothing the module understands
-            buf = self._take(buf + data)
+            self.hear(data)
+
+    def hear(self, data: bytes) -> None:
+        """Bytes from the host, after what it holds of a frame or line."""
+        self.held = self._take(self.held + data)
 
     def _serve_tcp(self) -> None:
         while not self._stop.is_set():
@@ -156,7 +183,7 @@ class Responder:
             except OSError:
                 return
             with conn:
-                self._conn, buf = conn, b""
+                self._conn, self.held = conn, b""
                 while True:
                     try:
                         data = conn.recv(1024)
@@ -165,7 +192,7 @@ class Responder:
                     if not data:
                         break
                     try:
-                        buf = self._take(buf + data)
+                        self.hear(data)
                     except OSError:
                         break
                 self._conn = None
@@ -176,6 +203,8 @@ class Responder:
 
     def close(self) -> None:
         self._stop.set()
+        if self._line is not None:
+            return  # (the line closes itself)
         if hasattr(self, "server"):
             self.server.close()
             self._thread.join(2)
@@ -356,3 +385,23 @@ class TwoAtOneAddress(Responder):
             if one is not None:
                 replies.append(one)
         return b"".join(replies) or None
+
+
+class SharedLine(Responder):
+    """Several modules on one pty, as on an RS485 bus: every byte the host sends reaches each
+    module, which frames it in its own way (``nines``, ASCII mode); their answers go out on
+    the one line. Make it, then the modules with ``line=`` it: ``Module(address=5,
+    nines=True, line=bus)``."""
+
+    def __init__(self, **kw):
+        self.modules: list[Responder] = []
+        super().__init__(**kw)
+
+    def hear(self, data: bytes) -> None:
+        for module in list(self.modules):
+            module.hear(data)
+
+    def close(self) -> None:
+        for module in self.modules:
+            module.close()
+        super().close()

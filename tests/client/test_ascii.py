@@ -111,8 +111,9 @@ def test_ascii_commands_list():
 
 
 def test_command_bytes():
-    assert am.command_bytes(1, "GAP 1, 0") == b"AGAP 1, 0\r"
-    assert am.command_bytes(3, "BIN") == b"CBIN\r"
+    # spaces after the address character (the manuals allow them) make whole nine-byte blocks
+    assert am.command_bytes(1, "GAP 1, 0") == b"A        GAP 1, 0\r"
+    assert am.command_bytes(3, "BIN") == b"C    BIN\r"
     with pytest.raises(ValidationError):
         am.command_bytes(1, "GAP 1, 0\rAMST 0")
 
@@ -195,9 +196,21 @@ def test_probe_bytes_are_harmless(address):
     assert (req.address, req.opcode, req.type) == (address, 136, 1)
     # in ASCII mode: no CR/LF to end a line and no backspace/DEL to edit one mid-frame
     assert not set(frame[1:]) & set(b"\r\n\x08\x7f")
-    # in binary mode: the ASCII probe (CR, then the GGP 67 line) holds no valid frame
-    assert not am.has_valid_frame(am.ascii_probe_bytes(address))
+    # in binary mode: the ASCII probe (the end of line, then the GGP 67 line) holds no valid
+    # frame, and it is whole nine-byte blocks: a module that frames in nines stays in step
+    probe = am.ascii_probe_bytes(address)
+    assert not am.has_valid_frame(probe) and len(probe) % SERIAL_FRAME_LEN == 0
     assert am.ascii_probe_line(address)[0] == 0x40 + address
+    assert am.END_LINE.startswith(b"\r") and len(am.END_LINE) == SERIAL_FRAME_LEN
+
+
+@pytest.mark.parametrize("address", range(1, am.MAX_ADDRESS + 1))
+@pytest.mark.parametrize("text", ["GAP 1, 0", "BIN", "MVP ABS, 0, -2147483648", "SGP 67, 0, 33"])
+def test_every_command_line_is_whole_blocks_without_a_frame(address, text):
+    line = am.command_bytes(address, text)
+    assert len(line) % SERIAL_FRAME_LEN == 0 and not am.has_valid_frame(line)
+    assert line[0] == 0x40 + address and line.endswith(text.encode() + b"\r")
+    assert set(line[1:-len(text) - 1]) <= {0x20}  # only spaces added, after the address
 
 
 def test_has_valid_frame():
@@ -266,7 +279,7 @@ def test_transact_skips_echo(answer, chunk):
     client, _ = _link(t)
     reply = client.request(Request(1, 6, 1, 0, 0))
     assert reply == Reply(2, 1, 100, 6, -5000)
-    assert t.written == [b"AGAP 1, 0\r"]
+    assert t.written == [am.command_bytes(1, "GAP 1, 0")]
 
 
 def test_transact_drops_other_hosts_modules_and_stale_input():
@@ -279,7 +292,7 @@ def test_transact_drops_other_hosts_modules_and_stale_input():
     seen = []
     client.add_tracer(lambda d, raw, x: seen.append((d, str(x))))
     assert client.request(Request(1, 6, 1, 0, 0)).value == 3
-    assert t.written == [b"AGGP 76, 0\r", b"AGAP 1, 0\r"]
+    assert t.written == [am.command_bytes(1, "GGP 76, 0"), am.command_bytes(1, "GAP 1, 0")]
     drops = [x for d, x in seen if d == "drop"]
     assert drops == ["late reply to an earlier command", "reply for host 3 (C)",
                      "reply from address 3", "not a reply"]
@@ -290,7 +303,7 @@ def test_address_3_and_host_5():
     t = Canned([b"CGAP 1, 0\rEC 100 42\r"])
     client, _ = _link(t, address=3, host_address=5)
     assert client.request(Request(3, 6, 1, 0, 0)) == Reply(5, 3, 100, 6, 42)
-    assert t.written == [b"CGAP 1, 0\r"]
+    assert t.written == [am.command_bytes(3, "GAP 1, 0")]
 
 
 def test_error_status_is_a_reply():
@@ -331,7 +344,7 @@ def test_run_and_stop_program():
     assert link.stop_program().opcode == 128
     with pytest.raises(Exception, match="RUN: module answered status 6"):
         link.run()
-    assert t.written == [b"ARUN\r", b"ASTOP\r", b"AGGP 76, 0\r", b"ARUN\r"]
+    assert t.written == [am.command_bytes(1, text) for text in ("RUN", "STOP", "GGP 76, 0", "RUN")]
 
 
 def test_reply_part():

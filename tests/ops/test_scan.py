@@ -326,3 +326,13 @@ def test_baud_auto_over_tcp_scans_once(run_tmclsh, responders):
     assert [line.split()[:3] for line in p.stdout.splitlines()] == [["address", "2",
                                                                      "TMCM-1311"]]
     assert "bytes over TCP carry no baud rate): one pass" in p.stderr
+
+
+def test_the_ascii_pass_waits_for_the_padded_probe_its_echo_and_the_reply():
+    """The probe line is padded to whole nine-byte blocks (issue 31): the wait per address
+    in the ASCII pass counts its bytes as they are on the wire."""
+    from tmclsh.client.ascii import MAX_ADDRESS, ascii_probe_line
+    from tmclsh.ops.scan import ASCII_WIRE_BYTES
+
+    longest = max(len(ascii_probe_line(a)) for a in range(1, MAX_ADDRESS + 1))
+    assert ASCII_WIRE_BYTES >= 2 * longest + len(b"BA 100 33\r")

@@ -21,10 +21,18 @@ Mode detection (``probe_mode``) is built so that nothing harmful happens in eith
 binary 136 type 1 (read the version number, harmless) goes first: a binary module answers it;
 in ASCII mode its bytes are an unaddressed line with no CR in it (the don't-care value field
 is chosen so that neither the checksum nor any other byte is CR, LF, BS or DEL), which the
-following lone CR ends, and the line discipline drops. Only then an ASCII ``GGP 67, 0`` line
+following CR ends, and the line discipline drops. Only then an ASCII ``GGP 67, 0`` line
 asks for the echo mode. Should a binary module have missed the first probe, the ASCII bytes
 reach its binary framer: no nine-byte window of them carries a valid checksum (a unit test
 checks every address), so they are never taken for a command.
+
+Every binary module on the line hears the ASCII bytes too, and one that counts what it hears
+in nines, with no receive timeout (the manuals describe none), would be left out of step by
+any count that is not a multiple of nine: it would then answer nothing, not even at its own
+address. So every run of ASCII bytes tmclsh sends is a whole number of nine-byte blocks, none
+of them a valid frame: a command line gets spaces after its address character, which the
+manuals allow (``command_bytes``), and the CR that ends a line of binary bytes is sent as
+``END_LINE``, CR, seven spaces and CR (an empty, unaddressed line in ASCII mode).
 
 ``decode_line`` and ``classify_line`` are pure (bytes in, results out, no I/O), in the style
 of the frame decoder (tmcl/decoder.py); ``AsciiLink`` does the I/O through the client's transport, under
@@ -56,6 +64,9 @@ log = logging.getLogger(__name__)
 
 CR = b"\r"
 BS = b"\x08"
+#: ends a line of binary bytes on a module in ASCII mode; a nine-byte block (CR, seven spaces:
+#: an unaddressed line, CR) whose checksum is wrong, so binary modules stay in step
+END_LINE = CR + b" " * 7 + CR
 _EOL = b"\r\n"
 # bytes the ASCII line discipline acts on: a binary probe frame must not contain them
 _LINE_BYTES = frozenset(b"\r\n\x08\x7f")
@@ -208,10 +219,18 @@ def format_request(req: Request, module: Module | None = None) -> str:
 
 
 def command_bytes(address: int, text: str) -> bytes:
-    """``command_bytes(1, "GAP 1, 0") == b"AGAP 1, 0\\r"``."""
+    """The command line for ``text``, padded with spaces after the address character to a
+    whole number of nine-byte blocks (``command_bytes(1, "GAP 1, 0") == b"A        GAP 1,
+    0\\r"``, 18 bytes): a binary module on the same line that frames in nines stays in step
+    (see the module docstring). Of the paddings that do, the first in which no nine bytes
+    read as a valid frame is taken (the shortest if none: the text itself holds one)."""
     if any(c in text for c in "\r\n"):
         raise ValidationError("an ASCII command is one line")
-    return (address_char(address) + text).encode("latin-1") + CR
+    head, body = address_char(address).encode("latin-1"), text.encode("latin-1") + CR
+    need = -(len(head) + len(body)) % SERIAL_FRAME_LEN
+    lines = [head + b" " * pad + body
+             for pad in range(need, need + 4 * SERIAL_FRAME_LEN, SERIAL_FRAME_LEN)]
+    return next((line for line in lines if not has_valid_frame(line)), lines[0])
 
 
 # -- the reply parser (pure) -----------------------------------------------------------------
@@ -326,7 +345,7 @@ def classify_line(line: bytes, sent: bytes | None = None, opcode: int = 0
                 return LineKind.ECHO, None
             if norm.startswith(target):
                 # find where the echo ends in the raw line, then parse the rest
-                for cut in range(len(echo), len(line) + 1):
+                for cut in range(len(target), len(line) + 1):  # (spaces may be left out)
                     if _norm(line[:cut]) == target:
                         rest = parse_reply(line[cut:].lstrip(b" "), opcode)
                         if rest is not None:
@@ -357,19 +376,20 @@ _PROBE_TEXTS = (f"GGP {GP_ASCII_MODE}, {GP_BANK}", f"GGP {GP_ASCII_MODE},{GP_BAN
 
 
 def ascii_probe_line(address: int) -> bytes:
-    """The ASCII probe's command line, ``AGGP 67, 0`` + CR, spaced so that the CR before it
-    and the line form no binary frame with a valid checksum (for a few addresses the plain
-    spelling would)."""
+    """The ASCII probe's command line, ``AGGP 67, 0`` + CR, spaced so that the line ending
+    before it (``END_LINE``) and the line form no binary frame with a valid checksum (for a
+    few addresses the plain spelling would)."""
     for text in _PROBE_TEXTS:
         line = command_bytes(address, text)
-        if not has_valid_frame(CR + line):
+        if not has_valid_frame(END_LINE + line):
             return line
     raise AssertionError(f"no safe ASCII probe for address {address}")  # pragma: no cover
 
 
 def ascii_probe_bytes(address: int) -> bytes:
-    """Everything the ASCII probe sends: a CR ending whatever line is pending, then the line."""
-    return CR + ascii_probe_line(address)
+    """Everything the ASCII probe sends: ``END_LINE`` ending whatever line is pending, then
+    the line: whole nine-byte blocks (27 bytes)."""
+    return END_LINE + ascii_probe_line(address)
 
 
 def has_valid_frame(data: bytes) -> bool:
@@ -464,10 +484,11 @@ def probe_mode(client: Client, timeout: float | None = None) -> Probe:
 
 def end_line(client: Client, timeout: float) -> bytes:
     """End the unaddressed line that binary bytes (a probe, a scan's probes) started on a
-    module in ASCII mode, with a lone CR, and let any answer to it pass: what came is
+    module in ASCII mode, with ``END_LINE``, and let any answer to it pass: what came is
     returned (and traced as dropped). Callers hold ``client.lock``."""
     t = _transport(client)
-    t.write(CR)
+    t.write(END_LINE)
+    client.trace("tx", END_LINE, "end of line for a module in ASCII mode")
     late = _read_quiet(t, 0.05, timeout)
     if late:
         client.trace("drop", late, "after ending the probe line")

@@ -55,9 +55,10 @@ MARGIN_LOCAL = 0.004  # a pty, the in-process simulator: only scheduling
 MARGIN_USB = 0.006  # the module's own USB port (CDC), TCP: a USB frame or a network hop
 MARGIN_RS485 = 0.025  # a USB-RS485 adapter (FTDI latency timer up to 16 ms) + the module
 CAN_TIMEOUT = 0.05  # see the module docstring
-# what crosses the line for one address in the ASCII pass: the probe line (AGGP 67, 0 CR),
-# its echo (a module may echo every character) and the reply (BA 100 0 CR, a longer value)
-ASCII_WIRE_BYTES = 36
+# what crosses the line for one address in the ASCII pass: the probe line (AGGP 67, 0 CR,
+# padded with spaces to two nine-byte blocks: client/ascii.py), its echo (a module may echo
+# every character) and the reply (BA 100 0 CR, a longer value)
+ASCII_WIRE_BYTES = 2 * 2 * SERIAL_FRAME_LEN + 14
 SLOW_TIMEOUT = 0.25  # the second pass: addresses that answered late or garbled
 
 Progress = Callable[[int, "Found | None"], None]
