@@ -21,7 +21,7 @@ from tmclsh.link import open_serial
 from tmclsh.shell.render import Output
 from tmclsh.shell.session import Session
 
-from responder import PtyModule
+from responder import CanModule, PtyModule
 
 SGP, GGP = 9, 10
 # TMCM-1311 bank 0: baud rate, address, ASCII mode, CAN bit rate, reply id, id, telegram
@@ -228,3 +228,58 @@ def test_save_of_a_module_known_by_names_only_fails_unless_names_only(tmp_path, 
         assert "by name only" in p.stdout + p.stderr
     finally:
         module.close()
+
+
+# -- over CAN: the ids are followed, the bit rate is what cuts the link --------------------------
+
+class MovingOnCan(CanModule):
+    """A module on python-can's virtual bus that takes a new CAN id (GP 71) and reply id
+    (GP 70) at once, as the manual describes them."""
+
+    def respond(self, command: int, type_: int, motor: int, value: int):
+        ans = super().respond(command, type_, motor, value)
+        if command == SGP and motor == 0 and ans[0] == 100:
+            if type_ == 71:
+                self.can_id = value
+            elif type_ == 70:
+                self.reply_id = value
+        return ans
+
+
+def test_restore_with_link_over_can_says_reconnect_only_for_the_bit_rate(
+        backup_of_a, monkeypatch, tmp_path, capsys):
+    import can
+
+    from tmclsh.cli import main as cli
+
+    monkeypatch.setenv("TMCLSH_CONFIG", str(tmp_path / "none.toml"))
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path))
+    for var in ("TMCLSH_CAN", "TMCLSH_PORT", "TMCLSH_PROFILE", "CAN_INTERFACE", "CAN_CHANNEL",
+                "CAN_BITRATE"):
+        monkeypatch.delenv(var, raising=False)
+    b = MovingOnCan(can.Bus(interface="virtual", channel="clone-link"), can_id=11,
+                    reply_id=12, version="1311V111")
+    for number, value in LINK_B.items():
+        b.values[(number, 0, True)] = value
+    b.values[MAX_CURRENT] = 50
+    try:
+        capsys.readouterr()
+        rc = cli.main(["--can", "virtual:clone-link", "--can-id", "11", "--reply-id", "12",
+                       "-y", "-c", f".restore {backup_of_a}"])
+        said = "".join(capsys.readouterr())
+        assert rc == 0, said
+        assert "left alone" in said and (b.can_id, b.reply_id) == (11, 12)
+        assert b.values[MAX_CURRENT] == 100
+        b.values[MAX_CURRENT] = 50
+        rc = cli.main(["--can", "virtual:clone-link", "--can-id", "11", "--reply-id", "12",
+                       "-y", "-c", f".restore {backup_of_a} --with-link"])
+        said = "".join(capsys.readouterr())
+        assert rc == 0, said
+        assert (b.can_id, b.reply_id) == (1, 2)
+        assert "listens on CAN id 1 now" in said and "replies on CAN id 2 now" in said
+        reconnect = [ln for ln in said.splitlines() if "reconnect" in ln]
+        assert len(reconnect) == 1 and reconnect[0].startswith("CANBitRate is now 8"), said
+        writes = [t for c, t, m, v in b.got if c == SGP]
+        assert writes[-1] == 69  # the bit rate after everything else
+    finally:
+        b.close()

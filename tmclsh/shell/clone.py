@@ -8,8 +8,11 @@ parser, so a hand-written file is checked exactly as typed commands are, before 
 sent. Parameters are keyed by number and motor/bank; names are only needed to carry a file
 across module types (and for people), so a module without parameter data compares by number.
 
-Which parameters are state and which change the link is data (``state``/``link`` in the
-module files), never a list here.
+Which parameters are state and which make up the module's place on its line is data
+(``state``/``link``/``breaks`` in the module files), never a list here. That place (address,
+baud rate, CAN ids, ASCII start-up, ...) belongs to the module, not to the backup: a backup
+of the module at address 1 restored onto the one at address 5 must not move it onto the
+first one's address, so it is carried only when asked (--with-link).
 """
 
 from __future__ import annotations
@@ -325,7 +328,7 @@ def save_lines(session: Session, path: Path, with_program: Path | None
         head.append("// ASCII start-up): left alone unless --with-link asks for them.")
     head += [
         "// Compare with the module: .diff FILE   write what differs: .restore FILE [--store]",
-        "// Replay every line: tmclsh -f FILE --yes (bank 0 global parameters go to EEPROM)",
+        "// Replay it: tmclsh -f FILE --yes (bank 0 global parameters go to EEPROM)",
     ]
     if outside:
         head.append(f"// {len(outside)} value{'s' if len(outside) != 1 else ''} outside the manual's ranges, "
