@@ -39,6 +39,7 @@ from .commands import command, find, options_of
 from .lines import split_line
 
 if TYPE_CHECKING:
+    from ..client.core import Client
     from .session import Session
 
 CATEGORY = "configuration"
@@ -912,7 +913,7 @@ def _is_link(slot: Slot) -> bool:
     return slot.param is not None and slot.param.link
 
 
-def _cuts(client, param: Parameter | None) -> bool:
+def _cuts(client: Client, param: Parameter | None) -> bool:
     """Whether writing ``param`` may cut the link in use with nothing to follow (``breaks``
     in the module data): a CAN bit rate on CAN, the ASCII echo while talking ASCII. A CAN id
     written over a serial line cuts nothing here."""
