@@ -61,6 +61,7 @@ complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modu
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan firmware monitor bridge' -l timeout -x -d 'reply timeout in seconds (default 1; 0.001..60 s)'
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan firmware monitor bridge' -l retries -x -d 'retries of idempotent commands (default 2; 0..10)'
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan firmware monitor bridge' -l keep-going -d 'scripts: continue after an error'
+complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan firmware monitor bridge' -l with-link -d '-f of a configuration backup: write the module\'s link identity too (address, baud rate, CAN, ASCII start-up; left alone otherwise)'
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan firmware monitor bridge' -l log-dir -x -d 'several units: one transcript per unit in DIR (every frame sent and answered and every line shown, with times)'
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan firmware monitor bridge' -s y -l yes -d 'do not ask before EEPROM writes, factory reset or program download'
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan firmware monitor bridge' -l debug -d 'show tracebacks instead of one-line errors'

@@ -98,7 +98,10 @@ def test_save_change_diff_restore(pty_client, tmp_path, capsys, module, ascii):
     s.run_line(f".save {path}")
     saved = json_lines(capsys.readouterr().out)
     values = file_values(path, mod)
-    assert saved == [{"saved": len(values), "file": str(path)}]
+    link = {p.number for p in mod.global_params if p.link}
+    assert saved == [{"saved": len(values), "file": str(path),
+                      "link": sum(1 for k in values if k[0] == "global" and k[1] in link
+                                  and k[2] == 0)}]
     if mod.motors > 1:  # every motor's parameters are in the file
         assert {k[2] for k in values if k[0] == "axis"} == set(range(mod.motors))
     head = path.read_text(encoding="utf-8").splitlines()[:6]
@@ -367,8 +370,10 @@ def test_cli_exit_code_json_and_replay(make_pty_sim, run_tmclsh, tmp_path):
     path = tmp_path / "b.tmcl"
     r = run_tmclsh("--port", pty, "-m", "TMCM-351", "--json", "-c", f".save {path}")
     assert r.returncode == 0, r.stderr
-    assert json.loads(r.stdout) == {"saved": len(LINE.findall(path.read_text("utf-8"))),
-                                    "file": str(path)}
+    text = path.read_text("utf-8")
+    link_part = text.split("// -- link identity:")[1]  # the last section: its own place
+    assert json.loads(r.stdout) == {"saved": len(LINE.findall(text)),
+                                    "link": len(LINE.findall(link_part)), "file": str(path)}
     change = "SAP MaxCurrent, 2, 9\n"
     r = run_tmclsh("--port", pty, "-m", "TMCM-351", "-c", change + f".diff {path}")
     assert r.returncode == 0 and "MaxCurrent" in r.stdout, r.stderr
@@ -524,7 +529,7 @@ def test_save_program(pty_client, tmp_path, capsys):
     s.run_line(f".save {path} --program")
     out = json_lines(capsys.readouterr().out)[0]
     prog = tmp_path / "b.program.tmcl"
-    assert out == {"saved": out["saved"], "file": str(path), "program": str(prog),
+    assert out == {"saved": out["saved"], "link": 11, "file": str(path), "program": str(prog),
                    "instructions": 3}
     assert "// program: b.program.tmcl" in path.read_text(encoding="utf-8")
     text = prog.read_text(encoding="utf-8")
@@ -581,7 +586,8 @@ def test_bench_save_runs(tmp_path):
     assert result["save_s"] > 0 and result["raw_s"] > 0 and "ratio" in result
 
 
-def test_link_settings_are_written_last_and_not_read_back(pty_client, tmp_path, capsys):
+def test_link_settings_are_left_alone_or_written_last_and_followed(pty_client, tmp_path,
+                                                                    capsys):
     sim, client = pty_client("TMCM-1311", target=Recording("TMCM-1311"))
     s = shell(client, yes=True)
     path = tmp_path / "b.tmcl"
@@ -594,15 +600,23 @@ def test_link_settings_are_written_last_and_not_read_back(pty_client, tmp_path, 
     s.run_line("SAP MaxCurrent, 0, 44")
     sim.received.clear()
     capsys.readouterr()
-    s.run_line(f".restore {path}")
+    s.run_line(f".restore {path}")  # the address is the module's own: left alone
+    cap = capsys.readouterr()
+    writes = [tuple(f[:4]) for f in _frames(sim.received) if f[1] in (5, 9)]
+    assert writes == [(1, 5, 6, 0)]
+    assert "left alone" in cap.out and "SerialAddress = 5" in cap.out
+    s.run_line("SAP MaxCurrent, 0, 44")
+    sim.received.clear()
+    capsys.readouterr()
+    s.run_line(f".restore {path} --with-link")
     cap = capsys.readouterr()
     sent = [tuple(f[:4]) for f in _frames(sim.received)]
     writes = [f for f in sent if f[1] in (5, 9)]
     assert writes == [(1, 5, 6, 0), (1, 9, 66, 0)]  # the address last
-    assert sent[-1] == (1, 9, 66, 0)  # ... and not read back at the old address
-    assert "SerialAddress is now 5" in cap.err and "reconnect" in cap.err
-    client.address = 5
-    assert client.value("GAP MaxCurrent, 0") == 0
+    assert sent[-1] == (5, 10, 66, 0)  # ... and read back where the module answers now
+    said = cap.out + cap.err
+    assert "answers at address 5 now" in said and "reconnect" not in said
+    assert client.address == 5 and client.value("GAP MaxCurrent, 0") == 0
 
 
 def test_save_from_independent_responder(responder, tmp_path):

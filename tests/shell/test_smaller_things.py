@@ -99,13 +99,14 @@ def test_diff_across_module_types_never_compares_different_units(tmp_path, run_t
     assert p.returncode == 0, p.stderr
     module = PtyModule(version="1640V210")
     module.values[(4, 0, False)] = 3000  # rpm
+    module.values[(77, 0, True)] = 1  # AutoStartMode: a difference both modules can show
     try:
         p = run_tmclsh("--port", module.path, "-c", f".diff {backup} --force")
         assert p.returncode == 0, p.stderr
         said = p.stdout + p.stderr
-        assert ("MaxPositioningSpeed (motor 0, line 17): units differ: pps there, rpm on the "
+        assert ("MaxPositioningSpeed (motor 0, line 19): units differ: pps there, rpm on the "
                 "TMCM-1640") in said
-        assert "MaxCurrent (motor 0, line 19): units differ: 1/255 of module max. current " \
+        assert "MaxCurrent (motor 0, line 21): units differ: 1/255 of module max. current " \
                "there, mA on the TMCM-1640" in said
         rows = [ln for ln in p.stdout.splitlines() if "│" in ln]
         assert rows and not [r for r in rows if r.startswith(("MaxPositioningSpeed", "MaxCurr"))]

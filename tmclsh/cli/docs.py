@@ -954,9 +954,28 @@ Each {_b("SAP")}/{_b("SGP")} line is one writable configuration parameter of one
 bank, by name (a run of user variables by number), with its number, unit and meaning after
 {_b("//")}. Read\\-only values and motion state (parameters marked {_b("state")} in the module
 data: target and actual position and speed, counters, writes that start a move or an
-initialisation) are comments and are never written back. Parameters that change how the
-module is reached (marked {_b("link")}: address, baud rate, CAN ids, interface) are restored
-last and not read back.
+initialisation) are comments and are never written back.
+.PP
+A clone carries the configuration, not the module's place on its line. Its link identity
+(parameters marked {_b("link")} in the module data: serial address, baud rate, host address,
+CAN ids, bit rate and secondary address, ASCII start\\-up mode, telegram pause, serial
+heartbeat, interface selection) is written in a last section of its own,
+{_b("// -- link identity: where this module sits on its line")}. {_b(".restore")},
+{_b(".diff")} and a replayed backup ({_b("-f")} or {_b(".source")} of a file whose first line
+is the backup header) leave those lines alone and name them ("left alone, the module's own
+place on its line"), so a backup of the module at address 1 restored onto the one at address
+5 leaves it at address 5. {_b("--with-link")} ({_b(".restore")}, {_b(".diff")}, and
+{_b("tmclsh -f")} {_i("FILE")} {_b("--with-link")}) carries them: {_b(".restore")} asks naming
+each that changes, old and new, writes them after everything else and follows a new
+address, host address or CAN id as a typed {_b("SGP")} is ("the module answers at address N
+now"), then reads them back there. A setting that may cut the link in use with nothing to
+follow (marked {_b("breaks")}: the CAN bit rate on CAN, the ASCII echo while talking ASCII,
+the interface selection) is written last and not read back: reconnect with it.
+.PP
+A module known by parameter names only (a module file imported from PyTrinamic: no ranges,
+every parameter {_b("state")}) has nothing a backup could restore: {_b(".save")} names what it
+could not save and fails; {_b(".save")} {_i("FILE")} {_b("--names-only")} writes the values as
+comments all the same.
 .PP
 {_b(".diff")} and {_b(".restore")} accept any script of {_b("SAP")}/{_b("SGP")} lines (by
 name or number, or as raw command 5 or 9; several on a line split by {_b(";")} as in {_b("-f")}), checked
@@ -974,8 +993,8 @@ ranges are skipped and listed). A module without parameter data compares by numb
 {_b(".save")} over a file that exists asks first (naming the module and date its header
 gives); in {_b("-c")} and {_b("-f")} it is refused unless {_b("--yes")}.
 .PP
-Replaying the file with {_b("tmclsh -f")} {_i("FILE")} {_b("--yes")} writes every line
-(global parameters of bank 0 go straight to EEPROM, hence {_b("--yes")}); {_b(".restore")}
+Replaying the file with {_b("tmclsh -f")} {_i("FILE")} {_b("--yes")} writes every line but
+the link identity's (global parameters of bank 0 go straight to EEPROM, hence {_b("--yes")}); {_b(".restore")}
 writes only what differs. With {_b("--program")} the stored program is read back and written
 as source to {_i("FILE")}{_b(".program.tmcl")} (the suffix of {_i("FILE")} replaced), which
 {_b(".upload")} puts back; {_b(".restore")} does not upload it.

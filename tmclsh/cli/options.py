@@ -220,6 +220,9 @@ def add_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--retries", type=setting("retries"), metavar="N",
                    help=f"retries of idempotent commands (default 2; {_range('retries')})")
     g.add_argument("--keep-going", action="store_true", help="scripts: continue after an error")
+    g.add_argument("--with-link", action="store_true",
+                   help="-f of a configuration backup: write the module's link identity too "
+                        "(address, baud rate, CAN, ASCII start-up; left alone otherwise)")
     g.add_argument("--log-dir", metavar="DIR",
                    help="several units: one transcript per unit in DIR (every frame sent and "
                         "answered and every line shown, with times)")

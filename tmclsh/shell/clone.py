@@ -8,8 +8,11 @@ parser, so a hand-written file is checked exactly as typed commands are, before 
 sent. Parameters are keyed by number and motor/bank; names are only needed to carry a file
 across module types (and for people), so a module without parameter data compares by number.
 
-Which parameters are state and which change the link is data (``state``/``link`` in the
-module files), never a list here.
+Which parameters are state and which make up the module's place on its line is data
+(``state``/``link``/``breaks`` in the module files), never a list here. That place (address,
+baud rate, CAN ids, ASCII start-up, ...) belongs to the module, not to the backup: a backup
+of the module at address 1 restored onto the one at address 5 must not move it onto the
+first one's address, so it is carried only when asked (--with-link).
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ from ..tmcl import modules as moddb
 from ..tmcl import instructions as isa
 from ..base.errors import EXIT_USAGE, AsmError, RangeError, TmclError, ValidationError
 from ..tmcl.modules import Module, Parameter
+from ..client import reach
 from ..client.text import AS_TYPED
 from ..tmcl.frames import Control, Request, status_ok, status_text
 from . import options
@@ -35,6 +39,7 @@ from .commands import command, find, options_of
 from .lines import split_line
 
 if TYPE_CHECKING:
+    from ..client.core import Client
     from .session import Session
 
 CATEGORY = "configuration"
@@ -46,6 +51,16 @@ STORE = {kind: isa.parameter_command(kind, "store").opcode for kind in ("axis", 
 HEADER_LINES = 30  # the header keys are looked for in the file's first lines only
 _HEADER = re.compile(r"^\s*//\s*(module|firmware|address|connection|date|program)\s*:\s*(.*?)\s*$",
                      re.IGNORECASE)
+
+
+# the first line of every backup .save writes: how a replayed script is known as a backup
+BACKUP_MARK = "// tmclsh configuration backup of a"
+# the heading of the backup's last section: the module's link identity (``link`` in its data)
+LINK_SECTION = "// -- link identity: where this module sits on its line"
+LINK_SECTION_WHY = (
+    "// These belong to the module saved, not to its configuration: .restore, .diff and",
+    "// tmclsh -f leave them alone and say so; --with-link writes them too (the module moves).",
+)
 
 
 class CloneError(TmclError):
@@ -242,7 +257,8 @@ def save_lines(session: Session, path: Path, with_program: Path | None
     firmware = _firmware(session)
     slots = list(readable_slots(module))
     body: list[str] = []
-    saved = 0
+    saved = link_saved = 0
+    link_body: list[str] = []
     outside: list[str] = []
     last_section = None
     replies: list = [None] * len(slots)
@@ -283,11 +299,18 @@ def save_lines(session: Session, path: Path, with_program: Path | None
             comment = f"{comment} (outside the manual's range {beyond}: as the module held it)"
             outside.append(f"{name} = {_with_unit(value, p)} ({'motor' if kind == 'axis' else 'bank'} "
                            f"{index}; the manual says {beyond})")
-        body.append(f"{mark}{mn} {target}, {index}, {value}  // {comment}")
+        text = f"{mark}{mn} {target}, {index}, {value}  // {comment}"
+        if p.link:  # the module's place on its line: a section of its own, at the end
+            link_body.append(text)
+            link_saved += 1
+            continue
+        body.append(text)
         saved += 1
+    if link_body:
+        body += ["", LINK_SECTION, *LINK_SECTION_WHY, *link_body]
     when = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
     head = [
-        f"// tmclsh configuration backup of a {module.name} (.save); format: man tmclsh, CONFIGURATION BACKUPS",
+        f"{BACKUP_MARK} {module.name} (.save); format: man tmclsh, CONFIGURATION BACKUPS",
         f"// module: {module.name}",
         f"// firmware: {firmware}",
         f"// address: {c.address}",
@@ -299,14 +322,20 @@ def save_lines(session: Session, path: Path, with_program: Path | None
     head += [
         f"// {saved} SAP/SGP lines restore the configuration; commented values are read-only",
         "// or motion state and are never written back.",
+    ]
+    if link_saved:
+        head.append(f"// {link_saved} more, at the end, are this module's place on its line "
+                    "(address, baud rate, CAN,")
+        head.append("// ASCII start-up): left alone unless --with-link asks for them.")
+    head += [
         "// Compare with the module: .diff FILE   write what differs: .restore FILE [--store]",
-        "// Replay every line: tmclsh -f FILE --yes (bank 0 global parameters go to EEPROM)",
+        "// Replay it: tmclsh -f FILE --yes (bank 0 global parameters go to EEPROM)",
     ]
     if outside:
         head.append(f"// {len(outside)} value{'s' if len(outside) != 1 else ''} outside the manual's ranges, "
                     f"as the module held {'them' if len(outside) != 1 else 'it'}: the lines start with "
                     f"{AS_TYPED} (sent as written; the module decides)")
-    return "\n".join(head + body) + "\n", saved, outside
+    return "\n".join(head + body) + "\n", saved + link_saved, outside, link_saved
 
 
 def _program_path(path: Path) -> Path:
@@ -377,10 +406,35 @@ def _has_parameters_to_save(module: Module) -> None:
     raise ValidationError(why + "; nothing saved (the stored program: .dump FILE)")
 
 
+def _some(names: list[str], n: int = 6) -> str:
+    return ", ".join(names[:n]) + (f" and {len(names) - n} more" if len(names) > n else "")
+
+
+def _known_by_name_only(module: Module, names_only: bool) -> list[str]:
+    """The parameters whose data gives a name but neither a range nor whether they are
+    settings (a file imported from PyTrinamic marks them all ``state``): a backup can only
+    keep their values as comments. A backup that silently restores none of them would read
+    as a backup; it is refused, saying what could not be saved, unless --names-only asks
+    for the comments. -> the names (with --names-only)"""
+    names = sorted({p.name for kind, p, _, _ in readable_slots(module)
+                    if p.state and p.writable and p.min is None and p.max is None
+                    and not p.choices})
+    if not names or names_only:
+        return names
+    whence = f" ({module.origin})" if module.origin else ""
+    raise ValidationError(
+        f"the {module.name}'s data{whence} knows {_count(len(names))} by name only, without "
+        f"ranges or which are settings, so a backup could not restore them: "
+        f"{_some(names)}; nothing saved. Add --names-only to save their values as comments "
+        "(a record, not a restorable backup), or describe them in a module file "
+        "(--module-file FILE)")
+
+
 @command(".save")
 def cmd_save(session: Session, argtext: str) -> None:
     name, given = _args(argtext, ".save")
     _has_parameters_to_save(session.module)
+    names_only = _known_by_name_only(session.module, "--names-only" in given)
     path = Path(name).expanduser()
     if path.is_dir():
         raise CloneError(f"cannot write {path}: it is a directory")
@@ -389,7 +443,7 @@ def cmd_save(session: Session, argtext: str) -> None:
         raise ValidationError("--program reads program memory (134), which needs binary mode "
                               "(.mode binary)")
     _may_overwrite(session, [path, prog_path], "--yes" in given)  # before anything is read
-    text, saved, outside = save_lines(session, path, prog_path)
+    text, saved, outside, link_saved = save_lines(session, path, prog_path)
     instructions = None
     if prog_path is not None:
         prog_text, instructions = _program_text(session)
@@ -397,14 +451,21 @@ def cmd_save(session: Session, argtext: str) -> None:
     write_atomically(path, text)
     out = session.out
     if out.json:
-        obj: dict[str, object] = {"saved": saved, "file": str(path)}
+        obj: dict[str, object] = {"saved": saved, "link": link_saved, "file": str(path)}
+        if names_only:
+            obj["names_only"] = names_only
         if outside:
             obj["outside_range"] = outside
         if prog_path is not None:
             obj.update({"program": str(prog_path), "instructions": instructions})
         out.emit(obj)
         return
-    out.ok(f"saved {_count(saved)} of the {session.module.name} to {path}")
+    link = (f" ({link_saved} of them its link identity, which .restore and -f leave alone "
+            "unless --with-link)" if link_saved else "")
+    out.ok(f"saved {_count(saved)} of the {session.module.name} to {path}{link}")
+    if names_only:
+        out.warn(f"{_count(len(names_only))} known by name only, saved as comments, not "
+                 "restorable: " + _some(names_only))
     if outside:
         out.warn(f"{len(outside)} of them {'lie' if len(outside) != 1 else 'lies'} outside the "
                  "manual's ranges, as the module holds them (saved as they are, marked with "
@@ -425,6 +486,8 @@ class Backup:
     slots: dict[tuple[str, int, int], Slot] = field(default_factory=dict)
     state: list[Slot] = field(default_factory=list)  # state lines a hand-written file sets
     skipped: list[tuple[str, str]] = field(default_factory=list)  # (what, why), across modules
+    with_link: bool = False  # the module's link identity is compared and written too
+    left_alone: list[Slot] = field(default_factory=list)  # link identity, without --with-link
 
 
 def _header(lines: list[str]) -> dict[str, str]:
@@ -527,7 +590,8 @@ def _setters() -> list[isa.InstructionSpec]:
     return [isa.parameter_command(kind, "write") for kind in ("axis", "global")]
 
 
-def read_backup(session: Session, path: Path, *, force: bool, command: str) -> Backup:
+def read_backup(session: Session, path: Path, *, force: bool, command: str,
+                with_link: bool = False) -> Backup:
     """Parse and check every line of ``path`` against the live module (nothing is sent).
     Only comments, blank lines and SAP/SGP lines the module accepts may be in it: anything
     else is an error at FILE:LINE, so a typo never reads as "matches". ``command`` (.diff,
@@ -547,7 +611,7 @@ def read_backup(session: Session, path: Path, *, force: bool, command: str) -> B
         raise BackupFileError(f"{path}: backup longer than {files.MAX_LINES:,} lines; not read",
                               "unreadable")
     head = _header(lines)
-    backup = Backup(path, head.get("module"), head.get("program"))
+    backup = Backup(path, head.get("module"), head.get("program"), with_link=with_link)
     source = _source_module(backup.module_name, live)
     other = backup.module_name is not None and _norm(backup.module_name) != _norm(live.name)
     if other and not force and _has_data(live):
@@ -579,7 +643,7 @@ def read_backup(session: Session, path: Path, *, force: bool, command: str) -> B
         raise BackupFileError(f"{path}: {len(refused)} lines refused, nothing sent:\n"
                               + "\n".join(f"  {e}" for e in refused) + hint,
                               "range" if kinds == {"range"} else refused[0].kind)
-    if not (backup.slots or backup.state or backup.skipped):
+    if not (backup.slots or backup.state or backup.skipped or backup.left_alone):
         # an empty or truncated file must not read as "matches" either
         raise BackupFileError(f"{path} has no SAP/SGP lines: nothing to compare or restore "
                               "(a backup is written by .save)")
@@ -629,6 +693,9 @@ def _read_line(session: Session, backup: Backup, path: Path, number: int, text: 
     if slot.param is not None and slot.param.state:
         backup.state.append(slot)
         return
+    if slot.param is not None and slot.param.link and not backup.with_link:
+        backup.left_alone.append(slot)  # the module's own place on its line: not the file's
+        return
     backup.slots[slot.key] = slot  # a later line for the same parameter wins, as replayed
 
 
@@ -660,6 +727,59 @@ def _carry(backup: Backup, live: Module, p: Parameter, number: int, index: int, 
                                      f"({q.range_text}{' ' + q.unit if q.unit else ''})"))
         return None
     return Slot(p.kind, new_number, q.bank if p.kind == "global" else index, shown, q, line)
+
+
+def left_alone_text(slots: list[Slot]) -> str:
+    """``SerialAddress = 1, ...`` (the file's values): what a clone did not carry."""
+    return ", ".join(f"{s.name or s.label} = {s.value}" for s in slots)
+
+
+def replay_lines(session: Session, path: Path | str, lines: list[str]) -> list[str]:
+    """A script replayed with -f (or .source): when it is a configuration backup (.save's
+    first line), the lines that write the live module's link identity are left out, unless
+    --with-link was given, and what was left alone is said. The module being replayed onto
+    keeps its own address, baud rate, CAN and ASCII settings; another module's would move
+    it off its place on the line (or onto another module's). Line numbers stay as they were
+    (a line left out is blank). Lines that do not parse are kept: the script's own checks
+    report them at their line."""
+    if not lines or not lines[0].startswith(BACKUP_MARK) or session.with_link:
+        return lines
+    try:
+        module = session.module
+    except TmclError:
+        return lines
+    ascii_mode = session.client.mode == "ascii"
+    left: list[Slot] = []
+    kept = list(lines)
+    for number, raw in enumerate(lines, 1):
+        texts = split_line(raw)
+        rest = [t for t in texts if not _writes_link(t, module, ascii_mode, number, left)]
+        if len(rest) != len(texts):
+            kept[number - 1] = "; ".join(rest)
+    if left:
+        session.out.info(f"{path}: left alone, the module's own place on its line (write "
+                         "it with --with-link): " + left_alone_text(left))
+    return kept
+
+
+def _writes_link(text: str, module: Module, ascii_mode: bool, number: int,
+                 left: list[Slot]) -> bool:
+    """Whether one shell line writes a parameter of the module's link identity (noted)."""
+    if text.startswith(".") or "${" in text:
+        return False
+    try:
+        line = asm.parse_line(text.removeprefix(AS_TYPED), number)
+        if line.mnemonic is None:
+            return False
+        enc = asm.encode(line, module, direct=True, ascii=ascii_mode, as_typed=True)
+    except TmclError:
+        return False
+    p = enc.parameter
+    if p is None or not p.link or enc.spec is None or not enc.spec.sets_parameter:
+        return False
+    ins = enc.instruction
+    left.append(Slot(p.kind, ins.type, ins.motor, p.reading(ins.value), p, number))
+    return True
 
 
 def _unit_of(p: Parameter) -> str:
@@ -694,8 +814,12 @@ def compare(session: Session, backup: Backup) -> list[Difference]:
     return [d for _, d in sorted(diffs, key=lambda x: x[0])]
 
 
-def _notes(session: Session, backup: Backup, live: Module) -> None:
+def _notes(session: Session, backup: Backup, live: Module, command: str) -> None:
     out = session.out
+    if backup.left_alone:  # (under --json on stderr: stdout holds the differences)
+        verb = "compare" if command == ".diff" else "write"
+        out.info(f"left alone, the module's own place on its line ({verb} it with "
+                 f"--with-link): " + left_alone_text(backup.left_alone))
     if backup.skipped:
         out.info(f"{_count(len(backup.skipped))} of the {backup.module_name} backup skipped "
                  f"on the {live.name}:")
@@ -734,9 +858,9 @@ def _against_backup(session: Session, argtext: str, command: str):
     compared with it, and the notes on what was not compared. -> (backup, diffs, flags given)"""
     name, given = _args(argtext, command)
     backup = read_backup(session, _file(session, name), force="--force" in given,
-                         command=command)
+                         command=command, with_link="--with-link" in given)
     diffs = compare(session, backup)
-    _notes(session, backup, session.module)
+    _notes(session, backup, session.module, command)
     return backup, diffs, given
 
 
@@ -785,6 +909,24 @@ class Written:
         return obj
 
 
+def _is_link(slot: Slot) -> bool:
+    return slot.param is not None and slot.param.link
+
+
+def _cuts(client: Client, param: Parameter | None) -> bool:
+    """Whether writing ``param`` may cut the link in use with nothing to follow (``breaks``
+    in the module data): a CAN bit rate on CAN, the ASCII echo while talking ASCII. A CAN id
+    written over a serial line cuts nothing here."""
+    where = param.breaks if param is not None and param.link else None
+    return (where == "any" or (where == "can" and client.is_can)
+            or (where == "serial" and not client.is_can)
+            or (where == "ascii" and client.mode == "ascii"))
+
+
+def _left_alone_json(backup: Backup) -> list[dict[str, object]]:
+    return [{**s.to_json(), "saved": s.value} for s in backup.left_alone]
+
+
 @command(".restore")
 def cmd_restore(session: Session, argtext: str) -> None:
     backup, diffs, given = _against_backup(session, argtext, ".restore")
@@ -797,11 +939,14 @@ def cmd_restore(session: Session, argtext: str) -> None:
     if not diffs:
         if out.json:
             out.emit({"file": str(backup.path), "restored": [], "failed": [],
-                      "skipped": [w for w, _ in backup.skipped], "stored": 0})
+                      "skipped": [w for w, _ in backup.skipped], "stored": 0,
+                      "left_alone": _left_alone_json(backup)})
         else:
-            out.ok(f"nothing to restore: the {live.name} matches {backup.path.name}")
+            out.ok(f"nothing to restore: the {live.name} matches {backup.path.name}"
+                   + (" (its link identity aside)" if backup.left_alone else ""))
         return
     yes = "--yes" in given
+    address = c.address
     eeprom = sum(1 for d in diffs if d.slot.kind == "global" and d.slot.param is not None
                  and d.slot.param.storable and d.slot.index == 0)
     question = (f"write {_count(len(diffs))} from {backup.path.name} to the {live.name} at "
@@ -809,10 +954,16 @@ def cmd_restore(session: Session, argtext: str) -> None:
     if eeprom:
         question += (f" ({eeprom} global parameter{'' if eeprom == 1 else 's'} of bank 0 "
                      f"{'is' if eeprom == 1 else 'are'} written straight to EEPROM)")
+    moves = [d for d in diffs if _is_link(d.slot)]
+    if moves:  # --with-link: each change of the module's place on its line, old and new
+        question += (" Its place on the line changes: "
+                     + ", ".join(f"{d.slot.name or d.slot.label} ({d.slot.label}) {d.live} -> "
+                                 f"{d.slot.value}" for d in moves))
     if not yes:
         session.confirm(question)
-    # link settings last: after one of them the module may no longer hear this connection
-    order = sorted(diffs, key=lambda d: d.slot.param is not None and d.slot.param.link)
+    # link settings last, and last of all those that may cut this connection: after one of
+    # them the module may no longer hear it
+    order = sorted(diffs, key=lambda d: (_is_link(d.slot), _cuts(c, d.slot.param)))
     done: list[Written] = []
     link_changed: list[Written] = []
     with _Progress(session, "restoring", len(order)) as advance:
@@ -821,12 +972,18 @@ def cmd_restore(session: Session, argtext: str) -> None:
             w = Written(d)
             done.append(w)
             try:
-                reply = _request(session, WRITE[slot.kind], slot, slot.value)
+                if _is_link(slot) and slot.param.reaches is not None:  # type: ignore[union-attr]
+                    # followed as a typed SGP 66 is: the module is talked to where it is now
+                    req = Request.make(c.address, WRITE[slot.kind], slot.number, slot.index,
+                                       slot.value)
+                    reply = reach.write(c, req, slot.param)  # type: ignore[arg-type]
+                else:
+                    reply = _request(session, WRITE[slot.kind], slot, slot.value)
                 if reply is not None and not status_ok(reply.status):
                     w.error = (f"the module refused {slot.value}: status {reply.status} "
                                f"({status_text(reply.status)})")
                     continue
-                if slot.param is not None and slot.param.link:
+                if _cuts(c, slot.param):
                     link_changed.append(w)
                     continue
                 back = _request(session, READ[slot.kind], slot)
@@ -863,6 +1020,8 @@ def cmd_restore(session: Session, argtext: str) -> None:
     failed = [w for w in done if w.error is not None]
     restored = [w for w in done if w.error is None]
     _report_restore(session, backup, restored, failed, link_changed, stored)
+    if c.address != address:
+        out.info(f"the {live.name} answers at address {c.address} now (it was at {address})")
     if failed:
         err = CloneError(f"{len(failed)} of {_count(len(done))} "
                          f"{'was' if len(failed) == 1 else 'were'} not restored")
@@ -876,7 +1035,9 @@ def _report_restore(session: Session, backup: Backup, restored: list[Written],
     if out.json:
         out.emit({"file": str(backup.path), "restored": [w.to_json() for w in restored],
                   "failed": [w.to_json() for w in failed],
-                  "skipped": [w for w, _ in backup.skipped], "stored": stored})
+                  "skipped": [w for w, _ in backup.skipped], "stored": stored,
+                  "left_alone": _left_alone_json(backup),
+                  "address": session.client.address})
         return
     if restored:
         rows = [[w.diff.slot.name or "", w.diff.slot.label, w.diff.slot.where,

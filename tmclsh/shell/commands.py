@@ -613,7 +613,7 @@ COMMANDS: tuple[Command, ...] = (
                      'first (--yes). The start-up mode applies from the next power-up. A '
                      "module whose data has no ASCII interface (TMCM-1640) is refused before "
                      'anything is sent.')),
-    Command('.save', 'clone', '.save FILE [--program] [--yes]',
+    Command('.save', 'clone', '.save FILE [--program] [--names-only] [--yes]',
             "back up the module's configuration as a replayable script",
             complete='complete_file', category='configuration',
             details=('Reads every readable axis parameter of every motor and the global '
@@ -639,11 +639,24 @@ COMMANDS: tuple[Command, ...] = (
                      'A module read by number only (no parameter data, or -m generic) has no '
                      'list of parameters\n'
                      'to read: .save refuses it (a failure in -c/-f) and says what to do '
-                     'instead.'),
+                     'instead.\n'
+                     "The module's link identity (address, baud rate, host address, CAN ids "
+                     'and bit rate, ASCII\n'
+                     'start-up, telegram pause: what its data marks link) is written in a '
+                     'section of its own at the\n'
+                     'end: .restore, .diff and tmclsh -f leave those lines alone unless '
+                     '--with-link.\n'
+                     'A module known by parameter names only (imported from PyTrinamic: no '
+                     'ranges, not known which\n'
+                     'are settings) has nothing a backup could restore: .save refuses it '
+                     'and names what it could\n'
+                     'not save; --names-only writes the values as comments all the same.'),
             options=(Option("--program", help="also the stored program"),
+                     Option("--names-only", help="save a module known by names only, "
+                                                 "its values as comments"),
                      Option("--yes", help="replace a file that exists", aliases=("-y",))),
             expands=True),
-    Command('.diff', 'clone', '.diff FILE [--exit-code] [--force]',
+    Command('.diff', 'clone', '.diff FILE [--exit-code] [--force] [--with-link]',
             'compare the module with a backup (or any script of SAP/SGP lines)',
             complete='complete_file', category='configuration',
             details=("Reads FILE with the shell's own line parser and checks it whole "
@@ -664,12 +677,18 @@ COMMANDS: tuple[Command, ...] = (
                      'parameter whose unit differs\n'
                      '(pps there, rpm here) is skipped and named, never compared as a number '
                      '(JSON: {"skipped",\n'
-                     '"why"} for each parameter not compared).'),
+                     '"why"} for each parameter not compared).\n'
+                     "The module's link identity (address, baud rate, CAN, ASCII start-up) "
+                     'is not compared and\n'
+                     'is named as left alone (on stderr under --json); --with-link '
+                     'compares it too.'),
             options=(Option("--exit-code", help="exit 1 when there are differences"),
+                     Option("--with-link", help="compare the address, baud rate, CAN and "
+                                                "ASCII settings too"),
                      Option("--force", help="compare a backup of another module type",
                             aliases=("-f",))),
             expands=True),
-    Command('.restore', 'clone', '.restore FILE [--yes] [--store] [--force]',
+    Command('.restore', 'clone', '.restore FILE [--yes] [--store] [--force] [--with-link]',
             'write the parameters that differ from a backup back to the module',
             complete='complete_file', category='configuration',
             details=('Compares like .diff, then writes only the parameters that differ '
@@ -680,20 +699,32 @@ COMMANDS: tuple[Command, ...] = (
                      'the module refuses is\n'
                      'reported and the rest are still restored; the command then fails. '
                      '--store also stores the\n'
-                     'written parameters in EEPROM (STAP/STGP) after asking. Address, baud '
-                     'rate and other link\n'
-                     'settings are written last and not read back (reconnect with the new '
-                     'settings). A backup of\n'
+                     'written parameters in EEPROM (STAP/STGP) after asking. The '
+                     "module's link identity\n"
+                     '(address, baud rate, host address, CAN ids and bit rate, ASCII '
+                     'start-up, telegram pause) is\n'
+                     "the module's own: it is left alone and named, unless --with-link. "
+                     'Then the question names\n'
+                     'each of them that changes, old and new; they are written last, and '
+                     'a new address, host\n'
+                     'address or CAN id is followed as a typed SGP is (the module answers '
+                     'there now). A setting\n'
+                     'that may cut the link in use with nothing to follow (CAN bit rate on '
+                     'CAN) is not read back:\n'
+                     'reconnect with it. A backup of\n'
                      'another module type is refused unless --force: then only parameters '
                      'both modules have (by\n'
                      'name) are restored, and the skipped ones are listed. Motion state is '
                      'never written. JSON:\n'
                      '{"file", "restored": [...], "failed": [...], "skipped": [...], '
-                     '"stored": N}.'),
+                     '"stored": N,\n'
+                     '"left_alone": [...], "address": N}.'),
             options=(Option("--yes", help="do not ask", aliases=("-y",)),
                      Option("--store", help="also store in EEPROM (STAP/STGP)"),
                      Option("--force", help="restore a backup of another module type",
-                            aliases=("-f",))),
+                            aliases=("-f",)),
+                     Option("--with-link", help="write the address, baud rate, CAN and "
+                                                "ASCII settings too (the module moves)")),
             expands=True),
 )
 

@@ -175,6 +175,7 @@ def run_connected(args: argparse.Namespace, client, settings: dict, *,
     yes = bool(args.yes) or shell_settings.get("confirm") is False
     session = Session(client, out, interactive=interactive, yes=yes,
                       keep_going=bool(args.keep_going), settings=settings)
+    session.with_link = bool(getattr(args, "with_link", False))
     if client.module is not None and client.module.generic:
         out.warn(f"{client.module.type_name}: {client.module.NOTICE}")  # once, at the start
     client.on_notice = out.warn  # what the client does on its own (ends download mode)

@@ -299,7 +299,8 @@ class Parser:
             raise self.fail(number, f"{args} includes itself")
         if len(self.stack) > 16:
             raise self.fail(number, "includes nested more than 16 deep")
-        lines = read_lines(path, lambda msg, kind: self.fail(number, msg, kind))
+        lines = as_replayed(self.session, path,
+                            read_lines(path, lambda msg, kind: self.fail(number, msg, kind)))
         sub = Parser(self.session, str(path), path.parent, self.stack)
         sub.precheck = self.precheck
         sub.outer_blocks = self.outer_blocks + blocks + 1  # an include nests like a block
@@ -629,7 +630,7 @@ def run_file(session: Session, path: str) -> int:
             _run_nodes(runner, parser.nodes(_stdin_lines()))
         else:
             file = Path(path)
-            lines = read_lines(file, ScriptError)
+            lines = as_replayed(session, path, read_lines(file, ScriptError))
             nodes = list(Parser(session, path, file.resolve().parent).nodes(lines))
             bar = _progress(session, path, nodes)
             if bar is None and session.progress is not None:
@@ -744,6 +745,16 @@ def summary(session: Session, name: str, before: Counts, elapsed: float, status:
         session.out.print(text, style="tmcl.error" if status else "tmcl.note", markup=False)
 
 
+def as_replayed(session: Session, path: Path | str, lines: list[str]) -> list[str]:
+    """A configuration backup replayed leaves the module's link identity alone unless
+    --with-link (shell/clone.py: replay_lines); any other script is run as written."""
+    if not lines or not lines[0].startswith("//") or session.client is None:
+        return lines
+    from .clone import replay_lines
+
+    return replay_lines(session, path, lines)
+
+
 def run_source(session: Session, path: str) -> bool:
     """``.source`` typed at the prompt or in -c: run a file in this session.
 
@@ -751,7 +762,7 @@ def run_source(session: Session, path: str) -> bool:
     gets one ScriptError marked as shown.
     """
     file = resolve(path, None)  # relative to the current folder
-    lines = read_lines(file, ScriptError)
+    lines = as_replayed(session, file, read_lines(file, ScriptError))
     nodes = list(Parser(session, str(file), file.parent).nodes(lines))
     runner = Runner(session)
     _run_nodes(runner, nodes)

@@ -117,6 +117,8 @@ class Session:
         self.interactive = interactive
         self.yes = yes
         self.keep_going = keep_going
+        # a replayed configuration backup writes the module's link identity too (--with-link)
+        self.with_link = False
         if keep_going:  # a line that needs the module waits for a lost link to come back
             client.on_link_lost = self.relink
         self.settings = settings or {}

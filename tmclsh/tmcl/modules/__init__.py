@@ -53,9 +53,13 @@ class Parameter:
     # motion or module state (positions, speeds, counters) or a write that acts rather than
     # configures: a configuration backup (.save) keeps it as a comment, .restore never writes it
     state: bool = False
-    # writing it changes how the module is reached (address, baud rate, interface): a restore
-    # writes it last and cannot read it back over the same connection
+    # part of the module's place on its line (address, baud rate, host address, CAN ids and
+    # bit rate, ASCII start-up, telegram pause, ...): its link identity, which belongs to the
+    # module, not to a backup: a clone leaves it alone unless asked (--with-link)
     link: bool = False
+    # which link a write of it may cut until tmclsh reconnects ("can", "serial", "ascii",
+    # "any"): nothing to follow, so a restore writes it last and does not read it back there
+    breaks: str | None = None
     # writing it can start the motor (AP 2 TargetSpeed: in velocity mode the motor follows it)
     starts_motion: bool = False
     # writing it changes where the module answers (address, host_address, can_id, reply_id,
@@ -171,6 +175,7 @@ def _parameter(kind: str, raw: dict) -> Parameter:
         bits=_int_keys(raw.get("bits")), note=raw.get("note"), source=raw.get("source"),
         state=bool(raw.get("state", False)), link=bool(raw.get("link", False)),
         starts_motion=bool(raw.get("starts_motion", False)), reaches=raw.get("reaches"),
+        breaks=raw.get("breaks"),
         io=raw.get("io"))
 
 

@@ -18,6 +18,9 @@ ACCESS_CODES = ("R", "W", "RW", "RWE")
 IO_KINDS = ("digital_in", "analog_in", "digital_out")
 # what a link parameter sets: how the module is reached from now on (the client follows it)
 REACHES = ("address", "host_address", "can_id", "reply_id", "baud")
+# which link a write of a link parameter may cut until tmclsh reconnects (nothing to follow:
+# a CAN bit rate, the interface selection, the ASCII echo); "any" is every link
+BREAKS = ("can", "serial", "ascii", "any")
 
 # key -> (type, required); "ints"/"strs" are lists of those, "names" an int-keyed text table
 MODULE_KEYS: dict[str, tuple[str, bool]] = {
@@ -40,6 +43,7 @@ PARAMETER_KEYS: dict[str, tuple[str, bool]] = {
     "values": ("names", False), "bits": ("names", False), "note": ("str", False),
     "source": ("str", False), "state": ("bool", False), "link": ("bool", False),
     "starts_motion": ("bool", False), "reaches": ("str", False), "io": ("str", False),
+    "breaks": ("str", False),
 }
 IO_KEYS: dict[str, tuple[str, bool]] = {
     "bank": ("int", True), "port": ("int", True), "name": ("str", True), "kind": ("str", True),
@@ -74,6 +78,8 @@ MEANINGS = {
         "bank": "global parameters only: the bank (0..3)",
         "values": "names of values: { \"0\" = \"off\" }; bits names bits the same way",
         "io": "the analog input ([[io]] name) that reads the same quantity in the same unit",
+        "link": "true: part of the module's place on its line (address, baud rate, CAN, ASCII "
+                "start-up); a clone leaves it alone unless --with-link",
     },
     "io": {
         "bank": "0 digital inputs, 1 analog inputs, 2 digital outputs (as the manual numbers)",
@@ -215,6 +221,9 @@ def check(data: dict, lines: _Lines, path: str) -> None:
                 if entry.get("reaches") not in (None, *REACHES):
                     raise fail(table, i, "reaches", f"{what}: reaches must be one of "
                                f"{', '.join(REACHES)}, got {entry['reaches']!r}")
+                if entry.get("breaks") not in (None, *BREAKS):
+                    raise fail(table, i, "breaks", f"{what}: breaks must be one of "
+                               f"{', '.join(BREAKS)}, got {entry['breaks']!r}")
                 if entry["access"] not in ACCESS_CODES:
                     raise fail(table, i, "access", f"{what}: access must be one of "
                                f"{', '.join(ACCESS_CODES)}, got {entry['access']!r}")
@@ -283,5 +292,5 @@ def _rules() -> bytes:
         try:
             _RULES.append(Path(__file__).read_bytes())
         except OSError:
-            _RULES.append(repr((MODULE_KEYS, TABLES, ACCESS_CODES, IO_KINDS, REACHES)).encode())
+            _RULES.append(repr((MODULE_KEYS, TABLES, ACCESS_CODES, IO_KINDS, REACHES, BREAKS)).encode())
     return _RULES[0]
