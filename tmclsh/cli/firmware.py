@@ -166,15 +166,11 @@ def cmd_firmware(args: argparse.Namespace) -> int:
               "nothing to do")
     else:
         old = result.old_version or "its bootloader (an update that broke off)"
-        print(f"{_DONE.get(result.change or '', 'updated')} the {result.module} from {old} to "
-              f"{result.new_version}{_CHANGE.get(result.change or '', '')} ({result.written} "
-              f"bytes written in {result.seconds:.1f} s)")
+        down = result.change == "downgrade"
+        print(f"{'downgraded' if down else 'updated'} the {result.module} from {old} to "
+              f"{result.new_version}{', an older version' if down else ''} "
+              f"({result.written} bytes written in {result.seconds:.1f} s)")
     return EXIT_OK
-
-
-# how the last line names a downgrade and a rewrite of the same version
-_DONE = {"downgrade": "downgraded", "same version": "rewrote"}
-_CHANGE = {"downgrade": ", an older version", "same version": ", the same version"}
 
 
 def _stopped(report: Report, update, args: argparse.Namespace, what: str,
@@ -232,10 +228,9 @@ def _show_plan(report: Report, plan) -> None:
         print(f"would   complete the update: write {img.length} bytes (unless the memory "
               f"holds the image already), verify, start {plan.image_version.text}")
     else:
-        change = {"downgrade": f" (a DOWNGRADE: older than {plan.version})",
-                  "same version": f" (the same version as {plan.version})"}
+        down = f" (a DOWNGRADE: older than {plan.version})" if plan.change == "downgrade" else ""
         print(f"would   restart it into its bootloader, erase, write {img.length} bytes, "
-              f"verify, start {plan.image_version.text}{change.get(plan.change or '', '')}")
+              f"verify, start {plan.image_version.text}{down}")
 
 
 def _unwind_on_signals() -> dict:

@@ -728,17 +728,13 @@ class Update:
 
 
 def _verb(change: str | None) -> str:
-    """How the question names the update: a downgrade or a rewrite of the same version is
-    said to be one."""
-    return {DOWNGRADE: "downgrade", SAME: "rewrite"}.get(change or "", "update")
+    """How the question names the update: a downgrade is said to be one (the same version
+    never gets this far: it is nothing to do)."""
+    return "downgrade" if change == DOWNGRADE else "update"
 
 
 def _aside(change: str | None) -> str:
-    if change == DOWNGRADE:
-        return ", an OLDER version than it runs"
-    if change == SAME:
-        return ", the version it runs already"
-    return ""
+    return ", an OLDER version than it runs" if change == DOWNGRADE else ""
 
 
 def _module_name(type_number: int) -> str:
