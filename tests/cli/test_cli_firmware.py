@@ -287,6 +287,7 @@ def test_connect_to_a_module_in_its_bootloader_points_at_tmclsh_firmware(run_tmc
         assert p.returncode == 3
         assert ("is in its bootloader (it answers '1311B100'): a firmware update did not "
                 "complete") in p.stderr
+        assert "runs no firmware while it is there" in p.stderr  # (not "until one does")
         assert f"'tmclsh firmware FILE.hex --port {server.path}'" in p.stderr
         assert "unknown module type" not in p.stderr
     finally:

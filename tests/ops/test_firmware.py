@@ -472,3 +472,25 @@ def test_an_image_starting_in_the_bootloaders_area_is_refused_for_that():
         assert module.erases == 0
     finally:
         module.close()
+
+
+def test_a_refused_image_whose_restart_goes_unanswered_says_so():
+    """The bootloader refuses the image, 205 is sent to start the firmware again, and the
+    module does not answer: what is said is that, not that it waits in its bootloader."""
+    from bootmodel import SIZE
+
+    module = BootModule()
+    module.hooks[205] = lambda m: setattr(m, "silent", True)  # (205 is not acted on)
+    try:
+        update = Update({"port": module.path, "timeout": 0.2}, model_image(size=SIZE + 4))
+        with pytest.raises(ImageRefused, match="does not fit; refused, nothing was erased"):
+            update.run()
+        update.close()
+        assert module.commands()[-1] == 205 and module.erases == 0
+        assert update.state == "bootloader" and not update.sent_back
+        assert update.situation() == (
+            "nothing was erased: 205 was sent to start its firmware 1311V111 again, but it has "
+            "not answered at address 1 yet; its firmware 1311V111 is intact, and starts again "
+            "when the module is switched off and on")
+    finally:
+        module.close()

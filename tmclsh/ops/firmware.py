@@ -231,6 +231,7 @@ class Update:
         self.entered = False  # this run restarted it into its bootloader (242)
         self.found_in_bootloader = False
         self.sent_back = False  # interrupted before the erase: 205 took it back
+        self.start_unanswered = False  # 205 was sent to take it back; nothing answered yet
         self.memory: Memory | None = None  # the bootloader's (206), once asked
         self.data_memory: Memory | None = None  # the module data's, known before any restart
         self.written = 0
@@ -687,6 +688,8 @@ class Update:
         if parsed is not None and not parsed.bootloader:
             self.sent_back = True
             self.state = APPLICATION
+        else:
+            self.start_unanswered = True
 
     # -- after a failure ----------------------------------------------------------------
     def situation(self) -> str:
@@ -700,6 +703,10 @@ class Update:
             if self.found_in_bootloader:
                 return ("the module is in its bootloader, as it was found (nothing was erased "
                         "by this run)")
+            if self.start_unanswered:
+                return (f"nothing was erased: 205 was sent to start {fw} again, but it has not "
+                        f"answered at address {self.client.address} yet; {fw} is intact, and "
+                        "starts again when the module is switched off and on")
             return (f"the module is in its bootloader; nothing was erased ({fw} is intact, "
                     "and starts again when the module is switched off and on)")
         if self.state in (ERASING, WRITING):
