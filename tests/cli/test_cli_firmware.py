@@ -105,7 +105,8 @@ def test_interrupted_then_resumed(model_hex, phase, command, nth):
         again = [h[0] for h in module.heard[before:]]
         assert module.app_version == "1311V112" and not module.in_bootloader
         if phase == "after 205":
-            assert "runs 1311V112 already: nothing to do" in out
+            assert "runs 1311V112, the image's version, already: nothing to do" in out
+            assert (out + err).count("nothing to do") == 1  # said once
             assert 200 not in again
         elif phase == "before 208":
             assert 200 not in again and 201 not in again  # written already: only finished
@@ -186,7 +187,7 @@ def test_json_steps_then_the_result(make_pty_sim, sim_hex):
     assert writes[-1]["done"] == writes[-1]["total"] == 20000
     assert objs[-1] == {"updated": True, "module": "TMCM-1311", "old_version": "1311V111",
                         "new_version": "1311V112", "written": 20000,
-                        "seconds": objs[-1]["seconds"], "resumed": False}
+                        "seconds": objs[-1]["seconds"], "resumed": False, "change": "upgrade"}
 
 
 def test_check_says_what_would_happen_and_writes_nothing(model_hex):
@@ -213,7 +214,8 @@ def test_check_in_the_bootloader_says_whether_it_fits(model_hex):
         plan = json.loads(out.splitlines()[-1])
         assert plan["bootloader"] is True and plan["fits"] is False
         assert "does not fit" in plan["problem"]
-        assert plan["memory"] == {"page_size": 256, "start": START, "size": SIZE}
+        assert plan["memory"] == {"page_size": 256, "start": START, "size": SIZE,
+                                  "from": "bootloader"}
         assert set(module.commands()) <= {136, 206} and module.erases == 0
     finally:
         module.close()
@@ -285,6 +287,7 @@ def test_connect_to_a_module_in_its_bootloader_points_at_tmclsh_firmware(run_tmc
         assert p.returncode == 3
         assert ("is in its bootloader (it answers '1311B100'): a firmware update did not "
                 "complete") in p.stderr
+        assert "runs no firmware while it is there" in p.stderr  # (not "until one does")
         assert f"'tmclsh firmware FILE.hex --port {server.path}'" in p.stderr
         assert "unknown module type" not in p.stderr
     finally:
@@ -315,3 +318,104 @@ def test_242_has_help_and_is_not_sent_as_a_line(run_tmclsh):
     assert p.returncode == 1
     assert "242 (enter the bootloader" in p.stderr and "is not sent as a line" in p.stderr
     assert "'tmclsh firmware FILE.hex' updates the firmware" in p.stderr
+
+
+# -- images checked whole before anything is restarted (issue 31) ---------------------------
+
+def test_a_hex_file_without_its_end_record_is_refused_check_included(model_hex, tmp_path):
+    module = BootModule()
+    with open(model_hex(size=5000)) as f:
+        lines = f.read().splitlines()
+    cut = tmp_path / "cut.hex"
+    cut.write_text("\n".join(lines[:-1]) + "\n")  # cut at a record boundary
+    try:
+        for extra in ((), ("--check",)):
+            rc, out, err = finish(tmclsh("firmware", str(cut), "--port", module.path, "--yes",
+                                         *extra))
+            assert rc == 2 and out == "", err
+            assert (f"tmclsh: {cut}:{len(lines) - 1}: the file ends without its end-of-file "
+                    "record (:00000001FF)") in err
+            assert "nothing was sent" in err and "Traceback" not in err
+        assert module.heard == [] and not module.in_bootloader
+    finally:
+        module.close()
+
+
+def test_too_large_is_refused_and_the_firmware_started_again(model_hex, run_tmclsh):
+    """Only the bootloader knows the memory here: the refusal starts the firmware again, and
+    the next connect finds it running."""
+    from bootmodel import SIZE
+
+    module = BootModule()
+    try:
+        rc, out, err = finish(tmclsh("firmware", model_hex(size=SIZE + 16), "--port",
+                                     module.path, "--yes"))
+        assert rc == 1 and out == "", err
+        assert "does not fit; refused, nothing was erased" in err
+        assert "nothing was erased: the module runs its firmware 1311V111 again" in err
+        assert "to complete the update" not in err
+        assert not module.in_bootloader and module.erases == 0
+        p = run_tmclsh("--port", module.path, "-c", "GAP 1, 0")
+        assert p.returncode == 0 and "runs no firmware" not in p.stderr, p.stderr
+    finally:
+        module.close()
+
+
+def test_too_large_for_the_module_file_is_refused_before_the_restart(model_hex, tmp_path):
+    from importlib import resources
+
+    from bootmodel import SIZE
+
+    text = resources.files("tmclsh.tmcl.modules").joinpath("tmcm1311.toml").read_text()
+    data = tmp_path / "tmcm1311.toml"
+    data.write_text(text.replace("program_memory = 2048\n", "program_memory = 2048\n"
+                                 f"firmware_start = {START}\nfirmware_size = {SIZE}\n", 1))
+    module = BootModule()
+    image = model_hex(size=SIZE + 16)
+    try:
+        rc, out, err = finish(tmclsh("--module-file", str(data), "firmware", image, "--port",
+                                     module.path, "--check"))
+        assert rc == 1, err
+        assert ("fits    NO: application memory 131072 bytes at 0x00004000..0x00023FFF, from "
+                "its module data") in out
+        assert "would   refuse: " in out and "does not fit" in out
+        rc, out, err = finish(tmclsh("--module-file", str(data), "firmware", image, "--port",
+                                     module.path, "--yes"))
+        assert rc == 1 and "refused before anything was sent to change it" in err, err
+        assert "nothing was changed: the module runs its firmware 1311V111" in err
+        assert 242 not in module.commands() and not module.in_bootloader
+    finally:
+        module.close()
+
+
+def test_a_downgrade_is_named_in_the_report(model_hex):
+    module = BootModule()
+    try:
+        rc, out, err = finish(tmclsh("firmware", model_hex("1311V110"), "--port", module.path,
+                                     "--check"))
+        assert rc == 0 and "start 1311V110 (a DOWNGRADE: older than 1311V111)" in out, err
+        rc, out, err = finish(tmclsh("firmware", model_hex("1311V110"), "--port", module.path,
+                                     "--yes"))
+        assert rc == 0, err
+        assert out.startswith("downgraded the TMCM-1311 from 1311V111 to 1311V110, an older "
+                              "version (5000 bytes written")
+        rc, out, err = finish(tmclsh("firmware", model_hex("1311V111"), "--port", module.path,
+                                     "--yes", "--json"))
+        assert rc == 0, err
+        last = json.loads(out.splitlines()[-1])
+        assert last["change"] == "upgrade" and last["new_version"] == "1311V111"
+    finally:
+        module.close()
+
+
+def test_check_of_an_image_for_another_module_says_one_thing(model_hex):
+    module = BootModule()
+    try:
+        rc, out, err = finish(tmclsh("firmware", model_hex("1640V211"), "--port", module.path,
+                                     "--check"))
+        assert rc == 1, err
+        assert "image   " in out and ": 1640V211, 5000 bytes at 0x00004000" in out
+        assert "no version string" not in out
+        assert "would   refuse: " in out and "is firmware for the TMCM-1640" in out
+    finally:
+        module.close()

@@ -364,3 +364,133 @@ def test_a_usb_module_is_found_again_under_its_port_name(make_pty_sim, monkeypat
     _, result, _ = run({"port": path}, sim_image())
     assert reopened == ["bootloader", "starting"]
     assert result.new_version == "1311V112" == version_of(sim)
+
+
+# -- the image measured before the restart (issue 31) --------------------------------------
+
+@pytest.fixture
+def memory_in_module_data(tmp_path):
+    """A user's TMCM-1311 file that gives the application memory (the table bootloader's):
+    tmclsh knows it before the module is restarted."""
+    from importlib import resources
+
+    from bootmodel import SIZE
+    from tmclsh.tmcl import modules
+
+    text = resources.files("tmclsh.tmcl.modules").joinpath("tmcm1311.toml").read_text()
+    text = text.replace("program_memory = 2048\n", "program_memory = 2048\nfirmware_start = "
+                        f"0x{START:X}\nfirmware_size = 0x{SIZE:X}\n", 1)
+    path = tmp_path / "tmcm1311.toml"
+    path.write_text(text)
+    modules.add_file(path)
+    yield SIZE
+    modules.forget_user_files()
+
+
+def test_too_large_for_the_module_data_is_refused_before_the_restart(memory_in_module_data):
+    module = BootModule()
+    try:
+        image = model_image(size=memory_in_module_data + 256)
+        update = Update({"port": module.path, "timeout": 0.3}, image)
+        try:
+            plan = update.check()
+        finally:
+            update.close()
+        assert plan.fits is False and plan.memory.told_by == "module data"
+        assert "lies beyond the TMCM-1311's application memory" in plan.problem
+        update = Update({"port": module.path, "timeout": 0.3}, image)
+        with pytest.raises(ImageRefused, match=r"^1311V112.hex:\d+: this record lies beyond "
+                           r"the TMCM-1311's application memory \(131072 bytes at 0x00004000.."
+                           r"0x00023FFF, from its module data\).*does not fit; refused before "
+                           "anything was sent to change it"):
+            update.run()
+        update.close()
+        assert 242 not in module.commands() and not module.in_bootloader
+        assert update.state == APPLICATION and not update.sent_back
+        assert update.situation() == "nothing was changed: the module runs its firmware 1311V111"
+    finally:
+        module.close()
+
+
+def test_the_bootloaders_memory_decides_over_the_module_data(memory_in_module_data):
+    """The module data says the memory is larger than the bootloader answers: the bootloader
+    has the last word, and the firmware is started again."""
+    module = BootModule()
+    try:
+        import bootmodel
+
+        bootmodel_size = bootmodel.SIZE
+        bootmodel.SIZE = bootmodel_size // 2  # (this module's memory: half the data's)
+        try:
+            update = Update({"port": module.path, "timeout": 0.3},
+                            model_image(size=bootmodel_size // 2 + 256))
+            with pytest.raises(ImageRefused, match="does not fit; refused, nothing was erased"):
+                update.run()
+            update.close()
+        finally:
+            bootmodel.SIZE = bootmodel_size
+        assert 242 in module.commands() and module.erases == 0
+        assert not module.in_bootloader and update.sent_back
+    finally:
+        module.close()
+
+
+def test_a_downgrade_is_named_in_the_question_and_the_result():
+    module = BootModule()
+    questions: list[str] = []
+    try:
+        update, result, _ = run({"port": module.path}, model_image("1311V110"),
+                                confirm=lambda q: questions.append(q) or True)
+        assert questions[0].startswith("Downgrade the TMCM-1311 at address 1 on ")
+        assert "from 1311V111 to 1311V110, an OLDER version than it runs (" in questions[0]
+        assert result.change == "downgrade" and result.to_json()["change"] == "downgrade"
+        assert module.app_version == "1311V110"
+        _, result, _ = run({"port": module.path}, model_image("1311V112"),
+                           confirm=lambda q: questions.append(q) or True)
+        assert questions[1].startswith("Update the TMCM-1311") and "OLDER" not in questions[1]
+        assert result.change == "upgrade"
+    finally:
+        module.close()
+
+
+def test_an_image_starting_in_the_bootloaders_area_is_refused_for_that():
+    """Found in its bootloader, the memory is known first: an image that starts below it is
+    refused for where it starts, not for the version string it lacks."""
+    module = BootModule(in_bootloader=True)
+    try:
+        image = image_from_hex(hex_image("no string", 3000, 0x1000), "boot.hex")
+        update = Update({"port": module.path, "timeout": 0.1}, image)
+        try:
+            plan = update.check()
+        finally:
+            update.close()
+        assert plan.problem.startswith("boot.hex:2: the image starts at 0x00001000, below the "
+                                       "TMCM-1311's application memory")
+        assert "bootloader's own area" in plan.problem and "version string" not in plan.problem
+        with pytest.raises(ImageRefused, match="bootloader's own area"):
+            run({"port": module.path, "timeout": 0.1}, image)
+        assert module.erases == 0
+    finally:
+        module.close()
+
+
+def test_a_refused_image_whose_restart_goes_unanswered_says_so():
+    """The bootloader refuses the image, 205 is sent to start the firmware again, and the
+    module does not answer: what is said is that, not that it waits in its bootloader."""
+    from bootmodel import SIZE
+
+    module = BootModule()
+    module.hooks[205] = lambda m: setattr(m, "silent", True)  # (205 is not acted on)
+    try:
+        update = Update({"port": module.path, "timeout": 0.2}, model_image(size=SIZE + 4))
+        with pytest.raises(ImageRefused, match="does not fit; refused, nothing was erased"):
+            update.run()
+        update.close()
+        assert module.commands()[-1] == 205 and module.erases == 0
+        assert update.state == "bootloader" and not update.sent_back
+        assert update.situation() == (
+            "nothing was erased: 205 was sent to start its firmware 1311V111 again, but it has "
+            "not answered at address 1 yet; its firmware 1311V111 is intact, and starts again "
+            "when the module is switched off and on")
+    finally:
+        module.close()

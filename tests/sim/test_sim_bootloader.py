@@ -170,3 +170,32 @@ def test_pytrinamic_tmclfwupload_updates_tmclsh_sim_pty(tmp_path):
     finally:
         sim.terminate()
         sim.wait(10)
+
+
+def test_the_memory_a_module_file_gives_is_the_one_the_bootloader_answers(tmp_path):
+    """firmware_start/firmware_size in a module file: the simulated bootloader answers them
+    (206), so what tmclsh checks before a restart and what the bootloader says agree."""
+    from importlib import resources
+
+    from tmclsh.base.errors import ValidationError
+    from tmclsh.tmcl import modules
+
+    text = resources.files("tmclsh.tmcl.modules").joinpath("tmcm1311.toml").read_text()
+    path = tmp_path / "tmcm1311.toml"
+    path.write_text(text.replace("program_memory = 2048\n", "program_memory = 2048\n"
+                                 "firmware_start = 0x10000\nfirmware_size = 0x4000\n", 1))
+    modules.add_file(path)
+    try:
+        sim = Simulator("TMCM-1311")
+        try:
+            assert ask(sim, 1, 242, *KEY) == b""
+            answers = [value(ask(sim, 1, 206, t))[1] for t in (0, 1, 2)]
+            assert answers == [P, 0x10000, 0x4000]
+        finally:
+            sim.close()
+        path.write_text(text.replace("program_memory = 2048\n", "program_memory = 2048\n"
+                                     "firmware_size = 0x4000\n", 1))
+        with pytest.raises(ValidationError, match="firmware_size needs firmware_start"):
+            modules.read_file(path)
+    finally:
+        modules.forget_user_files()

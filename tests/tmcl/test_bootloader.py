@@ -38,7 +38,9 @@ def test_bootloader_strings():
     assert bl.bootloader_string(351, 103) == "351B1.03"
 
 
-def test_an_image_with_gaps():
+def test_an_image_with_a_gap_is_refused_naming_the_record_after_it():
+    """A hole between records inside the image: the file does not say what belongs there,
+    and the bootloader's checksum would cover it."""
     from intelhex import IntelHex
 
     ih = IntelHex()
@@ -46,9 +48,49 @@ def test_an_image_with_gaps():
     ih.puts(0x8010, b"\x01\x02\x03")
     out = io.StringIO()
     ih.write_hex_file(out)
-    img = bl.image_from_hex(out.getvalue(), "gaps.hex")
+    lines = out.getvalue().splitlines()
+    after = next(n for n, line in enumerate(lines, 1) if line.startswith(":038010"))
+    with pytest.raises(bl.ImageError, match=rf"^gaps.hex:{after}: a gap before this record: "
+                       r"the file gives nothing for 0x0000800C..0x0000800F \(4 bytes\)"):
+        bl.image_from_hex(out.getvalue(), "gaps.hex")
+
+
+def test_a_hex_file_cut_at_a_record_boundary_is_refused():
+    """Every record it holds is valid; only the end-of-file record is missing (intelhex
+    reads such a file without a word)."""
+    lines = hex_image("1311V112", 200, 0x4000).splitlines()
+    assert lines[-1] == ":00000001FF"
+    bl.image_from_hex("\n".join(lines) + "\n", "whole.hex")  # (the whole file is taken)
+    cut = "\n".join(lines[:-3]) + "\n\n"
+    with pytest.raises(bl.ImageError, match=rf"^cut.hex:{len(lines) - 3}: the file ends "
+                       r"without its end-of-file record \(:00000001FF\): it is cut short"):
+        bl.image_from_hex(cut, "cut.hex")
+
+
+def test_overlapping_records_are_refused_naming_the_line():
+    lines = hex_image("1311V112", 64, 0x4000).splitlines()  # line 1: the upper address
+    again = lines[:4] + [lines[2]] + lines[4:]  # the record of line 3 once more, as line 5
+    with pytest.raises(bl.ImageError, match=r"^x.hex:5: not a valid Intel HEX file: the "
+                       r"record gives 0x00004010 again \(it overlaps an earlier record\)"):
+        bl.image_from_hex("\n".join(again) + "\n", "x.hex")
+
+
+def test_an_image_knows_the_line_of_each_address():
+    img = bl.image_from_hex(hex_image("1311V112", 64, 0x4000), "x.hex")
+    assert [img.line_at(a) for a in (0x4000, 0x400F, 0x4010, 0x403F, 0x4040)] == [
+        2, 2, 3, 5, None]
+    assert img.where(0x4020) == "x.hex:4" and img.where(0x9999) == "x.hex"
+
+
+def test_an_image_ending_mid_word_is_filled_and_paged():
+    from intelhex import IntelHex
+
+    ih = IntelHex()
+    ih.puts(0x8000, b"abcd1311V112\0\0\0\0\x01\x02\x03")
+    out = io.StringIO()
+    ih.write_hex_file(out)
+    img = bl.image_from_hex(out.getvalue(), "short.hex")
     assert (img.start, img.length, img.end) == (0x8000, 19, 0x8013)
-    assert img.data == b"abcd1311V112\0\0\0\0\x01\x02\x03"  # the gap filled with 0x00
     assert img.checksum == sum(img.data)
     assert [v.text for v in img.versions] == ["1311V112"]
     assert img.version_for(1311).number == 112 and img.version_for(1640) is None
@@ -68,7 +110,7 @@ def test_version_strings_in_an_image():
 @pytest.mark.parametrize("text, why", [
     (":0000000", "not a valid Intel HEX file"),
     (":00000001FF\n", "holds no data"),
-    (":020000000102FA\n", "invalid checksum"),
+    (":020000000102FA\n", "x.hex:1: .*checksum is wrong"),
     (":0100000001FE\n:01000000FF0000\n", "not a valid Intel HEX file"),
 ])
 def test_bad_hex_files(text, why):

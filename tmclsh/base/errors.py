@@ -70,7 +70,7 @@ class ConnectError(TmclError):
 
 class InBootloaderError(ConnectError):
     """The module answers from its bootloader (136 says ``1311B100``): a firmware update did
-    not complete, and it runs no firmware until one does (``tmclsh firmware``)."""
+    not complete, and it runs no firmware while it is there (``tmclsh firmware``)."""
 
     def __init__(self, message: str, version: str = ""):
         self.version = version

@@ -162,10 +162,13 @@ def cmd_firmware(args: argparse.Namespace) -> int:
     if as_json:
         report.emit(result.to_json())
     elif result.nothing_to_do:
-        print(f"the {result.module} runs {result.new_version} already: nothing to do")
+        print(f"the {result.module} runs {result.new_version}, the image's version, already: "
+              "nothing to do")
     else:
         old = result.old_version or "its bootloader (an update that broke off)"
-        print(f"updated the {result.module} from {old} to {result.new_version} "
+        down = result.change == "downgrade"
+        print(f"{'downgraded' if down else 'updated'} the {result.module} from {old} to "
+              f"{result.new_version}{', an older version' if down else ''} "
               f"({result.written} bytes written in {result.seconds:.1f} s)")
     return EXIT_OK
 
@@ -203,27 +206,31 @@ def _show_plan(report: Report, plan) -> None:
     img = plan.image
     now = "in its bootloader" if plan.in_bootloader else "running its firmware"
     print(f"module  {plan.module}, {now}: {plan.version}")
-    name = plan.image_version.text if plan.image_version else "no version string for it"
+    # (what the image carries, whoever it is for: the "would" line says what that means)
+    name = plan.image_version.text if plan.image_version else \
+        ", ".join(v.text for v in img.versions) or "no firmware version string"
     print(f"image   {img.name}: {name}, {img.length} bytes at 0x{img.start:08X}, checksum "
           f"0x{img.checksum:08X}")
     if plan.memory is not None:
         m = plan.memory
         fits = "yes" if plan.fits else "NO"
-        print(f"fits    {fits}: application memory {m.size} bytes at 0x{m.start:08X}, pages "
-              f"of {m.page_size} bytes")
+        pages = f", pages of {m.page_size} bytes" if m.page_size else ""
+        print(f"fits    {fits}: application memory {m.describe()}{pages}")
     else:
         print("fits    asked of the bootloader before anything is erased (--check does not "
-              "restart the module to ask)")
+              "restart the module to ask; an image that does not fit is refused there and "
+              "the firmware started again)")
     if plan.problem is not None:
         print(f"would   refuse: {plan.problem}")
     elif plan.nothing_to_do:
-        print(f"would   do nothing: it runs {plan.version} already")
+        print(f"would   do nothing: it runs {plan.version}, the image's version, already")
     elif plan.in_bootloader:
         print(f"would   complete the update: write {img.length} bytes (unless the memory "
               f"holds the image already), verify, start {plan.image_version.text}")
     else:
+        down = f" (a DOWNGRADE: older than {plan.version})" if plan.change == "downgrade" else ""
         print(f"would   restart it into its bootloader, erase, write {img.length} bytes, "
-              f"verify, start {plan.image_version.text}")
+              f"verify, start {plan.image_version.text}{down}")
 
 
 def _unwind_on_signals() -> dict:

@@ -270,7 +270,7 @@ def in_bootloader_message(client: Client, version: str) -> str:
     """What a module answering from its bootloader means, and the command that ends it."""
     return (f"the module at address {client.address} on {client.describe()} is in its "
             f"bootloader (it answers {version!r}): a firmware update did not complete, and it "
-            f"runs no firmware until one does; 'tmclsh firmware FILE.hex"
+            f"runs no firmware while it is there; 'tmclsh firmware FILE.hex"
             f"{connection_words(client)}' writes the firmware and starts it")
 
 

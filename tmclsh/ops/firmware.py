@@ -95,20 +95,59 @@ Progress = Callable[[Step], None]
 Confirm = Callable[[str], bool]
 
 
+BOOTLOADER_SAYS = "bootloader"  # Memory.told_by: its 206 answers
+MODULE_DATA_SAYS = "module data"  # the module file's firmware_start and firmware_size
+
+
 @dataclass(frozen=True)
 class Memory:
-    """The bootloader's application memory (206)."""
+    """The application memory an image is written into: as the bootloader answers it (206),
+    or, before the module is restarted, as its module data says (no page size then)."""
 
-    page_size: int
+    page_size: int | None
     start: int
     size: int
+    told_by: str = BOOTLOADER_SAYS
 
     @property
     def end(self) -> int:
         return self.start + self.size
 
+    def describe(self) -> str:
+        said = ", from its module data" if self.told_by == MODULE_DATA_SAYS else ""
+        return f"{self.size} bytes at 0x{self.start:08X}..0x{self.end - 1:08X}{said}"
+
     def to_json(self) -> dict:
-        return {"page_size": self.page_size, "start": self.start, "size": self.size}
+        return {"page_size": self.page_size, "start": self.start, "size": self.size,
+                "from": self.told_by}
+
+
+def memory_of(module) -> Memory | None:
+    """The application memory a module's data file gives (``firmware_start`` and
+    ``firmware_size``), if it does: what lets an image be measured before any restart."""
+    start = getattr(module, "firmware_start", None)
+    size = getattr(module, "firmware_size", None)
+    if start is None or size is None:
+        return None
+    return Memory(None, start, size, MODULE_DATA_SAYS)
+
+
+# Plan.change and Result.change: what the image's version is to the module's
+UPGRADE = "upgrade"
+DOWNGRADE = "downgrade"
+SAME = "same version"
+
+
+def version_change(old: str | None, new: VersionString | None) -> str | None:
+    """Whether ``new`` is a newer version than the firmware ``old``, an older one or the
+    same; None when either is not known (a module found in its bootloader)."""
+    was = parse_string(old or "")
+    if was is None or was.bootloader or new is None or was.number is None \
+            or new.number is None or was.type_number != new.type_number:
+        return None
+    if new.number > was.number:
+        return UPGRADE
+    return DOWNGRADE if new.number < was.number else SAME
 
 
 @dataclass(frozen=True)
@@ -120,9 +159,10 @@ class Plan:
     in_bootloader: bool
     image: bl.Image
     image_version: VersionString | None  # the image's string for this type
-    memory: Memory | None  # known only from the bootloader
+    memory: Memory | None  # from the bootloader, or the module data; None: not known yet
     problem: str | None  # why the update would be refused; None: it would go ahead
     nothing_to_do: bool  # the module runs the image's version already
+    change: str | None = None  # UPGRADE, DOWNGRADE, SAME; None: not known
 
     @property
     def fits(self) -> bool | None:
@@ -138,7 +178,8 @@ class Plan:
                 "image_start": self.image.start, "image_length": self.image.length,
                 "image_checksum": self.image.checksum,
                 "memory": self.memory.to_json() if self.memory else None, "fits": self.fits,
-                "problem": self.problem, "nothing_to_do": self.nothing_to_do}
+                "problem": self.problem, "nothing_to_do": self.nothing_to_do,
+                "change": self.change}
 
 
 @dataclass(frozen=True)
@@ -152,12 +193,16 @@ class Result:
     seconds: float
     resumed: bool  # found in its bootloader: an earlier update was completed
     nothing_to_do: bool = False
+    change: str | None = None  # UPGRADE, DOWNGRADE, SAME; None: the old one not known
 
     def to_json(self) -> dict:
-        return {"updated": not self.nothing_to_do, "module": self.module,
-                "old_version": self.old_version, "new_version": self.new_version,
-                "written": self.written, "seconds": round(self.seconds, 3),
-                "resumed": self.resumed}
+        out = {"updated": not self.nothing_to_do, "module": self.module,
+               "old_version": self.old_version, "new_version": self.new_version,
+               "written": self.written, "seconds": round(self.seconds, 3),
+               "resumed": self.resumed, "change": self.change}
+        if self.nothing_to_do:
+            out["nothing_to_do"] = True
+        return out
 
 
 def _nothing(step: Step) -> None:
@@ -186,7 +231,9 @@ class Update:
         self.entered = False  # this run restarted it into its bootloader (242)
         self.found_in_bootloader = False
         self.sent_back = False  # interrupted before the erase: 205 took it back
-        self.memory: Memory | None = None
+        self.start_unanswered = False  # 205 was sent to take it back; nothing answered yet
+        self.memory: Memory | None = None  # the bootloader's (206), once asked
+        self.data_memory: Memory | None = None  # the module data's, known before any restart
         self.written = 0
         self._user_link: tuple | None = None
 
@@ -312,6 +359,7 @@ class Update:
         self.version = self.old_version = c.version
         self.type_number = parsed.type_number
         self.module = _module_name(parsed.type_number)
+        self.data_memory = memory_of(c.module) or memory_of(by_firmware_id(self.type_number))
         self.progress(Step("found", f"{self.module} at address {c.address} on "
                                     f"{c.describe()}: firmware {c.version}"))
 
@@ -338,6 +386,7 @@ class Update:
         self.version = version
         self.type_number = parsed.type_number if parsed is not None else 0
         self.module = _module_name(self.type_number)
+        self.data_memory = memory_of(by_firmware_id(self.type_number))
         at = f", found where a bootloader answers (address {c.address})" if where else ""
         self.progress(Step("found", f"{self.module} on {c.describe()} in its bootloader "
                                     f"({version}){at}: an earlier update did not complete"))
@@ -372,32 +421,44 @@ class Update:
                 and now.number == image_version.number and now.number is not None)
 
     def _fit_problem(self, memory: Memory) -> str | None:
+        """Why the image cannot go into this memory, naming the file's line that shows it;
+        None if it fits."""
         img = self.image
+        where = f"the {self.module}'s application memory ({memory.describe()})"
+        if img.start < memory.start:
+            return (f"{img.where(img.start)}: the image starts at 0x{img.start:08X}, below "
+                    f"{where}, in the bootloader's own area: it is not an application image "
+                    f"for this bootloader")
         if img.start != memory.start:
-            return (f"{img.name} starts at 0x{img.start:08X}, the module's application memory "
-                    f"at 0x{memory.start:08X}: the image is not for this bootloader")
+            return (f"{img.where(img.start)}: the image starts at 0x{img.start:08X}, not where "
+                    f"{where} starts: the image is not for this bootloader")
         if img.end > memory.end:
-            return (f"{img.name} is {img.length} bytes (0x{img.start:08X}..0x{img.end - 1:08X}), "
-                    f"more than the module's application memory of {memory.size} bytes "
-                    f"(0x{memory.start:08X}..0x{memory.end - 1:08X}): it does not fit")
+            return (f"{img.where(memory.end)}: this record lies beyond {where}: the image is "
+                    f"{img.length} bytes (0x{img.start:08X}..0x{img.end - 1:08X}), "
+                    f"{img.end - memory.end} bytes too many: it does not fit")
         return None
 
+    def _known_memory(self) -> Memory | None:
+        return self.memory or self.data_memory
+
     def check(self) -> Plan:
-        """What ``run`` would do, without writing anything (nor restarting the module)."""
+        """What ``run`` would do, without writing anything (nor restarting the module): the
+        image's place in memory first (the bootloader's answer when it is there, else the
+        module data's), then its version string."""
         self.find()
-        problem = None
+        if self.state == BOOTLOADER and self.memory is None:
+            self.memory = self._info()
+        memory = self._known_memory()
+        problem = self._fit_problem(memory) if memory is not None else None
         image_version = None
         try:
             image_version = self._image_version()
         except ImageRefused as exc:
-            problem = str(exc)
-        if self.state == BOOTLOADER and self.memory is None:
-            self.memory = self._info()
-        if problem is None and self.memory is not None:
-            problem = self._fit_problem(self.memory)
+            problem = problem or str(exc)
         same = image_version is not None and self._same_version(image_version)
         return Plan(self.module, self.version, self.state == BOOTLOADER, self.image,
-                    image_version, self.memory, problem, same)
+                    image_version, memory, problem, same,
+                    version_change(self.old_version, image_version))
 
     # -- the update ---------------------------------------------------------------------
     def run(self) -> Result:
@@ -406,27 +467,29 @@ class Update:
         t0 = time.monotonic()
         try:
             self.find()
+            if self.state == BOOTLOADER:
+                self.memory = self._info()
+            self._refuse_misfit()  # (before the restart where the module data knows)
             image_version = self._image_version()
+            change = version_change(self.old_version, image_version)
             if self.state == APPLICATION:
                 if self._same_version(image_version):
-                    self.progress(Step("done", f"the {self.module} runs {self.old_version} "
-                                               "already, the image's version: nothing to do"))
                     return Result(self.module, self.old_version, self.old_version, 0,
-                                  time.monotonic() - t0, False, nothing_to_do=True)
+                                  time.monotonic() - t0, False, nothing_to_do=True,
+                                  change=change)
                 busy = activity(self.client)
                 first = f" ({busy}: stopped first)" if not busy.idle else ""
-                self._ask(f"update the {self.module} at address {self.client.address} on "
-                          f"{self.client.describe()} from {self.old_version} to "
-                          f"{image_version.text} ({self.image.name}, {self.image.length} "
-                          f"bytes)?{first} It restarts into its bootloader and its firmware "
-                          "is erased and written; do not switch it off until it is done")
+                self._ask(f"{_verb(change).capitalize()} the {self.module} at address "
+                          f"{self.client.address} on {self.client.describe()} from "
+                          f"{self.old_version} to {image_version.text}{_aside(change)} "
+                          f"({self.image.name}, {self.image.length} bytes)?{first} It "
+                          "restarts into its bootloader and its firmware is erased and "
+                          "written; do not switch it off until it is done")
                 if not busy.idle:
                     self._stop_first(busy)
                 self._enter()
-            self.memory = self._info()
-            problem = self._fit_problem(self.memory)
-            if problem is not None:
-                raise ImageRefused(f"{problem}; refused, nothing was erased")
+                self.memory = self._info()
+                self._refuse_misfit()
             if self.found_in_bootloader and self._holds_image():
                 self.progress(Step("verify", "the memory holds this image already (its "
                                              "checksum agrees): finishing the update"))
@@ -447,9 +510,18 @@ class Update:
             raise
         self.state = UPDATED
         result = Result(self.module, self.old_version, self.new_version or "", self.written,
-                        time.monotonic() - t0, self.found_in_bootloader)
+                        time.monotonic() - t0, self.found_in_bootloader, change=change)
         self.progress(Step("done", f"the {self.module} runs {self.new_version}"))
         return result
+
+    def _refuse_misfit(self) -> None:
+        memory = self._known_memory()
+        problem = self._fit_problem(memory) if memory is not None else None
+        if problem is None:
+            return
+        if self.entered:  # (the bootloader said it: _after_failure starts the firmware again)
+            raise ImageRefused(f"{problem}; refused, nothing was erased")
+        raise ImageRefused(f"{problem}; refused before anything was sent to change it")
 
     def _ask(self, question: str) -> None:
         if self.confirm is not None and not self.confirm(question):
@@ -616,6 +688,8 @@ class Update:
         if parsed is not None and not parsed.bootloader:
             self.sent_back = True
             self.state = APPLICATION
+        else:
+            self.start_unanswered = True
 
     # -- after a failure ----------------------------------------------------------------
     def situation(self) -> str:
@@ -629,6 +703,10 @@ class Update:
             if self.found_in_bootloader:
                 return ("the module is in its bootloader, as it was found (nothing was erased "
                         "by this run)")
+            if self.start_unanswered:
+                return (f"nothing was erased: 205 was sent to start {fw} again, but it has not "
+                        f"answered at address {self.client.address} yet; {fw} is intact, and "
+                        "starts again when the module is switched off and on")
             return (f"the module is in its bootloader; nothing was erased ({fw} is intact, "
                     "and starts again when the module is switched off and on)")
         if self.state in (ERASING, WRITING):
@@ -654,6 +732,16 @@ class Update:
     def close(self) -> None:
         if self.client is not None:
             self.client.close()
+
+
+def _verb(change: str | None) -> str:
+    """How the question names the update: a downgrade is said to be one (the same version
+    never gets this far: it is nothing to do)."""
+    return "downgrade" if change == DOWNGRADE else "update"
+
+
+def _aside(change: str | None) -> str:
+    return ", an OLDER version than it runs" if change == DOWNGRADE else ""
 
 
 def _module_name(type_number: int) -> str:

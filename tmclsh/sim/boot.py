@@ -7,8 +7,9 @@ checksum the updater uses: ``tmclsh.tmcl.bootloader``). 205 starts the applicati
 the written length and checksum agree with the memory and the memory holds an application
 version string; the module then runs as the type and version that string names.
 
-The memory is this simulator's choice (the protocol lets each bootloader say its own through
-206): pages of ``PAGE_SIZE`` bytes from ``START``, ``SIZE`` bytes in all; erased flash reads
+The memory is the module data's where its file gives one (``firmware_start`` and
+``firmware_size``), else this simulator's choice (the protocol lets each bootloader say its
+own through 206): pages of ``PAGE_SIZE`` bytes from ``START``, ``SIZE`` bytes in all; erased flash reads
 0xFF, and writing a page can only clear bits (a page written twice without an erase holds
 the AND of both), as flash does. The page buffer reads 0xFF again once a page is written,
 so a 202 repeated after a lost reply leaves the page as it was.
@@ -44,7 +45,9 @@ class Bootloader:
     SIZE = 0x38000  # 224 KiB: a 256 KiB flash less the bootloader
     VERSION = 100  # its own version: 1311B100
 
-    def __init__(self) -> None:
+    def __init__(self, start: int | None = None, size: int | None = None) -> None:
+        if start is not None and size is not None:  # (the module data's, as 206 answers)
+            self.START, self.SIZE = start, size
         self.memory = bytearray([ERASED]) * self.SIZE
         self.buffer = bytearray([ERASED]) * self.PAGE_SIZE
         # written by 208, kept in flash beside the application: what makes it valid
@@ -56,6 +59,7 @@ class Bootloader:
     def install(self, version_string: str, size: int = 16 * 1024) -> None:
         """A valid application of ``size`` bytes that carries ``version_string`` (what the
         simulated module runs before anyone updates it)."""
+        size = min(size, self.SIZE)
         data = bytearray((i * 7 + 3) & 0xFF for i in range(size))
         text = version_string.encode("ascii")
         data[0x100:0x100 + len(text)] = text

@@ -185,7 +185,7 @@ class Simulator:
         # the firmware it runs: the module data's, until an update writes another
         self.version_string = self.module.version_string
         self.firmware_version = self.module.firmware_version
-        self.boot = Bootloader()
+        self.boot = Bootloader(self.module.firmware_start, self.module.firmware_size)
         if not bootloader:  # (in it: as after an update that broke off, nothing to start)
             self.boot.install(self.version_string)
         self.faults = Faults()

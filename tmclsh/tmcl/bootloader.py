@@ -178,6 +178,9 @@ class Image:
     name: str
     start: int
     data: bytes
+    # (first address, address after, line in the file) of each data record, when read
+    # from a file: what a refusal names
+    records: tuple[tuple[int, int, int], ...] = field(default=(), repr=False, compare=False)
 
     @property
     def length(self) -> int:
@@ -195,6 +198,15 @@ class Image:
     @cached_property
     def versions(self) -> tuple[VersionString, ...]:
         return versions_in(self.data)
+
+    def line_at(self, address: int) -> int | None:
+        """The line of the file whose record holds this address."""
+        return _line_at(self.records, address)
+
+    def where(self, address: int) -> str:
+        """``name:line`` of the record holding ``address`` (the name alone if not known)."""
+        line = self.line_at(address)
+        return f"{self.name}:{line}" if line else self.name
 
     def version_for(self, type_number: int) -> VersionString | None:
         """Its version string for a module of this type number, if it carries one."""
@@ -226,25 +238,112 @@ class Image:
 
 
 def image_from_hex(text: str, name: str = "<image>") -> Image:
-    """An image from Intel HEX text (read by ``intelhex``; gaps filled with the fill byte)."""
+    """An image from Intel HEX text, read by ``intelhex`` and checked whole: its end-of-file
+    record present (a file cut at a record boundary reads as valid records otherwise), no
+    record given twice (overlaps), no hole inside it (a gap: the file does not say what
+    belongs there, and the bootloader's checksum covers it). Every refusal names the file's
+    line."""
     from intelhex import HexReaderError, IntelHex
 
     ih = IntelHex()
+    lines = _Lines(text)
     try:
-        ih.loadhex(io.StringIO(text))
+        ih.loadhex(lines)
     except HexReaderError as exc:
-        raise ImageError(f"{name}: not a valid Intel HEX file: {_hex_reason(exc)}") from None
+        line = getattr(exc, "line", None)
+        where = f"{name}:{line}" if line else name
+        raise ImageError(f"{where}: not a valid Intel HEX file: {_hex_fault(exc)}") from None
     except (ValueError, UnicodeError) as exc:
         raise ImageError(f"{name}: not a valid Intel HEX file: {exc}") from None
+    if lines.read_to_end:
+        raise ImageError(f"{name}:{lines.last}: the file ends without its end-of-file record "
+                         "(:00000001FF): it is cut short, the image may be incomplete")
     lo, hi = ih.minaddr(), ih.maxaddr()
     if lo is None or hi is None:
         raise ImageError(f"{name}: the HEX file holds no data")
+    records = _records(lines.lines)
     if hi + 1 - lo > MAX_SPAN:
-        raise ImageError(f"{name}: the image spans {hi + 1 - lo} bytes, from 0x{lo:08X} to "
-                         f"0x{hi:08X}: more than any module's application memory (a record "
+        far = _line_at(records, hi)
+        raise ImageError(f"{name}:{far}: the image spans {hi + 1 - lo} bytes, from 0x{lo:08X} "
+                         f"to 0x{hi:08X}: more than any module's application memory (a record "
                          "far from the others?)")
+    segments = ih.segments()
+    if len(segments) > 1:
+        (_, stop), (after, _) = segments[0], segments[1]
+        raise ImageError(f"{name}:{_line_at(records, after)}: a gap before this record: the "
+                         f"file gives nothing for 0x{stop:08X}..0x{after - 1:08X} "
+                         f"({after - stop} bytes) inside the image; a firmware image is one "
+                         "block (the bootloader would be given bytes the file does not hold)")
     ih.padding = facts().fill
-    return Image(name, lo, ih.tobinstr(start=lo, end=hi))
+    return Image(name, lo, ih.tobinstr(start=lo, end=hi), records)
+
+
+class _Lines:
+    """The text's lines as ``intelhex`` reads them, noting whether it read them all: it
+    stops at the end-of-file record, so reading past the last line means there was none."""
+
+    def __init__(self, text: str):
+        self.lines = text.splitlines(keepends=True)
+        self.read_to_end = False
+        # the last line with text: where the end-of-file record was missed
+        self.last = next((n for n in range(len(self.lines), 0, -1)
+                          if self.lines[n - 1].strip()), 1)
+
+    def __iter__(self) -> Iterator[str]:
+        yield from self.lines
+        self.read_to_end = True
+
+    def read(self) -> str:
+        """(``loadhex`` takes an object with ``read`` for a file; it then iterates it.)"""
+        return "".join(self.lines)
+
+
+def _records(lines: list[str]) -> tuple[tuple[int, int, int], ...]:
+    """(first address, address after, line) of each data record, for naming a line: the
+    file is valid Intel HEX by now (``intelhex`` read it), so only addresses are followed."""
+    out = []
+    base = 0
+    for number, raw in enumerate(lines, 1):
+        s = raw.strip()
+        if not s:
+            continue
+        rec = bytes.fromhex(s[1:])
+        count, address, kind, data = rec[0], rec[1] << 8 | rec[2], rec[3], rec[4:4 + rec[0]]
+        if kind == 0:
+            out.append((base + address, base + address + count, number))
+        elif kind == 2:
+            base = int.from_bytes(data, "big") << 4
+        elif kind == 4:
+            base = int.from_bytes(data, "big") << 16
+        elif kind == 1:
+            break
+    return tuple(out)
+
+
+def _line_at(records: tuple[tuple[int, int, int], ...], address: int) -> int | None:
+    return next((line for lo, hi, line in records if lo <= address < hi), None)
+
+
+_HEX_FAULTS = {
+    "RecordChecksumError": "the record's checksum is wrong",
+    "RecordLengthError": "the record's length does not match its data",
+    "RecordTypeError": "a record type Intel HEX does not have",
+    "EOFRecordError": "a malformed end-of-file record",
+    "ExtendedSegmentAddressRecordError": "a malformed extended segment address record",
+    "ExtendedLinearAddressRecordError": "a malformed extended linear address record",
+    "StartSegmentAddressRecordError": "a malformed start segment address record",
+    "StartLinearAddressRecordError": "a malformed start linear address record",
+    "DuplicateStartAddressRecordError": "a second start address record",
+    "HexRecordError": "not an Intel HEX record",
+}
+
+
+def _hex_fault(exc: Exception) -> str:
+    kind = type(exc).__name__
+    if kind == "AddressOverlapError":
+        return (f"the record gives 0x{exc.address:08X} again (it overlaps an earlier "
+                "record)")
+    return _HEX_FAULTS.get(kind) or _hex_reason(exc)
 
 
 def _hex_reason(exc: Exception) -> str:

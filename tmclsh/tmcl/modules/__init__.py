@@ -214,6 +214,10 @@ class Module:
         self.origin: str | None = info.get("origin")
         # the file does not know the I/O ports: any port and bank, the module answers
         self.any_io: bool = info.get("any_io", False)
+        # the application memory its bootloader writes a firmware image into, where the data
+        # says (the manuals here do not): an image is measured before the module restarts
+        self.firmware_start: int | None = info.get("firmware_start")
+        self.firmware_size: int | None = info.get("firmware_size")
         # the byte order of its 136 type 1 answer (tmcl/version.py)
         self.version_layout: str = info.get("version_layout", TYPE_FIRST)
         # whose command set it has: its own (a documented module), the one its file names

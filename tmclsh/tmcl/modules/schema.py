@@ -34,6 +34,7 @@ MODULE_KEYS: dict[str, tuple[str, bool]] = {
     "io_all_banks": ("ints", False), "coordinates": ("int", False),
     "commands_like": ("str", False), "version_layout": ("str", False),
     "origin": ("str", False), "any_io": ("bool", False),
+    "firmware_start": ("int", False), "firmware_size": ("int", False),
 }
 PARAMETER_KEYS: dict[str, tuple[str, bool]] = {
     "number": ("int", True), "name": ("str", True), "manual_name": ("str", False),
@@ -67,6 +68,10 @@ MEANINGS = {
                           "version; the default) or version_first (as the TMCM-1640)",
         "origin": "where the data comes from when not from a manual (shown in the banner)",
         "any_io": "true: the I/O ports are not known; GIO/SIO take any port and bank",
+        "firmware_start": "where the application memory a firmware image goes into starts, "
+                          "as its bootloader answers 206 (firmware_size too: its size in "
+                          "bytes); tmclsh firmware then refuses an image that does not fit "
+                          "before it restarts the module",
         "position_min": "position range of MVP (position_max too; default 32 bits)",
         "velocity_min": "velocity range of ROR/ROL (velocity_max too; default 32 bits)",
     },
@@ -187,6 +192,14 @@ def check(data: dict, lines: _Lines, path: str) -> None:
                    f"characters 136 answers (\"1161V130\"), got {info['version_string']!r}")
     if info["program_memory"] < 1:
         raise fail("module", 0, "program_memory", "[module] program_memory must be at least 1")
+    memory = [k for k in ("firmware_start", "firmware_size") if k in info]
+    if len(memory) == 1:
+        other = "firmware_size" if memory[0] == "firmware_start" else "firmware_start"
+        raise fail("module", 0, memory[0], f"[module] {memory[0]} needs {other} beside it "
+                   "(the application memory is where it starts and how large it is)")
+    if memory and (info["firmware_start"] < 0 or info["firmware_size"] < 1):
+        raise fail("module", 0, "firmware_size", "[module] firmware_start must be 0 or more "
+                   "and firmware_size at least 1")
     layout = info.get("version_layout")
     if layout is not None:
         from ..version import LAYOUTS
