@@ -649,7 +649,10 @@ the run. Status messages go to standard error.
 .IP \\(bu 2
 Ctrl-C interrupts: everything is stopped (see {_b("Ctrl-C")} below) and, outside the
 interactive prompt, {_b(PROG)} exits with status 130. A script that ends while a motor turns
-or the stored program runs leaves them so, with a note on standard error.
+or the stored program runs leaves them so, with a note on standard error (with {_b("--json")}
+also {_b('{"left_running": {...}}')} on standard output). A motor the run told to turn
+({_b("ROR")}, {_b("ROL")}, {_b("MVP")}, a target speed written) and did not stop counts as
+left turning even while its speed reads 0 (it has not started yet, or it stalls).
 .IP \\(bu 2
 A lost link fails the line it was lost on, with the reason; with {_b("--keep-going")} the
 script goes on: lines that need no module run as always ({_b(".sleep")} still sleeps), and
@@ -671,7 +674,8 @@ back until it is 0. Only motors that read 0 are called stopped; any other is nam
 .TP
 {_b("Ctrl-D")}
 Leaves the shell, like {_b(".quit")}. While a motor turns or the stored program runs, it
-asks first: stop everything first, leave it running, or cancel.
+asks first: stop everything first, leave it running, or cancel. A motor the shell told to
+turn and did not stop counts, even while its speed reads 0 (a stalled motor).
 .SS Keys in .watch
 .TP
 {_b("s")} or space

@@ -292,7 +292,8 @@ def _motion_parameters(client) -> frozenset[tuple[int, int]]:
 
 
 def _note_left_running(session: Session) -> None:
-    """A script that ends while a motor turns or the program runs says so on stderr (it
+    """A script that ends while a motor turns, or one it told to turn reads still (stalled,
+    not started yet), or the program runs, says so on stderr, and on stdout with --json (it
     leaves them so: that may well be what it was for)."""
     from ..ops.stop import activity
 
@@ -308,6 +309,8 @@ def _note_left_running(session: Session) -> None:
     elif not act.idle:
         print(f"tmclsh: note: {act}; left running (.stopall stops everything)",
               file=sys.stderr)
+        if session.out.json:  # (a program reading stdout learns it there)
+            session.out.emit({"left_running": act.to_json()})
 
 
 class Terminated(SystemExit):
