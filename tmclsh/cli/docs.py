@@ -657,7 +657,10 @@ left turning even while its speed reads 0 (it has not started yet, or it stalls)
 A lost link fails the line it was lost on, with the reason; with {_b("--keep-going")} the
 script goes on: lines that need no module run as always ({_b(".sleep")} still sleeps), and
 a line that needs the module waits for the link to come back (its timeout times its
-attempts) before it is given up, not run.
+attempts) before it is given up, not run. After 4 lines in a row got no answer (the link
+stayed lost, or the module stayed silent) with nothing from the module in between, the
+module is taken to be gone: the rest is not run and the exit status is 3, as for no module
+(with several units, that unit alone ends so: "no module").
 .SS Keys at the prompt
 .TP
 {_b("Tab")}
@@ -846,8 +849,9 @@ def _exit_status() -> list[str]:
                        "module (--sim simulates one); two or more Trinamic USB modules are "
                        "attached and no --port picks one; the port or CAN bus cannot be "
                        "opened; nothing answers at connect (command 136) or scan finds no "
-                       "module; -m names another type than the module reports; or tmclsh "
-                       "sim cannot start its server."),
+                       "module; -m names another type than the module reports; with "
+                       "--keep-going, the module is gone (4 lines in a row got no answer, "
+                       "the rest is not run); or tmclsh sim cannot start its server."),
         (130, "Interrupted with Ctrl-C (the program and the motors were stopped first). "
               "With several units (SEVERAL MODULES): 0 when every unit passed, 1 when any "
               "failed, 3 when a unit had no module."),

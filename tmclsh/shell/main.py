@@ -7,7 +7,7 @@ import sys
 from collections.abc import Callable
 
 from ..base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE,
-                           TmclError)
+                           ModuleGoneError, TmclError)
 from .render import Output
 from .session import QuitShell, Session, frames_sent
 
@@ -70,6 +70,11 @@ def run_lines(session: Session, lines: list[str]) -> int:
             session.report_error(line, exc)
             if not session.keep_going:
                 break
+            try:
+                session.failed_unanswered(exc)
+            except ModuleGoneError as gone:
+                session.report_error(None, gone)
+                return EXIT_CONNECT
         finally:
             if progress is not None:
                 progress(done, len(lines))
