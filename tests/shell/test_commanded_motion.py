@@ -78,3 +78,41 @@ def test_ctrl_d_after_ror_asks_first_though_the_speed_reads_0(still_motor, termi
     assert "leaving: stopped motor 0" in screen, screen
     mst = [raw for raw in still_motor.log if len(raw) == 9 and raw[1] == 3]
     assert mst, "no MST reached the module"
+
+
+def test_a_position_move_that_has_not_ended_counts_too(still_motor):
+    """TargetPositionReached reads 0 here, as for a motor stalled on its way."""
+    p = run(still_motor, "--json", "-c", "MVP ABS, 0, 5000")
+    left = [json.loads(x)["left_running"] for x in p.stdout.splitlines()
+            if "left_running" in x]
+    assert left and left[0]["commanded"] == {"0": {"line": "MVP ABS, 0, 5000", "speed": 0}}
+    assert ("motor 0 was told to move (MVP ABS, 0, 5000) and has not reached its target"
+            in p.stderr), p.stderr
+
+
+def test_a_position_move_the_module_says_has_ended_is_forgotten():
+    from tmclsh.client.connect import connect
+    from tmclsh.ops.stop import activity
+
+    with connect(sim="TMCM-1311") as client:
+        client.execute("MVP ABS, 0, 200")
+        assert 0 in client.motion.motors()
+        client.wait_until(lambda: client.value("GAP TargetPositionReached, 0") == 1,
+                          timeout=30, interval=0.05)  # (raises at the timeout)
+        assert activity(client).idle
+        assert not client.motion  # the module said it has ended: forgotten
+
+
+def test_every_unit_says_what_it_left_turning(tmp_path):
+    modules = [Responder(), Responder()]
+    try:
+        p = subprocess.run([sys.executable, "-m", "tmclsh", "--port", modules[0].path,
+                            "--port", modules[1].path, "--timeout", "2", "--json",
+                            "-c", "ROR 0, ${unit}00"], capture_output=True, text=True,
+                           timeout=60, env=tmclsh_env(), cwd=str(ROOT))
+        left = {o["unit"]: o["left_running"]["commanded"]["0"]["target_speed"]
+                for o in map(json.loads, p.stdout.splitlines()) if "left_running" in o}
+        assert left == {1: 100, 2: 200}, p.stdout + p.stderr
+    finally:
+        for m in modules:
+            m.close()

@@ -93,8 +93,9 @@ class Activity:
         return {"program_running": self.program_running,
                 "turning": {str(m): v for m, v in sorted(self.turning.items())},
                 "slowing": sorted(self.slowing),
-                "commanded": {str(m): {"line": c.line, f"target_{c.kind}": c.target,
-                                       "speed": v}
+                "commanded": {str(m): {"line": c.line, "speed": v,
+                                       **({"target_speed": c.target} if c.kind == "speed"
+                                          else {})}
                               for m, (c, v) in sorted(self.commanded.items())}}
 
 
