@@ -5,7 +5,6 @@ remaining line's full wait on it (a 300-line script: minutes)."""
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 import threading
@@ -84,13 +83,15 @@ class FallsSilent(Responder):
         return None if self.silent.is_set() else super().answer(raw)
 
 
-def test_a_module_that_falls_silent_is_concluded_gone(tmp_path):
+@pytest.mark.parametrize("given", ["-f", "-c"])
+def test_a_module_that_falls_silent_is_concluded_gone(tmp_path, given):
     module = FallsSilent(tcp=True)
     try:
         path = tmp_path / "s.tmcl"
         path.write_text("GAP 4, 0\n.sleep 0.02\n" * 100)
+        lines = str(path) if given == "-f" else path.read_text()
         run = subprocess.Popen([sys.executable, "-m", "tmclsh", "--port", module.url,
-                                "-m", "TMCM-1311", "-f", str(path), "--keep-going",
+                                "-m", "TMCM-1311", given, lines, "--keep-going",
                                 "--timeout", "0.3"], stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True, env=tmclsh_env(),
                                cwd=str(ROOT))

@@ -110,8 +110,8 @@ def _motion(spec: isa.InstructionSpec, module: Module | None, req: Request) -> C
         param = module.axis(req.type)
         if param is None or not param.starts_motion:
             return None
-        return (Commanded("speed", req.value, f"{spec.mnemonic} {param.name}, {req.motor}, {req.value}")
-                if req.value else _STOP)
+        written = f"{spec.mnemonic} {param.name}, {req.motor}, {req.value}"
+        return Commanded("speed", req.value, written) if req.value else _STOP
     return None
 
 

@@ -100,7 +100,7 @@ class Activity:
 
 
 def _told(motor: int, told: Commanded, speed: int | None) -> str:
-    """``motor 0 was told to turn (ROR 0, 1000: target speed 1000) and reads speed 0``."""
+    """``motor 0 was told to turn (ROR 0, 1000: target speed 1000); it reads speed 0``."""
     what = (f"was told to turn ({told.line}: target speed {told.target})" if told.kind == "speed"
             else f"was told to move ({told.line}) and has not reached its target")
     reads = "its speed could not be read" if speed is None else f"it reads speed {speed}"
@@ -163,7 +163,8 @@ def _program_running(client, timeout: float, retries: int | None = None) -> bool
         return None
 
 
-def _speed(client, motor: int, number: int, timeout: float, retries: int | None = None) -> int:
+def _read_axis(client, motor: int, number: int, timeout: float,
+               retries: int | None = None) -> int:
     reply = _ok(_send(client, _GAP, number, motor, timeout=timeout, retries=retries),
                 f"GAP {number}, {motor}")
     return reply.value
@@ -183,7 +184,7 @@ def activity(client, *, timeout: float | None = None) -> Activity:
     told = record.motors() if record is not None else {}
     for m in _motors(client):
         try:
-            v = _speed(client, m, number, t, retries=0)
+            v = _read_axis(client, m, number, t, retries=0)
         except TmclError as exc:
             if _no_such_motor(client, m, exc):
                 break
@@ -191,7 +192,7 @@ def activity(client, *, timeout: float | None = None) -> Activity:
         if v:
             act.turning[m] = v
             try:  # (after MST: the motor ramps down, nothing drives it any more)
-                if target is not None and _speed(client, m, target, t, retries=0) == 0:
+                if target is not None and _read_axis(client, m, target, t, retries=0) == 0:
                     act.slowing.add(m)
             except TmclError:
                 pass
@@ -209,11 +210,12 @@ def _move_ended(client, told: Commanded, motor: int, timeout: float) -> bool:
     flag = _axis_parameter(client, "TargetPositionReached")
     try:
         if flag is not None:
-            ended = _speed(client, motor, flag, timeout, retries=0) == 1
+            ended = _read_axis(client, motor, flag, timeout, retries=0) == 1
         else:
             at, to = (_axis_parameter(client, n) for n in ("ActualPosition", "TargetPosition"))
-            ended = (at is not None and to is not None and _speed(client, motor, at, timeout, 0)
-                     == _speed(client, motor, to, timeout, 0))
+            ended = (at is not None and to is not None
+                     and _read_axis(client, motor, at, timeout, 0)
+                     == _read_axis(client, motor, to, timeout, 0))
     except TmclError:
         return False
     if ended:
@@ -309,7 +311,7 @@ def _settle(client, report: StopReport, pending: list[int], zero_at: dict[int, i
     while pending:
         for m in list(pending):
             try:
-                v = _speed(client, m, number, t)
+                v = _read_axis(client, m, number, t)
             except TmclError as exc:
                 report.unknown[m] = f"its speed could not be read: {exc}"
                 report.turning.pop(m, None)
