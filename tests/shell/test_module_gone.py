@@ -48,7 +48,9 @@ def test_a_unit_whose_module_dies_ends_as_gone_and_the_other_finishes(two_sims, 
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                            env=tmclsh_env(), cwd=str(ROOT))
     killed_at, ended_at, summaries, answered = None, {}, {}, 0
+    run_out = []
     for line in run.stdout:  # (read as it comes: when each unit ends is part of the test)
+        run_out.append(line)
         obj = json.loads(line)
         if obj.get("unit") == 1 and "reply" in obj:
             answered += 1
@@ -69,6 +71,9 @@ def test_a_unit_whose_module_dies_ends_as_gone_and_the_other_finishes(two_sims, 
     assert gone["line"] < LINES
     assert other["result"] == "passed" and other["line"] == LINES, other
     assert f"tmclsh: no module for unit 1 {url1}" in err, err
+    said = [o for o in map(json.loads, run_out) if o.get("unit") == 1 and o.get("exit") == 3
+            and not o.get("summary")]
+    assert said and said[0]["line"] is None and "taken to be gone" in said[0]["error"]
 
 
 class FallsSilent(Responder):

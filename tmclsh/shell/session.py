@@ -21,7 +21,7 @@ from ..client.core import idempotent
 from ..client.text import LineClient as Client
 from ..client.text import Result
 from ..link.framing import name_of as _name
-from ..base.errors import (ChecksumError, ModuleGoneError, StatusError, TmclError,
+from ..base.errors import (EXIT_CONNECT, ChecksumError, ModuleGoneError, StatusError, TmclError,
                            TmclTimeoutError, TransportError, ValidationError)
 from ..tmcl.modules import Module
 from ..tmcl.status import OK_STATUSES
@@ -233,10 +233,12 @@ class Session:
             self._unanswered, self._unanswered_since = 0, replies
         self._unanswered += 1
         if self._unanswered >= GONE_AFTER:
-            raise ModuleGoneError(
+            gone = ModuleGoneError(
                 f"{self._unanswered} lines in a row got no answer from the module on "
                 f"{self.client.describe()}: it is taken to be gone, the rest is not run "
                 f"(the last: {exc})")
+            gone.record = {"exit": EXIT_CONNECT}  # (JSON: as a run that found no module)
+            raise gone
 
     def report_error(self, line: str | None, exc: BaseException) -> None:
         """Say what went wrong with ``line`` (once: an error already shown is not said
