@@ -82,6 +82,12 @@ class NoAnswerError(ConnectError, TmclTimeoutError):
     tried and what to try next."""
 
 
+class ModuleGoneError(ConnectError):
+    """With ``--keep-going``, line after line got no answer (the link stayed lost, or the
+    module stayed silent): the module is taken to be gone and the rest is not sent, as when
+    there was none at the start (exit status 3)."""
+
+
 class AsmError(TmclError, ValueError):
     """An error in TMCL source text, with its location (1-based line and column)."""
 

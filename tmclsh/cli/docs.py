@@ -665,12 +665,18 @@ the run. Status messages go to standard error.
 .IP \\(bu 2
 Ctrl-C interrupts: everything is stopped (see {_b("Ctrl-C")} below) and, outside the
 interactive prompt, {_b(PROG)} exits with status 130. A script that ends while a motor turns
-or the stored program runs leaves them so, with a note on standard error.
+or the stored program runs leaves them so, with a note on standard error (with {_b("--json")}
+also {_b('{"left_running": {...}}')} on standard output). A motor the run told to turn
+({_b("ROR")}, {_b("ROL")}, {_b("MVP")}, a target speed written) and did not stop counts as
+left turning even while its speed reads 0 (it has not started yet, or it stalls).
 .IP \\(bu 2
 A lost link fails the line it was lost on, with the reason; with {_b("--keep-going")} the
 script goes on: lines that need no module run as always ({_b(".sleep")} still sleeps), and
 a line that needs the module waits for the link to come back (its timeout times its
-attempts) before it is given up, not run.
+attempts) before it is given up, not run. After 4 lines in a row got no answer (the link
+stayed lost, or the module stayed silent) with nothing from the module in between, the
+module is taken to be gone: the rest is not run and the exit status is 3, as for no module
+(with several units, that unit alone ends so: "no module").
 .SS Keys at the prompt
 .TP
 {_b("Tab")}
@@ -687,7 +693,8 @@ back until it is 0. Only motors that read 0 are called stopped; any other is nam
 .TP
 {_b("Ctrl-D")}
 Leaves the shell, like {_b(".quit")}. While a motor turns or the stored program runs, it
-asks first: stop everything first, leave it running, or cancel.
+asks first: stop everything first, leave it running, or cancel. A motor the shell told to
+turn and did not stop counts, even while its speed reads 0 (a stalled motor).
 .SS Keys in .watch
 .TP
 {_b("s")} or space
@@ -858,8 +865,9 @@ def _exit_status() -> list[str]:
                        "module (--sim simulates one); two or more Trinamic USB modules are "
                        "attached and no --port picks one; the port or CAN bus cannot be "
                        "opened; nothing answers at connect (command 136) or scan finds no "
-                       "module; -m names another type than the module reports; or tmclsh "
-                       "sim cannot start its server."),
+                       "module; -m names another type than the module reports; with "
+                       "--keep-going, the module is gone (4 lines in a row got no answer, "
+                       "the rest is not run); or tmclsh sim cannot start its server."),
         (130, "Interrupted with Ctrl-C (the program and the motors were stopped first). "
               "With several units (SEVERAL MODULES): 0 when every unit passed, 1 when any "
               "failed, 3 when a unit had no module."),

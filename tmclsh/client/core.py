@@ -58,6 +58,7 @@ from ..tmcl.frames import Control, Reply, ReplyKind, Request, Status
 from ..tmcl.modules import Module
 from ..tmcl.modules import load as load_module
 from .ledger import CONFIRM_ROUNDS, Ledger, Suspect
+from .motion import MotionRecord, watched_opcodes
 
 if TYPE_CHECKING:
     from ..link.framing import CanFraming, SerialFraming
@@ -76,6 +77,7 @@ _WRONG_CHECKSUM = int(Status.WRONG_CHECKSUM)
 _ALL_OPCODES = frozenset(range(256))  # a sent-only tracer that watches every command
 _QUIT_DOWNLOAD = isa.download_command("leave")
 _GET_VERSION = int(Control.GET_VERSION)
+_MOTION = watched_opcodes()  # what may start or stop a motor (client/motion.py)
 
 __all__ = ["Client", "Suspect", "CONFIRM_ROUNDS", "idempotent"]
 
@@ -120,6 +122,9 @@ class Client:
         self.also_reply_id: int | None = None
         self._lock = threading.RLock()
         self.ledger = Ledger()
+        # what tmclsh set each motor doing and has not stopped (motion.py): the leave-checks
+        # read it, as a motor that reads speed 0 may still be meant to turn
+        self.motion = MotionRecord()
         self._events: deque[tuple[Reply, float]] = deque()  # with when each arrived
         self._delivering = threading.RLock()  # held while events go to the listeners
         # when the event being delivered arrived (time.monotonic()), for listeners that
@@ -229,6 +234,7 @@ class Client:
         if self.tracers:
             _tell(self.tracers, "rx", raw, reply)
         self._events.append((reply, time.monotonic()))
+        self.motion.reached(reply.value)  # (138: the motors whose position move ended)
 
     def late(self, address: int, opcode: int, reply: Reply | None) -> bool:
         """A reply arrived that no request waits for: True if one like it was expected
@@ -383,6 +389,8 @@ class Client:
                 except TransportError:
                     self._down = True
                     raise
+            if req.opcode in _MOTION and reply is not None and not self.downloading:
+                self.motion.take(self.module, req, reply.status)
             if req.opcode >= _FIRST_CONTROL and reply is not None and reply.ok:
                 ctl = isa.control(req.opcode)  # (a typed 132 with no 133 after it)
                 if ctl is not None and ctl.download == "enter" and not self.downloading:
@@ -906,6 +914,7 @@ class Client:
             self.transport = transport
             self.module = mod
             self.version = None
+            self.motion.forget()  # (another module, or one that was told nothing yet)
             self._reopen()  # clears buffers and stale-reply bookkeeping, reopens the link
             self._bring_up_next = self._check_download = False  # (what bring_up does)
             self.stats["reconnects"] += 1

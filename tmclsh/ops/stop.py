@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 from ..base.errors import StatusError, TmclError, ValidationError
 from ..client.ledger import CONFIRM_ROUNDS
+from ..client.motion import Commanded
 from ..tmcl import instructions as isa
 from ..tmcl.frames import Control
 from .program import GGP, GP_APPLICATION_STATUS, AppState, _ascii_control, _ok, _send
@@ -60,29 +61,50 @@ class StopReport:
 
 @dataclass
 class Activity:
-    """Whether anything is going on: the stored program runs, motors turn (motor -> speed)."""
+    """Whether anything is going on: the stored program runs, motors turn (motor -> speed),
+    motors tmclsh set moving that read still (motor -> what it was told, the speed read or
+    None: a stalled motor, one that has not started yet, a read that failed)."""
 
     program_running: bool = False
     turning: dict[int, int] = field(default_factory=dict)
     slowing: set[int] = field(default_factory=set)  # turning, its target speed read 0 (MST)
+    commanded: dict[int, tuple[Commanded, int | None]] = field(default_factory=dict)
 
     @property
     def idle(self) -> bool:
-        return not self.program_running and not self.turning
+        return not self.program_running and not self.turning and not self.commanded
 
     @property
     def only_slowing(self) -> bool:
         """Every motor that turns is ramping down to a target speed of 0, no program runs."""
-        return (bool(self.turning) and not self.program_running
+        return (bool(self.turning) and not self.program_running and not self.commanded
                 and set(self.turning) <= self.slowing)
 
     def __str__(self) -> str:
         """``motor 0 turns (speed 2000) and the stored program runs``."""
         parts = [f"motor {m} slows down (speed {v}, target speed 0)" if m in self.slowing
                  else f"motor {m} turns (speed {v})" for m, v in sorted(self.turning.items())]
+        parts += [_told(m, c, v) for m, (c, v) in sorted(self.commanded.items())]
         if self.program_running:
             parts.append("the stored program runs")
         return " and ".join([", ".join(parts[:-1]), parts[-1]] if len(parts) > 2 else parts)
+
+    def to_json(self) -> dict[str, object]:
+        return {"program_running": self.program_running,
+                "turning": {str(m): v for m, v in sorted(self.turning.items())},
+                "slowing": sorted(self.slowing),
+                "commanded": {str(m): {"line": c.line, "speed": v,
+                                       **({"target_speed": c.target} if c.kind == "speed"
+                                          else {})}
+                              for m, (c, v) in sorted(self.commanded.items())}}
+
+
+def _told(motor: int, told: Commanded, speed: int | None) -> str:
+    """``motor 0 was told to turn (ROR 0, 1000: target speed 1000); it reads speed 0``."""
+    what = (f"was told to turn ({told.line}: target speed {told.target})" if told.kind == "speed"
+            else f"was told to move ({told.line}) and has not reached its target")
+    reads = "its speed could not be read" if speed is None else f"it reads speed {speed}"
+    return f"motor {motor} {what}; {reads}"
 
 
 # generic mode (a type without data): how many motors is not known, so every motor number
@@ -141,34 +163,64 @@ def _program_running(client, timeout: float, retries: int | None = None) -> bool
         return None
 
 
-def _speed(client, motor: int, number: int, timeout: float, retries: int | None = None) -> int:
+def _read_axis(client, motor: int, number: int, timeout: float,
+               retries: int | None = None) -> int:
     reply = _ok(_send(client, _GAP, number, motor, timeout=timeout, retries=retries),
                 f"GAP {number}, {motor}")
     return reply.value
 
 
 def activity(client, *, timeout: float | None = None) -> Activity:
-    """Is a program running, is a motor turning? (135 and each motor's actual speed; a read
-    that fails counts as nothing going on: this is for a question, not for safety.)"""
+    """Is a program running, is a motor turning, or meant to? (135, each motor's actual
+    speed, and what tmclsh told the motors, ``client.motion``: a motor told to turn that
+    reads 0, stalled or not yet started, is still meant to turn. A read that fails counts
+    as nothing going on, unless tmclsh told the motor to move: this is for a question, not
+    for safety.)"""
     t = min(client.timeout, 0.5) if timeout is None else timeout
     act = Activity(bool(_program_running(client, t, retries=0)))
     number = _speed_parameter(client)
     target = _axis_parameter(client, "TargetSpeed")
+    record = getattr(client, "motion", None)  # (a stand-in client in a test has none)
+    told = record.motors() if record is not None else {}
     for m in _motors(client):
         try:
-            v = _speed(client, m, number, t, retries=0)
+            v = _read_axis(client, m, number, t, retries=0)
         except TmclError as exc:
             if _no_such_motor(client, m, exc):
                 break
-            continue
+            v = None
         if v:
             act.turning[m] = v
             try:  # (after MST: the motor ramps down, nothing drives it any more)
-                if target is not None and _speed(client, m, target, t, retries=0) == 0:
+                if target is not None and _read_axis(client, m, target, t, retries=0) == 0:
                     act.slowing.add(m)
             except TmclError:
                 pass
+        elif m in told and not _move_ended(client, told[m], m, t):
+            act.commanded[m] = (told[m], v)
     return act
+
+
+def _move_ended(client, told: Commanded, motor: int, timeout: float) -> bool:
+    """A position move the module says has ended (TargetPositionReached, or the actual
+    position at the target): tmclsh forgets it. A speed it was told is never over by
+    itself."""
+    if told.kind != "position":
+        return False
+    flag = _axis_parameter(client, "TargetPositionReached")
+    try:
+        if flag is not None:
+            ended = _read_axis(client, motor, flag, timeout, retries=0) == 1
+        else:
+            at, to = (_axis_parameter(client, n) for n in ("ActualPosition", "TargetPosition"))
+            ended = (at is not None and to is not None
+                     and _read_axis(client, motor, at, timeout, 0)
+                     == _read_axis(client, motor, to, timeout, 0))
+    except TmclError:
+        return False
+    if ended:
+        client.motion.forget(motor)
+    return ended
 
 
 def stop_everything(client, *, settle: float = SETTLE,
@@ -259,7 +311,7 @@ def _settle(client, report: StopReport, pending: list[int], zero_at: dict[int, i
     while pending:
         for m in list(pending):
             try:
-                v = _speed(client, m, number, t)
+                v = _read_axis(client, m, number, t)
             except TmclError as exc:
                 report.unknown[m] = f"its speed could not be read: {exc}"
                 report.turning.pop(m, None)

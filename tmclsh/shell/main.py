@@ -7,7 +7,7 @@ import sys
 from collections.abc import Callable
 
 from ..base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE,
-                           TmclError)
+                           ModuleGoneError, TmclError)
 from .render import Output
 from .session import QuitShell, Session, frames_sent
 
@@ -70,6 +70,11 @@ def run_lines(session: Session, lines: list[str]) -> int:
             session.report_error(line, exc)
             if not session.keep_going:
                 break
+            try:
+                session.failed_unanswered(exc)
+            except ModuleGoneError as gone:
+                session.report_error(None, gone)
+                return EXIT_CONNECT
         finally:
             if progress is not None:
                 progress(done, len(lines))
@@ -293,7 +298,8 @@ def _motion_parameters(client) -> frozenset[tuple[int, int]]:
 
 
 def _note_left_running(session: Session) -> None:
-    """A script that ends while a motor turns or the program runs says so on stderr (it
+    """A script that ends while a motor turns, or one it told to turn reads still (stalled,
+    not started yet), or the program runs, says so on stderr, and on stdout with --json (it
     leaves them so: that may well be what it was for)."""
     from ..ops.stop import activity
 
@@ -309,6 +315,8 @@ def _note_left_running(session: Session) -> None:
     elif not act.idle:
         print(f"tmclsh: note: {act}; left running (.stopall stops everything)",
               file=sys.stderr)
+        if session.out.json:  # (a program reading stdout learns it there)
+            session.out.emit({"left_running": act.to_json()})
 
 
 class Terminated(SystemExit):

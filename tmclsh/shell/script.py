@@ -31,8 +31,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..base import clock, files, limits
-from ..base.errors import (EXIT_FAILED, EXIT_OK, EXIT_USAGE, AsmError, ChecksumError,
-                           FrameError, RangeError, TmclError, TmclTimeoutError, ValidationError)
+from ..base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_OK, EXIT_USAGE, AsmError,
+                           ChecksumError, FrameError, ModuleGoneError, RangeError, TmclError,
+                           TmclTimeoutError, ValidationError)
 from ..client.ledger import CONFIRM_ROUNDS
 from . import commands, expr, options
 from .commands import command, options_of
@@ -462,6 +463,7 @@ class Runner:
                     report(session, node, exc)
                     if not session.keep_going:
                         raise _Stop() from exc
+                    session.failed_unanswered(exc)  # (ModuleGoneError: the run is over)
                 if self.on_step is not None:
                     self.on_step()
         except KeyboardInterrupt:
@@ -533,6 +535,7 @@ class Runner:
             report(self.session, node, exc)
             if not self.session.keep_going:
                 raise _Stop() from exc
+            self.session.failed_unanswered(exc)  # (ModuleGoneError: the run is over)
             return None
 
 
@@ -652,6 +655,9 @@ def run_file(session: Session, path: str) -> int:
     except ScriptError as exc:
         _report_plain(session, exc)
         status, kind = EXIT_USAGE, exc.kind
+    except ModuleGoneError as exc:  # (--keep-going: line after line went unanswered)
+        session.report_error(None, exc)
+        status = EXIT_CONNECT
     except KeyboardInterrupt:
         # how far it got, before the Ctrl-C policy (stop everything) says what it stopped
         where = runner.interrupted_at

@@ -21,8 +21,8 @@ from ..client.core import idempotent
 from ..client.text import LineClient as Client
 from ..client.text import Result
 from ..link.framing import name_of as _name
-from ..base.errors import (ChecksumError, StatusError, TmclError, TmclTimeoutError, TransportError,
-                           ValidationError)
+from ..base.errors import (EXIT_CONNECT, ChecksumError, ModuleGoneError, StatusError, TmclError,
+                           TmclTimeoutError, TransportError, ValidationError)
 from ..tmcl.modules import Module
 from ..tmcl.status import OK_STATUSES
 from . import commands
@@ -31,6 +31,10 @@ from .render import Output
 
 _VAR = re.compile(r"\$\{([^}]*)\}")
 ANSWERED = 64  # recent replies whose line a later suspect report can name
+# --keep-going: lines in a row that get no answer, none coming in between, before the module
+# is taken to be gone (Session.failed_unanswered). A link pulled and put back costs a line or
+# two (each waits as long as it would for its answer: --timeout times its attempts).
+GONE_AFTER = 4
 
 
 
@@ -154,6 +158,10 @@ class Session:
         # told (lines done, lines in all) after each line of -c and of a -f script (a unit's
         # live table, shell/units.py); None: nobody asks
         self.progress: Callable[[int, int], None] | None = None
+        # lines failed in a row for want of an answer, and client.replies when the count
+        # began (failed_unanswered)
+        self._unanswered = 0
+        self._unanswered_since = -1
 
     def close(self) -> bool:
         """End the session: run the closers; a failing one is reported, the rest still run.
@@ -212,6 +220,27 @@ class Session:
             raise TransportError(f"still disconnected after waiting {wait:g} s ({exc}); "
                                  "the line was not run") from exc
         self.out.info(reconnected(client))
+
+    def failed_unanswered(self, exc: BaseException) -> None:
+        """A line of -c/-f --keep-going failed: after ``GONE_AFTER`` lines in a row that got
+        no answer (the link stayed lost, or nothing came back) with no reply from the module
+        since, the module is gone: ModuleGoneError, and the run ends as one with no module
+        would (exit status 3). Without it a dead module cost every remaining line its full
+        wait: half an hour for a long script. Any reply (an error status too, or the 136 of
+        a reconnect) starts the count again; errors that are no silence do not count."""
+        if not isinstance(exc, (TransportError, TmclTimeoutError)):
+            return
+        replies = self.client.replies
+        if replies != self._unanswered_since:
+            self._unanswered, self._unanswered_since = 0, replies
+        self._unanswered += 1
+        if self._unanswered >= GONE_AFTER:
+            gone = ModuleGoneError(
+                f"{self._unanswered} lines in a row got no answer from the module on "
+                f"{self.client.describe()}: it is taken to be gone, the rest is not run "
+                f"(the last: {exc})")
+            gone.record = {"exit": EXIT_CONNECT}  # (JSON: as a run that found no module)
+            raise gone
 
     def report_error(self, line: str | None, exc: BaseException) -> None:
         """Say what went wrong with ``line`` (once: an error already shown is not said

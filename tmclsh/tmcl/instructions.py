@@ -53,6 +53,7 @@ class InstructionSpec:
     idempotent: bool = False  # sending it twice has the outcome of sending it once
     once_types: tuple[str, ...] = ()  # ... except with these symbolic types
     starts_motion: bool = False
+    stops: bool = False  # it stops the motor (its target speed becomes 0)
     confirm: str | None = None  # store | storable | factory: asked before it is sent
     done: str | dict[str, str] | None = None  # what the shell says when it was accepted
     turns: str | None = None  # ROR/ROL: the way a positive speed turns the motor
@@ -228,8 +229,8 @@ def _spec(raw: dict) -> InstructionSpec:
         value_kind=raw["value"], modules=frozenset(raw["modules"]), direct=raw["direct"],
         ascii=raw["ascii"], access=raw.get("access"), read_types=tuple(raw.get("read_types", ())),
         idempotent=raw.get("idempotent", False), once_types=tuple(raw.get("once_types", ())),
-        starts_motion=raw.get("starts_motion", False), confirm=raw.get("confirm"),
-        done=raw.get("done"), turns=raw.get("turns"), waits=raw.get("waits", False),
+        starts_motion=raw.get("starts_motion", False), stops=raw.get("stops", False),
+        confirm=raw.get("confirm"), done=raw.get("done"), turns=raw.get("turns"), waits=raw.get("waits", False),
         note=raw.get("note"), source=raw.get("source"),
         notes_for=dict(raw.get("notes_for", {})), types=dict(raw.get("types", {})),
         types_for={k: dict(v) for k, v in raw.get("types_for", {}).items()},
