@@ -29,6 +29,11 @@ _GET_VERSION = int(Control.GET_VERSION)
 _ANY = -1  # the command of a reply that names none (an ASCII line)
 # how often a reader reads a value again whose answer is in doubt before it says so
 CONFIRM_ROUNDS = 3
+# how many answers in a row from one address must each have come twice (as many replies again
+# as requests) before two modules are said to share it (``Doubles``): a line that copies a
+# reply now and then copies this many within as many requests only at about its copy rate to
+# this power
+SHARED_AFTER = 5
 
 
 @dataclass(frozen=True)
@@ -40,6 +45,75 @@ class Suspect:
     reply: Reply
     seq: int
     extra: bytes  # the reply that came when none was outstanding (b"": damaged bytes)
+
+
+class Doubles:
+    """Which addresses two modules answer at: the one rule (the client's, and ``scan``'s).
+
+    Two modules given one address both answer every request: each request brings two replies
+    from that address, whether the two agree or not, and whatever the offset between them
+    (the second may even be taken for the next request's answer, whose own replies then come
+    when nothing waits). So replies are counted, not matched: an address is shared when its
+    last ``SHARED_AFTER`` answered requests brought twice as many replies. A line that copies
+    a frame now and then (a repeater, a noisy RS485 line: the simulator's ``dup`` and
+    ``dup-late`` faults) brings one more reply per copy, not one per request, and the check
+    of the line that follows a copy (136, answered once) is one more request answered once."""
+
+    def __init__(self) -> None:
+        self.last: tuple[int, int, int] | None = None  # (address, command, type) last answered
+        self.replies: Counter[int] = Counter()  # replies from each address, taken or not
+        # the reply count before each of the last answers from each address
+        self.marks: dict[int, deque[int]] = {}
+        self.shared: set[int] = set()  # addresses two modules were found to answer at
+        self.new: list[int] = []  # found and not yet taken (``take``)
+
+    def answered(self, req: Request) -> int | None:
+        """``req`` was answered (a marker too). The address, when found shared just now."""
+        addr = req.address
+        marks = self.marks.get(addr)
+        if marks is None:
+            marks = self.marks[addr] = deque(maxlen=SHARED_AFTER)
+        marks.append(self.replies[addr])
+        self.replies[addr] += 1
+        self.last = (addr, req.opcode, req.type)
+        return self._check(addr)
+
+    def extra(self, address: int) -> int | None:
+        """A reply from ``address`` came that nothing waited for. The address, when found
+        shared just now."""
+        self.replies[address] += 1
+        return self._check(address)
+
+    def extra_version(self) -> int | None:
+        """A version string came that nothing waited for, right after a 136 type 0 answer:
+        one more reply from the address asked (``extra``)."""
+        if not self.asks_version():
+            return None
+        return self.extra(self.last[0])  # type: ignore[index]
+
+    def _check(self, addr: int) -> int | None:
+        marks = self.marks.get(addr)
+        if (addr in self.shared or marks is None or len(marks) < SHARED_AFTER
+                or self.replies[addr] - marks[0] < 2 * SHARED_AFTER):
+            return None
+        self.shared.add(addr)
+        self.new.append(addr)
+        return addr
+
+    def seconded(self, address: int) -> bool:
+        """Has the last answer from ``address`` had another reply behind it? (Not yet a
+        finding: asking again tells more.)"""
+        marks = self.marks.get(address)
+        return bool(marks) and self.replies[address] - marks[-1] >= 2  # type: ignore[index]
+
+    def asks_version(self) -> bool:
+        """Was the last answer a version string (136 type 0)? Then a second one may come."""
+        return self.last is not None and self.last[1:] == (_GET_VERSION, 0)
+
+    def take(self) -> list[int]:
+        """The addresses found shared since last asked, each told once."""
+        out, self.new = self.new, []
+        return out
 
 
 class Ledger:
@@ -76,6 +150,7 @@ class Ledger:
         self.found = 0  # suspects found so far (a reader judging answers asks what came since)
         self.doubted: deque[int] = deque(maxlen=16)  # answers returned in doubt (``doubt``)
         self.confirmed = -1  # ``replies`` when the line was last watched for a late answer
+        self.doubles = Doubles()  # second answers: two modules at one address (not reset)
 
     def _key(self, address: int, opcode: int) -> tuple[int, int]:
         """What a late reply could be taken for: its address and command (any on ASCII)."""
