@@ -344,13 +344,17 @@ class AsciiModeModule(Responder):
 class TwoAtOneAddress(Responder):
     """Two modules given the same address on one line (both arrived at address 1): every
     frame to that address is answered by each, one reply after the other, each with its own
-    version (a TMCM-1311 and a TMCM-1161). ``offset``: seconds the second one answers after
+    version (a TMCM-1311 and a TMCM-1161; ``versions``: others, two alike for modules that
+    agree in every answer). ``offset``: seconds the second one answers after
     the first (it is slower to reply). ``alone``: addresses a single module answers at on the
     same line (a TMCM-1311)."""
 
     versions = ("1311V111", "1161V130")
 
-    def __init__(self, *, offset: float = 0.0, alone: tuple[int, ...] = (), **kw):
+    def __init__(self, *, offset: float = 0.0, alone: tuple[int, ...] = (),
+                 versions: tuple[str, str] | None = None, **kw):
+        if versions is not None:
+            self.versions = versions
         self.offset = offset
         self.alone = frozenset(alone)
         self.addresses = frozenset({1}) | self.alone

@@ -42,13 +42,15 @@ def _settle(c: Client) -> None:
     c.confirm_last()
 
 
+@pytest.mark.parametrize("versions", [None, ("1311V111", "1311V111")],
+                         ids=["two-types", "alike"])
 @pytest.mark.parametrize("offset", [0.0, 0.03], ids=["back-to-back", "slower-second"])
-def test_two_modules_at_one_address_are_found_by_the_client(two, offset):
-    c, m = two(offset=offset)
+def test_two_modules_at_one_address_are_found_by_the_client(two, offset, versions):
+    c, m = two(offset=offset, versions=versions)
     notes: list[str] = []
     c.add_tracer(lambda d, raw, what: notes.append(what) if d == "note" else None)
-    for motor in range(4):
-        c.request(Request(1, GAP, 1, motor, 0))
+    for motor in range(SHARED_AFTER):  # (two alike are found by counting: this many)
+        c.request(Request(1, GAP, 1, motor % 3, 0))
     _settle(c)
     assert c.shared == {1}
     assert c.take_shared() == [1] and c.take_shared() == []  # told once
@@ -61,7 +63,7 @@ def test_a_single_module_beside_them_is_not_called_shared(two):
         c.request(Request(2, GAP, 1, 0, 0))
     _settle(c)
     assert c.shared == frozenset()
-    for _ in range(4):
+    for _ in range(SHARED_AFTER):
         c.request(Request(1, GAP, 1, 0, 0))
     _settle(c)
     assert c.shared == {1}
@@ -124,3 +126,21 @@ def test_the_rule_counts_replies_not_matches():
         if n % 2:
             assert one.extra(1) is None
     assert one.shared == set()
+
+
+def test_two_different_answers_to_136_from_one_address_are_found_at_once():
+    """A module answers 136 type 1 the same every time, and a line's copy of it is the same:
+    two different answers from one address are two modules (another type or firmware)."""
+    from tmclsh.tmcl.frames import Reply
+
+    ask = Request(1, 136, 1, 0, 0)
+    first = Reply(2, 1, 100, 136, 0x051F0101)
+    other = Reply(2, 1, 100, 136, 0x04890130)
+    d = Doubles()
+    assert d.answered(ask, first) is None and d.extra(1, first) is None  # a copy: nothing
+    assert d.answered(ask, first) is None
+    assert d.extra(1, other) == 1 and d.shared == {1}
+    moved = Doubles()  # another module there after the link was reopened: not two
+    moved.answered(ask, first)
+    moved.forget_versions()
+    assert moved.answered(ask, other) is None and moved.shared == set()

@@ -52,8 +52,10 @@ def test_c_json_has_one_duplicate_record(line, run_tmclsh):
     assert len(dups) == 1 and dups[0]["address"] == 1 and SAID in dups[0]["warning"]
 
 
-def test_f_says_it_in_the_summary_and_in_json(line, run_tmclsh, tmp_path):
-    m = line()
+@pytest.mark.parametrize("versions", [None, ("1311V111", "1311V111")],
+                         ids=["two-types", "alike"])
+def test_f_says_it_in_the_summary_and_in_json(line, run_tmclsh, tmp_path, versions):
+    m = line(versions=versions)
     script = tmp_path / "eol.tmcl"
     script.write_text("GAP 1, 0\n.expect GAP 1, 0 == 0\nSAP 4, 0, 100\n")
     p = run_tmclsh("--port", m.path, "-f", str(script))

@@ -285,11 +285,12 @@ class Client:
         request to one reaches both, and which answer is taken is chance."""
         return frozenset(self.ledger.doubles.shared)
 
-    def answered_twice(self, address: int) -> bool:
-        """Did the last answer from ``address`` come twice? Not yet a finding (a line may
-        copy a reply): asked again, two modules answer twice every time (``shared``)."""
+    def answered_twice(self, address: int, *, lately: bool = False) -> bool:
+        """Did the last answer from ``address`` come twice (``lately``: any of the last
+        few)? Not yet a finding (a line may copy a reply): asked again, two modules answer
+        twice every time (``shared``)."""
         with self._lock:
-            return self.ledger.doubles.seconded(address)
+            return self.ledger.doubles.seconded(address, lately=lately)
 
     @property
     def shared_news(self) -> bool:
@@ -304,7 +305,7 @@ class Client:
     def _unsolicited(self, extra: Reply | None) -> None:
         self.stats["unsolicited"] += 1
         if extra is not None:
-            self._second(self.ledger.doubles.extra(extra.module))
+            self._second(self.ledger.doubles.extra(extra.module, extra))
         raw = b"" if extra is None else extra.to_can() if self.is_can else extra.to_bytes()
         for suspect in self.ledger.unsolicited(extra, raw):
             self.stats["suspect"] += 1
@@ -527,7 +528,7 @@ class Client:
                     return None
                 copy = not self.downloading and ledger.may_be_a_copy(req, reply)
                 ledger.took(req, reply, copy=copy)
-                self._second(ledger.doubles.answered(req))
+                self._second(ledger.doubles.answered(req, reply))
                 self._answered_at = time.monotonic()
                 if copy and not self._judging:
                     return self._judge(req, reply, timeout, retries)
@@ -605,7 +606,7 @@ class Client:
                 continue
             if got is not None:
                 ledger.took_marker(marker, got)
-                self._second(ledger.doubles.answered(marker))
+                self._second(ledger.doubles.answered(marker, got))
             ledger.forget()
             for _ in range(extra):  # (crossed off when they come)
                 ledger.expect_late(Request(address, _GET_VERSION, 1, 0, 0), _NORMAL)
@@ -649,7 +650,7 @@ class Client:
                     else:
                         if got is not None:
                             ledger.took_marker(marker, got)
-                            self._second(ledger.doubles.answered(marker))
+                            self._second(ledger.doubles.answered(marker, got))
                 # not judged (no answer to the marker), or bytes that were no frame came
                 # before it (the displaced answer, damaged?): in doubt, unless found already
                 if (got is None or self.stats["discarded"] > noise) and not any(

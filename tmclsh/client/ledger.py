@@ -22,18 +22,18 @@ from collections import Counter, deque
 from collections.abc import Container
 from dataclasses import dataclass
 
-from ..tmcl.frames import Control, Reply, ReplyKind, Request
+from ..tmcl.frames import Control, Reply, ReplyKind, Request, Status
 
 _NORMAL, _VERSION, _NONE = ReplyKind.NORMAL, ReplyKind.VERSION_STRING, ReplyKind.NONE
 _GET_VERSION = int(Control.GET_VERSION)
+_OK = int(Status.OK)
 _ANY = -1  # the command of a reply that names none (an ASCII line)
 # how often a reader reads a value again whose answer is in doubt before it says so
 CONFIRM_ROUNDS = 3
 # how many answers in a row from one address must each have come twice (as many replies again
-# as requests) before two modules are said to share it (``Doubles``): a line that copies a
-# reply now and then copies this many within as many requests only at about its copy rate to
-# this power
-SHARED_AFTER = 5
+# as requests) before two modules that agree are said to share it (``Doubles``): a line that
+# copies replies at a rate p copies this many within as many requests at about p to this power
+SHARED_AFTER = 8
 
 
 @dataclass(frozen=True)
@@ -53,35 +53,49 @@ class Doubles:
     Two modules given one address both answer every request: each request brings two replies
     from that address, whether the two agree or not, and whatever the offset between them
     (the second may even be taken for the next request's answer, whose own replies then come
-    when nothing waits). So replies are counted, not matched: an address is shared when its
-    last ``SHARED_AFTER`` answered requests brought twice as many replies. A line that copies
-    a frame now and then (a repeater, a noisy RS485 line: the simulator's ``dup`` and
-    ``dup-late`` faults) brings one more reply per copy, not one per request, and the check
-    of the line that follows a copy (136, answered once) is one more request answered once."""
+    when nothing waits). Two kinds of evidence, both counted from replies, not matched:
+
+    * two different answers to 136 type 1 (a checksummed frame naming the module type and
+      firmware version) from one address, within a few requests: a module always gives the
+      same one, and a line's copy of it is the same too, so two modules of another type or
+      firmware are found at the first line check;
+    * two modules that agree (one type, one firmware) are found by counting: the address's
+      last ``SHARED_AFTER`` answered requests brought twice as many replies. A line that
+      copies a frame now and then (a repeater, a noisy RS485 line: the simulator's ``dup``
+      and ``dup-late`` faults) brings one more reply per copy, not one per request, and the
+      line check that follows a copy (136) is one more request most likely answered once."""
 
     def __init__(self) -> None:
         self.last: tuple[int, int, int] | None = None  # (address, command, type) last answered
         self.replies: Counter[int] = Counter()  # replies from each address, taken or not
         # the reply count before each of the last answers from each address
         self.marks: dict[int, deque[int]] = {}
+        # the last 136 type 1 answers from each address: (reply count, value)
+        self.versions: dict[int, deque[tuple[int, int]]] = {}
         self.shared: set[int] = set()  # addresses two modules were found to answer at
         self.new: list[int] = []  # found and not yet taken (``take``)
 
-    def answered(self, req: Request) -> int | None:
-        """``req`` was answered (a marker too). The address, when found shared just now."""
+    def answered(self, req: Request, reply: Reply | None = None) -> int | None:
+        """``req`` was answered (a marker too), with ``reply``. The address, when found
+        shared just now."""
         addr = req.address
         marks = self.marks.get(addr)
         if marks is None:
             marks = self.marks[addr] = deque(maxlen=SHARED_AFTER)
         marks.append(self.replies[addr])
-        self.replies[addr] += 1
         self.last = (addr, req.opcode, req.type)
-        return self._check(addr)
+        return self.extra(addr, reply if req.type == 1 else None)
 
-    def extra(self, address: int) -> int | None:
-        """A reply from ``address`` came that nothing waited for. The address, when found
-        shared just now."""
+    def extra(self, address: int, reply: Reply | None = None) -> int | None:
+        """A reply from ``address`` came (one that nothing waited for, unless ``answered``
+        says it was taken). The address, when found shared just now."""
         self.replies[address] += 1
+        if (reply is not None and reply.opcode == _GET_VERSION and reply.status == _OK
+                and reply.version is None):
+            seen = self.versions.get(address)
+            if seen is None:
+                seen = self.versions[address] = deque(maxlen=4)
+            seen.append((self.replies[address], reply.value))
         return self._check(address)
 
     def extra_version(self) -> int | None:
@@ -92,23 +106,37 @@ class Doubles:
         return self.extra(self.last[0])  # type: ignore[index]
 
     def _check(self, addr: int) -> int | None:
+        if addr in self.shared:
+            return None
         marks = self.marks.get(addr)
-        if (addr in self.shared or marks is None or len(marks) < SHARED_AFTER
-                or self.replies[addr] - marks[0] < 2 * SHARED_AFTER):
+        seen = self.versions.get(addr, ())
+        now = self.replies[addr]
+        differ = len({v for n, v in seen if now - n <= 2 * SHARED_AFTER}) > 1
+        doubled = (marks is not None and len(marks) == SHARED_AFTER
+                   and now - marks[0] >= 2 * SHARED_AFTER)
+        if not (differ or doubled):
             return None
         self.shared.add(addr)
         self.new.append(addr)
         return addr
 
-    def seconded(self, address: int) -> bool:
-        """Has the last answer from ``address`` had another reply behind it? (Not yet a
-        finding: asking again tells more.)"""
+    def seconded(self, address: int, *, lately: bool = False) -> bool:
+        """Has the last answer from ``address`` had another reply behind it (``lately``:
+        any of its last ``SHARED_AFTER``)? Not yet a finding: asking again tells more."""
         marks = self.marks.get(address)
-        return bool(marks) and self.replies[address] - marks[-1] >= 2  # type: ignore[index]
+        if not marks:
+            return False
+        if lately:
+            return self.replies[address] - marks[0] > len(marks)
+        return self.replies[address] - marks[-1] >= 2
 
     def asks_version(self) -> bool:
         """Was the last answer a version string (136 type 0)? Then a second one may come."""
         return self.last is not None and self.last[1:] == (_GET_VERSION, 0)
+
+    def forget_versions(self) -> None:
+        """The link was reopened: the module there may be another one now."""
+        self.versions.clear()
 
     def take(self) -> list[int]:
         """The addresses found shared since last asked, each told once."""
@@ -350,3 +378,4 @@ class Ledger:
         it starts in binary frames, until an ASCII link takes it again)."""
         self.forget()
         self.by_command = True
+        self.doubles.forget_versions()

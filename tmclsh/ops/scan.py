@@ -215,18 +215,29 @@ def _answers_twice(client: Client, addr: int, timeout: float) -> bool:
     modules at one address answer every request, a reply copied on a bad line is not
     copied every time."""
     for _ in range(SHARED_AFTER):
-        client.absorb()
+        if not _second_came(client, addr):
+            return False
         if addr in client.shared:
             return True
-        if not client.answered_twice(addr):
-            return False
         try:
             _probe(client, addr, max(timeout, 0.05), 1)
         except (ChecksumError, TmclTimeoutError):
             return False
-        time.sleep(min(SLOW_TIMEOUT, 4 * timeout))
-    client.absorb()
+    _second_came(client, addr)
     return addr in client.shared
+
+
+def _second_came(client: Client, addr: int, wait: float = SLOW_TIMEOUT) -> bool:
+    """Wait for another reply behind the last answer from ``addr`` (``wait`` at most: a
+    busy machine or a slow second module); whatever came is taken in."""
+    end = time.monotonic() + wait
+    while True:
+        client.absorb()
+        if client.answered_twice(addr) or addr in client.shared:
+            return True
+        if time.monotonic() >= end:
+            return False
+        time.sleep(0.01)
 
 
 def _in_ascii_mode(client: Client, addr: int, timeout: float) -> Found | None:
@@ -290,7 +301,8 @@ def scan(client: Client, addresses: Iterable[int], *, timeout: float,
                 if binary is not None:
                     hit = found[addr] = _identify(client, addr, binary, timeout)
                     client.absorb()  # (a second answer to the string, if it came)
-                    if client.answered_twice(addr) or addr in client.shared:
+                    if client.answered_twice(addr, lately=True) or _second_came(
+                            client, addr, timeout):  # (as long as an answer takes)
                         checked.add(addr)
                         if _answers_twice(client, addr, timeout):
                             hit = found[addr] = replace(hit, answers=2)
@@ -308,7 +320,7 @@ def scan(client: Client, addresses: Iterable[int], *, timeout: float,
             if binary is not None:
                 found[addr] = _identify(client, addr, binary, slow_timeout)
         for addr in sorted(a for a in found if a not in checked and (
-                a in client.shared or client.answered_twice(a))):
+                a in client.shared or client.answered_twice(a, lately=True))):
             if _answers_twice(client, addr, timeout):  # (a second answer that came later)
                 found[addr] = replace(found[addr], answers=2)
         if ascii is not False and (ascii or not found) and _has_ascii_mode(client):
