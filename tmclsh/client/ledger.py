@@ -67,7 +67,7 @@ class Doubles:
 
     def __init__(self) -> None:
         self.last: tuple[int, int, int] | None = None  # (address, command, type) last answered
-        self.replies: Counter[int] = Counter()  # replies from each address, taken or not
+        self.replies: dict[int, int] = {}  # replies from each address, taken or not
         # the reply count before each of the last answers from each address
         self.marks: dict[int, deque[int]] = {}
         # the last 136 type 1 answers from each address: (reply count, value)
@@ -77,26 +77,31 @@ class Doubles:
 
     def answered(self, req: Request, reply: Reply | None = None) -> int | None:
         """``req`` was answered (a marker too), with ``reply``. The address, when found
-        shared just now."""
+        shared just now. (Once per request: kept short.)"""
         addr = req.address
         marks = self.marks.get(addr)
         if marks is None:
             marks = self.marks[addr] = deque(maxlen=SHARED_AFTER)
-        marks.append(self.replies[addr])
+        n = self.replies.get(addr, 0)
+        marks.append(n)
+        self.replies[addr] = n + 1
         self.last = (addr, req.opcode, req.type)
-        return self.extra(addr, reply if req.type == 1 else None)
+        if reply is not None and self._version_differs(addr, reply):
+            return self._found(addr)
+        if n + 1 - marks[0] >= 2 * SHARED_AFTER and len(marks) == SHARED_AFTER:
+            return self._found(addr)
+        return None
 
     def extra(self, address: int, reply: Reply | None = None) -> int | None:
-        """A reply from ``address`` came (one that nothing waited for, unless ``answered``
-        says it was taken). The address, when found shared just now."""
-        self.replies[address] += 1
-        if (reply is not None and reply.opcode == _GET_VERSION and reply.status == _OK
-                and reply.version is None):
-            seen = self.versions.get(address)
-            if seen is None:
-                seen = self.versions[address] = deque(maxlen=4)
-            seen.append((self.replies[address], reply.value))
-        return self._check(address)
+        """A reply from ``address`` came that nothing waited for. The address, when found
+        shared just now."""
+        n = self.replies[address] = self.replies.get(address, 0) + 1
+        if reply is not None and self._version_differs(address, reply):
+            return self._found(address)
+        marks = self.marks.get(address)
+        if marks is not None and len(marks) == SHARED_AFTER and n - marks[0] >= 2 * SHARED_AFTER:
+            return self._found(address)
+        return None
 
     def extra_version(self) -> int | None:
         """A version string came that nothing waited for, right after a 136 type 0 answer:
@@ -105,16 +110,20 @@ class Doubles:
             return None
         return self.extra(self.last[0])  # type: ignore[index]
 
-    def _check(self, addr: int) -> int | None:
-        if addr in self.shared:
-            return None
-        marks = self.marks.get(addr)
-        seen = self.versions.get(addr, ())
+    def _version_differs(self, addr: int, reply: Reply) -> bool:
+        """Is ``reply`` a 136 type 1 answer (a normal frame: a string answers type 0) other
+        than one from ``addr`` within the last few requests?"""
+        if not (reply.opcode == _GET_VERSION and reply.status == _OK and reply.version is None):
+            return False
+        seen = self.versions.get(addr)
+        if seen is None:
+            seen = self.versions[addr] = deque(maxlen=4)
         now = self.replies[addr]
-        differ = len({v for n, v in seen if now - n <= 2 * SHARED_AFTER}) > 1
-        doubled = (marks is not None and len(marks) == SHARED_AFTER
-                   and now - marks[0] >= 2 * SHARED_AFTER)
-        if not (differ or doubled):
+        seen.append((now, reply.value))
+        return len({v for n, v in seen if now - n <= 2 * SHARED_AFTER}) > 1
+
+    def _found(self, addr: int) -> int | None:
+        if addr in self.shared:
             return None
         self.shared.add(addr)
         self.new.append(addr)
@@ -126,9 +135,8 @@ class Doubles:
         marks = self.marks.get(address)
         if not marks:
             return False
-        if lately:
-            return self.replies[address] - marks[0] > len(marks)
-        return self.replies[address] - marks[-1] >= 2
+        n = self.replies.get(address, 0)
+        return n - marks[0] > len(marks) if lately else n - marks[-1] >= 2
 
     def asks_version(self) -> bool:
         """Was the last answer a version string (136 type 0)? Then a second one may come."""
