@@ -126,3 +126,21 @@ def test_the_prompt_names_the_address(line, terminal):
     term.wait_for(said)
     term.run("GGP 66, 0", "SerialAddress")
     assert len(said.findall(term.screen())) == 1
+
+
+def test_an_upload_that_finds_the_address_shared_says_so_not_a_quieter_line(
+        make_pty_sim, run_tmclsh, tmp_path):
+    """Two alike modules (the simulator's bus, an address given twice): not found yet when
+    the upload starts (the bring-up is too short to count on), found by the replies of
+    download mode (status 101, twice each); the verify then names the real cause."""
+    from tmclsh.sim import SimBus, Simulator
+
+    _, path = make_pty_sim(target=SimBus([Simulator("TMCM-1311", 1),
+                                          Simulator("TMCM-1311", 1)]))
+    program = ROOT / "scripts" / "programs" / "tmcm1311-first-program.tmc"
+    script = tmp_path / "up.tmcl"
+    script.write_text(f".upload {program} --yes\n")
+    p = run_tmclsh("--port", path, "-f", str(script))
+    assert p.returncode == 1, p.stdout + p.stderr
+    assert re.search(r"error: verify failed at address \d+ \(.*\): " + SAID, p.stderr), p.stderr
+    assert "quieter line" not in p.stderr

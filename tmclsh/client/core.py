@@ -234,7 +234,11 @@ class Client:
         """A reply arrived that no request waits for: True if one like it was expected
         (``Ledger.late``), or the line may carry anything; else it is unsolicited."""
         ledger = self.ledger
-        if ledger.late(address, opcode, reply) or ledger.opaque or self.downloading:
+        if ledger.late(address, opcode, reply):
+            return True
+        if ledger.opaque or self.downloading:
+            # (no doubt cast, but a reply all the same: a second module answers here too)
+            self._second(ledger.doubles.extra(address, reply))
             return True
         self._unsolicited(reply)
         return False
