@@ -13,7 +13,8 @@ read-back, an upload's verify), ``take_suspects`` for the shell's report after a
 The framing (tmclsh.link.framing) writes to it as it reads the line, and so does the ASCII
 link (tmclsh.client.ascii) on the module's ASCII command line, whose replies name no command
 (``by_command`` false): there any late reply may be taken for any request; nothing here does
-I/O.
+I/O. Which addresses two modules answer at is counted here too (``Doubles``), from the same
+replies.
 """
 
 from __future__ import annotations
