@@ -373,17 +373,36 @@ class AsciiModeModule(Responder):
 class TwoAtOneAddress(Responder):
     """Two modules given the same address on one line (both arrived at address 1): every
     frame to that address is answered by each, one reply after the other, each with its own
-    version (a TMCM-1311 and a TMCM-1161)."""
+    version (a TMCM-1311 and a TMCM-1161; ``versions``: others, two alike for modules that
+    agree in every answer). ``offset``: seconds the second one answers after
+    the first (it is slower to reply). ``alone``: addresses a single module answers at on the
+    same line (a TMCM-1311)."""
 
     versions = ("1311V111", "1161V130")
 
+    def __init__(self, *, offset: float = 0.0, alone: tuple[int, ...] = (),
+                 versions: tuple[str, str] | None = None, **kw):
+        if versions is not None:
+            self.versions = versions
+        self.offset = offset
+        self.alone = frozenset(alone)
+        self.addresses = frozenset({1}) | self.alone
+        super().__init__(**kw)
+
     def answer(self, raw: bytes) -> bytes | None:
+        if raw[0] in self.alone:
+            self.version = self.versions[0]
+            return super().answer(raw)
         replies = []
         for version in self.versions:
             self.version = version
             one = super().answer(raw)
             if one is not None:
                 replies.append(one)
+        if self.offset and len(replies) == 2:
+            self.send(replies[0])
+            time.sleep(self.offset)
+            return replies[1]
         return b"".join(replies) or None
 
 

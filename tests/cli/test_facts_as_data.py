@@ -28,6 +28,9 @@ ALLOWED = {
     ("shell/render.py", "ins.opcode == Control.GET_VERSION"):
         "a raw 136 type 1 typed at the prompt: its value is read by the version decoder "
         "(tmcl/version.py), the one place that knows its layout",
+    ("client/ledger.py", "reply.opcode == _GET_VERSION"):
+        "136 type 1 names the module's type and firmware, the same every time: two different "
+        "answers to it from one address are two modules there (ledger.Doubles)",
     ("client/ledger.py", "extra.opcode == _GET_VERSION"):
         "the ledger's own resynchronisation marker is a 136: a copy of a marker's reply "
         "proves nothing about the answers before it",

@@ -661,7 +661,11 @@ summary line says SIMULATED). A 138 target-reached message is an object of its o
 with the results: {_b('{"event": 138, "motors": [0], "t": 1.25}')} (seconds since the start).
 An answer that may have been another request's (a reply came later that no request was
 waiting for) is reported as {_b('{"line": ..., "suspect": true, "warning": "..."}')} and fails
-the run. Status messages go to standard error.
+the run. Two modules at one address (every request brings two replies from there, or two
+different 136 answers: the client counts, the prompt and {_b("scan")} say the same) are
+reported once as {_b('{"address": 1, "duplicate": true, "warning": "..."}')}, fail the run
+(a unit: failed, with that reason, and {_b('"duplicate": true')} in its summary), and
+{_b(".upload")} refuses to write there. Status messages go to standard error.
 .IP \\(bu 2
 Ctrl-C interrupts: everything is stopped (see {_b("Ctrl-C")} below) and, outside the
 interactive prompt, {_b(PROG)} exits with status 130. A script that ends while a motor turns
@@ -847,7 +851,8 @@ def _exit_status() -> list[str]:
         (EXIT_OK, "Success."),
         (EXIT_FAILED, "A TMCL or shell command failed (a rejected line, an error status from "
                      "the module, a timeout), an answer of -c or -f stayed in doubt (the line "
-                     "and a warning say which; the run goes on), a script stopped at an "
+                     "and a warning say which; the run goes on), two modules answer at the "
+                     "address (a warning names it), a script stopped at an "
                      "error, asm or disasm "
                      "failed, a file could not be written (the message names it and why), "
                      "scan found no module, or a module file that cannot be used (tmclsh "

@@ -79,7 +79,7 @@ _QUIT_DOWNLOAD = isa.download_command("leave")
 _GET_VERSION = int(Control.GET_VERSION)
 _MOTION = watched_opcodes()  # what may start or stop a motor (client/motion.py)
 
-__all__ = ["Client", "Suspect", "CONFIRM_ROUNDS", "idempotent"]
+__all__ = ["Client", "Suspect", "CONFIRM_ROUNDS", "idempotent", "shared_text"]
 
 
 def idempotent(req: Request, downloading: bool = False) -> bool:
@@ -240,7 +240,11 @@ class Client:
         """A reply arrived that no request waits for: True if one like it was expected
         (``Ledger.late``), or the line may carry anything; else it is unsolicited."""
         ledger = self.ledger
-        if ledger.late(address, opcode, reply) or ledger.opaque or self.downloading:
+        if ledger.late(address, opcode, reply):
+            return True
+        if ledger.opaque or self.downloading:
+            # (no doubt cast, but a reply all the same: a second module answers here too)
+            self._second(ledger.doubles.extra(address, reply))
             return True
         self._unsolicited(reply)
         return False
@@ -257,20 +261,61 @@ class Client:
         if window[0] != self.host_address or not all(32 <= b < 127 for b in window[1:9]):
             return False
         raw = bytes(window[:9])
-        if self.ledger.late_version():
+        ledger = self.ledger
+        if ledger.late_version():
             self.discard(raw, "stale version string")
             return True
-        if self.ledger.is_version_copy(raw[1:].decode("latin-1")):
+        if ledger.is_version_copy(raw[1:].decode("latin-1")):
             # (a copy is no damaged reply either: the answer may still come, after a
             # module's pause before replying)
             self.stats["unsolicited"] += 1
-            self.ledger.mark_dirty()
+            ledger.mark_dirty()
             self.discard(raw, "copy of the version string")
+            self._second(ledger.doubles.extra_version())
+            return True
+        if ledger.doubles.asks_version() and not ledger.opaque:
+            # another version string right behind the one asked for: a second module
+            # answered the same 136 (nothing else sends a host-addressed string)
+            self.stats["unsolicited"] += 1
+            ledger.mark_dirty()
+            self.discard(raw, "a second version string (another module at this address?)")
+            self._second(ledger.doubles.extra_version())
             return True
         return False
 
+    def _second(self, found: int | None) -> None:
+        """A reply was counted (``ledger.Doubles``): ``found``, the address found shared
+        just now (the trace says so where it happened)."""
+        if found is not None and self.tracers:
+            _tell(self.tracers, "note", b"", shared_text(found))
+
+    @property
+    def shared(self) -> frozenset[int]:
+        """The addresses two modules were found to answer at (``ledger.Doubles``): every
+        request to one reaches both, and which answer is taken is chance."""
+        return frozenset(self.ledger.doubles.shared)
+
+    def answered_twice(self, address: int, *, lately: bool = False) -> bool:
+        """Did the last answer from ``address`` come twice (``lately``: any of the last
+        few)? Not yet a finding (a line may copy a reply): asked again, two modules answer
+        twice every time (``shared``)."""
+        with self._lock:
+            return self.ledger.doubles.seconded(address, lately=lately)
+
+    @property
+    def shared_news(self) -> bool:
+        """Was an address found shared that ``take_shared`` has not told yet?"""
+        return bool(self.ledger.doubles.new)
+
+    def take_shared(self) -> list[int]:
+        """The addresses found shared since last asked (each told once: the shell warns)."""
+        with self._lock:
+            return self.ledger.doubles.take()
+
     def _unsolicited(self, extra: Reply | None) -> None:
         self.stats["unsolicited"] += 1
+        if extra is not None:
+            self._second(self.ledger.doubles.extra(extra.module, extra))
         raw = b"" if extra is None else extra.to_can() if self.is_can else extra.to_bytes()
         for suspect in self.ledger.unsolicited(extra, raw):
             self.stats["suspect"] += 1
@@ -495,6 +540,7 @@ class Client:
                     return None
                 copy = not self.downloading and ledger.may_be_a_copy(req, reply)
                 ledger.took(req, reply, copy=copy)
+                self._second(ledger.doubles.answered(req, reply))
                 self._answered_at = time.monotonic()
                 if copy and not self._judging:
                     return self._judge(req, reply, timeout, retries)
@@ -572,6 +618,7 @@ class Client:
                 continue
             if got is not None:
                 ledger.took_marker(marker, got)
+                self._second(ledger.doubles.answered(marker, got))
             ledger.forget()
             for _ in range(extra):  # (crossed off when they come)
                 ledger.expect_late(Request(address, _GET_VERSION, 1, 0, 0), _NORMAL)
@@ -615,6 +662,7 @@ class Client:
                     else:
                         if got is not None:
                             ledger.took_marker(marker, got)
+                            self._second(ledger.doubles.answered(marker, got))
                 # not judged (no answer to the marker), or bytes that were no frame came
                 # before it (the displaced answer, damaged?): in doubt, unless found already
                 if (got is None or self.stats["discarded"] > noise) and not any(
@@ -926,6 +974,13 @@ class Client:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def shared_text(address: int) -> str:
+    """What a shared address means, in words for users (the one wording)."""
+    return (f"two modules answer at address {address}: every reply came twice, so every "
+            "command reaches both and which answer is shown is chance; give one of them "
+            "another address while the other is disconnected")
 
 
 def _tell(tracers: list[Tracer], direction: str, raw: bytes, decoded: object) -> None:

@@ -13,7 +13,8 @@ read-back, an upload's verify), ``take_suspects`` for the shell's report after a
 The framing (tmclsh.link.framing) writes to it as it reads the line, and so does the ASCII
 link (tmclsh.client.ascii) on the module's ASCII command line, whose replies name no command
 (``by_command`` false): there any late reply may be taken for any request; nothing here does
-I/O.
+I/O. Which addresses two modules answer at is counted here too (``Doubles``), from the same
+replies.
 """
 
 from __future__ import annotations
@@ -22,13 +23,18 @@ from collections import Counter, deque
 from collections.abc import Container
 from dataclasses import dataclass
 
-from ..tmcl.frames import Control, Reply, ReplyKind, Request
+from ..tmcl.frames import Control, Reply, ReplyKind, Request, Status
 
 _NORMAL, _VERSION, _NONE = ReplyKind.NORMAL, ReplyKind.VERSION_STRING, ReplyKind.NONE
 _GET_VERSION = int(Control.GET_VERSION)
+_OK = int(Status.OK)
 _ANY = -1  # the command of a reply that names none (an ASCII line)
 # how often a reader reads a value again whose answer is in doubt before it says so
 CONFIRM_ROUNDS = 3
+# how many answers in a row from one address must each have come twice (as many replies again
+# as requests) before two modules that agree are said to share it (``Doubles``): a line that
+# copies replies at a rate p copies this many within as many requests at about p to this power
+SHARED_AFTER = 8
 
 
 @dataclass(frozen=True)
@@ -40,6 +46,111 @@ class Suspect:
     reply: Reply
     seq: int
     extra: bytes  # the reply that came when none was outstanding (b"": damaged bytes)
+
+
+class Doubles:
+    """Which addresses two modules answer at: the one rule (the client's, and ``scan``'s).
+
+    Two modules given one address both answer every request: each request brings two replies
+    from that address, whether the two agree or not, and whatever the offset between them
+    (the second may even be taken for the next request's answer, whose own replies then come
+    when nothing waits). Two kinds of evidence, both counted from replies, not matched:
+
+    * two different answers to 136 type 1 (a checksummed frame naming the module type and
+      firmware version) from one address, within a few requests: a module always gives the
+      same one, and a line's copy of it is the same too, so two modules of another type or
+      firmware are found at the first line check;
+    * two modules that agree (one type, one firmware) are found by counting: the address's
+      last ``SHARED_AFTER`` answered requests brought twice as many replies. A line that
+      copies a frame now and then (a repeater, a noisy RS485 line: the simulator's ``dup``
+      and ``dup-late`` faults) brings one more reply per copy, not one per request, and the
+      line check that follows a copy (136) is one more request most likely answered once."""
+
+    def __init__(self) -> None:
+        self.last: tuple[int, int, int] | None = None  # (address, command, type) last answered
+        self.replies: dict[int, int] = {}  # replies from each address, taken or not
+        # the reply count before each of the last answers from each address
+        self.marks: dict[int, deque[int]] = {}
+        # the last 136 type 1 answers from each address: (reply count, value)
+        self.versions: dict[int, deque[tuple[int, int]]] = {}
+        self.shared: set[int] = set()  # addresses two modules were found to answer at
+        self.new: list[int] = []  # found and not yet taken (``take``)
+
+    def answered(self, req: Request, reply: Reply | None = None) -> int | None:
+        """``req`` was answered (a marker too), with ``reply``. The address, when found
+        shared just now. (Once per request: kept short.)"""
+        addr = req.address
+        marks = self.marks.get(addr)
+        if marks is None:
+            marks = self.marks[addr] = deque(maxlen=SHARED_AFTER)
+        n = self.replies.get(addr, 0)
+        marks.append(n)
+        self.replies[addr] = n + 1
+        self.last = (addr, req.opcode, req.type)
+        if reply is not None and self._version_differs(addr, reply):
+            return self._found(addr)
+        if n + 1 - marks[0] >= 2 * SHARED_AFTER and len(marks) == SHARED_AFTER:
+            return self._found(addr)
+        return None
+
+    def extra(self, address: int, reply: Reply | None = None) -> int | None:
+        """A reply from ``address`` came that nothing waited for. The address, when found
+        shared just now."""
+        n = self.replies[address] = self.replies.get(address, 0) + 1
+        if reply is not None and self._version_differs(address, reply):
+            return self._found(address)
+        marks = self.marks.get(address)
+        if marks is not None and len(marks) == SHARED_AFTER and n - marks[0] >= 2 * SHARED_AFTER:
+            return self._found(address)
+        return None
+
+    def extra_version(self) -> int | None:
+        """A version string came that nothing waited for, right after a 136 type 0 answer:
+        one more reply from the address asked (``extra``)."""
+        if not self.asks_version():
+            return None
+        return self.extra(self.last[0])  # type: ignore[index]
+
+    def _version_differs(self, addr: int, reply: Reply) -> bool:
+        """Is ``reply`` a 136 type 1 answer (a normal frame: a string answers type 0) other
+        than one from ``addr`` within the last few requests?"""
+        if not (reply.opcode == _GET_VERSION and reply.status == _OK and reply.version is None):
+            return False
+        seen = self.versions.get(addr)
+        if seen is None:
+            seen = self.versions[addr] = deque(maxlen=4)
+        now = self.replies[addr]
+        seen.append((now, reply.value))
+        return len({v for n, v in seen if now - n <= 2 * SHARED_AFTER}) > 1
+
+    def _found(self, addr: int) -> int | None:
+        if addr in self.shared:
+            return None
+        self.shared.add(addr)
+        self.new.append(addr)
+        return addr
+
+    def seconded(self, address: int, *, lately: bool = False) -> bool:
+        """Has the last answer from ``address`` had another reply behind it (``lately``:
+        any of its last ``SHARED_AFTER``)? Not yet a finding: asking again tells more."""
+        marks = self.marks.get(address)
+        if not marks:
+            return False
+        n = self.replies.get(address, 0)
+        return n - marks[0] > len(marks) if lately else n - marks[-1] >= 2
+
+    def asks_version(self) -> bool:
+        """Was the last answer a version string (136 type 0)? Then a second one may come."""
+        return self.last is not None and self.last[1:] == (_GET_VERSION, 0)
+
+    def forget_versions(self) -> None:
+        """The link was reopened: the module there may be another one now."""
+        self.versions.clear()
+
+    def take(self) -> list[int]:
+        """The addresses found shared since last asked, each told once."""
+        out, self.new = self.new, []
+        return out
 
 
 class Ledger:
@@ -76,6 +187,7 @@ class Ledger:
         self.found = 0  # suspects found so far (a reader judging answers asks what came since)
         self.doubted: deque[int] = deque(maxlen=16)  # answers returned in doubt (``doubt``)
         self.confirmed = -1  # ``replies`` when the line was last watched for a late answer
+        self.doubles = Doubles()  # second answers: two modules at one address (not reset)
 
     def _key(self, address: int, opcode: int) -> tuple[int, int]:
         """What a late reply could be taken for: its address and command (any on ASCII)."""
@@ -275,3 +387,4 @@ class Ledger:
         it starts in binary frames, until an ASCII link takes it again)."""
         self.forget()
         self.by_command = True
+        self.doubles.forget_versions()

@@ -47,6 +47,7 @@ from ..tmcl import instructions as isa
 from ..tmcl.asm import Program
 from ..base.errors import StatusError, TmclError, TmclTimeoutError, TransportError, ValidationError
 from ..tmcl.frames import AppState, Control, Instruction, Request, Status
+from ..client.core import shared_text
 from ..client.ledger import CONFIRM_ROUNDS
 
 log = logging.getLogger(__name__)
@@ -93,6 +94,9 @@ class Mismatch:
     # the read-back stayed in doubt (answers that may have been another request's, three
     # rounds running): not shown to differ, not shown to be the same either
     doubtful: bool = False
+    # two modules answer at the module's address (Client.shared): why the read-back was
+    # in doubt, and the program went to both
+    shared: bool = False
 
 
 @dataclass
@@ -181,6 +185,13 @@ def require_binary(client, what: str) -> None:
                               "RUN and STOP for its program (switch with .mode binary)")
 
 
+def require_alone(client) -> None:
+    """Refuse to store a program where two modules answer at the address (``Client.shared``):
+    it would be written to both, and no read-back could say what either holds."""
+    if client.address in getattr(client, "shared", ()):
+        raise ValidationError(f"not uploading, nothing was sent: {shared_text(client.address)}")
+
+
 def check_fits(module, start: int, count: int) -> None:
     """Refuse a program that does not fit the module's memory, before anything is sent."""
     size = module.program_memory
@@ -244,6 +255,7 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
     instructions, start = _image(program, origin)
     module = client.require_module()
     require_binary(client, "uploading a program (132/133)")
+    require_alone(client)
     if not instructions:
         raise ValidationError("the program has no instructions; nothing to upload")
     check_fits(module, start, len(instructions))
@@ -401,9 +413,10 @@ def verify_image(client, instructions: Sequence[Instruction], start: int = 0, *,
         if not doubtful:
             break
         todo = sorted(doubtful)
+    shared = client.address in getattr(client, "shared", ())
     for idx, want in enumerate(instructions):
         if idx in doubtful:
-            return Mismatch(start + idx, want, got[idx], doubtful=True)
+            return Mismatch(start + idx, want, got[idx], doubtful=True, shared=shared)
         if got[idx].to_bytes() != want.to_bytes():
             # a difference is said only when a second read says the same (a copy of another
             # frame that no suspect gave away would otherwise be named the cell's content)
@@ -412,7 +425,7 @@ def verify_image(client, instructions: Sequence[Instruction], start: int = 0, *,
             if again.to_bytes() == want.to_bytes() and not unsure:
                 continue
             certain = again.to_bytes() == got[idx].to_bytes() and not unsure
-            return Mismatch(start + idx, want, again, doubtful=not certain)
+            return Mismatch(start + idx, want, again, doubtful=not certain, shared=shared)
     return None
 
 

@@ -22,9 +22,10 @@ and a module found so is identified and left in ASCII mode. That pass costs as m
 first, so by default it is made only when nothing answered in binary (``ascii=True``: always).
 
 Two modules at one address both answer every request (on an RS485 line they may collide,
-on a simulated bus each reply comes twice): an address whose presence probe brought a second
-answer is asked once more, and if that is answered twice as well the address is reported as
-shared (``Found.answers``).
+on a simulated bus each reply comes twice): an address whose answer came twice is asked
+again until the client's rule (``client.ledger.Doubles``, the one rule, also what every
+other command is told by) finds it shared, or an answer comes once; a shared address is
+reported (``Found.answers``).
 
 Whether the baud rate matters on a link: a module's own USB port (CDC) and TCP carry bytes
 at any rate (``rate_matters``), so ``scan --baud auto`` there scans once; elsewhere it stops
@@ -43,6 +44,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 
 from ..client.core import Client
+from ..client.ledger import SHARED_AFTER
 from ..base.errors import (ChecksumError, DownloadModeError, TmclError, TmclTimeoutError,
                            ValidationError)
 from ..tmcl.decoder import is_frame
@@ -208,24 +210,35 @@ def _probe(client: Client, addr: int, timeout: float, retries: int):
         return exc.reply
 
 
-def _copy_of_probe(raw: bytes, host: int) -> int | None:
-    """The address a dropped frame is a second answer to 136 type 1 from, if it is one."""
-    if len(raw) == SERIAL_FRAME_LEN and raw[3] == Control.GET_VERSION and is_frame(raw, host):
-        return raw[1]
-    return None
+def _answers_twice(client: Client, addr: int, timeout: float) -> bool:
+    """Is ``addr`` shared? While its last answer came twice, ask again, giving a second
+    answer the time to come, until the client's rule says so (``Client.shared``): two
+    modules at one address answer every request, a reply copied on a bad line is not
+    copied every time."""
+    for _ in range(SHARED_AFTER):
+        if not _second_came(client, addr):
+            return False
+        if addr in client.shared:
+            return True
+        try:
+            _probe(client, addr, max(timeout, 0.05), 1)
+        except (ChecksumError, TmclTimeoutError):
+            return False
+    _second_came(client, addr)
+    return addr in client.shared
 
 
-def _answers_twice(client: Client, addr: int, timeout: float, copies: dict[int, int]) -> bool:
-    """Ask ``addr`` once more and give a second answer the time to come: two modules at one
-    address answer every request (a reply copied once on a bad line does not again)."""
-    before = copies.get(addr, 0)
-    try:
-        _probe(client, addr, max(timeout, 0.05), 1)
-    except (ChecksumError, TmclTimeoutError):
-        return False
-    time.sleep(min(SLOW_TIMEOUT, 4 * timeout))
-    client.absorb()
-    return copies.get(addr, 0) > before
+def _second_came(client: Client, addr: int, wait: float = SLOW_TIMEOUT) -> bool:
+    """Wait for another reply behind the last answer from ``addr`` (``wait`` at most: a
+    busy machine or a slow second module); whatever came is taken in."""
+    end = time.monotonic() + wait
+    while True:
+        client.absorb()
+        if client.answered_twice(addr) or addr in client.shared:
+            return True
+        if time.monotonic() >= end:
+            return False
+        time.sleep(0.01)
 
 
 def _in_ascii_mode(client: Client, addr: int, timeout: float) -> Found | None:
@@ -266,15 +279,11 @@ def scan(client: Client, addresses: Iterable[int], *, timeout: float,
     addresses = list(addresses)
     found: dict[int, Found] = {}
     again: set[int] = set()
-    copies: dict[int, int] = {}  # second answers to the presence probe, by address
     checked: set[int] = set()
     host = client.host_address
 
     def tracer(direction: str, raw: bytes, decoded: object) -> None:
         if direction == "drop" and not client.is_can:
-            copy = _copy_of_probe(raw, host)
-            if copy is not None:
-                copies[copy] = copies.get(copy, 0) + 1
             addr = _late_answerer(raw, host)
             if addr is not None:
                 again.add(addr)
@@ -292,9 +301,11 @@ def scan(client: Client, addresses: Iterable[int], *, timeout: float,
             else:
                 if binary is not None:
                     hit = found[addr] = _identify(client, addr, binary, timeout)
-                    if copies.get(addr):  # (the copy came while the string was asked)
+                    client.absorb()  # (a second answer to the string, if it came)
+                    if client.answered_twice(addr, lately=True) or _second_came(
+                            client, addr, timeout):  # (as long as an answer takes)
                         checked.add(addr)
-                        if _answers_twice(client, addr, timeout, copies):
+                        if _answers_twice(client, addr, timeout):
                             hit = found[addr] = replace(hit, answers=2)
             if progress is not None:
                 progress(addr, hit)
@@ -309,8 +320,9 @@ def scan(client: Client, addresses: Iterable[int], *, timeout: float,
                 continue
             if binary is not None:
                 found[addr] = _identify(client, addr, binary, slow_timeout)
-        for addr in sorted(a for a in found if copies.get(a) and a not in checked):
-            if _answers_twice(client, addr, timeout, copies):  # (a copy that came later)
+        for addr in sorted(a for a in found if a not in checked and (
+                a in client.shared or client.answered_twice(a, lately=True))):
+            if _answers_twice(client, addr, timeout):  # (a second answer that came later)
                 found[addr] = replace(found[addr], answers=2)
         if ascii is not False and (ascii or not found) and _has_ascii_mode(client):
             found.update(_ascii_pass(client, [a for a in addresses if a not in found],

@@ -324,6 +324,8 @@ def run_repl(session: Session, prompt_session: PromptSession | None = None) -> i
         _dumb_echo(ps)
     session.out.print(banner(session), soft_wrap=False)
     unlisten = client.add_listener(session.out.event)
+    client.poll()  # (the last answer of the bring-up may have come twice: said now)
+    session.report_shared()
     client.start_event_poller()
     try:
         while True:

@@ -30,6 +30,7 @@ from ..tmcl import asm, sourcemap
 from ..base import files, limits
 from ..ops import program
 from ..base.errors import AsmError, TmclError, ValidationError
+from ..client.core import shared_text
 from ..ops.program import AppStatus, UploadError
 from ..tmcl.frames import Instruction
 from . import options
@@ -483,7 +484,10 @@ def cmd_upload(session: Session, argtext: str) -> None:
         w = where(session, mm.address)
         expected, _ = asm.disassemble_instruction(mm.expected, module)
         actual, _ = asm.disassemble_instruction(mm.actual, module)
-        if mm.doubtful:
+        if mm.shared:
+            message = (f"verify failed at address {mm.address} ({w.place}): "
+                       f"{shared_text(session.client.address)}; the program went to both")
+        elif mm.doubtful:
             message = (f"verify failed at address {mm.address} ({w.place}): its read-back "
                        "stayed in doubt (the line brought answers nothing waited for, so a "
                        "reply may have been another request's); upload again on a quieter "

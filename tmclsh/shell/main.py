@@ -46,7 +46,7 @@ def refused_line(session: Session, lines: list[str]) -> tuple[str, TmclError] | 
 
 def run_lines(session: Session, lines: list[str]) -> int:
     failed = False
-    suspects = session.stats.suspects
+    suspects, shared = session.stats.suspects, len(session.stats.shared)
     bad = refused_line(session, lines)
     if bad is not None:
         line, exc = bad
@@ -80,7 +80,8 @@ def run_lines(session: Session, lines: list[str]) -> int:
                 progress(done, len(lines))
     if failed and refused and frames_sent(session.client) == sent:
         return EXIT_USAGE  # a file refused before anything was sent, as -f says of a script
-    return EXIT_FAILED if failed or session.stats.suspects > suspects else EXIT_OK
+    doubtful = session.stats.suspects > suspects or len(session.stats.shared) > shared
+    return EXIT_FAILED if failed or doubtful else EXIT_OK
 
 
 def run_shell(args: argparse.Namespace) -> int:
@@ -227,7 +228,7 @@ def _run_unattended(args: argparse.Namespace, session: Session) -> int:
         unlisten = client.add_listener(lambda reply: out.event(reply, client.event_time))
         client.start_event_poller()  # an event shows when it comes, not at the next line
     finished = False
-    suspects = session.stats.suspects
+    suspects, shared = session.stats.suspects, len(session.stats.shared)
     try:
         if args.command is not None:
             status = run_lines(session, session.split(args.command))
@@ -243,8 +244,11 @@ def _run_unattended(args: argparse.Namespace, session: Session) -> int:
         unlisten()
         if started() and finished:  # else nothing this run sent can have started anything
             _note_left_running(session)
-    if status == EXIT_OK and session.stats.suspects > suspects:
-        status = EXIT_FAILED  # (an answer found suspect as the run ended is no pass either)
+    if status == EXIT_OK and (session.stats.suspects > suspects
+                              or len(session.stats.shared) > shared):
+        # (an answer found suspect as the run ended is no pass either, nor a run on an
+        # address two modules answer at)
+        status = EXIT_FAILED
     return status
 
 

@@ -426,12 +426,13 @@ class Counts:
     errors: int
     suspects: int = 0
     shell: int = 0  # shell commands that sent frames of their own (Stats.shell_commands)
+    shared: int = 0  # addresses found shared (Stats.shared)
 
 
 def _counts(session: Session) -> Counts:
     s = session.stats
     return Counts(s.commands, s.checks_passed, s.checks_failed, s.errors, s.suspects,
-                  s.shell_commands)
+                  s.shell_commands, len(s.shared))
 
 
 class Runner:
@@ -671,8 +672,11 @@ def run_file(session: Session, path: str) -> int:
     finally:
         session.location = None
     session.confirm_answers()  # (the last answer may show only now to be another's)
-    if status == EXIT_OK and (runner.failed or session.stats.suspects > before.suspects):
-        status = EXIT_FAILED  # a result that may be another request's is no pass
+    if status == EXIT_OK and (runner.failed or session.stats.suspects > before.suspects
+                              or len(session.stats.shared) > before.shared):
+        # a result that may be another request's is no pass, nor a run on an address two
+        # modules answer at
+        status = EXIT_FAILED
     summary(session, name, before, time.monotonic() - start, status, kind)
     if status == EXIT_USAGE and (session.stats.commands > before.commands
                                   or session.stats.shell_commands > before.shell):
@@ -743,6 +747,10 @@ def summary(session: Session, name: str, before: Counts, elapsed: float, status:
         suspects = now.suspects - before.suspects
         if suspects:
             text += f"; {suspects} answer{'s' if suspects != 1 else ''} in doubt (see the warnings)"
+        shared = session.stats.shared[before.shared:]
+        if shared:
+            text += ("; two modules answer at address "
+                     + ", ".join(str(a) for a in shared))
     if session.out.simulated():
         text += "  [SIMULATED: built-in simulator, no module]"
     if session.out.json:

@@ -17,7 +17,7 @@ from typing import Any
 
 from ..tmcl import asm
 from ..tmcl import instructions as isa
-from ..client.core import idempotent
+from ..client.core import idempotent, shared_text
 from ..client.text import LineClient as Client
 from ..client.text import Result
 from ..link.framing import name_of as _name
@@ -105,6 +105,8 @@ class Stats:
     checks_passed: int = 0
     checks_failed: int = 0
     suspects: int = 0  # results reported as possibly another request's answer
+    # addresses two modules were found to answer at (Client.take_shared), in the order found
+    shared: list[int] = field(default_factory=list)
     # shell commands that sent frames of their own (.upload, .run, .save, ...): not TMCL lines,
     # but a summary saying "0 commands sent" after one would say the module was not touched
     shell_commands: int = 0
@@ -352,6 +354,7 @@ class Session:
     def report_suspects(self) -> None:
         """Say which earlier answers may have been another request's (Client.take_suspects):
         a result is never silently kept when the link shows it may be wrong."""
+        self.report_shared()
         take = getattr(self.client, "take_suspects", None)
         for s in take() if callable(take) else ():
             known = self._answered[s.seq % ANSWERED]
@@ -365,6 +368,20 @@ class Session:
                     "to be sure")
             if self.out.json:
                 self.out.emit({"line": line, "suspect": True, "warning": text})
+            else:
+                self.out.warn(f"warning: {text}")
+
+    def report_shared(self) -> None:
+        """Say once of each address that two modules answer at (Client.take_shared): every
+        command reaches both, and no result from there can be trusted. A run that found one
+        fails (``Stats.shared``)."""
+        take = getattr(self.client, "take_shared", None)
+        for address in take() if callable(take) else ():
+            self.stats.shared.append(address)
+            text = shared_text(address)
+            self.out.saw_error(text)  # (a unit's last error: the reason it failed)
+            if self.out.json:
+                self.out.emit({"address": address, "duplicate": True, "warning": text})
             else:
                 self.out.warn(f"warning: {text}")
 
@@ -416,7 +433,8 @@ class Session:
                 self._record(text, f"error: {exc}")
             raise
         finally:
-            if getattr(client, "suspects", True):  # (a client without the list: ask it)
+            # (a client without the list: ask it)
+            if getattr(client, "suspects", True) or getattr(client, "shared_news", False):
                 self.report_suspects()
 
     def run_tmcl(self, text: str, *, show: bool = True) -> Result:

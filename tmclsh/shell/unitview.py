@@ -259,13 +259,21 @@ class Record:
             return "-"
         return f"{self.line}/{self.total}"
 
+    @property
+    def shared(self) -> list[int]:
+        """The addresses two modules answered at during the run (the unit failed for it)."""
+        return list(self.session.stats.shared) if self.session is not None else []
+
     def summary(self) -> dict:
         passed, failed, errors = self.counts
-        return {**self.unit.tag(self._address()), "summary": True, "result": self.result,
-                "exit": self.status, "module": self.module, "firmware": self.firmware,
-                "line": self.line, "of": self.total, "commands": self.commands,
-                "checks_passed": passed, "checks_failed": failed, "errors": errors,
-                "error": self.last_error or None, "seconds": round(self.seconds, 3)}
+        row = {**self.unit.tag(self._address()), "summary": True, "result": self.result,
+               "exit": self.status, "module": self.module, "firmware": self.firmware,
+               "line": self.line, "of": self.total, "commands": self.commands,
+               "checks_passed": passed, "checks_failed": failed, "errors": errors,
+               "error": self.last_error or None, "seconds": round(self.seconds, 3)}
+        if self.shared:
+            row["duplicate"] = True  # (two modules answer at the unit's address)
+        return row
 
     def _address(self) -> int:
         u = self.unit
