@@ -671,7 +671,7 @@ Ctrl-C interrupts: everything is stopped (see {_b("Ctrl-C")} below) and, outside
 interactive prompt, {_b(PROG)} exits with status 130. A script that ends while a motor turns
 or the stored program runs leaves them so, with a note on standard error (with {_b("--json")}
 also {_b('{"left_running": {...}}')} on standard output). A motor the run told to turn
-({_b("ROR")}, {_b("ROL")}, {_b("MVP")}, a target speed written) and did not stop counts as
+({_b("ROR 0, 1000")}, a rotation left, a position move, a target speed written) and did not stop counts as
 left turning even while its speed reads 0 (it has not started yet, or it stalls).
 .IP \\(bu 2
 A lost link fails the line it was lost on, with the reason; with {_b("--keep-going")} the
