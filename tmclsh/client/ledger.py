@@ -199,6 +199,11 @@ class Ledger:
             self.copy_at = self.replies
         self.recent.append((req, reply))
 
+    def took_a_copy(self) -> bool:
+        """Was the answer just returned taken as one that may be a copy (``took``)? Then it
+        cannot confirm another answer: two copies agree with each other."""
+        return self.copy_at == self.replies != 0
+
     def took_marker(self, marker: Request, reply: Reply) -> None:
         """A marker's reply came: everything sent before it was answered before it."""
         self.recent.append((None, reply))
