@@ -828,7 +828,7 @@ class Client:
                 time.sleep(min(0.1, max(0.0, deadline - time.monotonic())))
         self._down = False
         self.framing = self.transport.framing(self)
-        self.ledger.reset()  # whatever comes now says nothing about answers before
+        self.ledger.reset()  # (an answer still to come may come on the new link too)
 
     @property
     def lock(self):

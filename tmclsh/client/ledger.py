@@ -276,7 +276,11 @@ class Ledger:
         return out
 
     def reset(self) -> None:
-        """The link was reopened: whatever comes now says nothing about answers before (and
-        it starts in binary frames, until an ASCII link takes it again)."""
+        """The link was reopened: it starts in binary frames, until an ASCII link takes it
+        again. An answer still to come when the link was lost may still arrive on the new
+        one (the module answers late, an adapter or a device server kept it): then the first
+        request resynchronises, as on a line that may carry anything."""
+        late = self.dirty(False)
         self.forget()
         self.by_command = True
+        self.opaque = late
