@@ -170,3 +170,55 @@ def test_two_copies_of_a_line_checks_answer_do_not_confirm_each_other():
     finally:
         client.close()
         module.close()
+
+
+class HoldsChecks(NoEchoModule):
+    """Answers GAP 1, 0 (a measurement: read once) with 5000, but not the first time; the
+    answers to the first two line checks are held back and come, in order, just before the
+    answer to the third (a slow line: later than the client waits, never out of order)."""
+
+    silent = 0
+    doubled = 0
+    quiet_reads = 1
+    hold = 2
+
+    def __init__(self, **kw):
+        self.held: list[str] = []
+        super().__init__(**kw)
+
+    def line(self, text: str) -> str | None:
+        word = text[1:].strip().upper().replace(" ", "")
+        if word == "GAP1,0":
+            if self.quiet_reads:
+                self.quiet_reads -= 1
+                return None
+            return f"{chr(0x40 + self.host)}{self.char} 100 5000"
+        out = super().line(text)
+        if word in ("GGP76,0", "GGP67,0") and b"AGAP 1, 0" in self.log:
+            if self.hold:
+                self.hold -= 1
+                self.held.append(out)
+                return None
+            out, self.held = "\r".join(self.held + [out]), []
+        return out
+
+
+def test_a_line_checks_answer_later_than_the_wait_is_not_taken_for_a_read():
+    """Both line checks went unanswered (their answers were late, not lost). The next check
+    was asked after a quiet moment, and took the first check's late answer for its own; the
+    second check's (33, GP 67) was then taken for GAP 1, 0 (read once: shown as the
+    position). Now the late answers are counted off before the check's own."""
+    import tmclsh
+    from tmclsh.base.errors import TmclTimeoutError
+
+    module = HoldsChecks()
+    client = tmclsh.connect(port=module.path, module="TMCM-1311", ascii=True, timeout=0.3)
+    try:
+        with pytest.raises(TmclTimeoutError):
+            client.execute("GAP 1, 0")  # unanswered, and both checks after it too
+        r = client.execute("GAP 1, 0")
+        assert (r.value, r.in_doubt) == (5000, False)
+        assert not module.held and not module.hold
+    finally:
+        client.close()
+        module.close()
