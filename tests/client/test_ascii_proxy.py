@@ -173,14 +173,16 @@ def test_two_copies_of_a_line_checks_answer_do_not_confirm_each_other():
 
 
 class HoldsChecks(NoEchoModule):
-    """Answers GAP 1, 0 (a measurement: read once) with 5000, but not the first time; the
-    answers to the first two line checks are held back and come, in order, just before the
-    answer to the third (a slow line: later than the client waits, never out of order)."""
+    """Answers GAP 1, 0 (a measurement: read once) with 5000, but not the first
+    ``quiet_reads`` times; once the line ``arm`` came, the answers to the next ``hold`` line
+    checks are held back and come, in order, just before its next answer (a slow line:
+    later than the client waits, never out of order)."""
 
     silent = 0
     doubled = 0
     quiet_reads = 1
     hold = 2
+    arm = b"AGAP 1, 0"
 
     def __init__(self, **kw):
         self.held: list[str] = []
@@ -188,17 +190,21 @@ class HoldsChecks(NoEchoModule):
 
     def line(self, text: str) -> str | None:
         word = text[1:].strip().upper().replace(" ", "")
+        head = f"{chr(0x40 + self.host)}{self.char} 100 "
         if word == "GAP1,0":
             if self.quiet_reads:
                 self.quiet_reads -= 1
                 return None
-            return f"{chr(0x40 + self.host)}{self.char} 100 5000"
-        out = super().line(text)
-        if word in ("GGP76,0", "GGP67,0") and b"AGAP 1, 0" in self.log:
-            if self.hold:
-                self.hold -= 1
-                self.held.append(out)
-                return None
+            out = f"{head}5000"
+        elif word.startswith("SGP"):
+            out = f"{head}{word.rsplit(',', 1)[1]}"
+        else:
+            out = super().line(text)
+        if word in ("GGP76,0", "GGP67,0") and self.arm in self.log and self.hold:
+            self.hold -= 1
+            self.held.append(out)
+            return None
+        if out is not None and self.held:
             out, self.held = "\r".join(self.held + [out]), []
         return out
 
@@ -222,3 +228,4 @@ def test_a_line_checks_answer_later_than_the_wait_is_not_taken_for_a_read():
     finally:
         client.close()
         module.close()
+

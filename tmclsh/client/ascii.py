@@ -871,7 +871,7 @@ class AsciiLink:
         first given a moment; silence proves nothing (a slow line keeps its order), so the
         answers of that kind still to come are counted off before this one's, as the binary
         link counts its markers. TmclTimeoutError if it does not come (it is then
-        outstanding, in the ledger too: the next command checks the line first)."""
+        outstanding)."""
         client, ledger, buf = self.client, self.client.ledger, self._buf
         markers = self._markers()
         pending = self._pending
@@ -918,7 +918,6 @@ class AsciiLink:
         # (earlier answers of its kind that did not come before it were lost: this one is
         # the one still to come)
         pending[value] = 1
-        ledger.expect_late(req, ReplyKind.NORMAL)
         raise TmclTimeoutError(f"no answer to {text!r} within {timeout:g} s")
 
     def absorb(self, *, watch: bool = False) -> None:
