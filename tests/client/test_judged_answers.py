@@ -180,6 +180,18 @@ def test_a_line_that_brings_the_same_copy_first_every_time_is_said_in_the_line(p
     assert js.returncode == 1
 
 
+def test_from_python_an_answer_left_in_doubt_says_so_in_its_result(client):
+    """The API path: ``LineClient.execute`` returned the copy as a plain answer (its
+    ``Result.in_doubt`` was never set outside the shell); it stays a suspect as well."""
+    c, sim = client
+    assert c.execute("GGP 0, 2").value == 11
+    every_time_after(sim, 11, 22, [11])
+    r = c.execute("GGP 1, 2")
+    assert r.value == 11 and r.in_doubt
+    assert [s.seq for s in c.take_suspects()] == [c.replies]
+    assert not c.execute("GGP 0, 2").in_doubt
+
+
 def test_a_write_that_may_have_taken_a_copy_is_followed_by_a_marker(client):
     """SGP is not sent twice to judge it: a 136 follows, and the displaced answer, coming
     before the 136's reply, makes the answer a suspect at once (not one line later)."""
