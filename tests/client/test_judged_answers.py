@@ -216,6 +216,14 @@ def test_no_wrong_value_is_shown_as_a_plain_answer_under_random_faults(mix):
     assert counts["right, flagged"] <= 4, counts
 
 
+def test_the_api_path_flags_every_wrong_value_too():
+    """The same through the Python API (``fault_trial.py --api``: tmclsh.connect and
+    LineClient.execute in a process of their own; ``Result.in_doubt`` is the flag)."""
+    counts, _ = fault_trial.trial("dup=0.1,dup-late=0.1", 200, seed=3, api=True)
+    assert counts["reads"] >= 190, counts
+    assert counts["wrong, unflagged"] == 0 and counts["wrong, later"] == 0, counts
+
+
 def test_the_trial_counts_a_wrong_value_it_is_shown():
     """The trial's judge is no test that cannot fail: a wrong plain record counts."""
     values = {"GGP 0, 2": 11}
