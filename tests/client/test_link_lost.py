@@ -382,7 +382,7 @@ def test_an_answer_still_to_come_when_the_link_was_lost_is_not_taken_after_it():
     said so): reopening the link forgot that an answer was still to come. (Reopened
     without a bring-up, as a firmware update reopens it; a bring-up's 136 type 0 happened
     to take the kept answer in first.)"""
-    from responder import TcpModule, reply
+    from responder import TcpModule
 
     class KeepsTheAnswer(TcpModule):
         held: bytes | None = None
