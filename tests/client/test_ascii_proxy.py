@@ -137,12 +137,16 @@ class NoEchoModule(AsciiModeModule):
     silent = 2
     doubled = 2
 
+    def heard(self, word: bytes) -> bool:
+        """Was the command ``word`` (no spaces: ``b"GGP0,2"``) sent to it, however spaced?"""
+        return any(t[1:].replace(b" ", b"").upper() == word for t in self.log)
+
     def line(self, text: str) -> str | None:
         word = text[1:].strip().upper().replace(" ", "")
         head = f"{chr(0x40 + self.host)}{self.char} 100 "
         if word in ("GGP76,0", "GGP67,0"):
             value = self.host if word == "GGP76,0" else 33
-            if self.doubled and b"AGGP 0, 2" in self.log:  # (not at bring-up)
+            if self.doubled and self.heard(b"GGP0,2"):  # (not at bring-up)
                 self.doubled -= 1
                 return f"{head}{value}\r{head}{value}"
             return f"{head}{value}"
@@ -174,7 +178,7 @@ def test_two_copies_of_a_line_checks_answer_do_not_confirm_each_other():
 
 class HoldsChecks(NoEchoModule):
     """Answers GAP 1, 0 (a measurement: read once) with 5000, but not the first
-    ``quiet_reads`` times; once the line ``arm`` came, the answers to the next ``hold`` line
+    ``quiet_reads`` times; once the command ``arm`` came, the answers to the next ``hold`` line
     checks are held back and come, in order, just before its next answer (a slow line:
     later than the client waits, never out of order)."""
 
@@ -182,7 +186,7 @@ class HoldsChecks(NoEchoModule):
     doubled = 0
     quiet_reads = 1
     hold = 2
-    arm = b"AGAP 1, 0"
+    arm = b"GAP1,0"
 
     def __init__(self, **kw):
         self.held: list[str] = []
@@ -200,7 +204,7 @@ class HoldsChecks(NoEchoModule):
             out = f"{head}{word.rsplit(',', 1)[1]}"
         else:
             out = super().line(text)
-        if word in ("GGP76,0", "GGP67,0") and self.arm in self.log and self.hold:
+        if word in ("GGP76,0", "GGP67,0") and self.heard(self.arm) and self.hold:
             self.hold -= 1
             self.held.append(out)
             return None
