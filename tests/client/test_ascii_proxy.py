@@ -189,7 +189,7 @@ class HoldsChecks(NoEchoModule):
     arm = b"GAP1,0"
 
     def __init__(self, **kw):
-        self.held: list[str] = []
+        self.kept: list[str] = []  # answers held back, in order
         super().__init__(**kw)
 
     def line(self, text: str) -> str | None:
@@ -206,10 +206,10 @@ class HoldsChecks(NoEchoModule):
             out = super().line(text)
         if word in ("GGP76,0", "GGP67,0") and self.heard(self.arm) and self.hold:
             self.hold -= 1
-            self.held.append(out)
+            self.kept.append(out)
             return None
-        if out is not None and self.held:
-            out, self.held = "\r".join(self.held + [out]), []
+        if out is not None and self.kept:
+            out, self.kept = "\r".join(self.kept + [out]), []
         return out
 
 
@@ -228,7 +228,7 @@ def test_a_line_checks_answer_later_than_the_wait_is_not_taken_for_a_read():
             client.execute("GAP 1, 0")  # unanswered, and both checks after it too
         r = client.execute("GAP 1, 0")
         assert (r.value, r.in_doubt) == (5000, False)
-        assert not module.held and not module.hold
+        assert not module.kept and not module.hold
     finally:
         client.close()
         module.close()

@@ -385,17 +385,17 @@ def test_an_answer_still_to_come_when_the_link_was_lost_is_not_taken_after_it():
     from responder import TcpModule
 
     class KeepsTheAnswer(TcpModule):
-        held: bytes | None = None
+        kept: bytes | None = None  # the answer the cut kept back
         cut = False
 
         def answer(self, raw):
             out = super().answer(raw)
             if raw[1] == 10 and raw[2] == 0 and not self.cut:
-                self.cut, self.held = True, out  # the link goes down before it is sent
+                self.cut, self.kept = True, out  # the link goes down before it is sent
                 self._conn.shutdown(2)
                 return None
-            if self.held is not None and out is not None:
-                out, self.held = self.held + out, None
+            if self.kept is not None and out is not None:
+                out, self.kept = self.kept + out, None
             return out
 
     module = KeepsTheAnswer(version="1311V111")
@@ -408,7 +408,7 @@ def test_an_answer_still_to_come_when_the_link_was_lost_is_not_taken_after_it():
         client.reconnect(2.0, bring_up=False)
         r = client.execute("GGP 1, 2")
         assert (r.value, r.in_doubt) == (222, False)
-        assert module.held is None  # (the kept answer came)
+        assert module.kept is None  # (the kept answer came)
     finally:
         client.close()
         module.close()
