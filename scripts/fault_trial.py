@@ -24,6 +24,11 @@ duplicates and changes the module's reply lines (``--mix`` in the proxy's kinds:
 dup-late, flip); ``--echo`` sets the module's echo mode (GP 67). ASCII replies carry no
 checksum: a flipped digit is a valid reply, found out only by reading again.
 tests/client/test_ascii_proxy.py runs a short version.
+
+``--api`` reads through the Python API instead (``tmclsh.connect()`` and
+``LineClient.execute`` in a process of its own, with ``--ascii`` too): a value is flagged in
+line when its ``Result.in_doubt`` says so, later when ``Client.take_suspects`` names it after
+a later read, or ``Client.confirm_last`` at the end.
 """
 
 from __future__ import annotations
@@ -135,6 +140,46 @@ def judge(records: list[dict], values: dict[str, int]) -> dict[str, int]:
     return counts
 
 
+# The API path's reader, run as ``python -c`` (it imports only the tmclsh of the tree measured):
+# argv port, script file, timeout, "ascii" or "binary"; one JSON record a line, as --json's.
+API_READER = """
+import json, sys
+import tmclsh
+from tmclsh.base.errors import TmclError
+
+port, path, timeout, mode = sys.argv[1:5]
+client = tmclsh.connect(port=port, module="TMCM-1311", timeout=float(timeout),
+                        ascii=mode == "ascii")
+read_as = {}  # reply seq -> the line it answered
+
+
+def later():
+    for s in client.take_suspects():
+        print(json.dumps({"line": read_as.get(s.seq), "suspect": True}))
+
+
+try:
+    for line in open(path).read().splitlines():
+        try:
+            result = client.execute(line)
+        except TmclError as exc:
+            print(json.dumps({"line": line, "error": str(exc)}))
+            if not client.connected:
+                client.reconnect(1.0)
+            continue
+        read_as[client.replies] = line
+        rec = {"line": line, "reply": result.value}
+        if result.in_doubt:
+            rec["in_doubt"] = True
+        print(json.dumps(rec))
+        later()
+    client.confirm_last()
+    later()
+finally:
+    client.close()
+"""
+
+
 def ascii_rates(text: str) -> dict[str, float]:
     """``"delay=0.1,flip=0.05"`` -> the proxy's rates."""
     from asciiproxy import KINDS
@@ -149,9 +194,10 @@ def ascii_rates(text: str) -> dict[str, float]:
 
 
 def trial(mix: str, reads: int, seed: int, *, ascii_echo: str | None = None,
-          tree: Path = ROOT) -> tuple[dict[str, int], float]:
+          tree: Path = ROOT, api: bool = False) -> tuple[dict[str, int], float]:
     """One run of ``reads`` reads under ``mix``; ``ascii_echo``: in ASCII mode through the
-    proxy, with that echo mode. ``tree``: the checkout whose tmclsh runs (before/after)."""
+    proxy, with that echo mode. ``tree``: the checkout whose tmclsh runs (before/after).
+    ``api``: read through the Python API (``API_READER``) instead of ``tmclsh -f``."""
     sim = Simulator("TMCM-1311")
     server = serve_pty(sim)
     proxy = None
@@ -176,10 +222,15 @@ def trial(mix: str, reads: int, seed: int, *, ascii_echo: str | None = None,
             path.write_text("\n".join(lines) + "\n")
             env = dict(os.environ, PYTHONPATH=str(tree))
             start = time.monotonic()
-            run = subprocess.run(
-                [sys.executable, "-m", "tmclsh", "--port", port, "-m", "TMCM-1311",
-                 "--timeout", "0.3", *extra, "-f", str(path), "--keep-going", "--json"],
-                capture_output=True, text=True, env=env, cwd=tmp, timeout=3600)
+            if api:
+                command = [sys.executable, "-c", API_READER, port, str(path), "0.3",
+                           "ascii" if extra else "binary"]
+            else:
+                command = [sys.executable, "-m", "tmclsh", "--port", port, "-m", "TMCM-1311",
+                           "--timeout", "0.3", *extra, "-f", str(path), "--keep-going",
+                           "--json"]
+            run = subprocess.run(command, capture_output=True, text=True, env=env, cwd=tmp,
+                                 timeout=3600)
             took = time.monotonic() - start
         records = []
         for text in run.stdout.splitlines():
@@ -217,6 +268,8 @@ def main() -> int:
                     help="the module's ASCII mode, through a proxy that mangles its replies")
     ap.add_argument("--echo", choices=tuple(ECHO), default="char",
                     help="with --ascii: the module's echo mode (default char)")
+    ap.add_argument("--api", action="store_true",
+                    help="read through the Python API (tmclsh.connect) instead of tmclsh -f")
     ap.add_argument("--tree", type=Path, default=ROOT,
                     help="the checkout whose tmclsh runs (default this one)")
     args = ap.parse_args()
@@ -224,7 +277,8 @@ def main() -> int:
     with loaded(args.load):
         for mix in args.mix or (ASCII_MIXES if args.ascii else MIXES):
             counts, took = trial(mix, args.reads, args.seed,
-                                 ascii_echo=args.echo if args.ascii else None, tree=args.tree)
+                                 ascii_echo=args.echo if args.ascii else None, tree=args.tree,
+                                 api=args.api)
             worst = max(worst, counts["wrong, unflagged"])
             print(f"{mix}  ({took:.0f} s{', loaded' if args.load else ''})")
             print("    " + ", ".join(f"{k}: {v}" for k, v in counts.items()), flush=True)

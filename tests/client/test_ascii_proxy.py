@@ -22,6 +22,7 @@ from tmclsh.sim import Simulator
 from tmclsh.sim.serve import serve_pty
 
 from asciiproxy import AsciiProxy
+from responder import AsciiModeModule
 from conftest import ROOT, tmclsh_env
 
 sys.path.insert(0, str(ROOT / "scripts"))
@@ -124,3 +125,111 @@ def test_no_wrong_value_shown_unflagged_under_a_mangling_proxy(echo, mix, reads)
     assert counts["wrong, unflagged"] == 0, counts
     assert counts["wrong, later"] == 0, counts
     assert counts["reads"] >= reads * 0.8, counts
+
+
+# -- a module written from the manual, no echo: the order of its lines is the test's ----------
+
+class NoEchoModule(AsciiModeModule):
+    """A TMCM-1311 in ASCII mode without echo (GP 67 = 0x21) that answers the line checks
+    (GGP 76 and 67) and user variables; ``silent`` reads of GGP 0, 2 go unanswered first,
+    and the first ``doubled`` answers to a line check are sent twice, back to back."""
+
+    silent = 2
+    doubled = 2
+
+    def heard(self, word: bytes) -> bool:
+        """Was the command ``word`` (no spaces: ``b"GGP0,2"``) sent to it, however spaced?"""
+        return any(t[1:].replace(b" ", b"").upper() == word for t in self.log)
+
+    def line(self, text: str) -> str | None:
+        word = text[1:].strip().upper().replace(" ", "")
+        head = f"{chr(0x40 + self.host)}{self.char} 100 "
+        if word in ("GGP76,0", "GGP67,0"):
+            value = self.host if word == "GGP76,0" else 33
+            if self.doubled and self.heard(b"GGP0,2"):  # (not at bring-up)
+                self.doubled -= 1
+                return f"{head}{value}\r{head}{value}"
+            return f"{head}{value}"
+        if word == "GGP0,2":
+            if self.silent:
+                self.silent -= 1
+                return None
+            return f"{head}111111"
+        return super().line(text)
+
+
+def test_two_copies_of_a_line_checks_answer_do_not_confirm_each_other():
+    """Without echo, an ASCII reply names no command: a copy of a line check's answer (the
+    host address, 2) is taken for a read, and reading again after the next check takes the
+    copy of that check's answer. The two agreed, and 2 was shown for a user variable holding
+    111111 (the trial's "late answer to tmclsh's own GGP 67/76" under --echo none)."""
+    import tmclsh
+
+    module = NoEchoModule()
+    client = tmclsh.connect(port=module.path, module="TMCM-1311", ascii=True, timeout=0.3)
+    try:
+        r = client.execute("GGP 0, 2")
+        assert r.value == 111111 or r.in_doubt, r
+        assert module.doubled == 0  # (the copies were sent)
+    finally:
+        client.close()
+        module.close()
+
+
+class HoldsChecks(NoEchoModule):
+    """Answers GAP 1, 0 (a measurement: read once) with 5000, but not the first
+    ``quiet_reads`` times; once the command ``arm`` came, the answers to the next ``hold`` line
+    checks are held back and come, in order, just before its next answer (a slow line:
+    later than the client waits, never out of order)."""
+
+    silent = 0
+    doubled = 0
+    quiet_reads = 1
+    hold = 2
+    arm = b"GAP1,0"
+
+    def __init__(self, **kw):
+        self.kept: list[str] = []  # answers held back, in order
+        super().__init__(**kw)
+
+    def line(self, text: str) -> str | None:
+        word = text[1:].strip().upper().replace(" ", "")
+        head = f"{chr(0x40 + self.host)}{self.char} 100 "
+        if word == "GAP1,0":
+            if self.quiet_reads:
+                self.quiet_reads -= 1
+                return None
+            out = f"{head}5000"
+        elif word.startswith("SGP"):
+            out = f"{head}{word.rsplit(',', 1)[1]}"
+        else:
+            out = super().line(text)
+        if word in ("GGP76,0", "GGP67,0") and self.heard(self.arm) and self.hold:
+            self.hold -= 1
+            self.kept.append(out)
+            return None
+        if out is not None and self.kept:
+            out, self.kept = "\r".join(self.kept + [out]), []
+        return out
+
+
+def test_a_line_checks_answer_later_than_the_wait_is_not_taken_for_a_read():
+    """Both line checks went unanswered (their answers were late, not lost). The next check
+    was asked after a quiet moment, and took the first check's late answer for its own; the
+    second check's (33, GP 67) was then taken for GAP 1, 0 (read once: shown as the
+    position). Now the late answers are counted off before the check's own."""
+    import tmclsh
+    from tmclsh.base.errors import TmclTimeoutError
+
+    module = HoldsChecks()
+    client = tmclsh.connect(port=module.path, module="TMCM-1311", ascii=True, timeout=0.3)
+    try:
+        with pytest.raises(TmclTimeoutError):
+            client.execute("GAP 1, 0")  # unanswered, and both checks after it too
+        r = client.execute("GAP 1, 0")
+        assert (r.value, r.in_doubt) == (5000, False)
+        assert not module.kept and not module.hold
+    finally:
+        client.close()
+        module.close()
+

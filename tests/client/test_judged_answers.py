@@ -180,6 +180,18 @@ def test_a_line_that_brings_the_same_copy_first_every_time_is_said_in_the_line(p
     assert js.returncode == 1
 
 
+def test_from_python_an_answer_left_in_doubt_says_so_in_its_result(client):
+    """The API path: ``LineClient.execute`` returned the copy as a plain answer (its
+    ``Result.in_doubt`` was never set outside the shell); it stays a suspect as well."""
+    c, sim = client
+    assert c.execute("GGP 0, 2").value == 11
+    every_time_after(sim, 11, 22, [11])
+    r = c.execute("GGP 1, 2")
+    assert r.value == 11 and r.in_doubt
+    assert [s.seq for s in c.take_suspects()] == [c.replies]
+    assert not c.execute("GGP 0, 2").in_doubt
+
+
 def test_a_write_that_may_have_taken_a_copy_is_followed_by_a_marker(client):
     """SGP is not sent twice to judge it: a 136 follows, and the displaced answer, coming
     before the 136's reply, makes the answer a suspect at once (not one line later)."""
@@ -202,6 +214,14 @@ def test_no_wrong_value_is_shown_as_a_plain_answer_under_random_faults(mix):
     assert counts["reads"] >= 380, counts
     assert counts["wrong, unflagged"] == 0 and counts["wrong, later"] == 0, counts
     assert counts["right, flagged"] <= 4, counts
+
+
+def test_the_api_path_flags_every_wrong_value_too():
+    """The same through the Python API (``fault_trial.py --api``: tmclsh.connect and
+    LineClient.execute in a process of their own; ``Result.in_doubt`` is the flag)."""
+    counts, _ = fault_trial.trial("dup=0.1,dup-late=0.1", 200, seed=3, api=True)
+    assert counts["reads"] >= 190, counts
+    assert counts["wrong, unflagged"] == 0 and counts["wrong, later"] == 0, counts
 
 
 def test_the_trial_counts_a_wrong_value_it_is_shown():

@@ -372,3 +372,43 @@ def test_keep_going_waits_for_a_link_that_comes_back(tmp_path):
     finally:
         server.close()
         sim.close()
+
+
+def test_an_answer_still_to_come_when_the_link_was_lost_is_not_taken_after_it():
+    """A module written from the manual (tests/responder.py) on TCP, a device server that
+    keeps what the module sent: the link goes down while GGP 0, 2 waits for its answer, and
+    the answer (111) arrives on the new link, before the module's next answer, as a module
+    answers in order. It was taken for the next read's answer (GGP 1, 2 showed 111, nothing
+    said so): reopening the link forgot that an answer was still to come. (Reopened
+    without a bring-up, as a firmware update reopens it; a bring-up's 136 type 0 happened
+    to take the kept answer in first.)"""
+    from responder import TcpModule
+
+    class KeepsTheAnswer(TcpModule):
+        kept: bytes | None = None  # the answer the cut kept back
+        cut = False
+
+        def answer(self, raw):
+            out = super().answer(raw)
+            if raw[1] == 10 and raw[2] == 0 and not self.cut:
+                self.cut, self.kept = True, out  # the link goes down before it is sent
+                self._conn.shutdown(2)
+                return None
+            if self.kept is not None and out is not None:
+                out, self.kept = self.kept + out, None
+            return out
+
+    module = KeepsTheAnswer(version="1311V111")
+    module.values.update({(0, 2, True): 111, (1, 2, True): 222})
+    client = LineClient(open_serial(module.url), module="TMCM-1311", timeout=0.3)
+    try:
+        with pytest.raises(Exception):
+            client.execute("GGP 0, 2")
+        assert not client.connected
+        client.reconnect(2.0, bring_up=False)
+        r = client.execute("GGP 1, 2")
+        assert (r.value, r.in_doubt) == (222, False)
+        assert module.kept is None  # (the kept answer came)
+    finally:
+        client.close()
+        module.close()

@@ -884,20 +884,26 @@ class AsciiLink:
         return out
 
     def _marker(self, t: StreamTransport, address: int, timeout: float) -> Reply:
-        """Ask a marker whose answer no earlier marker's late answer can be taken for (both
-        outstanding: wait for the line to go quiet first, then count them lost) and read up
-        to its answer; replies before it are late (``_late``), an earlier marker's answer
-        crossed off. TmclTimeoutError if it does not come (it is then outstanding)."""
+        """Ask a marker and read up to its answer; replies before it are late (``_late``),
+        an earlier marker's answer crossed off. The marker asked is one whose answer no
+        earlier marker's late answer can be taken for, and, of those, one whose answer
+        differs from the last one given (a copy of the marker's answer, taken for a read
+        again, then cannot agree with it). When both may still be answered, the line is
+        first given a moment; silence proves nothing (a slow line keeps its order), so the
+        answers of that kind still to come are counted off before this one's, as the binary
+        link counts its markers. TmclTimeoutError if it does not come (it is then
+        outstanding)."""
         client, ledger, buf = self.client, self.client.ledger, self._buf
         markers = self._markers()
         pending = self._pending
-        choice = next((m for m in markers if not pending.get(m[2])), None)
-        if choice is None:
+        free = [m for m in markers if not pending.get(m[2])]
+        if not free:
             self._buf += _read_quiet(t, max(0.05, timeout), 4 * timeout)
             self._take_in()
-            pending.clear()
-            choice = markers[0]
-        text, req, value = choice
+            free = [m for m in markers if not pending.get(m[2])] or markers[:1]
+        given = next((rep.value for r, rep in reversed(ledger.recent) if r is not None), None)
+        text, req, value = next((m for m in free if m[2] != given), free[0])
+        earlier = pending.get(value, 0)  # answers like this one's still to come, first
         line = command_bytes(address, text)
         t.write(line)
         self.stats["sent"] += 1
@@ -912,11 +918,13 @@ class AsciiLink:
                     continue
                 if (kind == LineKind.REPLY and reply is not None and reply.module == address
                         and reply.host == client.host_address):
-                    if reply.status == Status.OK and reply.value == value:
+                    if reply.status == Status.OK and reply.value == value and not earlier:
                         if client.tracing:
                             client.trace("rx", raw, reply)
                         ledger.took_marker(req, reply)
                         return reply
+                    if reply.status == Status.OK and reply.value == value:
+                        earlier -= 1
                     self._late(raw, reply)  # (an earlier check's, crossed off)
                     continue
                 self._drop(raw, "not a reply")
@@ -928,7 +936,9 @@ class AsciiLink:
         self.stats["timeouts"] += 1
         client.stats["timeouts"] += 1
         self._dirty = True
-        pending[value] = pending.get(value, 0) + 1
+        # (earlier answers of its kind that did not come before it were lost: this one is
+        # the one still to come)
+        pending[value] = 1
         raise TmclTimeoutError(f"no answer to {text!r} within {timeout:g} s")
 
     def absorb(self, *, watch: bool = False) -> None:

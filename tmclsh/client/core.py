@@ -675,10 +675,13 @@ class Client:
                          else ascii_link.once(req, timeout))
                 if again is None:
                     break
-                if again == reply and ledger.found == found:
-                    # two answers agree, and nothing that came meanwhile speaks against
-                    # them (a line that brings the same copy first every time would agree
-                    # with itself): the doubts cast on this request's answers are met
+                if (again == reply and ledger.found == found
+                        and not ledger.took_a_copy()):
+                    # two answers agree, nothing that came meanwhile speaks against them (a
+                    # line that brings the same copy first every time would agree with
+                    # itself), and the second may not be a copy itself (on the ASCII line, of
+                    # a line check's answer: two such copies agree with each other): the
+                    # doubts cast on this request's answers are met
                     ledger.clear_suspects(first, ledger.replies)
                     ledger.in_step()
                     return again
@@ -706,6 +709,21 @@ class Client:
         values in doubt itself, takes its own; the rest stay to be reported)."""
         with self._lock:  # (the event poller may add one meanwhile)
             return self.ledger.take_suspects(seqs)
+
+    def doubt_on_last(self, *, take: bool = True) -> bool:
+        """Was the answer just returned left in doubt (its judge could not settle it, or a
+        reply that came while it was judged spoke against it)? ``take``: it is said with the
+        answer by whoever shows it, so it is not reported again (``take_suspects``)."""
+        ledger = self.ledger
+        if not ledger.suspects:  # (the common case, without the lock: a script's every line)
+            return False
+        with self._lock:
+            seq = ledger.replies
+            if ledger.suspects and ledger.suspects[-1].seq == seq:
+                if take:
+                    ledger.take_suspects((seq,))
+                return True
+            return False
 
     def in_doubt(self, answered: Mapping[int, K], *, confirm: bool = True) -> set[K]:
         """The one check of answers in doubt: of the reads ``answered`` (``replies`` right
@@ -866,7 +884,7 @@ class Client:
                 time.sleep(min(0.1, max(0.0, deadline - time.monotonic())))
         self._down = False
         self.framing = self.transport.framing(self)
-        self.ledger.reset()  # whatever comes now says nothing about answers before
+        self.ledger.reset()  # (an answer still to come may come on the new link too)
 
     @property
     def lock(self):

@@ -311,6 +311,11 @@ class Ledger:
             self.copy_at = self.replies
         self.recent.append((req, reply))
 
+    def took_a_copy(self) -> bool:
+        """Was the answer just returned taken as one that may be a copy (``took``)? Then it
+        cannot confirm another answer: two copies agree with each other."""
+        return self.copy_at == self.replies != 0
+
     def took_marker(self, marker: Request, reply: Reply) -> None:
         """A marker's reply came: everything sent before it was answered before it."""
         self.recent.append((None, reply))
@@ -383,8 +388,12 @@ class Ledger:
         return out
 
     def reset(self) -> None:
-        """The link was reopened: whatever comes now says nothing about answers before (and
-        it starts in binary frames, until an ASCII link takes it again)."""
+        """The link was reopened: it starts in binary frames, until an ASCII link takes it
+        again. An answer still to come when the link was lost may still arrive on the new
+        one (the module answers late, an adapter or a device server kept it): then the first
+        request resynchronises, as on a line that may carry anything."""
+        late = self.dirty(False)
         self.forget()
         self.by_command = True
         self.doubles.forget_versions()
+        self.opaque = late

@@ -109,12 +109,16 @@ class LineClient(Client):
         return self.request(req, timeout=timeout)
 
     def execute(self, line: str, *, check: bool = True, timeout: float | None = None) -> Result:
-        """Parse, check, send one TMCL line (``"GAP 1, 0"``); StatusError on an error status."""
+        """Parse, check, send one TMCL line (``"GAP 1, 0"``); StatusError on an error status.
+        ``Result.in_doubt``: the answer may have been another request's (Client._judge could
+        not settle it). It stays a suspect too (``take_suspects``, ``in_doubt``), for callers
+        that ask there."""
         enc, req = self.prepare(line)
         reply = self.send_encoded(enc, req, timeout=timeout)
+        doubt = reply is not None and self.doubt_on_last(take=False)
         if check and reply is not None and not status_ok(reply.status):
             raise StatusError(reply.status, reply)
-        return Result(line, enc, reply)
+        return Result(line, enc, reply, doubt)
 
     def value(self, line: str, *, timeout: float | None = None) -> int:
         """The reply value of one TMCL line: ``client.value("GAP ActualPosition, 0")``."""

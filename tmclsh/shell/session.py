@@ -454,9 +454,8 @@ class Session:
         if reply is not None:
             seq = client.replies
             self._answered[seq % ANSWERED] = (seq, text, self.location)
-            suspects = getattr(client, "suspects", None)
-            if suspects and suspects[-1].seq == seq:  # judged, and not settled: said in line
-                client.take_suspects((seq,))
+            doubt = getattr(client, "doubt_on_last", None)
+            if doubt is not None and doubt():  # judged, and not settled: said in line
                 self.stats.suspects += 1
                 result = result._replace(in_doubt=True)
         self.last_result = result
