@@ -162,12 +162,15 @@ def parse_config(text: str, path: Path) -> Config:
     """Parse and check the text of a config file (``path`` is only for messages)."""
     import tomllib  # here: without a config file a start-up does not load it
 
+    from .files import toml_limits
+
+    beyond = toml_limits(text)
+    if beyond is not None:
+        raise SettingError(f"{path}:{beyond[0]}: {beyond[1]}")
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SettingError(f"{path}: {exc}") from None
-    except RecursionError:  # tomllib recurses per nesting level ([[[[...]]]] 3,000 deep)
-        raise SettingError(f"{path}: values nested too deeply") from None
     extra = set(data) - {"settings", "profiles"}
     if extra:
         raise _unknown(str(path), "table(s)", extra, ("settings", "profiles"))

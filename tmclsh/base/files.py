@@ -27,6 +27,10 @@ from .errors import TmclError
 MAX_FILE = 16 * 1024 * 1024  # bytes of any text or image a user names
 MAX_LINES = 100_000  # lines of a script
 MAX_LINE = 64 * 1024  # characters of one line (scripts, stdin)
+# nesting of arrays, inline tables and dotted keys in a TOML file (config, module files):
+# theirs is 3 at most; tomllib recurses per level and fails near 300
+MAX_DEPTH = 16
+MAX_DIGITS = 40  # digits of one number in a data file (Python refuses to read 4,300)
 _CHUNK = 64 * 1024
 
 
@@ -159,6 +163,72 @@ def stream_lines(stream: Iterable[str], name: str = "stdin",
         if len(line) > max_line and not line.endswith("\n"):
             raise FileError(f"{name}:{no}: line longer than {max_line:,} characters")
         yield line.rstrip("\r\n")
+
+
+def toml_limits(text: str) -> tuple[int, str] | None:
+    """The first place a TOML text goes past what tmclsh reads, as ``(line, what)``, else
+    None: looked for before tomllib parses it, because tomllib recurses once per level of
+    nesting (a file nested 5,000 deep is a RecursionError) and turns a 5,000-digit number
+    into a ValueError, neither of which says where. Strings and comments are skipped; the
+    text need not be valid TOML (tomllib says what else is wrong)."""
+    depth = dots = digits = 0
+    line, i, n = 1, 0, len(text)
+    while i < n:
+        c = text[i]
+        if c == "\n":
+            line, dots, digits, i = line + 1, 0, 0, i + 1
+            continue
+        if c == "#":
+            end = text.find("\n", i)
+            i = n if end < 0 else end
+            continue
+        if c in "\"'":
+            end = _string_end(text, i)
+            line += text.count("\n", i, end)
+            i, digits = end, 0
+            continue
+        if c in "0123456789_":
+            digits += 1
+            if digits > MAX_DIGITS:
+                return line, f"a number longer than {MAX_DIGITS} digits"
+        else:
+            if c == "." and not digits:
+                dots += 1  # a dotted key (a.b.c), not a decimal point
+            elif c in "[{":
+                depth += 1
+            elif c in "]}":
+                depth = max(0, depth - 1)
+            digits = 0
+            if depth > MAX_DEPTH or dots >= MAX_DEPTH:
+                return line, f"values nested more than {MAX_DEPTH} deep"
+        i += 1
+    return None
+
+
+def _string_end(text: str, i: int) -> int:
+    """Where the TOML string starting at ``i`` ends (just past its closing quote; at the
+    line end or the text's end for one never closed)."""
+    quote = text[i]
+    close = quote * 3 if text.startswith(quote * 3, i) else quote
+    j = i + len(close)
+    if quote == "'":
+        end = text.find(close, j)
+        if close == "'" and (end < 0 or "\n" in text[j:end]):
+            end = text.find("\n", j)
+            return len(text) if end < 0 else end
+        return len(text) if end < 0 else end + len(close)
+    n = len(text)
+    while j < n:
+        ch = text[j]
+        if ch == "\\":
+            j += 2
+        elif ch == "\n" and close == '"':
+            return j
+        elif text.startswith(close, j):
+            return j + len(close)
+        else:
+            j += 1
+    return n
 
 
 # -- writing -----------------------------------------------------------------------------
