@@ -19,6 +19,7 @@ from __future__ import annotations
 import os
 import tempfile
 from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any
 
@@ -229,6 +230,122 @@ def _string_end(text: str, i: int) -> int:
         else:
             j += 1
     return n
+
+
+MAX_READ_MEMORY = 512 * 1024 * 1024  # bytes a reader of a user's file may grow the process
+SIGNAL_GRACE = 0.5  # s a SIGTERM/SIGHUP waits for its handler during a read, then ends it
+
+
+@contextmanager
+def bounded_read(name: str, what: str = "file",
+                 limit: int = MAX_READ_MEMORY) -> Iterator[None]:
+    """Reading ``name`` inside this block grows the process by ``limit`` bytes at most, and
+    a SIGTERM or SIGHUP ends it within ``SIGNAL_GRACE`` seconds.
+
+    For readers that are not ours (python-can's log readers, tomllib, intelhex): a damaged
+    or hostile file can claim a 4 GiB record or hold a container that inflates a
+    thousandfold, and they allocate what it says; past the limit that is a ``FileError``
+    instead of the machine's memory. A signal's Python handler runs only between bytecodes,
+    so one long step in C (inflating that container) would hold it off: the watchdog hears
+    the signal at once (``signal.set_wakeup_fd``) and, if the read is still going after the
+    grace, ends the process with the signal's exit status."""
+    with _prompt_signals(name), _memory_bound(name, what, limit):
+        yield
+
+
+@contextmanager
+def _memory_bound(name: str, what: str, limit: int) -> Iterator[None]:
+    try:
+        import resource
+    except ImportError:  # pragma: no cover - not POSIX
+        yield
+        return
+    restore: tuple[int, int] | None = None
+    try:
+        soft, hard = resource.getrlimit(resource.RLIMIT_AS)
+        want = _address_space() + limit
+        if hard != resource.RLIM_INFINITY:
+            want = min(want, hard)
+        if soft == resource.RLIM_INFINITY or soft > want:
+            resource.setrlimit(resource.RLIMIT_AS, (want, hard))
+            restore = (soft, hard)
+    except (OSError, ValueError):
+        pass
+    try:
+        yield
+    except MemoryError:
+        raise FileError(f"{name}: reading the {what} needs more than {size_text(limit)} "
+                        "of memory (a damaged or hostile file?); not read on") from None
+    finally:
+        if restore is not None:
+            try:
+                resource.setrlimit(resource.RLIMIT_AS, restore)
+            except (OSError, ValueError):
+                pass
+
+
+@contextmanager
+def _prompt_signals(name: str) -> Iterator[None]:
+    """SIGTERM/SIGHUP during the block: the handler's way if it comes within the grace,
+    else ``os._exit(128 + signal)``. Only in the main thread, and only where nothing else
+    (an asyncio loop) listens on the wake-up fd already."""
+    import signal
+    import threading
+
+    try:
+        reader, writer = os.pipe()
+    except OSError:
+        yield
+        return
+    os.set_blocking(writer, False)
+    try:
+        previous = signal.set_wakeup_fd(writer, warn_on_full_buffer=False)
+    except (ValueError, OSError):  # not the main thread
+        previous = None
+    if previous is None or previous != -1:
+        if previous is not None:
+            signal.set_wakeup_fd(previous)
+        os.close(reader)
+        os.close(writer)
+        yield
+        return
+    done = threading.Event()
+    ends = {getattr(signal, n) for n in ("SIGTERM", "SIGHUP") if hasattr(signal, n)}
+
+    def watch() -> None:
+        while True:
+            try:
+                got = os.read(reader, 64)
+            except OSError:
+                return
+            if not got:
+                return
+            signum = next((n for n in got if n in ends), None)
+            if signum is not None and not done.wait(SIGNAL_GRACE):
+                os.write(2, f"tmclsh: {name}: ended by signal {signum} while reading it\n"
+                         .encode(errors="replace"))
+                os._exit(128 + signum)
+
+    threading.Thread(target=watch, name="signal-watch", daemon=True).start()
+    try:
+        yield
+    finally:
+        done.set()
+        signal.set_wakeup_fd(-1)
+        os.close(writer)  # the watcher's read ends
+        try:
+            os.close(reader)
+        except OSError:
+            pass
+
+
+def _address_space() -> int:
+    """The process's address space now, in bytes (/proc; a guess where there is none)."""
+    try:
+        with open("/proc/self/statm", "rb") as fh:
+            return int(fh.read().split()[0]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError):
+        return 4 * 1024 * 1024 * 1024
 
 
 # -- writing -----------------------------------------------------------------------------

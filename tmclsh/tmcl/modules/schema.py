@@ -337,7 +337,7 @@ def read(path: Path) -> dict:
     the data cache (a user with forty imported files would otherwise parse them all on every
     start)."""
     from ...base.datafiles import parsed
-    from ...base.files import FileError, read_bytes
+    from ...base.files import FileError, bounded_read, read_bytes
 
     try:
         raw = read_bytes(path, what="module file")  # bounded: /dev/zero
@@ -346,7 +346,12 @@ def read(path: Path) -> dict:
         raise ModuleFileError(str(exc)) from None
     except UnicodeDecodeError:
         raise ModuleFileError(f"{path}:1: not a text file (UTF-8)") from None
-    return parsed(raw, "user-module", lambda text: parse(text, str(path)), salt=_rules())
+    try:
+        with bounded_read(str(path), "module file"):
+            return parsed(raw, "user-module", lambda text: parse(text, str(path)),
+                          salt=_rules())
+    except FileError as exc:
+        raise ModuleFileError(str(exc)) from None
 
 
 _RULES: list[bytes] = []
