@@ -11,9 +11,11 @@ Like link/can.py, python-can is imported only when a log is opened.
 from __future__ import annotations
 
 import io
+import logging
 import math
 import re
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from ..base.errors import ValidationError
@@ -51,7 +53,7 @@ def read_log(path: str | Path) -> Iterator[CanFrame]:
     from ..base.files import bounded_read
     from .can import frame_of
 
-    with bounded_read(str(path), "CAN log"):
+    with bounded_read(str(path), "CAN log"), _warnings() as warned:
         try:
             reader = can.LogReader(str(path))
         except ValueError as exc:  # no reader for the suffix
@@ -78,8 +80,40 @@ def read_log(path: str | Path) -> Iterator[CanFrame]:
             except Exception:  # closing a damaged log; its error is said above
                 pass
         if not count:
+            said = f"; python-can: {_why(warned[0].getMessage())}" if warned else ""
+            warned.clear()  # (said here, in the one line)
             raise ValidationError(f"{path}: no CAN frames in it (an empty log, or not the "
-                                  f"{_suffix(path) or 'format'} its name says)")
+                                  f"{_suffix(path) or 'format'} its name says{said})")
+
+
+@contextmanager
+def _warnings() -> Iterator[list[logging.LogRecord]]:
+    """python-can's warnings while it reads a log (a line it skips), held back: of a log
+    that fails, the one error line is what is said (with the first warning when there were
+    no frames); of one read to its end, they are shown as python-can would have."""
+    held: list[logging.LogRecord] = []
+
+    class Hold(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            if len(held) < 100:
+                held.append(record)
+
+    logger = logging.getLogger("can")
+    handler = Hold(logging.WARNING)
+    logger.addHandler(handler)
+    try:
+        yield held
+    except ValidationError:
+        held.clear()  # the one line says where the log went wrong
+        raise
+    finally:
+        logger.removeHandler(handler)
+        if logger.hasHandlers():
+            for record in held:
+                logger.handle(record)
+        elif logging.lastResort is not None:
+            for record in held:
+                logging.lastResort.handle(record)
 
 
 def _checked(frame: CanFrame, path: str | Path, number: int) -> CanFrame:

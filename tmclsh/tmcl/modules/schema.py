@@ -204,8 +204,9 @@ def parse(text: str, path: str) -> dict:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         m = re.search(r"\(at line (\d+), column \d+\)", str(exc))
-        msg = re.sub(r"\s*\(at line \d+, column \d+\)", "", str(exc))
-        raise ModuleFileError(f"{path}:{m.group(1) if m else 1}: not valid TOML: {msg}") from None
+        msg = re.sub(r"\s*\(at (line \d+, column \d+|end of document)\)", "", str(exc))
+        no = m.group(1) if m else max(1, len(text.splitlines()))  # at the end: a cut file
+        raise ModuleFileError(f"{path}:{no}: not valid TOML: {msg}") from None
     check(data, _Lines(text), path)
     return data
 
