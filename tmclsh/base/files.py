@@ -313,18 +313,20 @@ def _prompt_signals(name: str) -> Iterator[None]:
     ends = {getattr(signal, n) for n in ("SIGTERM", "SIGHUP") if hasattr(signal, n)}
 
     def watch() -> None:
-        while True:
-            try:
+        try:
+            while True:
                 got = os.read(reader, 64)
-            except OSError:
-                return
-            if not got:
-                return
-            signum = next((n for n in got if n in ends), None)
-            if signum is not None and not done.wait(SIGNAL_GRACE):
-                os.write(2, f"tmclsh: {name}: ended by signal {signum} while reading it\n"
-                         .encode(errors="replace"))
-                os._exit(128 + signum)
+                if not got:  # the block is over: its end closed the writer
+                    return
+                signum = next((n for n in got if n in ends), None)
+                if signum is not None and not done.wait(SIGNAL_GRACE):
+                    os.write(2, f"tmclsh: {name}: ended by signal {signum} while reading "
+                             "it\n".encode(errors="replace"))
+                    os._exit(128 + signum)
+        except OSError:
+            return
+        finally:  # closed here, never under a read: its number may be reused at once
+            os.close(reader)
 
     threading.Thread(target=watch, name="signal-watch", daemon=True).start()
     try:
@@ -332,11 +334,7 @@ def _prompt_signals(name: str) -> Iterator[None]:
     finally:
         done.set()
         signal.set_wakeup_fd(-1)
-        os.close(writer)  # the watcher's read ends
-        try:
-            os.close(reader)
-        except OSError:
-            pass
+        os.close(writer)  # the watcher's read ends, and it closes the reader
 
 
 def _address_space() -> int:
