@@ -255,9 +255,15 @@ def bounded_read(name: str, what: str = "file",
 
 @contextmanager
 def _memory_bound(name: str, what: str, limit: int) -> Iterator[None]:
+    """The address-space limit is the process's: set and put back by the main thread only,
+    so two threads' reads never put back each other's."""
+    import threading
+
     try:
         import resource
     except ImportError:  # pragma: no cover - not POSIX
+        resource = None
+    if resource is None or threading.current_thread() is not threading.main_thread():
         yield
         return
     restore: tuple[int, int] | None = None

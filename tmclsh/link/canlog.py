@@ -61,6 +61,8 @@ def read_log(path: str | Path) -> Iterator[CanFrame]:
         except ImportError as exc:  # a format whose optional package is missing (.mf4)
             raise ValidationError(f"{path}: python-can needs another package for this "
                                   f"format ({exc})") from None
+        except MemoryError:
+            raise
         except Exception as exc:  # a header python-can cannot read (an empty .blf)
             raise ValidationError(f"{path}: not a log python-can reads ({_why(exc)})") from None
         count = 0
@@ -69,7 +71,7 @@ def read_log(path: str | Path) -> Iterator[CanFrame]:
                 frame = _checked(frame_of(msg), path, count + 1)
                 count += 1
                 yield frame
-        except ValidationError:
+        except (ValidationError, MemoryError):  # (the bound says the memory's own line)
             raise
         except Exception as exc:  # the log's damage, in the reader's words
             raise ValidationError(f"{path}: frame {count + 1}: python-can cannot read on "
