@@ -156,7 +156,7 @@ def test_hostile_config_files_are_refused_in_one_line(name, text, expected, env,
 
 # Intel HEX (firmware) and the image forms disasm and .upload take
 HEX_FILES = [
-    ("empty.hex", b"", "holds no data"),
+    ("empty.hex", b"", "empty.hex:1: the file ends without its end-of-file record"),
     ("cut.hex", b":1000000000000000000000000000000000", "not a valid Intel HEX file"),
     ("long.hex", b":" + b"F" * 5000 + b"\n", "not a valid Intel HEX file"),
     ("digits.hex", b":02000004" + b"9" * 5000 + b"\n", "not a valid Intel HEX file"),
@@ -276,7 +276,8 @@ def test_a_log_that_inflates_to_gigabytes_is_refused_in_bounded_memory(env, tmp_
                        env=env, cwd=str(tmp_path), timeout=300)
     status, peak_kib = map(int, r.stdout.split())
     r.returncode = status
-    _one_line(r, "bomb.blf: frame 1:")
+    line = _one_line(r, "bomb.blf: ")  # the bound's MemoryError, or zlib's own refusal
+    assert "of memory" in line or "allocate" in line, line
     assert peak_kib * 1024 < GIB, f"peak {peak_kib // 1024} MiB"
 
 
