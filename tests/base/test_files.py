@@ -115,3 +115,33 @@ def test_devices_and_missing_folders(tmp_path):
         files.write_file(tmp_path / "no" / "x", "x")
     with pytest.raises(files.FileError, match="it is a directory"):
         files.write_file(tmp_path, "x")
+
+
+# -- TOML bounds (issue 31) -----------------------------------------------------------------
+
+def test_toml_limits_finds_the_line_and_skips_strings_and_comments():
+    from tmclsh.base.files import MAX_DEPTH, toml_limits
+
+    ok = ('a = "[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[["\n'
+          "b = '''\n" + "{" * 40 + "\n'''  # " + "[" * 40 + "\n"
+          'c = """x\\"""' + "9" * 60 + '"""\n'
+          "d = 1.5\ne = 1979-05-27T07:32:00.999Z\n[f.g]\nh = [[1, 2], [3]]\n")
+    assert toml_limits(ok) is None
+    assert toml_limits(ok + "x = " + "[" * (MAX_DEPTH + 1)) == (
+        10, f"values nested more than {MAX_DEPTH} deep")
+    assert toml_limits(ok + "x = " + "{a=" * 500) == (10, f"values nested more than {MAX_DEPTH} deep")
+    assert toml_limits(ok + "x" + ".x" * 100 + " = 1") == (10, f"values nested more than {MAX_DEPTH} deep")
+    assert toml_limits(ok + "x = 1" + "0" * 5000) == (10, "a number longer than 40 digits")
+    assert toml_limits("x = 1" + "_0" * 30) == (1, "a number longer than 40 digits")
+    assert toml_limits("x = " + "[" * MAX_DEPTH + "]" * MAX_DEPTH) is None
+
+
+def test_bounded_read_turns_a_runaway_allocation_into_one_error():
+    import pytest
+
+    from tmclsh.base.files import FileError, bounded_read
+
+    with pytest.raises(FileError, match=r"^x.blf: reading the CAN log needs more than 64 MiB"):
+        with bounded_read("x.blf", "CAN log", limit=64 * 1024 * 1024):
+            bytearray(1024 * 1024 * 1024)
+    bytearray(256 * 1024 * 1024)  # the bound is gone after the block

@@ -200,8 +200,10 @@ def test_ids_are_learnt_from_frames_that_answer_each_other(tmp_path, capsys):
 def test_a_file_python_can_cannot_read(tmp_path, capsys):
     bad = tmp_path / "bus.asc"
     bad.write_text("not a log\n")
-    assert cli.main(["monitor", "--log", str(bad)]) == 0  # (an .asc with no frames: none)
-    capsys.readouterr()
+    assert cli.main(["monitor", "--log", str(bad)]) == 1  # an .asc with no frames: said
+    err = capsys.readouterr().err
+    assert err == f"tmclsh: {bad}: no CAN frames in it (an empty log, or not the .asc its " \
+        "name says)\n"
     other = tmp_path / "bus.xyz"
     other.write_text("hello\n")
     assert cli.main(["monitor", "--log", str(other)]) != 0

@@ -208,7 +208,7 @@ def test_config_nested_too_deep_and_config_a_directory(env, tmp_path):
     deep = tmp_path / "deep.toml"
     deep.write_text("a = " + "[" * 3000 + "]" * 3000 + "\n")
     r = _tmclsh("--sim", "-c", "GAP 1, 0", env={**env, "TMCLSH_CONFIG": str(deep)}, cwd=tmp_path)
-    assert r.returncode == 2 and r.stderr.strip() == f"tmclsh: {deep}: values nested too deeply"
+    assert r.returncode == 2 and r.stderr.strip() == f"tmclsh: {deep}:1: values nested more than 16 deep"
     (tmp_path / "config" / "tmclsh" / "config.toml").mkdir(parents=True)
     env.pop("TMCLSH_CONFIG")
     r = _tmclsh("--sim", "-c", "GAP 1, 0", env=env, cwd=tmp_path)

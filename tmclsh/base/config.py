@@ -162,12 +162,15 @@ def parse_config(text: str, path: Path) -> Config:
     """Parse and check the text of a config file (``path`` is only for messages)."""
     import tomllib  # here: without a config file a start-up does not load it
 
+    from .files import toml_limits
+
+    beyond = toml_limits(text)
+    if beyond is not None:
+        raise SettingError(f"{path}:{beyond[0]}: {beyond[1]}")
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SettingError(f"{path}: {exc}") from None
-    except RecursionError:  # tomllib recurses per nesting level ([[[[...]]]] 3,000 deep)
-        raise SettingError(f"{path}: values nested too deeply") from None
     extra = set(data) - {"settings", "profiles"}
     if extra:
         raise _unknown(str(path), "table(s)", extra, ("settings", "profiles"))
@@ -204,7 +207,7 @@ MAX_CONFIG = 1024 * 1024  # bytes of a config file
 def load_config(path: Path | None = None) -> Config:
     """Read the config file; a missing file is an empty config, a bad one an error (a
     directory where the file should be too: it is never silently ignored)."""
-    from .files import FileError, read_text
+    from .files import FileError, bounded_read, read_text
 
     path = path or config_file()
     try:
@@ -218,7 +221,8 @@ def load_config(path: Path | None = None) -> Config:
         raise SettingError(str(exc)) from None
     except OSError as exc:  # a path the OS refuses to look at (too long, no permission)
         raise SettingError(f"cannot read {path}: {exc.strerror}") from None
-    return parse_config(text, path)
+    with bounded_read(str(path), "config file"):
+        return parse_config(text, path)
 
 
 def profile_names(config: Config | None = None) -> list[str]:

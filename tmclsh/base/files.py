@@ -19,6 +19,7 @@ from __future__ import annotations
 import os
 import tempfile
 from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any
 
@@ -27,6 +28,10 @@ from .errors import TmclError
 MAX_FILE = 16 * 1024 * 1024  # bytes of any text or image a user names
 MAX_LINES = 100_000  # lines of a script
 MAX_LINE = 64 * 1024  # characters of one line (scripts, stdin)
+# nesting of arrays, inline tables and dotted keys in a TOML file (config, module files):
+# theirs is 3 at most; tomllib recurses per level and fails near 300
+MAX_DEPTH = 16
+MAX_DIGITS = 40  # digits of one number in a data file (Python refuses to read 4,300)
 _CHUNK = 64 * 1024
 
 
@@ -159,6 +164,192 @@ def stream_lines(stream: Iterable[str], name: str = "stdin",
         if len(line) > max_line and not line.endswith("\n"):
             raise FileError(f"{name}:{no}: line longer than {max_line:,} characters")
         yield line.rstrip("\r\n")
+
+
+def toml_limits(text: str) -> tuple[int, str] | None:
+    """The first place a TOML text goes past what tmclsh reads, as ``(line, what)``, else
+    None: looked for before tomllib parses it, because tomllib recurses once per level of
+    nesting (a file nested 5,000 deep is a RecursionError) and turns a 5,000-digit number
+    into a ValueError, neither of which says where. Strings and comments are skipped; the
+    text need not be valid TOML (tomllib says what else is wrong)."""
+    depth = dots = digits = 0
+    line, i, n = 1, 0, len(text)
+    while i < n:
+        c = text[i]
+        if c == "\n":
+            line, dots, digits, i = line + 1, 0, 0, i + 1
+            continue
+        if c == "#":
+            end = text.find("\n", i)
+            i = n if end < 0 else end
+            continue
+        if c in "\"'":
+            end = _string_end(text, i)
+            line += text.count("\n", i, end)
+            i, digits = end, 0
+            continue
+        if c in "0123456789_":
+            digits += 1
+            if digits > MAX_DIGITS:
+                return line, f"a number longer than {MAX_DIGITS} digits"
+        else:
+            if c == "." and not digits:
+                dots += 1  # a dotted key (a.b.c), not a decimal point
+            elif c in "[{":
+                depth += 1
+            elif c in "]}":
+                depth = max(0, depth - 1)
+            digits = 0
+            if depth > MAX_DEPTH or dots >= MAX_DEPTH:
+                return line, f"values nested more than {MAX_DEPTH} deep"
+        i += 1
+    return None
+
+
+def _string_end(text: str, i: int) -> int:
+    """Where the TOML string starting at ``i`` ends (just past its closing quote; at the
+    line end or the text's end for one never closed)."""
+    quote = text[i]
+    close = quote * 3 if text.startswith(quote * 3, i) else quote
+    j = i + len(close)
+    if quote == "'":
+        end = text.find(close, j)
+        if close == "'" and (end < 0 or "\n" in text[j:end]):
+            end = text.find("\n", j)
+            return len(text) if end < 0 else end
+        return len(text) if end < 0 else end + len(close)
+    n = len(text)
+    while j < n:
+        ch = text[j]
+        if ch == "\\":
+            j += 2
+        elif ch == "\n" and close == '"':
+            return j
+        elif text.startswith(close, j):
+            return j + len(close)
+        else:
+            j += 1
+    return n
+
+
+MAX_READ_MEMORY = 512 * 1024 * 1024  # bytes a reader of a user's file may grow the process
+SIGNAL_GRACE = 0.5  # s a SIGTERM/SIGHUP waits for its handler during a read, then ends it
+
+
+@contextmanager
+def bounded_read(name: str, what: str = "file",
+                 limit: int = MAX_READ_MEMORY) -> Iterator[None]:
+    """Reading ``name`` inside this block grows the process by ``limit`` bytes at most, and
+    a SIGTERM or SIGHUP ends it within ``SIGNAL_GRACE`` seconds.
+
+    For readers that are not ours (python-can's log readers, tomllib, intelhex): a damaged
+    or hostile file can claim a 4 GiB record or hold a container that inflates a
+    thousandfold, and they allocate what it says; past the limit that is a ``FileError``
+    instead of the machine's memory. A signal's Python handler runs only between bytecodes,
+    so one long step in C (inflating that container) would hold it off: the watchdog hears
+    the signal at once (``signal.set_wakeup_fd``) and, if the read is still going after the
+    grace, ends the process with the signal's exit status."""
+    with _prompt_signals(name), _memory_bound(name, what, limit):
+        yield
+
+
+@contextmanager
+def _memory_bound(name: str, what: str, limit: int) -> Iterator[None]:
+    """The address-space limit is the process's: set and put back by the main thread only,
+    so two threads' reads never put back each other's."""
+    import threading
+
+    try:
+        import resource
+    except ImportError:  # pragma: no cover - not POSIX
+        resource = None
+    if resource is None or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    restore: tuple[int, int] | None = None
+    try:
+        soft, hard = resource.getrlimit(resource.RLIMIT_AS)
+        want = _address_space() + limit
+        if hard != resource.RLIM_INFINITY:
+            want = min(want, hard)
+        if soft == resource.RLIM_INFINITY or soft > want:
+            resource.setrlimit(resource.RLIMIT_AS, (want, hard))
+            restore = (soft, hard)
+    except (OSError, ValueError):
+        pass
+    try:
+        yield
+    except MemoryError:
+        raise FileError(f"{name}: reading the {what} needs more than {size_text(limit)} "
+                        "of memory (a damaged or hostile file?); not read on") from None
+    finally:
+        if restore is not None:
+            try:
+                resource.setrlimit(resource.RLIMIT_AS, restore)
+            except (OSError, ValueError):
+                pass
+
+
+@contextmanager
+def _prompt_signals(name: str) -> Iterator[None]:
+    """SIGTERM/SIGHUP during the block: the handler's way if it comes within the grace,
+    else ``os._exit(128 + signal)``. Only in the main thread, and only where nothing else
+    (an asyncio loop) listens on the wake-up fd already."""
+    import signal
+    import threading
+
+    try:
+        reader, writer = os.pipe()
+    except OSError:
+        yield
+        return
+    os.set_blocking(writer, False)
+    try:
+        previous = signal.set_wakeup_fd(writer, warn_on_full_buffer=False)
+    except (ValueError, OSError):  # not the main thread
+        previous = None
+    if previous is None or previous != -1:
+        if previous is not None:
+            signal.set_wakeup_fd(previous)
+        os.close(reader)
+        os.close(writer)
+        yield
+        return
+    done = threading.Event()
+    ends = {getattr(signal, n) for n in ("SIGTERM", "SIGHUP") if hasattr(signal, n)}
+
+    def watch() -> None:
+        try:
+            while True:
+                got = os.read(reader, 64)
+                if not got:  # the block is over: its end closed the writer
+                    return
+                signum = next((n for n in got if n in ends), None)
+                if signum is not None and not done.wait(SIGNAL_GRACE):
+                    os.write(2, f"tmclsh: {name}: ended by signal {signum} while reading "
+                             "it\n".encode(errors="replace"))
+                    os._exit(128 + signum)
+        except OSError:
+            return
+        finally:  # closed here, never under a read: its number may be reused at once
+            os.close(reader)
+
+    threading.Thread(target=watch, name="signal-watch", daemon=True).start()
+    try:
+        yield
+    finally:
+        done.set()
+        signal.set_wakeup_fd(-1)
+        os.close(writer)  # the watcher's read ends, and it closes the reader
+
+
+def _address_space() -> int:
+    """The process's address space now, in bytes (/proc; a guess where there is none)."""
+    try:
+        with open("/proc/self/statm", "rb") as fh:
+            return int(fh.read().split()[0]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError):
+        return 4 * 1024 * 1024 * 1024
 
 
 # -- writing -----------------------------------------------------------------------------

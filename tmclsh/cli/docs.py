@@ -887,7 +887,8 @@ def _exit_status() -> list[str]:
 
 
 def _limits() -> list[str]:
-    from ..base.files import MAX_FILE, MAX_LINE, MAX_LINES, size_text
+    from ..base.files import (MAX_DEPTH as MAX_NESTING, MAX_DIGITS, MAX_FILE, MAX_LINE,
+                              MAX_LINES, MAX_READ_MEMORY, SIGNAL_GRACE, size_text)
     from ..base.limits import LIMITS
     from ..shell.expr import MAX_DEPTH, MAX_LENGTH, MAX_LITERAL, MAX_OPERATORS
 
@@ -908,7 +909,17 @@ def _limits() -> list[str]:
                  f"literals at most {MAX_LITERAL} digits. Every file "
                  "tmclsh writes (asm -o, .record, .watch --csv, .dump, .echo >) is written "
                  "beside its target and renamed over it when complete, so a failed write "
-                 "leaves the old file as it was.")]
+                 "leaves the old file as it was."),
+            ".PP",
+            _esc(f"Data files from the field (module files, the config file, Intel HEX "
+                 f"images, CAN logs and serial captures for monitor --log) may be cut, empty "
+                 f"or damaged: each is refused with one line naming the file and the line, "
+                 f"or the frame of a log. TOML files nest at most {MAX_NESTING} levels and "
+                 f"hold numbers of at most {MAX_DIGITS} digits; a module file's counts are "
+                 "those modules have (see modules check). A reader of a log or image may "
+                 f"grow tmclsh by {size_text(MAX_READ_MEMORY)} at most, and a SIGTERM or "
+                 f"SIGHUP ends tmclsh within {SIGNAL_GRACE:g} s whatever it is reading. A log "
+                 "without a single frame is an error (exit status 1).")]
     return out
 
 

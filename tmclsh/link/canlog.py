@@ -11,12 +11,17 @@ Like link/can.py, python-can is imported only when a log is opened.
 from __future__ import annotations
 
 import io
+import logging
+import math
 import re
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from ..base.errors import ValidationError
 from .base import CanFrame
+
+MAX_DATA = 64  # data bytes of a CAN FD frame, the most any CAN frame carries
 
 
 def _suffix(path: str | Path) -> str:
@@ -36,25 +41,108 @@ def readable(path: str | Path) -> bool:
 
 
 def read_log(path: str | Path) -> Iterator[CanFrame]:
-    """Every frame of a python-can log file, in its order, with the log's timestamps."""
+    """Every frame of a python-can log file, in its order, with the log's timestamps.
+
+    The readers are python-can's, and a damaged log (cut, empty, bytes flipped) makes them
+    fail in their own ways: struct, zlib and sqlite errors, a format error, a TypeError on a
+    row without a time. Whatever they raise is one line naming the file and the frame it
+    got to; what they allocate is bounded (``bounded_read``), since a log's sizes and
+    compressed containers say how much they take."""
     import can
 
+    from ..base.files import bounded_read
     from .can import frame_of
 
+    with bounded_read(str(path), "CAN log"), _warnings() as warned:
+        try:
+            reader = can.LogReader(str(path))
+        except ValueError as exc:  # no reader for the suffix
+            raise ValidationError(f"{path}: {exc}; python-can reads {_formats()}") from None
+        except ImportError as exc:  # a format whose optional package is missing (.mf4)
+            raise ValidationError(f"{path}: python-can needs another package for this "
+                                  f"format ({exc})") from None
+        except MemoryError:
+            raise
+        except Exception as exc:  # a header python-can cannot read (an empty .blf)
+            raise ValidationError(f"{path}: not a log python-can reads ({_why(exc)})") from None
+        count = 0
+        try:
+            for msg in reader:
+                frame = _checked(frame_of(msg), path, count + 1)
+                count += 1
+                yield frame
+        except (ValidationError, MemoryError):  # (the bound says the memory's own line)
+            raise
+        except Exception as exc:  # the log's damage, in the reader's words
+            raise ValidationError(f"{path}: frame {count + 1}: python-can cannot read on "
+                                  f"({_why(exc)})") from None
+        finally:
+            try:
+                reader.stop()
+            except Exception:  # closing a damaged log; its error is said above
+                pass
+        if not count:
+            said = f"; python-can: {_why(warned[0].getMessage())}" if warned else ""
+            warned.clear()  # (said here, in the one line)
+            raise ValidationError(f"{path}: no CAN frames in it (an empty log, or not the "
+                                  f"{_suffix(path) or 'format'} its name says{said})")
+
+
+@contextmanager
+def _warnings() -> Iterator[list[logging.LogRecord]]:
+    """python-can's warnings while it reads a log (a line it skips), held back: of a log
+    that fails, the one error line is what is said (with the first warning when there were
+    no frames); of one read to its end, they are shown as python-can would have."""
+    held: list[logging.LogRecord] = []
+
+    class Hold(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            if len(held) < 100:
+                held.append(record)
+
+    logger = logging.getLogger("can")
+    handler = Hold(logging.WARNING)
+    logger.addHandler(handler)
     try:
-        reader = can.LogReader(str(path))
-    except ValueError as exc:  # no reader for the suffix
-        raise ValidationError(f"{path}: {exc}; python-can reads {_formats()}") from None
-    except ImportError as exc:  # a format whose optional package is missing (.mf4)
-        raise ValidationError(f"{path}: python-can needs another package for this "
-                              f"format ({exc})") from None
-    try:
-        for msg in reader:
-            yield frame_of(msg)
-    except (ValueError, IndexError, KeyError, UnicodeDecodeError) as exc:
-        raise ValidationError(f"{path}: python-can cannot read on ({exc})") from None
+        yield held
+    except ValidationError:
+        held.clear()  # the one line says where the log went wrong
+        raise
     finally:
-        reader.stop()
+        logger.removeHandler(handler)
+        if logger.hasHandlers():
+            for record in held:
+                logger.handle(record)
+        elif logging.lastResort is not None:
+            for record in held:
+                logging.lastResort.handle(record)
+
+
+def _checked(frame: CanFrame, path: str | Path, number: int) -> CanFrame:
+    """A frame as a log gives it, refused when it is no frame a bus carries (a row of a
+    damaged .db without a time, an id beyond 29 bits)."""
+    t = frame.t
+    if not isinstance(t, (int, float)) or not math.isfinite(t):
+        raise ValidationError(f"{path}: frame {number}: its time is {_why_value(t)}, not "
+                              "seconds")
+    if not isinstance(frame.arbitration_id, int) or not 0 <= frame.arbitration_id < 2**29:
+        raise ValidationError(f"{path}: frame {number}: its id is "
+                              f"{_why_value(frame.arbitration_id)}, not one of 0..2**29-1")
+    if len(frame.data) > MAX_DATA:
+        raise ValidationError(f"{path}: frame {number}: {len(frame.data)} data bytes, more "
+                              f"than the {MAX_DATA} of a CAN FD frame")
+    return frame
+
+
+def _why_value(value: object) -> str:
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _why(exc: BaseException) -> str:
+    """A reader's exception as a few words on one line."""
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return text if len(text) <= 120 else text[:117] + "..."
 
 
 def _formats() -> str:

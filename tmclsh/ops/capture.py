@@ -11,6 +11,7 @@ A tap on a bus hears both directions at once and writes no direction; a bridge w
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -53,6 +54,7 @@ def read_capture(path: str | Path) -> Iterator[tuple[float, str | None, bytes]]:
     except OSError as exc:
         raise FileError(f"cannot read {path}: {exc.strerror or exc}") from None
     with fh:
+        no = seen = 0
         for no, line in enumerate(stream_lines(fh, str(path)), 1):
             text = line.strip()
             if not text or text.startswith("#"):
@@ -67,4 +69,10 @@ def read_capture(path: str | Path) -> Iterator[tuple[float, str | None, bytes]]:
                     f"{path}:{no}: not a line of a serial capture (time, then bytes in hex) "
                     "nor a CAN log python-can reads (named .asc, .blf, .trc, .log, .csv, ...)"
                 ) from None
+            if not math.isfinite(t):
+                raise ValidationError(f"{path}:{no}: the time {words[0][:40]!r} is not seconds")
+            seen += 1
             yield t, direction, data
+    if not seen:
+        raise ValidationError(f"{path}: no captured bytes in it (no line of a time and "
+                              "bytes in hex)")

@@ -441,7 +441,8 @@ def run_monitor(args) -> int:
         close_capture()
     if failed is not None:  # (what was heard until then is still summed up)
         print(f"tmclsh: {failed}", file=sys.stderr, flush=True)
-    view.summary(monitor.summary)
+    if failed is None or monitor.summary.frames or monitor.summary.noise:
+        view.summary(monitor.summary)  # (of a log that gave nothing, only why)
     return EXIT_OK if failed is None else EXIT_FAILED
 
 

@@ -245,10 +245,13 @@ def image_from_hex(text: str, name: str = "<image>") -> Image:
     line."""
     from intelhex import HexReaderError, IntelHex
 
+    from ..base.files import bounded_read
+
     ih = IntelHex()
     lines = _Lines(text)
     try:
-        ih.loadhex(lines)
+        with bounded_read(name, "HEX file"):
+            ih.loadhex(lines)
     except HexReaderError as exc:
         line = getattr(exc, "line", None)
         where = f"{name}:{line}" if line else name

@@ -93,6 +93,42 @@ MEANINGS = {
         "min": "the value range (max too)",
     },
 }
+# The numbers a module file may give, as (low, high, why). A file is data from the field and
+# may be cut or hostile: the simulator makes a list per motor, per instruction of program
+# memory and per coordinate, so a count no module has (motors = 1000000000) would grow
+# tmclsh to gigabytes. The bounds are what Trinamic's TMCL modules have, or what the
+# protocol's fields can carry.
+BYTE = (0, 255, "one byte of a TMCL frame carries it")
+INT32 = (-(2**31), 2**31 - 1, "a 32-bit signed value")
+VALUE = (-(2**31), 2**32 - 1, "a 32-bit value")  # unsigned parameters reach 2**32 - 1
+RANGES: dict[str, dict[str, tuple[int, int, str]]] = {
+    "module": {
+        # the most axes of any Trinamic TMCL module: 6 (TMCM-6110, TMCM-6212, TMCM-6214)
+        "motors": (1, 6, "no TMCL module drives more than 6 motors"),
+        # the manuals' modules hold 2048 instructions; tmclsh assembles to addresses
+        # 0..65535 (asm --at), so no program it makes needs more
+        "program_memory": (1, 65536, "tmclsh's program addresses are 0..65535"),
+        # 136 type 1 carries the type number and the version in 16 bits each
+        "firmware_id": (0, 65535, "136 reports it in 16 bits"),
+        "firmware_version": (0, 65535, "136 reports it in 16 bits"),
+        # a coordinate number is the type byte of SCO/GCO/CCO/ACO
+        "coordinates": (0, 256, "SCO/GCO number coordinates in one byte"),
+        # where the bootloader's application memory lies: 32-bit addresses
+        "firmware_start": (0, 2**32 - 1, "a 32-bit address"),
+        "firmware_size": (1, 2**32, "a 32-bit address space"),
+        "io_all_port": BYTE, "io_all_banks": BYTE,
+        "position_min": INT32, "position_max": INT32,
+        "velocity_min": INT32, "velocity_max": INT32,
+    },
+    "parameter": {
+        "number": BYTE, "bank": BYTE,
+        # a run of user variables ends at 255, the last number the type byte carries
+        "count": (1, 256, "numbers 0..255 fit the type byte"),
+        "min": VALUE, "max": VALUE, "default": VALUE, "choices": VALUE,
+    },
+    "io": {"bank": BYTE, "port": BYTE, "min": VALUE, "max": VALUE, "default": VALUE},
+}
+_RANGE_TABLE = {"module": "module", "axis": "parameter", "global": "parameter", "io": "io"}
 _TYPE_WORDS = {"str": "a string", "int": "an integer", "bool": "true or false",
                "table": "a table", "strs": "a list of strings", "ints": "a list of integers",
                "names": "a table of texts keyed by numbers (\"0\" = \"...\")"}
@@ -147,7 +183,7 @@ def _is(kind: str, value: object) -> bool:
         return isinstance(value, list) and all(_is("int", v) for v in value)
     if kind == "names":
         return isinstance(value, dict) and all(
-            re.fullmatch(r"-?\d+", k) and isinstance(v, str) for k, v in value.items())
+            re.fullmatch(r"-?\d{1,10}", k) and isinstance(v, str) for k, v in value.items())
     raise AssertionError(kind)
 
 
@@ -159,12 +195,18 @@ def check_text(text: str, path: str) -> None:
 
 def parse(text: str, path: str) -> dict:
     """A module file's text as data, checked against the schema; ModuleFileError if not."""
+    from ...base.files import toml_limits
+
+    beyond = toml_limits(text)
+    if beyond is not None:
+        raise ModuleFileError(f"{path}:{beyond[0]}: {beyond[1]}")
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         m = re.search(r"\(at line (\d+), column \d+\)", str(exc))
-        msg = re.sub(r"\s*\(at line \d+, column \d+\)", "", str(exc))
-        raise ModuleFileError(f"{path}:{m.group(1) if m else 1}: not valid TOML: {msg}") from None
+        msg = re.sub(r"\s*\(at (line \d+, column \d+|end of document)\)", "", str(exc))
+        no = m.group(1) if m else max(1, len(text.splitlines()))  # at the end: a cut file
+        raise ModuleFileError(f"{path}:{no}: not valid TOML: {msg}") from None
     check(data, _Lines(text), path)
     return data
 
@@ -185,13 +227,9 @@ def check(data: dict, lines: _Lines, path: str) -> None:
                    "firmware_id, version_string)")
     _entry(data["module"], MODULE_KEYS, "module", 0, "[module]", fail)
     info = data["module"]
-    if info["motors"] < 1:
-        raise fail("module", 0, "motors", "[module] motors must be at least 1")
     if len(info["version_string"]) != 8 or not info["version_string"].isascii():
         raise fail("module", 0, "version_string", "[module] version_string must be the 8 "
-                   f"characters 136 answers (\"1161V130\"), got {info['version_string']!r}")
-    if info["program_memory"] < 1:
-        raise fail("module", 0, "program_memory", "[module] program_memory must be at least 1")
+                   f"characters 136 answers (\"1161V130\"), got {_shown(info['version_string'])}")
     memory = [k for k in ("firmware_start", "firmware_size") if k in info]
     if len(memory) == 1:
         other = "firmware_size" if memory[0] == "firmware_start" else "firmware_start"
@@ -206,7 +244,7 @@ def check(data: dict, lines: _Lines, path: str) -> None:
 
         if layout not in LAYOUTS:
             raise fail("module", 0, "version_layout", f"[module] version_layout must be one "
-                       f"of {', '.join(LAYOUTS)}, got {layout!r}")
+                       f"of {', '.join(LAYOUTS)}, got {_shown(layout)}")
     like = info.get("commands_like")
     if like is not None:
         from ..instructions import GENERIC, family
@@ -214,7 +252,7 @@ def check(data: dict, lines: _Lines, path: str) -> None:
         allowed = sorted(family()) + [GENERIC]
         if like not in allowed:
             raise fail("module", 0, "commands_like", f"[module] commands_like must be one of "
-                       f"{', '.join(allowed)}, got {like!r}")
+                       f"{', '.join(allowed)}, got {_shown(like)}")
     for table, keys in TABLES.items():
         entries = data.get(table, [])
         if not isinstance(entries, list):
@@ -228,19 +266,23 @@ def check(data: dict, lines: _Lines, path: str) -> None:
             if table == "io":
                 if entry["kind"] not in IO_KINDS:
                     raise fail(table, i, "kind", f"{what}: kind must be one of "
-                               f"{', '.join(IO_KINDS)}, got {entry['kind']!r}")
+                               f"{', '.join(IO_KINDS)}, got {_shown(entry['kind'])}")
                 ident: tuple = (entry["bank"], entry["port"])
             else:
                 if entry.get("reaches") not in (None, *REACHES):
                     raise fail(table, i, "reaches", f"{what}: reaches must be one of "
-                               f"{', '.join(REACHES)}, got {entry['reaches']!r}")
+                               f"{', '.join(REACHES)}, got {_shown(entry['reaches'])}")
                 if entry.get("breaks") not in (None, *BREAKS):
                     raise fail(table, i, "breaks", f"{what}: breaks must be one of "
-                               f"{', '.join(BREAKS)}, got {entry['breaks']!r}")
+                               f"{', '.join(BREAKS)}, got {_shown(entry['breaks'])}")
                 if entry["access"] not in ACCESS_CODES:
                     raise fail(table, i, "access", f"{what}: access must be one of "
-                               f"{', '.join(ACCESS_CODES)}, got {entry['access']!r}")
+                               f"{', '.join(ACCESS_CODES)}, got {_shown(entry['access'])}")
                 ident = (entry.get("bank", 0), entry["number"])
+                if entry["number"] + entry.get("count", 1) > 256:
+                    raise fail(table, i, "count", f"{what}: numbers {entry['number']}.."
+                               f"{entry['number'] + entry.get('count', 1) - 1} go past 255, "
+                               "the last the type byte carries")
             if ident in seen:
                 raise fail(table, i, None, f"{what} repeats entry {seen[ident] + 1}")
             seen[ident] = i
@@ -256,7 +298,7 @@ def _check_io_links(data: dict, fail) -> None:
             if name is not None and name not in inputs:
                 raise fail(table, i, "io", f"[[{table}]] entry {i + 1} ({entry['name']}): io "
                            f"must name an analog input of [[io]] ({', '.join(sorted(inputs)) or 'none'}), "
-                           f"got {name!r}")
+                           f"got {_shown(name)}")
 
 
 def _entry(entry: object, keys: dict[str, tuple[str, bool]], table: str, index: int,
@@ -270,10 +312,23 @@ def _entry(entry: object, keys: dict[str, tuple[str, bool]], table: str, index: 
         kind = keys[key][0]
         if not _is(kind, value):
             raise fail(table, index, key, f"{what}: {key} must be {_TYPE_WORDS[kind]}, "
-                       f"got {value!r}")
+                       f"got {_shown(value)}")
+        bounds = RANGES[_RANGE_TABLE[table]].get(key)
+        if bounds is not None:
+            low, high, why = bounds
+            for number in value if isinstance(value, list) else (value,):
+                if not low <= number <= high:
+                    raise fail(table, index, key, f"{what}: {key} must be from {low} to "
+                               f"{high} ({why}), got {_shown(number)}")
     missing = [k for k, (_, required) in keys.items() if required and k not in entry]
     if missing:
         raise fail(table, index, None, f"{what} lacks {', '.join(missing)}")
+
+
+def _shown(value: object) -> str:
+    """A value as a message quotes it: cut short, so one line stays one line."""
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def read(path: Path) -> dict:
@@ -283,7 +338,7 @@ def read(path: Path) -> dict:
     the data cache (a user with forty imported files would otherwise parse them all on every
     start)."""
     from ...base.datafiles import parsed
-    from ...base.files import FileError, read_bytes
+    from ...base.files import FileError, bounded_read, read_bytes
 
     try:
         raw = read_bytes(path, what="module file")  # bounded: /dev/zero
@@ -292,7 +347,12 @@ def read(path: Path) -> dict:
         raise ModuleFileError(str(exc)) from None
     except UnicodeDecodeError:
         raise ModuleFileError(f"{path}:1: not a text file (UTF-8)") from None
-    return parsed(raw, "user-module", lambda text: parse(text, str(path)), salt=_rules())
+    try:
+        with bounded_read(str(path), "module file"):
+            return parsed(raw, "user-module", lambda text: parse(text, str(path)),
+                          salt=_rules())
+    except FileError as exc:
+        raise ModuleFileError(str(exc)) from None
 
 
 _RULES: list[bytes] = []
