@@ -468,10 +468,13 @@ _SUB_NOTES = {
               "(on --can: the request's seven instruction bytes to the module's CAN id, the "
               "reply back as a serial frame) and shown as monitor shows it, ASCII mode as "
               "text lines. The first line on standard output is the pseudo-terminal's path "
-              "or HOST:PORT, as for sim. It runs until interrupted; then, as tmclsh does "
+              "or HOST:PORT, as for sim: PyTrinamic's serial interface opens a device path, "
+              "not a URL, so give it --pty; --tcp is for programs that take socket:// URLs. "
+              "A request whose checksum is wrong is shown as such, paired with the module's "
+              "status-1 answer. It runs until interrupted; then, as tmclsh does "
               "for its own commands, it stops a motor or stored program the traffic "
               "started, ends download mode and leaves ASCII mode the traffic entered, and "
-              "prints the summary. Exit status 0; 1 when the module's link goes away; 3 "
+              "prints the summary; -o keeps the frames of that closing stop too. Exit status 0; 1 when the module's link goes away; 3 "
               "when the module's port or bus cannot be opened or the bridge cannot serve.",
 }
 
