@@ -879,9 +879,12 @@ class AsciiLink:
         try:
             self._marker(t, address, timeout)
         except TmclTimeoutError as exc:
-            raise TmclTimeoutError(f"address {address} stopped answering: after an answer "
-                                   "that did not come, a value whose answer is known was "
-                                   f"read to be sure which reply is which: {exc}") from None
+            from .core import lost_check
+
+            raise TmclTimeoutError(lost_check(client, address, "after an answer that did not "
+                                              "come, a value whose answer is known was read "
+                                              f"to be sure which reply is which: {exc}")) from None
+        client.checks_lost = 0
         client.ledger.forget()
 
     def _markers(self) -> list[tuple[str, Request, int]]:
