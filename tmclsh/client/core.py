@@ -815,6 +815,12 @@ class Client:
         self.ledger.reset()  # whatever comes now says nothing about answers before
 
     @property
+    def bring_up_pending(self) -> bool:
+        """The link came back but the module has not been brought up since (it did not
+        answer yet): the next exchange waits for its bring-up first."""
+        return self._bring_up_next
+
+    @property
     def lock(self):
         """Held for every exchange on the line; a peer that talks past ``request`` takes it."""
         return self._lock
