@@ -165,7 +165,7 @@ complete -c tmclsh -n '__fish_seen_subcommand_from monitor' -s o -l output -r -F
 complete -c tmclsh -n '__fish_seen_subcommand_from monitor' -s h -l help -d 'show this help message and exit'
 
 # tmclsh bridge
-complete -c tmclsh -n '__fish_seen_subcommand_from bridge' -l pty -d 'a pseudo-terminal (its path is the first line on stdout; Linux and macOS)'
+complete -c tmclsh -n '__fish_seen_subcommand_from bridge' -l pty -d 'a pseudo-terminal (its path is the first line on stdout; Linux and macOS): for PyTrinamic and programs that open a device path'
 complete -c tmclsh -n '__fish_seen_subcommand_from bridge' -l tcp -x -d 'a TCP port, for socket:// URLs (the endpoint is the first line)'
 complete -c tmclsh -n '__fish_seen_subcommand_from bridge' -l port -x -a '(__tmclsh_ports)' -d 'the module\'s serial port or pyserial URL: bytes forwarded unchanged'
 complete -c tmclsh -n '__fish_seen_subcommand_from bridge' -l can -x -a '(__tmclsh_can)' -d 'the module on a python-can bus: the program\'s serial frames go to it as CAN frames, its replies come back as serial frames'

@@ -63,7 +63,10 @@ def test_import_writes_a_usable_file_with_pytrinamics_names(run_tmclsh, env, tmp
     got_axis = {p["number"]: p for p in data["axis"]}
     assert set(got_axis) == set(axis)
     for number, name in axis.items():
-        assert got_axis[number]["name"].startswith(name)  # _N added only on a clash
+        got = got_axis[number]
+        # the built-in modules' style (MinimumSpeed), PyTrinamic's spelling an alias
+        assert got["name"][0].isupper() and "_" not in got["name"].rstrip("0123456789"), got
+        assert got["name"] == name or name in got.get("aliases", []) or "_" in got["name"]
         assert got_axis[number]["access"] == "RWE" and "min" not in got_axis[number]
     assert {(p["bank"], p["number"]) for p in data.get("global", [])} == set(glob)
     check = run_tmclsh("modules", "check", str(files[0]), env=env)
@@ -243,3 +246,19 @@ def test_a_family_class_and_status_bits(run_tmclsh, env):
     status = next(p for p in tomllib.loads(r.stdout)["axis"] if p["name"] == "StatusFlags")
     assert status["number"] == 156 and status["bits"] == {"14": "position end"}
 
+
+
+def test_imported_names_read_like_the_built_in_ones_and_pytrinamics_still_work(
+        run_tmclsh, env, tmp_path):
+    r = run_tmclsh("modules", "import", "pytrinamic", "TMCM1161", env=env)
+    assert r.returncode == 0, r.stderr
+    data = tomllib.loads(next(modules_dir(tmp_path).glob("*.toml")).read_text("utf-8"))
+    by_number = {p["number"]: p for p in data["axis"]}
+    assert by_number[130]["name"] == "MinimumSpeed"  # PyTrinamic: minimumSpeed
+    assert by_number[130]["aliases"] == ["minimumSpeed"]
+    assert by_number[4]["name"] == "MaxVelocity" and "aliases" not in by_number[4]
+    from tmclsh.tmcl.modules import read_file
+
+    mod = read_file(next(modules_dir(tmp_path).glob("*.toml")))
+    assert mod.lookup("axis", "minimumSpeed").number == 130
+    assert mod.lookup("axis", "MinimumSpeed").aliases == ("minimumSpeed",)

@@ -249,3 +249,14 @@ def test_the_first_command_piped_needs_sim_as_ci_gives_it(tmp_path):
                          capture_output=True, text=True, timeout=120, env=env, cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     assert "ActualPosition = 0" in out.stdout
+
+
+def test_the_bridge_paragraph_sends_pytrinamic_to_the_pty_not_a_socket_url():
+    """PyTrinamic's serial interface opens a device path; a socket:// URL fails there."""
+    para = README[README.index("To see a program's traffic"):]
+    para = para[:para.index("\n\n")]
+    assert "PyTrinamic" in para
+    pty = para.index("--pty")
+    assert pty < para.index("PyTrinamic") < para.index("socket://")
+    man = (ROOT / "man" / "tmclsh.1").read_text(encoding="utf-8")
+    assert "PyTrinamic's serial interface opens a device path" in man

@@ -323,3 +323,28 @@ def test_a_lost_line_check_before_a_move_is_asked_again_not_the_move(pty_client)
     assert c.stats["resyncs"] == 2
     assert reply is not None and reply.status == Status.OK
     assert c.request(Request(1, GAP, 0, 0)).value == target + 20  # moved once each, no more
+
+
+def test_one_lost_line_check_is_a_lost_reply_two_in_a_row_a_module_that_stopped(pty_client):
+    """A line check (136) after a failure whose reply is lost once: that reply was lost, the
+    next line works; 'stopped answering' is kept for a module that answers nothing more."""
+    c, sim = pty_client, pty_client.sim
+    sim.faults.drop_next = 1
+    with pytest.raises(TmclTimeoutError):
+        c.request(Request(1, GIO, AIN0, ANALOG), retries=0)
+    sim.faults.drop_next = 1  # the check's reply is lost too
+    with pytest.raises(TmclTimeoutError) as lost:
+        c.request(Request(1, GIO, AIN0, ANALOG), retries=0)
+    assert "was lost" in str(lost.value) and "stopped answering" not in str(lost.value)
+    in_step(c)  # the next line works
+    sim.faults.drop_next = 1
+    with pytest.raises(TmclTimeoutError):
+        c.request(Request(1, GIO, AIN0, ANALOG), retries=0)
+    sim.faults.drop_next = 1000  # gone: nothing answers any more
+    with pytest.raises(TmclTimeoutError) as first:
+        c.request(Request(1, GIO, AIN0, ANALOG), retries=0)
+    with pytest.raises(TmclTimeoutError) as second:
+        c.request(Request(1, GIO, AIN0, ANALOG), retries=0)
+    assert "was lost" in str(first.value)
+    assert "stopped answering" in str(second.value)
+    sim.faults.drop_next = 0

@@ -563,3 +563,13 @@ def test_ascii_asked_for_a_module_left_in_download_mode(run_tmclsh, make_pty_sim
     assert p.returncode == 0, p.stderr
     assert "ended it with 133" in p.stderr and not sim.vm.download
     assert p.stdout.splitlines()[-1] == "MaxPositioningSpeed = 555 pps"
+
+
+def test_the_missing_checksum_is_said_once_a_session_not_at_every_connect(run_tmclsh,
+                                                                           responders):
+    module = responders(AsciiStartupModule, ascii=True)
+    p = run_tmclsh("--port", module.path, "--timeout", "0.3", "--retries", "0",
+                   "-c", "GAP 1, 0; .connect; GAP 1, 0")
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.count("ActualPosition = 1234") == 2
+    assert p.stderr.count("carry no checksum") == 1, p.stderr

@@ -210,3 +210,49 @@ def test_a_module_that_goes_away_ends_the_bridge():
     objs = [json.loads(line) for line in out.splitlines()]  # (the endpoint line was read)
     assert [o.get("frame") for o in objs] == ["request", "reply", None]
     assert objs[-1]["summary"]["frames"] == 2
+
+
+def test_a_request_with_a_bad_checksum_is_shown_as_one_and_paired_with_its_answer():
+    from responder import PtyModule
+
+    module = PtyModule(version="1311V111", nines=True)  # answers a bad sum with status 1
+    bridge = Bridge("--pty", "--port", module.path)
+    try:
+        with serial.Serial(bridge.endpoint, timeout=5) as port:
+            bad = bytearray(request(1, 6, 4))
+            bad[8] ^= 0x5A
+            port.write(bytes(bad))
+            assert port.read(9)[:4] == bytes([2, 1, 1, 6])  # status 1: wrong checksum
+            port.write(request(1, 6, 4))  # and the line goes on
+            assert port.read(9)[2] == 100
+            objs, err = bridge.stop()
+    finally:
+        bridge.kill()
+        module.close()
+    got = [o for o in objs if "frame" in o]
+    assert [o["frame"] for o in got] == ["request", "reply", "request", "reply"], got
+    assert got[0]["line"] == "GAP 4, 0" and got[0]["note"].startswith("bad checksum")
+    assert got[1]["status"] == 1 and got[1]["latency"] > 0  # paired with it
+    assert objs[-1]["summary"]["unpaired"] == 0 and objs[-1]["summary"]["noise"] == 0
+
+
+def test_the_capture_holds_the_stop_the_bridge_sends_when_it_closes(tmp_path):
+    from responder import PtyModule
+    from tmclsh.ops.capture import read_capture
+
+    module = PtyModule(version="1311V111")
+    out = tmp_path / "cap.txt"
+    bridge = Bridge("--pty", "--port", module.path, "-o", str(out))
+    try:
+        with serial.Serial(bridge.endpoint, timeout=5) as port:
+            port.write(request(1, 1, 0, 0, 800))  # ROR 0, 800: and then the bridge closes
+            assert port.read(9)[2] == 100
+            objs, err = bridge.stop(signal.SIGTERM)
+    finally:
+        bridge.kill()
+        module.close()
+    assert "ending that" in err
+    sent = [raw for _, direction, raw in read_capture(out) if direction == "tx"]
+    assert sent[0][:2] == bytes([1, 1])  # the program's ROR
+    stops = [raw for raw in sent[1:] if raw[:2] == bytes([1, 3])]  # MST to address 1
+    assert stops, [raw.hex(" ") for raw in sent]

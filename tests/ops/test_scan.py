@@ -336,3 +336,13 @@ def test_the_ascii_pass_waits_for_the_padded_probe_its_echo_and_the_reply():
 
     longest = max(len(ascii_probe_line(a)) for a in range(1, MAX_ADDRESS + 1))
     assert ASCII_WIRE_BYTES >= 2 * longest + len(b"BA 100 33\r")
+
+
+def test_scan_of_a_module_in_ascii_mode_says_nothing_of_checksums(run_tmclsh, responders):
+    """A scan reads nothing twice: the paragraph about ASCII reads is not its to say."""
+    from responder import AsciiModeModule
+
+    m = responders(AsciiModeModule, address=1)
+    p = run_tmclsh("scan", "--port", m.path, "--to", "3")
+    assert p.returncode == 0, p.stderr
+    assert "TMCM-1311" in p.stdout and "checksum" not in p.stderr + p.stdout, p.stderr

@@ -375,7 +375,8 @@ _SUB_NOTES = {
                "is wrong. modules import pytrinamic NAME (TMCM1260) writes a module file from "
                "the installed PyTrinamic's class for that module (pip install "
                "'tmclsh[pytrinamic]'): its motors and its axis and global parameter names and "
-               "numbers, nothing else (ranges, units and access are not known, so values are "
+               "numbers (named as the built-in modules are, MinimumSpeed, with PyTrinamic's "
+               "minimumSpeed kept as an alias), nothing else (ranges, units and access are not known, so values are "
                "checked as 32-bit numbers and the module decides). The file goes to the config "
                "directory's modules/ (or -o FILE, - for standard output); tmclsh then knows the "
                "module by its 136 answer and names it with the data's origin. --all imports "
@@ -468,10 +469,13 @@ _SUB_NOTES = {
               "(on --can: the request's seven instruction bytes to the module's CAN id, the "
               "reply back as a serial frame) and shown as monitor shows it, ASCII mode as "
               "text lines. The first line on standard output is the pseudo-terminal's path "
-              "or HOST:PORT, as for sim. It runs until interrupted; then, as tmclsh does "
+              "or HOST:PORT, as for sim: PyTrinamic's serial interface opens a device path, "
+              "not a URL, so give it --pty; --tcp is for programs that take socket:// URLs. "
+              "A request whose checksum is wrong is shown as such, paired with the module's "
+              "status-1 answer. It runs until interrupted; then, as tmclsh does "
               "for its own commands, it stops a motor or stored program the traffic "
               "started, ends download mode and leaves ASCII mode the traffic entered, and "
-              "prints the summary. Exit status 0; 1 when the module's link goes away; 3 "
+              "prints the summary; -o keeps the frames of that closing stop too. Exit status 0; 1 when the module's link goes away; 3 "
               "when the module's port or bus cannot be opened or the bridge cannot serve.",
 }
 

@@ -401,7 +401,7 @@ def build_parser() -> argparse.ArgumentParser:
     serve = side.add_mutually_exclusive_group(required=True)
     serve.add_argument("--pty", action="store_true",
                        help="a pseudo-terminal (its path is the first line on stdout; Linux "
-                            "and macOS)")
+                            "and macOS): for PyTrinamic and programs that open a device path")
     serve.add_argument("--tcp", type=_host_port, metavar="HOST:PORT",
                        help="a TCP port, for socket:// URLs (the endpoint is the first line)")
     mod = br.add_argument_group("the module (one of)")

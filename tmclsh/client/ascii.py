@@ -74,7 +74,9 @@ _LINE_BYTES = frozenset(b"\r\n\x08\x7f")
 # within this time (then the module does not echo, whatever GP 67 said).
 _ECHO_WAIT = 0.05
 
-#: said once where ASCII mode is chosen (connect, .mode ascii, .ascii)
+#: said where tmclsh reads through the ASCII mode (connect, .mode ascii, .ascii), once in a
+#: run of tmclsh (not again at each .connect or reconnect); not by scan, nor on the raw
+#: terminal, where nothing is read twice
 NO_CHECKSUM = ("ASCII replies carry no checksum: a digit changed on the line gives a valid "
                "reply with a wrong value, which no single read can reveal. tmclsh reads every "
                "setting twice and takes it only when both reads agree; motion state, "
@@ -545,6 +547,15 @@ def probe_ascii(client: Client, timeout: float | None = None) -> Probe:
 # -- the link --------------------------------------------------------------------------------
 
 _LINKS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_told = [False]  # NO_CHECKSUM was said in this run
+
+
+def _tell_no_checksum(client: Client) -> None:
+    """NO_CHECKSUM, the first time this run reads through an ASCII mode: a paragraph
+    repeated at every connect is one the user learns to skip."""
+    if not _told[0]:
+        _told[0] = True
+        client.notice(NO_CHECKSUM)
 
 
 class AsciiLink:
@@ -584,9 +595,11 @@ class AsciiLink:
 
     @classmethod
     def attach(cls, client: Client, *, timeout: float | None = None,
-               found: Probe | None = None) -> AsciiLink:
+               found: Probe | None = None, tell: bool = True) -> AsciiLink:
         """Drive ``client`` through the module's ASCII mode (entering it with 139 if needed).
-        ``found``: what a ``probe_mode`` just now found (it is not asked again)."""
+        ``found``: what a ``probe_mode`` just now found (it is not asked again). ``tell``:
+        settings will be read through it, so the missing checksum is said (once to each
+        run); a scan or the raw terminal reads nothing twice and says nothing."""
         if client.ascii_link is not None:
             return client.ascii_link
         _transport(client)
@@ -636,9 +649,10 @@ class AsciiLink:
                 if link is None:
                     link = cls(client, found=entered_from, echo=echo, gp67=probe.gp67)
                     _LINKS[client] = link
-                    client.notice(NO_CHECKSUM)  # (once a session: the first time)
                 else:
                     link.echo, link.gp67, link._closed = echo, probe.gp67, False
+                if tell:
+                    _tell_no_checksum(client)
                 link.entered = entered
                 link._buf.clear()
                 link._dirty = False
@@ -865,9 +879,12 @@ class AsciiLink:
         try:
             self._marker(t, address, timeout)
         except TmclTimeoutError as exc:
-            raise TmclTimeoutError(f"address {address} stopped answering: after an answer "
-                                   "that did not come, a value whose answer is known was "
-                                   f"read to be sure which reply is which: {exc}") from None
+            from .core import lost_check
+
+            raise TmclTimeoutError(lost_check(client, address, "after an answer that did not "
+                                              "come, a value whose answer is known was read "
+                                              f"to be sure which reply is which: {exc}")) from None
+        client.checks_lost = 0
         client.ledger.forget()
 
     def _markers(self) -> list[tuple[str, Request, int]]:

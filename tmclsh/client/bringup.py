@@ -75,7 +75,12 @@ def again(client: Client, req: Request) -> ValidationError | None:
     link = client.ascii_link
     if link is not None:
         client.ascii_link = None  # found again, in whichever mode the module is in now
-    bring_up(client, ascii=link is not None, strict=False)
+    try:
+        bring_up(client, ascii=link is not None, strict=False)
+    except BaseException:
+        if client.module is None:  # (nothing answered: still the module it was, by name)
+            client.module = old
+        raise
     new = client.module
     if old is None or new is None or new.name == old.name:
         return None

@@ -144,6 +144,7 @@ class Client:
         # one-line notices about what the client did on its own (ended download mode); the
         # shell points it at its output, else they are logged
         self.on_notice: Callable[[str], None] | None = None
+        self.checks_lost = 0  # line checks in a row that got no good answer (lost_check)
         # called when a request finds the link down, to bring it back before the request
         # goes (a --keep-going script waits for a cable plugged back in); it raises
         # TransportError if the link stays down. None: the request fails at once.
@@ -606,9 +607,9 @@ class Client:
                 got = framing.exchange(marker, kind, timeout)
             except (TmclTimeoutError, ChecksumError) as exc:
                 ledger.expect_late(marker, kind)
-                raise type(exc)(f"address {address} stopped answering: after a reply that "
-                                "went wrong, its version (136) was asked to be sure which "
-                                f"reply is which, and this failed too: {exc}") from exc
+                raise type(exc)(lost_check(self, address, "after a reply that went wrong, its "
+                                           "version (136) was asked to be sure which reply "
+                                           f"is which, and this failed too: {exc}")) from exc
             except BaseException:
                 ledger.expect_late(marker, kind)
                 raise
@@ -619,6 +620,7 @@ class Client:
             if got is not None:
                 ledger.took_marker(marker, got)
                 self._second(ledger.doubles.answered(marker, got))
+            self.checks_lost = 0
             ledger.forget()
             for _ in range(extra):  # (crossed off when they come)
                 ledger.expect_late(Request(address, _GET_VERSION, 1, 0, 0), _NORMAL)
@@ -887,6 +889,12 @@ class Client:
         self.ledger.reset()  # (an answer still to come may come on the new link too)
 
     @property
+    def bring_up_pending(self) -> bool:
+        """The link came back but the module has not been brought up since (it did not
+        answer yet): the next exchange waits for its bring-up first."""
+        return self._bring_up_next
+
+    @property
     def lock(self):
         """Held for every exchange on the line; a peer that talks past ``request`` takes it."""
         return self._lock
@@ -999,6 +1007,17 @@ def shared_text(address: int) -> str:
     return (f"two modules answer at address {address}: every reply came twice, so every "
             "command reaches both and which answer is shown is chance; give one of them "
             "another address while the other is disconnected")
+
+
+def lost_check(client: Client, address: int, why: str) -> str:
+    """The words for a line check (after a failure) that got no good answer: the first is a
+    lost reply, as a line that loses one now and then does; only a second in a row, with
+    no good answer between, is a module that stopped answering."""
+    client.checks_lost += 1
+    if client.checks_lost == 1:
+        return (f"a reply from address {address} was lost ({why}); the next command checks "
+                "the line again")
+    return f"address {address} stopped answering: {why}"
 
 
 def _tell(tracers: list[Tracer], direction: str, raw: bytes, decoded: object) -> None:

@@ -26,12 +26,13 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
 from ..client.ascii import next_line, parse_reply
-from ..tmcl.decoder import FRAME, FRAME_PIECE, NOISE, FrameDecoder, printable
+from ..tmcl.decoder import FRAME, FRAME_PIECE, NOISE, WHOLE, FrameDecoder, printable
 from ..tmcl.frames import Instruction, Reply, ReplyKind
 from ..tmcl.modules import Module, identify
 from ..tmcl.status import status_ok
-from ..tmcl.traffic import (STATUSES, enters_ascii, expects, is_event, known_command,
-                            leaves_ascii, plausible_reply, plausible_request, version_answer)
+from ..tmcl.traffic import (STATUSES, damaged_request, enters_ascii, expects, is_event,
+                            known_command, leaves_ascii, plausible_reply, plausible_request,
+                            version_answer)
 
 REQUEST, REPLY, EVENT, NOISE_RUN, TEXT, OTHER = (
     "request", "reply", "event", "noise", "text", "other")
@@ -55,7 +56,8 @@ class Seen:
     reply's module byte). ``instruction``: a request's; ``reply``: a reply's or an event's.
     ``answers``: the request a reply answers; ``latency`` the seconds between them.
     ``direction``: ``tx``/``rx`` where the wire tells (a bridge). ``note``: what noise or an
-    other frame is, in words.
+    other frame is, in words. ``bad_sum``: a request whose checksum is wrong (the module
+    answers it with status 1, whatever the command).
     """
 
     t: float
@@ -70,6 +72,7 @@ class Seen:
     direction: str | None = None
     note: str = ""
     late: bool = False  # a reply that came after its request was called unanswered
+    bad_sum: bool = False
 
 
 @dataclass(eq=False, slots=True)
@@ -177,21 +180,30 @@ class Monitor:
         s.last = t
 
     # -- what is seen ----------------------------------------------------------------------
+    def layout(self, request: Seen) -> ReplyKind:
+        """How the answer to this request is laid out: a damaged request is answered with
+        a status-1 frame, whatever its command says."""
+        return _NORMAL if request.bad_sum else expects(request.instruction)
+
     def request(self, t: float, raw: bytes, ins: Instruction, address: int | None, *,
                 can_id: int | None = None, direction: str | None = None,
-                alone: bool = False) -> list[Item]:
+                alone: bool = False, bad_sum: bool = False) -> list[Item]:
         """A request; ``alone``: the line carries one exchange at a time (a serial bus), so
-        whatever still waited got no answer."""
+        whatever still waited got no answer. ``bad_sum``: its checksum is wrong."""
         self._count(t)
         self.summary.requests += 1
         if address is not None:
             self.addresses.add(address)
-        seen = Seen(t, REQUEST, raw, address, can_id, ins, direction=direction)
+        seen = Seen(t, REQUEST, raw, address, can_id, ins, direction=direction,
+                    bad_sum=bad_sum)
+        if bad_sum:
+            seen.note = (f"bad checksum: {raw[FRAME - 1]:02x}, the bytes add up to "
+                         f"{sum(raw[:FRAME - 1]) & 0xFF:02x}")
         out: list[Item] = [seen]
         if alone and self.waiting:
             out += self._give_up([r for r in self.waiting if r.address == address]
                                  or self.waiting, "no reply before the next request")
-        if expects(ins) is _NONE:
+        if self.layout(seen) is _NONE:
             out.append(Exchange(seen, None, "no reply expected"))
         else:
             self.waiting.append(seen)
@@ -286,14 +298,14 @@ class Monitor:
             if answers(r):
                 return r
         for r in reversed(self.recent):
-            if expects(r.instruction) is _NORMAL and answers(r):
+            if self.layout(r) is _NORMAL and answers(r):
                 return r
         return None
 
     def expecting(self, kind: ReplyKind) -> Seen | None:
         """The latest waiting request whose answer has this layout."""
         for r in reversed(self.waiting):
-            if expects(r.instruction) is kind:
+            if self.layout(r) is kind:
                 return r
         return None
 
@@ -442,7 +454,7 @@ class SerialTap:
         m = self.monitor
 
         def answers(r: Seen) -> bool:
-            kind = expects(r.instruction)
+            kind = m.layout(r)
             if kind is _MEMORY:
                 return frame[0] in m.hosts
             return (frame[1] == r.address and frame[3] == r.instruction.opcode
@@ -453,7 +465,7 @@ class SerialTap:
         m = self.monitor
         req = m.find(self._answers(frame))
         if req is not None:
-            if expects(req.instruction) is _MEMORY:
+            if m.layout(req) is _MEMORY:
                 reply = Reply.from_memory_frame(frame, req.address, req.instruction.opcode)
             else:
                 reply = Reply.from_frame(frame)
@@ -522,7 +534,7 @@ class SerialPair:
         dec.feed(data)
         noise = bytearray()
         while not self.text[direction]:
-            piece = dec.next(whole=self._whole if direction == RX else None)
+            piece = dec.next(whole=self._whole if direction == RX else self._damaged)
             if piece is None:
                 break
             what, raw = piece
@@ -537,7 +549,7 @@ class SerialPair:
                     self.text[RX] = m.ascii = m.leaving = False
                     self.decoders[RX].feed(self.lines[RX].rest())
                 out += m.request(t, raw, Instruction.from_bytes(raw[1:8]), raw[0],
-                                 direction=TX, alone=True)
+                                 direction=TX, alone=True, bad_sum=what == WHOLE)
             else:
                 out += self._reply(raw, what, t)
                 if m.ascii and not self.text[TX]:  # 139 accepted: text from here on
@@ -556,9 +568,9 @@ class SerialPair:
             req = m.expecting(_VERSION)
             reply = Reply.from_bytes(raw, _VERSION, module=req.address if req else 0)
             return m.reply(t, raw, reply, req, direction=RX)
-        req = m.find(lambda r: expects(r.instruction) is _MEMORY
+        req = m.find(lambda r: m.layout(r) is _MEMORY
                      or (raw[1] == r.address and raw[3] == r.instruction.opcode))
-        if req is not None and expects(req.instruction) is _MEMORY:
+        if req is not None and m.layout(req) is _MEMORY:
             reply = Reply.from_memory_frame(raw, req.address, req.instruction.opcode)
         else:
             reply = Reply.from_frame(raw)
@@ -584,6 +596,11 @@ class SerialPair:
     def _whole(self, window: bytearray) -> bool:
         return (self.monitor.expecting(_VERSION) is not None and len(window) >= FRAME
                 and printable(window[1:FRAME]))
+
+    def _damaged(self, window: bytearray) -> bool:
+        """A request whose checksum is wrong: shown as one, paired with the module's
+        status-1 answer (not as noise and a partial frame)."""
+        return damaged_request(window, self.monitor.addresses)
 
 
 # -- CAN -------------------------------------------------------------------------------------

@@ -257,7 +257,7 @@ def _in_ascii_mode(client: Client, addr: int, timeout: float) -> Found | None:
     client.module, client.version = None, None
     baud = line_baud(client.transport)
     try:
-        link = AsciiLink.attach(client, found=probe, timeout=max(timeout, 0.05))
+        link = AsciiLink.attach(client, found=probe, timeout=max(timeout, 0.05), tell=False)
     except TmclError:
         return Found(addr, None, None, baud, ascii=True)
     try:

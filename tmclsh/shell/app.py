@@ -247,6 +247,10 @@ def may_leave(session: Session) -> bool:
     choose = getattr(session, "choose", None)
     if not client.connected or choose is None:
         return True
+    if getattr(client, "bring_up_pending", False):  # (its answers are waited for: say so)
+        session.out.info(f"leaving: first asking the module at address {client.address} "
+                         "whether a motor turns or its program runs; it has not answered "
+                         "since the link came back, so this waits a few seconds for it")
     try:
         act = activity(client)
     except (TmclError, OSError):

@@ -72,11 +72,11 @@ def run_bridge(args) -> int:
     try:
         _forward(bridge, told)
     finally:
-        close_capture()
         try:
             if told.left:
-                _put_right(transport, told.left, monitor, args, is_can, told.lost)
+                _put_right(transport, told.left, monitor, args, is_can, told.lost, capture)
         finally:
+            close_capture()  # (after the closing stop: a replayed capture shows it too)
             transport.close()
     view.summary(monitor.summary)
     return EXIT_OK if told.lost is None else EXIT_FAILED
@@ -172,8 +172,10 @@ def _read(event: tuple, reader, monitor: Monitor, capture) -> tuple[list, str | 
 
 
 def _put_right(transport, left: Left, monitor: Monitor, args, is_can: bool,
-               lost: str | None) -> None:
-    """The program can no longer reach the module: end what its exchanges left behind."""
+               lost: str | None, capture=None) -> None:
+    """The program can no longer reach the module: end what its exchanges left behind.
+    ``capture`` (``-o``) gets the frames sent for that too, so a replayed capture ends as
+    the module was left."""
     from ..client import bringup
     from ..client.ascii import Mode
     from ..client.core import Client
@@ -196,6 +198,8 @@ def _put_right(transport, left: Left, monitor: Monitor, args, is_can: bool,
                         module=monitor.module_for(address), timeout=0.5,
                         can_id=(can_id if can_id is not None else address) if is_can else None,
                         reply_id=getattr(args, "reply_id", None))
+        if capture is not None:
+            client.add_tracer(_capturing(capture, client, is_can))
         try:
             bringup.bring_up(client, strict=False)  # (leaves download mode, finds ASCII)
             if client.ascii_link is not None and address in left.ascii:
@@ -207,3 +211,21 @@ def _put_right(transport, left: Left, monitor: Monitor, args, is_can: bool,
                   file=sys.stderr)
         finally:
             client.close()
+
+
+def _capturing(capture, client, is_can: bool):
+    """A tracer that writes what the closing stop sends and gets to the ``-o`` capture, as
+    the bridge writes what it forwards (bytes with their direction; CAN frames)."""
+    from ..link.base import CanFrame
+
+    def trace(direction: str, raw: bytes, decoded: object) -> None:
+        if direction not in ("tx", "rx", "drop") or not isinstance(raw, (bytes, bytearray)):
+            return
+        now = time.time()
+        if not is_can:
+            capture(now, bytes(raw), TX if direction == "tx" else RX)
+        elif direction == "tx":
+            capture(CanFrame(now, client.can_id, bytes(raw)))
+        elif direction == "rx":
+            capture(CanFrame(now, client.reply_id, bytes(raw)))
+    return trace

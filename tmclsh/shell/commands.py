@@ -601,7 +601,10 @@ COMMANDS: tuple[Command, ...] = (
             complete='_complete_mode', category='ascii',
             details=('ascii enters ASCII mode (command 139) unless the module is in it '
                      'already; its replies carry no checksum, so every setting read there is '
-                     'read twice and taken only when both reads agree; binary sends BIN. On exit tmclsh leaves the module in the '
+                     'read twice and taken only when both reads agree (said once a run, the '
+                     'first time tmclsh reads through ASCII mode; not by scan, nor by .ascii '
+                     '--raw, where nothing is read twice); binary sends BIN. On exit tmclsh '
+                     'leaves the module in the '
                      'mode it found it in, unless --keep was given with the last switch.'),
             changes_link=True,
             options=(Option("--keep", help="the module keeps the mode after tmclsh exits"),)),

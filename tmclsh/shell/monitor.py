@@ -183,6 +183,8 @@ class View:
         out.append(f" {self._where(req)}  ", "tmcl.note")
         self._hex(out, req)
         out.append(self._request_words(req))
+        if req.bad_sum:
+            out.append(f"  ({req.note})", "tmcl.warn")
         out.append("  =>  ", "tmcl.note")
         if reply is None:
             out.append(ex.note, "tmcl.note" if ex.note == "no reply expected" else "tmcl.warn")
@@ -262,7 +264,7 @@ class View:
                 _line(obj, req, mod)
         elif kind == TEXT:
             obj["text"] = seen.raw.decode("latin-1")
-        if kind in (NOISE_RUN, OTHER, TEXT) and seen.note:
+        if kind in (NOISE_RUN, OTHER, TEXT) and seen.note or seen.bad_sum:
             obj["note"] = seen.note
         obj["bytes"] = seen.raw.hex(" ")
         return obj

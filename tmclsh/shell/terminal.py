@@ -915,7 +915,7 @@ def cmd_ascii(session: Session, argtext: str) -> None:
     if opts.raw and not tty_in:
         raise ValidationError(".ascii --raw needs a terminal")
     was_ascii = client.ascii_link is not None
-    link = client.ascii_link or AsciiLink.attach(client)
+    link = client.ascii_link or AsciiLink.attach(client, tell=not opts.raw)
     if opts.raw:  # straight to the terminal: no prompt to draw around, no proxy's delay
         term = Terminal(session, link, opts, _real_write(sys.__stdout__),
                         write_note=_real_write(sys.__stderr__))

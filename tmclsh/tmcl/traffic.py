@@ -10,6 +10,7 @@ instead of spelling out command numbers.
 from __future__ import annotations
 
 from . import instructions as isa
+from .decoder import FRAME, is_frame
 from .frames import Control, Instruction, Reply, ReplyKind, reply_kind
 from .status import Status
 
@@ -47,6 +48,20 @@ def plausible_reply(frame: bytes | bytearray, hosts: frozenset[int] | set[int] =
     command, to one of ``hosts`` (any host when none is known)."""
     return ((not hosts or frame[0] in hosts) and frame[2] in STATUSES
             and known_command(frame[3]))
+
+
+def damaged_request(window: bytes | bytearray, addresses: frozenset[int] | set[int] = frozenset()
+                    ) -> bool:
+    """Nine bytes whose sum is wrong, read as a request damaged on its way (what a module
+    answers with status 1, and what one listens in to find): a known command, to an address
+    seen before (any while none is), and no frame starting inside them (``window`` is the
+    nine bytes and what lies after them), so noise before a frame is not taken for one."""
+    if len(window) < FRAME or is_frame(window[:FRAME]) or not known_command(window[1]):
+        return False
+    if addresses and window[0] not in addresses:
+        return False
+    return not any(is_frame(window[k:k + FRAME])
+                   for k in range(1, min(FRAME, len(window) - FRAME + 1)))
 
 
 def version_answer(ins: Instruction, reply: Reply) -> tuple[str | None, int | None]:

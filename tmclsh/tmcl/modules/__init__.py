@@ -67,6 +67,9 @@ class Parameter:
     reaches: str | None = None
     # the analog input that reads the same quantity (TMCM-1311 AP 153 and GIO 8, 1)
     io: str | None = None
+    # other names it is found by as exactly as by ``name`` (another tool's spelling: an
+    # imported file keeps PyTrinamic's ``minimumSpeed`` beside ``MinimumSpeed``)
+    aliases: tuple[str, ...] = ()
 
     @property
     def readable(self) -> bool:
@@ -176,7 +179,7 @@ def _parameter(kind: str, raw: dict) -> Parameter:
         state=bool(raw.get("state", False)), link=bool(raw.get("link", False)),
         starts_motion=bool(raw.get("starts_motion", False)), reaches=raw.get("reaches"),
         breaks=raw.get("breaks"),
-        io=raw.get("io"))
+        io=raw.get("io"), aliases=tuple(raw.get("aliases", ())))
 
 
 def _normalise(name: str) -> str:
@@ -327,7 +330,7 @@ class Module:
         ranked: list[tuple[int, Parameter]] = []
         for p in pool:
             name, manual = _normalise(p.name), _normalise(p.manual_name)
-            if name == nq:
+            if name == nq or any(_normalise(a) == nq for a in p.aliases):
                 ranked.append((_RANK_EXACT, p))
             elif name.startswith(nq):
                 ranked.append((_RANK_PREFIX, p))

@@ -172,11 +172,11 @@ def convert(class_name: str, name: str | None = None) -> Imported:
     if len({id(t) for t in tables}) > 1 and any(_numbers(t) != _numbers(tables[0])
                                                  for t in tables):
         notes.append("The motors' AP classes differ; every number any of them names is here.")
-    globals_: list[tuple[int, int, str, list[str]]] = []
+    globals_: list[tuple[int, int, str, list[str], str]] = []
     for bank, table in _gp_tables(cls):
-        for number, first, others in _entries([_numbers(table)], notes, f"bank {bank}"):
-            globals_.append((bank, number, first, others))
-    flags = _flags(motors) if any(n == STATUS_WORD for _, n, _o in axis) else {}
+        for number, first, others, own in _entries([_numbers(table)], notes, f"bank {bank}"):
+            globals_.append((bank, number, first, others, own))
+    flags = _flags(motors) if any(n == STATUS_WORD for _, n, _o, _w in axis) else {}
     text = _render(class_name, name, cls, len(motors), axis, globals_, notes, flags)
     parse(text, f"{name} (from PyTrinamic)")  # what is written is a file tmclsh can use
     return Imported(class_name, name, text, len(motors), len(axis), len(globals_), notes)
@@ -219,9 +219,10 @@ def _gp_tables(cls: type) -> list[tuple[int, type]]:
 
 
 def _entries(tables: list[list[tuple[str, int]]], notes: list[str],
-             where: str) -> list[tuple[int, str, list[str]]]:
-    """``(number, name, other names)`` per number: PyTrinamic's first name for it (usable on a
-    command line, unique in the table), and the others it gives the same number."""
+             where: str) -> list[tuple[int, str, list[str], str]]:
+    """``(number, name, other names, PyTrinamic's name)`` per number: PyTrinamic's first name
+    for it in the built-in modules' style (usable on a command line, unique in the table),
+    the others it gives the same number, and its own spelling of the first."""
     by_number: dict[int, list[str]] = {}
     beyond: set[int] = set()
     for table in tables:
@@ -237,14 +238,26 @@ def _entries(tables: list[list[tuple[str, int]]], notes: list[str],
     taken: set[str] = set()
     for number in sorted(by_number):
         names = by_number[number]
-        first = names[0] if _NAME.match(names[0]) else f"P{number}"
+        own = names[0] if _NAME.match(names[0]) else f"P{number}"
+        first = house_style(own)
         if _normalise(first) in taken:
             notes.append(f"{where}: {first} names two numbers in PyTrinamic; "
                          f"number {number} is {first}_{number} here.")
             first = f"{first}_{number}"
         taken.add(_normalise(first))
-        out.append((number, first, names[1:]))
+        out.append((number, first, names[1:], own))
     return out
+
+
+def house_style(name: str) -> str:
+    """PyTrinamic's name in the built-in modules' style, the manuals' (``minimumSpeed`` ->
+    ``MinimumSpeed``, ``max_EncoderDeviation`` -> ``MaxEncoderDeviation``): one module's
+    names read alike whichever source they come from. PyTrinamic's own stays an alias."""
+    parts = [p for p in name.split("_") if p]
+    if len(parts) > 1:
+        parts = [p.capitalize() if p.isalpha() and p.isupper() and len(p) > 3 else p
+                 for p in parts]
+    return "".join(p[0].upper() + p[1:] for p in parts) or name
 
 
 def _q(text: str) -> str:
@@ -252,8 +265,8 @@ def _q(text: str) -> str:
 
 
 def _render(class_name: str, name: str, cls: type, motors: int,
-            axis: list[tuple[int, str, list[str]]],
-            globals_: list[tuple[int, int, str, list[str]]], notes: list[str],
+            axis: list[tuple[int, str, list[str], str]],
+            globals_: list[tuple[int, int, str, list[str], str]], notes: list[str],
             flags: dict[int, str]) -> str:
     ver = version()
     doc = " ".join((inspect.getdoc(cls) or "").split())
@@ -285,12 +298,12 @@ def _render(class_name: str, name: str, cls: type, motors: int,
         "]",
         "",
     ]
-    for num, pname, others in axis:
-        lines += _param("axis", num, pname, others, f"{class_name}.AP", note,
+    for num, pname, others, own in axis:
+        lines += _param("axis", num, pname, others, f"{class_name}.AP", note, own=own,
                         bits=flags if pname == STATUS_WORD else None, enum=f"{class_name}.ENUM")
-    for bank, num, pname, others in globals_:
+    for bank, num, pname, others, own in globals_:
         table = f"{class_name}.GP{bank}" if hasattr(cls, f"GP{bank}") else f"{class_name}.GP"
-        lines += _param("global", num, pname, others, table, note, bank=bank)
+        lines += _param("global", num, pname, others, table, note, bank=bank, own=own)
     return "\n".join(lines)
 
 
@@ -309,16 +322,19 @@ def _module_notes(ver: str, class_name: str) -> list[str]:
 
 def _param(kind: str, number: int, name: str, others: list[str], table: str, note: str,
            bank: int | None = None, bits: dict[int, str] | None = None,
-           enum: str = "") -> list[str]:
+           enum: str = "", own: str = "") -> list[str]:
+    own = own or name
     also = f" (also {', '.join(others)})" if others else ""
     if bits:
         also += f"; bits from {enum}.FLAG_*"
     out = [f"[[{kind}]]", f"number = {number}"]
     if bank is not None:
         out.append(f"bank = {bank}")
-    out += [f"name = {_q(name)}", 'access = "RWE"', "state = true",
-            f"note = {_q(note)}",
-            f"source = {_q(f'PyTrinamic {version()}: {table}.{name} = {number}{also}')}"]
+    out.append(f"name = {_q(name)}")
+    if own != name and house_style(own) == name:  # (PyTrinamic's spelling finds it too)
+        out.append(f"aliases = [{_q(own)}]")
+    out += ['access = "RWE"', "state = true", f"note = {_q(note)}",
+            f"source = {_q(f'PyTrinamic {version()}: {table}.{own} = {number}{also}')}"]
     if bits:
         out.append("bits = { " + ", ".join(f'"{b}" = {_q(t)}' for b, t in bits.items()) + " }")
     return out + [""]

@@ -44,7 +44,7 @@ PARAMETER_KEYS: dict[str, tuple[str, bool]] = {
     "values": ("names", False), "bits": ("names", False), "note": ("str", False),
     "source": ("str", False), "state": ("bool", False), "link": ("bool", False),
     "starts_motion": ("bool", False), "reaches": ("str", False), "io": ("str", False),
-    "breaks": ("str", False),
+    "breaks": ("str", False), "aliases": ("strs", False),
 }
 IO_KEYS: dict[str, tuple[str, bool]] = {
     "bank": ("int", True), "port": ("int", True), "name": ("str", True), "kind": ("str", True),
@@ -78,6 +78,8 @@ MEANINGS = {
     "axis": {
         "number": "the parameter number (type field of SAP/GAP)",
         "name": "the name typed on the command line (GAP MaxSpeed, 0)",
+        "aliases": "other names the parameter is found by, as exactly as by its name "
+                   "([\"minimumSpeed\"]: another tool's spelling)",
         "access": "R, W, RW or RWE (E: may be stored with STAP/STGP)",
         "min": "inclusive range (max too); choices = [..] lists the only legal values",
         "bank": "global parameters only: the bank (0..3)",

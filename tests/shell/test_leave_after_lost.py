@@ -1,0 +1,34 @@
+"""Leaving the shell after the link was lost and came back with a module that does not
+answer (yet): the prompt keeps the module's name, and Ctrl-D says what it waits for."""
+
+from __future__ import annotations
+
+from tmclsh.client.connect import connect
+from tmclsh.shell import app
+from tmclsh.shell.render import Output
+from tmclsh.shell.session import Session
+
+
+def test_a_silent_module_after_a_reconnect_keeps_its_name_and_leaving_says_why_it_waits(
+        capsys):
+    from responder import PtyModule
+
+    module = PtyModule(version="1311V111")
+    client = connect(module.path, timeout=0.3, retries=0)
+    try:
+        session = Session(client, Output())
+        asked: list[str] = []
+        session.choose = lambda question, options: asked.append(question) or "leave"
+        prompt = app.prompt_message(session)
+        assert "TMCM-1311:1" in "".join(text for _, text in prompt())
+        module.address = 99  # it answers nothing at address 1 from now on
+        client.reconnect()  # the link came back (a cable put back)
+        app.run_one(session, "GAP 1, 0")  # the bring-up finds no answer
+        capsys.readouterr()
+        assert "TMCM-1311:1" in "".join(text for _, text in prompt())
+        assert app.may_leave(session)  # nothing known to turn: it leaves
+        said = capsys.readouterr()
+        assert "has not answered since the link came back" in said.out + said.err
+    finally:
+        client.close()
+        module.close()
