@@ -445,6 +445,8 @@ COMMANDS: tuple[Command, ...] = (
                      'corrupted reply, lost link),\n'
                      'download mode is ended anyway and the message says which instructions '
                      'are written.\n'
+                     'The question says so when the stored program is running (the '
+                     'download stops it).\n'
                      'Under --json: {"uploaded": N, "verified": true|false}. Needs binary '
                      'mode.'),
             options=(Option("--at", "ADDR", "store it from this address"),
@@ -532,8 +534,10 @@ COMMANDS: tuple[Command, ...] = (
                      'program by stepping it\n'
                      '(130) and reading the program counter (GP 130) after every '
                      'instruction, stopping when it\n'
-                     'reaches a breakpoint, when the program stops by itself, after MAXSTEPS '
-                     'steps, or on Ctrl-C.\n'
+                     'reaches a breakpoint, when the program stops by itself, at the end of '
+                     'the stored program\n'
+                     '(no instruction there: nothing is stepped through empty memory), after '
+                     'MAXSTEPS steps, or on Ctrl-C.\n'
                      'That is two round trips per instruction: much slower than .run, and a '
                      'WAIT takes its full\n'
                      'time. With no breakpoints it is .run (129 type 0). Needs binary mode.')),
@@ -549,14 +553,19 @@ COMMANDS: tuple[Command, ...] = (
     Command('.delete', 'debugger', '.delete [N]',
             'delete breakpoint N (all without N)',
             complete='complete_breakpoints', category='program'),
-    Command('.list', 'debugger', '.list [LINE|LABEL|@ADDR]',
-            'source around the current line (or around LINE), with a marker',
+    Command('.list', 'debugger', '.list [LINE|LABEL|@ADDR | FROM TO]',
+            'the program (a short one whole, else around the current line or LINE), marked',
             complete='complete_location', category='program',
             details=("'->' marks the line the program counter is at, 'B' a breakpoint; the "
                      'program address of each\n'
-                     'line with an instruction is shown. Without a known source file the '
-                     'disassembly around the\n'
-                     'address is listed instead.')),
+                     'line with an instruction is shown. A program of up to 20 lines is '
+                     'listed whole; a longer\n'
+                     "one 5 lines either side, and '...' marks lines left out. '.list 1 8' "
+                     '(or 1-8, 1..8, @0 @6,\n'
+                     'Loop @9) lists that range. Without a known source file the '
+                     'disassembly is listed instead.\n'
+                     'JSON: {"pc": N, "lines": [...]}, with "more": {"before": B, "after": '
+                     'B} when cut.')),
     Command('.display', 'debugger', '.display [EXPR]',
             'show EXPR (e.g. GGP 0, 2 or GAP 1, 0) at every stop; without EXPR show all now',
             category='program',
