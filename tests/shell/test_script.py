@@ -495,3 +495,20 @@ def test_c_checks_a_commands_arguments_before_anything_is_sent(tmp_path):
     finally:
         server.close()
         sim.close()
+
+
+def test_record_stop_ends_the_recording_and_is_never_a_file_name(session, tmp_path,
+                                                                  monkeypatch, capsys):
+    """Issue 35: `.record stop` started a recording into a file named `stop`."""
+    monkeypatch.chdir(tmp_path)
+    rec = tmp_path / "rec.tmcl"
+    session.run_line(f".record {rec}")
+    session.run_line("GAP 4, 0")
+    session.run_line(".record stop")
+    assert session.state.record is None and not (tmp_path / "stop").exists()
+    assert "GAP 4, 0" in rec.read_text()
+    capsys.readouterr()
+    session.run_line(".record stop")  # not recording: said, and still no file
+    said = capsys.readouterr()
+    assert "not recording" in said.out + said.err
+    assert session.state.record is None and not (tmp_path / "stop").exists()

@@ -383,10 +383,12 @@ COMMANDS: tuple[Command, ...] = (
             'record what you type to a script file',
             complete=['off'], category='script',
             details=('Every line typed from now on is written to FILE (results as // '
-                     "comments); replay it with tmclsh -f FILE. '.record off' stops; "
-                     "'.record' shows the state. FILE is replaced when the recording ends "
-                     "('.record off' or leaving the shell); if it cannot be written, the old "
-                     'FILE stays as it was.'),
+                     "comments); replay it with tmclsh -f FILE. '.record off' (or "
+                     "'.record stop') stops\n"
+                     "(a file named stop is ./stop); '.record' shows the state. FILE is "
+                     "replaced when the recording\n"
+                     "ends ('.record off' or leaving the shell); if it cannot be written, "
+                     'the old FILE stays as it was.'),
             expands=True),
     Command('.history', 'script', '.history [N]',
             'show the lines of this session (the last N)',

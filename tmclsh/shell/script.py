@@ -1213,6 +1213,11 @@ def _is_read(session: Session, line: str) -> bool:
             and r.encoded.spec.reads)
 
 
+# the words that end a recording; they are never taken as a file name (a file called
+# `stop` is `./stop`)
+RECORD_OFF = ("off", "stop")
+
+
 @command(".record")
 def cmd_record(session: Session, args: str) -> None:
     current: Recorder | None = session.state.record  # type: ignore[assignment]
@@ -1225,7 +1230,7 @@ def cmd_record(session: Session, args: str) -> None:
     if current is not None:
         current.close()
         session.out.info(f"recorded {current.lines} lines to {current.path}")
-    if args.strip().lower() == "off":
+    if args.strip().lower() in RECORD_OFF:
         if current is None:
             session.out.info("not recording")
         return
