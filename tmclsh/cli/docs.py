@@ -1030,8 +1030,8 @@ before its run). A unit that has no module, loses its link or fails a line fails
 {_b("--keep-going")} works for each as for one module.
 .PP
 On a terminal a live table shows every unit: link and address, module and firmware, the
-line reached of how many, checks passed and failed, errors, the result, the time and the last
-error; what a unit says on standard error is printed above it, with the unit in front; its
+line reached of how many (the file's line numbers, as in its errors' FILE:LINE), checks passed
+and failed, errors, the result, the time and the last error; what a unit says on standard error is printed above it, with the unit in front; its
 results are not (see {_b("--log-dir")}). In a pipe or a file every line starts with its unit,
 {_b("[2 /dev/ttyACM1]")} or {_b("[3 /dev/ttyUSB0 @3]")}. With {_b("--json")} every object
 starts with {_b('"unit"')} and {_b('"port"')} and {_b('"address"')} (on CAN

@@ -59,6 +59,8 @@ def run_lines(session: Session, lines: list[str]) -> int:
     if progress is not None:
         progress(0, len(lines))
     for done, line in enumerate(lines, 1):
+        if progress is not None:  # the line being run, as its errors number it
+            progress(done, len(lines))
         try:
             session.ensure_link()  # the link was lost on an earlier line (--keep-going)
             session.run_line(line)
@@ -70,9 +72,6 @@ def run_lines(session: Session, lines: list[str]) -> int:
             session.report_error(line, exc)
             if not session.keep_going:
                 break
-        finally:
-            if progress is not None:
-                progress(done, len(lines))
     if failed and refused and frames_sent(session.client) == sent:
         return EXIT_USAGE  # a file refused before anything was sent, as -f says of a script
     return EXIT_FAILED if failed or session.stats.suspects > suspects else EXIT_OK

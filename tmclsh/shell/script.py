@@ -438,6 +438,8 @@ class Runner:
         self.session = session
         self.failed = False
         self.on_step = on_step
+        # told each node before it runs (its file and line), for a unit's "line reached"
+        self.on_node: Callable[[Node], None] | None = None
         self.interrupted_at: tuple[str, int] | None = None  # where Ctrl-C came (file, line)
 
     def run(self, nodes: Iterable[Node]) -> None:
@@ -448,6 +450,8 @@ class Runner:
         saved = session.location
         try:
             for node in nodes:
+                if self.on_node is not None:
+                    self.on_node(node)
                 # the fast path: a plain TMCL line, what most of a long script is (see step)
                 plain = node.plain if type(node) is Step else None  # type: ignore[attr-defined]
                 if plain is None or session.time_limit is not None or state.capture is not None:
@@ -604,17 +608,16 @@ def _progress(session: Session, name: str, nodes: list[Node]):
     return progress, advance
 
 
-def _counter(progress: Callable[[int, int], None], total: int) -> Callable[[], None]:
-    """A runner's ``on_step`` telling ``progress`` (steps done, steps in all), told the
-    total at once."""
-    done = 0
+def _line_counter(progress: Callable[[int, int], None], path: str,
+                  total: int) -> Callable[[Node], None]:
+    """A runner's ``on_node`` telling ``progress`` the line of ``path`` being run and the
+    file's line count: the numbers its errors' FILE:LINE use, so the two never disagree."""
     progress(0, total)
 
-    def step() -> None:
-        nonlocal done
-        done += 1
-        progress(done, max(total, done))
-    return step
+    def at(node: Node) -> None:
+        if node.file == path:  # (an included file's lines count as the line including it)
+            progress(node.line, total)
+    return at
 
 
 def run_file(session: Session, path: str) -> int:
@@ -630,11 +633,12 @@ def run_file(session: Session, path: str) -> int:
             _run_nodes(runner, parser.nodes(_stdin_lines()))
         else:
             file = Path(path)
-            lines = as_replayed(session, path, read_lines(file, ScriptError))
+            written = read_lines(file, ScriptError)
+            lines = as_replayed(session, path, written)
             nodes = list(Parser(session, path, file.resolve().parent).nodes(lines))
             bar = _progress(session, path, nodes)
             if bar is None and session.progress is not None:
-                runner.on_step = _counter(session.progress, count_steps(nodes)[0])
+                runner.on_node = _line_counter(session.progress, path, len(written))
             if bar is None:
                 # results are written in batches, not flushed line by line (see Output.hold);
                 # not for stdin, whose writer may wait for each result before the next line
