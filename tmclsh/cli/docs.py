@@ -606,8 +606,10 @@ the reply carries it (signed, unless the data calls the parameter an unsigned 32
 quantity) with the range it lies outside ({_b("outside_range")} in JSON). {_b("!")} before a
 TMCL line sends its value as typed, whatever the data says of its range
 ({_b("!SAP 140, 0, 12")}); everything else is checked as usual and the module's answer decides.
-{_b(".save")} marks values outside the manual's ranges so; {_b(".restore")} writes them back,
-and refuses other such values unless {_b("--force")}.
+{_b(".save")} marks values outside the manual's ranges so (on a fresh module they are often
+unset defaults; the file's head names them, each line's comment gives the range, and the
+shell says so once a run); {_b(".restore")} writes them back, and refuses other such values
+unless {_b("--force")}.
 """
 
 _LANGUAGE = f"""\
