@@ -176,3 +176,27 @@ def test_the_override_in_a_script_and_in_c(module, tmp_path, run_tmclsh):
     p = run_tmclsh("--port", module.path, "-c", "!SAP 136, 0, 3; GAP 136, 0")
     assert p.returncode == 0, p.stderr
     assert "StandstillErrorGain = 3 (outside the manual's range 10..50)" in p.stdout
+
+
+def test_replaying_a_backup_that_stops_points_to_keep_going_and_restore(module, tmp_path,
+                                                                        run_tmclsh):
+    """Issue 35: a backup holding values outside the manual's ranges, replayed with -f on a
+    stricter module (the simulator refuses them), stopped at the first refused !SAP without
+    a word on --keep-going or .restore; another module's backup stopped at an unknown
+    parameter without saying whose backup it is."""
+    s = session_on(module)
+    path = tmp_path / "fresh.tmcl"
+    try:
+        s.run_line(f".save {path}")
+    finally:
+        s.client.close()
+    p = run_tmclsh("--sim", "TMCM-1311", "-f", str(path), "--yes")
+    assert p.returncode == 1 and "status 4" in p.stderr
+    said = " ".join((p.stdout + p.stderr).split())
+    assert "--keep-going replays the rest" in said and f".restore {path}" in said
+    p = run_tmclsh("--sim", "TMCM-1311", "-f", str(path), "--yes", "--keep-going")
+    assert "--keep-going replays" not in p.stdout + p.stderr
+    p = run_tmclsh("--sim", "TMCM-1640", "-f", str(path), "--yes")
+    assert p.returncode == 2 and "unknown axis parameter" in p.stderr
+    said = " ".join((p.stdout + p.stderr).split())
+    assert f"is a backup of a TMCM-1311, not of this TMCM-1640: .restore {path} --force" in said

@@ -983,6 +983,11 @@ now"), then reads them back there. A setting that may cut the link in use with n
 follow (marked {_b("breaks")}: the CAN bit rate on CAN, the ASCII echo while talking ASCII,
 the interface selection) is written last and not read back: reconnect with it.
 .PP
+A backup replayed with {_b("-f")} stops, as any script, at the first line the module refuses,
+and then points to {_b("--keep-going")} (replay the rest) and {_b(".restore")} (write what
+differs, listing every refusal); another module type's backup is refused before anything is
+sent, saying whose backup it is and pointing to {_b(".restore")} {_i("FILE")} {_b("--force")}.
+.PP
 A module known by parameter names only (a module file imported from PyTrinamic: no ranges,
 every parameter {_b("state")}) has nothing a backup could restore: {_b(".save")} names what it
 could not save and fails; {_b(".save")} {_i("FILE")} {_b("--names-only")} writes the values as

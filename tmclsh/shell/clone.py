@@ -779,6 +779,30 @@ def replay_lines(session: Session, path: Path | str, lines: list[str]) -> list[s
     return kept
 
 
+def replay_hint(session: Session, path: Path | str, lines: list[str], *,
+                stopped: bool) -> str | None:
+    """What to do instead, when replaying a configuration backup with -f went wrong: it was
+    another module's (its lines name parameters this one lacks, so the check refuses it whole),
+    or the module refused a line and the run stopped there (--keep-going goes on; .restore
+    writes what differs and lists every refusal)."""
+    if not lines or not lines[0].startswith(BACKUP_MARK):
+        return None
+    saved_from = next((line.split(":", 1)[1].strip() for line in lines[1:8]
+                       if line.startswith("// module:")), None)
+    try:
+        here = session.module.name
+    except TmclError:
+        return None
+    if saved_from is not None and saved_from != here:
+        return (f"{path} is a backup of a {saved_from}, not of this {here}: .restore {path} "
+                f"--force writes the values the {here} has too and lists the rest")
+    if stopped and not session.keep_going:
+        return (f"{path} is a configuration backup: -f stops at the first line the module "
+                "refuses; --keep-going replays the rest, and .restore "
+                f"{path} writes what differs and lists every value the module refuses")
+    return None
+
+
 def _writes_link(text: str, module: Module, ascii_mode: bool, number: int,
                  left: list[Slot]) -> bool:
     """Whether one shell line writes a parameter of the module's link identity (noted)."""

@@ -437,6 +437,7 @@ class Runner:
     def __init__(self, session: Session, on_step: Callable[[], None] | None = None):
         self.session = session
         self.failed = False
+        self.stopped = False  # a failed line ended the run (no --keep-going)
         self.on_step = on_step
         # told each node before it runs (its file and line), for a unit's "line reached"
         self.on_node: Callable[[Node], None] | None = None
@@ -625,6 +626,7 @@ def run_file(session: Session, path: str) -> int:
     start = time.monotonic()
     before = _counts(session)
     name = STDIN if path == "-" else path
+    written: list[str] = []
     runner = Runner(session)
     status, kind = EXIT_OK, SYNTAX
     try:
@@ -656,6 +658,7 @@ def run_file(session: Session, path: str) -> int:
     except ScriptError as exc:
         _report_plain(session, exc)
         status, kind = EXIT_USAGE, exc.kind
+        _backup_hint(session, path, written, stopped=True)
     except KeyboardInterrupt:
         # how far it got, before the Ctrl-C policy (stop everything) says what it stopped
         where = runner.interrupted_at
@@ -669,6 +672,8 @@ def run_file(session: Session, path: str) -> int:
     finally:
         session.location = None
     session.confirm_answers()  # (the last answer may show only now to be another's)
+    if runner.failed and status == EXIT_OK:
+        _backup_hint(session, path, written, stopped=runner.stopped)
     if status == EXIT_OK and (runner.failed or session.stats.suspects > before.suspects):
         status = EXIT_FAILED  # a result that may be another request's is no pass
     summary(session, name, before, time.monotonic() - start, status, kind)
@@ -680,10 +685,22 @@ def run_file(session: Session, path: str) -> int:
     return status
 
 
+def _backup_hint(session: Session, path: str, lines: list[str], *, stopped: bool) -> None:
+    """After a configuration backup's replay failed: what would do better (shell/clone.py)."""
+    if not lines or not lines[0].startswith("//"):
+        return
+    from .clone import replay_hint
+
+    hint = replay_hint(session, path, lines, stopped=stopped)
+    if hint is not None:
+        session.out.info(hint)
+
+
 def _run_nodes(runner: Runner, nodes: Iterable[Node]) -> None:
     try:
         runner.run(nodes)
     except _Stop:
+        runner.stopped = True
         runner.on_error()
     except QuitShell:
         pass
