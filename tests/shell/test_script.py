@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import io
 import json
+import re
 import subprocess
 import sys
 import textwrap
@@ -512,3 +513,11 @@ def test_record_stop_ends_the_recording_and_is_never_a_file_name(session, tmp_pa
     said = capsys.readouterr()
     assert "not recording" in said.out + said.err
     assert session.state.record is None and not (tmp_path / "stop").exists()
+
+
+def test_wait_says_when_the_condition_was_reached(session, capsys):
+    """Issue 35: `.wait` printed nothing when it succeeded."""
+    capsys.readouterr()
+    session.run_line(".wait GAP 1, 0 == 0 --timeout 10")
+    out = capsys.readouterr().out
+    assert re.search(r"^reached after \d+\.\d\d s: GAP 1, 0 == 0 \(", out, re.M), out

@@ -638,7 +638,9 @@ Lines are separated by newlines or {_b(";")}, at the prompt, with {_b("-c")} and
 {_b("help 4; help 5")} is two lines, a {_b(";")} inside quotes ({_b('.echo "a;b"')}) is not a
 separator. Only a command that owns the rest of its line takes the {_b(";")}: {_b(".watch")}
 separates its expressions with it ({_b(".watch a=GAP 1, 0; b=GIO 0, 0")} is one command) and
-{_b(".decode")} its pasted bytes; put other commands after those on a new line.
+{_b(".decode")} its pasted bytes, up to a {_b(";")} that another dot-command follows
+({_b(".decode 01 06 ...; .decode 02 06 ...")} is two); put other lines after those on a new
+line.
 .IP \\(bu 2
 {_b("//")} and {_b("#")} start a comment that runs to the end of the line ({_b("#")} at the start of
 a word, outside quotes: {_b("GAP 1, 0 # where it is")}). Empty lines are ignored.

@@ -254,7 +254,8 @@ COMMANDS: tuple[Command, ...] = (
                      '00`), a candump -L line (`(1.0) can0 001#06010000000000`) or a '
                      'Vector .asc line (`0.0012 1 1 Rx d 7 06 01 00 00 00 00 00`). '
                      'Without a hint every plausible reading is shown. It takes the rest '
-                     "of its line (pasted bytes may be separated by ';'). tmclsh monitor "
+                     "of its line (pasted bytes may be separated by ';') up to a ';' that "
+                     "another dot-command follows (.decode A; .decode B). tmclsh monitor "
                      'decodes whole logs and live buses.')),
     Command('.connect', 'builtin', '.connect [PORT | sim [MODULE] | can [IFACE:CHANNEL]]',
             'reconnect, or switch to another port, simulator or CAN bus',
@@ -358,7 +359,9 @@ COMMANDS: tuple[Command, ...] = (
             details=('  .wait GAP 8, 0 == 1 --timeout 10\n'
                      '  .wait RFS STATUS, 0 == 0\n'
                      '--timeout none waits forever; otherwise at most a day (86400 s); '
-                     '--interval 0.001..86400 s. A poll that gets no intact answer is '
+                     '--interval 0.001..86400 s. When the condition holds it says so: '
+                     "'reached after 1.23 s: GAP 8, 0 == 1 (GAP 8, 0 is 1)'. "
+                     'A poll that gets no intact answer is '
                      'polled again. A timeout is an error that shows the last value read '
                      'and when (or says it was in doubt, or that none could be read, and '
                      'why). A condition met on an answer that may have been another '

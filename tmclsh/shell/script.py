@@ -1098,10 +1098,14 @@ def cmd_wait(session: Session, args: str) -> None:
                                f"({seen})")
         err.record = record  # type: ignore[attr-defined]
         raise err from None
+    assert last is not None
+    elapsed = time.monotonic() - start
     if session.out.json:
-        assert last is not None
         session.out.emit({"line": f".wait {args}", **last.record(expression, True),
-                          "elapsed": round(time.monotonic() - start, 3)})
+                          "elapsed": round(elapsed, 3)})
+    else:  # said as .expect says a pass, with how long it took
+        session.out.print(f"reached after {elapsed:.2f} s: {expression.text} ({last.left})",
+                          style="tmcl.ok", markup=False)
 
 
 @command(".sleep")
