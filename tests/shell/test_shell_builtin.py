@@ -420,3 +420,25 @@ def test_stopall_with_words_is_one_line_and_sends_nothing(run_tmclsh):
     p = run_tmclsh("--sim", "TMCM-1311", "-c", ".stopall extra words")
     assert p.returncode == 1 and p.stdout == ""
     assert p.stderr == "error: .stopall takes no arguments (got 'extra words')\n"
+
+
+def test_suggestions_are_near_in_spelling_and_kind(session, run_tmclsh):
+    """Issue 35: `help SAPP` suggested CurrentScaleUpperErrorLimit, `clear` suggested CLE."""
+    for word in ("SAPP", "sapp"):
+        with pytest.raises(ValidationError) as exc:
+            session.run_line(f"help {word}")
+        assert "did you mean SAP" in str(exc.value) and "Limit" not in str(exc.value)
+    with pytest.raises(ValidationError) as exc:  # a long name misspelt: still parameters
+        session.run_line("help MaxSpeeed")
+    assert "Speed" in str(exc.value)
+    sent = session.client.stats["sent"]
+    with pytest.raises(TmclError) as exc:
+        session.run_line("clear")
+    assert "did you mean .clear?" in str(exc.value) and "Ctrl-L" in str(exc.value)
+    assert "CLE" not in str(exc.value) and session.client.stats["sent"] == sent
+    with pytest.raises(TmclError, match="did you mean SGP, SAP"):  # a mnemonic misspelt
+        session.run_line("SPA 4, 0, 1")
+    session.run_line(".clear")  # not a terminal: nothing written, nothing sent
+    assert session.client.stats["sent"] == sent
+    p = run_tmclsh("--sim", "-c", "clear")  # checked ahead: the same pointer
+    assert p.returncode == 2 and "did you mean .clear?" in p.stderr

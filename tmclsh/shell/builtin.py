@@ -7,6 +7,7 @@ registry, so a command is described in exactly one place. Handlers print through
 
 from __future__ import annotations
 
+import difflib
 import re
 from typing import TYPE_CHECKING
 
@@ -120,7 +121,33 @@ def cmd_help(session: Session, arg: str) -> None:
         return _help_number(session, number, source=source)
     if find("." + word) is not None:
         return _help_command(session, find("." + word))  # type: ignore[arg-type]
-    return cmd_param(session, arg, from_help=True)
+    try:
+        return cmd_param(session, arg, from_help=True)
+    except ValidationError:
+        near = _near_instructions(session, word)
+        if not near:
+            raise
+        # `help SAPP` is a command misspelt, not a parameter: suggest commands of its kind
+        raise ValidationError(f"no help topic or parameter matches {word!r}; did you mean "
+                              f"{', '.join(near)}? (.help lists the commands)") from None
+
+
+def _near_instructions(session: Session, word: str) -> list[str]:
+    """The TMCL mnemonics a word shaped like one is close to in spelling (`SAPP`: SAP)."""
+    every = [s.mnemonic for s in isa.all_instructions()]
+    if not (word.isalpha() and len(word) <= max(map(len, every)) + 1):
+        return []  # longer than any mnemonic misspelt: a name
+    try:
+        known = [s.mnemonic for s in session.module.instructions]
+    except TmclError:
+        known = every
+    return difflib.get_close_matches(word.upper(), known, n=3, cutoff=0.7)
+
+
+@command(".clear")
+def cmd_clear(session: Session, arg: str) -> None:
+    if session.out.is_terminal and not session.out.json:
+        session.out.console.clear()
 
 
 def _help_overview(session: Session) -> None:

@@ -198,6 +198,9 @@ CATEGORIES: tuple[tuple[str, str], ...] = (
 # are listed by name, categories in their first appearance.
 
 COMMANDS: tuple[Command, ...] = (
+    Command('.clear', 'builtin', '.clear',
+            'clear the screen; Ctrl-L at the prompt does the same',
+            details=('Clears the terminal; in a pipe or a file nothing is written.')),
     Command('.help', 'builtin', '.help [--source] [COMMAND|MNEMONIC|NUMBER|PARAMETER]',
             'show help: all commands, one command, a TMCL instruction, or a parameter',
             complete='complete_help', bare=True,

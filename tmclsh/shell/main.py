@@ -19,7 +19,7 @@ def refused_line(session: Session, lines: list[str]) -> tuple[str, TmclError] | 
     of the first one running. Lines with ``${...}`` are checked when they run."""
     from ..base.errors import ValidationError
     from .lines import classify
-    from .session import unknown_command
+    from .session import encode_typed, unknown_command
 
     for raw in lines:
         line = classify(raw)
@@ -38,7 +38,7 @@ def refused_line(session: Session, lines: list[str]) -> tuple[str, TmclError] | 
         if not line.text or "${" in line.text:
             continue
         try:
-            session.client.encode(line.text)
+            encode_typed(session.client, line.text)
         except TmclError as exc:
             return raw, exc
     return None

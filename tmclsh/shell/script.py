@@ -37,7 +37,7 @@ from ..client.ledger import CONFIRM_ROUNDS
 from . import commands, expr, options
 from .commands import command, options_of
 from .lines import classify, split_line
-from .session import QuitShell, check_substitutions, unknown_command
+from .session import QuitShell, check_substitutions, encode_typed, unknown_command
 
 if TYPE_CHECKING:
     from .session import Session
@@ -235,7 +235,7 @@ class Parser:
                 self.seen[text] = None
                 return Step(file, number, text)
             if self.precheck and "${" not in text:
-                self.session.client.encode(text)
+                encode_typed(self.session.client, text)
             # what Session.run_line would send as it is (see Step.plain)
             plain = self.seen[text] = text if "${" not in text else None
             return Step(file, number, text, plain)
