@@ -691,7 +691,8 @@ back until it is 0. Only motors that read 0 are called stopped; any other is nam
 .TP
 {_b("Ctrl-D")}
 Leaves the shell, like {_b(".quit")}. While a motor turns or the stored program runs, it
-asks first: stop everything first, leave it running, or cancel.
+asks first: 1 stop everything first, 2 leave it running, or 3 cancel; the number chooses (or
+the arrows and Enter), and the selection starts on 1 every time.
 .SS Keys in .watch
 .TP
 {_b("s")} or space
