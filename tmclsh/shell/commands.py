@@ -289,7 +289,17 @@ COMMANDS: tuple[Command, ...] = (
             expands=True),
     Command('.version', 'builtin', '.version',
             'ask the module for its firmware version (command 136)',
-            category='connection'),
+            category='connection',
+            details=('Reads the string (136 type 0) and the binary value (type 1), and says '
+                     'whether they agree. The\n'
+                     'manuals disagree on the byte order of the binary value (type first, as '
+                     "the TMCM-1311's; version\n"
+                     "first, as the TMCM-1640's): read in the other order when that is the "
+                     'one that agrees, and said so.\n'
+                     '136 has no ASCII form: in ASCII mode the version read at connect is '
+                     'shown (nothing is sent).\n'
+                     'JSON: {"version", "binary", "module", "binary_type", "binary_version", '
+                     '"agrees"}, and "layout" when read\nin the other order.')),
     Command('.stopall', 'builtin', '.stopall',
             'stop everything: the stored program (128) if it runs, then every motor (MST), '
             'each read back until its speed is 0; Ctrl-C does the same',
