@@ -1139,7 +1139,8 @@ Or load them from tmclsh itself: {_b("tmclsh --completions")} {_i("SHELL")}.
 .TP
 {_i("prefix")}{_b("/share/man/man1/tmclsh.1")}
 This manual. An editable install ({_b("pip install -e")}) installs no manual, so
-{_b("man tmclsh")} cannot find it: read it with {_b("tmclsh --man")}, or
+{_b("man tmclsh")} cannot find it: read it with {_b("tmclsh --man")} (formatted by
+{_b("man")}, plain text in a pipe), or
 {_b("man ./man/tmclsh.1")} in the source tree.
 """
 
