@@ -1042,7 +1042,7 @@ def _listing(session: Session, center: int, pc: int | None, breaks: set[int],
     if span is not None and not span.lines:
         lo, hi = span.first, span.last
     elif last - first < SHORT_LISTING:
-        lo, hi = first, last
+        lo, hi = first, min(last + 1, module.program_memory - 1)  # (and where it ends)
     else:
         lo = max(0, center - LIST_CONTEXT)
         hi = min(module.program_memory - 1, center + LIST_CONTEXT)
