@@ -49,7 +49,8 @@ class Command:
     details: str = ""
     bare: bool = False  # also accepted without the dot (help, quit)
     # the command's arguments may contain ';' (.watch separates its expressions with it), so
-    # it takes the rest of its line; for all others ';' ends the command and starts a new line
+    # it takes the rest of its line, up to a ';' a dot-command follows (lines.py); for all
+    # others ';' ends the command and starts a new line
     owns_line: bool = False
     same_as: str = ""
     # it may change the module or the mode lines are checked against (.connect, .mode, ...):
@@ -420,8 +421,8 @@ COMMANDS: tuple[Command, ...] = (
             category='watch',
             owns_line=True,
             details=('  .watch pos=GAP 1, 0; speed=GAP 3, 0; in0=GIO 0, 0\n'
-                     "It takes the rest of its line (';' separates its expressions): put "
-                     'other commands on lines of their own.\n'
+                     "It takes the rest of its line (';' separates its expressions) up to "
+                     "a ';' that a dot-command follows.\n"
                      '  .watch rev=GAP 1, 0 / 51200 --until "rev >= 2" --csv run.csv\n'
                      'Keys: s or space stops everything (the stored program if it runs, then '
                      'MST to every motor, speeds read back) and keeps watching; Ctrl-C does '
