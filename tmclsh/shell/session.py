@@ -23,6 +23,7 @@ from ..client.text import Result
 from ..link.framing import name_of as _name
 from ..base.errors import (AsmError, ChecksumError, StatusError, TmclError, TmclTimeoutError,
                            TransportError, ValidationError)
+from ..tmcl.frames import Request
 from ..tmcl.modules import Module
 from ..tmcl.status import OK_STATUSES
 from . import commands
@@ -48,7 +49,7 @@ def unknown_command(word: str) -> str:
     near = f"did you mean {', '.join(close)}? " if close else ""
     return f"unknown shell command {word!r}; {near}type .help for the list"
 
-def encode_typed(client, text: str):
+def encode_typed(client: Client, text: str) -> asm.Encoded:
     """``client.encode(text)`` for a line typed as TMCL; a word that is no TMCL command but a
     dot-command's name without its dot (``clear``) is pointed to that command, rather than to
     the mnemonic nearest in spelling (CLE, which clears a flag on the module)."""
@@ -58,7 +59,7 @@ def encode_typed(client, text: str):
         raise _dot_command_meant(text, exc) from None
 
 
-def prepare_typed(client, text: str):
+def prepare_typed(client: Client, text: str) -> tuple[asm.Encoded, Request]:
     """``client.prepare(text)``, with :func:`encode_typed`'s pointer to a dot-command."""
     try:
         return client.prepare(text)
