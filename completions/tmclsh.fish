@@ -69,7 +69,7 @@ complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modu
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan firmware monitor bridge' -s c -x -d 'run shell lines (separated by \';\' or newlines), print results, exit'
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan firmware monitor bridge' -s f -r -F -d 'replay a script file (\'-\' = stdin), exit'
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan firmware monitor bridge' -l completions -x -a 'bash zsh fish' -d 'print the completion script for bash, zsh or fish'
-complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan firmware monitor bridge' -l man -d 'show this manual (also where \'man tmclsh\' cannot find it: an editable install has none)'
+complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan firmware monitor bridge' -l man -d 'show this manual as man shows it, plain text in a pipe (also where \'man tmclsh\' cannot find it: an editable install has none)'
 complete -c tmclsh -n 'not __fish_seen_subcommand_from asm disasm sim ports modules scan firmware monitor bridge' -l version -d 'show program\'s version number and exit'
 
 # tmclsh asm

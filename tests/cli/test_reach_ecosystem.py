@@ -29,13 +29,23 @@ def test_color_auto_and_never_leave_a_pipe_plain(tmp_path, run_tmclsh):
         assert "\x1b[" not in r.stdout, value
 
 
-def test_man_prints_the_current_manual(run_tmclsh):
+def test_man_prints_the_current_manual(run_tmclsh, tmp_path):
+    """Issue 35: in a pipe it printed the raw roff; it is the text man shows now."""
+    import shutil
+
     from tmclsh.cli.docs import manpage
 
-    r = run_tmclsh("--man")
+    if shutil.which("man") is not None:
+        r = run_tmclsh("--man")
+        assert r.returncode == 0
+        assert ".SH" not in r.stdout and "\\f" not in r.stdout  # formatted, not roff
+        assert "MODULE FILES" in r.stdout and "PROGRAM IMAGES" in r.stdout
+    # no man(1) to format it: the roff as generated now, said to be that
+    r = run_tmclsh("--man", env=tmclsh_env(PATH=str(tmp_path)))
     assert r.returncode == 0
-    assert r.stdout == manpage()  # not a tty: the roff itself, as generated now
+    assert r.stdout == manpage()
     assert ".SH MODULE FILES" in r.stdout and ".SH PROGRAM IMAGES" in r.stdout
+    assert "roff source" in r.stderr
 
 
 def test_json_before_or_after_the_subcommand(tmp_path, run_tmclsh):

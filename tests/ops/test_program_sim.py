@@ -527,3 +527,97 @@ def test_stop_with_no_program_says_so_rather_than_showing_zeros(client, capsys):
     assert "0, 0, 0" not in out
     (obj,) = run_json(json_session(client), capsys, ".status")
     assert obj["state"] == "stop" and obj["pc"] == 0 and obj["end"] is True and "text" not in obj
+
+
+# -- issue 35: the rough edges a first try found -----------------------------------------
+
+# 7 instructions on 8 lines: the last line (`JA Loop` at @6) is the one a window cut off
+EIGHT_LINES = ("// blink\n"
+               "Loop:   SIO 0, 2, 1\n"
+               "        WAIT TICKS, 0, 5\n"
+               "        SIO 0, 2, 0\n"
+               "        WAIT TICKS, 0, 5\n"
+               "        SAP 4, 0, 1000\n"
+               "        SAP 4, 0, 0\n"
+               "        JA Loop\n")
+
+
+def test_list_shows_a_short_program_whole(client, tmp_path, capsys):
+    src = tmp_path / "blink.tmc"
+    src.write_text(EIGHT_LINES, encoding="utf-8")
+    s = Session(client, Output(), yes=True)
+    s.run_line(f".upload {src}")
+    capsys.readouterr()
+    s.run_line(".list")
+    out = capsys.readouterr().out
+    assert "8     @6  " in out and "JA Loop" in out and "..." not in out
+
+
+def test_list_marks_a_cut_window_and_takes_a_range(client, timer_file, capsys):
+    s = Session(client, Output(), yes=True)
+    s.run_line(f".upload {timer_file}")  # 22 lines: longer than a whole listing
+    capsys.readouterr()
+    s.run_line(".list")
+    out = capsys.readouterr().out.splitlines()
+    assert out[-1].strip() == "..." and "..." not in out[0]
+    s.run_line(".list 1 8")
+    out = capsys.readouterr().out
+    rows = [x for x in out.splitlines() if x.strip() != "..."]
+    assert [int(r[4:8]) for r in rows] == list(range(1, 9))
+    assert "unknown label" not in out and out.rstrip().endswith("...")
+    for arg in ("1,8", "1-8", "1..8", "@0 @4"):
+        s.run_line(f".list {arg}")
+        assert capsys.readouterr().out == out
+    js = json_session(client)
+    js.run_line(f".upload {timer_file}")
+    objs = run_json(js, capsys, ".list 2 3")
+    assert [r["line"] for r in objs[0]["lines"]] == [2, 3]
+    assert objs[0]["more"] == {"before": True, "after": True}
+
+
+def test_continue_stops_at_the_end_of_the_stored_program(client, capsys):
+    """Past the last instruction memory is empty: .continue stops there and says why,
+    instead of stepping on through empty memory until Ctrl-C."""
+    prog = asm.assemble("    SIO 0, 2, 1\n    SIO 0, 2, 0\n", client.require_module())
+    program.upload(client, prog)
+    info = program.continue_to(client, {40}, max_steps=50)
+    assert (info.reason, info.pc, info.steps) == ("end", 2, 2)
+    again = program.continue_to(client, {40}, max_steps=50)  # nothing more is stepped
+    assert (again.reason, again.steps) == ("end", 0)
+    s = Session(client, Output(), yes=True)
+    s.run_line(".break @40")
+    capsys.readouterr()
+    s.run_line(".continue 50")
+    out = capsys.readouterr().out
+    assert "end of the stored program, no breakpoint reached" in out and "0 steps" in out
+
+
+def test_step_after_a_binary_upload_cites_the_disassembly(client, tmp_path, capsys):
+    image = tmp_path / "pp.bin"
+    image.write_bytes(asm.assemble(EIGHT_LINES, client.require_module()).to_binary())
+    s = Session(client, Output(), yes=True)
+    s.run_line(f".upload {image}")
+    capsys.readouterr()
+    s.run_line(".step")
+    out = capsys.readouterr().out
+    assert "step @1" in out and "WAIT TICKS, 0, 5" in out and "pp.bin:" not in out
+
+
+def test_upload_question_says_the_program_is_running(client, tmp_path):
+    src = tmp_path / "blink.tmc"
+    src.write_text(EIGHT_LINES, encoding="utf-8")
+    program.upload(client, asm.assemble(EIGHT_LINES, client.require_module()))
+    program.run(client)
+    asked: list[str] = []
+    s = Session(client, Output(), interactive=True)
+    s.ask = lambda q: asked.append(q) or False
+    with pytest.raises(Exception, match="cancelled"):
+        s.run_line(f".upload {src}")
+    assert asked and asked[0].startswith("the stored program is running (at @")
+    assert "the upload stops it" in asked[0]
+    program.stop(client)
+    s.run_line(".reset")
+    asked.clear()
+    with pytest.raises(Exception, match="cancelled"):
+        s.run_line(f".upload {src}")
+    assert asked[0].startswith("overwrite")

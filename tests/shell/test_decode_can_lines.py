@@ -76,3 +76,15 @@ def test_lines_that_are_no_tmcl_frame(session, capsys):
     assert "3 data bytes: no TMCL frame" in capsys.readouterr().out
     with pytest.raises(TmclError, match=r"says \[7\] and carries 3 bytes"):
         session.run_line(".decode can0  001   [7]  01 02 03")
+
+
+def test_decode_then_decode_on_one_line_is_two_commands(run_tmclsh):
+    """Issue 35: `.decode HEX; .decode HEX` took the whole line as hex. A ';' that a
+    dot-command follows ends the line .decode owns; pasted bytes may still hold ';'."""
+    p = run_tmclsh("--sim", "TMCM-1311", "-c",
+                   ".decode request 01 06 04 00 00 00 00 00 0b; .decode request 01 05 04 00 "
+                   "00 00 03 e8 f5")
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.count("request") >= 2 and "GAP" in p.stdout and "SAP" in p.stdout, p.stdout
+    p = run_tmclsh("--sim", "TMCM-1311", "-c", ".decode request 01 06 04 00; 00 00 00 00 0b")
+    assert p.returncode == 0 and "GAP" in p.stdout, p.stdout + p.stderr

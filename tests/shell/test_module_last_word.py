@@ -16,6 +16,7 @@ freshly flashed or differently configured module may hold values its manual does
 from __future__ import annotations
 
 import json
+import re
 
 import pytest
 
@@ -89,9 +90,11 @@ def test_a_backup_with_values_outside_the_ranges_is_compared_and_restored(module
         text = path.read_text(encoding="utf-8")
         assert "!SAP MaxPositioningSpeed, 0, -5" in text and "!SAP MicrostepResolution, 0, 12" \
             in text
-        # said once, all of them
-        warning = [line for line in said.err.splitlines() if "outside the manual" in line]
-        assert len(warning) == 1 and all(name in warning[0] for name in (
+        # said briefly, once; every one of them named in the file
+        assert re.search(r"; \d+ outside the manual's ranges, marked !",
+                         " ".join((said.out + said.err).split()))
+        head = [line for line in text.splitlines() if "lines start with !" in line]
+        assert len(head) == 1 and all(name in head[0] for name in (
             "MaxPositioningSpeed", "StandstillErrorGain", "MicrostepResolution",
             "PowerDownDelay"))
         s.run_line("SAP 4, 0, 1000")  # the change made after the save
@@ -103,6 +106,28 @@ def test_a_backup_with_values_outside_the_ranges_is_compared_and_restored(module
         assert "outside the manual's ranges, as the module took them" in restored.err
     finally:
         s.client.close()
+
+
+def test_the_note_on_values_outside_the_ranges_is_said_once_per_run(module, tmp_path,
+                                                                    capsys, monkeypatch):
+    """Issue 35: every unit's .save printed a four-line note; on fresh modules these are
+    unset defaults. One short note per run, a count on each save, the details in the file."""
+    from tmclsh.shell import clone
+
+    monkeypatch.setattr(clone, "_SAID", set())
+    s = session_on(module)
+    try:
+        s.run_line(f".save {tmp_path / 'one.tmcl'}")
+        first = capsys.readouterr()
+        s.run_line(f".save {tmp_path / 'two.tmcl'}")
+        second = capsys.readouterr()
+    finally:
+        s.client.close()
+    said = " ".join((first.out + first.err).split())  # (as one line: rich wraps at 80)
+    assert said.count("unset default") == 1 and said.count("outside the manual") == 2, said
+    again = " ".join((second.out + second.err).split())
+    assert again.startswith("saved ") and again.count("saved ") == 1, again
+    assert re.search(r"; \d+ outside the manual's ranges, marked !$", again), again
 
 
 def test_hand_edited_values_outside_the_ranges_are_all_named_then_forced(module, tmp_path):
@@ -151,3 +176,27 @@ def test_the_override_in_a_script_and_in_c(module, tmp_path, run_tmclsh):
     p = run_tmclsh("--port", module.path, "-c", "!SAP 136, 0, 3; GAP 136, 0")
     assert p.returncode == 0, p.stderr
     assert "StandstillErrorGain = 3 (outside the manual's range 10..50)" in p.stdout
+
+
+def test_replaying_a_backup_that_stops_points_to_keep_going_and_restore(module, tmp_path,
+                                                                        run_tmclsh):
+    """Issue 35: a backup holding values outside the manual's ranges, replayed with -f on a
+    stricter module (the simulator refuses them), stopped at the first refused !SAP without
+    a word on --keep-going or .restore; another module's backup stopped at an unknown
+    parameter without saying whose backup it is."""
+    s = session_on(module)
+    path = tmp_path / "fresh.tmcl"
+    try:
+        s.run_line(f".save {path}")
+    finally:
+        s.client.close()
+    p = run_tmclsh("--sim", "TMCM-1311", "-f", str(path), "--yes")
+    assert p.returncode == 1 and "status 4" in p.stderr
+    said = " ".join((p.stdout + p.stderr).split())
+    assert "--keep-going replays the rest" in said and f".restore {path}" in said
+    p = run_tmclsh("--sim", "TMCM-1311", "-f", str(path), "--yes", "--keep-going")
+    assert "--keep-going replays" not in p.stdout + p.stderr
+    p = run_tmclsh("--sim", "TMCM-1640", "-f", str(path), "--yes")
+    assert p.returncode == 2 and "unknown axis parameter" in p.stderr
+    said = " ".join((p.stdout + p.stderr).split())
+    assert f"is a backup of a TMCM-1311, not of this TMCM-1640: .restore {path} --force" in said

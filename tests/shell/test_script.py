@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import io
 import json
+import re
 import subprocess
 import sys
 import textwrap
@@ -495,3 +496,28 @@ def test_c_checks_a_commands_arguments_before_anything_is_sent(tmp_path):
     finally:
         server.close()
         sim.close()
+
+
+def test_record_stop_ends_the_recording_and_is_never_a_file_name(session, tmp_path,
+                                                                  monkeypatch, capsys):
+    """Issue 35: `.record stop` started a recording into a file named `stop`."""
+    monkeypatch.chdir(tmp_path)
+    rec = tmp_path / "rec.tmcl"
+    session.run_line(f".record {rec}")
+    session.run_line("GAP 4, 0")
+    session.run_line(".record stop")
+    assert session.state.record is None and not (tmp_path / "stop").exists()
+    assert "GAP 4, 0" in rec.read_text()
+    capsys.readouterr()
+    session.run_line(".record stop")  # not recording: said, and still no file
+    said = capsys.readouterr()
+    assert "not recording" in said.out + said.err
+    assert session.state.record is None and not (tmp_path / "stop").exists()
+
+
+def test_wait_says_when_the_condition_was_reached(session, capsys):
+    """Issue 35: `.wait` printed nothing when it succeeded."""
+    capsys.readouterr()
+    session.run_line(".wait GAP 1, 0 == 0 --timeout 10")
+    out = capsys.readouterr().out
+    assert re.search(r"^reached after \d+\.\d\d s: GAP 1, 0 == 0 \(", out, re.M), out

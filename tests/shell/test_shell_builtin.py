@@ -420,3 +420,66 @@ def test_stopall_with_words_is_one_line_and_sends_nothing(run_tmclsh):
     p = run_tmclsh("--sim", "TMCM-1311", "-c", ".stopall extra words")
     assert p.returncode == 1 and p.stdout == ""
     assert p.stderr == "error: .stopall takes no arguments (got 'extra words')\n"
+
+
+def test_suggestions_are_near_in_spelling_and_kind(session, run_tmclsh):
+    """Issue 35: `help SAPP` suggested CurrentScaleUpperErrorLimit, `clear` suggested CLE."""
+    for word in ("SAPP", "sapp"):
+        with pytest.raises(ValidationError) as exc:
+            session.run_line(f"help {word}")
+        assert "did you mean SAP" in str(exc.value) and "Limit" not in str(exc.value)
+    with pytest.raises(ValidationError) as exc:  # a long name misspelt: still parameters
+        session.run_line("help MaxSpeeed")
+    assert "Speed" in str(exc.value)
+    sent = session.client.stats["sent"]
+    with pytest.raises(TmclError) as exc:
+        session.run_line("clear")
+    assert "did you mean .clear?" in str(exc.value) and "Ctrl-L" in str(exc.value)
+    assert "CLE" not in str(exc.value) and session.client.stats["sent"] == sent
+    with pytest.raises(TmclError, match="did you mean SGP, SAP"):  # a mnemonic misspelt
+        session.run_line("SPA 4, 0, 1")
+    session.run_line(".clear")  # not a terminal: nothing written, nothing sent
+    assert session.client.stats["sent"] == sent
+    p = run_tmclsh("--sim", "-c", "clear")  # checked ahead: the same pointer
+    assert p.returncode == 2 and "did you mean .clear?" in p.stderr
+
+
+def test_version_in_ascii_mode_says_what_connect_read_and_how_to_read_it(session, capsys):
+    """Issue 35: `.version` in ASCII mode was refused without a word on how to get it."""
+    session.run_line(".mode ascii")
+    capsys.readouterr()
+    sent = session.client.stats["sent"]
+    session.run_line(".version")
+    out = capsys.readouterr()
+    said = " ".join((out.out + out.err).split())
+    assert "firmware 1311V111 (TMCM-1311)" in said and "as read at connect" in said
+    assert ".mode binary, .version, .mode ascii" in said
+    assert session.client.stats["sent"] == sent  # 136 has no ASCII form: nothing sent
+    session.run_line(".mode binary")
+
+
+def test_version_read_in_the_other_byte_order_is_explained_not_a_fault(capsys):
+    """Issue 35: a TMCM-1640 whose 136 type 1 bytes come type first (as the TMCM-1311
+    manual prints them, not as the 1640's does) got "does not match the string"."""
+    from tmclsh.tmcl.version import TYPE_FIRST, encode_type1
+
+    for json_mode in (False, True):
+        s = make_session("TMCM-1640", json_mode=json_mode)
+        try:
+            s.client.transport.simulator._version_binary = (
+                lambda: encode_type1(1640, 210, TYPE_FIRST))
+            capsys.readouterr()
+            s.run_line(".version")
+            out = capsys.readouterr()
+        finally:
+            s.client.close()
+        if json_mode:
+            obj = json.loads(out.out)
+            assert obj["agrees"] is True and obj["layout"] == "type_first", obj
+            assert (obj["binary_type"], obj["binary_version"]) == (1640, 210)
+        else:
+            said = " ".join((out.out + out.err).split())
+            assert "does not match" not in said and "module type 1640 (06 68)" in said
+            assert "the same as the string, read type first" in said
+            assert "TMCM-1640 data says version first" in said
+            assert not out.err  # a statement, not a warning

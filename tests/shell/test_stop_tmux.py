@@ -102,3 +102,23 @@ def test_leaving_while_the_motor_turns_asks_first(bench):
     screen = term.wait("EXIT=0")
     assert "leaving: stopped motor 0 (MST; speed reads 0)" in screen
     assert speed(sim) == 0
+
+
+def test_the_leave_menu_takes_a_number_and_keeps_the_safe_default(bench):
+    """Issue 35: typing 3 only moved the selection; after one "cancel" the menu started on
+    it the next time instead of on "stop everything first"."""
+    term, sim, _ = bench
+    term.run("ROR 0, 20000", "rotating right")
+    term.keys("C-d")
+    term.wait("Leave the shell?")
+    term.keys("3")  # cancel, chosen by its number: no Enter
+    term.wait("TMCM-1311:1>", more_than=2)
+    assert speed(sim) != 0
+    term.keys("C-d")
+    screen = term.wait("Leave the shell?", more_than=1)
+    menu = screen[screen.rindex("Leave the shell?"):]
+    assert re.search(r">\s*1\.\s*stop everything first", menu), menu  # the safe default
+    term.keys("Enter")
+    screen = term.wait("EXIT=0")
+    assert "leaving: stopped motor 0 (MST; speed reads 0)" in screen
+    assert speed(sim) == 0

@@ -148,8 +148,8 @@ def test_a_unit_unplugged_mid_run_fails_alone(make_pty_sim, run, tmp_path):
     finally:
         gone.close()
         gone_sim.close()
-    assert rc == 1
-    assert re.search(r"^ +1 .* 80/80 .* passed", out, re.M), out
+    assert rc == 1, out + err
+    assert re.search(r"^ +1 .* 4/4 .* passed", out, re.M), out  # the file's lines
     assert re.search(r"^ +2 .* failed +[0-9.]+ s  long.tmcl:2: lost ", out, re.M), out
     assert f"[2 {gone.path}] " in err and "lost" in err
 
@@ -298,12 +298,13 @@ def test_the_live_table_in_a_terminal(make_pty_sim, terminal, tmp_path):
     term = terminal(width=150)
     term.start("--port", slow[1], "--port", fast[1], "-f", str(script))
     live = term.wait_for(re.compile(r"│ +1 │.*running.*\n.*│ +2 │.*(passed|failed)"), timeout=20)
-    assert re.search(r"│ +1 │ \S+ +│ TMCM-1311 │ 1311V111 │ +\d+/61 │", live), live
+    assert re.search(r"│ +1 │ \S+ +│ TMCM-1311 │ 1311V111 │ +[1-5]/5 │", live), live
     screen = term.wait("EXIT=", timeout=30)
     assert "EXIT=1" in screen
     assert "summary" in screen and "units" not in screen  # the live table made way for it
-    assert re.search(r"│ +1 │.*61/61 .*│ failed .*│ line.tmcl:5: expectation failed", screen)
-    assert re.search(r"│ +2 │.*│ TMCM-351 .*61/61 .*│ failed", screen)
+    # the line column numbers the file's lines, as the error's FILE:LINE does
+    assert re.search(r"│ +1 │.* 5/5 .*│ failed .*│ line.tmcl:5: expectation failed", screen)
+    assert re.search(r"│ +2 │.*│ TMCM-351 .* 5/5 .*│ failed", screen)
     # what a unit says on stderr is above the table, with the unit in front
     assert f"[1 {slow[1]}] {script}:5: expectation failed" in screen.replace("\n", "")
     # the results themselves are not on the screen: where to find them is
@@ -342,3 +343,29 @@ def test_ctrl_c_stops_the_motor_a_unit_that_had_ended_left_turning(make_pty_sim,
     assert [sim.param(AXIS, 3) for sim in bus.simulators] == [0, 0, 0], err
     assert f"[1 {path} @1] interrupted: stopped motor 0" in err, err
     assert f"[2 {path} @2] interrupted: stopped motor 0" in err, err
+
+
+def test_a_units_line_is_the_files_line_as_its_errors_say(make_pty_sim, run, tmp_path):
+    """Issue 35: the `line` column counted lines without comments (3/19) while the error
+    beside it said eol.tmcl:4; both number the file's lines now, JSON too."""
+    sims = [make_pty_sim("TMCM-1311") for _ in range(2)]
+    script = tmp_path / "eol.tmcl"
+    script.write_text("// set up\n"
+                      "GAP 4, 0\n"
+                      "\n"
+                      ".expect GAP 4, 0 == -7   // fails: never negative\n"
+                      "GAP 5, 0\n"
+                      "// the end\n")
+    rc, out, err = run(*_ports(sims), "--json", "-f", str(script))
+    assert rc != 0
+    summaries = [o for o in _objects(out) if o.get("summary")]
+    assert len(summaries) == 2
+    for s in summaries:
+        assert "eol.tmcl:4:" in s["error"], s
+        assert (s["line"], s["of"]) == (4, 6), s
+    rc, out, err = run(*_ports(sims), "-f", str(script))
+    assert re.search(r"^ +1 .* 4/6 ", out + err, re.M), out + err
+    script.write_text("// only comments and one line\nGAP 4, 0\n// end\n")
+    rc, out, err = run(*_ports(sims), "--json", "-f", str(script))
+    assert rc == 0, err
+    assert all((o["line"], o["of"]) == (3, 3) for o in _objects(out) if o.get("summary"))

@@ -610,8 +610,10 @@ the reply carries it (signed, unless the data calls the parameter an unsigned 32
 quantity) with the range it lies outside ({_b("outside_range")} in JSON). {_b("!")} before a
 TMCL line sends its value as typed, whatever the data says of its range
 ({_b("!SAP 140, 0, 12")}); everything else is checked as usual and the module's answer decides.
-{_b(".save")} marks values outside the manual's ranges so; {_b(".restore")} writes them back,
-and refuses other such values unless {_b("--force")}.
+{_b(".save")} marks values outside the manual's ranges so (on a fresh module they are often
+unset defaults; the file's head names them, each line's comment gives the range, and the
+shell says so once a run); {_b(".restore")} writes them back, and refuses other such values
+unless {_b("--force")}.
 """
 
 _LANGUAGE = f"""\
@@ -640,7 +642,9 @@ Lines are separated by newlines or {_b(";")}, at the prompt, with {_b("-c")} and
 {_b("help 4; help 5")} is two lines, a {_b(";")} inside quotes ({_b('.echo "a;b"')}) is not a
 separator. Only a command that owns the rest of its line takes the {_b(";")}: {_b(".watch")}
 separates its expressions with it ({_b(".watch a=GAP 1, 0; b=GIO 0, 0")} is one command) and
-{_b(".decode")} its pasted bytes; put other commands after those on a new line.
+{_b(".decode")} its pasted bytes, up to a {_b(";")} that another dot-command follows
+({_b(".decode 01 06 ...; .decode 02 06 ...")} is two); put other lines after those on a new
+line.
 .IP \\(bu 2
 {_b("//")} and {_b("#")} start a comment that runs to the end of the line ({_b("#")} at the start of
 a word, outside quotes: {_b("GAP 1, 0 # where it is")}). Empty lines are ignored.
@@ -701,7 +705,8 @@ back until it is 0. Only motors that read 0 are called stopped; any other is nam
 .TP
 {_b("Ctrl-D")}
 Leaves the shell, like {_b(".quit")}. While a motor turns or the stored program runs, it
-asks first: stop everything first, leave it running, or cancel. A motor the shell told to
+asks first: 1 stop everything first, 2 leave it running, or 3 cancel; the number chooses (or
+the arrows and Enter), and the selection starts on 1 every time. A motor the shell told to
 turn and did not stop counts, even while its speed reads 0 (a stalled motor).
 .SS Keys in .watch
 .TP
@@ -1009,6 +1014,11 @@ now"), then reads them back there. A setting that may cut the link in use with n
 follow (marked {_b("breaks")}: the CAN bit rate on CAN, the ASCII echo while talking ASCII,
 the interface selection) is written last and not read back: reconnect with it.
 .PP
+A backup replayed with {_b("-f")} stops, as any script, at the first line the module refuses,
+and then points to {_b("--keep-going")} (replay the rest) and {_b(".restore")} (write what
+differs, listing every refusal); another module type's backup is refused before anything is
+sent, saying whose backup it is and pointing to {_b(".restore")} {_i("FILE")} {_b("--force")}.
+.PP
 A module known by parameter names only (a module file imported from PyTrinamic: no ranges,
 every parameter {_b("state")}) has nothing a backup could restore: {_b(".save")} names what it
 could not save and fails; {_b(".save")} {_i("FILE")} {_b("--names-only")} writes the values as
@@ -1058,8 +1068,8 @@ before its run). A unit that has no module, loses its link or fails a line fails
 {_b("--keep-going")} works for each as for one module.
 .PP
 On a terminal a live table shows every unit: link and address, module and firmware, the
-line reached of how many, checks passed and failed, errors, the result, the time and the last
-error; what a unit says on standard error is printed above it, with the unit in front; its
+line reached of how many (the file's line numbers, as in its errors' FILE:LINE), checks passed
+and failed, errors, the result, the time and the last error; what a unit says on standard error is printed above it, with the unit in front; its
 results are not (see {_b("--log-dir")}). In a pipe or a file every line starts with its unit,
 {_b("[2 /dev/ttyACM1]")} or {_b("[3 /dev/ttyUSB0 @3]")}. With {_b("--json")} every object
 starts with {_b('"unit"')} and {_b('"port"')} and {_b('"address"')} (on CAN
@@ -1157,7 +1167,8 @@ Or load them from tmclsh itself: {_b("tmclsh --completions")} {_i("SHELL")}.
 .TP
 {_i("prefix")}{_b("/share/man/man1/tmclsh.1")}
 This manual. An editable install ({_b("pip install -e")}) installs no manual, so
-{_b("man tmclsh")} cannot find it: read it with {_b("tmclsh --man")}, or
+{_b("man tmclsh")} cannot find it: read it with {_b("tmclsh --man")} (formatted by
+{_b("man")}, plain text in a pipe), or
 {_b("man ./man/tmclsh.1")} in the source tree.
 """
 

@@ -325,8 +325,9 @@ def cmd_firmware(args: argparse.Namespace) -> int:
 # -- entry point -------------------------------------------------------------------------
 
 def show_manual(parser: argparse.ArgumentParser) -> int:
-    """The man page, generated now (so an editable install shows the current one): through
-    man(1) on a terminal where there is one, else the roff text."""
+    """The man page, generated now (so an editable install shows the current one), shown
+    as man(1) shows it: paged on a terminal, plain text in a pipe (``tmclsh --man | less``,
+    ``> tmclsh.txt``). Without man(1) the roff text, said to be that."""
     import shutil
     import subprocess
     import tempfile
@@ -335,14 +336,20 @@ def show_manual(parser: argparse.ArgumentParser) -> int:
 
     text = manpage(parser)
     man = shutil.which("man")
-    if not sys.stdout.isatty() or man is None:
-        sys.stdout.write(text)
-        return EXIT_OK
-    with tempfile.TemporaryDirectory() as tmp:
-        page = os.path.join(tmp, "tmclsh.1")
-        with open(page, "w", encoding="utf-8") as f:
-            f.write(text)
-        return subprocess.call([man, page])  # a path with a slash: man reads that file
+    if man is not None:
+        with tempfile.TemporaryDirectory() as tmp:
+            page = os.path.join(tmp, "tmclsh.1")
+            with open(page, "w", encoding="utf-8") as f:
+                f.write(text)
+            sys.stdout.flush()
+            # a path with a slash: man reads that file; in a pipe it writes the plain text
+            if subprocess.call([man, page]) == 0:
+                return EXIT_OK
+    sys.stdout.write(text)
+    sys.stdout.flush()
+    print("tmclsh: no man(1) to format the manual: this is its roff source "
+          "(groff -man -Tutf8 formats it)", file=sys.stderr)
+    return EXIT_OK
 
 
 def _say_error(args: argparse.Namespace, message: str, status: int, prefix: str = "tmclsh: "

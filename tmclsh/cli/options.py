@@ -246,8 +246,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--completions", metavar="SHELL", choices=("bash", "zsh", "fish"),
                    help="print the completion script for bash, zsh or fish")
     p.add_argument("--man", action="store_true",
-                   help="show this manual (also where 'man tmclsh' cannot find it: an "
-                        "editable install has none)")
+                   help="show this manual as man shows it, plain text in a pipe (also "
+                        "where 'man tmclsh' cannot find it: an editable install has none)")
     p.add_argument("--version", action="version", version=f"tmclsh {__version__}")
     sub = p.add_subparsers(dest="subcommand", metavar="SUBCOMMAND")
 

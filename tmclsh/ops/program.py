@@ -502,7 +502,8 @@ def download_mode(client) -> bool:
 
 @dataclass
 class StopInfo:
-    """Why :func:`continue_to` returned: "breakpoint", "ended" or "limit"."""
+    """Why :func:`continue_to` returned: "breakpoint", "ended" (it stopped by itself),
+    "end" (the program counter is past the stored program) or "limit"."""
 
     reason: str
     pc: int
@@ -552,7 +553,8 @@ def continue_to(client, breakpoints: Iterable[int], *, max_steps: int | None = N
     instruction, and a WAIT takes its full time (see :func:`step_one`). A breakpoint counts
     when the program counter arrives there: moving off the breakpoint it starts at takes a
     step. Returns when a breakpoint is reached, the program stopped by itself (STOP, or the
-    end of the program), or after ``max_steps`` steps. KeyboardInterrupt propagates (the
+    end of the program), the program counter is where no instruction is stored (nothing is
+    stepped there), or after ``max_steps`` steps. KeyboardInterrupt propagates (the
     module stays in step mode, at an instruction boundary). ``instruction_at(address)`` gives
     the stored instruction (default: read with 134, once per address).
     """
@@ -570,6 +572,9 @@ def continue_to(client, breakpoints: Iterable[int], *, max_steps: int | None = N
     steps = 0
     pc = program_counter(client)
     while max_steps is None or steps < max_steps:
+        if is_end_marker(stored(pc)):
+            # past the stored program: stepping on would run through empty memory for ever
+            return StopInfo("end", pc, steps)
         before = pc
         pc = step_one(client, pc=pc, instruction_at=stored)
         steps += 1

@@ -213,8 +213,8 @@ def _dumb_echo(ps: PromptSession) -> None:
 
 
 def ask_choice(question: str, options: list[tuple[str, str]]) -> str:
-    """``session.choose`` in the REPL: one of ``options`` (value, label); Ctrl-C or Ctrl-D
-    picks the last one (cancel)."""
+    """``session.choose`` in the REPL: one of ``options`` (value, label), by arrows and Enter
+    or by its number; Ctrl-C or Ctrl-D picks the last one (cancel)."""
     try:
         from prompt_toolkit.shortcuts import choice
     except ImportError:  # prompt_toolkit before 3.0.52: a typed answer
@@ -226,8 +226,18 @@ def ask_choice(question: str, options: list[tuple[str, str]]) -> str:
         except (KeyboardInterrupt, EOFError):
             return options[-1][0]
         return next((v for v, _ in options if answer and v.startswith(answer)), options[-1][0])
+    from prompt_toolkit.key_binding import KeyBindings
+
+    keys = KeyBindings()
+    for number, (value, _label) in enumerate(options[:9], 1):
+        # a number chooses, as the numbers beside the options say (prompt_toolkit's only
+        # moves the selection there, and Enter then takes it)
+        keys.add(str(number), eager=True)(lambda event, v=value: event.app.exit(result=v))
     try:
-        return choice(question, options=options, default=options[0][0])
+        # a fresh copy each time, the first (safe) option the default: what was chosen last
+        # time is never where the selection starts
+        return choice(question, options=list(options), default=options[0][0],
+                      key_bindings=keys)
     except (KeyboardInterrupt, EOFError):
         return options[-1][0]
 

@@ -7,6 +7,7 @@ registry, so a command is described in exactly one place. Handlers print through
 
 from __future__ import annotations
 
+import difflib
 import re
 from typing import TYPE_CHECKING
 
@@ -14,7 +15,7 @@ from ..tmcl import instructions as isa
 from ..base import limits
 from ..base.errors import StatusError, TmclError, TmclTimeoutError, TransportError, ValidationError
 from ..tmcl.modules import Module, Parameter, available, identify, load, type1_of
-from ..tmcl.version import parse_string
+from ..tmcl.version import LAYOUTS, TYPE_FIRST, VERSION_FIRST, decode_type1, parse_string
 from ..tmcl.frames import Control, Request, status_ok
 from . import options
 from .commands import CATEGORIES, all_commands, command, find, options_of
@@ -120,7 +121,33 @@ def cmd_help(session: Session, arg: str) -> None:
         return _help_number(session, number, source=source)
     if find("." + word) is not None:
         return _help_command(session, find("." + word))  # type: ignore[arg-type]
-    return cmd_param(session, arg, from_help=True)
+    try:
+        return cmd_param(session, arg, from_help=True)
+    except ValidationError:
+        near = _near_instructions(session, word)
+        if not near:
+            raise
+        # `help SAPP` is a command misspelt, not a parameter: suggest commands of its kind
+        raise ValidationError(f"no help topic or parameter matches {word!r}; did you mean "
+                              f"{', '.join(near)}? (.help lists the commands)") from None
+
+
+def _near_instructions(session: Session, word: str) -> list[str]:
+    """The TMCL mnemonics a word shaped like one is close to in spelling (`SAPP`: SAP)."""
+    every = [s.mnemonic for s in isa.all_instructions()]
+    if not (word.isalpha() and len(word) <= max(map(len, every)) + 1):
+        return []  # longer than any mnemonic misspelt: a name
+    try:
+        known = [s.mnemonic for s in session.module.instructions]
+    except TmclError:
+        known = every
+    return difflib.get_close_matches(word.upper(), known, n=3, cutoff=0.7)
+
+
+@command(".clear")
+def cmd_clear(session: Session, arg: str) -> None:
+    if session.out.is_terminal and not session.out.json:
+        session.out.console.clear()
 
 
 def _help_overview(session: Session) -> None:
@@ -1011,6 +1038,8 @@ def cmd_module(session: Session, arg: str) -> None:
 @command(".version")
 def cmd_version(session: Session, arg: str) -> None:
     client = session.client
+    if client.mode == "ascii":
+        return _version_in_ascii(session)
     reply = client.request(Request(client.address, Control.GET_VERSION, 0, 0, 0))
     version = reply.version if reply is not None else None
     binary = client.request(Request(client.address, Control.GET_VERSION, 1, 0, 0))
@@ -1026,12 +1055,16 @@ def cmd_version(session: Session, arg: str) -> None:
     from_string = (parsed.type_number, parsed.number) if parsed is not None else None
     from_binary = type1_of(value, layout_of) if value is not None else None
     agrees = None if from_string is None or value is None else from_binary == from_string
+    other = _layout_of_string(value, from_string, layout_of) if value is not None \
+        and not agrees else None
     if session.out.json:
+        if other is not None:
+            from_binary, agrees = decode_type1(value, other), True  # type: ignore[arg-type]
         session.out.emit({"version": version, "binary": value,
                           "module": mod.name if mod else None,
                           "binary_type": from_binary[0] if from_binary else None,
                           "binary_version": from_binary[1] if from_binary else None,
-                          "agrees": agrees})
+                          "agrees": agrees, **({"layout": other} if other else {})})
         return
     text = f"firmware {version}" if version else "firmware: no string reply (136 type 0)"
     if mod is not None:
@@ -1044,9 +1077,48 @@ def cmd_version(session: Session, arg: str) -> None:
     elif agrees:
         session.out.print(f"binary (136 type 1): {version_text(value, layout_of)}; "
                           "the same as the string", markup=False)
+    elif other is not None:
+        # the manuals disagree on the byte order; this firmware uses the other one
+        said = layout_of.version_layout if layout_of is not None else LAYOUTS[0]
+        session.out.print(f"binary (136 type 1): {version_text(value, layout_of, other)}; the "
+                          f"same as the string, read {_LAYOUT_WORDS[other]} (the "
+                          f"{layout_of.name if layout_of else 'module'} data says "
+                          f"{_LAYOUT_WORDS[said]}; the manuals disagree on this order)",
+                          markup=False)
     else:
         session.out.warn(f"binary (136 type 1): {version_text(value, layout_of)}; "
                          + ("does not match the string" if version else "no string to check"))
+
+
+_LAYOUT_WORDS = {TYPE_FIRST: "type first", VERSION_FIRST: "version first"}
+
+
+def _layout_of_string(value: int, from_string: tuple[int, int | None] | None,
+                      module: Module | None) -> str | None:
+    """The other byte order of a 136 type 1 value, when read so it says what the string
+    says (None: no layout does, or the module's own already did)."""
+    if from_string is None:
+        return None
+    own = module.version_layout if module is not None else LAYOUTS[0]
+    return next((layout for layout in LAYOUTS if layout != own
+                 and decode_type1(value, layout) == from_string), None)
+
+
+def _version_in_ascii(session: Session) -> None:
+    """136 has no ASCII form: say the version read in binary mode at connect (nothing sent),
+    or how to read it."""
+    client = session.client
+    how = ".mode binary, .version, .mode ascii reads it again"
+    if not client.version:
+        raise ValidationError("the firmware version (136) cannot be read in ASCII mode and was "
+                              f"not read at connect; {how}")
+    mod = client.module.name if client.module is not None else None
+    if session.out.json:
+        session.out.emit({"version": client.version, "binary": None, "module": mod,
+                          "read_at_connect": True})
+        return
+    session.out.print(f"firmware {client.version}" + (f" ({mod})" if mod else ""), markup=False)
+    session.out.info(f"(as read at connect: 136 has no ASCII form; {how})")
 
 
 # -- motion ------------------------------------------------------------------------------

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import os
 import re
+import threading
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -333,8 +334,10 @@ def save_lines(session: Session, path: Path, with_program: Path | None
     ]
     if outside:
         head.append(f"// {len(outside)} value{'s' if len(outside) != 1 else ''} outside the manual's ranges, "
-                    f"as the module held {'them' if len(outside) != 1 else 'it'}: the lines start with "
-                    f"{AS_TYPED} (sent as written; the module decides)")
+                    f"as the module held {'them' if len(outside) != 1 else 'it'} (on a fresh module often "
+                    "unset defaults):")
+        head.append(f"// the lines start with {AS_TYPED} (sent as written; the module decides): "
+                    + "; ".join(outside))
     return "\n".join(head + body) + "\n", saved + link_saved, outside, link_saved
 
 
@@ -462,16 +465,30 @@ def cmd_save(session: Session, argtext: str) -> None:
         return
     link = (f" ({link_saved} of them its link identity, which .restore and -f leave alone "
             "unless --with-link)" if link_saved else "")
-    out.ok(f"saved {_count(saved)} of the {session.module.name} to {path}{link}")
+    beyond = f"; {len(outside)} outside the manual's ranges, marked {AS_TYPED}" if outside else ""
+    out.ok(f"saved {_count(saved)} of the {session.module.name} to {path}{link}{beyond}")
     if names_only:
         out.warn(f"{_count(len(names_only))} known by name only, saved as comments, not "
                  "restorable: " + _some(names_only))
-    if outside:
-        out.warn(f"{len(outside)} of them {'lie' if len(outside) != 1 else 'lies'} outside the "
-                 "manual's ranges, as the module holds them (saved as they are, marked with "
-                 f"{AS_TYPED}: .restore writes them back): " + "; ".join(outside))
+    if outside and _first_time("outside"):
+        out.info(f"({AS_TYPED} marks a value outside the manual's range, often a fresh "
+                 "module's unset default: saved as the module holds it, and .restore writes "
+                 "it back; each line's comment says the range)")
     if prog_path is not None:
         out.ok(f"saved the stored program ({instructions} instructions) to {prog_path}")
+
+
+_SAID: set[str] = set()  # notes said once per run (every unit's .save would say the same)
+_SAID_LOCK = threading.Lock()
+
+
+def _first_time(note: str) -> bool:
+    """True the first time ``note`` comes up in this process (units run in threads)."""
+    with _SAID_LOCK:
+        if note in _SAID:
+            return False
+        _SAID.add(note)
+        return True
 
 
 # -- reading a backup --------------------------------------------------------------------
@@ -760,6 +777,30 @@ def replay_lines(session: Session, path: Path | str, lines: list[str]) -> list[s
         session.out.info(f"{path}: left alone, the module's own place on its line (write "
                          "it with --with-link): " + left_alone_text(left))
     return kept
+
+
+def replay_hint(session: Session, path: Path | str, lines: list[str], *,
+                stopped: bool) -> str | None:
+    """What to do instead, when replaying a configuration backup with -f went wrong: it was
+    another module's (its lines name parameters this one lacks, so the check refuses it whole),
+    or the module refused a line and the run stopped there (--keep-going goes on; .restore
+    writes what differs and lists every refusal)."""
+    if not lines or not lines[0].startswith(BACKUP_MARK):
+        return None
+    saved_from = next((line.split(":", 1)[1].strip() for line in lines[1:8]
+                       if line.startswith("// module:")), None)
+    try:
+        here = session.module.name
+    except TmclError:
+        return None
+    if saved_from is not None and saved_from != here:
+        return (f"{path} is a backup of a {saved_from}, not of this {here}: .restore {path} "
+                f"--force writes the values the {here} has too and lists the rest")
+    if stopped and not session.keep_going:
+        return (f"{path} is a configuration backup: -f stops at the first line the module "
+                "refuses; --keep-going replays the rest, and .restore "
+                f"{path} writes what differs and lists every value the module refuses")
+    return None
 
 
 def _writes_link(text: str, module: Module, ascii_mode: bool, number: int,

@@ -49,7 +49,8 @@ class Command:
     details: str = ""
     bare: bool = False  # also accepted without the dot (help, quit)
     # the command's arguments may contain ';' (.watch separates its expressions with it), so
-    # it takes the rest of its line; for all others ';' ends the command and starts a new line
+    # it takes the rest of its line, up to a ';' a dot-command follows (lines.py); for all
+    # others ';' ends the command and starts a new line
     owns_line: bool = False
     same_as: str = ""
     # it may change the module or the mode lines are checked against (.connect, .mode, ...):
@@ -198,6 +199,9 @@ CATEGORIES: tuple[tuple[str, str], ...] = (
 # are listed by name, categories in their first appearance.
 
 COMMANDS: tuple[Command, ...] = (
+    Command('.clear', 'builtin', '.clear',
+            'clear the screen; Ctrl-L at the prompt does the same',
+            details=('Clears the terminal; in a pipe or a file nothing is written.')),
     Command('.help', 'builtin', '.help [--source] [COMMAND|MNEMONIC|NUMBER|PARAMETER]',
             'show help: all commands, one command, a TMCL instruction, or a parameter',
             complete='complete_help', bare=True,
@@ -254,7 +258,8 @@ COMMANDS: tuple[Command, ...] = (
                      '00`), a candump -L line (`(1.0) can0 001#06010000000000`) or a '
                      'Vector .asc line (`0.0012 1 1 Rx d 7 06 01 00 00 00 00 00`). '
                      'Without a hint every plausible reading is shown. It takes the rest '
-                     "of its line (pasted bytes may be separated by ';'). tmclsh monitor "
+                     "of its line (pasted bytes may be separated by ';') up to a ';' that "
+                     "another dot-command follows (.decode A; .decode B). tmclsh monitor "
                      'decodes whole logs and live buses.')),
     Command('.connect', 'builtin', '.connect [PORT | sim [MODULE] | can [IFACE:CHANNEL]]',
             'reconnect, or switch to another port, simulator or CAN bus',
@@ -285,7 +290,17 @@ COMMANDS: tuple[Command, ...] = (
             expands=True),
     Command('.version', 'builtin', '.version',
             'ask the module for its firmware version (command 136)',
-            category='connection'),
+            category='connection',
+            details=('Reads the string (136 type 0) and the binary value (type 1), and says '
+                     'whether they agree. The\n'
+                     'manuals disagree on the byte order of the binary value (type first, as '
+                     "the TMCM-1311's; version\n"
+                     "first, as the TMCM-1640's): read in the other order when that is the "
+                     'one that agrees, and said so.\n'
+                     '136 has no ASCII form: in ASCII mode the version read at connect is '
+                     'shown (nothing is sent).\n'
+                     'JSON: {"version", "binary", "module", "binary_type", "binary_version", '
+                     '"agrees"}, and "layout" when read\nin the other order.')),
     Command('.stopall', 'builtin', '.stopall',
             'stop everything: the stored program (128) if it runs, then every motor (MST), '
             'each read back until its speed is 0; Ctrl-C does the same',
@@ -358,7 +373,9 @@ COMMANDS: tuple[Command, ...] = (
             details=('  .wait GAP 8, 0 == 1 --timeout 10\n'
                      '  .wait RFS STATUS, 0 == 0\n'
                      '--timeout none waits forever; otherwise at most a day (86400 s); '
-                     '--interval 0.001..86400 s. A poll that gets no intact answer is '
+                     '--interval 0.001..86400 s. When the condition holds it says so: '
+                     "'reached after 1.23 s: GAP 8, 0 == 1 (GAP 8, 0 is 1)'. "
+                     'A poll that gets no intact answer is '
                      'polled again. A timeout is an error that shows the last value read '
                      'and when (or says it was in doubt, or that none could be read, and '
                      'why). A condition met on an answer that may have been another '
@@ -383,10 +400,12 @@ COMMANDS: tuple[Command, ...] = (
             'record what you type to a script file',
             complete=['off'], category='script',
             details=('Every line typed from now on is written to FILE (results as // '
-                     "comments); replay it with tmclsh -f FILE. '.record off' stops; "
-                     "'.record' shows the state. FILE is replaced when the recording ends "
-                     "('.record off' or leaving the shell); if it cannot be written, the old "
-                     'FILE stays as it was.'),
+                     "comments); replay it with tmclsh -f FILE. '.record off' (or "
+                     "'.record stop') stops\n"
+                     "(a file named stop is ./stop); '.record' shows the state. FILE is "
+                     "replaced when the recording\n"
+                     "ends ('.record off' or leaving the shell); if it cannot be written, "
+                     'the old FILE stays as it was.'),
             expands=True),
     Command('.history', 'script', '.history [N]',
             'show the lines of this session (the last N)',
@@ -402,8 +421,8 @@ COMMANDS: tuple[Command, ...] = (
             category='watch',
             owns_line=True,
             details=('  .watch pos=GAP 1, 0; speed=GAP 3, 0; in0=GIO 0, 0\n'
-                     "It takes the rest of its line (';' separates its expressions): put "
-                     'other commands on lines of their own.\n'
+                     "It takes the rest of its line (';' separates its expressions) up to "
+                     "a ';' that a dot-command follows.\n"
                      '  .watch rev=GAP 1, 0 / 51200 --until "rev >= 2" --csv run.csv\n'
                      'Keys: s or space stops everything (the stored program if it runs, then '
                      'MST to every motor, speeds read back) and keeps watching; Ctrl-C does '
@@ -447,6 +466,8 @@ COMMANDS: tuple[Command, ...] = (
                      'corrupted reply, lost link),\n'
                      'download mode is ended anyway and the message says which instructions '
                      'are written.\n'
+                     'The question says so when the stored program is running (the '
+                     'download stops it).\n'
                      'Under --json: {"uploaded": N, "verified": true|false}. Needs binary '
                      'mode.'),
             options=(Option("--at", "ADDR", "store it from this address"),
@@ -534,8 +555,10 @@ COMMANDS: tuple[Command, ...] = (
                      'program by stepping it\n'
                      '(130) and reading the program counter (GP 130) after every '
                      'instruction, stopping when it\n'
-                     'reaches a breakpoint, when the program stops by itself, after MAXSTEPS '
-                     'steps, or on Ctrl-C.\n'
+                     'reaches a breakpoint, when the program stops by itself, at the end of '
+                     'the stored program\n'
+                     '(no instruction there: nothing is stepped through empty memory), after '
+                     'MAXSTEPS steps, or on Ctrl-C.\n'
                      'That is two round trips per instruction: much slower than .run, and a '
                      'WAIT takes its full\n'
                      'time. With no breakpoints it is .run (129 type 0). Needs binary mode.')),
@@ -551,14 +574,19 @@ COMMANDS: tuple[Command, ...] = (
     Command('.delete', 'debugger', '.delete [N]',
             'delete breakpoint N (all without N)',
             complete='complete_breakpoints', category='program'),
-    Command('.list', 'debugger', '.list [LINE|LABEL|@ADDR]',
-            'source around the current line (or around LINE), with a marker',
+    Command('.list', 'debugger', '.list [LINE|LABEL|@ADDR | FROM TO]',
+            'the program (a short one whole, else around the current line or LINE), marked',
             complete='complete_location', category='program',
             details=("'->' marks the line the program counter is at, 'B' a breakpoint; the "
                      'program address of each\n'
-                     'line with an instruction is shown. Without a known source file the '
-                     'disassembly around the\n'
-                     'address is listed instead.')),
+                     'line with an instruction is shown. A program of up to 20 lines is '
+                     'listed whole; a longer\n'
+                     "one 5 lines either side, and '...' marks lines left out. '.list 1 8' "
+                     '(or 1-8, 1..8, @0 @6,\n'
+                     'Loop @9) lists that range. Without a known source file the '
+                     'disassembly is listed instead.\n'
+                     'JSON: {"pc": N, "lines": [...]}, with "more": {"before": B, "after": '
+                     'B} when cut.')),
     Command('.display', 'debugger', '.display [EXPR]',
             'show EXPR (e.g. GGP 0, 2 or GAP 1, 0) at every stop; without EXPR show all now',
             category='program',

@@ -42,6 +42,7 @@ if TYPE_CHECKING:
 
 CATEGORY = "program"
 LIST_CONTEXT = 5  # lines shown either side of the current one by .list
+SHORT_LISTING = 20  # a program of up to this many lines is listed whole
 SOURCE_SUFFIXES = (".tmc", ".tmcl", ".inc", ".tmc.txt", ".txt")
 
 
@@ -201,6 +202,9 @@ def where(session: Session, pc: int) -> Where:
     dbg = state(session)
     prog = dbg.program
     loc = prog.loc(pc) if prog is not None else None
+    if loc is not None and prog is not None and prog.image:
+        # an image's "lines" are records of a binary file: cite the disassembly instead
+        return Where(pc, text=loc.text, label=_enclosing_label(prog, pc))
     if loc is not None:
         return Where(pc, loc.file, loc.line, loc.text, _enclosing_label(prog, pc))
     try:
@@ -453,8 +457,9 @@ def cmd_upload(session: Session, argtext: str) -> None:
     program.check_fits(module, origin, len(prog))
     first, last = origin, origin + len(prog) - 1
     if not opts.get("--yes"):
-        session.confirm(f"overwrite the {module.name}'s program memory at {first}..{last} "
-                        f"with {len(prog)} instructions from {path.name}?")
+        session.confirm(f"{_running_note(session)}overwrite the {module.name}'s program "
+                        f"memory at {first}..{last} with {len(prog)} instructions from "
+                        f"{path.name}?")
     dbg = state(session)
     dbg.forget_memory()
     _not_repeating(session)
@@ -515,6 +520,20 @@ def cmd_upload(session: Session, argtext: str) -> None:
         _read_status(session)
     except TmclError:
         pass
+
+
+def _running_note(session: Session) -> str:
+    """The start of the upload question when the stored program runs: the download (132)
+    stops it, which the person answering should know. Read only when someone is asked."""
+    if session.yes or session.ask is None or not session.interactive:
+        return ""
+    try:
+        st = _read_status(session)
+    except TmclError:
+        return ""
+    if st.state != "run":
+        return ""
+    return f"the stored program is running (at @{st.pc}); the upload stops it. "
 
 
 def _keep_source(prog: asm.Program, module: str, origin: int, path: Path) -> None:
@@ -843,6 +862,11 @@ def cmd_continue(session: Session, argtext: str) -> None:
                                                                     bp.number})
     elif info.reason == "ended":
         report(session, st, prefix="program stopped:", extra=extra)
+    elif info.reason == "end":
+        report(session, st, prefix="end of the stored program, no breakpoint reached:",
+               extra=extra)
+        if not session.out.json:
+            session.out.info("  .reset or .run LABEL starts it again")
     else:
         report(session, st, prefix=f"{_plural(info.steps, 'step')}, no breakpoint:",
                extra=extra)
@@ -906,19 +930,27 @@ def cmd_list(session: Session, argtext: str) -> None:
         pc = _read_status(session).pc
     except TmclError:
         pc = dbg.last.pc if dbg.last is not None else None
-    if argtext.strip():
+    span = _span(session, argtext)
+    if span is not None:
+        center = span.first if not span.lines else 0
+    elif argtext.strip():
         center, _ = resolve(session, argtext, line_numbers=True)
     elif pc is not None:
         center = pc
     else:
         center = 0
     breaks = {bp.address for bp in dbg.breakpoints.values()}
-    rows = _listing(session, center, pc, breaks)
+    rows, before, after = _listing(session, center, pc, breaks, span)
     if session.out.json:
-        session.out.emit({"pc": pc, "lines": rows})
+        obj: dict[str, object] = {"pc": pc, "lines": rows}
+        if before or after:
+            obj["more"] = {"before": before, "after": after}
+        session.out.emit(obj)
         return
     from rich.text import Text
 
+    if before:
+        session.out.print("      ...", style="tmcl.note")
     for row in rows:
         mark = "->" if row["current"] else "  "
         bmark = "B" if row["break"] else " "
@@ -932,12 +964,57 @@ def cmd_list(session: Session, argtext: str) -> None:
         t.append(f"{addr:>6}  ", style="tmcl.name")
         t.append(str(row["text"]), style="bold" if row["current"] else "")
         _line(session, t)
+    if after:
+        session.out.print("      ...", style="tmcl.note")
 
 
-def _listing(session: Session, center: int, pc: int | None, breaks: set[int]) -> list[dict]:
+# `.list 1 8`, `.list 1,8`, `.list 1-8`, `.list 1..8`, `.list Loop @20`
+_RANGE = re.compile(r"(\S+?)\s*(?:\.\.|,|\s|(?<=\d)-(?=[\d$@]))\s*(\S+)")
+
+
+@dataclass
+class Span:
+    """A range typed to .list: source lines, or program addresses."""
+
+    first: int
+    last: int
+    lines: bool
+
+
+def _span(session: Session, argtext: str) -> Span | None:
+    """Source lines when the source is known and both ends are line numbers, else program
+    addresses; None when one location was typed."""
+    m = _RANGE.fullmatch(argtext.strip())
+    if m is None:
+        return None
+    a, b = m.group(1), m.group(2)
+    prog = state(session).program
+    lines = prog is not None and not prog.image and a.isdigit() and b.isdigit()
+    if lines:
+        first, last = int(a), int(b)
+    else:
+        first = resolve(session, a, line_numbers=False)[0]
+        last = resolve(session, b, line_numbers=False)[0]
+        ends = [prog.loc(x) for x in (first, last)] if prog is not None and not \
+            prog.image else [None]
+        if all(e is not None for e in ends) and ends[0].file == ends[-1].file:  # type: ignore
+            first, last, lines = ends[0].line, ends[-1].line, True  # type: ignore[union-attr]
+    if last < first:
+        raise ValidationError(f"empty range {a}..{b}: the first end comes after the last")
+    return Span(first, last, lines)
+
+
+def _listing(session: Session, center: int, pc: int | None, breaks: set[int],
+             span: Span | None = None) -> tuple[list[dict], bool, bool]:
+    """The rows to list, and whether lines were left out before and after them. A short
+    program is listed whole, a longer one in a window around ``center``, a span as typed."""
     dbg = state(session)
     prog = dbg.program
+    if span is not None and not span.lines:
+        center = span.first
     loc = prog.loc(center) if prog is not None and not prog.image else None
+    if span is not None and span.lines and prog is not None and prog.source:
+        loc = prog.source[0]
     if prog is not None and loc is not None:  # (an image's file holds bytes, not lines)
         lines = _source_lines(session, loc.file)
         addr_of: dict[int, int] = {}
@@ -945,26 +1022,41 @@ def _listing(session: Session, center: int, pc: int | None, breaks: set[int]) ->
             if sl.file == loc.file:
                 addr_of.setdefault(sl.line, prog.origin + idx)
         if lines is not None:
-            lo = max(1, loc.line - LIST_CONTEXT)
-            hi = min(len(lines), loc.line + LIST_CONTEXT)
+            if span is not None and span.lines:
+                lo, hi = max(1, span.first), min(len(lines), span.last)
+                if lo > hi:
+                    raise ValidationError(f"{_show_path(loc.file)} has {len(lines)} lines")
+            elif len(lines) <= SHORT_LISTING:
+                lo, hi = 1, len(lines)
+            else:
+                lo = max(1, loc.line - LIST_CONTEXT)
+                hi = min(len(lines), loc.line + LIST_CONTEXT)
             rows = []
             for n in range(lo, hi + 1):
                 addr = addr_of.get(n)
                 rows.append({"line": n, "address": addr, "text": lines[n - 1].rstrip(),
                              "current": addr is not None and addr == pc,
                              "break": addr is not None and addr in breaks})
-            return rows
+            return rows, lo > 1, hi < len(lines)
     module = session.module
-    lo = max(0, center - LIST_CONTEXT)
-    hi = min(module.program_memory - 1, center + LIST_CONTEXT)
+    # what there is to list: the known program, else all of memory
+    first, last = 0, module.program_memory - 1
+    if prog is not None and prog.origin <= center < prog.origin + len(prog):
+        first, last = prog.origin, prog.origin + len(prog) - 1
+    if span is not None and not span.lines:
+        lo, hi = span.first, span.last
+    elif last - first < SHORT_LISTING:
+        lo, hi = first, min(last + 1, module.program_memory - 1)  # (and where it ends)
+    else:
+        lo = max(0, center - LIST_CONTEXT)
+        hi = min(module.program_memory - 1, center + LIST_CONTEXT)
     rows = []
     for addr in range(lo, hi + 1):
         w = where(session, addr)
-        line = None if prog is not None and prog.image else w.line  # (a record, not a line)
         text = w.text or ("(no instruction stored)" if w.end else "?")
-        rows.append({"line": line, "address": addr, "text": text,
+        rows.append({"line": w.line, "address": addr, "text": text,
                      "current": addr == pc, "break": addr in breaks})
-    return rows
+    return rows, lo > first, hi < last
 
 
 @command(".display")

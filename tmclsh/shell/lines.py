@@ -10,7 +10,8 @@ wherever it is typed:
   ``quit`` and ``?`` bare), a dot-word no command has, or TMCL. The REPL, ``-c``, ``-f``
   and the checks before a run all go by that one reading.
 - ``;`` outside quotes separates lines (``help 4; help 5``), except after a command that owns
-  the rest of its line (``Command.owns_line``: ``.watch`` separates its expressions with ``;``).
+  the rest of its line (``Command.owns_line``: ``.watch`` separates its expressions with ``;``)
+  up to a ``;`` that another dot-command follows.
 
 A quote opens only at the start of a word, so the apostrophe in ``.echo don't`` is a letter.
 """
@@ -81,14 +82,27 @@ def split_line(text: str, owns_line: Callable[[str], bool] = owns_line) -> list[
     out: list[str] = []
     while rest:
         if owns_line(rest):
-            out.append(rest)
-            break
+            cut = _next_command(rest)
+            out.append(rest if cut is None else rest[:cut].strip())
+            rest = "" if cut is None else rest[cut + 1:].strip()
+            continue
         cut = next(separators(rest), None)
         head, rest = (rest, "") if cut is None else (rest[:cut], rest[cut + 1:])
         if head.strip():
             out.append(head.strip())
         rest = rest.strip()
     return out
+
+
+def _next_command(text: str) -> int | None:
+    """In a line a command owns: the ``;`` that a dot-command follows (``.decode 01 06; .decode
+    02 06``), which ends it all the same: its own pieces (bytes, expressions) never start
+    with a dot-command's name."""
+    for cut in separators(text):
+        after = text[cut + 1:].split(None, 1)
+        if after and after[0].startswith(".") and commands.find(after[0]) is not None:
+            return cut
+    return None
 
 
 def split_text(text: str, owns_line: Callable[[str], bool] = owns_line) -> list[str]:

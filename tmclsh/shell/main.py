@@ -19,7 +19,7 @@ def refused_line(session: Session, lines: list[str]) -> tuple[str, TmclError] | 
     of the first one running. Lines with ``${...}`` are checked when they run."""
     from ..base.errors import ValidationError
     from .lines import classify
-    from .session import unknown_command
+    from .session import encode_typed, unknown_command
 
     for raw in lines:
         line = classify(raw)
@@ -38,7 +38,7 @@ def refused_line(session: Session, lines: list[str]) -> tuple[str, TmclError] | 
         if not line.text or "${" in line.text:
             continue
         try:
-            session.client.encode(line.text)
+            encode_typed(session.client, line.text)
         except TmclError as exc:
             return raw, exc
     return None
@@ -59,6 +59,8 @@ def run_lines(session: Session, lines: list[str]) -> int:
     if progress is not None:
         progress(0, len(lines))
     for done, line in enumerate(lines, 1):
+        if progress is not None:  # the line being run, as its errors number it
+            progress(done, len(lines))
         try:
             session.ensure_link()  # the link was lost on an earlier line (--keep-going)
             session.run_line(line)
@@ -75,9 +77,6 @@ def run_lines(session: Session, lines: list[str]) -> int:
             except ModuleGoneError as gone:
                 session.report_error(None, gone)
                 return EXIT_CONNECT
-        finally:
-            if progress is not None:
-                progress(done, len(lines))
     if failed and refused and frames_sent(session.client) == sent:
         return EXIT_USAGE  # a file refused before anything was sent, as -f says of a script
     doubtful = session.stats.suspects > suspects or len(session.stats.shared) > shared

@@ -35,7 +35,7 @@ from ..tmcl import asm
 from ..tmcl import instructions as isa
 from ..client.text import Result
 from ..tmcl.modules import Module, Parameter, type1_of
-from ..tmcl.version import TYPE_FIRST, type1_bytes
+from ..tmcl.version import TYPE_FIRST, decode_type1, type1_bytes
 from ..tmcl.frames import Control, Instruction, Reply, Request, Status, status_text
 from .style import rich_theme
 
@@ -705,16 +705,20 @@ def prose_list(items, empty: str = "none") -> str:
     return ", ".join(words) if words else empty
 
 
-def version_text(value: int, module: Module | None) -> str:
-    """The value field read the way the module's manual lays out its four bytes:
-    ``05 1F 6F 00: module type 1311 (05 1F), version 111 (6F 00, low byte first)``."""
+def version_text(value: int, module: Module | None, layout: str | None = None) -> str:
+    """The value field read the way the module's manual lays out its four bytes (or as
+    ``layout`` says): ``05 1F 6F 00: module type 1311 (05 1F), version 111 (6F 00, low byte
+    first)``."""
     b = [f"{x:02X}" for x in (value & 0xFFFFFFFF).to_bytes(4, "big")]
     raw = " ".join(b)
-    decoded = type1_of(value, module)
+    if layout is None:
+        decoded = type1_of(value, module)
+        layout = module.version_layout if module is not None else TYPE_FIRST
+    else:
+        decoded = decode_type1(value, layout)
     if decoded is None:
         return f"{raw} (not a module type and version this module's manual describes)"
     kind, ver = decoded
-    layout = module.version_layout if module is not None else TYPE_FIRST
     kind_at, ver_at = type1_bytes(layout)
     low_first = "" if layout == TYPE_FIRST else ", low byte first"
     return (f"{raw}: module type {kind} ({' '.join(b[kind_at])}{low_first}), "

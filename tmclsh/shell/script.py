@@ -38,7 +38,7 @@ from ..client.ledger import CONFIRM_ROUNDS
 from . import commands, expr, options
 from .commands import command, options_of
 from .lines import classify, split_line
-from .session import QuitShell, check_substitutions, unknown_command
+from .session import QuitShell, check_substitutions, encode_typed, unknown_command
 
 if TYPE_CHECKING:
     from .session import Session
@@ -236,7 +236,7 @@ class Parser:
                 self.seen[text] = None
                 return Step(file, number, text)
             if self.precheck and "${" not in text:
-                self.session.client.encode(text)
+                encode_typed(self.session.client, text)
             # what Session.run_line would send as it is (see Step.plain)
             plain = self.seen[text] = text if "${" not in text else None
             return Step(file, number, text, plain)
@@ -439,7 +439,10 @@ class Runner:
     def __init__(self, session: Session, on_step: Callable[[], None] | None = None):
         self.session = session
         self.failed = False
+        self.stopped = False  # a failed line ended the run (no --keep-going)
         self.on_step = on_step
+        # told each node before it runs (its file and line), for a unit's "line reached"
+        self.on_node: Callable[[Node], None] | None = None
         self.interrupted_at: tuple[str, int] | None = None  # where Ctrl-C came (file, line)
 
     def run(self, nodes: Iterable[Node]) -> None:
@@ -450,6 +453,8 @@ class Runner:
         saved = session.location
         try:
             for node in nodes:
+                if self.on_node is not None:
+                    self.on_node(node)
                 # the fast path: a plain TMCL line, what most of a long script is (see step)
                 plain = node.plain if type(node) is Step else None  # type: ignore[attr-defined]
                 if plain is None or session.time_limit is not None or state.capture is not None:
@@ -608,17 +613,16 @@ def _progress(session: Session, name: str, nodes: list[Node]):
     return progress, advance
 
 
-def _counter(progress: Callable[[int, int], None], total: int) -> Callable[[], None]:
-    """A runner's ``on_step`` telling ``progress`` (steps done, steps in all), told the
-    total at once."""
-    done = 0
+def _line_counter(progress: Callable[[int, int], None], path: str,
+                  total: int) -> Callable[[Node], None]:
+    """A runner's ``on_node`` telling ``progress`` the line of ``path`` being run and the
+    file's line count: the numbers its errors' FILE:LINE use, so the two never disagree."""
     progress(0, total)
 
-    def step() -> None:
-        nonlocal done
-        done += 1
-        progress(done, max(total, done))
-    return step
+    def at(node: Node) -> None:
+        if node.file == path:  # (an included file's lines count as the line including it)
+            progress(node.line, total)
+    return at
 
 
 def run_file(session: Session, path: str) -> int:
@@ -626,6 +630,7 @@ def run_file(session: Session, path: str) -> int:
     start = time.monotonic()
     before = _counts(session)
     name = STDIN if path == "-" else path
+    written: list[str] = []
     runner = Runner(session)
     status, kind = EXIT_OK, SYNTAX
     try:
@@ -634,11 +639,12 @@ def run_file(session: Session, path: str) -> int:
             _run_nodes(runner, parser.nodes(_stdin_lines()))
         else:
             file = Path(path)
-            lines = as_replayed(session, path, read_lines(file, ScriptError))
+            written = read_lines(file, ScriptError)
+            lines = as_replayed(session, path, written)
             nodes = list(Parser(session, path, file.resolve().parent).nodes(lines))
             bar = _progress(session, path, nodes)
             if bar is None and session.progress is not None:
-                runner.on_step = _counter(session.progress, count_steps(nodes)[0])
+                runner.on_node = _line_counter(session.progress, path, len(written))
             if bar is None:
                 # results are written in batches, not flushed line by line (see Output.hold);
                 # not for stdin, whose writer may wait for each result before the next line
@@ -656,6 +662,7 @@ def run_file(session: Session, path: str) -> int:
     except ScriptError as exc:
         _report_plain(session, exc)
         status, kind = EXIT_USAGE, exc.kind
+        _backup_hint(session, path, written, stopped=True)
     except ModuleGoneError as exc:  # (--keep-going: line after line went unanswered)
         session.report_error(None, exc)
         status = EXIT_CONNECT
@@ -672,6 +679,8 @@ def run_file(session: Session, path: str) -> int:
     finally:
         session.location = None
     session.confirm_answers()  # (the last answer may show only now to be another's)
+    if runner.failed and status == EXIT_OK:
+        _backup_hint(session, path, written, stopped=runner.stopped)
     if status == EXIT_OK and (runner.failed or session.stats.suspects > before.suspects
                               or len(session.stats.shared) > before.shared):
         # a result that may be another request's is no pass, nor a run on an address two
@@ -686,10 +695,22 @@ def run_file(session: Session, path: str) -> int:
     return status
 
 
+def _backup_hint(session: Session, path: str, lines: list[str], *, stopped: bool) -> None:
+    """After a configuration backup's replay failed: what would do better (shell/clone.py)."""
+    if not lines or not lines[0].startswith("//"):
+        return
+    from .clone import replay_hint
+
+    hint = replay_hint(session, path, lines, stopped=stopped)
+    if hint is not None:
+        session.out.info(hint)
+
+
 def _run_nodes(runner: Runner, nodes: Iterable[Node]) -> None:
     try:
         runner.run(nodes)
     except _Stop:
+        runner.stopped = True
         runner.on_error()
     except QuitShell:
         pass
@@ -1091,10 +1112,14 @@ def cmd_wait(session: Session, args: str) -> None:
                                f"({seen})")
         err.record = record  # type: ignore[attr-defined]
         raise err from None
+    assert last is not None
+    elapsed = time.monotonic() - start
     if session.out.json:
-        assert last is not None
         session.out.emit({"line": f".wait {args}", **last.record(expression, True),
-                          "elapsed": round(time.monotonic() - start, 3)})
+                          "elapsed": round(elapsed, 3)})
+    else:  # said as .expect says a pass, with how long it took
+        session.out.print(f"reached after {elapsed:.2f} s: {expression.text} ({last.left})",
+                          style="tmcl.ok", markup=False)
 
 
 @command(".sleep")
@@ -1227,6 +1252,11 @@ def _is_read(session: Session, line: str) -> bool:
             and r.encoded.spec.reads)
 
 
+# the words that end a recording; they are never taken as a file name (a file called
+# `stop` is `./stop`)
+RECORD_OFF = ("off", "stop")
+
+
 @command(".record")
 def cmd_record(session: Session, args: str) -> None:
     current: Recorder | None = session.state.record  # type: ignore[assignment]
@@ -1239,7 +1269,7 @@ def cmd_record(session: Session, args: str) -> None:
     if current is not None:
         current.close()
         session.out.info(f"recorded {current.lines} lines to {current.path}")
-    if args.strip().lower() == "off":
+    if args.strip().lower() in RECORD_OFF:
         if current is None:
             session.out.info("not recording")
         return

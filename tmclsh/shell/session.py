@@ -21,8 +21,9 @@ from ..client.core import idempotent, shared_text
 from ..client.text import LineClient as Client
 from ..client.text import Result
 from ..link.framing import name_of as _name
-from ..base.errors import (EXIT_CONNECT, ChecksumError, ModuleGoneError, StatusError, TmclError,
-                           TmclTimeoutError, TransportError, ValidationError)
+from ..base.errors import (EXIT_CONNECT, AsmError, ChecksumError, ModuleGoneError, StatusError,
+                           TmclError, TmclTimeoutError, TransportError, ValidationError)
+from ..tmcl.frames import Request
 from ..tmcl.modules import Module
 from ..tmcl.status import OK_STATUSES
 from . import commands
@@ -51,6 +52,33 @@ def unknown_command(word: str) -> str:
     close = difflib.get_close_matches(word.lower(), names, n=3, cutoff=0.6)
     near = f"did you mean {', '.join(close)}? " if close else ""
     return f"unknown shell command {word!r}; {near}type .help for the list"
+
+def encode_typed(client: Client, text: str) -> asm.Encoded:
+    """``client.encode(text)`` for a line typed as TMCL; a word that is no TMCL command but a
+    dot-command's name without its dot (``clear``) is pointed to that command, rather than to
+    the mnemonic nearest in spelling (CLE, which clears a flag on the module)."""
+    try:
+        return client.encode(text)
+    except AsmError as exc:
+        raise _dot_command_meant(text, exc) from None
+
+
+def prepare_typed(client: Client, text: str) -> tuple[asm.Encoded, Request]:
+    """``client.prepare(text)``, with :func:`encode_typed`'s pointer to a dot-command."""
+    try:
+        return client.prepare(text)
+    except AsmError as exc:
+        raise _dot_command_meant(text, exc) from None
+
+
+def _dot_command_meant(text: str, exc: AsmError) -> TmclError:
+    word = text.split(None, 1)[0] if text.split() else ""
+    cmd = commands.find("." + word.lower()) if word.isalpha() else None
+    if cmd is None or not exc.message.startswith("unknown command"):
+        return exc
+    return ValidationError(f"{word!r} is not a TMCL command; did you mean {cmd.name}? "
+                           f"({cmd.help})")
+
 
 def reconnected(client) -> str:
     """The one wording of a link brought back, wherever it is said (the prompt, a script
@@ -439,7 +467,7 @@ class Session:
 
     def run_tmcl(self, text: str, *, show: bool = True) -> Result:
         client = self.client
-        enc, req = client.prepare(self.expand(text) if "${" in text else text)
+        enc, req = prepare_typed(client, self.expand(text) if "${" in text else text)
         spec = enc.spec
         if spec is None or spec.confirm:  # may refuse, or ask first
             self._before_sending(enc)

@@ -248,10 +248,11 @@ class Record:
 
     @property
     def line(self) -> int:
-        """The line reached: the one running, or the one it stopped at (all when passed)."""
+        """The line reached, numbered as the file's lines: the one running, or the one it
+        stopped at (all when passed)."""
         if self.total is None:
             return 0
-        return self.done if self.status == EXIT_OK else min(self.done + 1, self.total)
+        return self.total if self.status == EXIT_OK else self.done
 
     @property
     def reached(self) -> str:
