@@ -50,6 +50,7 @@ from ..tmcl.frames import AppState, Control, Instruction, Request, Status
 from ..client.core import shared_text
 from .certain import read_until_certain
 
+
 log = logging.getLogger(__name__)
 
 # GGP <type>, 0: the program's global parameters (bank 0)

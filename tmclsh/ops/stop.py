@@ -16,10 +16,10 @@ from dataclasses import dataclass, field
 
 from ..base.errors import StatusError, TmclError, ValidationError
 from ..client.ledger import CONFIRM_ROUNDS
-from .certain import read_until_certain
 from ..client.motion import Commanded
 from ..tmcl import instructions as isa
 from ..tmcl.frames import Control
+from .certain import read_until_certain
 from .program import GGP, GP_APPLICATION_STATUS, AppState, _ascii_control, _ok, _send
 
 
@@ -286,8 +286,6 @@ def _stop_everything(client, settle: float, sleep: Callable[[float], None]) -> S
             report.unknown[m] = str(exc)
     number = _speed_parameter(client)
     deadline = time.monotonic() + settle
-    first = pending
-
     def read(doubt: set[int] | None) -> dict[int, int]:
         """The speeds of the motors not known to be still (``doubt``: those whose 0 may
         have been another motor's, read again) -> which reply said 0 (Client.replies)."""
@@ -295,7 +293,7 @@ def _stop_everything(client, settle: float, sleep: Callable[[float], None]) -> S
             for m in doubt:
                 report.stopped.remove(m)
         zero_at: dict[int, int] = {}  # motor -> Client.replies when its speed read 0
-        _settle(client, report, first if doubt is None else sorted(doubt), zero_at, number,
+        _settle(client, report, pending if doubt is None else sorted(doubt), zero_at, number,
                 t, deadline, sleep)
         return {seq: m for m, seq in zero_at.items()}
 
