@@ -48,7 +48,8 @@ from ..tmcl.asm import Program
 from ..base.errors import StatusError, TmclError, TmclTimeoutError, TransportError, ValidationError
 from ..tmcl.frames import AppState, Control, Instruction, Request, Status
 from ..client.core import shared_text
-from ..client.ledger import CONFIRM_ROUNDS
+from .certain import read_until_certain
+
 
 log = logging.getLogger(__name__)
 
@@ -397,22 +398,20 @@ def verify_image(client, instructions: Sequence[Instruction], start: int = 0, *,
     where it matches. The client finds such a read out when the cell's own answer comes
     while nothing waits (a suspect); those cells are read again, ``CONFIRM_ROUNDS`` times
     at most. A cell still in doubt then is no pass (``Mismatch.doubtful``): verified means
-    certain (``Client.in_doubt`` is the check)."""
+    certain (``read_until_certain``, on ``Client.in_doubt``)."""
     total = len(instructions)
     got: dict[int, Instruction] = {}
-    todo: Sequence[int] = range(total)
-    doubtful: set[int] = set()
-    for round_ in range(1 + CONFIRM_ROUNDS):
+
+    def read(todo: set[int] | None) -> dict[int, int]:
         read_at: dict[int, int] = {}  # Client.replies after the read -> the cell's index
-        for n, idx in enumerate(todo):
+        for n, idx in enumerate(range(total) if todo is None else sorted(todo)):
             got[idx] = read_instruction(client, start + idx, timeout=timeout)
             read_at[client.replies] = idx
-            if progress is not None and round_ == 0:
+            if progress is not None and todo is None:
                 progress("verify", n + 1, total)
-        doubtful = client.in_doubt(read_at)
-        if not doubtful:
-            break
-        todo = sorted(doubtful)
+        return read_at
+
+    doubtful = read_until_certain(client, read).doubt
     shared = client.address in getattr(client, "shared", ())
     for idx, want in enumerate(instructions):
         if idx in doubtful:

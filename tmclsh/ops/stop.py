@@ -19,6 +19,7 @@ from ..client.ledger import CONFIRM_ROUNDS
 from ..client.motion import Commanded
 from ..tmcl import instructions as isa
 from ..tmcl.frames import Control
+from .certain import read_until_certain
 from .program import GGP, GP_APPLICATION_STATUS, AppState, _ascii_control, _ok, _send
 
 
@@ -285,21 +286,23 @@ def _stop_everything(client, settle: float, sleep: Callable[[float], None]) -> S
             report.unknown[m] = str(exc)
     number = _speed_parameter(client)
     deadline = time.monotonic() + settle
-    zero_at: dict[int, int] = {}  # motor -> Client.replies when its speed read 0
-    doubtful: list[int] = []
-    for _ in range(CONFIRM_ROUNDS):
-        _settle(client, report, pending, zero_at, number, t, deadline, sleep)
-        doubtful = sorted(client.in_doubt({seq: m for m, seq in zero_at.items()}))
-        if not doubtful:
-            break
-        for m in doubtful:  # read again: that 0 may have been another motor's
-            report.stopped.remove(m)
-            del zero_at[m]
-        pending = doubtful
-    else:
-        for m in doubtful:
-            report.unknown[m] = ("its speed read 0, but that answer may have been another "
-                                 "request's (the line brought a reply nothing was waiting for)")
+    def read(doubt: set[int] | None) -> dict[int, int]:
+        """The speeds of the motors not known to be still (``doubt``: those whose 0 may
+        have been another motor's, read again) -> which reply said 0 (Client.replies)."""
+        if doubt is not None:
+            for m in doubt:
+                report.stopped.remove(m)
+        zero_at: dict[int, int] = {}  # motor -> Client.replies when its speed read 0
+        _settle(client, report, pending if doubt is None else sorted(doubt), zero_at, number,
+                t, deadline, sleep)
+        return {seq: m for m, seq in zero_at.items()}
+
+    # (the first read and CONFIRM_ROUNDS - 1 more, as this loop has always done)
+    doubtful = read_until_certain(client, read, again=CONFIRM_ROUNDS - 1).doubt
+    for m in sorted(doubtful):
+        report.stopped.remove(m)
+        report.unknown[m] = ("its speed read 0, but that answer may have been another "
+                             "request's (the line brought a reply nothing was waiting for)")
     report.stopped.sort()
     return report
 

@@ -21,47 +21,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import NamedTuple
 
+from ..tmcl.textlines import comment_at, separators, strip_comment  # noqa: F401 (users of this file)
+from ..tmcl.textlines import split_line as _split_line
 from . import commands
-
-
-def _scan(text: str):
-    """``(index, char, quoted)`` for each character; ``quoted`` is True inside quotes."""
-    quote: str | None = None
-    for i, ch in enumerate(text):
-        if quote is not None:
-            yield i, ch, True
-            if ch == quote:
-                quote = None
-        elif ch in "\"'" and (i == 0 or text[i - 1].isspace() or text[i - 1] in "=(,"):
-            quote = ch
-            yield i, ch, True
-        else:
-            yield i, ch, False
-
-
-def comment_at(text: str) -> int | None:
-    """Where a ``//`` or ``#`` comment starts in ``text`` (None if it has none)."""
-    if "/" not in text and "#" not in text:
-        return None  # most lines of a script: nothing to scan for (a scan is per character)
-    for i, ch, quoted in _scan(text):
-        if quoted:
-            continue
-        if ch == "/" and text.startswith("//", i):
-            return i
-        if ch == "#" and (i == 0 or text[i - 1].isspace()):
-            return i
-    return None
-
-
-def separators(text: str):
-    """Where ``text`` has a ``;`` outside quotes, in order (the places a line may be cut)."""
-    return (i for i, ch, quoted in _scan(text) if ch == ";" and not quoted)
-
-
-def strip_comment(text: str) -> str:
-    """``text`` without its comment, stripped."""
-    at = comment_at(text)
-    return (text if at is None else text[:at]).strip()
 
 
 def owns_line(text: str) -> bool:
@@ -76,22 +38,7 @@ def split_line(text: str, owns_line: Callable[[str], bool] = owns_line) -> list[
 
     ``owns_line(line)`` tells whether a line starts with a command that takes the rest of
     the line, ``;`` included."""
-    rest = strip_comment(text)
-    if ";" not in rest:
-        return [rest] if rest else []  # what the loop below gives, without its scan
-    out: list[str] = []
-    while rest:
-        if owns_line(rest):
-            cut = _next_command(rest)
-            out.append(rest if cut is None else rest[:cut].strip())
-            rest = "" if cut is None else rest[cut + 1:].strip()
-            continue
-        cut = next(separators(rest), None)
-        head, rest = (rest, "") if cut is None else (rest[:cut], rest[cut + 1:])
-        if head.strip():
-            out.append(head.strip())
-        rest = rest.strip()
-    return out
+    return _split_line(text, owns_line, _next_command)
 
 
 def _next_command(text: str) -> int | None:

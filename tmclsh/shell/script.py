@@ -35,6 +35,7 @@ from ..base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_OK, EXIT_USAGE, AsmEr
                            ChecksumError, FrameError, ModuleGoneError, RangeError, TmclError,
                            TmclTimeoutError, ValidationError)
 from ..client.ledger import CONFIRM_ROUNDS
+from ..ops.certain import read_until_certain
 from . import commands, expr, options
 from .commands import command, options_of
 from .lines import classify, split_line
@@ -990,33 +991,43 @@ def judge(session: Session, expression: expr.Expression, *, again: bool = True,
     more exchange (136 type 1, ``confirm``) gives the chance to. A read in doubt is read
     again (the whole condition, ``CONFIRM_ROUNDS`` times at most, if ``again``).
     The suspects a check dealt with are taken from the client (not reported again)."""
-    answered: dict[int, str] = {}
-    tries = 0
     # ASCII replies carry no checksum: the client reads settings twice, but motion state and
     # inputs once, so the condition itself must come out the same on two evaluations
     twice = getattr(session.client, "mode", "binary") == "ascii"
+    answered: dict[int, str] = {}
+    seen: list[tuple[bool, str, str, dict[str, expr.Number]]] = []  # each evaluation
     outcome: bool | None = None
-    for tries in range(1, 2 + (CONFIRM_ROUNDS if again else 0) + twice):
+
+    def evaluate(_doubt: set[str] | None) -> dict[int, str]:
         ctx = expr.TrackedContext(session)
         try:
             ok, left, right = check(expression, ctx)
+            seen.append((ok, left, right, dict(ctx.trace)))
         finally:
             answered.update(ctx.answered)
-        doubt = session.client.in_doubt(ctx.answered, confirm=confirm)
+        return ctx.answered
+
+    def settled(doubt: set[str]) -> bool:
+        nonlocal outcome
         if doubt:
             outcome = None
-            continue
+            return False
+        ok = seen[-1][0]
         if twice and outcome is not ok:
             outcome = ok
-            continue
-        break
-    else:
-        if twice and not doubt:  # the evaluations never agreed twice in a row
-            session.client.settle(answered)
-            return Judged(ok, left, right, [expression.text], answered, tries,
-                          values=dict(ctx.trace), disagreed=True)
+            return False
+        return True
+
+    found = read_until_certain(session.client, evaluate, confirm=confirm,
+                               confirm_again=confirm, accept=settled,
+                               again=(CONFIRM_ROUNDS if again else 0) + twice)
+    ok, left, right, values = seen[-1]
     session.client.settle(answered)
-    return Judged(ok, left, right, sorted(doubt), answered, tries, values=dict(ctx.trace))
+    if twice and not found.accepted and not found.doubt:  # never agreed twice in a row
+        return Judged(ok, left, right, [expression.text], answered, found.again + 1,
+                      values=values, disagreed=True)
+    return Judged(ok, left, right, sorted(found.doubt), answered, found.again + 1,
+                  values=values)
 
 
 def _side(node: expr.Node, ctx: expr.SessionContext) -> str:

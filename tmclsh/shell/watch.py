@@ -48,6 +48,7 @@ from typing import TYPE_CHECKING, TextIO
 from ..base import clock, files
 from ..base.errors import TmclError, TransportError, ValidationError
 from ..client.ledger import CONFIRM_ROUNDS
+from ..ops.certain import read_until_certain
 from . import expr, lines, plot, script
 from . import options
 from .commands import command, options_of
@@ -201,6 +202,10 @@ def poll(session: Session, items: Sequence[Item], t: float) -> Sample:
     return reading.sample()
 
 
+class _Lost(Exception):
+    """The link was lost while reading again (the sample ends: ``_Reading.lost``)."""
+
+
 class _Reading:
     """One sample's reads, with the reply that answered each (``expr.TrackedContext``), so
     a read whose answer is found in doubt can be read again or marked."""
@@ -249,23 +254,33 @@ class _Reading:
         if self.lost is not None or self.judged:
             return
         session, ctx = self.session, self.ctx
-        doubt = session.client.in_doubt(ctx.answered, confirm=confirm)
-        self.judged = confirm or followed or not expr.can_doubt(session)
-        rounds = 0
-        while doubt and again and rounds < CONFIRM_ROUNDS:
-            rounds += 1
+        client = session.client
+
+        def read(doubt: set[str] | None) -> dict[int, str]:
+            """Read the reads in doubt again: every item that used one is evaluated again
+            (the others' reads come from this sample's cache)."""
+            assert doubt is not None and ctx.cache is not None
             self.reread += len(doubt)
-            session.client.settle(ctx.answered)
+            client.settle(ctx.answered)
             for seq in [q for q, text in ctx.answered.items() if text in doubt]:
                 del ctx.answered[seq]
             for text in doubt:
-                assert ctx.cache is not None
                 ctx.cache.pop(text, None)
+            before = set(ctx.answered)
             for item in self.items:
                 if self.uses.get(item.name, set()) & doubt and not self._evaluate(item):
-                    return
-            doubt = session.client.in_doubt(ctx.answered, confirm=True)
-            self.judged = True
+                    raise _Lost
+            return {q: text for q, text in ctx.answered.items() if q not in before}
+
+        try:
+            found = read_until_certain(client, read, first=dict(ctx.answered), confirm=confirm,
+                                       again=CONFIRM_ROUNDS if again else 0)
+        except _Lost:
+            self.judged = confirm or followed or not expr.can_doubt(session)
+            return
+        doubt = found.doubt
+        self.judged = (confirm or followed or not expr.can_doubt(session)
+                       or found.again > 0)
         if doubt:
             names = [i.name for i in self.items if self.uses.get(i.name, set()) & doubt]
             for name in names:
