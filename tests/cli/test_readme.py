@@ -233,7 +233,7 @@ def test_the_ascii_mode_rescue_works(tmp_path):
 def test_the_first_command_piped_needs_sim_as_ci_gives_it(tmp_path):
     """What the README's first line ends with: the installed `tmclsh`, no module attached,
     fed a line on stdin as .ci/run does. Piped input is no person at the prompt: without
-    --sim it exits 3 (the interactive fallback is tested in a terminal, test_connect_trust)."""
+    --sim it exits 3 (the interactive fallback is tested in a terminal, tests/client/test_connect.py)."""
     exe = Path(sys.executable).with_name("tmclsh")
     if not exe.exists():
         pytest.skip("tmclsh is not installed beside this Python")

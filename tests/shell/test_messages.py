@@ -1,4 +1,5 @@
-"""Issue 23, section 5 ("smaller things seen on the way"), each tried as a user would: through
+"""What scripts say when something is off (a backup that cannot be made, a module of another
+type, a wait that times out, an extra operand), each tried as a user would: through
 ``tmclsh -c``/``-f`` against a module written from the manual's byte tables
 (tests/responder.py, which imports nothing of tmclsh) or the simulator served on a pty.
 """
