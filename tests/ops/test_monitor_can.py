@@ -130,7 +130,7 @@ def test_logs_of_every_format_python_can_writes(tmp_path, capsys, suffix):
     objs = objects(capsys.readouterr().out)
     got = frames(objs)
     assert [o["frame"] for o in got] == ["request", "reply"] * 7 + [
-        "event", "request", "other", "unanswered"]
+        "event", "request", "no-reply", "other"]
     assert got[1]["version"] == "1311V111"
     assert (got[2]["line"], got[2]["param"], got[3]["value"]) == (
         "GAP 1, 0", "ActualPosition", -5000)
@@ -143,10 +143,12 @@ def test_logs_of_every_format_python_can_writes(tmp_path, capsys, suffix):
     assert got[14]["event"] == 138 and got[14]["motors"] == [0]
     assert (got[15]["op"], got[15]["type"], got[15]["motor"]) == (242, 0x81, 0x92)
     assert got[15]["bytes"] == "f2 81 92 a3 b4 c5 d6"
-    assert got[16]["can_id"] == 0x300
-    assert got[17]["op"] == 242 and "no reply" in got[17]["note"]
+    # 242 answers nothing by design (the instruction set's reply = "none"): no error
+    assert got[16]["op"] == 242 and got[16]["note"] == "no reply expected"
+    assert got[17]["can_id"] == 0x300
     s = objs[-1]["summary"]
     assert (s["requests"], s["replies"], s["events"], s["other"]) == (8, 7, 1, 1)
+    assert s["unanswered"] == 0
     assert s["statuses"] == {"2": 1, "4": 1, "100": 5}
     assert s["modules"] == {"1": "TMCM-1311 (1311V111)"}
 

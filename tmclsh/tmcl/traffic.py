@@ -10,7 +10,7 @@ instead of spelling out command numbers.
 from __future__ import annotations
 
 from . import instructions as isa
-from .frames import Control, Instruction, Reply, ReplyKind, reply_kind
+from .frames import Control, Instruction, Reply, ReplyKind
 from .status import Status
 
 STATUSES = frozenset(int(s) for s in Status)
@@ -31,8 +31,9 @@ def is_event(status: int, opcode: int) -> bool:
 
 
 def expects(ins: Instruction) -> ReplyKind:
-    """How the answer to this request is laid out (or that none comes)."""
-    return reply_kind(ins.opcode, ins.type)
+    """How the answer to this request is laid out, or that none comes by design (137, and
+    the bootloader's 242 and 205: the instruction set's ``reply = "none"``)."""
+    return isa.reply_kind(ins.opcode, ins.type)
 
 
 def plausible_request(frame: bytes | bytearray) -> bool:
