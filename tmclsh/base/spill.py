@@ -22,11 +22,17 @@ log = logging.getLogger(__name__)
 class Spill:
     """``put`` hands ``thing`` to ``take`` on the worker thread, in order; beyond ``bound``
     things waiting, ``put`` drops it and counts it in ``dropped``. ``take`` failing is
-    logged and the worker goes on (what describes traffic must not end it)."""
+    logged and the worker goes on (what describes traffic must not end it).
 
-    def __init__(self, take: Callable[[Any], None], bound: int, name: str = "spill"):
+    ``poll``: the worker looks for new things this often (seconds) instead of being woken
+    for each: ``put`` is then a bare append, no system call and no thread woken on the
+    giver's path, and the worker takes what came meanwhile in one go."""
+
+    def __init__(self, take: Callable[[Any], None], bound: int, name: str = "spill",
+                 poll: float | None = None):
         self.take = take
         self.bound = bound
+        self.poll = poll
         self.dropped = 0
         self._items: deque[Any] = deque()
         self._ready = threading.Condition(threading.Lock())
@@ -36,12 +42,15 @@ class Spill:
 
     def put(self, thing: Any) -> bool:
         """False (and counted) when dropped."""
-        with self._ready:
-            if len(self._items) >= self.bound or self._closing:
+        items = self._items
+        if len(items) >= self.bound or self._closing:
+            with self._ready:
                 self.dropped += 1
-                return False
-            self._items.append(thing)
-            self._ready.notify()
+            return False
+        items.append(thing)  # (atomic: several givers may put at once)
+        if self.poll is None:
+            with self._ready:
+                self._ready.notify()
         return True
 
     @property
@@ -49,18 +58,20 @@ class Spill:
         return len(self._items)
 
     def _work(self) -> None:
-        items, ready = self._items, self._ready
+        items, ready, take = self._items, self._ready, self.take
         while True:
-            with ready:
-                while not items and not self._closing:
-                    ready.wait()
+            if not items:
+                with ready:
+                    while not items and not self._closing:
+                        ready.wait(self.poll)
                 if not items:
                     return
+            while items:
                 thing = items.popleft()
-            try:
-                self.take(thing)
-            except Exception:
-                log.exception("taking what was handed over failed")
+                try:
+                    take(thing)
+                except Exception:
+                    log.exception("taking what was handed over failed")
 
     def close(self, timeout: float | None = None) -> int:
         """Take nothing more; the worker takes what waits (for at most ``timeout`` seconds,

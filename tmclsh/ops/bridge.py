@@ -49,6 +49,7 @@ CAN_TX, CAN_RX, NOISE, LOST = "can-tx", "can-rx", "noise", "lost"
 
 Heard = Callable[[tuple], None]
 NOTES = 200_000  # things forwarded that may wait to be told before the newest are not told
+TELL_EVERY = 0.002  # s between the teller's looks: forwarding only appends, wakes nobody
 
 
 class _Target:
@@ -78,7 +79,7 @@ class _Bridge:
 
         self.heard = heard
         self.lock = threading.Lock()
-        self._notes = Spill(self._tell, NOTES, name="bridge-teller")
+        self._notes = Spill(self._tell, NOTES, name="bridge-teller", poll=TELL_EVERY)
         self._closed = threading.Event()
         self.target = _Target(self._from_master)
         if pty:

@@ -29,6 +29,9 @@ from .monitor import (Limits, View, _capture, end_live_output, interruptible, li
                       load_module, off_the_wire, restore, show_items)
 
 
+FORWARDING_SWITCH = 0.0002  # s a thread may hold the interpreter while another waits
+
+
 def run_bridge(args) -> int:
     module = load_module(getattr(args, "module", None))
     monitor = Monitor(module, timeout=getattr(args, "timeout", None) or 1.0)
@@ -77,9 +80,15 @@ def run_bridge(args) -> int:
     sys.stdout.flush()
     print(f"bridging {bridge.endpoint} <-> {transport.describe()}; Ctrl-C ends",
           file=sys.stderr, flush=True)
+    # the forwarding threads wait for the interpreter while the teller reads and shows
+    # what was forwarded: a short switch interval bounds that wait (the default 5 ms would
+    # be the forwarding's worst case)
+    switch = sys.getswitchinterval()
+    sys.setswitchinterval(FORWARDING_SWITCH)
     try:
         _forward(bridge, told)
     finally:
+        sys.setswitchinterval(switch)
         close_capture()
         monitor.summary.capture_dropped = capture_dropped()
         monitor.summary.untold = bridge.untold
