@@ -79,6 +79,7 @@ class _Bridge:
 
         self.heard = heard
         self.lock = threading.Lock()
+        self.told_at = time.monotonic()
         self._notes = Spill(self._tell, NOTES, name="bridge-teller", poll=TELL_EVERY)
         self._closed = threading.Event()
         self.target = _Target(self._from_master)
@@ -104,6 +105,14 @@ class _Bridge:
     def _tell(self, event: tuple) -> None:
         with self.lock:
             self.heard(event)
+        self.told_at = time.monotonic()
+
+    def quiet_for(self) -> float:
+        """Seconds since the last thing forwarded was told, 0 while some wait to be told:
+        only a line quiet this long has partial frames (a chunk may still be on its way)."""
+        if self._notes.waiting:
+            return 0.0
+        return time.monotonic() - self.told_at
 
     def _to_master(self, data: bytes) -> None:
         out = self.target.on_output

@@ -153,8 +153,10 @@ def _forward(bridge, told: _Told) -> None:
     try:
         try:
             while not told.done.wait(TICK):
+                quiet = bridge.quiet_for() >= TICK  # (else bytes may still be told)
                 with bridge.lock:
-                    told.show(told.reader.quiet(time.time()))
+                    now = time.time()
+                    told.show(told.reader.quiet(now) if quiet else told.monitor.expire(now))
         except KeyboardInterrupt:
             pass
         finally:
