@@ -1417,6 +1417,151 @@ def bench_bridge(args: argparse.Namespace) -> dict:
                f"{floor:.0f} us straight to the simulator")
 
 
+# a minimal forwarder, the floor a bridge is held to (issue 34): a pty for the master, the
+# module's pty, one select loop copying bytes both ways and nothing else
+FORWARDER = r"""
+import os, select, sys, tty
+m, s = os.openpty()
+tty.setraw(s)
+print(os.ttyname(s), flush=True)
+fd = os.open(sys.argv[1], os.O_RDWR | os.O_NOCTTY)
+tty.setraw(fd)
+while True:
+    for src in select.select([m, fd], [], [])[0]:
+        os.write(fd if src == m else m, os.read(src, 4096))
+"""
+FORWARDER_RATIO = 2.0  # the issue's target: the bridge adds at most twice what it adds
+
+
+def _started(proc: subprocess.Popen, what: str) -> str:
+    assert proc.stdout is not None
+    line = proc.stdout.readline().strip()
+    if not line:
+        raise RuntimeError(f"the {what} did not start")
+    return line
+
+
+def _p99(values: list[float]) -> float:
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(0.99 * len(ordered)))]
+
+
+@benchmark("bridge-forwarder", "added latency (median, p99) of tmclsh bridge --pty vs a minimal "
+                               "Python select-loop forwarder, same run (target: <= 2x)")
+def bench_bridge_forwarder(args: argparse.Namespace) -> dict:
+    """What ``tmclsh bridge`` (its lines read and dropped) adds to a raw pyserial GAP round
+    trip, against what a minimal select-loop forwarder in Python adds, each in front of its
+    own simulator, with blocks straight to a third simulator around each (``bracket``):
+    added = a path block's median (or p99) minus the mean of the raw blocks' either side,
+    the median of that over the pairs (this machine's floor drifts within seconds)."""
+    block = max(50, args.count // 10)
+    pairs = args.pairs or 4 * args.rounds
+    frame = gap_frame()
+    with SimProcess(args.module) as direct, SimProcess(args.module) as fsim, \
+            SimProcess(args.module) as bsim, open(os.devnull, "w") as sink:
+        fwd = subprocess.Popen([sys.executable, "-c", FORWARDER, fsim.path],
+                               stdout=subprocess.PIPE, stderr=sink, text=True)
+        bridge = subprocess.Popen(tmclsh_cmd("bridge", "--pty", "--port", bsim.path, "--baud",
+                                             str(BAUD)), stdout=subprocess.PIPE, stderr=sink,
+                                  text=True, env=tree_env(args), cwd=args.state_dir)
+        drain = None
+        try:
+            fwd_path, bridge_path = _started(fwd, "forwarder"), _started(bridge, "bridge")
+            drain = subprocess.Popen(["cat"], stdin=bridge.stdout, stdout=sink)
+            with RawPort(direct.path) as raw, RawPort(fwd_path) as f, \
+                    RawPort(bridge_path) as b:
+                for port in (raw, f, b):
+                    port.round_trips([frame], 200)
+
+                def raw_block(_: int) -> Block:
+                    lat = raw.round_trips([frame], block)
+                    return {"us": statistics.median(lat) * 1e6, "p99": _p99(lat) * 1e6}
+
+                def paths_block(_: int) -> Block:
+                    out = {}
+                    for name, port in (("forwarder", f), ("bridge", b)):
+                        lat = port.round_trips([frame], block)
+                        out[name] = statistics.median(lat) * 1e6
+                        out[name + "-p99"] = _p99(lat) * 1e6
+                    return out
+
+                say(f"bridge-forwarder: {pairs} pairs of {block} GAP round trips, raw | "
+                    f"forwarder, bridge ({load_note()})")
+                raws, paths = bracket(pairs, raw_block, paths_block, args.verbose)
+        finally:
+            for proc in (bridge, fwd):
+                proc.terminate()
+                proc.wait(10)
+            if drain is not None:
+                drain.wait(10)
+    added = {name: statistics.median(p[name] - (a["us"] + c["us"]) / 2
+                                     for p, a, c in zip(paths, raws, raws[1:]))
+             for name in ("forwarder", "bridge")}
+    p99 = {name: statistics.median(p[name + "-p99"] - (a["p99"] + c["p99"]) / 2
+                                   for p, a, c in zip(paths, raws, raws[1:]))
+           for name in ("forwarder", "bridge")}
+    ratio = added["bridge"] / max(added["forwarder"], 1.0)
+    ratio99 = p99["bridge"] / max(p99["forwarder"], 1.0)
+    say(f"  added, median: forwarder {added['forwarder']:.1f} us, bridge "
+        f"{added['bridge']:.1f} us ({ratio:.2f}x); p99: forwarder {p99['forwarder']:.1f} us, "
+        f"bridge {p99['bridge']:.1f} us ({ratio99:.2f}x)")
+    result = {"benchmark": "bridge-forwarder",
+              "forwarder_added_us": round(added["forwarder"], 1),
+              "bridge_added_us": round(added["bridge"], 1),
+              "forwarder_added_p99_us": round(p99["forwarder"], 1),
+              "bridge_added_p99_us": round(p99["bridge"], 1)}
+    result["rows"] = [row({}, "bridge: added p99 / a select-loop forwarder's", ratio99, "x",
+                          FORWARDER_RATIO, f"{p99['bridge']:.0f} us vs "
+                                           f"{p99['forwarder']:.0f} us")]
+    return row(result, "bridge: added median / a select-loop forwarder's", ratio, "x",
+               FORWARDER_RATIO, f"{added['bridge']:.0f} us vs {added['forwarder']:.0f} us")
+
+
+@benchmark("bridge-unread", "timeouts the other master sees while tmclsh bridge's stdout is "
+                            "not read, for --count exchanges (target: 0)")
+def bench_bridge_unread(args: argparse.Namespace) -> dict:
+    """``tmclsh bridge --pty --json`` with its stdout a pipe nobody reads (a paused pager):
+    round trips of a raw pyserial master through it, and the replies that did not come
+    within a second (after three, the rest are not tried); the lines the bridge dropped,
+    from its summary once the pipe is read at the end."""
+    n = args.count
+    frame = gap_frame()
+    with SimProcess(args.module) as behind:
+        bridge = subprocess.Popen(tmclsh_cmd("bridge", "--pty", "--port", behind.path, "--baud",
+                                             str(BAUD), "--json"), stdout=subprocess.PIPE,
+                                  stderr=subprocess.DEVNULL, text=True, env=tree_env(args),
+                                  cwd=args.state_dir)
+        timeouts = done = 0
+        try:
+            endpoint = _started(bridge, "bridge")
+            with RawPort(endpoint) as port:
+                port.ser.timeout = 1.0
+                say(f"bridge-unread: {n} exchanges, the bridge's stdout not read ({load_note()})")
+                for done in range(1, n + 1):
+                    port.ser.write(frame)
+                    if len(port.ser.read(9)) < 9:
+                        timeouts += 1
+                        if timeouts >= 3:
+                            break
+            bridge.terminate()
+            out, _ = bridge.communicate(timeout=60)
+        finally:
+            if bridge.poll() is None:
+                bridge.kill()
+                bridge.wait()
+    try:
+        summary = json.loads(out.splitlines()[-1])["summary"]
+    except (ValueError, KeyError, IndexError):
+        summary = {}
+    dropped = summary.get("dropped_lines")
+    say(f"  {done} exchanges, {timeouts} timeouts; the bridge dropped {dropped} lines and "
+        f"counted {summary.get('requests')} requests")
+    return row({"benchmark": "bridge-unread", "exchanges": done, "timeouts": timeouts,
+                "dropped_lines": dropped},
+               f"bridge, stdout not read: timeouts in {n} exchanges", timeouts, "", 0,
+               f"{dropped} lines dropped, counted")
+
+
 # -- entry point ------------------------------------------------------------------------------
 
 def print_table(results: list[dict], tree: Path) -> None:

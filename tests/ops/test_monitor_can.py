@@ -130,7 +130,7 @@ def test_logs_of_every_format_python_can_writes(tmp_path, capsys, suffix):
     objs = objects(capsys.readouterr().out)
     got = frames(objs)
     assert [o["frame"] for o in got] == ["request", "reply"] * 7 + [
-        "event", "request", "other", "unanswered"]
+        "event", "request", "no-reply", "other"]
     assert got[1]["version"] == "1311V111"
     assert (got[2]["line"], got[2]["param"], got[3]["value"]) == (
         "GAP 1, 0", "ActualPosition", -5000)
@@ -143,10 +143,12 @@ def test_logs_of_every_format_python_can_writes(tmp_path, capsys, suffix):
     assert got[14]["event"] == 138 and got[14]["motors"] == [0]
     assert (got[15]["op"], got[15]["type"], got[15]["motor"]) == (242, 0x81, 0x92)
     assert got[15]["bytes"] == "f2 81 92 a3 b4 c5 d6"
-    assert got[16]["can_id"] == 0x300
-    assert got[17]["op"] == 242 and "no reply" in got[17]["note"]
+    # 242 answers nothing by design (the instruction set's reply = "none"): no error
+    assert got[16]["op"] == 242 and got[16]["note"] == "no reply expected"
+    assert got[17]["can_id"] == 0x300
     s = objs[-1]["summary"]
     assert (s["requests"], s["replies"], s["events"], s["other"]) == (8, 7, 1, 1)
+    assert s["unanswered"] == 0
     assert s["statuses"] == {"2": 1, "4": 1, "100": 5}
     assert s["modules"] == {"1": "TMCM-1311 (1311V111)"}
 
@@ -224,3 +226,90 @@ def test_what_the_command_line_refuses(run_tmclsh):
     assert r.returncode == 3 and "Traceback" not in r.stderr
     r = run_tmclsh("monitor", "--log", "missing.asc")
     assert r.returncode == 1 and "missing.asc" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_a_reply_of_eight_data_bytes_reads_the_same_everywhere(tmp_path, capsys):
+    """A TMCM-1260 answers with DLC 8 (its seven bytes and their sum): the client, the
+    monitor (a log of it), the bridge (a serial master to the CAN module) and ``.decode``
+    read the same reply: module 1, status 100, GAP, value 1000; nothing called unanswered."""
+    import serial
+    from responder import CanModule
+
+    from tmclsh.client.connect import connect
+    from tmclsh.shell.trace import decode_hex
+
+    captured = bytes.fromhex("01 64 06 00 00 03 e8 56")  # 7 bytes, then their sum
+    # .decode, of the candump line a user pastes
+    (_, readings), = decode_hex("can0  002   [8]  01 64 06 00 00 03 E8 56", None)
+    assert readings[0].plausible and "1000" in readings[0].text
+    assert "status 100" in readings[0].text or "ok" in readings[0].text
+    # the monitor, reading a log of the exchange
+    path = tmp_path / "eight.asc"
+    with can.Logger(str(path)) as log:
+        log.on_message_received(msg(T0, 1, instruction(6, 4)))
+        log.on_message_received(msg(T0 + 0.001, 2, captured))
+    assert cli.main(["monitor", "--log", str(path), "--json"]) == 0
+    objs = objects(capsys.readouterr().out)
+    (req, rep) = frames(objs)
+    assert (rep["frame"], rep["op"], rep["status"], rep["value"]) == ("reply", 6, 100, 1000)
+    assert objs[-1]["summary"]["unanswered"] == 0 and objs[-1]["summary"]["other"] == 0
+    # the client and the bridge, against a module that answers so
+    channel = "eight-everywhere"
+    bus = can.Bus(interface="virtual", channel=channel)
+    module = CanModule(bus, version="1311V111", eighth="sum")
+    module.values[(4, 0, False)] = 1000
+    try:
+        c = connect(can=f"virtual:{channel}", timeout=1)
+        try:
+            assert c.value("GAP 4, 0") == 1000
+        finally:
+            c.close()
+        from test_bridge import _free_port, request
+
+        port_no = _free_port()
+        rc: list[int] = []
+        thread = threading.Thread(target=lambda: rc.append(cli.main(
+            ["bridge", "--tcp", f"127.0.0.1:{port_no}", "--can", f"virtual:{channel}",
+             "--json", "--count", "2"])))
+        thread.start()
+        deadline = time.monotonic() + 10
+        while True:
+            try:
+                port = serial.serial_for_url(f"socket://127.0.0.1:{port_no}", timeout=5)
+                break
+            except serial.SerialException:
+                assert time.monotonic() < deadline
+                time.sleep(0.05)
+        with port:
+            port.write(request(1, 6, 4))
+            got = port.read(9)
+        thread.join(20)
+    finally:
+        module.close()
+        bus.shutdown()
+    assert got == bytes([2, 1, 100, 6, 0, 0, 3, 0xE8]) + bytes([sum(got[:8]) & 0xFF])
+    assert rc == [0]
+    objs = objects("\n".join(line for line in capsys.readouterr().out.splitlines()
+                             if line.startswith("{")))
+    (req, rep) = frames(objs)
+    assert (rep["frame"], rep["op"], rep["status"], rep["value"]) == ("reply", 6, 100, 1000)
+
+
+def test_requests_sent_ahead_of_their_replies_are_paired_in_order():
+    """Three requests to one id before the first reply: each reply answers its own; a
+    request whose module answered a later one instead got no answer (and says so)."""
+    from tmclsh.ops.monitor import CanReader, Exchange, Monitor
+
+    reader = CanReader(Monitor())
+    items = []
+    for i, cmd in enumerate((6, 5, 6, 10)):
+        items += reader.feed(T0 + i * 0.001, 1, instruction(cmd, 4, 0, i))
+    for i, (cmd, value) in enumerate(((6, 7), (5, 1), (10, 9))):  # (the second GAP: none)
+        items += reader.feed(T0 + 0.01 + i * 0.001, 2, answer(cmd, value))
+    ex = [x for x in items if isinstance(x, Exchange)]
+    assert [(x.request.instruction.value, x.reply.reply.value if x.reply else x.note)
+            for x in ex] == [(0, 7), (1, 1),
+                             (2, "no reply: a later request to this module was answered"),
+                             (3, 9)]
+    s = reader.monitor.summary
+    assert (s.unanswered, s.late, s.unpaired) == (1, 0, 0)

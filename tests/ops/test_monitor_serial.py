@@ -298,3 +298,41 @@ def test_a_tap_that_goes_away_ends_the_run_with_its_summary():
     assert proc.returncode == 1, err
     assert "GAP 1, 0  =>  100 ok, GAP value 7" in out
     assert "tmclsh: lost " in err and "2 frames in" in err and "Traceback" not in err
+
+
+def test_a_live_tap_whose_output_nobody_reads_keeps_reading_the_line():
+    """``monitor --port`` with its stdout a pipe nobody reads: it still reads the line as
+    fast as it comes (the bytes on the tap never back up) and counts every frame; the lines
+    nobody took are dropped and counted."""
+    import threading
+
+    tap_master, tap_slave = os.openpty()
+    tty.setraw(tap_slave)
+    proc = _monitor("--port", os.ttyname(tap_slave), "--json")
+    n = 3000
+    chunk = b"".join(request(1, 6, 4, 0, 0) + reply(6, i) for i in range(100))
+    done = threading.Event()
+
+    def line() -> None:  # (a write blocks when the tap stops reading: the pty fills up)
+        for _ in range(n // 100):
+            os.write(tap_master, chunk)
+            time.sleep(0.01)
+        done.set()
+    try:
+        _wait_listening(proc)
+        threading.Thread(target=line, daemon=True).start()
+        assert done.wait(120), "the tap stopped reading the line"
+        time.sleep(1.5)  # (the last requests' replies are read; nothing waits)
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+        os.close(tap_master)
+        os.close(tap_slave)
+    assert proc.returncode == 0, err
+    summary = json.loads(out.splitlines()[-1])["summary"]
+    assert (summary["requests"], summary["replies"], summary["unanswered"]) == (n, n, 0)
+    shown = sum(1 for text in out.splitlines() if '"frame"' in text)
+    assert summary["dropped_lines"] > 0 and shown + summary["dropped_lines"] == 2 * n

@@ -475,7 +475,12 @@ _SUB_NOTES = {
               "status-1 answer. It runs until interrupted; then, as tmclsh does "
               "for its own commands, it stops a motor or stored program the traffic "
               "started, ends download mode and leaves ASCII mode the traffic entered, and "
-              "prints the summary; -o keeps the frames of that closing stop too. Exit status 0; 1 when the module's link goes away; 3 "
+              "prints the summary; -o keeps the frames of that closing stop too. Forwarding comes first: what is shown is read on another "
+              "thread, and when nothing reads the output (a paused pager, a full pipe) lines "
+              "are dropped and counted (\"dropped_lines\" in the JSON summary), never "
+              "frames; the counts stay whole. A request that answers nothing by design "
+              "(137, 242, 205) is no error, and requests sent ahead of their replies are "
+              "each paired with their own. Exit status 0; 1 when the module's link goes away; 3 "
               "when the module's port or bus cannot be opened or the bridge cannot serve.",
 }
 

@@ -21,7 +21,8 @@ import time
 from typing import TYPE_CHECKING, Protocol
 
 from ..base.errors import ChecksumError, TmclTimeoutError
-from ..tmcl.decoder import FRAME, FRAME_PIECE, NOISE, FrameDecoder, is_frame, is_version_string
+from ..tmcl.decoder import (CAN_VERSION, FRAME, FRAME_PIECE, NOISE, FrameDecoder, can_reply,
+                            is_frame, is_version_string)
 from ..tmcl.frames import Control, Reply, ReplyKind, Request, Status
 
 if TYPE_CHECKING:
@@ -35,7 +36,6 @@ _EVENT = int(Status.EVENT)
 _OK = int(Status.OK)
 _TARGET_REACHED = int(Control.TARGET_REACHED_EVENT)
 _CAN_REPLY_LEN = 7
-_VERSION_LEN = 8
 # After bytes that were no frame, how long a silent line is given to bring the rest of the
 # reply before it is called corrupted (instead of waiting out the whole timeout).
 QUIET_AFTER_GARBAGE = 0.05
@@ -92,13 +92,6 @@ def _echo_of(raw: bytes, seen: bytes) -> bool:
     """Are the first nine bytes of ``seen`` the request ``raw`` itself, one byte damaged at
     most (what an RS485 adapter that hears its own transmission gives back)?"""
     return len(seen) >= FRAME and sum(a != b for a, b in zip(raw, seen)) <= 1
-
-
-def _seven(data: bytes) -> bytes:
-    """A CAN reply's seven bytes. Some modules send eight (DLC 8; a TMCM-1260's candump in
-    PyTrinamic's tracker shows it): the eighth is left out, whether it is their sum or
-    padding; a reply is recognised by its first seven as from any module."""
-    return data[:_CAN_REPLY_LEN] if len(data) == _CAN_REPLY_LEN + 1 else data
 
 
 class SerialFraming:
@@ -401,15 +394,16 @@ class CanFraming:
                 o.also_reply_id is None or arb != o.also_reply_id):
             return None  # other traffic on the bus
         host = o.host_address
-        if kind == _VERSION and len(data) == _VERSION_LEN and all(32 <= b < 127 for b in data):
+        got = can_reply(data, version=kind == _VERSION)  # (the one reading of CAN replies)
+        if got is None:
+            o.discard(data, f"not a TMCL reply ({len(data)} bytes)")
+            return None
+        data = got
+        if len(data) == CAN_VERSION:
             reply = Reply.from_can(host, data, kind, module=req.address)
             if o.tracers:
                 o.tell("rx", data, reply)
             return reply
-        data = _seven(data)
-        if len(data) != _CAN_REPLY_LEN:
-            o.discard(data, f"not a TMCL reply ({len(data)} bytes)")
-            return None
         elif data[1] == _EVENT and data[2] == _TARGET_REACHED:
             o.event(data, Reply.from_can(host, data))
             return None
@@ -432,7 +426,7 @@ class CanFraming:
         if msg is None:
             return False
         arb, data = msg
-        data = _seven(data)
+        data = can_reply(data, version=False) or data
         ours = arb == o.reply_id or arb in o.other_reply_ids
         if ours and len(data) == _CAN_REPLY_LEN and data[1] == _EVENT \
                 and data[2] == _TARGET_REACHED:

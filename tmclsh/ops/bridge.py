@@ -10,13 +10,15 @@ link:
   and unchanged; each chunk is then told to the monitor (``heard``).
 * ``CanBridge``: a CAN module (``--can``). The master speaks serial frames; each request's
   seven instruction bytes go to the module's CAN id as they are, and each reply's seven
-  (or a version string's eight) come back as a serial frame to the host address, checksum
-  added. Bytes that are no frame cannot be forwarded on CAN: they are told as noise.
+  (of seven or eight: tmcl/decoder.py ``can_reply``), or a version string's eight, come
+  back as a serial frame to the host address, checksum added. Bytes that are no frame cannot be forwarded on CAN: they are told as noise.
 
-What was forwarded is told to the caller (``heard``) in the order the wire carried it, after
-it was forwarded (see ``_Bridge``): reading it never delays a byte. ``Left`` keeps what the master's exchanges
-leave behind (a motor started, download or ASCII mode entered), which the front end ends
-when the bridge closes. Nothing here prints.
+What was forwarded is told to the caller (``heard``) in the order the wire carried it, on a
+thread of its own, after it was forwarded (see ``_Bridge``): reading it, showing it and
+writing it to a file never delay a byte, and a reader that stops reading never stops the
+forwarding. ``Left`` keeps what the master's exchanges leave behind (a motor started,
+download or ASCII mode entered), which the front end ends when the bridge closes. Nothing
+here prints.
 """
 
 from __future__ import annotations
@@ -24,16 +26,16 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from ..base.errors import TransportError
+from ..base.spill import Spill
 from ..client.ascii import char_address
 from ..link.base import CanFrame, CanTransport, StreamTransport
 from ..tmcl import instructions as isa
-from ..tmcl.decoder import FRAME, FRAME_PIECE, FrameDecoder
-from ..tmcl.frames import checksum
+from ..tmcl.decoder import CAN_VERSION, FRAME_PIECE, FrameDecoder, can_reply
+from ..tmcl.frames import ReplyKind, checksum
 from ..tmcl.status import status_ok
 from ..tmcl.traffic import enters_ascii, leaves_ascii, plausible_request
 from .monitor import RX, TEXT, TX, Exchange, Item
@@ -46,6 +48,8 @@ TICK = 0.1  # s the module's reader waits before it looks whether the bridge clo
 CAN_TX, CAN_RX, NOISE, LOST = "can-tx", "can-rx", "noise", "lost"
 
 Heard = Callable[[tuple], None]
+NOTES = 200_000  # things forwarded that may wait to be told before the newest are not told
+TELL_EVERY = 0.002  # s between the teller's looks: forwarding only appends, wakes nobody
 
 
 class _Target:
@@ -60,13 +64,13 @@ class _Target:
 class _Bridge:
     """The forwarding, and the telling of what was forwarded.
 
-    Each chunk is noted (a deque append, atomic) just before it is forwarded, so the notes
-    keep the order the wire had: an answer is never noted ahead of its request, nor a
-    request ahead of the answer the master waited for. Once forwarded, the thread that
-    forwarded it tells ``heard`` every note in order, holding ``lock`` (the caller takes it
-    too, for its own looks at the monitor). Telling on the forwarding threads after the
-    forwarding wakes no other thread: an exchange through the bridge costs its two hops
-    and its reading, nothing more.
+    Each chunk is noted just before it is forwarded (a hand-off that never waits: a
+    ``Spill``), so the notes keep the order the wire had: an answer is never noted ahead of
+    its request, nor a request ahead of the answer the master waited for. A thread of its
+    own tells ``heard`` every note in order, holding ``lock`` (the caller takes it too, for
+    its own looks at the monitor). The forwarding threads never wait for it: when the
+    telling falls ``NOTES`` behind, the newest notes are not told and are counted
+    (``untold``); the frames were forwarded all the same.
     """
 
     def __init__(self, heard: Heard, *, pty: bool = False,
@@ -75,7 +79,8 @@ class _Bridge:
 
         self.heard = heard
         self.lock = threading.Lock()
-        self._notes: deque[tuple] = deque()
+        self.told_at = time.monotonic()
+        self._notes = Spill(self._tell, NOTES, name="bridge-teller", poll=TELL_EVERY)
         self._closed = threading.Event()
         self.target = _Target(self._from_master)
         if pty:
@@ -90,17 +95,24 @@ class _Bridge:
         self._reader.start()
 
     def note(self, event: tuple) -> None:
-        self._notes.append(event)
+        self._notes.put(event)
 
-    def tell(self) -> None:
-        """Tell ``heard`` what was noted, in order (on whichever thread gets here first)."""
-        notes = self._notes
+    @property
+    def untold(self) -> int:
+        """Things forwarded that were not told (the telling fell too far behind)."""
+        return self._notes.dropped
+
+    def _tell(self, event: tuple) -> None:
         with self.lock:
-            while notes:
-                try:
-                    self.heard(notes.popleft())
-                except Exception:  # a reader's failure must not stop the forwarding
-                    log.exception("reading what the bridge forwarded failed")
+            self.heard(event)
+        self.told_at = time.monotonic()
+
+    def quiet_for(self) -> float:
+        """Seconds since the last thing forwarded was told, 0 while some wait to be told:
+        only a line quiet this long has partial frames (a chunk may still be on its way)."""
+        if self._notes.waiting:
+            return 0.0
+        return time.monotonic() - self.told_at
 
     def _to_master(self, data: bytes) -> None:
         out = self.target.on_output
@@ -120,20 +132,19 @@ class _Bridge:
         except Exception as exc:  # the bridge must say why it stopped forwarding
             log.exception("the bridge's module reader failed")
             self.note((LOST, f"the bridge stopped forwarding: {exc}"))
-        self.tell()
 
     def _step(self) -> None:  # pragma: no cover - overridden
         raise NotImplementedError
 
     def close(self) -> None:
         """Stop serving the master and stop reading the module (its link stays open: the
-        front end may still need it); what was forwarded is told."""
+        front end may still need it); what was forwarded is told before this returns."""
         if self._closed.is_set():
             return
         self._closed.set()
         self.server.close()
         self._reader.join(timeout=2)
-        self.tell()
+        self._notes.close()
 
 
 class SerialBridge(_Bridge):
@@ -149,14 +160,12 @@ class SerialBridge(_Bridge):
             self.module.write(data)
         except TransportError as exc:
             self.note((LOST, str(exc)))
-        self.tell()
 
     def _step(self) -> None:
         data = self.module.read_some(TICK)
         if data:
             self.note((RX, data, time.time()))
             self._to_master(data)
-            self.tell()
 
 
 class CanBridge(_Bridge):
@@ -174,6 +183,7 @@ class CanBridge(_Bridge):
         self.reply_id = reply_id
         self.host = host
         self.requests = FrameDecoder(None, resync=plausible_request)
+        self._versions = 0  # version strings asked for and not yet answered
         super().__init__(heard, **kw)
 
     def _from_master(self, data: bytes) -> None:
@@ -186,13 +196,14 @@ class CanBridge(_Bridge):
                 self.note((NOISE, raw, now))
                 continue
             arb = self.can_id if self.can_id is not None else raw[0]
+            if isa.reply_kind(raw[1], raw[2]) is ReplyKind.VERSION_STRING:
+                self._versions += 1
             self.note((CAN_TX, CanFrame(time.time(), arb, raw[1:8])))
             try:
                 self.module.send(arb, raw[1:8])
             except TransportError as exc:
                 self.note((LOST, str(exc)))
                 break
-        self.tell()
 
     def _step(self) -> None:
         f = self.module.listen(TICK)  # type: ignore[attr-defined]
@@ -200,13 +211,15 @@ class CanBridge(_Bridge):
             return
         self.note((CAN_RX, f))
         if f.arbitration_id == self.reply_id and not (f.error or f.remote or f.extended):
-            data = f.data
-            if len(data) == FRAME - 1:  # a version string: the host byte, no checksum
+            data = can_reply(f.data, version=self._versions > 0)  # (the one reading)
+            if data is None:
+                return
+            if len(data) == CAN_VERSION:  # a version string: the host byte, no checksum
+                self._versions -= 1
                 self._to_master(bytes((self.host,)) + data)
-            elif len(data) == FRAME - 2:
+            else:
                 body = bytes((self.host,)) + data
                 self._to_master(body + bytes((checksum(body),)))
-        self.tell()
 
 
 @dataclass

@@ -26,7 +26,8 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
 from ..client.ascii import next_line, parse_reply
-from ..tmcl.decoder import FRAME, FRAME_PIECE, NOISE, WHOLE, FrameDecoder, printable
+from ..tmcl.decoder import (CAN_DATA, CAN_VERSION, FRAME, FRAME_PIECE, NOISE, WHOLE, FrameDecoder,
+                            can_reply, printable)
 from ..tmcl.frames import Instruction, Reply, ReplyKind
 from ..tmcl.modules import Module, identify
 from ..tmcl.status import status_ok
@@ -40,6 +41,7 @@ TX, RX = "tx", "rx"  # to a module, from one (where the wire tells: a bridge)
 
 DEFAULT_HOST = 2  # GP 76, the reply address of every module as it leaves the factory
 DEFAULT_CAN_ID, DEFAULT_REPLY_ID = 1, 2  # GP 71 and GP 70 as they leave the factory
+NO_REPLY = "no reply expected"  # an exchange without a reply by design
 TIMEOUT = 1.0  # s a request waits for its reply before it is called unanswered
 _NORMAL, _VERSION, _MEMORY, _NONE = (ReplyKind.NORMAL, ReplyKind.VERSION_STRING,
                                      ReplyKind.MEMORY, ReplyKind.NONE)
@@ -82,6 +84,7 @@ class Exchange:
     request: Seen
     reply: Seen | None
     note: str = ""
+    by_design: bool = False  # no reply comes to this command (137, 205, 242): none missing
 
     @property
     def latency(self) -> float | None:
@@ -117,6 +120,12 @@ class Summary:
     shown: int = 0  # lines or objects the front end showed (filters let through)
     filtered: bool = False  # a filter chose what was shown
     modules: dict[int, str] = field(default_factory=dict)  # address -> what 136 said
+    # what a live run could not keep up with, counted (the wire never waits for it): lines
+    # or objects not shown because their reader was not reading, frames not written to the
+    # -o file because the disk was too slow, frames forwarded but not read (a bridge)
+    dropped: int = 0
+    capture_dropped: int = 0
+    untold: int = 0
 
     @property
     def refused(self) -> int:
@@ -141,7 +150,8 @@ class Summary:
                 "seconds": round(self.last - self.first, 6) if self.first is not None
                 and self.last is not None else 0.0,
                 "modules": {str(k): v for k, v in sorted(self.modules.items())},
-                "shown": self.shown}
+                "shown": self.shown, "dropped_lines": self.dropped,
+                "capture_dropped": self.capture_dropped, "untold": self.untold}
 
 
 class Monitor:
@@ -204,7 +214,7 @@ class Monitor:
             out += self._give_up([r for r in self.waiting if r.address == address]
                                  or self.waiting, "no reply before the next request")
         if self.layout(seen) is _NONE:
-            out.append(Exchange(seen, None, "no reply expected"))
+            out.append(Exchange(seen, None, NO_REPLY, by_design=True))
         else:
             self.waiting.append(seen)
         return out
@@ -226,7 +236,9 @@ class Monitor:
         if request is None:
             s.unpaired += 1
             return [seen]
+        before: list[Item] = []
         if request in self.waiting:
+            before = self._passed_over(request)
             self.waiting.remove(request)
         else:
             seen.late = True
@@ -244,7 +256,20 @@ class Monitor:
         if address is not None:
             self.addresses.add(address)
         self._learn(request, reply)
-        return [seen, ex]
+        return before + [seen, ex]
+
+    def _passed_over(self, request: Seen) -> list[Item]:
+        """A module answers in the order it was asked: requests to it still waiting from
+        before the one answered now got no answer (several may be sent before the first is
+        answered, so a new request alone says nothing of those before it)."""
+        older = []
+        for r in self.waiting:
+            if r is request:
+                break
+            if r.address == request.address and r.can_id == request.can_id:
+                older.append(r)
+        return self._give_up(older, "no reply: a later request to this module was "
+                                    "answered") if older else []
 
     def _learn(self, request: Seen, reply: Reply) -> None:
         ins = request.instruction
@@ -548,8 +573,9 @@ class SerialPair:
                 if self.text[RX]:  # binary again, though no reply to BIN was read
                     self.text[RX] = m.ascii = m.leaving = False
                     self.decoders[RX].feed(self.lines[RX].rest())
+                # (not ``alone``: a master may send requests ahead of their replies)
                 out += m.request(t, raw, Instruction.from_bytes(raw[1:8]), raw[0],
-                                 direction=TX, alone=True, bad_sum=what == WHOLE)
+                                 direction=TX, bad_sum=what == WHOLE)
             else:
                 out += self._reply(raw, what, t)
                 if m.ascii and not self.text[TX]:  # 139 accepted: text from here on
@@ -605,8 +631,7 @@ class SerialPair:
 
 # -- CAN -------------------------------------------------------------------------------------
 
-_CAN_LEN = 7  # data bytes of a TMCL request or reply on CAN
-_VERSION_LEN = 8
+_CAN_LEN = CAN_DATA  # data bytes of a TMCL request or reply on CAN
 
 
 def _byte(req: Seen | None) -> int:
@@ -674,11 +699,9 @@ class CanReader:
             if len(self._ins) >= _CACHE:
                 self._ins.clear()
             self._ins[raw] = ins
-        # (a new request to a module that still waits means that one got no answer)
-        m = self.monitor
-        out = m._give_up([r for r in m.waiting if r.can_id == arb],
-                         "no reply before the next request to this id") if m.waiting else []
-        return out + m.request(t, data, ins, arb, can_id=arb)
+        # (a request to a module that still waits says nothing of the one before: requests
+        # may be sent ahead of their replies; the reply to a later one does: Monitor.reply)
+        return self.monitor.request(t, data, ins, arb, can_id=arb)
 
     def _answers(self, arb: int, opcode: int | None) -> Callable[[Seen], bool]:
         """Whether a waiting request is the one a reply on ``arb`` answers: its command (any,
@@ -695,9 +718,10 @@ class CanReader:
         """A frame on a reply id (``known``), or one on an unknown id that answers a request
         (learning); [] when it answers nothing and is not known to be a reply."""
         m = self.monitor
-        n = len(data)
-        if n == _VERSION_LEN and printable(data):
-            req, before = m.expecting(_VERSION), []
+        awaited = m.expecting(_VERSION)
+        got = can_reply(data, version=known or awaited is not None)  # (the one reading)
+        if got is not None and len(got) == CAN_VERSION:
+            req, before = awaited, []
             if req is None and not known:
                 req, before = self._learn_held(lambda ins: expects(ins) is _VERSION)
             if req is not None or known:
@@ -705,17 +729,18 @@ class CanReader:
                     self.answered_on[req.can_id] = arb
                 reply = Reply.from_can(0, data, _VERSION, module=_byte(req))
                 return before + m.reply(t, data, reply, req, can_id=arb)
-        if n != _CAN_LEN:
-            return m.other(t, data, f"{n} bytes on a reply id: not a TMCL reply",
+        if got is None:
+            return m.other(t, data, f"{len(data)} bytes on a reply id: not a TMCL reply",
                            can_id=arb) if known else []
+        seven = got
         reply, req = None, None
-        if data[1] in STATUSES:
-            reply = self._replies.get(data)
+        if seven[1] in STATUSES:
+            reply = self._replies.get(seven)
             if reply is None:
-                reply = Reply.from_frame(b"\0" + data)  # (host 0: the reply id says it)
+                reply = Reply.from_frame(b"\0" + seven)  # (host 0: the reply id says it)
                 if len(self._replies) >= _CACHE:
                     self._replies.clear()
-                self._replies[data] = reply
+                self._replies[seven] = reply
             if is_event(reply.status, reply.opcode):
                 return m.reply(t, data, reply, None, can_id=arb) if known else []
             req = m.find(self._answers(arb, reply.opcode))
@@ -723,7 +748,7 @@ class CanReader:
             mem = m.expecting(_MEMORY)
             if mem is not None and self._answers(arb, None)(mem):
                 self.answered_on[mem.can_id] = arb
-                stored = Reply.from_memory_frame(b"\0" + data, _byte(mem),
+                stored = Reply.from_memory_frame(b"\0" + seven, _byte(mem),
                                                  mem.instruction.opcode)
                 return m.reply(t, data, stored, mem, can_id=arb)
         if reply is None:

@@ -3,7 +3,9 @@ forwarded unchanged (ops/bridge.py) and shown as ``tmclsh monitor`` shows it.
 
 Like ``tmclsh sim``, the first line on stdout is where the program connects (the pty's path
 or HOST:PORT); the traffic follows, one line per exchange (or one JSON object per frame),
-until Ctrl-C or SIGTERM, then the summary.
+until Ctrl-C or SIGTERM, then the summary. Forwarding comes first: the frames are read and
+shown on another thread, and lines a reader does not take (a paused pager, a full pipe) are
+dropped and counted in the summary, never frames or the forwarding's pace.
 
 When the bridge closes, the program on the other side loses the module: what its exchanges
 left behind is ended then, as tmclsh ends its own (the one safety stop, shell/stop.py): a
@@ -23,7 +25,11 @@ from ..base.errors import (EXIT_FAILED, EXIT_OK, ConnectError, TmclError, Transp
                            ValidationError)
 from ..ops.bridge import CAN_RX, CAN_TX, LOST, TICK, CanBridge, Left, SerialBridge
 from ..ops.monitor import DEFAULT_HOST, RX, TX, CanReader, Filter, Monitor, SerialPair
-from .monitor import Limits, View, _capture, interruptible, load_module, restore, show_items
+from .monitor import (Limits, View, _capture, end_live_output, interruptible, live_output,
+                      load_module, off_the_wire, restore, show_items)
+
+
+FORWARDING_SWITCH = 0.0002  # s a thread may hold the interpreter while another waits
 
 
 def run_bridge(args) -> int:
@@ -48,6 +54,10 @@ def run_bridge(args) -> int:
     except BaseException:
         transport.close()
         raise
+    # forwarding first: showing and the -o file never hold it up (what they cannot keep
+    # up with is dropped and counted, never a frame on the wire)
+    capture, close_capture, capture_dropped = off_the_wire(capture, close_capture)
+    out = live_output(view)
     serve: dict[str, Any] = {"pty": True} if args.pty else {"tcp": args.tcp}
     if is_can:
         reader: Any = CanReader(monitor, [can_id] if can_id is not None else None,
@@ -64,20 +74,30 @@ def run_bridge(args) -> int:
     except OSError as exc:
         transport.close()
         close_capture()
+        end_live_output(view, out, monitor.summary)
         raise ConnectError(f"cannot serve the bridge: {exc}") from exc
     sys.stdout.write(bridge.endpoint + "\n")
     sys.stdout.flush()
     print(f"bridging {bridge.endpoint} <-> {transport.describe()}; Ctrl-C ends",
           file=sys.stderr, flush=True)
+    # the forwarding threads wait for the interpreter while the teller reads and shows
+    # what was forwarded: a short switch interval bounds that wait (the default 5 ms would
+    # be the forwarding's worst case)
+    switch = sys.getswitchinterval()
+    sys.setswitchinterval(FORWARDING_SWITCH)
     try:
         _forward(bridge, told)
     finally:
+        sys.setswitchinterval(switch)
+        monitor.summary.untold = bridge.untold
         try:
             if told.left:
                 _put_right(transport, told.left, monitor, args, is_can, told.lost, capture)
         finally:
             close_capture()  # (after the closing stop: a replayed capture shows it too)
+            monitor.summary.capture_dropped = capture_dropped()
             transport.close()
+            end_live_output(view, out, monitor.summary)
     view.summary(monitor.summary)
     return EXIT_OK if told.lost is None else EXIT_FAILED
 
@@ -133,8 +153,10 @@ def _forward(bridge, told: _Told) -> None:
     try:
         try:
             while not told.done.wait(TICK):
+                quiet = bridge.quiet_for() >= TICK  # (else bytes may still be told)
                 with bridge.lock:
-                    told.show(told.reader.quiet(time.time()))
+                    now = time.time()
+                    told.show(told.reader.quiet(now) if quiet else told.monitor.expire(now))
         except KeyboardInterrupt:
             pass
         finally:

@@ -28,6 +28,7 @@ from typing import Any
 
 from ..base.errors import (EXIT_FAILED, EXIT_OK, ConnectError, TmclError, TransportError,
                            UsageError, ValidationError)
+from ..base.spill import Spill, SpillWriter
 from ..ops.monitor import (DEFAULT_REPLY_ID, EVENT, NOISE_RUN, OTHER, REPLY, REQUEST, RX,
                            TEXT, TX, CanReader, Exchange, Filter, Item, Monitor, Seen, Summary)
 from ..tmcl import asm
@@ -97,7 +98,9 @@ class View:
         if self._console is None:
             from .render import _console
 
-            self._console = _console(color=self._color)
+            # (a live run's stream is a SpillWriter: the console writes through it too)
+            file = self.stream if isinstance(self.stream, SpillWriter) else None
+            self._console = _console(color=self._color, file=file)
         return self._console
 
     # -- words ----------------------------------------------------------------------------
@@ -187,7 +190,7 @@ class View:
             out.append(f"  ({req.note})", "tmcl.warn")
         out.append("  =>  ", "tmcl.note")
         if reply is None:
-            out.append(ex.note, "tmcl.note" if ex.note == "no reply expected" else "tmcl.warn")
+            out.append(ex.note, "tmcl.note" if ex.by_design else "tmcl.warn")
             return out
         self._hex(out, reply)
         ok = reply.reply.ok
@@ -205,7 +208,7 @@ class View:
             if item.reply is not None:
                 return None  # (its frames were written as they came)
             seen, t = item.request, item.request.t
-            body = self._body(seen, "unanswered")
+            body = self._body(seen, "no-reply" if item.by_design else "unanswered")
             return f'{{"t": {t:.6f}, {body}, "note": {json.dumps(item.note)}}}\n'
         body = self._body(item, item.kind)
         latency = item.latency
@@ -322,6 +325,15 @@ def summary_lines(s: Summary, view: View) -> list[str]:
         lines.append("modules: " + ", ".join(f"@{a} {v}" for a, v in sorted(s.modules.items())))
     if s.filtered:
         lines.append(f"shown: {_n(s.shown, 'line')} (the filters let these through)")
+    if s.dropped:
+        lines.append(f"not shown: {_n(s.dropped, 'line')} (the output was not being read; "
+                     "the traffic went on, counted above)")
+    if s.capture_dropped:
+        lines.append(f"not written to the -o file: {_n(s.capture_dropped, 'frame')} (the disk "
+                     "did not keep up)")
+    if s.untold:
+        lines.append(f"forwarded but not read: {_n(s.untold, 'chunk')} (reading fell too far "
+                     "behind; the frames went through)")
     return lines
 
 
@@ -408,6 +420,11 @@ def run_monitor(args) -> int:
     capture, close_capture = _capture(args.output, is_can)
     transport = None
     live = log_path is None
+    capture_dropped = lambda: 0  # noqa: E731
+    out = None
+    if live:  # (a log is read at the reader's pace: nothing is dropped)
+        capture, close_capture, capture_dropped = off_the_wire(capture, close_capture)
+        out = live_output(view)
     try:
         if can_spec is not None:
             from ..link import open_can
@@ -441,6 +458,9 @@ def run_monitor(args) -> int:
         if transport is not None:
             transport.close()
         close_capture()
+        monitor.summary.capture_dropped = capture_dropped()
+        if out is not None:
+            end_live_output(view, out, monitor.summary)
     if failed is not None:  # (what was heard until then is still summed up)
         print(f"tmclsh: {failed}", file=sys.stderr, flush=True)
     if failed is None or monitor.summary.frames or monitor.summary.noise:
@@ -486,6 +506,46 @@ def _capture(path: str | None, is_can: bool):
 
     writer = CaptureWriter(path)
     return writer.write, writer.close
+
+
+CAPTURE_BOUND = 100_000  # frames a live -o file may fall behind before the newest are dropped
+
+
+def off_the_wire(capture, close_capture):
+    """A live ``-o`` file written on a thread of its own, so a slow disk never holds up the
+    wire: (what takes each frame, what closes the file, how many frames were dropped)."""
+    if capture is None:
+        return None, close_capture, lambda: 0
+    spill = Spill(lambda args: capture(*args), CAPTURE_BOUND, name="capture")
+
+    def put(*args) -> None:
+        spill.put(args)
+
+    def close() -> None:
+        try:
+            spill.close()
+        finally:
+            close_capture()
+    return put, close, lambda: spill.dropped
+
+
+def live_output(view: View) -> SpillWriter:
+    """What a live run shows goes through a writer that never blocks: a reader that stops
+    reading (a paused pager, a full pipe) loses lines, counted, and never the wire's pace."""
+    out = SpillWriter(view.stream)
+    view.stream = out
+    return out
+
+
+def end_live_output(view: View, out: SpillWriter, summary: Summary) -> None:
+    """Let what was shown reach its reader (as long as that takes, Ctrl-C gives up on it),
+    count what was dropped, and write the rest (the summary) straight."""
+    try:
+        out.close()
+    except KeyboardInterrupt:
+        pass
+    summary.dropped = out.dropped
+    view.stream = out.stream
 
 
 def _run(source, reader, view: View, filt: Filter, monitor: Monitor, limits: Limits,

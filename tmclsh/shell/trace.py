@@ -20,7 +20,7 @@ from ..tmcl import asm
 from ..tmcl import instructions as isa
 from ..base.errors import FrameError
 from ..tmcl.modules import Module
-from ..tmcl.decoder import FRAME_PIECE, pieces
+from ..tmcl.decoder import FRAME_PIECE, can_reply, pieces
 from ..tmcl.frames import (INSTRUCTION_LEN, SERIAL_FRAME_LEN, VERSION_STRING_LEN, Instruction,
                            Reply, Request, Status, checksum, parse_hex, to_signed32)
 
@@ -192,8 +192,11 @@ def decode_frame(frame: bytes, module: Module | None, hint: str | None = None) -
             return [Reading("CAN reply data", f"from address {frame[0]}: {describe_reply(reply, module)}")]
         return [Reading("instruction (CAN request data or program memory)",
                         describe_instruction(ins, module), "", _instruction_plausible(ins, module))]
-    if len(frame) == VERSION_STRING_LEN and all(32 <= b < 127 for b in frame):
-        return [Reading("136 reply on CAN (version string)", repr(frame.decode("ascii")))]
+    if len(frame) == VERSION_STRING_LEN:
+        data = can_reply(frame, version=hint in (None, "version", "reply"))
+        if len(data) == VERSION_STRING_LEN:
+            return [Reading("136 reply on CAN (version string)", repr(frame.decode("ascii")))]
+        return [_can_reply_reading("CAN reply data", data, module)]
     if len(frame) != SERIAL_FRAME_LEN:
         raise FrameError(f"{len(frame)} bytes: a serial frame is {SERIAL_FRAME_LEN} bytes, "
                          f"CAN data {INSTRUCTION_LEN}")
@@ -243,12 +246,14 @@ def decode_can(frame, module: Module | None, hint: str | None = None) -> list[Re
     if frame.error or frame.remote:
         kind = "error frame" if frame.error else "remote frame"
         return [Reading(f"CAN {kind}", f"on {where}: no TMCL frame", plausible=False)]
-    if len(data) == VERSION_STRING_LEN and all(32 <= b < 127 for b in data) \
-            and hint in (None, "version", "reply"):
-        return [Reading(f"CAN reply on {where} (136 version string)", repr(data.decode()))]
+    if len(data) == VERSION_STRING_LEN:  # (the one reading of CAN replies: tmcl/decoder.py)
+        got = can_reply(data, version=hint in (None, "version", "reply"))
+        if len(got) == VERSION_STRING_LEN:
+            return [Reading(f"CAN reply on {where} (136 version string)", repr(data.decode()))]
+        return [_can_reply_reading(f"CAN reply on {where}", got, module)]
     if len(data) != INSTRUCTION_LEN:
         return [Reading(f"CAN frame on {where}", f"{len(data)} data bytes: no TMCL frame (7, "
-                        "or 8 for a version string)", plausible=False)]
+                        "or 8 for a reply)", plausible=False)]
     ins = Instruction.from_bytes(data)
     request = Reading(f"CAN request to {where}", describe_instruction(ins, module), "",
                       _instruction_plausible(ins, module))
@@ -266,6 +271,16 @@ def decode_can(frame, module: Module | None, hint: str | None = None) -> list[Re
 
 
 _FACTORY_REPLY_ID = 2  # GP 70 as modules leave the factory
+
+
+def _can_reply_reading(kind: str, seven: bytes, module: Module | None) -> Reading:
+    """Eight data bytes that are no version string: a reply whose eighth byte (its sum or
+    padding, as some modules send) is left out, as the client reads it."""
+    value = to_signed32(int.from_bytes(seven[3:7], "big"))
+    reply = Reply(0, seven[0], seven[1], seven[2], value)
+    return Reading(kind, f"from address {seven[0]}: {describe_reply(reply, module)} (8 data "
+                   "bytes: the eighth, a sum or padding, left out)", "",
+                   seven[1] in {int(s) for s in Status} and _known_opcode(seven[2]))
 
 
 def decode_hex(text: str, module: Module | None) -> list[tuple[bytes, list[Reading]]]:

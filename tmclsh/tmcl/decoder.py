@@ -51,6 +51,24 @@ def printable(data: bytes | bytearray) -> bool:
     return all(32 <= b < 127 for b in data)
 
 
+CAN_DATA = 7  # data bytes of a CAN request or reply: the serial frame without address and sum
+CAN_VERSION = 8  # data bytes of a CAN version string (136 type 0): eight characters
+
+
+def can_reply(data: bytes | bytearray, version: bool = True) -> bytes | None:
+    """The reply a CAN frame's data carries, as every reader of CAN replies reads it (the
+    client, the monitor, the bridge, ``.decode``): eight printable characters are a version
+    string where one may be awaited (``version``); otherwise seven bytes are a reply, and
+    so are the first seven of eight: some modules send DLC 8 (a TMCM-1260's candump shows
+    it), the eighth their sum or padding. None: no TMCL reply has this length."""
+    n = len(data)
+    if n == CAN_VERSION and version and printable(data):
+        return bytes(data)
+    if n == CAN_VERSION or n == CAN_DATA:
+        return bytes(data[:CAN_DATA])
+    return None
+
+
 def is_version_string(window: bytes | bytearray, host: int) -> bool:
     """Nine bytes that can be a 136 type 0 answer to ``host``: its address, then eight
     printable characters (no checksum to tell more)."""

@@ -32,8 +32,9 @@ def is_event(status: int, opcode: int) -> bool:
 
 
 def expects(ins: Instruction) -> ReplyKind:
-    """How the answer to this request is laid out (or that none comes)."""
-    return reply_kind(ins.opcode, ins.type)
+    """How the answer to this request is laid out, or that none comes by design (137, and
+    the bootloader's 242 and 205: the instruction set's ``reply = "none"``)."""
+    return isa.reply_kind(ins.opcode, ins.type)
 
 
 def plausible_request(frame: bytes | bytearray) -> bool:
