@@ -212,7 +212,6 @@ def test_a_module_that_goes_away_ends_the_bridge():
     assert objs[-1]["summary"]["frames"] == 2
 
 
-<<<<<<< HEAD
 def test_a_request_with_a_bad_checksum_is_shown_as_one_and_paired_with_its_answer():
     from responder import PtyModule
 
@@ -227,7 +226,38 @@ def test_a_request_with_a_bad_checksum_is_shown_as_one_and_paired_with_its_answe
             port.write(request(1, 6, 4))  # and the line goes on
             assert port.read(9)[2] == 100
             objs, err = bridge.stop()
-=======
+    finally:
+        bridge.kill()
+        module.close()
+    got = [o for o in objs if "frame" in o]
+    assert [o["frame"] for o in got] == ["request", "reply", "request", "reply"], got
+    assert got[0]["line"] == "GAP 4, 0" and got[0]["note"].startswith("bad checksum")
+    assert got[1]["status"] == 1 and got[1]["latency"] > 0  # paired with it
+    assert objs[-1]["summary"]["unpaired"] == 0 and objs[-1]["summary"]["noise"] == 0
+
+
+def test_the_capture_holds_the_stop_the_bridge_sends_when_it_closes(tmp_path):
+    from responder import PtyModule
+    from tmclsh.ops.capture import read_capture
+
+    module = PtyModule(version="1311V111")
+    out = tmp_path / "cap.txt"
+    bridge = Bridge("--pty", "--port", module.path, "-o", str(out))
+    try:
+        with serial.Serial(bridge.endpoint, timeout=5) as port:
+            port.write(request(1, 1, 0, 0, 800))  # ROR 0, 800: and then the bridge closes
+            assert port.read(9)[2] == 100
+            objs, err = bridge.stop(signal.SIGTERM)
+    finally:
+        bridge.kill()
+        module.close()
+    assert "ending that" in err
+    sent = [raw for _, direction, raw in read_capture(out) if direction == "tx"]
+    assert sent[0][:2] == bytes([1, 1])  # the program's ROR
+    stops = [raw for raw in sent[1:] if raw[:2] == bytes([1, 3])]  # MST to address 1
+    assert stops, [raw.hex(" ") for raw in sent]
+
+
 # -- a tap never holds up the link (issue 34) --------------------------------------------------
 
 def _exchange(port, req: bytes) -> bytes:
@@ -291,39 +321,10 @@ def test_pipelined_requests_are_paired_and_no_reply_by_design_is_no_error():
             time.sleep(0.2)
             assert _exchange(port, request(1, 6, 4))[2] == 100
         objs, err = bridge.stop(signal.SIGTERM)
->>>>>>> i34-tap
     finally:
         bridge.kill()
         module.close()
     got = [o for o in objs if "frame" in o]
-<<<<<<< HEAD
-    assert [o["frame"] for o in got] == ["request", "reply", "request", "reply"], got
-    assert got[0]["line"] == "GAP 4, 0" and got[0]["note"].startswith("bad checksum")
-    assert got[1]["status"] == 1 and got[1]["latency"] > 0  # paired with it
-    assert objs[-1]["summary"]["unpaired"] == 0 and objs[-1]["summary"]["noise"] == 0
-
-
-def test_the_capture_holds_the_stop_the_bridge_sends_when_it_closes(tmp_path):
-    from responder import PtyModule
-    from tmclsh.ops.capture import read_capture
-
-    module = PtyModule(version="1311V111")
-    out = tmp_path / "cap.txt"
-    bridge = Bridge("--pty", "--port", module.path, "-o", str(out))
-    try:
-        with serial.Serial(bridge.endpoint, timeout=5) as port:
-            port.write(request(1, 1, 0, 0, 800))  # ROR 0, 800: and then the bridge closes
-            assert port.read(9)[2] == 100
-            objs, err = bridge.stop(signal.SIGTERM)
-    finally:
-        bridge.kill()
-        module.close()
-    assert "ending that" in err
-    sent = [raw for _, direction, raw in read_capture(out) if direction == "tx"]
-    assert sent[0][:2] == bytes([1, 1])  # the program's ROR
-    stops = [raw for raw in sent[1:] if raw[:2] == bytes([1, 3])]  # MST to address 1
-    assert stops, [raw.hex(" ") for raw in sent]
-=======
     assert [o["frame"] for o in got].count("unanswered") == 0, [
         (o["frame"], o.get("line"), o.get("note")) for o in got]
     answered = [o for o in got if o["frame"] == "reply"]
@@ -335,4 +336,3 @@ def test_the_capture_holds_the_stop_the_bridge_sends_when_it_closes(tmp_path):
     assert [o["op"] for o in no_reply] == [242, 205]
     s = objs[-1]["summary"]
     assert (s["unanswered"], s["late"], s["unpaired"], s["errors"]) == (0, 0, 0, 0)
->>>>>>> i34-tap

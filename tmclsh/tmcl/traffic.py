@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from . import instructions as isa
 from .decoder import FRAME, is_frame
-from .frames import Control, Instruction, Reply, ReplyKind, reply_kind
+from .frames import Control, Instruction, Reply, ReplyKind
 from .status import Status
 
 STATUSES = frozenset(int(s) for s in Status)
