@@ -20,6 +20,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -27,6 +28,19 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Ctrl-C means KeyboardInterrupt here and in every tmclsh the tests start, whoever
+    started the run. A run started in the background by a shell without job control
+    (``stress.sh &``, a CI step) inherits SIGINT ignored; Python then installs no handler, the
+    xdist workers and every subprocess they start inherit the ignoring, and each test that
+    interrupts a tmclsh with SIGINT sees it run on to the end as if the signal were lost."""
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        try:
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+        except ValueError:  # not the main thread: nothing to restore from here
+            pass
 
 
 def tmclsh_env(**extra: str) -> dict[str, str]:
