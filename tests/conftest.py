@@ -23,11 +23,53 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
+
+
+try:  # a property test's examples are not timed: a busy machine is not a slow strategy
+    from hypothesis import HealthCheck, settings
+
+    settings.register_profile("tmclsh", deadline=None,
+                              suppress_health_check=[HealthCheck.too_slow])
+    settings.load_profile("tmclsh")
+except ImportError:  # pragma: no cover (hypothesis comes with the test extra)
+    pass
+
+
+def patience(seconds: float) -> float:
+    """A bound on how long a test waits for something that should happen (a subprocess to
+    end, a state to come up), which only a hang should reach: ``seconds`` on a quiet
+    machine, stretched by how many runnable processes share each core now. It bounds a wait
+    for a condition; it is never a time the test sleeps."""
+    try:
+        busy = os.getloadavg()[0] / (os.cpu_count() or 1)
+    except OSError:  # (no load average on this platform)
+        busy = 1.0
+    return seconds * max(1.0, busy)
+
+
+def delivered(pid: int, sig: int = signal.SIGINT, timeout: float = 30) -> None:
+    """Wait until the kernel has handed ``sig`` to process ``pid`` (no longer pending: its
+    handler has run, or runs now). On a busy machine a signalled process may not run for a
+    while; a module model that holds its answer "while the signal lands" waits for this
+    instead of a fixed time. Returns at once where /proc does not say."""
+    bit = 1 << (sig - 1)
+    deadline = time.monotonic() + patience(timeout)
+    while time.monotonic() < deadline:
+        try:
+            with open(f"/proc/{pid}/status") as fh:
+                fields = dict(line.split(":", 1) for line in fh if ":" in line)
+        except OSError:  # (ended, or no /proc here)
+            return
+        if not any(int(fields.get(k, "0"), 16) & bit for k in ("SigPnd", "ShdPnd")):
+            return
+        time.sleep(0.005)
+    raise AssertionError(f"signal {sig} still pending for process {pid}")
 
 
 def pytest_configure(config: pytest.Config) -> None:
