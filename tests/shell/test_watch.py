@@ -168,7 +168,9 @@ def test_not_a_terminal_gives_json_even_without_json_mode(sim, capsys):
 
 
 def test_until_stops_when_the_moving_motor_passes(session, capsys):
-    session.run_line("SAP 4, 0, 50000")
+    # slow enough that the watch, however late a busy machine starts it, finds the motor
+    # short of 5000 (2.5 s away): at 50000 pps it had passed before the first reading
+    session.run_line("SAP 4, 0, 2000")
     session.run_line("MVP ABS, 0, 20000")
     capsys.readouterr()
     session.run_line('.watch pos=GAP 1, 0 --interval 0.005 --until "pos >= 5000"')
