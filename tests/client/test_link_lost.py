@@ -19,7 +19,7 @@ from tmclsh.sim.serve import serve_tcp
 from tmclsh.tmcl.frames import Request
 from tmclsh.link import open_serial
 
-from conftest import ROOT, tmclsh_env
+from conftest import ROOT, patience, tmclsh_env
 
 
 @pytest.fixture
@@ -132,7 +132,7 @@ def test_a_watch_that_finds_the_link_lost_between_two_samples_reconnects(tcp_sim
         got.append(obj)
         if len(got) == 3:
             server.drop_client()
-            deadline = time.monotonic() + 30
+            deadline = time.monotonic() + patience(30)
             while not client.framing.waiting():  # the hang-up has reached us
                 assert time.monotonic() < deadline, "the hang-up never arrived"
                 time.sleep(0.01)
@@ -297,7 +297,7 @@ def test_ctrl_c_in_a_script_after_the_link_was_lost_reconnects_and_stops(tcp_sim
         assert hung_up.wait(60), "the ROR was never answered"
         assert sim.param("axis", 3, 0) != 0
         p.send_signal(2)
-        _, err = p.communicate(timeout=20)
+        _, err = p.communicate(timeout=patience(20))
     finally:
         if p.poll() is None:
             p.kill()
