@@ -72,6 +72,24 @@ def delivered(pid: int, sig: int = signal.SIGINT, timeout: float = 30) -> None:
     raise AssertionError(f"signal {sig} still pending for process {pid}")
 
 
+def read_until(proc: subprocess.Popen, done, timeout: float = 30) -> str:
+    """Read ``proc``'s stdout (a pipe) until ``done(text so far)``: the process has shown
+    it is where the test wants it (before a signal, say) instead of a guess at how long that
+    takes. Returns the text read; ``communicate()`` afterwards returns only the rest."""
+    import select
+
+    fd, data = proc.stdout.fileno(), b""
+    deadline = time.monotonic() + patience(timeout)
+    while not done(data.decode(errors="replace")):
+        left = deadline - time.monotonic()
+        assert left > 0, f"not seen in time; stdout so far: {data!r}"
+        if select.select([fd], [], [], min(left, 0.1))[0]:
+            chunk = os.read(fd, 65536)
+            assert chunk, f"the process ended first; stdout: {data!r}"
+            data += chunk
+    return data.decode(errors="replace")
+
+
 def pytest_configure(config: pytest.Config) -> None:
     """Ctrl-C means KeyboardInterrupt here and in every tmclsh the tests start, whoever
     started the run. A run started in the background by a shell without job control
