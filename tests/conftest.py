@@ -20,13 +20,87 @@
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
+
+
+try:  # a property test's examples are not timed: a busy machine is not a slow strategy
+    from hypothesis import HealthCheck, settings
+
+    settings.register_profile("tmclsh", deadline=None,
+                              suppress_health_check=[HealthCheck.too_slow])
+    settings.load_profile("tmclsh")
+except ImportError:  # pragma: no cover (hypothesis comes with the test extra)
+    pass
+
+
+def patience(seconds: float) -> float:
+    """A bound on how long a test waits for something that should happen (a subprocess to
+    end, a state to come up), which only a hang should reach: ``seconds`` on a quiet
+    machine, stretched by how many runnable processes share each core now. It bounds a wait
+    for a condition; it is never a time the test sleeps."""
+    try:
+        busy = os.getloadavg()[0] / (os.cpu_count() or 1)
+    except OSError:  # (no load average on this platform)
+        busy = 1.0
+    return seconds * max(1.0, busy)
+
+
+def delivered(pid: int, sig: int = signal.SIGINT, timeout: float = 30) -> None:
+    """Wait until the kernel has handed ``sig`` to process ``pid`` (no longer pending: its
+    handler has run, or runs now). On a busy machine a signalled process may not run for a
+    while; a module model that holds its answer "while the signal lands" waits for this
+    instead of a fixed time. Returns at once where /proc does not say."""
+    bit = 1 << (sig - 1)
+    deadline = time.monotonic() + patience(timeout)
+    while time.monotonic() < deadline:
+        try:
+            with open(f"/proc/{pid}/status") as fh:
+                fields = dict(line.split(":", 1) for line in fh if ":" in line)
+        except OSError:  # (ended, or no /proc here)
+            return
+        if not any(int(fields.get(k, "0"), 16) & bit for k in ("SigPnd", "ShdPnd")):
+            return
+        time.sleep(0.005)
+    raise AssertionError(f"signal {sig} still pending for process {pid}")
+
+
+def read_until(proc: subprocess.Popen, done, timeout: float = 30) -> str:
+    """Read ``proc``'s stdout (a pipe) until ``done(text so far)``: the process has shown
+    it is where the test wants it (before a signal, say) instead of a guess at how long that
+    takes. Returns the text read; ``communicate()`` afterwards returns only the rest."""
+    import select
+
+    fd, data = proc.stdout.fileno(), b""
+    deadline = time.monotonic() + patience(timeout)
+    while not done(data.decode(errors="replace")):
+        left = deadline - time.monotonic()
+        assert left > 0, f"not seen in time; stdout so far: {data!r}"
+        if select.select([fd], [], [], min(left, 0.1))[0]:
+            chunk = os.read(fd, 65536)
+            assert chunk, f"the process ended first; stdout: {data!r}"
+            data += chunk
+    return data.decode(errors="replace")
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Ctrl-C means KeyboardInterrupt here and in every tmclsh the tests start, whoever
+    started the run. A run started in the background by a shell without job control
+    (``stress.sh &``, a CI step) inherits SIGINT ignored; Python then installs no handler, the
+    xdist workers and every subprocess they start inherit the ignoring, and each test that
+    interrupts a tmclsh with SIGINT sees it run on to the end as if the signal were lost."""
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        try:
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+        except ValueError:  # not the main thread: nothing to restore from here
+            pass
 
 
 def tmclsh_env(**extra: str) -> dict[str, str]:

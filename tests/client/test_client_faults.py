@@ -150,10 +150,8 @@ def test_garbage_before_a_reply_is_skipped(pty_client):
     sim.set_input(ANALOG, AIN0, 99)
     # noise, a lone byte, and something that looks like the start of a reply
     sim.faults.garbage = b"\x00\xff\x02\x01\x64\x0f\x13"
-    t0 = time.monotonic()
     assert ain(c) == 99
-    assert time.monotonic() - t0 < 0.15  # no timeout, no retry
-    assert c.stats["timeouts"] == c.stats["retries"] == 0
+    assert c.stats["timeouts"] == c.stats["retries"] == 0  # no timeout, no retry
     assert c.stats["discarded"] == 7
 
 
@@ -181,10 +179,9 @@ def test_corrupted_reply_is_detected_quickly_and_retried(pty_client):
     c, sim = pty_client, pty_client.sim
     sim.set_input(ANALOG, AIN0, 654)
     sim.faults.corrupt_next = 1
-    t0 = time.monotonic()
     assert ain(c) == 654
-    assert time.monotonic() - t0 < 0.2  # no need to wait out the timeout
-    assert c.stats["checksum_errors"] == 1
+    # retried at once: the timeout was not waited out (said by the counts, not a clock)
+    assert c.stats["checksum_errors"] == 1 and c.stats["timeouts"] == 0
     sim.faults.corrupt_next = 1
     with pytest.raises(ChecksumError):
         c.request(Request(1, GIO, AIN0, ANALOG), retries=0)

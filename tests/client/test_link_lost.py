@@ -16,9 +16,10 @@ from tmclsh.shell.render import Output
 from tmclsh.shell.session import Session
 from tmclsh.sim import Simulator
 from tmclsh.sim.serve import serve_tcp
+from tmclsh.tmcl.frames import Request
 from tmclsh.link import open_serial
 
-from conftest import ROOT, tmclsh_env
+from conftest import ROOT, patience, tmclsh_env
 
 
 @pytest.fixture
@@ -30,17 +31,30 @@ def tcp_sim():
     sim.close()
 
 
-def hang_up_after(server, seconds: float) -> threading.Thread:
-    def run():
-        deadline = time.monotonic() + 20
-        while server._client is None and time.monotonic() < deadline:  # wait for the client
-            time.sleep(0.01)
-        time.sleep(seconds)
-        server.drop_client()
+def hang_up_after_reply(sim, server, *request: int) -> threading.Event:
+    """Hang up on the client right after the module has answered ``request`` (opcode, type,
+    motor, value; its first sending), in the server's own thread: the link drops at that point of the run,
+    never during tmclsh's start-up, however slowly a busy machine runs it (a drop a fixed time
+    after connecting raced the bring-up, and tmclsh said "no module", exit 3). Returns an
+    event set once it has hung up."""
+    frame = Request(1, *request).to_bytes()
+    write, send = sim.write, sim.on_output
+    asked, done = threading.Event(), threading.Event()
 
-    t = threading.Thread(target=run, daemon=True)
-    t.start()
-    return t
+    def heard(data: bytes) -> None:
+        if frame[1:8] in data:
+            asked.set()
+        write(data)
+
+    def answer(data: bytes) -> None:
+        send(data)
+        if asked.is_set() and not done.is_set() and any(
+                data[i + 3] == frame[1] for i in range(0, len(data) - 8, 9)):
+            done.set()
+            server.drop_client()
+
+    sim.write, sim.on_output = heard, answer
+    return done
 
 
 def script_run(url: str, tmp_path, *extra: str) -> subprocess.CompletedProcess:
@@ -52,8 +66,8 @@ def script_run(url: str, tmp_path, *extra: str) -> subprocess.CompletedProcess:
 
 
 def test_a_script_fails_the_line_that_lost_the_link(tcp_sim, tmp_path):
-    _, server, url = tcp_sim
-    hang_up_after(server, 0.5)
+    sim, server, url = tcp_sim
+    hang_up_after_reply(sim, server, 6, 4, 0, 0)  # the first GAP 4, 0 answered, then the .sleep
     p = script_run(url, tmp_path)
     assert p.returncode == 1
     assert f"s.tmcl:3: lost {url}" in p.stderr and "disconnected" in p.stderr
@@ -61,8 +75,8 @@ def test_a_script_fails_the_line_that_lost_the_link(tcp_sim, tmp_path):
 
 
 def test_keep_going_reconnects_before_the_next_line(tcp_sim, tmp_path):
-    _, server, url = tcp_sim
-    hang_up_after(server, 0.5)
+    sim, server, url = tcp_sim
+    hang_up_after_reply(sim, server, 6, 4, 0, 0)
     p = script_run(url, tmp_path, "--keep-going")
     assert p.returncode == 1  # a line failed
     assert f"s.tmcl:3: lost {url}" in p.stderr
@@ -77,7 +91,9 @@ def test_a_watch_says_link_lost_and_samples_again_once_it_is_back(tcp_sim, capsy
     client = LineClient(open_serial(url), module="TMCM-1311", timeout=0.3)
     session = Session(client, Output(json_mode=True))
     got = []
-    hang_up_after(server, 0.4)
+    # the cable pulled as soon as the second value is written, while the watch runs (a pull
+    # 0.4 s after connecting could come before it on a busy machine: the write failed)
+    hang_up_after_reply(sim, server, 9, 0, 2, 2)
     try:
         items = watch.parse_items(session, "v=GGP 0, 2")
         client.execute("SGP 0, 2, 1")
@@ -85,8 +101,8 @@ def test_a_watch_says_link_lost_and_samples_again_once_it_is_back(tcp_sim, capsy
 
         def emit(obj):
             got.append((time.monotonic() - t0, obj))
-            # written while the watch runs (before the hang-up: a sample is emitted once the
-            # next one is read): the samples after the link came back read the module again
+            # written while the watch runs, just before the hang-up (a sample is emitted once
+            # the next one is read): the samples after the link came back read it again
             if len(got) == 7:
                 client.execute("SGP 0, 2, 2")
         result = watch.run_watch(session, items, interval=0.05, count=16, live=False,
@@ -102,6 +118,33 @@ def test_a_watch_says_link_lost_and_samples_again_once_it_is_back(tcp_sim, capsy
     assert values[0] == 1 and values[-1] == 2
     times = [t for t, _ in got]
     assert max(b - a for a, b in zip(times, times[1:])) >= 0.3  # the gap while reconnecting
+
+
+def test_a_watch_that_finds_the_link_lost_between_two_samples_reconnects(tcp_sim, capsys):
+    """The cable pulled after a sample was read, found when the watch takes in what waits
+    before the next (it ended the watch with the TransportError instead of reconnecting)."""
+    sim, server, url = tcp_sim
+    client = LineClient(open_serial(url), module="TMCM-1311", timeout=0.3)
+    session = Session(client, Output(json_mode=True))
+    got = []
+
+    def emit(obj):
+        got.append(obj)
+        if len(got) == 3:
+            server.drop_client()
+            deadline = time.monotonic() + patience(30)
+            while not client.framing.waiting():  # the hang-up has reached us
+                assert time.monotonic() < deadline, "the hang-up never arrived"
+                time.sleep(0.01)
+    try:
+        client.execute("SGP 0, 2, 1")
+        items = watch.parse_items(session, "v=GGP 0, 2")
+        result = watch.run_watch(session, items, interval=0.05, count=8, live=False, emit=emit)
+    finally:
+        client.close()
+    err = capsys.readouterr().err
+    assert "watch: link lost: lost " + url in err and f"watch: reconnected to {url}" in err
+    assert result.samples == 8 and [obj["values"]["v"] for obj in got] == [1] * 8
 
 
 def test_live_watch_table_says_link_lost():
@@ -246,16 +289,15 @@ def test_ctrl_c_in_a_script_after_the_link_was_lost_reconnects_and_stops(tcp_sim
     sim, server, url = tcp_sim
     script = tmp_path / "turn.tmcl"
     script.write_text("ROR 0, 30000\n.sleep 30\n")
+    hung_up = hang_up_after_reply(sim, server, 1, 0, 0, 30000)  # ROR answered: the script is in its .sleep
     p = subprocess.Popen([sys.executable, "-m", "tmclsh", "--port", url, "-m", "TMCM-1311",
                           "-f", str(script)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                          text=True, env=tmclsh_env(), cwd=str(ROOT))
     try:
-        hang_up_after(server, 0.3).join(25)
-        deadline = time.monotonic() + 10
-        while sim.param("axis", 3, 0) == 0 and time.monotonic() < deadline:
-            time.sleep(0.02)  # (the motor turns: the script is in its .sleep)
+        assert hung_up.wait(60), "the ROR was never answered"
+        assert sim.param("axis", 3, 0) != 0
         p.send_signal(2)
-        _, err = p.communicate(timeout=20)
+        _, err = p.communicate(timeout=patience(20))
     finally:
         if p.poll() is None:
             p.kill()
@@ -277,6 +319,8 @@ class Unplugging:
         self.port = self._listen(0)
         self.cut = threading.Event()
         self.connections = 0
+        self.unplug_at: tuple[bytes, float] | None = None  # (request, seconds): see _pump
+        self._asked = False
         threading.Thread(target=self._serve, daemon=True).start()
 
     def _listen(self, port: int) -> int:
@@ -298,7 +342,7 @@ class Unplugging:
                 time.sleep(0.02)  # unplugged: nothing listens
                 continue
             self.connections += 1
-            back = self.socket.create_connection(self.target)
+            back = self._back = self.socket.create_connection(self.target)
             self.cut.clear()
             pumps = [threading.Thread(target=self._pump, args=(a, b), daemon=True)
                      for a, b in ((front, back), (back, front))]
@@ -320,16 +364,22 @@ class Unplugging:
                 return
             if not data:
                 return
+            plan = self.unplug_at
+            if plan is not None and plan[0] in data:  # the request: unplug once it is answered
+                self._asked = True
             try:
                 dst.sendall(data)
             except OSError:
                 return
+            if plan is not None and self._asked and src is self._back:
+                self.unplug_at = None
+                self.unplug(plan[1])
 
     def unplug(self, seconds: float) -> None:
+        """Unplugged at once; plugged back in ``seconds`` later."""
         self.listener.close()
         self.cut.set()
-        time.sleep(seconds)
-        self._listen(self.port)
+        threading.Timer(seconds, self._listen, args=(self.port,)).start()
 
 
 def test_keep_going_waits_for_a_link_that_comes_back(tmp_path):
@@ -345,14 +395,9 @@ def test_keep_going_waits_for_a_link_that_comes_back(tmp_path):
         script = tmp_path / "s.tmcl"
         script.write_text("GAP 4, 0\n.sleep 0.25\n" * reads)
         url = f"socket://127.0.0.1:{relay.port}"
-
-        def unplug():
-            while relay.connections == 0:
-                time.sleep(0.01)
-            time.sleep(0.6)
-            relay.unplug(2.0)
-
-        threading.Thread(target=unplug, daemon=True).start()
+        # unplugged for 2 s as soon as the first GAP 4 is answered (a cut at a fixed time
+        # after connecting raced tmclsh's start-up on a busy machine)
+        relay.unplug_at = (Request(1, 6, 4, 0, 0).to_bytes(), 2.0)
         t0 = time.monotonic()
         p = subprocess.run([sys.executable, "-m", "tmclsh", "--port", url, "-m", "TMCM-1311",
                             "--timeout", "0.3", "-f", str(script), "--keep-going"],
@@ -364,7 +409,7 @@ def test_keep_going_waits_for_a_link_that_comes_back(tmp_path):
         right = p.stdout.count("MaxPositioningSpeed = 51200")
         assert f"reconnected to {url}" in p.stdout
         after = p.stdout[p.stdout.index(f"reconnected to {url}"):]
-        # 0.6 s (about 2 reads) before the cut, 2 s without a link: a line waits 0.9 s for it
+        # one read before the cut, 2 s without a link: a line waits 0.9 s for it
         assert after.count("MaxPositioningSpeed = 51200") >= reads - 8
         failed = [x for x in p.stderr.splitlines() if "s.tmcl:" in x]
         assert right + len(failed) == reads and len(failed) <= 3  # a line lost, 2 s waited

@@ -263,7 +263,9 @@ def test_a_tap_on_the_line_of_a_pyserial_master_and_a_module(tmp_path):
     assert frames[1]["version"] == "1311V111"
     assert (frames[4]["line"], frames[4]["param"]) == ("GAP 4, 0", "MaxPositioningSpeed")
     assert frames[5]["value"] == 1000 and frames[5]["status"] == 100
-    assert frames[5]["latency"] > 0
+    # a latency is given (0.0 when a busy machine let the tap read request and reply at once:
+    # the 10 ms between them is the test's, not something the monitor must see)
+    assert isinstance(frames[5]["latency"], (int, float)) and frames[5]["latency"] >= 0
     assert frames[6]["line"] == "GGP 66, 0" and frames[7]["param"] == "SerialAddress"
     noise = [o for o in objs if o.get("frame") == "noise"]
     assert [n["bytes"] for n in noise] == ["ff 00 13", request(1, 6, 2)[:6].hex(" ")]

@@ -20,7 +20,7 @@ from tmclsh.shell.render import Output
 from tmclsh.shell.session import Session
 from tmclsh.link import open_serial
 
-from conftest import ROOT, tmclsh_env
+from conftest import ROOT, patience, read_until, tmclsh_env
 from responder import Responder, fields, reply, version_reply
 
 # a stored program that keeps the motor turning: MST alone is undone a moment later
@@ -198,12 +198,14 @@ def test_ctrl_c_in_a_script_stops_the_program(tmp_path):
         p = subprocess.Popen([sys.executable, "-m", "tmclsh", "--port", server.path,
                               "-m", "TMCM-1311", "-f", str(script)], stdout=subprocess.PIPE,
                              stderr=subprocess.PIPE, text=True, env=tmclsh_env(), cwd=str(ROOT))
-        deadline = time.monotonic() + 20
-        while sim.program_state != 1 and time.monotonic() < deadline:
-            time.sleep(0.05)
-        time.sleep(0.3)
+        # the .run has said where the program runs (the module's state alone came before
+        # tmclsh had taken the answer in: Ctrl-C landed on line 2); then the .sleep begins
+        shown = read_until(p, lambda text: "\nrun @1 " in "\n" + text and text.endswith("\n"))
+        assert sim.program_state == 1
+        time.sleep(0.3)  # (from the .run's last line to the .sleep's first: a few steps)
         p.send_signal(2)
-        out, err = p.communicate(timeout=20)
+        out, err = p.communicate(timeout=patience(20))
+        out = shown + out
         assert p.returncode == 130
         assert "stored program stopped; stopped motor 0 (MST; speed reads 0)" in err, err
         # how far the script got, as a run that ends says it

@@ -295,17 +295,17 @@ def test_interrupted_run_names_the_stopped_motors_in_prose(tmp_path):
     import sys
     import time
 
-    from conftest import tmclsh_env
+    from conftest import patience, tmclsh_env
 
     proc = subprocess.Popen([sys.executable, "-m", "tmclsh", "--sim", "TMCM-351", "-c",
                              "ROR 0, 100; .sleep 20"], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env=tmclsh_env())
     try:
-        deadline = time.monotonic() + 20
+        deadline = time.monotonic() + patience(20)
         line = proc.stdout.readline()  # the ROR's result: the shell is in .sleep now
         assert "0" in line and time.monotonic() < deadline
         proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=20)
+        _, err = proc.communicate(timeout=patience(20))
     finally:
         if proc.poll() is None:
             os.kill(proc.pid, signal.SIGKILL)

@@ -15,7 +15,7 @@ import time
 
 import pytest
 
-from conftest import ROOT, tmclsh_env
+from conftest import ROOT, patience, tmclsh_env
 from tmclsh.cli import main as cli
 from tmclsh.client.text import LineClient
 from tmclsh.base.errors import ValidationError
@@ -149,7 +149,7 @@ def test_wait_polls_until_the_motor_arrives(session, tmp_path):
         """)
     t0 = time.monotonic()
     assert run(session, path) == 0
-    assert time.monotonic() - t0 < 3
+    assert time.monotonic() - t0 < patience(3)
 
 
 def test_wait_timeout_is_an_error_with_the_last_value(session, tmp_path, capsys):
@@ -160,7 +160,7 @@ def test_wait_timeout_is_an_error_with_the_last_value(session, tmp_path, capsys)
         """)
     t0 = time.monotonic()
     assert run(session, path) == script.EXIT_FAILED
-    assert 0.2 <= time.monotonic() - t0 < 1.5
+    assert 0.2 <= time.monotonic() - t0 < patience(1.5)
     cap = capsys.readouterr()
     assert (f"{path}:2: timed out after 0.2 s waiting for GIO 1, 0 == wanted "
             "(GIO 1, 0 is 0, wanted is 1)") in cap.err
@@ -179,7 +179,7 @@ def test_sleep(session, tmp_path):
     path = write(tmp_path, "sleep.tmcl", ".let s = 0.1\n.sleep s * 2\n")
     t0 = time.monotonic()
     assert run(session, path) == 0
-    assert 0.2 <= time.monotonic() - t0 < 1
+    assert 0.2 <= time.monotonic() - t0 < patience(1)
 
 
 # -- blocks and includes ----------------------------------------------------------------

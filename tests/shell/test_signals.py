@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from conftest import ROOT, tmclsh_env
+from conftest import ROOT, patience, tmclsh_env
 from tmclsh.tmcl.frames import Request, Reply
 from tmclsh.sim import Simulator
 from tmclsh.sim.serve import serve_pty
@@ -22,7 +22,7 @@ def start(path: str, *args: str) -> subprocess.Popen:
 
 
 def wait_for(pred, timeout: float = 10.0) -> None:
-    deadline = time.monotonic() + timeout
+    deadline = time.monotonic() + patience(timeout)
     while not pred():
         assert time.monotonic() < deadline, "condition not met in time"
         time.sleep(0.01)
@@ -90,7 +90,7 @@ def test_killed_with_a_motor_turning_stops_it_and_says_so(served, tmp_path, sig,
         p = start(path, "-c", lines.replace("\n", "; ").strip("; "))
     wait_for(lambda: sim.param("axis", 3, 0) != 0)
     p.send_signal(sig)
-    _, err = p.communicate(timeout=20)
+    _, err = p.communicate(timeout=patience(20))
     assert p.returncode == 128 + sig, err
     assert f"{words}: stopped motor 0 (MST; speed reads 0)" in err, err
     assert sim.param("axis", 3, 0) == 0

@@ -18,7 +18,7 @@ import time
 
 import pytest
 
-from conftest import ROOT, tmclsh_env
+from conftest import ROOT, patience, tmclsh_env
 from test_repl import CTRL_C, ENTER, Repl, Screen
 
 from tmclsh.client.text import LineClient
@@ -164,13 +164,13 @@ def test_ctrl_c_in_c(tmp_path):
                           "-c", "ROR 0, 30000; .sleep 30"], stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True, env=tmclsh_env(), cwd=str(ROOT))
     try:
-        deadline = time.monotonic() + 15
+        deadline = time.monotonic() + patience(15)
         while sim.param("axis", 3, 0) == 0 and time.monotonic() < deadline:
             time.sleep(0.02)  # (the motor turns: the run is in its .sleep)
         server.drop_client()
         time.sleep(0.2)
         p.send_signal(2)
-        _, err = p.communicate(timeout=20)
+        _, err = p.communicate(timeout=patience(20))
         assert p.returncode == 130, err
         _stopped_and_said(sim, err, url, "interrupted")
     finally:

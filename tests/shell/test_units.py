@@ -15,7 +15,7 @@ import uuid
 
 import pytest
 
-from conftest import ROOT, tmclsh_env
+from conftest import ROOT, patience, read_until, tmclsh_env
 from tmclsh.cli import main as cli
 from tmclsh.sim import SimBus, Simulator
 from tmclsh.sim.model import AXIS
@@ -227,12 +227,15 @@ def test_a_signal_stops_every_unit(make_pty_sim, tmp_path, sig, status, why):
                             env=tmclsh_env(), cwd=str(ROOT))
     try:
         turning = [sim for sim, _ in sims]
-        deadline = time.monotonic() + 15
-        while not all(s.param(AXIS, 3) for s in turning):
-            assert time.monotonic() < deadline and proc.poll() is None
-            time.sleep(0.05)
+        # both units have taken in their ROR's answer (the motors turning alone came before
+        # that: a unit still on line 1 when the signal landed); then their .sleep
+        shown = read_until(proc, lambda text: text.count("ok: motor 0 rotating") == 2
+                           and text.endswith("\n"))
+        assert all(s.param(AXIS, 3) for s in turning)
+        time.sleep(0.3)  # (from the ROR's result to the .sleep: a few steps)
         proc.send_signal(sig)
-        out, err = proc.communicate(timeout=15)
+        out, err = proc.communicate(timeout=patience(15))
+        out = shown + out
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -251,14 +254,14 @@ def _interrupt_once_turning(script, path: str, sim, *extra: str,
                              "1-3", *extra, "-f", str(script)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env=tmclsh_env(), cwd=str(ROOT))
     try:
-        deadline = time.monotonic() + timeout
+        deadline = time.monotonic() + patience(timeout)
         while not sim.param(AXIS, 3):
             assert time.monotonic() < deadline and proc.poll() is None
             time.sleep(0.05)
         then()
         time.sleep(0.3)  # (in the loop: the main thread waits for the line's thread)
         proc.send_signal(signal.SIGINT)
-        out, err = proc.communicate(timeout=timeout)
+        out, err = proc.communicate(timeout=patience(timeout))
     finally:
         if proc.poll() is None:
             proc.kill()

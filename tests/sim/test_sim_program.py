@@ -10,7 +10,9 @@ import pytest
 from tmclsh.tmcl.asm import assemble
 from tmclsh.tmcl.frames import Reply, ReplyKind, Request, Status
 from tmclsh.sim import Simulator
+from conftest import patience
 from manuals import listing
+from steppedsim import SteppedSimulator
 
 
 class Host:
@@ -93,7 +95,9 @@ def test_download_refuses_what_the_module_lacks(host):
     assert host.raw(132, 0, 0, 2048).status == Status.INVALID_VALUE
 
 
-def test_run_step_stop_reset_and_status_parameters(host):
+def test_run_step_stop_reset_and_status_parameters():
+    # module time moved by the test: "not yet" stays not yet however late the next request
+    host = Host(SteppedSimulator("TMCM-1311"))
     host.upload("CALC LOAD, 1\nCALC ADD, 2\nAGP 0, 2\nWAIT TICKS, 0, 20\nJA 0\n")
     assert host.ok(135) == 0
     host.ok(130)  # step
@@ -102,8 +106,10 @@ def test_run_step_stop_reset_and_status_parameters(host):
     host.ok(130)
     assert host.var(0) == 3 and host.ok(10, 130) == 3
     host.ok(130)  # WAIT TICKS 20: completes 200 ms later (module time)
+    host.sim.step(0.15)
     assert host.ok(10, 130) == 3
-    host.wait(lambda: host.ok(10, 130) == 4)
+    host.sim.step(0.1)
+    assert host.ok(10, 130) == 4
     assert host.ok(135) == 2
     host.ok(129, 0, 0, 0)  # run from the current address
     assert host.ok(135) == 1
@@ -113,6 +119,7 @@ def test_run_step_stop_reset_and_status_parameters(host):
     assert (host.ok(135), host.ok(10, 130)) == (3, 0)
     assert host.raw(129, 2).status == Status.WRONG_TYPE
     assert host.raw(129, 1, 0, 4096).status == Status.INVALID_VALUE
+    host.sim.close()
 
 
 def test_stop_instruction_and_end_of_program(host):
@@ -292,16 +299,14 @@ def edges(samples: list[tuple[float, int]]) -> list[float]:
 
 
 def test_manual_timer_interrupt_toggles_out0():
-    with Simulator("TMCM-1311", speed=10) as sim:
+    # module time moved by the test: a sample every 20 ms of it, however busy the machine
+    with SteppedSimulator("TMCM-1311") as sim:
         h = Host(sim)
         h.run(TIMER_EXAMPLE)
-        out0, out3 = [], []
-        deadline = time.monotonic() + 0.7  # 7 s of module time
-        while time.monotonic() < deadline:
-            t = sim.now()
-            out0.append((t, h.ok(15, 0, 2)))  # each request brings the module up to date
-            out3.append((t, h.ok(15, 3, 2)))
-            time.sleep(0.002)
+        # each request brings the module up to date
+        samples = sim.run_for(7.0, 0.02, lambda t: (h.ok(15, 0, 2), h.ok(15, 3, 2)))
+        out0 = [(t, v[0]) for t, v in samples]
+        out3 = [(t, v[1]) for t, v in samples]
         e0, e3 = edges(out0), edges(out3)
         assert len(e0) >= 4
         period = (e0[-1] - e0[0]) / (len(e0) - 1)
@@ -445,13 +450,15 @@ def test_manual_simple_program_moves_between_two_positions():
 
     A new target is only set after WAIT POS saw the old one reached, so the alternating
     target positions prove each move arrived."""
-    with Simulator("TMCM-1311", speed=100) as sim:
+    with SteppedSimulator("TMCM-1311") as sim:  # module time moved by the test
         h = Host(sim)
         h.run(SIMPLE_PROGRAM)
-        h.wait(lambda: h.ok(6, 3) < -40000)  # ROL 0, 50000
-        h.wait(lambda: h.ok(6, 3) > 40000)  # ROR 0, 50000
-        h.wait(lambda: h.ok(6, 0) == -100000)  # the first move of the loop arrived
-        targets, positions, speeds = sweep(h, 0.4)  # 40 s of module time
+        h.wait(lambda: sim.step(0.05) or h.ok(6, 3) < -40000, patience(30))  # ROL 0, 50000
+        h.wait(lambda: sim.step(0.05) or h.ok(6, 3) > 40000, patience(30))  # ROR 0, 50000
+        # the first move of the loop arrived
+        h.wait(lambda: sim.step(0.05) or h.ok(6, 0) == -100000, patience(30))
+        rows = sim.run_for(40.0, 0.05, lambda t: (h.ok(6, 0), h.ok(6, 1), h.ok(6, 3)))
+        targets, positions, speeds = ([r[i] for _, r in rows] for i in range(3))
         seq = changes(targets)
         assert len(seq) >= 3 and set(seq) == {100000, -100000}
         assert max(positions) <= 100000 and min(positions) >= -100000

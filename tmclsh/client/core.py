@@ -768,6 +768,9 @@ class Client:
         try:
             if self.ascii_link is None and self.transport.is_open and self.framing.waiting():
                 self.framing.absorb()
+        except TransportError:
+            self._down = True  # found here as a request would have found it
+            raise
         finally:
             self._lock.release()
             if self._events:

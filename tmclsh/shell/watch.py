@@ -788,7 +788,11 @@ class _Watch:
                 # nothing readable at all: an error, not a watch of dashes
                 raise TmclError(next(iter(reading.errors.values())))
             if doubt:  # what already waits, taken in (no exchange, no wait): the last
-                self.session.client.poll()  # read's own answer, if it was displaced
+                try:  # read's own answer, if it was displaced
+                    self.session.client.poll()
+                except TransportError as exc:  # the cable pulled since this sample was read
+                    self._lost(str(exc))
+                    continue
             reading.settle(confirm=False)  # in doubt already: read again within the sample
             # --until on the values as read: an answer found in doubt later can only make it
             # false (not judged on), so a sample it does not end need not be judged now
