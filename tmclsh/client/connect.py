@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from ..base.canspec import FROM_PYTHON_CAN, LINK_DEFAULTS, parse_can
+from ..base.canspec import LINK_DEFAULTS
 from ..base.errors import ConnectError, UsageError, ValidationError
 from ..link import TRINAMIC_VID, trinamic_ports
 from ..link.base import Transport
@@ -39,8 +39,9 @@ def connection_settings(args: argparse.Namespace) -> dict:
     if settings.get("sim") == "":  # a bare --sim: simulate the module -m names
         module = settings.get("module")
         settings["sim"] = module if module and module.lower() != "generic" else SIM_DEFAULT
-    if settings.get("can") and settings["can"] != FROM_PYTHON_CAN:
-        parse_can(settings["can"])  # a malformed --can is a usage error, before opening anything
+    from ..link.spec import LinkSpec
+
+    LinkSpec.from_settings(settings)  # a malformed --can is a usage error, before opening anything
     return settings
 
 
@@ -117,7 +118,8 @@ def open_client(settings: dict, *, fallback: bool = False,
     transport = open_transport(settings, fallback=fallback)
     module = settings.get("module") or settings.get("sim")
     try:
-        client = LineClient(transport, address=_setting(settings, "address", LINK_DEFAULTS["address"]),
+        client = LineClient(transport,
+                        address=_setting(settings, "address", LINK_DEFAULTS["address"]),
                         host_address=_setting(settings, "host_address",
                                               LINK_DEFAULTS["host_address"]), module=module,
                         timeout=_setting(settings, "timeout", 1.0),
@@ -143,9 +145,10 @@ def connect(port: str | None = None, *, baud: int | None = None, can: str | None
     """Open a client: ``connect(port="/dev/ttyACM0")``, ``connect(port="socket://host:4001")``,
     ``connect(can="virtual:bench")``, ``connect(sim="TMCM-351")``; with none of them, the one
     Trinamic USB module attached, as the command line does. What is not given takes the
-    modules' factory settings (``LINK_DEFAULTS``: 9600 baud, address 1, host address 2). The simulator only when asked
-    (``sim=``): a test jig written in Python must not pass with its cable unplugged. No module
-    attached, or several, is a ``ConnectError`` saying what to give.
+    modules' factory settings, as on the command line (``LINK_DEFAULTS``: 9600 baud, address
+    1, host address 2). The simulator only when asked (``sim=``): a test jig written in
+    Python must not pass with its cable unplugged. No module attached, or several, is a
+    ``ConnectError`` saying what to give.
 
     The module type is asked with 136; a ``module`` that contradicts the answer is a
     ``ConnectError``. A number outside its range (``limits.LIMITS``, as for the command line:
