@@ -157,7 +157,7 @@ def test_the_exit_3_message_is_a_record_under_json(tmp_path, run_tmclsh):
     for args, line in ((("--json", "-c", "GAP 4, 0"), True),
                        (("--json", "--port", missing, "-c", "GAP 4, 0"), True),
                        (("--json", "--port", missing, "-f", "-"), True),
-                       (("--json", "scan", "--port", missing), False)):
+                       (("--json", "scan", "--port", missing), True)):  # (one envelope)
         p = run_tmclsh(*args, input="GAP 4, 0\n")
         assert p.returncode == 3
         (record,) = [json.loads(x) for x in p.stdout.splitlines()]

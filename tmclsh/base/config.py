@@ -23,6 +23,7 @@ from importlib import resources
 from pathlib import Path
 
 from . import limits
+from .canspec import LINK_DEFAULTS
 from .errors import UsageError, ValidationError
 from .limits import SettingError
 
@@ -58,9 +59,11 @@ CONNECTION_TYPES: dict[str, type] = {
 CONNECTION_KEYS = tuple(CONNECTION_TYPES)
 # the connection kinds: one source names at most one, and the strongest source decides
 KINDS = ("port", "can", "sim")
-# used when no option, variable or profile sets them (port/can/sim: see connection.open_transport)
+# used when no option, variable or profile sets them (port/can/sim: see connection.open_transport;
+# the link's own: canspec.LINK_DEFAULTS, the one table every way of opening a link reads)
+LINK_KEYS = ("baud", "address", "host_address")
 CONNECTION_DEFAULTS: dict[str, object] = {
-    "baud": 9600, "address": 1, "host_address": 2, "ascii": False, "timeout": 1.0, "retries": 2,
+    **{k: LINK_DEFAULTS[k] for k in LINK_KEYS}, "ascii": False, "timeout": 1.0, "retries": 2,
 }
 # allowed values of string settings
 SETTING_CHOICES: dict[str, tuple[str, ...]] = {
@@ -271,7 +274,7 @@ def resolve(cli: dict, config: Config, env: dict[str, str] | None = None) -> dic
             known = ", ".join(sorted(config.profiles)) or "none defined"
             raise UsageError(f"no profile {profile_name!r} in {config.path} (known: {known})")
         profile = config.profiles[profile_name]
-    merged: dict = dict(CONNECTION_DEFAULTS)
+    merged: dict = {**CONNECTION_DEFAULTS, **{k: LINK_DEFAULTS[k] for k in LINK_KEYS}}
     for source in (profile, envs, {k: v for k, v in cli.items() if v is not None}):
         if any(k in source for k in KINDS):
             for k in KINDS:

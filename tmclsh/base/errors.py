@@ -111,3 +111,17 @@ class AsmError(TmclError, ValueError):
             if self.col is not None:
                 where.append(str(self.col))
         return f"{':'.join(where)}: {self.message}" if where else self.message
+
+
+def exit_status(exc: BaseException) -> int:
+    """The exit status a run ends with when ``exc`` ends it, for every entry point alike:
+    Ctrl-C 130, a refused command line 2 (and an error that says it was refused before
+    anything was sent, ``exit_status``), no module 3, anything else 1."""
+    if isinstance(exc, KeyboardInterrupt):
+        return EXIT_INTERRUPTED
+    if isinstance(exc, UsageError):
+        return EXIT_USAGE
+    if isinstance(exc, ConnectError):
+        return EXIT_CONNECT
+    own = getattr(exc, "exit_status", None)
+    return own if isinstance(own, int) else EXIT_FAILED

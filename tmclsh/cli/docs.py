@@ -667,8 +667,9 @@ With {_b("--json")} every result is one JSON object on a line of standard output
 an error gives {_b('{"line": ..., "error": "..."}')}; a check ({_b(".expect")}, {_b(".wait")})
 has the same fields passed or failed ({_b('"check"')}, {_b('"passed": true|false')},
 {_b('"values"')}), and no module to talk to (exit status 3) gives
-{_b('{"line": null, "error": "...", "exit": 3}')} (the subcommands: {_b('{"error", "exit"}')})
-besides the line on standard error.
+{_b('{"line": null, "error": "...", "exit": 3}')} besides the line on standard error (the
+subcommands' errors too: {_b("scan")}, {_b("firmware")}, {_b("monitor")} and {_b("bridge")} end
+with the same object, their own fields before {_b('"error"')}).
 On the built-in simulator every object also has {_b('"simulated": true')} (and a script's
 summary line says SIMULATED). A 138 target-reached message is an object of its own, in order
 with the results: {_b('{"event": 138, "motors": [0], "t": 1.25}')} (seconds since the start).

@@ -12,12 +12,12 @@ stands and, when it is not back in its firmware, the exact command that complete
 from __future__ import annotations
 
 import argparse
-import json
 import shlex
 import sys
 
-from ..base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE,
-                           ConnectError, TmclError)
+from ..base.edges import error_record, write_json
+from ..base.errors import (EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, TmclError,
+                           exit_status)
 
 
 def resume_command(args: argparse.Namespace, image: str | None = None) -> str:
@@ -56,7 +56,7 @@ class Report:
         self._task = None
 
     def emit(self, obj: dict) -> None:
-        print(json.dumps(obj), flush=True)
+        write_json(obj)
 
     def line(self, text: str) -> None:
         if self._bar is not None:
@@ -118,7 +118,7 @@ def cmd_firmware(args: argparse.Namespace) -> int:
 
     def refuse(text: str, code: int) -> int:
         if as_json:
-            report.emit({"error": text})
+            report.emit(error_record(text, code))
         else:
             print(f"tmclsh: {text}", file=sys.stderr)
         return code
@@ -144,17 +144,18 @@ def cmd_firmware(args: argparse.Namespace) -> int:
         result = update.run()
     except (KeyboardInterrupt, SystemExit) as exc:
         code = exc.code if isinstance(exc, SystemExit) and isinstance(exc.code, int) \
-            else EXIT_INTERRUPTED
+            else exit_status(exc)  # type: ignore[arg-type]
         report.close()
         _stopped(report, update, args, "interrupted" if code == EXIT_INTERRUPTED
-                 else f"stopped by a signal (exit status {code})", None)
+                 else f"stopped by a signal (exit status {code})", None, code)
         return code
     except TmclError as exc:
         report.close()
-        _stopped(report, update, args, str(exc), exc)
-        if isinstance(exc, ConnectError) and update.state == "application":
-            return EXIT_CONNECT
-        return EXIT_FAILED
+        # no module is exit 3 only while the module was still running its firmware: from
+        # its bootloader on, the update failed half way
+        code = exit_status(exc) if update.state == "application" else EXIT_FAILED
+        _stopped(report, update, args, str(exc), exc, code)
+        return code
     finally:
         report.close()
         update.close()
@@ -174,7 +175,7 @@ def cmd_firmware(args: argparse.Namespace) -> int:
 
 
 def _stopped(report: Report, update, args: argparse.Namespace, what: str,
-             exc: BaseException | None) -> None:
+             exc: BaseException | None, code: int) -> None:
     """What stopped the update, where the module stands, and how to complete it."""
     from ..ops.firmware import ImageRefused
 
@@ -188,10 +189,8 @@ def _stopped(report: Report, update, args: argparse.Namespace, what: str,
         else:
             resume = resume_command(args)
     if report.json:
-        obj = {"error": what, "state": update.state, "situation": situation}
-        if resume:
-            obj["resume"] = resume
-        report.emit(obj)
+        more = {"resume": resume} if resume else {}
+        report.emit(error_record(what, code, state=update.state, situation=situation, **more))
         return
     print(f"tmclsh: {what}", file=sys.stderr)
     print(f"tmclsh: {situation}", file=sys.stderr)

@@ -8,10 +8,10 @@ files go (the config directory's ``modules/``, where tmclsh finds them by itself
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
+from ..base.edges import write_json
 from ..base.errors import EXIT_OK, EXIT_USAGE, UsageError
 
 LIBRARIES = ("pytrinamic",)
@@ -19,7 +19,7 @@ LIBRARIES = ("pytrinamic",)
 
 def _say(args: argparse.Namespace, obj: dict, text: str, *, err: bool = False) -> None:
     if getattr(args, "json", False):
-        print(json.dumps(obj))
+        write_json(obj)
     else:
         print(text, file=sys.stderr if err else sys.stdout)
 

@@ -9,7 +9,7 @@ import argparse
 import os
 import sys
 
-from ..base.errors import EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE
+from ..base.errors import EXIT_CONNECT, EXIT_FAILED, EXIT_OK, EXIT_USAGE
 from .options import SUBCOMMANDS, build_parser, parse_args
 
 
@@ -71,10 +71,9 @@ def cmd_bridge(args: argparse.Namespace) -> int:
 def cmd_ports(args: argparse.Namespace) -> int:
     """One line per serial port: device, USB vendor:product, description, serial number;
     Trinamic devices first and marked."""
-    import json
-
     from serial.tools import list_ports
 
+    from ..base.edges import write_json
     from ..link import TRINAMIC_VID
 
     ports = sorted(list_ports.comports(), key=lambda p: (p.vid != TRINAMIC_VID, p.device))
@@ -86,9 +85,9 @@ def cmd_ports(args: argparse.Namespace) -> int:
         trinamic = p.vid == TRINAMIC_VID
         desc = p.description if p.description and p.description != "n/a" else ""
         if as_json:
-            print(json.dumps({"device": p.device, "vid": p.vid, "pid": p.pid,
-                              "description": desc or None, "serial": p.serial_number,
-                              "trinamic": trinamic}))
+            write_json({"device": p.device, "vid": p.vid, "pid": p.pid,
+                        "description": desc or None, "serial": p.serial_number,
+                        "trinamic": trinamic})
             continue
         ids = f"{p.vid:04x}:{p.pid:04x}" if p.vid is not None else "-"
         serial = f"  serial {p.serial_number}" if p.serial_number else ""
@@ -101,8 +100,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
     """Ask every address in --from..--to who is there (``tmclsh.ops.scan``); with ``--baud auto``
     at each baud rate GP 65 can select. Rows on stdout as modules are found, progress (on a
     terminal) and a summary on stderr."""
-    import json
-
+    from ..base.edges import write_json
     from ..client.core import Client
     from ..client.connect import connection_settings, open_transport
     from ..tmcl.modules import baud_rates
@@ -157,9 +155,8 @@ def cmd_scan(args: argparse.Namespace) -> int:
 
             def row(hit) -> None:
                 if args.json:
-                    print(json.dumps(hit.as_json() if auto else
-                                     {k: v for k, v in hit.as_json().items() if k != "baud"}),
-                          flush=True)
+                    write_json(hit.as_json() if auto else
+                               {k: v for k, v in hit.as_json().items() if k != "baud"})
                 else:
                     at = f"  {hit.baud} baud" if auto else ""
                     mode = "  ASCII mode" if hit.ascii else ""
@@ -270,8 +267,7 @@ def _scan_with_progress(client, addresses: range, timeout: float, what: str, row
 
 def cmd_modules(args: argparse.Namespace) -> int:
     """The known modules and where each comes from, or (``check FILE``) one file validated."""
-    import json
-
+    from ..base.edges import write_json
     from ..tmcl import modules
 
     if args.action == "import":
@@ -305,8 +301,8 @@ def cmd_modules(args: argparse.Namespace) -> int:
         if mod.origin:
             source += f" (data from {mod.origin})"
         if getattr(args, "json", False):
-            print(json.dumps({"module": mod.name, "firmware_id": mod.firmware_id,
-                              "version_string": mod.version_string, "source": source}))
+            write_json({"module": mod.name, "firmware_id": mod.firmware_id,
+                        "version_string": mod.version_string, "source": source})
         else:
             print(f"{mod.name:<12} {mod.version_string:<10} {source}")
     if not getattr(args, "json", False):
@@ -355,12 +351,12 @@ def show_manual(parser: argparse.ArgumentParser) -> int:
 def _say_error(args: argparse.Namespace, message: str, status: int, prefix: str = "tmclsh: "
                ) -> None:
     """The error a run ends with: a line on stderr, and under --json a record on stdout
-    (``{"error", "exit"}``) too, so that stdout stays JSON."""
+    (``edges.error_record``, as every command's) too, so that stdout stays JSON."""
     print(f"{prefix}{message}", file=sys.stderr)
     if getattr(args, "json", False):
-        import json
+        from ..base.edges import error_record, write_json
 
-        print(json.dumps({"error": message, "exit": status}), flush=True)
+        write_json(error_record(message, status))
 
 
 def _user_modules(args: argparse.Namespace) -> None:
@@ -381,7 +377,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parse_args(parser, argv)
     debug = getattr(args, "debug", False)
-    from ..base.errors import TmclError, UsageError
+    from ..base.edges import reader_gone
+    from ..base.errors import TmclError, UsageError, exit_status
 
     try:
         if getattr(args, "man", False):
@@ -397,39 +394,19 @@ def main(argv: list[str] | None = None) -> int:
                    "monitor": cmd_monitor, "bridge": cmd_bridge}.get(args.subcommand or "")
         if handler is not None:
             return handler(args)
-        from ..shell.units import plan_units
+        from ..shell.entry import enter
 
-        units = plan_units(args)  # several modules at once: a unit each (-c, -f)
-        if len(units) > 1:
-            from ..shell.units import run_units
-
-            return run_units(args, units)
-        from ..shell.main import run_shell
-
-        return run_shell(args)
-    except KeyboardInterrupt:
-        return EXIT_INTERRUPTED
+        return enter(args)  # the REPL, -c, -f or several units
     except BrokenPipeError:  # `tmclsh modules | head`: the reader has gone; stop quietly
-        try:
-            sys.stdout = open(os.devnull, "w")
-        except OSError:
-            pass
-        return EXIT_FAILED
-    except UsageError as exc:
+        return reader_gone()
+    except KeyboardInterrupt as exc:
+        return exit_status(exc)
+    except (TmclError, OSError) as exc:
         if debug:
             raise
-        print(f"tmclsh: {exc}", file=sys.stderr)
-        return EXIT_USAGE
-    except TmclError as exc:
-        if debug:
-            raise
-        from ..base.errors import ConnectError
-
-        status = EXIT_CONNECT if isinstance(exc, ConnectError) else EXIT_FAILED
-        _say_error(args, str(exc), status)
+        status = exit_status(exc)
+        if isinstance(exc, TmclError) and not isinstance(exc, UsageError):
+            _say_error(args, str(exc), status)  # (a refused command line: stderr only)
+        else:
+            print(f"tmclsh: {exc}", file=sys.stderr)
         return status
-    except OSError as exc:
-        if debug:
-            raise
-        print(f"tmclsh: {exc}", file=sys.stderr)
-        return EXIT_FAILED

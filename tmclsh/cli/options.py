@@ -12,7 +12,7 @@ from collections.abc import Sequence
 
 from .. import __version__
 from ..base import limits
-from ..base.canspec import FROM_PYTHON_CAN
+from ..base.canspec import FROM_PYTHON_CAN, LINK_DEFAULTS as _D
 
 
 SUBCOMMANDS = ("asm", "disasm", "sim", "ports", "scan", "modules", "firmware", "monitor",
@@ -172,20 +172,20 @@ def add_connection(p: argparse.ArgumentParser, *, auto_baud: bool = False,
                         "module, else a TMCM-1311)")
     if auto_baud:
         g.add_argument("--baud", type=_baud_or_auto, metavar="N|auto",
-                       help="baud rate (default 9600, the factory setting); auto: each rate "
+                       help=f"baud rate (default {_D['baud']}, the factory setting); auto: each rate "
                             f"GP 65 can select, in turn ({_range('baud')})")
     else:
         g.add_argument("--baud", type=setting("baud"), metavar="N",
-                       help=f"baud rate (default 9600, the factory setting; {_range('baud')})")
+                       help=f"baud rate (default {_D['baud']}, the factory setting; {_range('baud')})")
     g.add_argument("--bitrate", type=setting("bitrate"), metavar="N",
                    help="CAN bit rate in bit/s; the modules' factory setting is 1000000 "
                         "(GP 69 = 8); without it the adapter's own default or configuration "
                         f"applies, which is often lower ({_range('bitrate')})")
     g.add_argument("--can-id", type=id_list("can_id"), metavar="N[,N...]",
-                   help=f"module's CAN id (GP 71, default 1; {_range('can_id')}); several "
+                   help=f"module's CAN id (GP 71, default {_D['can_id']}; {_range('can_id')}); several "
                         "(1,2,5 or 1-8): a module at each on the bus")
     g.add_argument("--reply-id", type=id_list("reply_id"), metavar="N[,N...]",
-                   help=f"module's CAN reply id (GP 70, default 2; {_range('reply_id')}); "
+                   help=f"module's CAN reply id (GP 70, default {_D['reply_id']}; {_range('reply_id')}); "
                         "several: one for each --can-id, in the same order")
     g.add_argument("--profile", metavar="NAME", help="connection profile from the config file")
     if not nested:  # (several modules at once: -c and -f, not a subcommand)
@@ -205,10 +205,10 @@ def add_options(p: argparse.ArgumentParser) -> None:
                    help="a module data file of your own (same format as the built-in ones; "
                         "files in the config directory's modules/ are read too)")
     g.add_argument("-a", "--address", type=id_list("address"), metavar="N[,N...]",
-                   help=f"module address (default 1; {_range('address')}); several (1,2,5 or "
+                   help=f"module address (default {_D['address']}; {_range('address')}); several (1,2,5 or "
                         "1-8): a module at each on the line, one unit each (-c, -f)")
     g.add_argument("--host-address", type=_address, metavar="N",
-                   help=f"host address (default 2; {_range('host_address')})")
+                   help=f"host address (default {_D['host_address']}; {_range('host_address')})")
     g.add_argument("--ascii", action="store_true", default=None,
                    help="talk to the module through its ASCII mode instead of binary frames "
                         "(its replies carry no checksum: settings are read twice)")
@@ -272,12 +272,13 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("sim", help="serve a simulated module on a pty, TCP or CAN")
     s.add_argument("-m", "--module", metavar="NAME", default="TMCM-1311",
                    help="module to simulate (default TMCM-1311; 'tmclsh modules' lists them)")
-    s.add_argument("--address", type=id_list("address"), default=(1,), metavar="N[,N...]",
-                   help="module address (default 1); several (1,2,3 or 1-3): a module at each "
+    s.add_argument("--address", type=id_list("address"), default=(_D["address"],),
+                   metavar="N[,N...]",
+                   help=f"module address (default {_D['address']}); several (1,2,3 or 1-3): a module at each "
                         "on one line, as on an RS485 bus (each answers its own address; an "
                         "address given twice answers twice); --pty and --tcp only")
-    s.add_argument("--host-address", type=_address, default=2, metavar="N",
-                   help="address its replies are sent to (default 2)")
+    s.add_argument("--host-address", type=_address, default=_D["host_address"], metavar="N",
+                   help=f"address its replies are sent to (default {_D['host_address']})")
     how = s.add_mutually_exclusive_group(required=True)
     how.add_argument("--pty", action="store_true",
                      help="serve on a pseudo-terminal (path on the first line; Linux and "
@@ -381,7 +382,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help="a serial port that hears a bus (an RS485 adapter on the line): "
                             "the master's requests and the modules' replies")
     src.add_argument("--baud", type=setting("baud"), metavar="N", default=argparse.SUPPRESS,
-                     help=f"the tap's baud rate (default 9600; {_range('baud')})")
+                     help=f"the tap's baud rate (default {_D['baud']}; {_range('baud')})")
     src.add_argument("--bitrate", type=setting("bitrate"), metavar="N",
                      default=argparse.SUPPRESS, help=f"CAN bit rate ({_range('bitrate')})")
     src.add_argument("--can-id", type=id_list("can_id"), metavar="LIST",
@@ -414,14 +415,14 @@ def build_parser() -> argparse.ArgumentParser:
                       help="the module on a python-can bus: the program's serial frames go "
                            "to it as CAN frames, its replies come back as serial frames")
     mod.add_argument("--baud", type=setting("baud"), metavar="N", default=argparse.SUPPRESS,
-                     help=f"the module's baud rate (default 9600; {_range('baud')})")
+                     help=f"the module's baud rate (default {_D['baud']}; {_range('baud')})")
     mod.add_argument("--bitrate", type=setting("bitrate"), metavar="N",
                      default=argparse.SUPPRESS, help=f"CAN bit rate ({_range('bitrate')})")
     mod.add_argument("--can-id", type=setting("can_id"), metavar="N", default=argparse.SUPPRESS,
                      help="CAN id every request goes to (default: each request's address)")
     mod.add_argument("--reply-id", type=setting("reply_id"), metavar="N",
                      default=argparse.SUPPRESS,
-                     help=f"CAN id replies come on (GP 70, default 2; {_range('reply_id')})")
+                     help=f"CAN id replies come on (GP 70, default {_D['reply_id']}; {_range('reply_id')})")
     mod.add_argument("--host-address", type=_address, metavar="N", default=argparse.SUPPRESS,
                      help="on CAN: the address byte of the serial replies (default 2)")
     _add_view(br)

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from ..base.canspec import LINK_DEFAULTS
 from ..base.errors import (ChecksumError, ConnectError, DownloadModeError, InBootloaderError,
                            NoAnswerError, StatusError, TmclError, TmclTimeoutError,
                            ValidationError)
@@ -453,7 +454,7 @@ def no_answer_message(client: Client, exc: BaseException, *, ascii: bool = False
         lines.append(f"  - a slow link: --timeout {max(2 * client.timeout, 2):g}")
         return "\n".join(lines)
     if not usb and not socket_url:
-        baud = getattr(client.transport, "baudrate", 9600)
+        baud = getattr(client.transport, "baudrate", LINK_DEFAULTS["baud"])
         others = ", ".join(str(r) for r in baud_rates() if r != baud)
         lines.append(f"  - baud rate: the module may be set to another rate than {baud} (GP 65 "
                      f"allows {others}); try --baud 115200, or 'tmclsh scan --port {url} "

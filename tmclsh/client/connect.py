@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from ..base.canspec import FROM_PYTHON_CAN, parse_can
+from ..base.canspec import LINK_DEFAULTS
 from ..base.errors import ConnectError, UsageError, ValidationError
 from ..link import TRINAMIC_VID, trinamic_ports
 from ..link.base import Transport
@@ -39,8 +39,9 @@ def connection_settings(args: argparse.Namespace) -> dict:
     if settings.get("sim") == "":  # a bare --sim: simulate the module -m names
         module = settings.get("module")
         settings["sim"] = module if module and module.lower() != "generic" else SIM_DEFAULT
-    if settings.get("can") and settings["can"] != FROM_PYTHON_CAN:
-        parse_can(settings["can"])  # a malformed --can is a usage error, before opening anything
+    from ..link.spec import LinkSpec
+
+    LinkSpec.from_settings(settings)  # a malformed --can is a usage error, before opening anything
     return settings
 
 
@@ -86,28 +87,24 @@ def open_transport(settings: dict, *, fallback: bool = False) -> Transport:
     the simulator; otherwise (scripts, ``-c``, ``scan``) that is a ``ConnectError``: a run
     nobody watches must not pass on a simulator by accident.
     """
-    from .. import link as tr
+    from ..link.spec import LinkSpec
 
-    baud = _setting(settings, "baud", 9600)
-    if settings.get("port"):
-        return tr.open_serial(settings["port"], baud)
-    if settings.get("can"):
-        return tr.open_can(settings["can"], settings.get("bitrate"))
-    if not settings.get("sim"):
+    spec = LinkSpec.from_settings(settings)
+    if spec is not None and spec.kind != "sim":
+        return spec.open()
+    if spec is None:
         port = attached_module_port()
         if port is not None:
             settings["port"] = port
-            return tr.open_serial(port, baud)
+            return LinkSpec.from_settings(settings).open()  # type: ignore[union-attr]
         if not fallback:
             raise ConnectError(
                 "no module found: no --port, --can or --sim given (nor a profile or "
                 "TMCLSH_PORT/TMCLSH_CAN naming one) and no Trinamic USB module attached "
                 f"(USB vendor {TRINAMIC_VID:04x}); give --port PORT ('tmclsh ports' lists "
                 "the serial ports), or --sim to simulate")
-    module = settings.get("sim") or settings.get("module") or SIM_DEFAULT
-    settings["sim"] = module
-    return tr.open_sim(module, _setting(settings, "address", 1),
-                       host_address=_setting(settings, "host_address", 2))
+    settings["sim"] = settings.get("sim") or settings.get("module") or SIM_DEFAULT
+    return LinkSpec.from_settings(settings).open()  # type: ignore[union-attr]
 
 
 def open_client(settings: dict, *, fallback: bool = False,
@@ -121,8 +118,10 @@ def open_client(settings: dict, *, fallback: bool = False,
     transport = open_transport(settings, fallback=fallback)
     module = settings.get("module") or settings.get("sim")
     try:
-        client = LineClient(transport, address=_setting(settings, "address", 1),
-                        host_address=_setting(settings, "host_address", 2), module=module,
+        client = LineClient(transport,
+                        address=_setting(settings, "address", LINK_DEFAULTS["address"]),
+                        host_address=_setting(settings, "host_address",
+                                              LINK_DEFAULTS["host_address"]), module=module,
                         timeout=_setting(settings, "timeout", 1.0),
                         retries=_setting(settings, "retries", 2),
                         can_id=settings.get("can_id"), reply_id=settings.get("reply_id"))
@@ -138,16 +137,18 @@ def open_client(settings: dict, *, fallback: bool = False,
             remove()
 
 
-def connect(port: str | None = None, *, baud: int = 9600, can: str | None = None,
-            sim: str | None = None, module: str | None = None, address: int = 1,
-            host_address: int = 2, timeout: float = 1.0, retries: int = 2,
+def connect(port: str | None = None, *, baud: int | None = None, can: str | None = None,
+            sim: str | None = None, module: str | None = None, address: int | None = None,
+            host_address: int | None = None, timeout: float = 1.0, retries: int = 2,
             can_id: int | None = None, reply_id: int | None = None,
             bitrate: int | None = None, ascii: bool = False) -> LineClient:
     """Open a client: ``connect(port="/dev/ttyACM0")``, ``connect(port="socket://host:4001")``,
     ``connect(can="virtual:bench")``, ``connect(sim="TMCM-351")``; with none of them, the one
-    Trinamic USB module attached, as the command line does. The simulator only when asked
-    (``sim=``): a test jig written in Python must not pass with its cable unplugged. No module
-    attached, or several, is a ``ConnectError`` saying what to give.
+    Trinamic USB module attached, as the command line does. What is not given takes the
+    modules' factory settings, as on the command line (``LINK_DEFAULTS``: 9600 baud, address
+    1, host address 2). The simulator only when asked (``sim=``): a test jig written in
+    Python must not pass with its cable unplugged. No module attached, or several, is a
+    ``ConnectError`` saying what to give.
 
     The module type is asked with 136; a ``module`` that contradicts the answer is a
     ``ConnectError``. A number outside its range (``limits.LIMITS``, as for the command line:
@@ -155,7 +156,7 @@ def connect(port: str | None = None, *, baud: int = 9600, can: str | None = None
     ``ValidationError``, also a ``ValueError``) before anything is opened.
     """
     from ..base import limits
-    from .. import link as tr
+    from ..link.spec import LinkSpec
 
     if sum(x is not None for x in (port, can, sim)) > 1:
         raise ValidationError("give only one of port, can and sim")
@@ -170,13 +171,12 @@ def connect(port: str | None = None, *, baud: int = 9600, can: str | None = None
             raise ConnectError("no module found: no Trinamic USB module is attached (USB vendor "
                                f"{TRINAMIC_VID:04x}); give port=\"/dev/ttyACM0\" (or a URL), "
                                "can=\"IFACE:CHANNEL\", or sim=\"TMCM-1311\" for the simulator")
-    if port is not None:
-        t: Transport = tr.open_serial(port, baud)
-    elif can is not None:
-        t = tr.open_can(can, bitrate)
-    else:
-        t = tr.open_sim(sim, address, host_address=host_address)
+    spec = LinkSpec.parse(port, can, sim, baud=baud, bitrate=bitrate, address=address,
+                          host_address=host_address)
+    t = spec.open()
+    if sim is not None:
         module = module or sim
+    address, host_address = spec.address, spec.host_address
     try:
         client = LineClient(t, address=address, host_address=host_address, module=module,
                         timeout=timeout, retries=retries, can_id=can_id, reply_id=reply_id)

@@ -49,6 +49,7 @@ from collections.abc import Callable, Container, Iterable, Mapping
 from typing import TYPE_CHECKING, TypeVar
 
 from ..base import clock
+from ..base.canspec import LINK_DEFAULTS
 from ..base.errors import (ChecksumError, DownloadModeError, TmclTimeoutError, TransportError,
                            ValidationError)
 from ..link.base import Transport
@@ -104,8 +105,8 @@ class Client:
         self.host_address = host_address
         self.timeout = timeout
         self.retries = retries
-        self.can_id = can_id if can_id is not None else 1
-        self.reply_id = reply_id if reply_id is not None else 2
+        self.can_id = can_id if can_id is not None else LINK_DEFAULTS["can_id"]
+        self.reply_id = reply_id if reply_id is not None else LINK_DEFAULTS["reply_id"]
         # CAN ids besides reply_id whose messages are replies too (a bootloader's 0x7FF)
         self.other_reply_ids: frozenset[int] = frozenset()
         self.module: Module | None = load_module(module) if isinstance(module, str) else module

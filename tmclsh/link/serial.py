@@ -22,6 +22,7 @@ import time
 
 import serial as pyserial
 
+from ..base.canspec import LINK_DEFAULTS
 from ..base.errors import TransportError
 from .base import StreamTransport
 
@@ -46,7 +47,7 @@ class SerialTransport(StreamTransport):
     # RS485 adapter that switches its driver on RTS never drives the line
     listen_only = False
 
-    def __init__(self, port: str, baudrate: int = 9600):
+    def __init__(self, port: str, baudrate: int = LINK_DEFAULTS["baud"]):  # type: ignore[assignment]
         super().__init__(port)
         if not isinstance(baudrate, int) or baudrate <= 0:
             raise ValueError(f"baud rate must be a positive number, got {baudrate!r}")

@@ -25,6 +25,7 @@ from collections import Counter, deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
+from ..base.canspec import LINK_DEFAULTS
 from ..client.ascii import next_line, parse_reply
 from ..tmcl.decoder import (CAN_DATA, CAN_VERSION, FRAME, FRAME_PIECE, NOISE, WHOLE, FrameDecoder,
                             can_reply, printable)
@@ -39,7 +40,7 @@ REQUEST, REPLY, EVENT, NOISE_RUN, TEXT, OTHER = (
     "request", "reply", "event", "noise", "text", "other")
 TX, RX = "tx", "rx"  # to a module, from one (where the wire tells: a bridge)
 
-DEFAULT_HOST = 2  # GP 76, the reply address of every module as it leaves the factory
+DEFAULT_HOST = LINK_DEFAULTS["host_address"]  # GP 76, the reply address as it leaves the factory
 DEFAULT_CAN_ID, DEFAULT_REPLY_ID = 1, 2  # GP 71 and GP 70 as they leave the factory
 NO_REPLY = "no reply expected"  # an exchange without a reply by design
 TIMEOUT = 1.0  # s a request waits for its reply before it is called unanswered

@@ -21,6 +21,7 @@ import threading
 import time
 from typing import Any
 
+from ..base.canspec import LINK_DEFAULTS
 from ..base.errors import (EXIT_FAILED, EXIT_OK, ConnectError, TmclError, TransportError, UsageError,
                            ValidationError)
 from ..ops.bridge import CAN_RX, CAN_TX, LOST, TICK, CanBridge, Left, SerialBridge
@@ -44,7 +45,7 @@ def run_bridge(args) -> int:
         raise UsageError("a pseudo-terminal needs Linux or macOS; use --tcp HOST:PORT")
     is_can = can_spec is not None
     can_id = getattr(args, "can_id", None)
-    reply_id = getattr(args, "reply_id", None) or 2
+    reply_id = getattr(args, "reply_id", None) or LINK_DEFAULTS["reply_id"]
     host = getattr(args, "host_address", None)
     host = DEFAULT_HOST if host is None else host
     transport = _open_module(args, port, can_spec)
@@ -103,14 +104,11 @@ def run_bridge(args) -> int:
 
 
 def _open_module(args, port: str | None, can_spec: str | None):
+    from ..link.spec import LinkSpec
+
     try:
-        if port is not None:
-            from ..link import open_serial
-
-            return open_serial(port, getattr(args, "baud", None) or 9600)
-        from ..link import open_can
-
-        return open_can(can_spec, getattr(args, "bitrate", None))
+        return LinkSpec.parse(port, can_spec, baud=getattr(args, "baud", None),
+                              bitrate=getattr(args, "bitrate", None)).open()
     except (TransportError, ValidationError) as exc:
         raise ConnectError(str(exc)) from exc
 

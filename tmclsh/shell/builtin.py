@@ -892,7 +892,8 @@ def cmd_decode(session: Session, arg: str) -> None:
 
 @command(".connect")
 def cmd_connect(session: Session, arg: str) -> None:
-    from .. import link as tr
+    from ..base.canspec import FROM_PYTHON_CAN
+    from ..link.spec import LinkSpec
     from ..client.bringup import bring_up
     from ..base.errors import ConnectError
 
@@ -913,15 +914,15 @@ def cmd_connect(session: Session, arg: str) -> None:
         module = words[1] if len(words) > 1 else (client.module.name if client.module
                                                   else "TMCM-1311")
         load(module)  # unknown names fail before the old link is closed
-        transport = tr.open_sim(module, client.address)
+        transport = LinkSpec.parse(sim=module, address=client.address).open()
         module = load(module).name
         new = {"sim": module}
     elif words[0].lower() == "can":
-        spec = words[1] if len(words) > 1 else tr.FROM_PYTHON_CAN
-        transport = tr.open_can(spec, settings.get("bitrate"))
+        spec = words[1] if len(words) > 1 else FROM_PYTHON_CAN
+        transport = LinkSpec.parse(can=spec, bitrate=settings.get("bitrate")).open()
         new = {"can": spec}
     else:
-        transport = tr.open_serial(words[0], settings.get("baud") or 9600)
+        transport = LinkSpec.parse(port=words[0], baud=settings.get("baud")).open()
         new = {"port": words[0]}
     # the old module is left in the mode it was found in; the new one is brought up as at
     # the command line (136, -m checked, download mode ended, ASCII mode recognised)

@@ -99,10 +99,9 @@ def run_shell(args: argparse.Namespace) -> int:
     except TmclError as exc:
         print(f"tmclsh: {exc}", file=sys.stderr)
         if args.json:  # stdout stays JSON: the failure is a record there too
-            import json
+            from ..base.edges import error_record, write_json
 
-            print(json.dumps({"line": None, "error": str(exc), "exit": EXIT_CONNECT}),
-                  flush=True)
+            write_json(error_record(str(exc), EXIT_CONNECT))
         return EXIT_CONNECT
     try:
         return run_connected(args, client, settings)
@@ -116,11 +115,10 @@ def run_shell(args: argparse.Namespace) -> int:
         print(file=sys.stderr)
         stop_on_interrupt(client)
         return EXIT_INTERRUPTED
-    except BrokenPipeError:
-        # whoever read our output has gone (`tmclsh -c ... | head`): stop quietly, as other
-        # command-line tools do, instead of `tmclsh: [Errno 32] Broken pipe`
-        _silence_stdout()
-        return EXIT_FAILED
+    except BrokenPipeError:  # whoever read our output has gone (`tmclsh -c ... | head`)
+        from ..base.edges import reader_gone
+
+        return reader_gone()
     finally:
         client.close()  # leaves ASCII mode if tmclsh entered it, whatever happened
 
@@ -153,17 +151,6 @@ def _interactive(args: argparse.Namespace) -> bool:
 
 def _notice(text: str) -> None:
     print(f"tmclsh: {text}", file=sys.stderr)
-
-
-def _silence_stdout() -> None:
-    """Point stdout at /dev/null, so the interpreter's last flush does not fail again."""
-    import os
-
-    try:
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-    except (OSError, ValueError):
-        pass
 
 
 def run_connected(args: argparse.Namespace, client, settings: dict, *,

@@ -427,17 +427,19 @@ def run_monitor(args) -> int:
         out = live_output(view)
     try:
         if can_spec is not None:
-            from ..link import open_can
+            from ..link.spec import LinkSpec
 
-            transport = _open(lambda: open_can(can_spec, getattr(args, "bitrate", None)))
+            link = LinkSpec.parse(can=can_spec, bitrate=getattr(args, "bitrate", None))
+            transport = _open(link.open)
             reader: Any = CanReader(monitor, args.can_id, args.reply_id)
             source = listen.can_bus(transport, reader, capture=capture)
         elif port is not None:
-            from ..link import open_serial
+            from ..link.spec import LinkSpec
             from ..ops.monitor import SerialTap
 
-            baud = getattr(args, "baud", None) or 9600
-            transport = _open(lambda: open_serial(port, baud, listen_only=True))
+            link = LinkSpec.parse(port=port, baud=getattr(args, "baud", None))
+            baud = link.baud
+            transport = _open(lambda: link.open(listen_only=True))
             reader = SerialTap(monitor)
             source = listen.serial_tap(transport, reader, quiet=listen.quiet_time(baud),
                                        capture=capture)

@@ -31,6 +31,7 @@ from contextlib import contextmanager
 from functools import wraps
 from typing import Any
 
+from ..base.edges import error_record
 from ..tmcl import asm
 from ..tmcl import instructions as isa
 from ..client.text import Result
@@ -320,7 +321,7 @@ class Output:
         """``record``: the fields a failed check (.expect, .wait) has in JSON, passed or not."""
         self.saw_error(message)
         if self.json:
-            self.emit({"line": line, **(record or {}), "error": message})
+            self.emit(error_record(message, line=line, **(record or {})))
         else:
             self._message(f"error: {message}", "tmcl.error", stderr=True)
 

@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..base import clock, files, limits
+from ..base.edges import error_record
 from ..base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_OK, EXIT_USAGE, AsmError,
                            ChecksumError, FrameError, ModuleGoneError, RangeError, TmclError,
                            TmclTimeoutError, ValidationError)
@@ -560,8 +561,8 @@ def report(session: Session, node: Node, exc: TmclError) -> None:
         if getattr(exc, "shown", False):
             session.out.warn(f"{where}{exc}")  # its result object already says "error"
         else:  # (a check's record: its fields, then the error)
-            session.out.emit({"line": node.text, **getattr(exc, "record", {}),
-                              "error": f"{where}{exc}"})
+            session.out.emit(error_record(f"{where}{exc}", line=node.text,
+                                          **getattr(exc, "record", {})))
     else:
         session.out.err.print(f"{where}{exc}", style="tmcl.error", markup=False)
 
@@ -731,7 +732,7 @@ def _report_plain(session: Session, exc: TmclError) -> None:
     session.out.saw_error(str(exc))
     if session.out.json:
         # (the line refused; null when no one line is to blame: an unreadable file)
-        session.out.emit({"line": getattr(exc, "text", None), "error": str(exc)})
+        session.out.emit(error_record(str(exc), line=getattr(exc, "text", None)))
     else:
         session.out.err.print(str(exc), style="tmcl.error", markup=False)
 

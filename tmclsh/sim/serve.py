@@ -26,6 +26,7 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
+from ..base.canspec import LINK_DEFAULTS
 from .device import SimBus, Simulator
 
 log = logging.getLogger(__name__)
@@ -323,7 +324,8 @@ def _split(spec: str, what: str) -> tuple[str, str]:
 
 
 def run(module: str, address: int | Sequence[int], *, pty: bool = False, tcp: str | None = None,
-        can: str | None = None, host_address: int = 2, bitrate: int | None = None,
+        can: str | None = None, host_address: int = LINK_DEFAULTS["host_address"],  # type: ignore[assignment]
+        bitrate: int | None = None,
         faults: dict[str, float] | None = None, seed: int | None = None,
         baud: int | None = None, bootloader: bool = False) -> int:
     """Serve a simulated module until SIGINT/SIGTERM; the first stdout line is the endpoint.
