@@ -17,7 +17,6 @@ bytes with the gaps filled, its checksum, and the application version strings it
 
 from __future__ import annotations
 
-import io
 import re
 from collections.abc import Iterator
 from dataclasses import dataclass, field
