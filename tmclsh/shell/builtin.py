@@ -894,8 +894,10 @@ def cmd_connect(session: Session, arg: str) -> None:
         transport = tr.open_can(spec, settings.get("bitrate"))
         new = {"can": spec}
     else:
-        transport = tr.open_serial(words[0], settings.get("baud") or 9600)
-        new = {"port": words[0]}
+        # the whole argument: a pyserial URL may hold a space (``hwgrep://USB VID``)
+        port = arg.strip()
+        transport = tr.open_serial(port, settings.get("baud") or 9600)
+        new = {"port": port}
     # the old module is left in the mode it was found in; the new one is brought up as at
     # the command line (136, -m checked, download mode ended, ASCII mode recognised)
     client.switch_transport(transport, module)

@@ -5,7 +5,8 @@ wherever it is typed:
 
 - ``// comment`` and ``# comment`` run to the end of the line. ``#`` starts a comment only at
   the start of a word (``GAP 1, 0 # where``), so nothing that contains one mid-word is cut.
-  Neither counts inside quotes (``.echo "a # b"``).
+  Neither counts inside quotes (``.echo "a # b"``), and ``//`` right after a URL's scheme
+  is part of the URL (``.connect socket://host:4001``, ``.connect rfc2217://...``).
 - A line is classified once (``classify``): a shell command (with a dot, or ``help``,
   ``quit`` and ``?`` bare), a dot-word no command has, or TMCL. The REPL, ``-c``, ``-f``
   and the checks before a run all go by that one reading.
@@ -17,6 +18,7 @@ A quote opens only at the start of a word, so the apostrophe in ``.echo don't`` 
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from typing import NamedTuple
 
@@ -38,6 +40,11 @@ def _scan(text: str):
             yield i, ch, False
 
 
+# a URL's scheme ending where ``//`` starts: a word of letters, digits, ``+ - .`` that
+# begins with a letter, then ``:`` (RFC 3986), as pyserial's ``socket://`` and ``loop://``
+_SCHEME = re.compile(r"(?:^|(?<=\s))[A-Za-z][A-Za-z0-9+.-]*:$")
+
+
 def comment_at(text: str) -> int | None:
     """Where a ``//`` or ``#`` comment starts in ``text`` (None if it has none)."""
     if "/" not in text and "#" not in text:
@@ -45,7 +52,7 @@ def comment_at(text: str) -> int | None:
     for i, ch, quoted in _scan(text):
         if quoted:
             continue
-        if ch == "/" and text.startswith("//", i):
+        if ch == "/" and text.startswith("//", i) and not _SCHEME.search(text, 0, i):
             return i
         if ch == "#" and (i == 0 or text[i - 1].isspace()):
             return i
