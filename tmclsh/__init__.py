@@ -26,6 +26,7 @@ from __future__ import annotations
 from typing import Any
 
 __version__ = "0.1.0"
+"""This release of tmclsh (also ``tmclsh --version``)."""
 
 # name -> (module, attribute in it): imported on first use (``__getattr__`` below)
 _LAZY: dict[str, tuple[str, str]] = {
@@ -43,7 +44,7 @@ _LAZY: dict[str, tuple[str, str]] = {
     "SettingError": ("tmclsh.base.limits", "SettingError"),
     # firmware: read and check an image, update a module over its bootloader
     "read_firmware": ("tmclsh.tmcl.bootloader", "read_image"),
-    "FirmwareUpdate": ("tmclsh.ops.firmware", "Update"),
+    "FirmwareUpdate": ("tmclsh.ops.firmware", "FirmwareUpdate"),
     "FirmwareError": ("tmclsh.ops.firmware", "FirmwareError"),
     "ImageRefused": ("tmclsh.ops.firmware", "ImageRefused"),
     "ImageError": ("tmclsh.tmcl.bootloader", "ImageError"),
@@ -64,7 +65,7 @@ _LAZY: dict[str, tuple[str, str]] = {
     "StopReport": ("tmclsh.ops.stop", "StopReport"),
     # logs and traffic another master sends
     "read_can_log": ("tmclsh.link.canlog", "read_log"),
-    "CanLogWriter": ("tmclsh.link.canlog", "LogWriter"),
+    "LogWriter": ("tmclsh.link.canlog", "LogWriter"),
     "Monitor": ("tmclsh.ops.monitor", "Monitor"),
     "CanReader": ("tmclsh.ops.monitor", "CanReader"),
     "SerialTap": ("tmclsh.ops.monitor", "SerialTap"),

@@ -65,6 +65,9 @@ Progress = Callable[[int, "Found | None"], None]
 
 @dataclass(frozen=True)
 class Found:
+    """A module that answered a scan: its address, type and version string as it named
+    them (None when it did not say), and how it was found."""
+
     address: int
     module: str | None
     version: str | None
