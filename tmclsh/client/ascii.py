@@ -457,7 +457,7 @@ def probe_mode(client: Client, timeout: float | None = None) -> Probe:
             client.trace("drop", data, "no binary answer to the mode probe")
         late = end_line(client, timeout)
         if _binary_answer(late, addr, Control.GET_VERSION) is not None:
-            client.resync_next()  # a slow binary module: resynchronise before its next use
+            client._resync_next()  # a slow binary module: resynchronise before its next use
             return Probe(Mode.BINARY, host=host)
         return probe_ascii(client, timeout)
 
@@ -514,7 +514,7 @@ def probe_ascii(client: Client, timeout: float | None = None) -> Probe:
                 f"not {host}; use --host-address {other_host}")
         rest = bytes(buf)
         if has_valid_frame(rest):
-            client.resync_next()
+            client._resync_next()
             return Probe(Mode.BINARY, host=host, binary_garbage=True)
         raise TmclTimeoutError(f"no module answered at address {addr} "
                                f"({address_char(addr)}) in binary or ASCII mode "
@@ -553,7 +553,7 @@ class AsciiLink:
         self.stats = {"sent": 0, "timeouts": 0, "dropped_lines": 0, "echo_lines": 0}
         # Client.close runs its close hooks while the transport is still open: restore the
         # mode there even after .mode binary detached the link
-        client.close_hooks.append(self._on_client_close)
+        client._close_hooks.append(self._on_client_close)
 
     # -- attaching ----------------------------------------------------------------------
     @classmethod
@@ -608,7 +608,7 @@ class AsciiLink:
                             "stays in binary mode")
                     if probe.mode != Mode.ASCII:
                         sent_139 = False  # binary frames came back: it did not take
-                        client.resync_next()
+                        client._resync_next()
                         raise TransportError(f"the module at address {client.address} did not "
                                              "enter ASCII mode after command 139")
                 echo = echo_mode(probe.gp67) if probe.gp67 is not None else Echo.CHAR
@@ -622,9 +622,9 @@ class AsciiLink:
                 link._buf.clear()
                 link._dirty = False
                 link._pending.clear()
-                client.clear_input()
-                client.ledger.forget()  # (what the binary link still expected cannot come)
-                client.ledger.by_command = False  # ASCII replies name no command
+                client._clear_input()
+                client._ledger.forget()  # (what the binary link still expected cannot come)
+                client._ledger.by_command = False  # ASCII replies name no command
                 client.ascii_link = link
             except BaseException:
                 # interrupted (Ctrl-C, SIGTERM) between 139 and the link taking over: leave
@@ -634,7 +634,7 @@ class AsciiLink:
                         cls._bin(client)
                     except Exception:
                         pass
-                    client.resync_next()
+                    client._resync_next()
                 raise
         log.info("ASCII mode on address %d (%s; found in %s mode)", client.address,
                  link.echo.text, link.found.value)
@@ -672,7 +672,7 @@ class AsciiLink:
         got = _read_quiet(t, 0.05, timeout)
         if got:
             client.trace("rx", got, "after BIN")
-        client.resync_next()
+        client._resync_next()
 
     # -- leaving ------------------------------------------------------------------------
     @property
@@ -688,7 +688,7 @@ class AsciiLink:
             if send_bin:
                 self._bin(client)
             client.ascii_link = None
-            client.ledger.by_command = True
+            client._ledger.by_command = True
             self._buf.clear()
         if send_bin and verify:
             try:
@@ -786,7 +786,7 @@ class AsciiLink:
         address = client.address if address is None else address
         line = command_bytes(address, text)
         req = request or Request(address, opcode, 0, 0, 0)
-        ledger = client.ledger
+        ledger = client._ledger
         with client.lock:
             ledger.by_command = False  # (the ledger is this line's while the link is on)
             t = _transport(client)
@@ -847,7 +847,7 @@ class AsciiLink:
             raise TmclTimeoutError(f"address {address} stopped answering: after an answer "
                                    "that did not come, a value whose answer is known was "
                                    f"read to be sure which reply is which: {exc}") from None
-        client.ledger.forget()
+        client._ledger.forget()
 
     def _markers(self) -> list[tuple[str, Request, int]]:
         """The reads whose answers are known, as (line, request, value): GP 76 (the host
@@ -867,7 +867,7 @@ class AsciiLink:
         outstanding: wait for the line to go quiet first, then count them lost) and read up
         to its answer; replies before it are late (``_late``), an earlier marker's answer
         crossed off. TmclTimeoutError if it does not come (it is then outstanding)."""
-        client, ledger, buf = self.client, self.client.ledger, self._buf
+        client, ledger, buf = self.client, self.client._ledger, self._buf
         markers = self._markers()
         pending = self._pending
         choice = next((m for m in markers if not pending.get(m[2])), None)
@@ -954,7 +954,7 @@ class AsciiLink:
                 continue
             self._drop(raw, "stale input")
             if _REPLY_START.match(text):  # (an echo of an earlier line starts otherwise)
-                client.noise_unsolicited()
+                client._noise_unsolicited()
 
     def _late(self, raw: bytes, reply: Reply) -> None:
         """A reply of this module that no command waits for: one the ledger expected (an

@@ -56,7 +56,7 @@ def start(client: Client, *, ascii: bool = False) -> Client:
 
 def bring_up(client: Client, *, ascii: bool = False, strict: bool = True) -> None:
     """What ``start`` does, leaving the client open when it fails (the shell's ``.connect``
-    after ``Client.switch_transport``: the link stays, its module unknown). The module the
+    after ``Client._switch_transport``: the link stays, its module unknown). The module the
     client holds is the one expected; ``strict``: another type answering is an error (at
     connect), else it is taken (after a reconnect, ``.address``)."""
     expected = client.module
@@ -343,7 +343,7 @@ def _answers_after_all(client: Client, expected: Module | None, strict: bool,
             ascii_tried=True)) from exc
     if probe.mode == Mode.BINARY:
         return True
-    client.forget_stale()  # a module in ASCII mode sends no late binary replies
+    client._forget_stale()  # a module in ASCII mode sends no late binary replies
     _attach_ascii(client, expected, strict, probe)
     link = client.ascii_link
     echo = f" ({link.echo.text}; it stays in ASCII mode at exit)" if link else ""

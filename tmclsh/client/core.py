@@ -105,26 +105,26 @@ class Client:
         self.can_id = can_id if can_id is not None else 1
         self.reply_id = reply_id if reply_id is not None else 2
         # CAN ids besides reply_id whose messages are replies too (a bootloader's 0x7FF)
-        self.other_reply_ids: frozenset[int] = frozenset()
+        self._other_reply_ids: frozenset[int] = frozenset()
         self.module: Module | None = load_module(module) if isinstance(module, str) else module
         self.version: str | None = None
         self.downloading = False  # set by tmclsh.ops.program between 132 and 133
         # a 132 was answered that no 133 has ended yet, outside tmclsh.ops.program (a line
         # typed or a script's): close() ends it, so the module is not left storing what it gets
-        self.left_downloading = False
+        self._left_downloading = False
         self.ascii_link = None  # set by tmclsh.client.ascii when the module is driven in ASCII
         # while a write moves the module (client/reach.py): its answer may come from the new
         # module address, go to the new host address, or come on the new CAN reply id
-        self.also_from: int | None = None
-        self.also_host: int | None = None
-        self.also_reply_id: int | None = None
+        self._also_from: int | None = None
+        self._also_host: int | None = None
+        self._also_reply_id: int | None = None
         self._lock = threading.RLock()
-        self.ledger = Ledger()
+        self._ledger = Ledger()
         self._events: deque[tuple[Reply, float]] = deque()  # with when each arrived
         self._delivering = threading.RLock()  # held while events go to the listeners
         # when the event being delivered arrived (time.monotonic()), for listeners that
         # put a time on it
-        self.event_time = 0.0
+        self._event_time = 0.0
         # set by reconnect(): before the next command, the module is brought up again as at
         # connect (tmclsh.client.bringup: what answers, its mode, download mode)
         self._bring_up_next = False
@@ -142,16 +142,16 @@ class Client:
         # called when a request finds the link down, to bring it back before the request
         # goes (a --keep-going script waits for a cable plugged back in); it raises
         # TransportError if the link stays down. None: the request fails at once.
-        self.on_link_lost: Callable[[], None] | None = None
+        self._on_link_lost: Callable[[], None] | None = None
         # run by close() while the link is still open (the ASCII link restores the mode the
         # module was found in)
-        self.close_hooks: list[Callable[[], None]] = []
+        self._close_hooks: list[Callable[[], None]] = []
         self._listeners: list[Listener] = []
-        self.tracers: list[Tracer] = []
-        self.sent_tracers: list[Tracer] = []  # add_tracer(sent_only=True)
+        self._tracers: list[Tracer] = []
+        self._sent_tracers: list[Tracer] = []  # add_tracer(sent_only=True)
         # the commands some sent-only tracer asked for (all when one asked for every one): a
         # script's per-line check costs a set lookup, not a call, for the lines none wants
-        self.sent_wanted: frozenset[int] = frozenset()
+        self._sent_wanted: frozenset[int] = frozenset()
         self._sent_filters: dict[Tracer, frozenset[int]] = {}  # each one's opcodes
         self._poller: threading.Thread | None = None
         self._poller_stop = threading.Event()
@@ -159,7 +159,7 @@ class Client:
                       "discarded": 0, "events": 0, "retries": 0, "reconnects": 0,
                       "flushed": 0, "unsolicited": 0, "suspect": 0,
                       "judged": 0}
-        self.framing: SerialFraming | CanFraming = transport.framing(self)
+        self._framing: SerialFraming | CanFraming = transport.framing(self)
 
     # -- subscriptions ------------------------------------------------------------------
     def add_listener(self, fn: Listener) -> Callable[[], None]:
@@ -183,19 +183,19 @@ class Client:
         """
         if opcodes is not None and not sent_only:
             raise ValueError("opcodes= filters a sent_only tracer")
-        tracers = self.sent_tracers if sent_only else self.tracers
+        tracers = self._sent_tracers if sent_only else self._tracers
         tracers.append(fn)
         filters = self._sent_filters
         if sent_only:
             filters[fn] = frozenset(opcodes) if opcodes is not None else _ALL_OPCODES
-            self.sent_wanted = frozenset().union(*filters.values())
+            self._sent_wanted = frozenset().union(*filters.values())
 
         def remove() -> None:
             if fn in tracers:
                 tracers.remove(fn)
                 if sent_only and fn not in tracers:
                     del filters[fn]
-                    self.sent_wanted = frozenset().union(*filters.values())
+                    self._sent_wanted = frozenset().union(*filters.values())
         return remove
 
     # -- what the framing reports (tmclsh.link.framing.Owner) ---------------------------
@@ -204,61 +204,61 @@ class Client:
         """Report a frame to the tracers ("tx", "rx", "drop" or "note"). ``request``: the
         request a "tx" line carries (an ASCII line's decoded is its text), for the tracers
         that only watch what is sent (``add_tracer(sent_only=True)`` is told requests)."""
-        if direction == "tx" and self.sent_tracers:
+        if direction == "tx" and self._sent_tracers:
             sent = decoded if request is None else request
-            if not isinstance(sent, Request) or sent.opcode in self.sent_wanted:
-                _tell(self.sent_tracers, "tx", raw, sent)
-        if self.tracers:
-            _tell(self.tracers, direction, raw, decoded)
+            if not isinstance(sent, Request) or sent.opcode in self._sent_wanted:
+                _tell(self._sent_tracers, "tx", raw, sent)
+        if self._tracers:
+            _tell(self._tracers, direction, raw, decoded)
 
-    def tell(self, direction: str, raw: bytes, decoded: object) -> None:
+    def _tell(self, direction: str, raw: bytes, decoded: object) -> None:
         """Report a frame to the full tracers (the framing's: it tells the sent-only
         tracers of a request itself, before it goes out)."""
-        _tell(self.tracers, direction, raw, decoded)
+        _tell(self._tracers, direction, raw, decoded)
 
-    def trace_sent(self, raw: bytes, req: Request) -> None:
-        _tell(self.sent_tracers, "tx", raw, req)
+    def _trace_sent(self, raw: bytes, req: Request) -> None:
+        _tell(self._sent_tracers, "tx", raw, req)
 
     def discard(self, raw: bytes, why: str) -> None:
         self.stats["discarded"] += len(raw)
-        if self.tracers:
-            _tell(self.tracers, "drop", raw, why)
+        if self._tracers:
+            _tell(self._tracers, "drop", raw, why)
 
     def event(self, raw: bytes, reply: Reply) -> None:
         self.stats["events"] += 1
-        if self.tracers:
-            _tell(self.tracers, "rx", raw, reply)
+        if self._tracers:
+            _tell(self._tracers, "rx", raw, reply)
         self._events.append((reply, time.monotonic()))
 
     def late(self, address: int, opcode: int, reply: Reply | None) -> bool:
         """A reply arrived that no request waits for: True if one like it was expected
         (``Ledger.late``), or the line may carry anything; else it is unsolicited."""
-        ledger = self.ledger
+        ledger = self._ledger
         if ledger.late(address, opcode, reply) or ledger.opaque or self.downloading:
             return True
         self._unsolicited(reply)
         return False
 
-    def noise_unsolicited(self) -> None:
+    def _noise_unsolicited(self) -> None:
         """Bytes that were no frame came while nothing was outstanding and nothing was
         expected: a damaged reply, possibly the real answer to the last request."""
-        if not self.ledger.dirty(self.downloading) and not self.downloading:
+        if not self._ledger.dirty(self.downloading) and not self.downloading:
             self._unsolicited(None)
 
-    def accept_version(self, window: bytes) -> bool:
+    def _accept_version(self, window: bytes) -> bool:
         """Nine bytes that are no frame: a version string the ledger expects (a stale 136
         type 0's) or one taken lately (a duplicated 136 reply)? Then they are read whole."""
         if window[0] != self.host_address or not all(32 <= b < 127 for b in window[1:9]):
             return False
         raw = bytes(window[:9])
-        if self.ledger.late_version():
+        if self._ledger.late_version():
             self.discard(raw, "stale version string")
             return True
-        if self.ledger.is_version_copy(raw[1:].decode("latin-1")):
+        if self._ledger.is_version_copy(raw[1:].decode("latin-1")):
             # (a copy is no damaged reply either: the answer may still come, after a
             # module's pause before replying)
             self.stats["unsolicited"] += 1
-            self.ledger.mark_dirty()
+            self._ledger.mark_dirty()
             self.discard(raw, "copy of the version string")
             return True
         return False
@@ -266,10 +266,10 @@ class Client:
     def _unsolicited(self, extra: Reply | None) -> None:
         self.stats["unsolicited"] += 1
         raw = b"" if extra is None else extra.to_can() if self.is_can else extra.to_bytes()
-        for suspect in self.ledger.unsolicited(extra, raw):
+        for suspect in self._ledger.unsolicited(extra, raw):
             self.stats["suspect"] += 1
-            if self.tracers:
-                _tell(self.tracers, "note", b"", f"the reply to {name_of(suspect.request)} may "
+            if self._tracers:
+                _tell(self._tracers, "note", b"", f"the reply to {name_of(suspect.request)} may "
                       "have been another request's: a reply came that nothing was waiting for")
 
     def _deliver_events(self) -> None:
@@ -286,7 +286,7 @@ class Client:
             try:
                 while True:
                     try:
-                        reply, self.event_time = self._events.popleft()
+                        reply, self._event_time = self._events.popleft()
                     except IndexError:
                         break
                     for fn in list(self._listeners):
@@ -327,11 +327,11 @@ class Client:
     @property
     def replies(self) -> int:
         """Replies returned so far (numbers them: ``Suspect.seq``, ``in_doubt``)."""
-        return self.ledger.replies
+        return self._ledger.replies
 
     @property
     def suspects(self):
-        return self.ledger.suspects
+        return self._ledger.suspects
 
     def describe(self) -> str:
         return self.transport.describe()
@@ -368,8 +368,8 @@ class Client:
             timeout = self._timeout
         elif not (isinstance(timeout, (int, float)) and timeout > 0):
             raise ValueError(f"timeout must be a positive number of seconds, got {timeout!r}")
-        if self.on_link_lost is not None and not self.connected:
-            self.on_link_lost()
+        if self._on_link_lost is not None and not self.connected:
+            self._on_link_lost()
         try:
             with self._lock:
                 if (self._bring_up_next or self._check_download) and not self.downloading:
@@ -386,9 +386,9 @@ class Client:
             if req.opcode >= _FIRST_CONTROL and reply is not None and reply.ok:
                 ctl = isa.control(req.opcode)  # (a typed 132 with no 133 after it)
                 if ctl is not None and ctl.download == "enter" and not self.downloading:
-                    self.left_downloading = True
+                    self._left_downloading = True
                 elif ctl is not None and ctl.download == "leave":
-                    self.left_downloading = False
+                    self._left_downloading = False
             if reply is not None and reply.status == _LOADED and not self.downloading:
                 raise DownloadModeError(
                     _LOADED, reply,
@@ -430,7 +430,7 @@ class Client:
         else:
             log.warning("%s", text)
 
-    def check_download_next(self) -> None:
+    def _check_download_next(self) -> None:
         """Download mode may not have ended (a 133 went unanswered, or was interrupted):
         before the next command, ask the module and end it if need be, so that command is
         executed, not stored."""
@@ -441,8 +441,8 @@ class Client:
             raise TransportError(f"{self.transport.describe()} is not connected "
                                  "(the link was closed or lost; reconnect first)")
         kind = _NORMAL if req.opcode < _FIRST_CONTROL else isa.reply_kind(req.opcode, req.type)
-        framing = self.framing
-        ledger = self.ledger
+        framing = self._framing
+        ledger = self._ledger
         attempt = 0
         went = False  # req itself went out, in some attempt
         while True:
@@ -479,8 +479,8 @@ class Client:
                         and not self.downloading and attempt <= retries):
                     # the module got a damaged frame and executed nothing: safe to send again
                     self.stats["retries"] += 1
-                    if self.tracers:
-                        _tell(self.tracers, "note", b"",
+                    if self._tracers:
+                        _tell(self._tracers, "note", b"",
                               "module saw a bad checksum; sending again")
                     continue
                 if reply is None:
@@ -505,23 +505,23 @@ class Client:
                 failure.sent = went  # type: ignore[attr-defined]
                 raise failure
             self.stats["retries"] += 1
-            if self.tracers:
-                _tell(self.tracers, "note", b"", f"retry {attempt} of {tries - 1}")
+            if self._tracers:
+                _tell(self._tracers, "note", b"", f"retry {attempt} of {tries - 1}")
 
     def _flush_input(self) -> None:
         """Before a request: what is already waiting cannot be its answer. Take it in
         (events are kept), drop the rest, count it."""
         before = self.stats["discarded"]
-        self.framing.absorb(flushing=True)
+        self._framing.absorb(flushing=True)
         self.stats["flushed"] += self.stats["discarded"] - before
 
     def _resync(self, address: int, timeout: float) -> None:
         """Consume every late reply: drain, then a 136 marker whose reply comes last."""
-        ledger = self.ledger
-        framing = self.framing
+        ledger = self._ledger
+        framing = self._framing
         self.stats["resyncs"] += 1
-        if self.tracers:
-            _tell(self.tracers, "note", b"",
+        if self._tracers:
+            _tell(self._tracers, "note", b"",
                   "checking the line with 136 after an earlier failure")
         if self.downloading:
             # a marker would be stored as an instruction: wait for a quiet line instead;
@@ -587,7 +587,7 @@ class Client:
         (``AsciiLink.once``, ``AsciiLink.mark``); there every reading of a setting is judged,
         copy or not: an ASCII reply has no checksum, and a digit changed on the line is
         found out only by a second read that disagrees."""
-        ledger = self.ledger
+        ledger = self._ledger
         ascii_link = self.ascii_link
         first = ledger.replies
         self.stats["judged"] += 1
@@ -600,7 +600,7 @@ class Client:
                     got = ascii_link.mark(timeout)
                 else:
                     try:
-                        got = self.framing.exchange(marker, _NORMAL, timeout)
+                        got = self._framing.exchange(marker, _NORMAL, timeout)
                     except (TmclTimeoutError, ChecksumError):
                         ledger.expect_late(marker, _NORMAL)
                         got = None
@@ -634,22 +634,22 @@ class Client:
             self._judging = False
 
     # -- answers in doubt ---------------------------------------------------------------
-    def last_may_be_a_copy(self) -> bool:
+    def _last_may_be_a_copy(self) -> bool:
         """Whether the last reply taken could be a late copy of the one before it."""
         with self._lock:
-            return self.ledger.last_may_be_a_copy()
+            return self._ledger.last_may_be_a_copy()
 
-    def suspect_seqs(self) -> set[int]:
+    def _suspect_seqs(self) -> set[int]:
         """The ``seq`` of every suspect not yet taken (``take_suspects`` still reports them)."""
         with self._lock:  # (the event poller may add one meanwhile)
-            return self.ledger.suspect_seqs()
+            return self._ledger.suspect_seqs()
 
-    def take_suspects(self, seqs: Container[int] | None = None) -> list[Suspect]:
+    def _take_suspects(self, seqs: Container[int] | None = None) -> list[Suspect]:
         """Replies returned earlier that may have answered another request (oldest first);
         each is reported once. ``seqs``: only those (a caller that read again, or marked the
         values in doubt itself, takes its own; the rest stay to be reported)."""
         with self._lock:  # (the event poller may add one meanwhile)
-            return self.ledger.take_suspects(seqs)
+            return self._ledger.take_suspects(seqs)
 
     def in_doubt(self, answered: Mapping[int, K], *, confirm: bool = True) -> set[K]:
         """The one check of answers in doubt: of the reads ``answered`` (``replies`` right
@@ -670,19 +670,19 @@ class Client:
             self.poll()  # what waits already is taken in (nothing is sent, nothing awaited)
             # the exchange only if the last answer may be the reply before it, taken again;
             # not on the simulator in process (whatever follows an answer waits already)
-            if not self.transport.simulated and self.last_may_be_a_copy():
+            if not self.transport.simulated and self._last_may_be_a_copy():
                 try:
                     self.request(Request(self.address, _GET_VERSION, 1, 0, 0))
                 except (TmclTimeoutError, ChecksumError, DownloadModeError):
                     pass  # what it could find is found by the next request's flush as well
-        found = self.suspect_seqs()
+        found = self._suspect_seqs()
         return {key for seq, key in answered.items() if seq in found}
 
     def settle(self, answered: Mapping[int, object]) -> None:
         """The suspects among ``answered`` were dealt with by their reader (read again, or
         said to be in doubt): they are not reported again."""
         if answered:
-            self.take_suspects(answered.keys())
+            self._take_suspects(answered.keys())
 
     # -- events while idle --------------------------------------------------------------
     def poll(self) -> None:
@@ -690,14 +690,14 @@ class Client:
         if not self._lock.acquire(blocking=False):
             return
         try:
-            if self.ascii_link is None and self.transport.is_open and self.framing.waiting():
-                self.framing.absorb()
+            if self.ascii_link is None and self.transport.is_open and self._framing.waiting():
+                self._framing.absorb()
         finally:
             self._lock.release()
             if self._events:
                 self._deliver_events()
 
-    def confirm_last(self) -> None:
+    def _confirm_last(self) -> None:
         """At the end of a run: was the last reply the answer to its request? A late copy of
         the reply before it (same address and command) would have been taken for it; its
         real answer then comes right behind, when nothing waits for it, and makes the last
@@ -710,12 +710,12 @@ class Client:
             if self.ascii_link is not None:
                 self.ascii_link.absorb(watch=True)
                 return
-            ledger = self.ledger
-            quiet = self.framing.quiet_time()
+            ledger = self._ledger
+            quiet = self._framing.quiet_time()
             if not ledger.last_may_be_a_copy() or ledger.confirmed == ledger.replies:
                 quiet = 0.0  # (this reply was watched for already)
             end = time.monotonic() + max(0.5, 10 * quiet)
-            while self.framing.absorb(quiet) and quiet and time.monotonic() < end:
+            while self._framing.absorb(quiet) and quiet and time.monotonic() < end:
                 pass
             ledger.confirmed = ledger.replies
         if self._events:
@@ -761,7 +761,7 @@ class Client:
 
         return identify(self)
 
-    def leave_download_mode(self) -> bool:
+    def _leave_download_mode(self) -> bool:
         """End download mode if the module is in it (bringup.leave_download_mode)."""
         from .bringup import leave_download_mode
 
@@ -794,8 +794,8 @@ class Client:
             self._reopen(wait)
             self._bring_up_next = bring_up
             self.stats["reconnects"] += 1
-            if self.tracers:
-                _tell(self.tracers, "note", b"", f"reconnected to {self.describe()}")
+            if self._tracers:
+                _tell(self._tracers, "note", b"", f"reconnected to {self.describe()}")
 
     def _reopen(self, wait: float = 0.0) -> None:
         self.transport.close()
@@ -809,8 +809,8 @@ class Client:
                     raise
                 time.sleep(min(0.1, max(0.0, deadline - time.monotonic())))
         self._down = False
-        self.framing = self.transport.framing(self)
-        self.ledger.reset()  # whatever comes now says nothing about answers before
+        self._framing = self.transport.framing(self)
+        self._ledger.reset()  # whatever comes now says nothing about answers before
 
     @property
     def lock(self):
@@ -819,30 +819,30 @@ class Client:
 
     @property
     def tracing(self) -> bool:
-        return bool(self.tracers or self.sent_tracers)
+        return bool(self._tracers or self._sent_tracers)
 
     def absorb(self) -> None:
         """Take in what is pending on a binary line: events are kept, all else is stale."""
         with self._lock:
-            self.framing.absorb()
+            self._framing.absorb()
 
-    def clear_input(self) -> None:
+    def _clear_input(self) -> None:
         """Forget bytes buffered for the binary framing (the line was in another mode)."""
         with self._lock:
-            self.framing.clear()
+            self._framing.clear()
 
-    def forget_stale(self) -> None:
+    def _forget_stale(self) -> None:
         """The line was reset (its baud rate changed): nothing sent before can still arrive."""
         with self._lock:
-            self.framing.clear()
-            self.ledger.forget()
+            self._framing.clear()
+            self._ledger.forget()
 
-    def resync_next(self) -> None:
+    def _resync_next(self) -> None:
         """Something else used the line (the module's ASCII mode): whatever is left on it is
         stale, so the next binary request starts with the resynchronisation marker."""
         with self._lock:
-            self.framing.clear()
-            self.ledger.mark_dirty()
+            self._framing.clear()
+            self._ledger.mark_dirty()
 
     def close(self) -> None:
         """Stop the event poller, run the close hooks, leave ASCII mode if entered, close the
@@ -855,13 +855,13 @@ class Client:
     def _leave_link(self) -> None:
         """Run the close hooks, leave ASCII mode if entered: the module is left as it was
         found, while the link is still open."""
-        hooks, self.close_hooks = self.close_hooks, []
+        hooks, self._close_hooks = self._close_hooks, []
         for hook in hooks:
             try:
                 hook()
             except Exception as exc:
                 _failed("closing", exc)
-        if self.left_downloading and self.transport.is_open:
+        if self._left_downloading and self.transport.is_open:
             self._end_left_download()
         if self.ascii_link is not None:
             try:
@@ -871,7 +871,7 @@ class Client:
 
     def _end_left_download(self) -> None:
         """133 for a 132 that was sent and never ended (by a line, not an upload)."""
-        self.left_downloading = False
+        self._left_downloading = False
         self.downloading = True  # (what 133 gets while the module stores commands)
         try:
             reply = self.request(Request(self.address, _QUIT_DOWNLOAD, 0, 0, 0))
@@ -889,7 +889,7 @@ class Client:
                         "line) and did not leave it for 133 "
                         f"(status {reply.status if reply is not None else 'none'})")
 
-    def switch_transport(self, transport: Transport, module: Module | str | None = None) -> None:
+    def _switch_transport(self, transport: Transport, module: Module | str | None = None) -> None:
         """Go on on another link (the shell's ``.connect``): the old one is left as ``close``
         leaves it (the close hooks run, the module is left in the mode it was found in, the
         port is closed); nothing of it is carried over. The new link starts in binary mode
@@ -909,8 +909,8 @@ class Client:
             self._reopen()  # clears buffers and stale-reply bookkeeping, reopens the link
             self._bring_up_next = self._check_download = False  # (what bring_up does)
             self.stats["reconnects"] += 1
-            if self.tracers:
-                _tell(self.tracers, "note", b"", f"reconnected to {self.describe()}")
+            if self._tracers:
+                _tell(self._tracers, "note", b"", f"reconnected to {self.describe()}")
 
     def __enter__(self) -> Client:
         return self

@@ -96,7 +96,7 @@ class LineClient(Client):
         cache[line] = hit
         return hit
 
-    def send_encoded(self, enc: asm.Encoded, req: Request, *,
+    def _send_encoded(self, enc: asm.Encoded, req: Request, *,
                      timeout: float | None = None) -> Reply | None:
         """Send a checked line's request; a write that moves the module (its address, CAN
         ids, baud rate: the data's ``reaches``) is followed to where it answers now."""
@@ -111,7 +111,7 @@ class LineClient(Client):
     def execute(self, line: str, *, check: bool = True, timeout: float | None = None) -> Result:
         """Parse, check, send one TMCL line (``"GAP 1, 0"``); StatusError on an error status."""
         enc, req = self.prepare(line)
-        reply = self.send_encoded(enc, req, timeout=timeout)
+        reply = self._send_encoded(enc, req, timeout=timeout)
         if check and reply is not None and not status_ok(reply.status):
             raise StatusError(reply.status, reply)
         return Result(line, enc, reply)

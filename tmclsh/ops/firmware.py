@@ -208,7 +208,7 @@ class FirmwareUpdate:
         except BaseException:
             transport.close()
             raise
-        client.other_reply_ids = frozenset(self.boot.can_other_reply_ids)
+        client._other_reply_ids = frozenset(self.boot.can_other_reply_ids)
         client.on_notice = lambda text: self.progress(Step("notice", text))
         self.client = client
         return client
@@ -224,7 +224,7 @@ class FirmwareUpdate:
         now = line_baud(c.transport)
         if baud is not None and now is not None and baud != now:
             c.transport.set_baudrate(baud)
-            c.forget_stale()  # nothing sent at the other rate can still arrive
+            c._forget_stale()  # nothing sent at the other rate can still arrive
 
     def _boot_link(self) -> tuple:
         b = self.boot

@@ -268,7 +268,7 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
         ended, end_error = _quit_download(client, timeout)
         client.downloading = False
         if not ended:
-            client.check_download_next()  # the next command ends it first, not stored
+            client._check_download_next()  # the next command ends it first, not stored
     upload_seconds = time.monotonic() - began
     if failure is not None:
         interrupted = isinstance(failure, KeyboardInterrupt)
@@ -330,7 +330,7 @@ def end_download(client, *, timeout: float | None = None) -> None:
     finally:
         client.downloading = False
         if not ended:
-            client.check_download_next()
+            client._check_download_next()
 
 
 def read_instruction(client, address: int, *, timeout: float | None = None) -> Instruction:

@@ -155,7 +155,7 @@ def answer_at(client: Client, addresses: Iterable[int], baud: int, timeout: floa
     """Does any module at ``addresses`` answer at ``baud``? (``--baud auto``: a module that
     answers at two rates is on a link where the rate has no effect.)"""
     client.transport.set_baudrate(baud)  # type: ignore[attr-defined]
-    client.forget_stale()
+    client._forget_stale()
     for addr in addresses:
         try:
             if _probe(client, addr, max(timeout, 0.05), 1) is not None:
@@ -339,5 +339,5 @@ def _ascii_pass(client: Client, addresses: list[int], timeout: float) -> dict[in
         hit = _in_ascii_mode(client, addr, timeout)
         if hit is not None:
             found[addr] = hit
-    client.resync_next()  # (binary frames after ASCII lines start from a clean line)
+    client._resync_next()  # (binary frames after ASCII lines start from a clean line)
     return found

@@ -118,7 +118,7 @@ class Session:
         self.yes = yes
         self.keep_going = keep_going
         if keep_going:  # a line that needs the module waits for a lost link to come back
-            client.on_link_lost = self.relink
+            client._on_link_lost = self.relink
         self.settings = settings or {}
         # numbers; text (a unit's ${port}) only goes into lines as ${name}
         self.variables: dict[str, int | float | str] = {}
@@ -199,7 +199,7 @@ class Session:
             self.out.info(reconnected(self.client))
 
     def relink(self) -> None:
-        """A request found the link down (``Client.on_link_lost``, set with --keep-going):
+        """A request found the link down (``Client._on_link_lost``, set with --keep-going):
         wait for it as long as the request would wait for its answer, then bring the module
         up again; TransportError (nothing sent) if it does not come back in that time."""
         client = self.client
@@ -319,9 +319,9 @@ class Session:
                 ring[seq % ANSWERED] = (seq, text, where)
 
     def report_suspects(self) -> None:
-        """Say which earlier answers may have been another request's (Client.take_suspects):
+        """Say which earlier answers may have been another request's (Client._take_suspects):
         a result is never silently kept when the link shows it may be wrong."""
-        take = getattr(self.client, "take_suspects", None)
+        take = getattr(self.client, "_take_suspects", None)
         for s in take() if callable(take) else ():
             known = self._answered[s.seq % ANSWERED]
             line, where = known[1:] if known is not None and known[0] == s.seq else (None, None)
@@ -339,8 +339,8 @@ class Session:
 
     def confirm_answers(self) -> None:
         """At the end of a run (-c, -f): give the last answer the chance to show it was
-        another request's (``Client.confirm_last``), then report the suspects."""
-        confirm = getattr(self.client, "confirm_last", None)
+        another request's (``Client._confirm_last``), then report the suspects."""
+        confirm = getattr(self.client, "_confirm_last", None)
         if callable(confirm) and self.client.connected:
             try:
                 confirm()
@@ -395,7 +395,7 @@ class Session:
         if spec is None or spec.confirm:  # may refuse, or ask first
             self._before_sending(enc)
         try:
-            reply = client.send_encoded(enc, req)
+            reply = client._send_encoded(enc, req)
         except (TmclTimeoutError, ChecksumError) as exc:
             if idempotent(req) or isinstance(exc, TimeLimitError):
                 raise
@@ -407,7 +407,7 @@ class Session:
             self._answered[seq % ANSWERED] = (seq, text, self.location)
             suspects = getattr(client, "suspects", None)
             if suspects and suspects[-1].seq == seq:  # judged, and not settled: said in line
-                client.take_suspects((seq,))
+                client._take_suspects((seq,))
                 self.stats.suspects += 1
                 result = result._replace(in_doubt=True)
         self.last_result = result
