@@ -35,7 +35,7 @@ SGP = 9
 
 def drive(c: LineClient, n: int) -> tuple[set[int], set[int], int]:
     """``n`` SGPs with unique values: (replies with a wrong value, replies reported suspect,
-    failed requests), by ``Client.replies`` number."""
+    failed requests), by ``Client._replies`` number."""
     unique = itertools.count(1000)
     wrong: set[int] = set()
     suspect: set[int] = set()
@@ -48,7 +48,7 @@ def drive(c: LineClient, n: int) -> tuple[set[int], set[int], int]:
             failed += 1
             continue
         if reply.value != v:
-            wrong.add(c.replies)
+            wrong.add(c._replies)
         suspect |= {s.seq for s in c._take_suspects()}
     c.request(Request(1, SGP, 0, 2, 0))  # the last displaced answer is found by the next request
     suspect |= {s.seq for s in c._take_suspects()}

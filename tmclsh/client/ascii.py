@@ -439,22 +439,22 @@ def probe_mode(client: Client, timeout: float | None = None) -> Probe:
     with client.lock:
         stale = _read_quiet(t, 0.02, 0.2)
         if stale:
-            client.trace("drop", stale, "stale input before the mode probe")
+            client._trace("drop", stale, "stale input before the mode probe")
         raw = probe_frame(addr)
         t.write(raw)
-        client.trace("tx", raw, "mode probe: binary 136 type 1")
+        client._trace("tx", raw, "mode probe: binary 136 type 1")
         data = _read_quiet(t, timeout, timeout,
                            stop=lambda d: _binary_answer(d, addr, Control.GET_VERSION) is not None)
         reply = _binary_answer(data, addr, Control.GET_VERSION)
         if reply is not None:
-            client.trace("rx", data, reply)
+            client._trace("rx", data, reply)
             if reply.host != host:
                 raise ValidationError(
                     f"the module at address {addr} answers host address {reply.host} (GP 76), "
                     f"not {host}; use --host-address {reply.host}")
             return Probe(Mode.BINARY, host=reply.host)
         if data:
-            client.trace("drop", data, "no binary answer to the mode probe")
+            client._trace("drop", data, "no binary answer to the mode probe")
         late = end_line(client, timeout)
         if _binary_answer(late, addr, Control.GET_VERSION) is not None:
             client._resync_next()  # a slow binary module: resynchronise before its next use
@@ -470,7 +470,7 @@ def end_line(client: Client, timeout: float) -> bytes:
     t.write(CR)
     late = _read_quiet(t, 0.05, timeout)
     if late:
-        client.trace("drop", late, "after ending the probe line")
+        client._trace("drop", late, "after ending the probe line")
     return late
 
 
@@ -484,7 +484,7 @@ def probe_ascii(client: Client, timeout: float | None = None) -> Probe:
     with client.lock:
         line = ascii_probe_line(addr)
         t.write(line)
-        client.trace("tx", line, "mode probe: ASCII GGP 67, 0")
+        client._trace("tx", line, "mode probe: ASCII GGP 67, 0")
         buf = bytearray()
         deadline = time.monotonic() + timeout
         other_host: int | None = None
@@ -496,14 +496,14 @@ def probe_ascii(client: Client, timeout: float | None = None) -> Probe:
                 del buf[:used]
                 kind, rep = classify_line(text, line, _GGP)
                 if kind == LineKind.REPLY and rep is not None and rep.module == addr:
-                    client.trace("rx", text + CR, rep)
+                    client._trace("rx", text + CR, rep)
                     if rep.host != host:
                         other_host = rep.host
                         continue
                     gp67 = rep.value if rep.status == Status.OK else None
                     return Probe(Mode.ASCII, gp67, rep.host)
                 if text:
-                    client.trace("rx" if kind == LineKind.ECHO else "drop", text, kind.value)
+                    client._trace("rx" if kind == LineKind.ECHO else "drop", text, kind.value)
             left = deadline - time.monotonic()
             if left <= 0:
                 break
@@ -615,7 +615,7 @@ class AsciiLink:
                 if link is None:
                     link = cls(client, found=entered_from, echo=echo, gp67=probe.gp67)
                     _LINKS[client] = link
-                    client.notice(NO_CHECKSUM)  # (once a session: the first time)
+                    client._notice(NO_CHECKSUM)  # (once a session: the first time)
                 else:
                     link.echo, link.gp67, link._closed = echo, probe.gp67, False
                 link.entered = entered
@@ -646,14 +646,14 @@ class AsciiLink:
         t = _transport(client)
         raw = Request(client.address, Control.ENTER_ASCII, 0, 0, 0).to_bytes()
         if t.pending():
-            client.absorb()  # stale replies dropped, events kept
+            client._absorb()  # stale replies dropped, events kept
         t.write(raw)
         client.stats["sent"] += 1
-        client.trace("tx", raw, "enter ASCII mode (139)")
+        client._trace("tx", raw, "enter ASCII mode (139)")
         got = _read_quiet(t, 0.05, min(client.timeout, 0.3),
                           stop=lambda d: len(d) >= SERIAL_FRAME_LEN)
         if got:
-            client.trace("rx", got, "answer to 139")
+            client._trace("rx", got, "answer to 139")
         answer = _binary_answer(got, client.address, Control.ENTER_ASCII)
         if answer is not None and not status_ok(answer.status):
             raise StatusError(answer.status, answer,
@@ -667,11 +667,11 @@ class AsciiLink:
         t = _transport(client)
         line = command_bytes(client.address, isa.ASCII_BIN)
         t.write(line)
-        client.trace("tx", line, isa.ASCII_BIN)
+        client._trace("tx", line, isa.ASCII_BIN)
         timeout = min(client.timeout, 0.3) if timeout is None else timeout
         got = _read_quiet(t, 0.05, timeout)
         if got:
-            client.trace("rx", got, "after BIN")
+            client._trace("rx", got, "after BIN")
         client._resync_next()
 
     # -- leaving ------------------------------------------------------------------------
@@ -764,7 +764,7 @@ class AsciiLink:
             except TmclTimeoutError as exc:
                 last = exc
                 if attempt + 1 < tries:
-                    self.client.trace("note", b"", f"retry {attempt + 1} of {tries - 1}")
+                    self.client._trace("note", b"", f"retry {attempt + 1} of {tries - 1}")
         assert last is not None
         if tries > 1:
             raise TmclTimeoutError(f"{last} (after {tries} attempts)")
@@ -796,8 +796,8 @@ class AsciiLink:
             t.write(line)
             self.stats["sent"] += 1
             client.stats["sent"] += 1
-            if client.tracing:
-                client.trace("tx", line, line.decode("latin-1").rstrip(), request=request)
+            if client._tracing:
+                client._trace("tx", line, line.decode("latin-1").rstrip(), request=request)
             try:
                 reply = self._await(t, line, opcode, address, timeout)
             except BaseException:
@@ -838,8 +838,8 @@ class AsciiLink:
         again. (The binary link's marker, 136, does not exist in ASCII mode.)"""
         client = self.client
         client.stats["resyncs"] += 1
-        if client.tracing:
-            client.trace("note", b"", "checking the line with a read whose answer is known, "
+        if client._tracing:
+            client._trace("note", b"", "checking the line with a read whose answer is known, "
                                       "after an answer that did not come")
         try:
             self._marker(t, address, timeout)
@@ -881,8 +881,8 @@ class AsciiLink:
         t.write(line)
         self.stats["sent"] += 1
         client.stats["sent"] += 1
-        if client.tracing:
-            client.trace("tx", line, text, request=req)
+        if client._tracing:
+            client._trace("tx", line, text, request=req)
         deadline = time.monotonic() + timeout
         while True:
             for raw, got in take_lines(buf):
@@ -892,8 +892,8 @@ class AsciiLink:
                 if (kind == LineKind.REPLY and reply is not None and reply.module == address
                         and reply.host == client.host_address):
                     if reply.status == Status.OK and reply.value == value:
-                        if client.tracing:
-                            client.trace("rx", raw, reply)
+                        if client._tracing:
+                            client._trace("rx", raw, reply)
                         ledger.took_marker(req, reply)
                         return reply
                     self._late(raw, reply)  # (an earlier check's, crossed off)
@@ -959,13 +959,13 @@ class AsciiLink:
     def _late(self, raw: bytes, reply: Reply) -> None:
         """A reply of this module that no command waits for: one the ledger expected (an
         answer that had timed out) is crossed off; otherwise it makes the answers it may have
-        displaced suspects (Client.late, the binary link's rule)."""
+        displaced suspects (Client._late, the binary link's rule)."""
         if reply.status == Status.OK and self._pending.get(reply.value):
             self._pending[reply.value] -= 1  # an earlier marker's late answer
             self._drop(raw, "late answer to an earlier check")
             return
         self._drop(raw, "late reply to an earlier command")
-        self.client.late(reply.module, reply.opcode, reply)
+        self.client._late(reply.module, reply.opcode, reply)
 
     def _await(self, t: StreamTransport, sent: bytes, opcode: int, address: int,
                timeout: float) -> Reply:
@@ -984,8 +984,8 @@ class AsciiLink:
                 kind, reply = classify_line(text, sent, opcode)
                 if kind == LineKind.ECHO:
                     self.stats["echo_lines"] += 1
-                    if client.tracing:
-                        client.trace("rx", raw, "echo")
+                    if client._tracing:
+                        client._trace("rx", raw, "echo")
                     echoed = True
                     if held is not None:
                         self._late(*held)  # (it came before the echo)
@@ -1005,14 +1005,14 @@ class AsciiLink:
                             self._late(*held)
                         held, held_until = (raw, reply), time.monotonic() + _ECHO_WAIT
                         continue
-                    if client.tracing:
-                        client.trace("rx", raw, reply)
+                    if client._tracing:
+                        client._trace("rx", raw, reply)
                     return reply
                 self._drop(raw, "not a reply")
             now = time.monotonic()
             if held is not None and (now >= held_until or now >= deadline):
-                if client.tracing:
-                    client.trace("rx", held[0], held[1])
+                if client._tracing:
+                    client._trace("rx", held[0], held[1])
                 return held[1]  # no echo followed: this module does not echo
             end = deadline if held is None else min(deadline, held_until)
             left = end - now
@@ -1028,8 +1028,8 @@ class AsciiLink:
     def _drop(self, raw: bytes, why: str) -> None:
         self.stats["dropped_lines"] += 1
         self.client.stats["discarded"] += len(raw)
-        if self.client.tracing:
-            self.client.trace("drop", raw, why)
+        if self.client._tracing:
+            self.client._trace("drop", raw, why)
 
     # -- ASCII-only commands ------------------------------------------------------------
     def run(self, timeout: float | None = None) -> Reply:
@@ -1065,8 +1065,8 @@ class AsciiLink:
     def write_raw(self, data: bytes) -> None:
         with self.client.lock:
             _transport(self.client).write(bytes(data))
-            if self.client.tracing:
-                self.client.trace("tx", bytes(data), "terminal")
+            if self.client._tracing:
+                self.client._trace("tx", bytes(data), "terminal")
 
     def read_raw(self, timeout: float) -> bytes:
         """Whatever the module sent within ``timeout`` (holding the client's lock while
@@ -1078,8 +1078,8 @@ class AsciiLink:
             if not data:
                 data = t.read(1, timeout)
             data += t.read_available()
-        if data and self.client.tracing:
-            self.client.trace("rx", data, "terminal")
+        if data and self.client._tracing:
+            self.client._trace("rx", data, "terminal")
         return data
 
     def describe(self) -> str:

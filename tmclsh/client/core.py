@@ -108,7 +108,7 @@ class Client:
         self._other_reply_ids: frozenset[int] = frozenset()
         self.module: Module | None = load_module(module) if isinstance(module, str) else module
         self.version: str | None = None
-        self.downloading = False  # set by tmclsh.ops.program between 132 and 133
+        self._downloading = False  # set by tmclsh.ops.program between 132 and 133
         # a 132 was answered that no 133 has ended yet, outside tmclsh.ops.program (a line
         # typed or a script's): close() ends it, so the module is not left storing what it gets
         self._left_downloading = False
@@ -199,7 +199,7 @@ class Client:
         return remove
 
     # -- what the framing reports (tmclsh.link.framing.Owner) ---------------------------
-    def trace(self, direction: str, raw: bytes, decoded: object, *,
+    def _trace(self, direction: str, raw: bytes, decoded: object, *,
               request: Request | None = None) -> None:
         """Report a frame to the tracers ("tx", "rx", "drop" or "note"). ``request``: the
         request a "tx" line carries (an ASCII line's decoded is its text), for the tracers
@@ -219,22 +219,22 @@ class Client:
     def _trace_sent(self, raw: bytes, req: Request) -> None:
         _tell(self._sent_tracers, "tx", raw, req)
 
-    def discard(self, raw: bytes, why: str) -> None:
+    def _discard(self, raw: bytes, why: str) -> None:
         self.stats["discarded"] += len(raw)
         if self._tracers:
             _tell(self._tracers, "drop", raw, why)
 
-    def event(self, raw: bytes, reply: Reply) -> None:
+    def _event(self, raw: bytes, reply: Reply) -> None:
         self.stats["events"] += 1
         if self._tracers:
             _tell(self._tracers, "rx", raw, reply)
         self._events.append((reply, time.monotonic()))
 
-    def late(self, address: int, opcode: int, reply: Reply | None) -> bool:
+    def _late(self, address: int, opcode: int, reply: Reply | None) -> bool:
         """A reply arrived that no request waits for: True if one like it was expected
         (``Ledger.late``), or the line may carry anything; else it is unsolicited."""
         ledger = self._ledger
-        if ledger.late(address, opcode, reply) or ledger.opaque or self.downloading:
+        if ledger.late(address, opcode, reply) or ledger.opaque or self._downloading:
             return True
         self._unsolicited(reply)
         return False
@@ -242,7 +242,7 @@ class Client:
     def _noise_unsolicited(self) -> None:
         """Bytes that were no frame came while nothing was outstanding and nothing was
         expected: a damaged reply, possibly the real answer to the last request."""
-        if not self._ledger.dirty(self.downloading) and not self.downloading:
+        if not self._ledger.dirty(self._downloading) and not self._downloading:
             self._unsolicited(None)
 
     def _accept_version(self, window: bytes) -> bool:
@@ -252,14 +252,14 @@ class Client:
             return False
         raw = bytes(window[:9])
         if self._ledger.late_version():
-            self.discard(raw, "stale version string")
+            self._discard(raw, "stale version string")
             return True
         if self._ledger.is_version_copy(raw[1:].decode("latin-1")):
             # (a copy is no damaged reply either: the answer may still come, after a
             # module's pause before replying)
             self.stats["unsolicited"] += 1
             self._ledger.mark_dirty()
-            self.discard(raw, "copy of the version string")
+            self._discard(raw, "copy of the version string")
             return True
         return False
 
@@ -325,12 +325,12 @@ class Client:
         return self.transport.is_open and not self._down
 
     @property
-    def replies(self) -> int:
+    def _replies(self) -> int:
         """Replies returned so far (numbers them: ``Suspect.seq``, ``in_doubt``)."""
         return self._ledger.replies
 
     @property
-    def suspects(self):
+    def _suspects(self):
         return self._ledger.suspects
 
     def describe(self) -> str:
@@ -372,7 +372,7 @@ class Client:
             self._on_link_lost()
         try:
             with self._lock:
-                if (self._bring_up_next or self._check_download) and not self.downloading:
+                if (self._bring_up_next or self._check_download) and not self._downloading:
                     self._before_next(req)
                 try:
                     if self.ascii_link is not None:
@@ -385,11 +385,11 @@ class Client:
                     raise
             if req.opcode >= _FIRST_CONTROL and reply is not None and reply.ok:
                 ctl = isa.control(req.opcode)  # (a typed 132 with no 133 after it)
-                if ctl is not None and ctl.download == "enter" and not self.downloading:
+                if ctl is not None and ctl.download == "enter" and not self._downloading:
                     self._left_downloading = True
                 elif ctl is not None and ctl.download == "leave":
                     self._left_downloading = False
-            if reply is not None and reply.status == _LOADED and not self.downloading:
+            if reply is not None and reply.status == _LOADED and not self._downloading:
                 raise DownloadModeError(
                     _LOADED, reply,
                     f"the module is in download mode (it stores commands instead of executing "
@@ -423,7 +423,7 @@ class Client:
                 self._check_download = True
                 raise
 
-    def notice(self, text: str) -> None:
+    def _notice(self, text: str) -> None:
         """Tell the user about something the client did on its own."""
         if self.on_notice is not None:
             self.on_notice(text)
@@ -452,8 +452,8 @@ class Client:
                 if framing.waiting():
                     self._flush_input()
                 synced = False
-                if ledger.dirty(self.downloading):
-                    if ledger.needs_sync(req, kind, self.downloading):
+                if ledger.dirty(self._downloading):
+                    if ledger.needs_sync(req, kind, self._downloading):
                         self._resync(req.address, timeout)
                         synced = True
                 elif ledger.run and time.monotonic() - self._answered_at >= timeout:
@@ -476,7 +476,7 @@ class Client:
                 raise
             else:
                 if (reply is not None and reply.status == _WRONG_CHECKSUM
-                        and not self.downloading and attempt <= retries):
+                        and not self._downloading and attempt <= retries):
                     # the module got a damaged frame and executed nothing: safe to send again
                     self.stats["retries"] += 1
                     if self._tracers:
@@ -485,7 +485,7 @@ class Client:
                     continue
                 if reply is None:
                     return None
-                copy = not self.downloading and ledger.may_be_a_copy(req, reply)
+                copy = not self._downloading and ledger.may_be_a_copy(req, reply)
                 ledger.took(req, reply, copy=copy)
                 self._answered_at = time.monotonic()
                 if copy and not self._judging:
@@ -494,7 +494,7 @@ class Client:
             if sent:
                 ledger.expect_late(req, kind)
             # a failed line check sent nothing of ``req``: asking again is safe for any command
-            tries = 1 + (retries if not sent or idempotent(req, self.downloading) else 0)
+            tries = 1 + (retries if not sent or idempotent(req, self._downloading) else 0)
             if attempt >= tries:
                 if tries > 1:
                     again = type(failure)(f"{failure} (after {tries} attempts)")
@@ -523,7 +523,7 @@ class Client:
         if self._tracers:
             _tell(self._tracers, "note", b"",
                   "checking the line with 136 after an earlier failure")
-        if self.downloading:
+        if self._downloading:
             # a marker would be stored as an instruction: wait for a quiet line instead;
             # stale replies are still dropped by opcode matching. That proves nothing, so a
             # marker follows once download mode is over.
@@ -678,7 +678,7 @@ class Client:
         found = self._suspect_seqs()
         return {key for seq, key in answered.items() if seq in found}
 
-    def settle(self, answered: Mapping[int, object]) -> None:
+    def _settle(self, answered: Mapping[int, object]) -> None:
         """The suspects among ``answered`` were dealt with by their reader (read again, or
         said to be in doubt): they are not reported again."""
         if answered:
@@ -818,10 +818,10 @@ class Client:
         return self._lock
 
     @property
-    def tracing(self) -> bool:
+    def _tracing(self) -> bool:
         return bool(self._tracers or self._sent_tracers)
 
-    def absorb(self) -> None:
+    def _absorb(self) -> None:
         """Take in what is pending on a binary line: events are kept, all else is stale."""
         with self._lock:
             self._framing.absorb()
@@ -872,20 +872,20 @@ class Client:
     def _end_left_download(self) -> None:
         """133 for a 132 that was sent and never ended (by a line, not an upload)."""
         self._left_downloading = False
-        self.downloading = True  # (what 133 gets while the module stores commands)
+        self._downloading = True  # (what 133 gets while the module stores commands)
         try:
             reply = self.request(Request(self.address, _QUIT_DOWNLOAD, 0, 0, 0))
         except Exception as exc:
             _failed("ending download mode (133)", exc)
             return
         finally:
-            self.downloading = False
+            self._downloading = False
         if reply is not None and reply.ok:
-            self.notice(f"the module at address {self.address} was still in download mode "
+            self._notice(f"the module at address {self.address} was still in download mode "
                         "(a 132 line with no 133 after it): ended it with 133; what was sent "
                         "after the 132 is stored as its program")
         else:
-            self.notice(f"the module at address {self.address} is in download mode (a 132 "
+            self._notice(f"the module at address {self.address} is in download mode (a 132 "
                         "line) and did not leave it for 133 "
                         f"(status {reply.status if reply is not None else 'none'})")
 

@@ -48,7 +48,7 @@ class Owner(Protocol):
     """What a framing needs of the client it reads for."""
 
     host_address: int
-    downloading: bool
+    _downloading: bool
     can_id: int
     reply_id: int
     _also_from: int | None  # (client/reach.py: an answer from the new address is the answer)
@@ -64,11 +64,11 @@ class Owner(Protocol):
 
     def _trace_sent(self, raw: bytes, req: Request) -> None: ...
 
-    def discard(self, raw: bytes, why: str) -> None: ...
+    def _discard(self, raw: bytes, why: str) -> None: ...
 
-    def event(self, raw: bytes, reply: Reply) -> None: ...
+    def _event(self, raw: bytes, reply: Reply) -> None: ...
 
-    def late(self, address: int, opcode: int, reply: Reply | None) -> bool: ...
+    def _late(self, address: int, opcode: int, reply: Reply | None) -> bool: ...
 
     def _noise_unsolicited(self) -> None: ...
 
@@ -264,20 +264,20 @@ class SerialFraming:
             reply = Reply.from_frame(head)  # a write that moved the module: its answer
         elif head[0] != host:
             # a frame for another host, or our own request echoed by an RS485 adapter
-            o.discard(head, f"frame for address {head[0]}, not host {host}")
+            o._discard(head, f"frame for address {head[0]}, not host {host}")
             return None
         elif head[2] == _EVENT and head[3] == _TARGET_REACHED:
             # (a 134 read-back of a stored instruction could have this shape too, but only
             # one whose opcode equals the address, with type 128 and motor 138)
-            o.event(head, Reply.from_frame(head))
+            o._event(head, Reply.from_frame(head))
             return None
         elif kind == _MEMORY:
             reply = Reply.from_memory_frame(head, req.address, req.opcode)
         elif head[1] != req.address or head[3] != req.opcode or (
                 kind == _VERSION and head[2] == _OK):
             # (a normal frame answering 136 type 0 can only carry an error status)
-            o.late(head[1], head[3], Reply.from_frame(head))
-            o.discard(head, f"stale reply (op {head[3]} from address {head[1]})")
+            o._late(head[1], head[3], Reply.from_frame(head))
+            o._discard(head, f"stale reply (op {head[3]} from address {head[1]})")
             return None
         else:
             reply = Reply.from_frame(head)
@@ -287,11 +287,11 @@ class SerialFraming:
 
     def _drop(self, junk: bytearray, why: str) -> None:
         if junk:
-            self.owner.discard(bytes(junk), why)
+            self.owner._discard(bytes(junk), why)
             junk.clear()
 
     # -- what comes between requests ------------------------------------------------------
-    def absorb(self, timeout: float = 0.0, *, flushing: bool = False) -> bool:
+    def _absorb(self, timeout: float = 0.0, *, flushing: bool = False) -> bool:
         """Take in whatever is pending now (or, if nothing is, what comes within
         ``timeout``): events are queued, anything else is stale. False if nothing came.
         ``flushing``: before a request (the trace says so)."""
@@ -319,11 +319,11 @@ class SerialFraming:
             if what != FRAME_PIECE:
                 continue  # a late or repeated version string, written down already
             if head[0] == host and head[2] == _EVENT and head[3] == _TARGET_REACHED:
-                o.event(head, Reply.from_frame(head))
+                o._event(head, Reply.from_frame(head))
                 continue
-            expected = head[0] != host or o.late(head[1], head[3], Reply.from_frame(head))
+            expected = head[0] != host or o._late(head[1], head[3], Reply.from_frame(head))
             why = "late reply" if expected else "reply no request was waiting for"
-            o.discard(head, f"discarded before the request: {why}" if flushing else why)
+            o._discard(head, f"discarded before the request: {why}" if flushing else why)
         rest = dec.settle()
         if rest is not None:
             junk += rest[1]
@@ -347,7 +347,7 @@ class SerialFraming:
             self.decoder.feed(chunk)
         self.absorb()
         if self.decoder.buf:
-            self.owner.discard(self.decoder.rest(), "partial frame")
+            self.owner._discard(self.decoder.rest(), "partial frame")
 
 
 class CanFraming:
@@ -408,18 +408,18 @@ class CanFraming:
             return reply
         data = _seven(data)
         if len(data) != _CAN_REPLY_LEN:
-            o.discard(data, f"not a TMCL reply ({len(data)} bytes)")
+            o._discard(data, f"not a TMCL reply ({len(data)} bytes)")
             return None
         elif data[1] == _EVENT and data[2] == _TARGET_REACHED:
-            o.event(data, Reply.from_can(host, data))
+            o._event(data, Reply.from_can(host, data))
             return None
         elif kind == _MEMORY:
             reply = Reply.from_can(host, data, kind, module=req.address)
         else:
             reply = Reply.from_can(host, data)
             if reply.opcode != req.opcode or (kind == _VERSION and reply.status == _OK):
-                o.late(reply.module, reply.opcode, reply)
-                o.discard(data, f"stale reply (op {reply.opcode})")
+                o._late(reply.module, reply.opcode, reply)
+                o._discard(data, f"stale reply (op {reply.opcode})")
                 return None
         if o._tracers:
             o._tell("rx", data, reply)
@@ -436,14 +436,14 @@ class CanFraming:
         ours = arb == o.reply_id or arb in o._other_reply_ids
         if ours and len(data) == _CAN_REPLY_LEN and data[1] == _EVENT \
                 and data[2] == _TARGET_REACHED:
-            o.event(data, Reply.from_can(o.host_address, data))
+            o._event(data, Reply.from_can(o.host_address, data))
         elif ours:
             if len(data) == _CAN_REPLY_LEN:
-                o.late(data[0], data[2], Reply.from_can(o.host_address, data))
-            o.discard(data, "stale reply")
+                o._late(data[0], data[2], Reply.from_can(o.host_address, data))
+            o._discard(data, "stale reply")
         return True
 
-    def absorb(self, timeout: float = 0.0, *, flushing: bool = False) -> bool:
+    def _absorb(self, timeout: float = 0.0, *, flushing: bool = False) -> bool:
         got = False
         while self._take_any(0 if got else timeout):
             got = True

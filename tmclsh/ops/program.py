@@ -251,7 +251,7 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
     acked = sent = 0
     failure: BaseException | None = None
     began = time.monotonic()
-    client.downloading = True  # no retries: a repeated frame would be stored twice
+    client._downloading = True  # no retries: a repeated frame would be stored twice
     try:
         _ok(_send(client, Control.START_DOWNLOAD, 0, 0, start, timeout=timeout),
             f"start download (132) at address {start}")
@@ -266,7 +266,7 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
         failure = exc
     finally:
         ended, end_error = _quit_download(client, timeout)
-        client.downloading = False
+        client._downloading = False
         if not ended:
             client._check_download_next()  # the next command ends it first, not stored
     upload_seconds = time.monotonic() - began
@@ -322,13 +322,13 @@ def _quit_download(client, timeout: float | None) -> tuple[bool, str | None]:
 def end_download(client, *, timeout: float | None = None) -> None:
     """133 on its own: end a download mode left behind (e.g. by a link lost mid-upload)."""
     require_binary(client, "quit download (133)")
-    client.downloading = True  # until it is answered, the module may store what it gets
+    client._downloading = True  # until it is answered, the module may store what it gets
     ended = False
     try:
         _ok(_send(client, Control.QUIT_DOWNLOAD, timeout=timeout), "quit download (133)")
         ended = True
     finally:
-        client.downloading = False
+        client._downloading = False
         if not ended:
             client._check_download_next()
 
@@ -391,10 +391,10 @@ def verify_image(client, instructions: Sequence[Instruction], start: int = 0, *,
     todo: Sequence[int] = range(total)
     doubtful: set[int] = set()
     for round_ in range(1 + CONFIRM_ROUNDS):
-        read_at: dict[int, int] = {}  # Client.replies after the read -> the cell's index
+        read_at: dict[int, int] = {}  # Client._replies after the read -> the cell's index
         for n, idx in enumerate(todo):
             got[idx] = read_instruction(client, start + idx, timeout=timeout)
-            read_at[client.replies] = idx
+            read_at[client._replies] = idx
             if progress is not None and round_ == 0:
                 progress("verify", n + 1, total)
         doubtful = client.in_doubt(read_at)
@@ -408,7 +408,7 @@ def verify_image(client, instructions: Sequence[Instruction], start: int = 0, *,
             # a difference is said only when a second read says the same (a copy of another
             # frame that no suspect gave away would otherwise be named the cell's content)
             again = read_instruction(client, start + idx, timeout=timeout)
-            unsure = bool(client.in_doubt({client.replies: idx}))
+            unsure = bool(client.in_doubt({client._replies: idx}))
             if again.to_bytes() == want.to_bytes() and not unsure:
                 continue
             certain = again.to_bytes() == got[idx].to_bytes() and not unsure

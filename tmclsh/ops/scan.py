@@ -226,7 +226,7 @@ def _answers_twice(client: Client, addr: int, timeout: float, copies: dict[int, 
     except (ChecksumError, TmclTimeoutError):
         return False
     time.sleep(min(SLOW_TIMEOUT, 4 * timeout))
-    client.absorb()
+    client._absorb()
     return copies.get(addr, 0) > before
 
 
@@ -302,7 +302,7 @@ def scan(client: Client, addresses: Iterable[int], *, timeout: float,
                 progress(addr, hit)
         if not client.is_can and addresses:
             time.sleep(min(slow_timeout, 4 * timeout))  # the last address's late answer
-            client.absorb()
+            client._absorb()
         wanted = set(addresses)
         for addr in sorted((again & wanted) - found.keys()):
             try:

@@ -233,7 +233,7 @@ def _stop_everything(client, settle: float, sleep: Callable[[float], None]) -> S
             report.unknown[m] = str(exc)
     number = _speed_parameter(client)
     deadline = time.monotonic() + settle
-    zero_at: dict[int, int] = {}  # motor -> Client.replies when its speed read 0
+    zero_at: dict[int, int] = {}  # motor -> Client._replies when its speed read 0
     doubtful: list[int] = []
     for _ in range(CONFIRM_ROUNDS):
         _settle(client, report, pending, zero_at, number, t, deadline, sleep)
@@ -267,7 +267,7 @@ def _settle(client, report: StopReport, pending: list[int], zero_at: dict[int, i
                 continue
             if v == 0:
                 report.stopped.append(m)
-                zero_at[m] = client.replies
+                zero_at[m] = client._replies
                 report.turning.pop(m, None)
                 pending.remove(m)
             else:

@@ -138,7 +138,7 @@ class Session:
         self.location: tuple[str, int] | None = None  # script file and line being run
         # the REPL sets it False before each line; see end_interrupted_line
         self.interrupted_line_ended = True
-        # which line each recent reply answered (Client.replies -> line, FILE:LINE), so a
+        # which line each recent reply answered (Client._replies -> line, FILE:LINE), so a
         # reply found suspect later can be named
         # (a ring: the reply numbered n is at n % ANSWERED, with its number)
         self._answered: list[tuple[int, str, tuple[str, int] | None] | None] = [None] * ANSWERED
@@ -295,7 +295,7 @@ class Session:
         capture = self.state.capture  # a block (.repeat/.if) collecting its lines
         if callable(capture) and capture(self, text):
             return None
-        first = getattr(self.client, "replies", 0)
+        first = getattr(self.client, "_replies", 0)
         try:
             result = self._dispatch(line)
         except TmclError as exc:
@@ -311,7 +311,7 @@ class Session:
     def _note_answered(self, first: int, text: str) -> None:
         """The replies after ``first`` that no TMCL line claimed (a .wait's or .expect's
         reads, ``${...}``) answered ``text``: a suspect among them names it."""
-        last = getattr(self.client, "replies", 0)
+        last = getattr(self.client, "_replies", 0)
         ring, where = self._answered, self.location
         for seq in range(max(first + 1, last - ANSWERED + 1), last + 1):
             known = ring[seq % ANSWERED]
@@ -385,7 +385,7 @@ class Session:
                 self._record(text, f"error: {exc}")
             raise
         finally:
-            if getattr(client, "suspects", True):  # (a client without the list: ask it)
+            if getattr(client, "_suspects", True):  # (a client without the list: ask it)
                 self.report_suspects()
 
     def run_tmcl(self, text: str, *, show: bool = True) -> Result:
@@ -403,9 +403,9 @@ class Session:
             raise _unsure(client, req, exc, getattr(exc, "sent", True)) from exc
         result = Result(text, enc, reply)
         if reply is not None:
-            seq = client.replies
+            seq = client._replies
             self._answered[seq % ANSWERED] = (seq, text, self.location)
-            suspects = getattr(client, "suspects", None)
+            suspects = getattr(client, "_suspects", None)
             if suspects and suspects[-1].seq == seq:  # judged, and not settled: said in line
                 client._take_suspects((seq,))
                 self.stats.suspects += 1

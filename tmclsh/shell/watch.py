@@ -255,7 +255,7 @@ class _Reading:
         while doubt and again and rounds < CONFIRM_ROUNDS:
             rounds += 1
             self.reread += len(doubt)
-            session.client.settle(ctx.answered)
+            session.client._settle(ctx.answered)
             for seq in [q for q, text in ctx.answered.items() if text in doubt]:
                 del ctx.answered[seq]
             for text in doubt:
@@ -273,7 +273,7 @@ class _Reading:
                 self.errors.pop(name, None)
             self.suspect += [n for n in names if n not in self.suspect]
         if self.judged:
-            session.client.settle(ctx.answered)
+            session.client._settle(ctx.answered)
 
     def sample(self) -> Sample:
         if self.lost is not None:
