@@ -98,21 +98,35 @@ class Client:
                  module: Module | str | None = None, timeout: float = 1.0, retries: int = 2,
                  can_id: int | None = None, reply_id: int | None = None):
         self.transport = transport
+        """The link (serial port, CAN bus, simulator); ``transport.simulated`` is true on
+        the built-in simulator."""
         self.address = address
+        """The module address requests go to (0..255); set it to talk to another module on
+        the same bus (the shell's ``.address`` also brings that one up)."""
         self.host_address = host_address
+        """The host address replies are sent to (the module's GP 76)."""
         self.timeout = timeout
+        """Seconds to wait for each reply (per attempt)."""
         self.retries = retries
+        """How often a request that may be repeated is sent again after no or a garbled
+        answer."""
         self.can_id = can_id if can_id is not None else 1
+        """The CAN id requests go out on (on a CAN link)."""
         self.reply_id = reply_id if reply_id is not None else 2
+        """The CAN id the module's replies come on (on a CAN link)."""
         # CAN ids besides reply_id whose messages are replies too (a bootloader's 0x7FF)
         self._other_reply_ids: frozenset[int] = frozenset()
         self.module: Module | None = load_module(module) if isinstance(module, str) else module
+        """The module's data (name, motors, parameters), as 136 named it; None before it
+        answered, or in generic mode, numbers only."""
         self.version: str | None = None
+        """The version string the module answered to 136 (``1311V111``)."""
         self._downloading = False  # set by tmclsh.ops.program between 132 and 133
         # a 132 was answered that no 133 has ended yet, outside tmclsh.ops.program (a line
         # typed or a script's): close() ends it, so the module is not left storing what it gets
         self._left_downloading = False
         self.ascii_link = None  # set by tmclsh.client.ascii when the module is driven in ASCII
+        """The ASCII-mode link while the module is driven in its ASCII mode, else None."""
         # while a write moves the module (client/reach.py): its answer may come from the new
         # module address, go to the new host address, or come on the new CAN reply id
         self._also_from: int | None = None
@@ -139,6 +153,8 @@ class Client:
         # one-line notices about what the client did on its own (ended download mode); the
         # shell points it at its output, else they are logged
         self.on_notice: Callable[[str], None] | None = None
+        """Called with each one-line notice of what the client did on its own (the module
+        answers at a new address, download mode ended); None: they are logged."""
         # called when a request finds the link down, to bring it back before the request
         # goes (a --keep-going script waits for a cable plugged back in); it raises
         # TransportError if the link stays down. None: the request fails at once.
@@ -159,6 +175,8 @@ class Client:
                       "discarded": 0, "events": 0, "retries": 0, "reconnects": 0,
                       "flushed": 0, "unsolicited": 0, "suspect": 0,
                       "judged": 0}
+        """Counters of what happened on the link since it was opened: requests sent,
+        timeouts, checksum errors, resynchronisations, retries, events, ..."""
         self._framing: SerialFraming | CanFraming = transport.framing(self)
 
     # -- subscriptions ------------------------------------------------------------------
@@ -312,10 +330,12 @@ class Client:
 
     @property
     def mode(self) -> str:
+        """``"binary"`` (TMCL frames) or ``"ascii"`` (the module's ASCII mode)."""
         return "ascii" if self.ascii_link is not None else "binary"
 
     @property
     def is_can(self) -> bool:
+        """The link is a CAN bus (addresses are CAN ids there)."""
         return self.transport.kind == "can"
 
     @property
@@ -334,6 +354,7 @@ class Client:
         return self._ledger.suspects
 
     def describe(self) -> str:
+        """Where the module is, in words (``/dev/ttyACM0 @ 9600``, ``SIMULATED TMCM-1311``)."""
         return self.transport.describe()
 
     def __repr__(self) -> str:
@@ -742,6 +763,7 @@ class Client:
         self._poller.start()
 
     def stop_event_poller(self) -> None:
+        """Stop delivering events in the background (``start_event_poller``)."""
         self._poller_stop.set()
         if self._poller is not None:
             self._poller.join(1)

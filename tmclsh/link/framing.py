@@ -291,7 +291,7 @@ class SerialFraming:
             junk.clear()
 
     # -- what comes between requests ------------------------------------------------------
-    def _absorb(self, timeout: float = 0.0, *, flushing: bool = False) -> bool:
+    def absorb(self, timeout: float = 0.0, *, flushing: bool = False) -> bool:
         """Take in whatever is pending now (or, if nothing is, what comes within
         ``timeout``): events are queued, anything else is stale. False if nothing came.
         ``flushing``: before a request (the trace says so)."""
@@ -443,7 +443,7 @@ class CanFraming:
             o._discard(data, "stale reply")
         return True
 
-    def _absorb(self, timeout: float = 0.0, *, flushing: bool = False) -> bool:
+    def absorb(self, timeout: float = 0.0, *, flushing: bool = False) -> bool:
         got = False
         while self._take_any(0 if got else timeout):
             got = True
