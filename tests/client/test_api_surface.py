@@ -42,9 +42,10 @@ MOVED = {
 
 
 def test_the_documented_names_import_from_tmclsh():
-    from tmclsh import AsmError, RangeError, TmclError, ValidationError, connect  # noqa: F401
+    from tmclsh import AsmError, RangeError, TmclError, ValidationError, connect
 
-    assert "connect" in tmclsh.__all__ and "TmclError" in tmclsh.__all__
+    assert connect is tmclsh.connect and "connect" in tmclsh.__all__
+    assert issubclass(RangeError, ValidationError) and issubclass(AsmError, ValidationError)
     for name in tmclsh.__all__:
         assert getattr(tmclsh, name) is not None, name
     errors = [getattr(tmclsh, n) for n in tmclsh.__all__
