@@ -27,8 +27,8 @@ tests/client/test_ascii_proxy.py runs a short version.
 
 ``--api`` reads through the Python API instead (``tmclsh.connect()`` and
 ``LineClient.execute`` in a process of its own, with ``--ascii`` too): a value is flagged in
-line when its ``Result.in_doubt`` says so, later when ``Client.take_suspects`` names it after
-a later read, or ``Client.confirm_last`` at the end.
+line when its ``Result.in_doubt`` says so, later when ``Client._take_suspects`` names it after
+a later read, or ``Client._confirm_last`` at the end.
 """
 
 from __future__ import annotations
@@ -154,7 +154,7 @@ read_as = {}  # reply seq -> the line it answered
 
 
 def later():
-    for s in client.take_suspects():
+    for s in client._take_suspects():
         print(json.dumps({"line": read_as.get(s.seq), "suspect": True}))
 
 
@@ -167,13 +167,13 @@ try:
             if not client.connected:
                 client.reconnect(1.0)
             continue
-        read_as[client.replies] = line
+        read_as[client._replies] = line
         rec = {"line": line, "reply": result.value}
         if result.in_doubt:
             rec["in_doubt"] = True
         print(json.dumps(rec))
         later()
-    client.confirm_last()
+    client._confirm_last()
     later()
 finally:
     client.close()

@@ -145,14 +145,14 @@ def test_on_exit_override(make):
 
 def _upload(client: LineClient, source: str) -> None:
     prog = asm.assemble(source, client.require_module())
-    client.downloading = True
+    client._downloading = True
     try:
         assert client.request(Request(1, Control.START_DOWNLOAD, 0, 0, 0)).ok
         for ins in prog.instructions:
             assert client.request(Request(1, ins.opcode, ins.type, ins.motor, ins.value)).ok
         assert client.request(Request(1, Control.QUIT_DOWNLOAD, 0, 0, 0)).ok
     finally:
-        client.downloading = False
+        client._downloading = False
 
 
 def test_run_and_stop(make):
@@ -186,9 +186,9 @@ def test_a_sent_only_tracer_is_told_the_request_each_ascii_line_carries(make):
 
 def test_refused_139_is_named(make):
     sim, client = make()
-    client.downloading = True
+    client._downloading = True
     client.request(Request(1, Control.START_DOWNLOAD, 0, 0, 0))
-    client.downloading = False
+    client._downloading = False
     with pytest.raises(StatusError, match=r"refused to enter ASCII mode \(139\): status 6"):
         AsciiLink.attach(client)  # in download mode 139 is not available
     assert client.mode == "binary" and not sim.ascii_active

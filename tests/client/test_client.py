@@ -252,7 +252,7 @@ def test_a_sent_only_tracer_is_told_each_request_before_it_goes_and_nothing_else
         sent.append((d, bytes(raw), dec, c.stats["sent"]))
 
     remove = c.add_tracer(watch, sent_only=True)
-    assert c.tracing
+    assert c._tracing
     c.send(GAP, 1, 0)
     c.sim.faults.garbage = b"\x55\xaa"  # a drop, which only a full tracer hears of
     c.send(SAP, 4, 0, 100)
@@ -286,7 +286,7 @@ def test_a_sent_only_tracer_given_opcodes_is_called_for_those_commands_only(pty_
     assert every == [GAP] and starts == [SAP, GAP, MVP]
     remove_starts()
     c.send(SAP, 4, 0, 100)
-    assert starts == [SAP, GAP, MVP] and not c.tracing
+    assert starts == [SAP, GAP, MVP] and not c._tracing
     with pytest.raises(ValueError):
         c.add_tracer(lambda *a: None, opcodes={GAP})  # a filter for what is sent only
 

@@ -452,7 +452,7 @@ def test_upload_under_faults(shape, inject, timeout, retries, start, seed):
         took = time.monotonic() - t0
         remove()
         assert took <= budget, (took, budget)
-        assert not client.downloading
+        assert not client._downloading
         h.calm()
         # download mode is off, whatever happened, unless the faults swallowed every 133 the
         # client sent (as often as it retries, at least twice): then it says so, and 133 on a

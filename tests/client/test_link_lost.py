@@ -133,7 +133,7 @@ def test_a_watch_that_finds_the_link_lost_between_two_samples_reconnects(tcp_sim
         if len(got) == 3:
             server.drop_client()
             deadline = time.monotonic() + patience(30)
-            while not client.framing.waiting():  # the hang-up has reached us
+            while not client._framing.waiting():  # the hang-up has reached us
                 assert time.monotonic() < deadline, "the hang-up never arrived"
                 time.sleep(0.01)
     try:

@@ -11,7 +11,7 @@ import pytest
 
 from bootmodel import START, BootModule, CanBootModule, hex_image
 from tmclsh.base.errors import TransportError
-from tmclsh.ops.firmware import APPLICATION, WRITING, FirmwareError, ImageRefused, Step, Update
+from tmclsh.ops.firmware import APPLICATION, WRITING, FirmwareError, ImageRefused, Step, FirmwareUpdate
 from tmclsh.sim import Simulator
 from tmclsh.sim.boot import Bootloader
 from tmclsh.sim.serve import serve_can, serve_tcp
@@ -30,7 +30,7 @@ def model_image(version: str = "1311V112", size: int = 5000) -> Image:
 
 def run(settings: dict, image: Image, **kw):
     steps: list[Step] = []
-    update = Update({"timeout": 0.3, **settings}, image, progress=steps.append, **kw)
+    update = FirmwareUpdate({"timeout": 0.3, **settings}, image, progress=steps.append, **kw)
     try:
         return update, update.run(), steps
     finally:
@@ -136,7 +136,7 @@ def test_an_image_too_large_is_refused_before_the_erase_and_the_module_sent_back
     try:
         from bootmodel import SIZE
 
-        update = Update({"port": module.path, "timeout": 0.3}, model_image(size=SIZE + 4))
+        update = FirmwareUpdate({"port": module.path, "timeout": 0.3}, model_image(size=SIZE + 4))
         with pytest.raises(ImageRefused, match="does not fit; refused, nothing was erased"):
             update.run()
         update.close()
@@ -225,7 +225,7 @@ def test_a_checksum_that_does_not_agree_starts_nothing():
 
     module.hooks[202] = lambda m: damage(m) if m.commands().count(202) == 1 else None
     try:
-        update = Update({"port": module.path, "timeout": 0.3}, model_image())
+        update = FirmwareUpdate({"port": module.path, "timeout": 0.3}, model_image())
         with pytest.raises(FirmwareError, match="checksum.*is not the image's.*not started"):
             update.run()
         update.close()
@@ -245,7 +245,7 @@ def test_a_module_gone_silent_mid_write_then_the_same_update_again():
     module = BootModule()
     module.hooks[201] = lambda m: setattr(m, "silent", m.commands().count(201) == 300)
     try:
-        update = Update({"port": module.path, "timeout": 0.1, "retries": 1}, model_image())
+        update = FirmwareUpdate({"port": module.path, "timeout": 0.1, "retries": 1}, model_image())
         with pytest.raises(TimeoutError):
             update.run()
         update.close()
@@ -273,7 +273,7 @@ def test_a_lost_tcp_link_mid_write_then_the_same_update_again():
             server.drop_client()  # the cable is pulled
 
     try:
-        update = Update({"port": url, "timeout": 0.3}, sim_image(), progress=progress)
+        update = FirmwareUpdate({"port": url, "timeout": 0.3}, sim_image(), progress=progress)
         with pytest.raises((TransportError, TimeoutError)):
             update.run()
         update.close()
@@ -300,7 +300,7 @@ def test_can_bootloader_answering_on_0x7ff():
 
 def test_check_writes_nothing_and_says_whether_it_fits(make_pty_sim):
     sim, path = make_pty_sim(bootloader=True)
-    update = Update({"port": path, "timeout": 0.3}, sim_image())
+    update = FirmwareUpdate({"port": path, "timeout": 0.3}, sim_image())
     try:
         plan = update.check()
     finally:
@@ -313,7 +313,7 @@ def test_check_writes_nothing_and_says_whether_it_fits(make_pty_sim):
 
 def test_declining_changes_nothing(make_pty_sim):
     sim, path = make_pty_sim()
-    update = Update({"port": path, "timeout": 0.3}, sim_image(), confirm=lambda q: False)
+    update = FirmwareUpdate({"port": path, "timeout": 0.3}, sim_image(), confirm=lambda q: False)
     try:
         with pytest.raises(FirmwareError, match="not updated: nothing was changed"):
             update.run()
@@ -336,7 +336,7 @@ def test_a_turning_motor_is_stopped_before_the_restart(make_pty_sim):
     sim.read(0.2)
     questions = []
     steps: list[Step] = []
-    update = Update({"port": path, "timeout": 0.3}, sim_image(), progress=steps.append,
+    update = FirmwareUpdate({"port": path, "timeout": 0.3}, sim_image(), progress=steps.append,
                     confirm=lambda q: questions.append(q) or True)
     try:
         update.run()
@@ -352,15 +352,15 @@ def test_a_usb_module_is_found_again_under_its_port_name(make_pty_sim, monkeypat
     """After 242 and 205 a module on its own USB port leaves the bus: the port is closed and
     opened again under the same name (here a pty stands in for the USB port)."""
     sim, path = make_pty_sim()
-    monkeypatch.setattr(Update, "_usb", lambda self: True)
+    monkeypatch.setattr(FirmwareUpdate, "_usb", lambda self: True)
     reopened = []
-    real = Update._reopen
+    real = FirmwareUpdate._reopen
 
     def counting(self):
         reopened.append(self.state)
         real(self)
 
-    monkeypatch.setattr(Update, "_reopen", counting)
+    monkeypatch.setattr(FirmwareUpdate, "_reopen", counting)
     _, result, _ = run({"port": path}, sim_image())
     assert reopened == ["bootloader", "starting"]
     assert result.new_version == "1311V112" == version_of(sim)

@@ -77,7 +77,7 @@ def fail_at_frame(client, frame: int, action) -> None:
     seen = [0]
 
     def tracer(direction, raw, decoded):
-        if direction != "tx" or not client.downloading:
+        if direction != "tx" or not client._downloading:
             return
         op = getattr(decoded, "opcode", None)
         if op is not None and op < 128:

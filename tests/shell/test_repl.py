@@ -408,3 +408,22 @@ def test_vi_mode_from_the_config_file(tmp_path, monkeypatch):
                 assert ps.editing_mode == EditingMode.VI
     finally:
         client.close()
+
+
+@pytest.mark.parametrize("comment", ["", "  // to the bench module"])
+def test_connect_takes_a_url_typed_at_the_prompt(repl, comment):
+    """``socket://`` was cut at its ``//`` as a comment: ``.connect socket:`` failed.
+    Against a module written from the manuals (tests/responder.py), not the simulator."""
+    from responder import TcpModule
+
+    m = TcpModule(version="1311V111")
+    try:
+        repl.line(f".connect {m.url}{comment}", "connected: TMCM-1311 at address 1 on ")
+        repl.wait_prompt()
+        assert 136 in m.commands()  # it was this module that answered
+        repl.line("GAP 4, 0", "MaxPositioningSpeed = ")
+        assert m.commands()[-1] == 6
+        assert repl.quit() == 0
+    finally:
+        repl.session.client.close()
+        m.close()

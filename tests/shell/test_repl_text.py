@@ -362,3 +362,15 @@ def test_a_line_owner_takes_everything_after_it(segments):
 ])
 def test_comments(text, kept):
     assert strip_comment(text) == kept
+
+
+@pytest.mark.parametrize("text, kept", [
+    (".connect socket://127.0.0.1:4001", ".connect socket://127.0.0.1:4001"),
+    (".connect rfc2217://10.0.0.5:2217 // bench", ".connect rfc2217://10.0.0.5:2217"),
+    (".connect loop://", ".connect loop://"),
+    ("GAP 1, 0// where", "GAP 1, 0"),
+    ("GAP 1, 0 ://x", "GAP 1, 0 :"),  # no scheme before it
+    (".echo a:b//c", ".echo a:b"),
+])
+def test_a_url_scheme_is_no_comment(text, kept):
+    assert strip_comment(text) == kept

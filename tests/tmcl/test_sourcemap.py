@@ -120,11 +120,11 @@ def test_dump_gives_back_the_uploaded_source_while_memory_matches(sim, tmp_path,
     assert "Start:" in dump(later, capsys)
     # download mode at address 2, one instruction stored there (SAP 4, 0, 1), quit download
     # (downloading: status 101 is expected; outside an upload it is a DownloadModeError)
-    later.client.downloading = True
+    later.client._downloading = True
     later.client.request(Request(1, Control.START_DOWNLOAD, 0, 0, 2))
     later.client.request(Request(1, 5, 4, 0, 1))
     later.client.request(Request(1, Control.QUIT_DOWNLOAD, 0, 0, 0))
-    later.client.downloading = False
+    later.client._downloading = False
     out = dump(later, capsys)
     assert "Start:" not in out and "// output 0 on" not in out
     assert "L0000:" in out  # the jump target, generated

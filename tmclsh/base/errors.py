@@ -88,8 +88,11 @@ class ModuleGoneError(ConnectError):
     there was none at the start (exit status 3)."""
 
 
-class AsmError(TmclError, ValueError):
-    """An error in TMCL source text, with its location (1-based line and column)."""
+class AsmError(ValidationError):
+    """An error in TMCL source text, with its location (1-based line and column).
+
+    A line refused before anything was sent, so a ``ValidationError`` as the API documents;
+    a value out of range is an ``AsmRangeError``, also a ``RangeError``."""
 
     def __init__(self, message: str, line: int | None = None, col: int | None = None,
                  file: str | None = None, kind: str = "syntax"):
@@ -111,6 +114,13 @@ class AsmError(TmclError, ValueError):
             if self.col is not None:
                 where.append(str(self.col))
         return f"{':'.join(where)}: {self.message}" if where else self.message
+
+
+class AsmRangeError(AsmError, RangeError):
+    """A value in TMCL source text outside what the module accepts (``SAP 140, 0, 12``).
+
+    Both classes, so ``except RangeError`` (what the API documents for a refused value) and
+    ``except AsmError`` (what scripts written before it caught) see it."""
 
 
 def exit_status(exc: BaseException) -> int:

@@ -1125,9 +1125,14 @@ The reply's value of a line ({_b('c.value("GAP ActualPosition, 0")')}).
 A raw command, no checks; the reply's status is returned, not raised.
 .PP
 Every error is a {_b("TmclError")}: {_b("TmclTimeoutError")} (also a TimeoutError) when the
-module does not answer, {_b("TransportError")} when the link is lost, {_b("ValidationError")}
-and {_b("AsmError")} for a line refused before anything was sent (all in
-{_b("tmclsh.base.errors")}).
+module does not answer, {_b("TransportError")} when the link is lost, {_b("RangeError")} for a
+value the module does not accept and {_b("ValidationError")} for any other line refused before
+anything was sent. They, the client and the operations a script needs without the shell
+(firmware, scan, stored programs, the stop, CAN logs and traffic) import from
+{_b("tmclsh")}; its {_b("__all__")} lists them, and anything else is private. Module paths of
+earlier releases ({_b("tmclsh.errors")}, {_b("tmclsh.protocol")}, ...) still import, with a
+DeprecationWarning naming the new place. \\fBscripts/api\\-docs\\fR in the source tree builds
+the reference from the docstrings; {_b("examples/")} holds the first tasks as scripts.
 """
 
 _FILES = f"""\

@@ -109,7 +109,7 @@ class Report:
 
 def cmd_firmware(args: argparse.Namespace) -> int:
     from ..client.connect import connection_settings
-    from ..ops.firmware import Update
+    from ..ops.firmware import FirmwareUpdate
     from ..tmcl.bootloader import read_image
 
     as_json = bool(getattr(args, "json", False))
@@ -133,7 +133,7 @@ def cmd_firmware(args: argparse.Namespace) -> int:
                       "to update without asking, or --check to see what would happen; "
                       "nothing was sent", EXIT_USAGE)
     settings = connection_settings(args)
-    update = Update(settings, image, progress=report.step,
+    update = FirmwareUpdate(settings, image, progress=report.step,
                     confirm=None if yes or args.check else report.ask)
     previous = _unwind_on_signals()
     try:

@@ -461,25 +461,25 @@ def probe_mode(client: Client, timeout: float | None = None) -> Probe:
     with client.lock:
         stale = _read_quiet(t, 0.02, 0.2)
         if stale:
-            client.trace("drop", stale, "stale input before the mode probe")
+            client._trace("drop", stale, "stale input before the mode probe")
         raw = probe_frame(addr)
         t.write(raw)
-        client.trace("tx", raw, "mode probe: binary 136 type 1")
+        client._trace("tx", raw, "mode probe: binary 136 type 1")
         data = _read_quiet(t, timeout, timeout,
                            stop=lambda d: _binary_answer(d, addr, Control.GET_VERSION) is not None)
         reply = _binary_answer(data, addr, Control.GET_VERSION)
         if reply is not None:
-            client.trace("rx", data, reply)
+            client._trace("rx", data, reply)
             if reply.host != host:
                 raise ValidationError(
                     f"the module at address {addr} answers host address {reply.host} (GP 76), "
                     f"not {host}; use --host-address {reply.host}")
             return Probe(Mode.BINARY, host=reply.host)
         if data:
-            client.trace("drop", data, "no binary answer to the mode probe")
+            client._trace("drop", data, "no binary answer to the mode probe")
         late = end_line(client, timeout)
         if _binary_answer(late, addr, Control.GET_VERSION) is not None:
-            client.resync_next()  # a slow binary module: resynchronise before its next use
+            client._resync_next()  # a slow binary module: resynchronise before its next use
             return Probe(Mode.BINARY, host=host)
         return probe_ascii(client, timeout)
 
@@ -490,10 +490,10 @@ def end_line(client: Client, timeout: float) -> bytes:
     returned (and traced as dropped). Callers hold ``client.lock``."""
     t = _transport(client)
     t.write(END_LINE)
-    client.trace("tx", END_LINE, "end of line for a module in ASCII mode")
+    client._trace("tx", END_LINE, "end of line for a module in ASCII mode")
     late = _read_quiet(t, 0.05, timeout)
     if late:
-        client.trace("drop", late, "after ending the probe line")
+        client._trace("drop", late, "after ending the probe line")
     return late
 
 
@@ -507,7 +507,7 @@ def probe_ascii(client: Client, timeout: float | None = None) -> Probe:
     with client.lock:
         line = ascii_probe_line(addr)
         t.write(line)
-        client.trace("tx", line, "mode probe: ASCII GGP 67, 0")
+        client._trace("tx", line, "mode probe: ASCII GGP 67, 0")
         buf = bytearray()
         deadline = time.monotonic() + timeout
         other_host: int | None = None
@@ -519,14 +519,14 @@ def probe_ascii(client: Client, timeout: float | None = None) -> Probe:
                 del buf[:used]
                 kind, rep = classify_line(text, line, _GGP)
                 if kind == LineKind.REPLY and rep is not None and rep.module == addr:
-                    client.trace("rx", text + CR, rep)
+                    client._trace("rx", text + CR, rep)
                     if rep.host != host:
                         other_host = rep.host
                         continue
                     gp67 = rep.value if rep.status == Status.OK else None
                     return Probe(Mode.ASCII, gp67, rep.host)
                 if text:
-                    client.trace("rx" if kind == LineKind.ECHO else "drop", text, kind.value)
+                    client._trace("rx" if kind == LineKind.ECHO else "drop", text, kind.value)
             left = deadline - time.monotonic()
             if left <= 0:
                 break
@@ -537,7 +537,7 @@ def probe_ascii(client: Client, timeout: float | None = None) -> Probe:
                 f"not {host}; use --host-address {other_host}")
         rest = bytes(buf)
         if has_valid_frame(rest):
-            client.resync_next()
+            client._resync_next()
             return Probe(Mode.BINARY, host=host, binary_garbage=True)
         raise TmclTimeoutError(f"no module answered at address {addr} "
                                f"({address_char(addr)}) in binary or ASCII mode "
@@ -555,7 +555,7 @@ def _tell_no_checksum(client: Client) -> None:
     repeated at every connect is one the user learns to skip."""
     if not _told[0]:
         _told[0] = True
-        client.notice(NO_CHECKSUM)
+        client._notice(NO_CHECKSUM)
 
 
 class AsciiLink:
@@ -585,7 +585,7 @@ class AsciiLink:
         self.stats = {"sent": 0, "timeouts": 0, "dropped_lines": 0, "echo_lines": 0}
         # Client.close runs its close hooks while the transport is still open: restore the
         # mode there even after .mode binary detached the link
-        client.close_hooks.append(self._on_client_close)
+        client._close_hooks.append(self._on_client_close)
 
     # -- attaching ----------------------------------------------------------------------
     @classmethod
@@ -642,7 +642,7 @@ class AsciiLink:
                             "stays in binary mode")
                     if probe.mode != Mode.ASCII:
                         sent_139 = False  # binary frames came back: it did not take
-                        client.resync_next()
+                        client._resync_next()
                         raise TransportError(f"the module at address {client.address} did not "
                                              "enter ASCII mode after command 139")
                 echo = echo_mode(probe.gp67) if probe.gp67 is not None else Echo.CHAR
@@ -657,9 +657,9 @@ class AsciiLink:
                 link._buf.clear()
                 link._dirty = False
                 link._pending.clear()
-                client.clear_input()
-                client.ledger.forget()  # (what the binary link still expected cannot come)
-                client.ledger.by_command = False  # ASCII replies name no command
+                client._clear_input()
+                client._ledger.forget()  # (what the binary link still expected cannot come)
+                client._ledger.by_command = False  # ASCII replies name no command
                 client.ascii_link = link
             except BaseException:
                 # interrupted (Ctrl-C, SIGTERM) between 139 and the link taking over: leave
@@ -669,7 +669,7 @@ class AsciiLink:
                         cls._bin(client)
                     except Exception:
                         pass
-                    client.resync_next()
+                    client._resync_next()
                 raise
         log.info("ASCII mode on address %d (%s; found in %s mode)", client.address,
                  link.echo.text, link.found.value)
@@ -681,14 +681,14 @@ class AsciiLink:
         t = _transport(client)
         raw = Request(client.address, Control.ENTER_ASCII, 0, 0, 0).to_bytes()
         if t.pending():
-            client.absorb()  # stale replies dropped, events kept
+            client._absorb()  # stale replies dropped, events kept
         t.write(raw)
         client.stats["sent"] += 1
-        client.trace("tx", raw, "enter ASCII mode (139)")
+        client._trace("tx", raw, "enter ASCII mode (139)")
         got = _read_quiet(t, 0.05, min(client.timeout, 0.3),
                           stop=lambda d: len(d) >= SERIAL_FRAME_LEN)
         if got:
-            client.trace("rx", got, "answer to 139")
+            client._trace("rx", got, "answer to 139")
         answer = _binary_answer(got, client.address, Control.ENTER_ASCII)
         if answer is not None and not status_ok(answer.status):
             raise StatusError(answer.status, answer,
@@ -702,12 +702,12 @@ class AsciiLink:
         t = _transport(client)
         line = command_bytes(client.address, isa.ASCII_BIN)
         t.write(line)
-        client.trace("tx", line, isa.ASCII_BIN)
+        client._trace("tx", line, isa.ASCII_BIN)
         timeout = min(client.timeout, 0.3) if timeout is None else timeout
         got = _read_quiet(t, 0.05, timeout)
         if got:
-            client.trace("rx", got, "after BIN")
-        client.resync_next()
+            client._trace("rx", got, "after BIN")
+        client._resync_next()
 
     # -- leaving ------------------------------------------------------------------------
     @property
@@ -723,7 +723,7 @@ class AsciiLink:
             if send_bin:
                 self._bin(client)
             client.ascii_link = None
-            client.ledger.by_command = True
+            client._ledger.by_command = True
             self._buf.clear()
         if send_bin and verify:
             try:
@@ -799,7 +799,7 @@ class AsciiLink:
             except TmclTimeoutError as exc:
                 last = exc
                 if attempt + 1 < tries:
-                    self.client.trace("note", b"", f"retry {attempt + 1} of {tries - 1}")
+                    self.client._trace("note", b"", f"retry {attempt + 1} of {tries - 1}")
         assert last is not None
         if tries > 1:
             raise TmclTimeoutError(f"{last} (after {tries} attempts)")
@@ -821,7 +821,7 @@ class AsciiLink:
         address = client.address if address is None else address
         line = command_bytes(address, text)
         req = request or Request(address, opcode, 0, 0, 0)
-        ledger = client.ledger
+        ledger = client._ledger
         with client.lock:
             ledger.by_command = False  # (the ledger is this line's while the link is on)
             t = _transport(client)
@@ -831,8 +831,8 @@ class AsciiLink:
             t.write(line)
             self.stats["sent"] += 1
             client.stats["sent"] += 1
-            if client.tracing:
-                client.trace("tx", line, line.decode("latin-1").rstrip(), request=request)
+            if client._tracing:
+                client._trace("tx", line, line.decode("latin-1").rstrip(), request=request)
             try:
                 reply = self._await(t, line, opcode, address, timeout)
             except BaseException:
@@ -873,8 +873,8 @@ class AsciiLink:
         again. (The binary link's marker, 136, does not exist in ASCII mode.)"""
         client = self.client
         client.stats["resyncs"] += 1
-        if client.tracing:
-            client.trace("note", b"", "checking the line with a read whose answer is known, "
+        if client._tracing:
+            client._trace("note", b"", "checking the line with a read whose answer is known, "
                                       "after an answer that did not come")
         try:
             self._marker(t, address, timeout)
@@ -885,7 +885,7 @@ class AsciiLink:
                                               "come, a value whose answer is known was read "
                                               f"to be sure which reply is which: {exc}")) from None
         client.checks_lost = 0
-        client.ledger.forget()
+        client._ledger.forget()
 
     def _markers(self) -> list[tuple[str, Request, int]]:
         """The reads whose answers are known, as (line, request, value): GP 76 (the host
@@ -910,7 +910,7 @@ class AsciiLink:
         answers of that kind still to come are counted off before this one's, as the binary
         link counts its markers. TmclTimeoutError if it does not come (it is then
         outstanding)."""
-        client, ledger, buf = self.client, self.client.ledger, self._buf
+        client, ledger, buf = self.client, self.client._ledger, self._buf
         markers = self._markers()
         pending = self._pending
         free = [m for m in markers if not pending.get(m[2])]
@@ -925,8 +925,8 @@ class AsciiLink:
         t.write(line)
         self.stats["sent"] += 1
         client.stats["sent"] += 1
-        if client.tracing:
-            client.trace("tx", line, text, request=req)
+        if client._tracing:
+            client._trace("tx", line, text, request=req)
         deadline = time.monotonic() + timeout
         while True:
             for raw, got in take_lines(buf):
@@ -936,8 +936,8 @@ class AsciiLink:
                 if (kind == LineKind.REPLY and reply is not None and reply.module == address
                         and reply.host == client.host_address):
                     if reply.status == Status.OK and reply.value == value and not earlier:
-                        if client.tracing:
-                            client.trace("rx", raw, reply)
+                        if client._tracing:
+                            client._trace("rx", raw, reply)
                         ledger.took_marker(req, reply)
                         return reply
                     if reply.status == Status.OK and reply.value == value:
@@ -1002,18 +1002,18 @@ class AsciiLink:
                 continue
             self._drop(raw, "stale input")
             if _REPLY_START.match(text):  # (an echo of an earlier line starts otherwise)
-                client.noise_unsolicited()
+                client._noise_unsolicited()
 
     def _late(self, raw: bytes, reply: Reply) -> None:
         """A reply of this module that no command waits for: one the ledger expected (an
         answer that had timed out) is crossed off; otherwise it makes the answers it may have
-        displaced suspects (Client.late, the binary link's rule)."""
+        displaced suspects (Client._late, the binary link's rule)."""
         if reply.status == Status.OK and self._pending.get(reply.value):
             self._pending[reply.value] -= 1  # an earlier marker's late answer
             self._drop(raw, "late answer to an earlier check")
             return
         self._drop(raw, "late reply to an earlier command")
-        self.client.late(reply.module, reply.opcode, reply)
+        self.client._late(reply.module, reply.opcode, reply)
 
     def _await(self, t: StreamTransport, sent: bytes, opcode: int, address: int,
                timeout: float) -> Reply:
@@ -1032,8 +1032,8 @@ class AsciiLink:
                 kind, reply = classify_line(text, sent, opcode)
                 if kind == LineKind.ECHO:
                     self.stats["echo_lines"] += 1
-                    if client.tracing:
-                        client.trace("rx", raw, "echo")
+                    if client._tracing:
+                        client._trace("rx", raw, "echo")
                     echoed = True
                     if held is not None:
                         self._late(*held)  # (it came before the echo)
@@ -1053,14 +1053,14 @@ class AsciiLink:
                             self._late(*held)
                         held, held_until = (raw, reply), time.monotonic() + _ECHO_WAIT
                         continue
-                    if client.tracing:
-                        client.trace("rx", raw, reply)
+                    if client._tracing:
+                        client._trace("rx", raw, reply)
                     return reply
                 self._drop(raw, "not a reply")
             now = time.monotonic()
             if held is not None and (now >= held_until or now >= deadline):
-                if client.tracing:
-                    client.trace("rx", held[0], held[1])
+                if client._tracing:
+                    client._trace("rx", held[0], held[1])
                 return held[1]  # no echo followed: this module does not echo
             end = deadline if held is None else min(deadline, held_until)
             left = end - now
@@ -1076,8 +1076,8 @@ class AsciiLink:
     def _drop(self, raw: bytes, why: str) -> None:
         self.stats["dropped_lines"] += 1
         self.client.stats["discarded"] += len(raw)
-        if self.client.tracing:
-            self.client.trace("drop", raw, why)
+        if self.client._tracing:
+            self.client._trace("drop", raw, why)
 
     # -- ASCII-only commands ------------------------------------------------------------
     def run(self, timeout: float | None = None) -> Reply:
@@ -1113,8 +1113,8 @@ class AsciiLink:
     def write_raw(self, data: bytes) -> None:
         with self.client.lock:
             _transport(self.client).write(bytes(data))
-            if self.client.tracing:
-                self.client.trace("tx", bytes(data), "terminal")
+            if self.client._tracing:
+                self.client._trace("tx", bytes(data), "terminal")
 
     def read_raw(self, timeout: float) -> bytes:
         """Whatever the module sent within ``timeout`` (holding the client's lock while
@@ -1126,8 +1126,8 @@ class AsciiLink:
             if not data:
                 data = t.read(1, timeout)
             data += t.read_available()
-        if data and self.client.tracing:
-            self.client.trace("rx", data, "terminal")
+        if data and self.client._tracing:
+            self.client._trace("rx", data, "terminal")
         return data
 
     def describe(self) -> str:

@@ -57,7 +57,7 @@ def start(client: Client, *, ascii: bool = False) -> Client:
 
 def bring_up(client: Client, *, ascii: bool = False, strict: bool = True) -> None:
     """What ``start`` does, leaving the client open when it fails (the shell's ``.connect``
-    after ``Client.switch_transport``: the link stays, its module unknown). The module the
+    after ``Client._switch_transport``: the link stays, its module unknown). The module the
     client holds is the one expected; ``strict``: another type answering is an error (at
     connect), else it is taken (after a reconnect, ``.address``)."""
     expected = client.module
@@ -85,7 +85,7 @@ def again(client: Client, req: Request) -> ValidationError | None:
     new = client.module
     if old is None or new is None or new.name == old.name:
         return None
-    client.notice(f"another module answers at address {client.address} on "
+    client._notice(f"another module answers at address {client.address} on "
                   f"{client.describe()} since the link came back: a {new.label}, version "
                   f"{client.version} (it was a {old.name}); lines are checked against its "
                   "data from now on")
@@ -144,17 +144,17 @@ def leave_download_mode(client: Client) -> bool:
         pass
     else:
         return False
-    client.downloading = True  # until 133 is answered, whatever is sent is stored
+    client._downloading = True  # until 133 is answered, whatever is sent is stored
     try:
         reply = client.request(Request(client.address, _QUIT_DOWNLOAD, 0, 0, 0))
     finally:
-        client.downloading = False
+        client._downloading = False
     if reply is None or not reply.ok:
         status = reply.status if reply is not None else 0
         raise StatusError(status, reply, f"the module at address {client.address} is in "
                           "download mode (it stores commands instead of executing them) "
                           f"and refused to leave it (133): status {status}")
-    client.notice(f"the module at address {client.address} was in download mode (an upload "
+    client._notice(f"the module at address {client.address} was in download mode (an upload "
                   "was cut short?): ended it with 133; the program stored on it may be "
                   "incomplete")
     return True
@@ -300,7 +300,7 @@ def _adopt_version(client: Client, version: str, by_binary: Module | None = None
     mod = named_by(version)  # data if tmclsh has it, else numbers only
     if by_binary is not None and (mod is None or mod.generic):
         # the string names no type tmclsh knows, the checksummed binary version does
-        client.notice(f"the module's version string {version!r} names no module type "
+        client._notice(f"the module's version string {version!r} names no module type "
                       f"tmclsh knows; its binary version (136 type 1) says {by_binary.name}: "
                       f"using its data (-m to say otherwise)")
         mod = by_binary
@@ -349,11 +349,11 @@ def _answers_after_all(client: Client, expected: Module | None, strict: bool,
             ascii_tried=True)) from exc
     if probe.mode == Mode.BINARY:
         return True
-    client.forget_stale()  # a module in ASCII mode sends no late binary replies
+    client._forget_stale()  # a module in ASCII mode sends no late binary replies
     _attach_ascii(client, expected, strict, probe)
     link = client.ascii_link
     echo = f" ({link.echo.text}; it stays in ASCII mode at exit)" if link else ""
-    client.notice(f"the module at address {client.address} is in its ASCII mode (it ignores "
+    client._notice(f"the module at address {client.address} is in its ASCII mode (it ignores "
                   "binary commands; GP 67 makes it start in it): talking to it through ASCII "
                   f"mode{echo}; '.mode binary --keep' switches it back to binary for good")
     return False

@@ -101,28 +101,38 @@ class Client:
                  module: Module | str | None = None, timeout: float = 1.0, retries: int = 2,
                  can_id: int | None = None, reply_id: int | None = None):
         self.transport = transport
+        """The link (serial port, CAN bus, simulator); ``transport.simulated`` is true on
+        the built-in simulator."""
         self.address = address
+        """The module address requests go to (0..255); set it to talk to another module on
+        the same bus (the shell's ``.address`` also brings that one up)."""
         self.host_address = host_address
+        """The host address replies are sent to (the module's GP 76)."""
         self.timeout = timeout
+        """Seconds to wait for each reply (per attempt)."""
         self.retries = retries
         self.can_id = can_id if can_id is not None else LINK_DEFAULTS["can_id"]
         self.reply_id = reply_id if reply_id is not None else LINK_DEFAULTS["reply_id"]
         # CAN ids besides reply_id whose messages are replies too (a bootloader's 0x7FF)
-        self.other_reply_ids: frozenset[int] = frozenset()
+        self._other_reply_ids: frozenset[int] = frozenset()
         self.module: Module | None = load_module(module) if isinstance(module, str) else module
+        """The module's data (name, motors, parameters), as 136 named it; None before it
+        answered, or in generic mode, numbers only."""
         self.version: str | None = None
-        self.downloading = False  # set by tmclsh.ops.program between 132 and 133
+        """The version string the module answered to 136 (``1311V111``)."""
+        self._downloading = False  # set by tmclsh.ops.program between 132 and 133
         # a 132 was answered that no 133 has ended yet, outside tmclsh.ops.program (a line
         # typed or a script's): close() ends it, so the module is not left storing what it gets
-        self.left_downloading = False
+        self._left_downloading = False
         self.ascii_link = None  # set by tmclsh.client.ascii when the module is driven in ASCII
+        """The ASCII-mode link while the module is driven in its ASCII mode, else None."""
         # while a write moves the module (client/reach.py): its answer may come from the new
         # module address, go to the new host address, or come on the new CAN reply id
-        self.also_from: int | None = None
-        self.also_host: int | None = None
-        self.also_reply_id: int | None = None
+        self._also_from: int | None = None
+        self._also_host: int | None = None
+        self._also_reply_id: int | None = None
         self._lock = threading.RLock()
-        self.ledger = Ledger()
+        self._ledger = Ledger()
         # what tmclsh set each motor doing and has not stopped (motion.py): the leave-checks
         # read it, as a motor that reads speed 0 may still be meant to turn
         self.motion = MotionRecord()
@@ -130,7 +140,7 @@ class Client:
         self._delivering = threading.RLock()  # held while events go to the listeners
         # when the event being delivered arrived (time.monotonic()), for listeners that
         # put a time on it
-        self.event_time = 0.0
+        self._event_time = 0.0
         # set by reconnect(): before the next command, the module is brought up again as at
         # connect (tmclsh.client.bringup: what answers, its mode, download mode)
         self._bring_up_next = False
@@ -149,16 +159,16 @@ class Client:
         # called when a request finds the link down, to bring it back before the request
         # goes (a --keep-going script waits for a cable plugged back in); it raises
         # TransportError if the link stays down. None: the request fails at once.
-        self.on_link_lost: Callable[[], None] | None = None
+        self._on_link_lost: Callable[[], None] | None = None
         # run by close() while the link is still open (the ASCII link restores the mode the
         # module was found in)
-        self.close_hooks: list[Callable[[], None]] = []
+        self._close_hooks: list[Callable[[], None]] = []
         self._listeners: list[Listener] = []
-        self.tracers: list[Tracer] = []
-        self.sent_tracers: list[Tracer] = []  # add_tracer(sent_only=True)
+        self._tracers: list[Tracer] = []
+        self._sent_tracers: list[Tracer] = []  # add_tracer(sent_only=True)
         # the commands some sent-only tracer asked for (all when one asked for every one): a
         # script's per-line check costs a set lookup, not a call, for the lines none wants
-        self.sent_wanted: frozenset[int] = frozenset()
+        self._sent_wanted: frozenset[int] = frozenset()
         self._sent_filters: dict[Tracer, frozenset[int]] = {}  # each one's opcodes
         self._poller: threading.Thread | None = None
         self._poller_stop = threading.Event()
@@ -166,7 +176,9 @@ class Client:
                       "discarded": 0, "events": 0, "retries": 0, "reconnects": 0,
                       "flushed": 0, "unsolicited": 0, "suspect": 0,
                       "judged": 0}
-        self.framing: SerialFraming | CanFraming = transport.framing(self)
+        """Counters of what happened on the link since it was opened: requests sent,
+        timeouts, checksum errors, resynchronisations, retries, events, ..."""
+        self._framing: SerialFraming | CanFraming = transport.framing(self)
 
     # -- subscriptions ------------------------------------------------------------------
     def add_listener(self, fn: Listener) -> Callable[[], None]:
@@ -190,89 +202,89 @@ class Client:
         """
         if opcodes is not None and not sent_only:
             raise ValueError("opcodes= filters a sent_only tracer")
-        tracers = self.sent_tracers if sent_only else self.tracers
+        tracers = self._sent_tracers if sent_only else self._tracers
         tracers.append(fn)
         filters = self._sent_filters
         if sent_only:
             filters[fn] = frozenset(opcodes) if opcodes is not None else _ALL_OPCODES
-            self.sent_wanted = frozenset().union(*filters.values())
+            self._sent_wanted = frozenset().union(*filters.values())
 
         def remove() -> None:
             if fn in tracers:
                 tracers.remove(fn)
                 if sent_only and fn not in tracers:
                     del filters[fn]
-                    self.sent_wanted = frozenset().union(*filters.values())
+                    self._sent_wanted = frozenset().union(*filters.values())
         return remove
 
     # -- what the framing reports (tmclsh.link.framing.Owner) ---------------------------
-    def trace(self, direction: str, raw: bytes, decoded: object, *,
+    def _trace(self, direction: str, raw: bytes, decoded: object, *,
               request: Request | None = None) -> None:
         """Report a frame to the tracers ("tx", "rx", "drop" or "note"). ``request``: the
         request a "tx" line carries (an ASCII line's decoded is its text), for the tracers
         that only watch what is sent (``add_tracer(sent_only=True)`` is told requests)."""
-        if direction == "tx" and self.sent_tracers:
+        if direction == "tx" and self._sent_tracers:
             sent = decoded if request is None else request
-            if not isinstance(sent, Request) or sent.opcode in self.sent_wanted:
-                _tell(self.sent_tracers, "tx", raw, sent)
-        if self.tracers:
-            _tell(self.tracers, direction, raw, decoded)
+            if not isinstance(sent, Request) or sent.opcode in self._sent_wanted:
+                _tell(self._sent_tracers, "tx", raw, sent)
+        if self._tracers:
+            _tell(self._tracers, direction, raw, decoded)
 
-    def tell(self, direction: str, raw: bytes, decoded: object) -> None:
+    def _tell(self, direction: str, raw: bytes, decoded: object) -> None:
         """Report a frame to the full tracers (the framing's: it tells the sent-only
         tracers of a request itself, before it goes out)."""
-        _tell(self.tracers, direction, raw, decoded)
+        _tell(self._tracers, direction, raw, decoded)
 
-    def trace_sent(self, raw: bytes, req: Request) -> None:
-        _tell(self.sent_tracers, "tx", raw, req)
+    def _trace_sent(self, raw: bytes, req: Request) -> None:
+        _tell(self._sent_tracers, "tx", raw, req)
 
-    def discard(self, raw: bytes, why: str) -> None:
+    def _discard(self, raw: bytes, why: str) -> None:
         self.stats["discarded"] += len(raw)
-        if self.tracers:
-            _tell(self.tracers, "drop", raw, why)
+        if self._tracers:
+            _tell(self._tracers, "drop", raw, why)
 
-    def event(self, raw: bytes, reply: Reply) -> None:
+    def _event(self, raw: bytes, reply: Reply) -> None:
         self.stats["events"] += 1
-        if self.tracers:
-            _tell(self.tracers, "rx", raw, reply)
+        if self._tracers:
+            _tell(self._tracers, "rx", raw, reply)
         self._events.append((reply, time.monotonic()))
         self.motion.reached(reply.value)  # (138: the motors whose position move ended)
 
-    def late(self, address: int, opcode: int, reply: Reply | None) -> bool:
+    def _late(self, address: int, opcode: int, reply: Reply | None) -> bool:
         """A reply arrived that no request waits for: True if one like it was expected
         (``Ledger.late``), or the line may carry anything; else it is unsolicited."""
-        ledger = self.ledger
+        ledger = self._ledger
         if ledger.late(address, opcode, reply):
             return True
-        if ledger.opaque or self.downloading:
+        if ledger.opaque or self._downloading:
             # (no doubt cast, but a reply all the same: a second module answers here too)
             self._second(ledger.doubles.extra(address, reply))
             return True
         self._unsolicited(reply)
         return False
 
-    def noise_unsolicited(self) -> None:
+    def _noise_unsolicited(self) -> None:
         """Bytes that were no frame came while nothing was outstanding and nothing was
         expected: a damaged reply, possibly the real answer to the last request."""
-        if not self.ledger.dirty(self.downloading) and not self.downloading:
+        if not self._ledger.dirty(self._downloading) and not self._downloading:
             self._unsolicited(None)
 
-    def accept_version(self, window: bytes) -> bool:
+    def _accept_version(self, window: bytes) -> bool:
         """Nine bytes that are no frame: a version string the ledger expects (a stale 136
         type 0's) or one taken lately (a duplicated 136 reply)? Then they are read whole."""
         if window[0] != self.host_address or not all(32 <= b < 127 for b in window[1:9]):
             return False
         raw = bytes(window[:9])
-        ledger = self.ledger
+        ledger = self._ledger
         if ledger.late_version():
-            self.discard(raw, "stale version string")
+            self._discard(raw, "stale version string")
             return True
         if ledger.is_version_copy(raw[1:].decode("latin-1")):
             # (a copy is no damaged reply either: the answer may still come, after a
             # module's pause before replying)
             self.stats["unsolicited"] += 1
             ledger.mark_dirty()
-            self.discard(raw, "copy of the version string")
+            self._discard(raw, "copy of the version string")
             self._second(ledger.doubles.extra_version())
             return True
         if ledger.doubles.asks_version() and not ledger.opaque:
@@ -280,7 +292,7 @@ class Client:
             # answered the same 136 (nothing else sends a host-addressed string)
             self.stats["unsolicited"] += 1
             ledger.mark_dirty()
-            self.discard(raw, "a second version string (another module at this address?)")
+            self._discard(raw, "a second version string (another module at this address?)")
             self._second(ledger.doubles.extra_version())
             return True
         return False
@@ -288,41 +300,41 @@ class Client:
     def _second(self, found: int | None) -> None:
         """A reply was counted (``ledger.Doubles``): ``found``, the address found shared
         just now (the trace says so where it happened)."""
-        if found is not None and self.tracers:
-            _tell(self.tracers, "note", b"", shared_text(found))
+        if found is not None and self._tracers:
+            _tell(self._tracers, "note", b"", shared_text(found))
 
     @property
     def shared(self) -> frozenset[int]:
         """The addresses two modules were found to answer at (``ledger.Doubles``): every
         request to one reaches both, and which answer is taken is chance."""
-        return frozenset(self.ledger.doubles.shared)
+        return frozenset(self._ledger.doubles.shared)
 
     def answered_twice(self, address: int, *, lately: bool = False) -> bool:
         """Did the last answer from ``address`` come twice (``lately``: any of the last
         few)? Not yet a finding (a line may copy a reply): asked again, two modules answer
         twice every time (``shared``)."""
         with self._lock:
-            return self.ledger.doubles.seconded(address, lately=lately)
+            return self._ledger.doubles.seconded(address, lately=lately)
 
     @property
     def shared_news(self) -> bool:
         """Was an address found shared that ``take_shared`` has not told yet?"""
-        return bool(self.ledger.doubles.new)
+        return bool(self._ledger.doubles.new)
 
     def take_shared(self) -> list[int]:
         """The addresses found shared since last asked (each told once: the shell warns)."""
         with self._lock:
-            return self.ledger.doubles.take()
+            return self._ledger.doubles.take()
 
     def _unsolicited(self, extra: Reply | None) -> None:
         self.stats["unsolicited"] += 1
         if extra is not None:
-            self._second(self.ledger.doubles.extra(extra.module, extra))
+            self._second(self._ledger.doubles.extra(extra.module, extra))
         raw = b"" if extra is None else extra.to_can() if self.is_can else extra.to_bytes()
-        for suspect in self.ledger.unsolicited(extra, raw):
+        for suspect in self._ledger.unsolicited(extra, raw):
             self.stats["suspect"] += 1
-            if self.tracers:
-                _tell(self.tracers, "note", b"", f"the reply to {name_of(suspect.request)} may "
+            if self._tracers:
+                _tell(self._tracers, "note", b"", f"the reply to {name_of(suspect.request)} may "
                       "have been another request's: a reply came that nothing was waiting for")
 
     def _deliver_events(self) -> None:
@@ -339,7 +351,7 @@ class Client:
             try:
                 while True:
                     try:
-                        reply, self.event_time = self._events.popleft()
+                        reply, self._event_time = self._events.popleft()
                     except IndexError:
                         break
                     for fn in list(self._listeners):
@@ -365,10 +377,12 @@ class Client:
 
     @property
     def mode(self) -> str:
+        """``"binary"`` (TMCL frames) or ``"ascii"`` (the module's ASCII mode)."""
         return "ascii" if self.ascii_link is not None else "binary"
 
     @property
     def is_can(self) -> bool:
+        """The link is a CAN bus (addresses are CAN ids there)."""
         return self.transport.kind == "can"
 
     @property
@@ -378,15 +392,16 @@ class Client:
         return self.transport.is_open and not self._down
 
     @property
-    def replies(self) -> int:
+    def _replies(self) -> int:
         """Replies returned so far (numbers them: ``Suspect.seq``, ``in_doubt``)."""
-        return self.ledger.replies
+        return self._ledger.replies
 
     @property
-    def suspects(self):
-        return self.ledger.suspects
+    def _suspects(self):
+        return self._ledger.suspects
 
     def describe(self) -> str:
+        """Where the module is, in words (``/dev/ttyACM0 @ 9600``, ``SIMULATED TMCM-1311``)."""
         return self.transport.describe()
 
     def __repr__(self) -> str:
@@ -421,11 +436,11 @@ class Client:
             timeout = self._timeout
         elif not (isinstance(timeout, (int, float)) and timeout > 0):
             raise ValueError(f"timeout must be a positive number of seconds, got {timeout!r}")
-        if self.on_link_lost is not None and not self.connected:
-            self.on_link_lost()
+        if self._on_link_lost is not None and not self.connected:
+            self._on_link_lost()
         try:
             with self._lock:
-                if (self._bring_up_next or self._check_download) and not self.downloading:
+                if (self._bring_up_next or self._check_download) and not self._downloading:
                     self._before_next(req)
                 try:
                     if self.ascii_link is not None:
@@ -436,15 +451,15 @@ class Client:
                 except TransportError:
                     self._down = True
                     raise
-            if req.opcode in _MOTION and reply is not None and not self.downloading:
+            if req.opcode in _MOTION and reply is not None and not self._downloading:
                 self.motion.take(self.module, req, reply.status)
             if req.opcode >= _FIRST_CONTROL and reply is not None and reply.ok:
                 ctl = isa.control(req.opcode)  # (a typed 132 with no 133 after it)
-                if ctl is not None and ctl.download == "enter" and not self.downloading:
-                    self.left_downloading = True
+                if ctl is not None and ctl.download == "enter" and not self._downloading:
+                    self._left_downloading = True
                 elif ctl is not None and ctl.download == "leave":
-                    self.left_downloading = False
-            if reply is not None and reply.status == _LOADED and not self.downloading:
+                    self._left_downloading = False
+            if reply is not None and reply.status == _LOADED and not self._downloading:
                 raise DownloadModeError(
                     _LOADED, reply,
                     f"the module is in download mode (it stores commands instead of executing "
@@ -478,14 +493,14 @@ class Client:
                 self._check_download = True
                 raise
 
-    def notice(self, text: str) -> None:
+    def _notice(self, text: str) -> None:
         """Tell the user about something the client did on its own."""
         if self.on_notice is not None:
             self.on_notice(text)
         else:
             log.warning("%s", text)
 
-    def check_download_next(self) -> None:
+    def _check_download_next(self) -> None:
         """Download mode may not have ended (a 133 went unanswered, or was interrupted):
         before the next command, ask the module and end it if need be, so that command is
         executed, not stored."""
@@ -496,8 +511,8 @@ class Client:
             raise TransportError(f"{self.transport.describe()} is not connected "
                                  "(the link was closed or lost; reconnect first)")
         kind = _NORMAL if req.opcode < _FIRST_CONTROL else isa.reply_kind(req.opcode, req.type)
-        framing = self.framing
-        ledger = self.ledger
+        framing = self._framing
+        ledger = self._ledger
         attempt = 0
         went = False  # req itself went out, in some attempt
         while True:
@@ -507,8 +522,8 @@ class Client:
                 if framing.waiting():
                     self._flush_input()
                 synced = False
-                if ledger.dirty(self.downloading):
-                    if ledger.needs_sync(req, kind, self.downloading):
+                if ledger.dirty(self._downloading):
+                    if ledger.needs_sync(req, kind, self._downloading):
                         self._resync(req.address, timeout)
                         synced = True
                 elif ledger.run and time.monotonic() - self._answered_at >= timeout:
@@ -531,16 +546,16 @@ class Client:
                 raise
             else:
                 if (reply is not None and reply.status == _WRONG_CHECKSUM
-                        and not self.downloading and attempt <= retries):
+                        and not self._downloading and attempt <= retries):
                     # the module got a damaged frame and executed nothing: safe to send again
                     self.stats["retries"] += 1
-                    if self.tracers:
-                        _tell(self.tracers, "note", b"",
+                    if self._tracers:
+                        _tell(self._tracers, "note", b"",
                               "module saw a bad checksum; sending again")
                     continue
                 if reply is None:
                     return None
-                copy = not self.downloading and ledger.may_be_a_copy(req, reply)
+                copy = not self._downloading and ledger.may_be_a_copy(req, reply)
                 ledger.took(req, reply, copy=copy)
                 self._second(ledger.doubles.answered(req, reply))
                 self._answered_at = time.monotonic()
@@ -550,7 +565,7 @@ class Client:
             if sent:
                 ledger.expect_late(req, kind)
             # a failed line check sent nothing of ``req``: asking again is safe for any command
-            tries = 1 + (retries if not sent or idempotent(req, self.downloading) else 0)
+            tries = 1 + (retries if not sent or idempotent(req, self._downloading) else 0)
             if attempt >= tries:
                 if tries > 1:
                     again = type(failure)(f"{failure} (after {tries} attempts)")
@@ -561,25 +576,25 @@ class Client:
                 failure.sent = went  # type: ignore[attr-defined]
                 raise failure
             self.stats["retries"] += 1
-            if self.tracers:
-                _tell(self.tracers, "note", b"", f"retry {attempt} of {tries - 1}")
+            if self._tracers:
+                _tell(self._tracers, "note", b"", f"retry {attempt} of {tries - 1}")
 
     def _flush_input(self) -> None:
         """Before a request: what is already waiting cannot be its answer. Take it in
         (events are kept), drop the rest, count it."""
         before = self.stats["discarded"]
-        self.framing.absorb(flushing=True)
+        self._framing.absorb(flushing=True)
         self.stats["flushed"] += self.stats["discarded"] - before
 
     def _resync(self, address: int, timeout: float) -> None:
         """Consume every late reply: drain, then a 136 marker whose reply comes last."""
-        ledger = self.ledger
-        framing = self.framing
+        ledger = self._ledger
+        framing = self._framing
         self.stats["resyncs"] += 1
-        if self.tracers:
-            _tell(self.tracers, "note", b"",
+        if self._tracers:
+            _tell(self._tracers, "note", b"",
                   "checking the line with 136 after an earlier failure")
-        if self.downloading:
+        if self._downloading:
             # a marker would be stored as an instruction: wait for a quiet line instead;
             # stale replies are still dropped by opcode matching. That proves nothing, so a
             # marker follows once download mode is over.
@@ -645,7 +660,7 @@ class Client:
         (``AsciiLink.once``, ``AsciiLink.mark``); there every reading of a setting is judged,
         copy or not: an ASCII reply has no checksum, and a digit changed on the line is
         found out only by a second read that disagrees."""
-        ledger = self.ledger
+        ledger = self._ledger
         ascii_link = self.ascii_link
         first = ledger.replies
         self.stats["judged"] += 1
@@ -658,7 +673,7 @@ class Client:
                     got = ascii_link.mark(timeout)
                 else:
                     try:
-                        got = self.framing.exchange(marker, _NORMAL, timeout)
+                        got = self._framing.exchange(marker, _NORMAL, timeout)
                     except (TmclTimeoutError, ChecksumError):
                         ledger.expect_late(marker, _NORMAL)
                         got = None
@@ -696,28 +711,28 @@ class Client:
             self._judging = False
 
     # -- answers in doubt ---------------------------------------------------------------
-    def last_may_be_a_copy(self) -> bool:
+    def _last_may_be_a_copy(self) -> bool:
         """Whether the last reply taken could be a late copy of the one before it."""
         with self._lock:
-            return self.ledger.last_may_be_a_copy()
+            return self._ledger.last_may_be_a_copy()
 
-    def suspect_seqs(self) -> set[int]:
+    def _suspect_seqs(self) -> set[int]:
         """The ``seq`` of every suspect not yet taken (``take_suspects`` still reports them)."""
         with self._lock:  # (the event poller may add one meanwhile)
-            return self.ledger.suspect_seqs()
+            return self._ledger.suspect_seqs()
 
-    def take_suspects(self, seqs: Container[int] | None = None) -> list[Suspect]:
+    def _take_suspects(self, seqs: Container[int] | None = None) -> list[Suspect]:
         """Replies returned earlier that may have answered another request (oldest first);
         each is reported once. ``seqs``: only those (a caller that read again, or marked the
         values in doubt itself, takes its own; the rest stay to be reported)."""
         with self._lock:  # (the event poller may add one meanwhile)
-            return self.ledger.take_suspects(seqs)
+            return self._ledger.take_suspects(seqs)
 
     def doubt_on_last(self, *, take: bool = True) -> bool:
         """Was the answer just returned left in doubt (its judge could not settle it, or a
         reply that came while it was judged spoke against it)? ``take``: it is said with the
         answer by whoever shows it, so it is not reported again (``take_suspects``)."""
-        ledger = self.ledger
+        ledger = self._ledger
         if not ledger.suspects:  # (the common case, without the lock: a script's every line)
             return False
         with self._lock:
@@ -747,19 +762,19 @@ class Client:
             self.poll()  # what waits already is taken in (nothing is sent, nothing awaited)
             # the exchange only if the last answer may be the reply before it, taken again;
             # not on the simulator in process (whatever follows an answer waits already)
-            if not self.transport.simulated and self.last_may_be_a_copy():
+            if not self.transport.simulated and self._last_may_be_a_copy():
                 try:
                     self.request(Request(self.address, _GET_VERSION, 1, 0, 0))
                 except (TmclTimeoutError, ChecksumError, DownloadModeError):
                     pass  # what it could find is found by the next request's flush as well
-        found = self.suspect_seqs()
+        found = self._suspect_seqs()
         return {key for seq, key in answered.items() if seq in found}
 
-    def settle(self, answered: Mapping[int, object]) -> None:
+    def _settle(self, answered: Mapping[int, object]) -> None:
         """The suspects among ``answered`` were dealt with by their reader (read again, or
         said to be in doubt): they are not reported again."""
         if answered:
-            self.take_suspects(answered.keys())
+            self._take_suspects(answered.keys())
 
     # -- events while idle --------------------------------------------------------------
     def poll(self) -> None:
@@ -767,8 +782,8 @@ class Client:
         if not self._lock.acquire(blocking=False):
             return
         try:
-            if self.ascii_link is None and self.transport.is_open and self.framing.waiting():
-                self.framing.absorb()
+            if self.ascii_link is None and self.transport.is_open and self._framing.waiting():
+                self._framing.absorb()
         except TransportError:
             self._down = True  # found here as a request would have found it
             raise
@@ -777,7 +792,7 @@ class Client:
             if self._events:
                 self._deliver_events()
 
-    def confirm_last(self) -> None:
+    def _confirm_last(self) -> None:
         """At the end of a run: was the last reply the answer to its request? A late copy of
         the reply before it (same address and command) would have been taken for it; its
         real answer then comes right behind, when nothing waits for it, and makes the last
@@ -790,12 +805,12 @@ class Client:
             if self.ascii_link is not None:
                 self.ascii_link.absorb(watch=True)
                 return
-            ledger = self.ledger
-            quiet = self.framing.quiet_time()
+            ledger = self._ledger
+            quiet = self._framing.quiet_time()
             if not ledger.last_may_be_a_copy() or ledger.confirmed == ledger.replies:
                 quiet = 0.0  # (this reply was watched for already)
             end = time.monotonic() + max(0.5, 10 * quiet)
-            while self.framing.absorb(quiet) and quiet and time.monotonic() < end:
+            while self._framing.absorb(quiet) and quiet and time.monotonic() < end:
                 pass
             ledger.confirmed = ledger.replies
         if self._events:
@@ -822,6 +837,7 @@ class Client:
         self._poller.start()
 
     def stop_event_poller(self) -> None:
+        """Stop delivering events in the background (``start_event_poller``)."""
         self._poller_stop.set()
         if self._poller is not None:
             self._poller.join(1)
@@ -841,7 +857,7 @@ class Client:
 
         return identify(self)
 
-    def leave_download_mode(self) -> bool:
+    def _leave_download_mode(self) -> bool:
         """End download mode if the module is in it (bringup.leave_download_mode)."""
         from .bringup import leave_download_mode
 
@@ -874,8 +890,8 @@ class Client:
             self._reopen(wait)
             self._bring_up_next = bring_up
             self.stats["reconnects"] += 1
-            if self.tracers:
-                _tell(self.tracers, "note", b"", f"reconnected to {self.describe()}")
+            if self._tracers:
+                _tell(self._tracers, "note", b"", f"reconnected to {self.describe()}")
 
     def _reopen(self, wait: float = 0.0) -> None:
         self.transport.close()
@@ -889,8 +905,8 @@ class Client:
                     raise
                 time.sleep(min(0.1, max(0.0, deadline - time.monotonic())))
         self._down = False
-        self.framing = self.transport.framing(self)
-        self.ledger.reset()  # (an answer still to come may come on the new link too)
+        self._framing = self.transport.framing(self)
+        self._ledger.reset()  # (an answer still to come may come on the new link too)
 
     @property
     def bring_up_pending(self) -> bool:
@@ -904,31 +920,31 @@ class Client:
         return self._lock
 
     @property
-    def tracing(self) -> bool:
-        return bool(self.tracers or self.sent_tracers)
+    def _tracing(self) -> bool:
+        return bool(self._tracers or self._sent_tracers)
 
-    def absorb(self) -> None:
+    def _absorb(self) -> None:
         """Take in what is pending on a binary line: events are kept, all else is stale."""
         with self._lock:
-            self.framing.absorb()
+            self._framing.absorb()
 
-    def clear_input(self) -> None:
+    def _clear_input(self) -> None:
         """Forget bytes buffered for the binary framing (the line was in another mode)."""
         with self._lock:
-            self.framing.clear()
+            self._framing.clear()
 
-    def forget_stale(self) -> None:
+    def _forget_stale(self) -> None:
         """The line was reset (its baud rate changed): nothing sent before can still arrive."""
         with self._lock:
-            self.framing.clear()
-            self.ledger.forget()
+            self._framing.clear()
+            self._ledger.forget()
 
-    def resync_next(self) -> None:
+    def _resync_next(self) -> None:
         """Something else used the line (the module's ASCII mode): whatever is left on it is
         stale, so the next binary request starts with the resynchronisation marker."""
         with self._lock:
-            self.framing.clear()
-            self.ledger.mark_dirty()
+            self._framing.clear()
+            self._ledger.mark_dirty()
 
     def close(self) -> None:
         """Stop the event poller, run the close hooks, leave ASCII mode if entered, close the
@@ -941,13 +957,13 @@ class Client:
     def _leave_link(self) -> None:
         """Run the close hooks, leave ASCII mode if entered: the module is left as it was
         found, while the link is still open."""
-        hooks, self.close_hooks = self.close_hooks, []
+        hooks, self._close_hooks = self._close_hooks, []
         for hook in hooks:
             try:
                 hook()
             except Exception as exc:
                 _failed("closing", exc)
-        if self.left_downloading and self.transport.is_open:
+        if self._left_downloading and self.transport.is_open:
             self._end_left_download()
         if self.ascii_link is not None:
             try:
@@ -957,25 +973,25 @@ class Client:
 
     def _end_left_download(self) -> None:
         """133 for a 132 that was sent and never ended (by a line, not an upload)."""
-        self.left_downloading = False
-        self.downloading = True  # (what 133 gets while the module stores commands)
+        self._left_downloading = False
+        self._downloading = True  # (what 133 gets while the module stores commands)
         try:
             reply = self.request(Request(self.address, _QUIT_DOWNLOAD, 0, 0, 0))
         except Exception as exc:
             _failed("ending download mode (133)", exc)
             return
         finally:
-            self.downloading = False
+            self._downloading = False
         if reply is not None and reply.ok:
-            self.notice(f"the module at address {self.address} was still in download mode "
+            self._notice(f"the module at address {self.address} was still in download mode "
                         "(a 132 line with no 133 after it): ended it with 133; what was sent "
                         "after the 132 is stored as its program")
         else:
-            self.notice(f"the module at address {self.address} is in download mode (a 132 "
+            self._notice(f"the module at address {self.address} is in download mode (a 132 "
                         "line) and did not leave it for 133 "
                         f"(status {reply.status if reply is not None else 'none'})")
 
-    def switch_transport(self, transport: Transport, module: Module | str | None = None) -> None:
+    def _switch_transport(self, transport: Transport, module: Module | str | None = None) -> None:
         """Go on on another link (the shell's ``.connect``): the old one is left as ``close``
         leaves it (the close hooks run, the module is left in the mode it was found in, the
         port is closed); nothing of it is carried over. The new link starts in binary mode
@@ -996,8 +1012,8 @@ class Client:
             self._reopen()  # clears buffers and stale-reply bookkeeping, reopens the link
             self._bring_up_next = self._check_download = False  # (what bring_up does)
             self.stats["reconnects"] += 1
-            if self.tracers:
-                _tell(self.tracers, "note", b"", f"reconnected to {self.describe()}")
+            if self._tracers:
+                _tell(self._tracers, "note", b"", f"reconnected to {self.describe()}")
 
     def __enter__(self) -> Client:
         return self

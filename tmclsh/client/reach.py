@@ -33,31 +33,31 @@ def write(client: Client, req: Request, param: Parameter,
     accepted it, follow the module there (with a notice)."""
     role = param.reaches
     value = param.reading(req.value)
-    accept = {"address": ("also_from", value), "host_address": ("also_host", value),
-              "reply_id": ("also_reply_id", value)}.get(role or "")
+    accept = {"address": ("_also_from", value), "host_address": ("_also_host", value),
+              "reply_id": ("_also_reply_id", value)}.get(role or "")
     if accept is not None:
         setattr(client, accept[0], accept[1])
     try:
         reply = client.request(req, timeout=timeout)
     finally:
-        client.also_from = client.also_host = client.also_reply_id = None
+        client._also_from = client._also_host = client._also_reply_id = None
     if reply is None or not reply.ok:
         return reply
     if role == "address" and not client.is_can and value != client.address:
         client.address = value
-        client.notice(f"the module answers at address {value} now: talking to it there "
+        client._notice(f"the module answers at address {value} now: talking to it there "
                       f"(-a {value} next time)")
     elif role == "host_address" and value != client.host_address:
         client.host_address = value
-        client.notice(f"the module sends its replies to host address {value} now: listening "
+        client._notice(f"the module sends its replies to host address {value} now: listening "
                       f"there (--host-address {value} next time)")
     elif role == "can_id" and client.is_can and value != client.can_id:
         client.can_id = value
-        client.notice(f"the module listens on CAN id {value} now: sending there "
+        client._notice(f"the module listens on CAN id {value} now: sending there "
                       f"(--can-id {value} next time)")
     elif role == "reply_id" and client.is_can and value != client.reply_id:
         client.reply_id = value
-        client.notice(f"the module replies on CAN id {value} now: listening there "
+        client._notice(f"the module replies on CAN id {value} now: listening there "
                       f"(--reply-id {value} next time)")
     elif role == "baud":
         _follow_baud(client, param, value)
@@ -74,18 +74,18 @@ def _follow_baud(client: Client, param: Parameter, code: int) -> None:
     if rate == old:
         return
     if _answers(client):
-        client.notice(f"the module still answers at {old} baud: it takes {rate} baud at its "
+        client._notice(f"the module still answers at {old} baud: it takes {rate} baud at its "
                       f"next start (then: --baud {rate})")
         return
     t.set_baudrate(rate)
-    client.forget_stale()
+    client._forget_stale()
     if _answers(client):
-        client.notice(f"the module answers at {rate} baud now: talking to it at that rate "
+        client._notice(f"the module answers at {rate} baud now: talking to it at that rate "
                       f"(--baud {rate} next time)")
         return
     t.set_baudrate(old)
-    client.forget_stale()
-    client.notice(f"the module answers neither at {old} nor at {rate} baud since the change; "
+    client._forget_stale()
+    client._notice(f"the module answers neither at {old} nor at {rate} baud since the change; "
                   f"try 'tmclsh scan --port {t.url} --baud auto'")
 
 

@@ -96,7 +96,7 @@ class LineClient(Client):
         cache[line] = hit
         return hit
 
-    def send_encoded(self, enc: asm.Encoded, req: Request, *,
+    def _send_encoded(self, enc: asm.Encoded, req: Request, *,
                      timeout: float | None = None) -> Reply | None:
         """Send a checked line's request; a write that moves the module (its address, CAN
         ids, baud rate: the data's ``reaches``) is followed to where it answers now."""
@@ -114,7 +114,7 @@ class LineClient(Client):
         not settle it). It stays a suspect too (``take_suspects``, ``in_doubt``), for callers
         that ask there."""
         enc, req = self.prepare(line)
-        reply = self.send_encoded(enc, req, timeout=timeout)
+        reply = self._send_encoded(enc, req, timeout=timeout)
         doubt = reply is not None and self.doubt_on_last(take=False)
         if check and reply is not None and not status_ok(reply.status):
             raise StatusError(reply.status, reply)

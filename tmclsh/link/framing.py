@@ -48,31 +48,31 @@ class Owner(Protocol):
     """What a framing needs of the client it reads for."""
 
     host_address: int
-    downloading: bool
+    _downloading: bool
     can_id: int
     reply_id: int
-    also_from: int | None  # (client/reach.py: an answer from the new address is the answer)
-    also_host: int | None
-    also_reply_id: int | None
-    other_reply_ids: frozenset[int]  # more ids replies come on (a CAN bootloader's 0x7FF)
+    _also_from: int | None  # (client/reach.py: an answer from the new address is the answer)
+    _also_host: int | None
+    _also_reply_id: int | None
+    _other_reply_ids: frozenset[int]  # more ids replies come on (a CAN bootloader's 0x7FF)
     stats: dict[str, int]
-    tracers: list  # (a framing asks whether any is there before it builds a trace's words)
-    sent_tracers: list  # tracers of requests only (add_tracer(sent_only=True))
-    sent_wanted: frozenset[int]  # the commands some sent-only tracer watches
+    _tracers: list  # (a framing asks whether any is there before it builds a trace's words)
+    _sent_tracers: list  # tracers of requests only (add_tracer(sent_only=True))
+    _sent_wanted: frozenset[int]  # the commands some sent-only tracer watches
 
-    def tell(self, direction: str, raw: bytes, decoded: object) -> None: ...
+    def _tell(self, direction: str, raw: bytes, decoded: object) -> None: ...
 
-    def trace_sent(self, raw: bytes, req: Request) -> None: ...
+    def _trace_sent(self, raw: bytes, req: Request) -> None: ...
 
-    def discard(self, raw: bytes, why: str) -> None: ...
+    def _discard(self, raw: bytes, why: str) -> None: ...
 
-    def event(self, raw: bytes, reply: Reply) -> None: ...
+    def _event(self, raw: bytes, reply: Reply) -> None: ...
 
-    def late(self, address: int, opcode: int, reply: Reply | None) -> bool: ...
+    def _late(self, address: int, opcode: int, reply: Reply | None) -> bool: ...
 
-    def noise_unsolicited(self) -> None: ...
+    def _noise_unsolicited(self) -> None: ...
 
-    def accept_version(self, window: bytes) -> bool: ...
+    def _accept_version(self, window: bytes) -> bool: ...
 
 
 def name_of(req: Request) -> str:
@@ -133,19 +133,19 @@ class SerialFraming:
             # these layouts take any well-formed frame: clear out what is already here
             self.absorb()
         raw = req.to_bytes()
-        if o.sent_tracers and req.opcode in o.sent_wanted:
-            o.trace_sent(raw, req)
+        if o._sent_tracers and req.opcode in o._sent_wanted:
+            o._trace_sent(raw, req)
         dec = self.decoder
         dec.forget_noise()
         host = dec.host = o.host_address  # (the client's may change between requests)
         buf = dec.buf
         deadline = time.monotonic() + timeout
-        tracing = o.tracers
+        tracing = o._tracers
         if buf or kind == _NONE or tracing:
             t.write(raw)
             o.stats["sent"] += 1
             if tracing:
-                o.tell("tx", raw, req)  # (when it goes: the trace shows the time)
+                o._tell("tx", raw, req)  # (when it goes: the trace shows the time)
             if kind == _NONE:
                 return None
             # the first read uses the client's timeout, so a pyserial URL port is not
@@ -164,7 +164,7 @@ class SerialFraming:
             if (reply is not None and reply.module == req.address
                     and reply.opcode == req.opcode and reply.host == host):
                 if tracing:
-                    o.tell("rx", head, reply)
+                    o._tell("rx", head, reply)
                 return reply
             if (len(head) == FRAME and kind == _NORMAL and head[1] == req.address
                     and head[3] == req.opcode and head[0] == host and head[2] != _EVENT
@@ -175,7 +175,7 @@ class SerialFraming:
                         seen.clear()
                     seen[head] = reply
                 if tracing:
-                    o.tell("rx", head, reply)
+                    o._tell("rx", head, reply)
                 return reply
             if (len(head) == FRAME and kind == _MEMORY and head[0] == host
                     and is_frame(head) and not (head[2] == _EVENT
@@ -184,7 +184,7 @@ class SerialFraming:
                 # that was just absorbed
                 reply = Reply.from_memory_frame(head, req.address, req.opcode)
                 if tracing:
-                    o.tell("rx", head, reply)
+                    o._tell("rx", head, reply)
                 return reply
             buf += head
             wait = deadline - time.monotonic()
@@ -236,11 +236,11 @@ class SerialFraming:
 
     def _accept_version(self, kind: ReplyKind) -> Callable[[bytearray], bool]:
         """Which nine bytes that are no frame are taken whole: the version string asked
-        for; else a late or repeated one the ledger expects (see Client.accept_version)."""
+        for; else a late or repeated one the ledger expects (see Client._accept_version)."""
         host = self.decoder.host
         if kind == _VERSION:
             return lambda w: is_version_string(w, host)
-        return self.owner.accept_version
+        return self.owner._accept_version
 
     def _take(self, req: Request, kind: ReplyKind, what: int, head: bytes) -> Reply | None:
         """A frame (or a version string taken whole) read while ``req`` waits: its reply,
@@ -251,36 +251,36 @@ class SerialFraming:
             if kind != _VERSION:
                 return None  # a late or repeated version string (accept_version said so)
             reply = Reply.from_bytes(head, kind, module=req.address)
-        elif (o.also_from is not None or o.also_host is not None) and head[0] in (
-                host, o.also_host) and head[1] in (req.address, o.also_from) and \
+        elif (o._also_from is not None or o._also_host is not None) and head[0] in (
+                host, o._also_host) and head[1] in (req.address, o._also_from) and \
                 head[3] == req.opcode and is_frame(head, head[0]) and head[2] != _EVENT:
             reply = Reply.from_frame(head)  # a write that moved the module: its answer
         elif head[0] != host:
             # a frame for another host, or our own request echoed by an RS485 adapter
-            o.discard(head, f"frame for address {head[0]}, not host {host}")
+            o._discard(head, f"frame for address {head[0]}, not host {host}")
             return None
         elif head[2] == _EVENT and head[3] == _TARGET_REACHED:
             # (a 134 read-back of a stored instruction could have this shape too, but only
             # one whose opcode equals the address, with type 128 and motor 138)
-            o.event(head, Reply.from_frame(head))
+            o._event(head, Reply.from_frame(head))
             return None
         elif kind == _MEMORY:
             reply = Reply.from_memory_frame(head, req.address, req.opcode)
         elif head[1] != req.address or head[3] != req.opcode or (
                 kind == _VERSION and head[2] == _OK):
             # (a normal frame answering 136 type 0 can only carry an error status)
-            o.late(head[1], head[3], Reply.from_frame(head))
-            o.discard(head, f"stale reply (op {head[3]} from address {head[1]})")
+            o._late(head[1], head[3], Reply.from_frame(head))
+            o._discard(head, f"stale reply (op {head[3]} from address {head[1]})")
             return None
         else:
             reply = Reply.from_frame(head)
-        if o.tracers:
-            o.tell("rx", head, reply)
+        if o._tracers:
+            o._tell("rx", head, reply)
         return reply
 
     def _drop(self, junk: bytearray, why: str) -> None:
         if junk:
-            self.owner.discard(bytes(junk), why)
+            self.owner._discard(bytes(junk), why)
             junk.clear()
 
     # -- what comes between requests ------------------------------------------------------
@@ -300,7 +300,7 @@ class SerialFraming:
         junk = bytearray()
         noise = False
         while True:
-            piece = dec.next(whole=o.accept_version)
+            piece = dec.next(whole=o._accept_version)
             if piece is None:
                 break
             what, head = piece
@@ -312,11 +312,11 @@ class SerialFraming:
             if what != FRAME_PIECE:
                 continue  # a late or repeated version string, written down already
             if head[0] == host and head[2] == _EVENT and head[3] == _TARGET_REACHED:
-                o.event(head, Reply.from_frame(head))
+                o._event(head, Reply.from_frame(head))
                 continue
-            expected = head[0] != host or o.late(head[1], head[3], Reply.from_frame(head))
+            expected = head[0] != host or o._late(head[1], head[3], Reply.from_frame(head))
             why = "late reply" if expected else "reply no request was waiting for"
-            o.discard(head, f"discarded before the request: {why}" if flushing else why)
+            o._discard(head, f"discarded before the request: {why}" if flushing else why)
         rest = dec.settle()
         if rest is not None:
             junk += rest[1]
@@ -325,7 +325,7 @@ class SerialFraming:
         if noise:
             # bytes that are no frame while nothing was outstanding: a damaged reply,
             # possibly the real answer to the last request (which then took another)
-            o.noise_unsolicited()
+            o._noise_unsolicited()
         return bool(data)
 
     def drain(self, hard_stop: float) -> None:
@@ -340,7 +340,7 @@ class SerialFraming:
             self.decoder.feed(chunk)
         self.absorb()
         if self.decoder.buf:
-            self.owner.discard(self.decoder.rest(), "partial frame")
+            self.owner._discard(self.decoder.rest(), "partial frame")
 
 
 class CanFraming:
@@ -366,12 +366,12 @@ class CanFraming:
         if kind != _NORMAL:
             self.absorb()
         data = req.to_can()
-        if o.sent_tracers and req.opcode in o.sent_wanted:
-            o.trace_sent(data, req)
+        if o._sent_tracers and req.opcode in o._sent_wanted:
+            o._trace_sent(data, req)
         t.send(o.can_id, data)
         o.stats["sent"] += 1
-        if o.tracers:
-            o.tell("tx", data, req)
+        if o._tracers:
+            o._tell("tx", data, req)
         if kind == _NONE:
             return None
         deadline = time.monotonic() + timeout
@@ -390,33 +390,33 @@ class CanFraming:
 
     def _take(self, req: Request, kind: ReplyKind, arb: int, data: bytes) -> Reply | None:
         o = self.owner
-        if arb != o.reply_id and arb not in o.other_reply_ids and (
-                o.also_reply_id is None or arb != o.also_reply_id):
+        if arb != o.reply_id and arb not in o._other_reply_ids and (
+                o._also_reply_id is None or arb != o._also_reply_id):
             return None  # other traffic on the bus
         host = o.host_address
         got = can_reply(data, version=kind == _VERSION)  # (the one reading of CAN replies)
         if got is None:
-            o.discard(data, f"not a TMCL reply ({len(data)} bytes)")
+            o._discard(data, f"not a TMCL reply ({len(data)} bytes)")
             return None
         data = got
         if len(data) == CAN_VERSION:
             reply = Reply.from_can(host, data, kind, module=req.address)
-            if o.tracers:
-                o.tell("rx", data, reply)
+            if o._tracers:
+                o._tell("rx", data, reply)
             return reply
         elif data[1] == _EVENT and data[2] == _TARGET_REACHED:
-            o.event(data, Reply.from_can(host, data))
+            o._event(data, Reply.from_can(host, data))
             return None
         elif kind == _MEMORY:
             reply = Reply.from_can(host, data, kind, module=req.address)
         else:
             reply = Reply.from_can(host, data)
             if reply.opcode != req.opcode or (kind == _VERSION and reply.status == _OK):
-                o.late(reply.module, reply.opcode, reply)
-                o.discard(data, f"stale reply (op {reply.opcode})")
+                o._late(reply.module, reply.opcode, reply)
+                o._discard(data, f"stale reply (op {reply.opcode})")
                 return None
-        if o.tracers:
-            o.tell("rx", data, reply)
+        if o._tracers:
+            o._tell("rx", data, reply)
         return reply
 
     def _take_any(self, timeout: float) -> bool:
@@ -427,14 +427,14 @@ class CanFraming:
             return False
         arb, data = msg
         data = can_reply(data, version=False) or data
-        ours = arb == o.reply_id or arb in o.other_reply_ids
+        ours = arb == o.reply_id or arb in o._other_reply_ids
         if ours and len(data) == _CAN_REPLY_LEN and data[1] == _EVENT \
                 and data[2] == _TARGET_REACHED:
-            o.event(data, Reply.from_can(o.host_address, data))
+            o._event(data, Reply.from_can(o.host_address, data))
         elif ours:
             if len(data) == _CAN_REPLY_LEN:
-                o.late(data[0], data[2], Reply.from_can(o.host_address, data))
-            o.discard(data, "stale reply")
+                o._late(data[0], data[2], Reply.from_can(o.host_address, data))
+            o._discard(data, "stale reply")
         return True
 
     def absorb(self, timeout: float = 0.0, *, flushing: bool = False) -> bool:

@@ -24,8 +24,8 @@ __all__ = ["Certain", "CONFIRM_ROUNDS", "read_until_certain"]
 @dataclass
 class Certain(Generic[K]):
     """What ``read_until_certain`` found. ``doubt``: the keys whose last answer is still in
-    doubt; ``answered``: the answer each key was last given (``Client.replies`` after it ->
-    key); ``taken``: every answer the rounds took, replaced ones too (for ``Client.settle``);
+    doubt; ``answered``: the answer each key was last given (``Client._replies`` after it ->
+    key); ``taken``: every answer the rounds took, replaced ones too (for ``Client._settle``);
     ``again``: rounds read again after the first; ``accepted``: the reading ended because it
     was accepted, not because the rounds ran out."""
 
@@ -43,7 +43,7 @@ def read_until_certain(client, read: Callable[[set[K] | None], Mapping[int, K]],
     """Read, judge the answers, read the doubtful ones again (``again`` rounds at most).
 
     ``read(keys)`` makes the reads (``keys`` None: the first round, else the keys in doubt)
-    and returns the answers to judge (``Client.replies`` after each read -> key). A key read
+    and returns the answers to judge (``Client._replies`` after each read -> key). A key read
     again replaces its earlier answer; every round judges each key's latest answer, so an
     answer found out later is caught too. ``first``: the first round's answers when the
     reads were already made. ``confirm``: give the first round's last answer the chance to

@@ -26,9 +26,10 @@ finished (208, 205); otherwise it is erased and written again: the checksum deci
 guess about how far a broken-off run got.
 
 Nothing here prints: each step goes to ``progress``, questions to ``confirm``, problems are
-raised. Whatever stops an update (an error, Ctrl-C, a lost link), ``Update.state`` and
-``Update.situation()`` say where the module stands; before the erase, a module this run
-restarted into its bootloader is sent back to its firmware first.
+raised. Whatever stops an update (an error, Ctrl-C, a lost link),
+``FirmwareUpdate.state`` and ``FirmwareUpdate.situation()`` say where the module stands;
+before the erase, a module this run restarted into its bootloader is sent back to its
+firmware first.
 """
 
 from __future__ import annotations
@@ -50,7 +51,7 @@ from ..tmcl.version import VersionString, parse_string
 from .scan import line_baud
 from .stop import activity, stop_everything
 
-# Where the module stands (``Update.state``), in the order an update passes them.
+# Where the module stands (``FirmwareUpdate.state``), in the order an update passes them.
 APPLICATION = "application"  # it runs its firmware; nothing was changed
 BOOTLOADER = "bootloader"  # in its bootloader; nothing erased by this run
 ERASING = "erasing"  # the erase was sent: its firmware may be gone already
@@ -66,7 +67,7 @@ POLL = 0.3  # s per version request while a module restarts
 
 
 class FirmwareError(TmclError):
-    """The update did not go on; ``Update.situation()`` says where the module stands."""
+    """The update did not go on; ``FirmwareUpdate.situation()`` says where the module stands."""
 
 
 class ImageRefused(FirmwareError):
@@ -209,7 +210,7 @@ def _nothing(step: Step) -> None:
     pass
 
 
-class Update:
+class FirmwareUpdate:
     """One firmware update of the module ``settings`` name (as ``client.connect`` takes
     them: port, baud, can, sim, address, ...) with ``image``. ``check()`` says what would
     happen; ``run()`` does it; ``close()`` releases the link (also after a failure)."""
@@ -254,7 +255,7 @@ class Update:
         except BaseException:
             transport.close()
             raise
-        client.other_reply_ids = frozenset(self.boot.can_other_reply_ids)
+        client._other_reply_ids = frozenset(self.boot.can_other_reply_ids)
         client.on_notice = lambda text: self.progress(Step("notice", text))
         self.client = client
         return client
@@ -270,7 +271,7 @@ class Update:
         now = line_baud(c.transport)
         if baud is not None and now is not None and baud != now:
             c.transport.set_baudrate(baud)
-            c.forget_stale()  # nothing sent at the other rate can still arrive
+            c._forget_stale()  # nothing sent at the other rate can still arrive
 
     def _boot_link(self) -> tuple:
         b = self.boot

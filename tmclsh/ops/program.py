@@ -264,7 +264,7 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
     acked = sent = 0
     failure: BaseException | None = None
     began = time.monotonic()
-    client.downloading = True  # no retries: a repeated frame would be stored twice
+    client._downloading = True  # no retries: a repeated frame would be stored twice
     try:
         _ok(_send(client, Control.START_DOWNLOAD, 0, 0, start, timeout=timeout),
             f"start download (132) at address {start}")
@@ -279,9 +279,9 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
         failure = exc
     finally:
         ended, end_error = _quit_download(client, timeout)
-        client.downloading = False
+        client._downloading = False
         if not ended:
-            client.check_download_next()  # the next command ends it first, not stored
+            client._check_download_next()  # the next command ends it first, not stored
     upload_seconds = time.monotonic() - began
     if failure is not None:
         interrupted = isinstance(failure, KeyboardInterrupt)
@@ -335,15 +335,15 @@ def _quit_download(client, timeout: float | None) -> tuple[bool, str | None]:
 def end_download(client, *, timeout: float | None = None) -> None:
     """133 on its own: end a download mode left behind (e.g. by a link lost mid-upload)."""
     require_binary(client, "quit download (133)")
-    client.downloading = True  # until it is answered, the module may store what it gets
+    client._downloading = True  # until it is answered, the module may store what it gets
     ended = False
     try:
         _ok(_send(client, Control.QUIT_DOWNLOAD, timeout=timeout), "quit download (133)")
         ended = True
     finally:
-        client.downloading = False
+        client._downloading = False
         if not ended:
-            client.check_download_next()
+            client._check_download_next()
 
 
 def read_instruction(client, address: int, *, timeout: float | None = None) -> Instruction:
@@ -403,10 +403,10 @@ def verify_image(client, instructions: Sequence[Instruction], start: int = 0, *,
     got: dict[int, Instruction] = {}
 
     def read(todo: set[int] | None) -> dict[int, int]:
-        read_at: dict[int, int] = {}  # Client.replies after the read -> the cell's index
+        read_at: dict[int, int] = {}  # Client._replies after the read -> the cell's index
         for n, idx in enumerate(range(total) if todo is None else sorted(todo)):
             got[idx] = read_instruction(client, start + idx, timeout=timeout)
-            read_at[client.replies] = idx
+            read_at[client._replies] = idx
             if progress is not None and todo is None:
                 progress("verify", n + 1, total)
         return read_at
@@ -420,7 +420,7 @@ def verify_image(client, instructions: Sequence[Instruction], start: int = 0, *,
             # a difference is said only when a second read says the same (a copy of another
             # frame that no suspect gave away would otherwise be named the cell's content)
             again = read_instruction(client, start + idx, timeout=timeout)
-            unsure = bool(client.in_doubt({client.replies: idx}))
+            unsure = bool(client.in_doubt({client._replies: idx}))
             if again.to_bytes() == want.to_bytes() and not unsure:
                 continue
             certain = again.to_bytes() == got[idx].to_bytes() and not unsure

@@ -23,7 +23,7 @@ first, so by default it is made only when nothing answered in binary (``ascii=Tr
 
 Two modules at one address both answer every request (on an RS485 line they may collide,
 on a simulated bus each reply comes twice): an address whose answer came twice is asked
-again until the client's rule (``client.ledger.Doubles``, the one rule, also what every
+again until the client's rule (``client._ledger.Doubles``, the one rule, also what every
 other command is told by) finds it shared, or an answer comes once; a shared address is
 reported (``Found.answers``).
 
@@ -68,6 +68,9 @@ Progress = Callable[[int, "Found | None"], None]
 
 @dataclass(frozen=True)
 class Found:
+    """A module that answered a scan: its address, type and version string as it named
+    them (None when it did not say), and how it was found."""
+
     address: int
     module: str | None
     version: str | None
@@ -155,7 +158,7 @@ def answer_at(client: Client, addresses: Iterable[int], baud: int, timeout: floa
     """Does any module at ``addresses`` answer at ``baud``? (``--baud auto``: a module that
     answers at two rates is on a link where the rate has no effect.)"""
     client.transport.set_baudrate(baud)  # type: ignore[attr-defined]
-    client.forget_stale()
+    client._forget_stale()
     for addr in addresses:
         try:
             if _probe(client, addr, max(timeout, 0.05), 1) is not None:
@@ -233,7 +236,7 @@ def _second_came(client: Client, addr: int, wait: float = SLOW_TIMEOUT) -> bool:
     busy machine or a slow second module); whatever came is taken in."""
     end = time.monotonic() + wait
     while True:
-        client.absorb()
+        client._absorb()
         if client.answered_twice(addr) or addr in client.shared:
             return True
         if time.monotonic() >= end:
@@ -301,7 +304,7 @@ def scan(client: Client, addresses: Iterable[int], *, timeout: float,
             else:
                 if binary is not None:
                     hit = found[addr] = _identify(client, addr, binary, timeout)
-                    client.absorb()  # (a second answer to the string, if it came)
+                    client._absorb()  # (a second answer to the string, if it came)
                     if client.answered_twice(addr, lately=True) or _second_came(
                             client, addr, timeout):  # (as long as an answer takes)
                         checked.add(addr)
@@ -311,7 +314,7 @@ def scan(client: Client, addresses: Iterable[int], *, timeout: float,
                 progress(addr, hit)
         if not client.is_can and addresses:
             time.sleep(min(slow_timeout, 4 * timeout))  # the last address's late answer
-            client.absorb()
+            client._absorb()
         wanted = set(addresses)
         for addr in sorted((again & wanted) - found.keys()):
             try:
@@ -349,5 +352,5 @@ def _ascii_pass(client: Client, addresses: list[int], timeout: float) -> dict[in
         hit = _in_ascii_mode(client, addr, timeout)
         if hit is not None:
             found[addr] = hit
-    client.resync_next()  # (binary frames after ASCII lines start from a clean line)
+    client._resync_next()  # (binary frames after ASCII lines start from a clean line)
     return found

@@ -288,11 +288,11 @@ def _stop_everything(client, settle: float, sleep: Callable[[float], None]) -> S
     deadline = time.monotonic() + settle
     def read(doubt: set[int] | None) -> dict[int, int]:
         """The speeds of the motors not known to be still (``doubt``: those whose 0 may
-        have been another motor's, read again) -> which reply said 0 (Client.replies)."""
+        have been another motor's, read again) -> which reply said 0 (Client._replies)."""
         if doubt is not None:
             for m in doubt:
                 report.stopped.remove(m)
-        zero_at: dict[int, int] = {}  # motor -> Client.replies when its speed read 0
+        zero_at: dict[int, int] = {}  # motor -> Client._replies when its speed read 0
         _settle(client, report, pending if doubt is None else sorted(doubt), zero_at, number,
                 t, deadline, sleep)
         return {seq: m for m, seq in zero_at.items()}
@@ -322,7 +322,7 @@ def _settle(client, report: StopReport, pending: list[int], zero_at: dict[int, i
                 continue
             if v == 0:
                 report.stopped.append(m)
-                zero_at[m] = client.replies
+                zero_at[m] = client._replies
                 report.turning.pop(m, None)
                 pending.remove(m)
             else:

@@ -922,11 +922,13 @@ def cmd_connect(session: Session, arg: str) -> None:
         transport = LinkSpec.parse(can=spec, bitrate=settings.get("bitrate")).open()
         new = {"can": spec}
     else:
-        transport = LinkSpec.parse(port=words[0], baud=settings.get("baud")).open()
-        new = {"port": words[0]}
+        # the whole argument: a pyserial URL may hold a space (``hwgrep://USB VID``)
+        port = arg.strip()
+        transport = LinkSpec.parse(port=port, baud=settings.get("baud")).open()
+        new = {"port": port}
     # the old module is left in the mode it was found in; the new one is brought up as at
     # the command line (136, -m checked, download mode ended, ASCII mode recognised)
-    client.switch_transport(transport, module)
+    client._switch_transport(transport, module)
     for key in ("port", "can", "sim"):
         settings.pop(key, None)
     settings.update(new)

@@ -265,7 +265,9 @@ COMMANDS: tuple[Command, ...] = (
             'reconnect, or switch to another port, simulator or CAN bus',
             complete='complete_connect', category='connection',
             details=('Without an argument the current link is closed and opened again (after '
-                     'a cable was pulled). The module type is asked with 136 on a real link. '
+                     'a cable was pulled). PORT is a device or a URL, as --port takes it '
+                     '(.connect socket://192.168.1.20:4001). '
+                     'The module type is asked with 136 on a real link. '
                      "'can' alone takes the bus from python-can's configuration, as --can "
                      "does; the bit rate is --bitrate's."),
             changes_link=True,

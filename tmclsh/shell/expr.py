@@ -598,8 +598,8 @@ class SessionContext:
 @dataclass
 class TrackedContext(SessionContext):
     """A ``SessionContext`` that remembers which reply answered each read (``answered``:
-    ``Client.replies`` after it -> the read's text), so a read whose answer the client finds
-    suspect later (``Client.suspect_seqs``) can be named, read again or marked. ``used``:
+    ``Client._replies`` after it -> the read's text), so a read whose answer the client finds
+    suspect later (``Client._suspect_seqs``) can be named, read again or marked. ``used``:
     the texts read (or taken from the cache) since it was last cleared."""
 
     answered: dict[int, str] = field(default_factory=dict)
@@ -613,7 +613,7 @@ class TrackedContext(SessionContext):
         try:
             value = read_value(self.session, text)
         finally:
-            seq = getattr(client, "replies", None)
+            seq = getattr(client, "_replies", None)
             if isinstance(seq, int):
                 self.answered[seq] = text  # (an error reply is an answer too)
         self.trace[text] = value

@@ -5,7 +5,8 @@ wherever it is typed:
 
 - ``// comment`` and ``# comment`` run to the end of the line. ``#`` starts a comment only at
   the start of a word (``GAP 1, 0 # where``), so nothing that contains one mid-word is cut.
-  Neither counts inside quotes (``.echo "a # b"``).
+  Neither counts inside quotes (``.echo "a # b"``), and ``//`` right after a URL's scheme
+  is part of the URL (``.connect socket://host:4001``, ``.connect rfc2217://...``).
 - A line is classified once (``classify``): a shell command (with a dot, or ``help``,
   ``quit`` and ``?`` bare), a dot-word no command has, or TMCL. The REPL, ``-c``, ``-f``
   and the checks before a run all go by that one reading.

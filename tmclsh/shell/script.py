@@ -956,7 +956,7 @@ class Judged:
     left: str
     right: str
     doubt: list[str]
-    answered: dict[int, str]  # every reply the check took (Client.replies -> read)
+    answered: dict[int, str]  # every reply the check took (Client._replies -> read)
     tries: int = 1  # times the condition was evaluated
     disagreed: bool = False  # (ASCII) two evaluations in a row never came out the same
     values: dict[str, expr.Number] = field(default_factory=dict)  # each read, as read
@@ -1023,7 +1023,7 @@ def judge(session: Session, expression: expr.Expression, *, again: bool = True,
                                confirm_again=confirm, accept=settled,
                                again=(CONFIRM_ROUNDS if again else 0) + twice)
     ok, left, right, values = seen[-1]
-    session.client.settle(answered)
+    session.client._settle(answered)
     if twice and not found.accepted and not found.doubt:  # never agreed twice in a row
         return Judged(ok, left, right, [expression.text], answered, found.again + 1,
                       values=values, disagreed=True)
@@ -1088,11 +1088,11 @@ def cmd_wait(session: Session, args: str) -> None:
             return False
         before, last, last_at, unread = last, judged, time.monotonic() - start, None
         if before is not None:  # (judged by this poll's requests)
-            session.client.settle(before.answered)
+            session.client._settle(before.answered)
         if not last.ok or last.doubt:
             return False  # a "not yet" in doubt costs one more poll: a condition met is confirmed
         last.doubt = sorted(session.client.in_doubt(last.answered, confirm=True))
-        session.client.settle(last.answered)
+        session.client._settle(last.answered)
         return not last.doubt
 
     left = session.time_left()
@@ -1111,7 +1111,7 @@ def cmd_wait(session: Session, args: str) -> None:
         else:
             # the last answer judged, so it is not stated as read when it was in doubt
             doubt = sorted(session.client.in_doubt(last.answered, confirm=True)) or last.doubt
-            session.client.settle(last.answered)
+            session.client._settle(last.answered)
             last.doubt = doubt
             seen = last.in_doubt() if doubt else last.seen()
             record.update(last.record(expression, False), read_at=round(last_at, 3))

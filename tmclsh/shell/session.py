@@ -154,7 +154,7 @@ class Session:
         # a replayed configuration backup writes the module's link identity too (--with-link)
         self.with_link = False
         if keep_going:  # a line that needs the module waits for a lost link to come back
-            client.on_link_lost = self.relink
+            client._on_link_lost = self.relink
         self.settings = settings or {}
         # numbers; text (a unit's ${port}) only goes into lines as ${name}
         self.variables: dict[str, int | float | str] = {}
@@ -174,7 +174,7 @@ class Session:
         self.location: tuple[str, int] | None = None  # script file and line being run
         # the REPL sets it False before each line; see end_interrupted_line
         self.interrupted_line_ended = True
-        # which line each recent reply answered (Client.replies -> line, FILE:LINE), so a
+        # which line each recent reply answered (Client._replies -> line, FILE:LINE), so a
         # reply found suspect later can be named
         # (a ring: the reply numbered n is at n % ANSWERED, with its number)
         self._answered: list[tuple[int, str, tuple[str, int] | None] | None] = [None] * ANSWERED
@@ -188,7 +188,7 @@ class Session:
         # told (lines done, lines in all) after each line of -c and of a -f script (a unit's
         # live table, shell/units.py); None: nobody asks
         self.progress: Callable[[int, int], None] | None = None
-        # lines failed in a row for want of an answer, and client.replies when the count
+        # lines failed in a row for want of an answer, and client._replies when the count
         # began (failed_unanswered)
         self._unanswered = 0
         self._unanswered_since = -1
@@ -239,7 +239,7 @@ class Session:
             self.out.info(reconnected(self.client))
 
     def relink(self) -> None:
-        """A request found the link down (``Client.on_link_lost``, set with --keep-going):
+        """A request found the link down (``Client._on_link_lost``, set with --keep-going):
         wait for it as long as the request would wait for its answer, then bring the module
         up again; TransportError (nothing sent) if it does not come back in that time."""
         client = self.client
@@ -260,7 +260,7 @@ class Session:
         a reconnect) starts the count again; errors that are no silence do not count."""
         if not isinstance(exc, (TransportError, TmclTimeoutError)):
             return
-        replies = self.client.replies
+        replies = self.client._replies
         if replies != self._unanswered_since:
             self._unanswered, self._unanswered_since = 0, replies
         self._unanswered += 1
@@ -356,7 +356,7 @@ class Session:
         capture = self.state.capture  # a block (.repeat/.if) collecting its lines
         if callable(capture) and capture(self, text):
             return None
-        first = getattr(self.client, "replies", 0)
+        first = getattr(self.client, "_replies", 0)
         try:
             result = self._dispatch(line)
         except TmclError as exc:
@@ -372,7 +372,7 @@ class Session:
     def _note_answered(self, first: int, text: str) -> None:
         """The replies after ``first`` that no TMCL line claimed (a .wait's or .expect's
         reads, ``${...}``) answered ``text``: a suspect among them names it."""
-        last = getattr(self.client, "replies", 0)
+        last = getattr(self.client, "_replies", 0)
         ring, where = self._answered, self.location
         for seq in range(max(first + 1, last - ANSWERED + 1), last + 1):
             known = ring[seq % ANSWERED]
@@ -380,10 +380,10 @@ class Session:
                 ring[seq % ANSWERED] = (seq, text, where)
 
     def report_suspects(self) -> None:
-        """Say which earlier answers may have been another request's (Client.take_suspects):
+        """Say which earlier answers may have been another request's (Client._take_suspects):
         a result is never silently kept when the link shows it may be wrong."""
         self.report_shared()
-        take = getattr(self.client, "take_suspects", None)
+        take = getattr(self.client, "_take_suspects", None)
         for s in take() if callable(take) else ():
             known = self._answered[s.seq % ANSWERED]
             line, where = known[1:] if known is not None and known[0] == s.seq else (None, None)
@@ -415,8 +415,8 @@ class Session:
 
     def confirm_answers(self) -> None:
         """At the end of a run (-c, -f): give the last answer the chance to show it was
-        another request's (``Client.confirm_last``), then report the suspects."""
-        confirm = getattr(self.client, "confirm_last", None)
+        another request's (``Client._confirm_last``), then report the suspects."""
+        confirm = getattr(self.client, "_confirm_last", None)
         if callable(confirm) and self.client.connected:
             try:
                 confirm()
@@ -462,7 +462,7 @@ class Session:
             raise
         finally:
             # (a client without the list: ask it)
-            if getattr(client, "suspects", True) or getattr(client, "shared_news", False):
+            if getattr(client, "_suspects", True) or getattr(client, "shared_news", False):
                 self.report_suspects()
 
     def run_tmcl(self, text: str, *, show: bool = True) -> Result:
@@ -472,7 +472,7 @@ class Session:
         if spec is None or spec.confirm:  # may refuse, or ask first
             self._before_sending(enc)
         try:
-            reply = client.send_encoded(enc, req)
+            reply = client._send_encoded(enc, req)
         except (TmclTimeoutError, ChecksumError) as exc:
             if idempotent(req) or isinstance(exc, TimeLimitError):
                 raise
@@ -480,7 +480,7 @@ class Session:
             raise _unsure(client, req, exc, getattr(exc, "sent", True)) from exc
         result = Result(text, enc, reply)
         if reply is not None:
-            seq = client.replies
+            seq = client._replies
             self._answered[seq % ANSWERED] = (seq, text, self.location)
             doubt = getattr(client, "doubt_on_last", None)
             if doubt is not None and doubt():  # judged, and not settled: said in line

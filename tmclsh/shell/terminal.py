@@ -498,7 +498,7 @@ class Terminal:
 
         client = self.session.client
         self.link.detach(send_bin=False)
-        client.resync_next()
+        client._resync_next()
         self.link.on_exit = Mode.BINARY
         try:
             client.request(Request(client.address, Control.GET_VERSION, 1, 0, 0))

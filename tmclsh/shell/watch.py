@@ -12,7 +12,7 @@
 * An answer in doubt is never shown as the module's value. On a line that brings a reply
   twice, the copy may be taken for the next request's answer (same command, same layout);
   the client finds that out when the real answer comes while nothing waits for it
-  (``Client.suspect_seqs``). A read found so during its sample (by a later read's request)
+  (``Client._suspect_seqs``). A read found so during its sample (by a later read's request)
   is read again at once, then one 136 type 1 exchange lets the line's last answer arrive;
   the sample's last read is judged by the next sample's first request, so a sample is shown
   one sample late (the last one after a 136 type 1 exchange). A value still in doubt is
@@ -261,7 +261,7 @@ class _Reading:
             (the others' reads come from this sample's cache)."""
             assert doubt is not None and ctx.cache is not None
             self.reread += len(doubt)
-            client.settle(ctx.answered)
+            client._settle(ctx.answered)
             for seq in [q for q, text in ctx.answered.items() if text in doubt]:
                 del ctx.answered[seq]
             for text in doubt:
@@ -288,7 +288,7 @@ class _Reading:
                 self.errors.pop(name, None)
             self.suspect += [n for n in names if n not in self.suspect]
         if self.judged:
-            session.client.settle(ctx.answered)
+            session.client._settle(ctx.answered)
 
     def sample(self) -> Sample:
         if self.lost is not None:

@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from . import instructions as isa
-from ..base.errors import AsmError, RangeError, ValidationError
+from ..base.errors import AsmError, AsmRangeError, RangeError, ValidationError
 from ..base.files import MAX_FILE as MAX_SOURCE
 from ..base.files import MAX_LINES, FileError, decode, read_bytes, size_text
 from .modules import Module, Parameter
@@ -222,7 +222,8 @@ class Line:
     comment: str = ""
 
     def error(self, msg: str, col: int | None = None, kind: str = "syntax") -> AsmError:
-        return AsmError(msg, self.number, col, self.file, kind)
+        cls = AsmRangeError if kind == "range" else AsmError
+        return cls(msg, self.number, col, self.file, kind)
 
     @property
     def is_raw(self) -> bool:
@@ -564,6 +565,8 @@ class _Encoder:
                 else:
                     number = self.number(expr)
                     self.param = mod.lookup(pkind, number, bank)
+            except AsmError:  # the number's own error, located already
+                raise
             except ValidationError as exc:
                 raise self.fail(str(exc), expr) from None
             if mod.generic:

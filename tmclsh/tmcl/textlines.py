@@ -8,6 +8,7 @@ exactly as the shell does.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 
 
@@ -26,6 +27,11 @@ def _scan(text: str):
             yield i, ch, False
 
 
+# a URL's scheme ending where ``//`` starts: a word of letters, digits, ``+ - .`` that
+# begins with a letter, then ``:`` (RFC 3986), as pyserial's ``socket://`` and ``loop://``
+_SCHEME = re.compile(r"(?:^|(?<=\s))[A-Za-z][A-Za-z0-9+.-]*:$")
+
+
 def comment_at(text: str) -> int | None:
     """Where a ``//`` or ``#`` comment starts in ``text`` (None if it has none)."""
     if "/" not in text and "#" not in text:
@@ -33,7 +39,7 @@ def comment_at(text: str) -> int | None:
     for i, ch, quoted in _scan(text):
         if quoted:
             continue
-        if ch == "/" and text.startswith("//", i):
+        if ch == "/" and text.startswith("//", i) and not _SCHEME.search(text, 0, i):
             return i
         if ch == "#" and (i == 0 or text[i - 1].isspace()):
             return i

@@ -1,0 +1,129 @@
+"""What ``import tmclsh`` promises (issue 32): the names in ``__all__``, the error a refused
+value raises, and the import paths scripts used before the modules moved into layers."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+import tmclsh
+
+from conftest import ROOT, tmclsh_env
+
+# every top-level module that moved (git log --no-renames --diff-filter=D -- 'tmclsh/*.py'):
+# the old path -> where it is now
+MOVED = {
+    "tmclsh.errors": "tmclsh.base.errors",
+    "tmclsh.protocol": "tmclsh.tmcl.frames",
+    "tmclsh.scan": "tmclsh.ops.scan",
+    "tmclsh.connection": "tmclsh.client.connect",
+    "tmclsh.docs": "tmclsh.cli.docs",
+    "tmclsh.ascii": "tmclsh.client.ascii",
+    "tmclsh.config": "tmclsh.base.config",
+    "tmclsh.options": "tmclsh.cli.options",
+    "tmclsh.program": "tmclsh.ops.program",
+    "tmclsh.asm": "tmclsh.tmcl.asm",
+    "tmclsh.instructions": "tmclsh.tmcl.instructions",
+    "tmclsh.sourcemap": "tmclsh.tmcl.sourcemap",
+    "tmclsh.canspec": "tmclsh.base.canspec",
+    "tmclsh.datafiles": "tmclsh.base.datafiles",
+    "tmclsh.files": "tmclsh.base.files",
+    "tmclsh.limits": "tmclsh.base.limits",
+    "tmclsh.status": "tmclsh.tmcl.status",
+    "tmclsh.transport.base": "tmclsh.link.base",
+    "tmclsh.transport.can": "tmclsh.link.can",
+    "tmclsh.transport.serial": "tmclsh.link.serial",
+    "tmclsh.transport.sim": "tmclsh.link.sim",
+    "tmclsh.modules.schema": "tmclsh.tmcl.modules.schema",
+}
+
+
+def test_the_documented_names_import_from_tmclsh():
+    from tmclsh import AsmError, RangeError, TmclError, ValidationError, connect
+
+    assert connect is tmclsh.connect and "connect" in tmclsh.__all__
+    assert issubclass(RangeError, ValidationError) and issubclass(AsmError, ValidationError)
+    for name in tmclsh.__all__:
+        assert getattr(tmclsh, name) is not None, name
+    errors = [getattr(tmclsh, n) for n in tmclsh.__all__
+              if isinstance(getattr(tmclsh, n), type) and issubclass(getattr(tmclsh, n),
+                                                                     BaseException)]
+    assert all(issubclass(e, TmclError) for e in errors), errors
+    with pytest.raises(AttributeError, match="no attribute 'nothing_here'"):
+        tmclsh.nothing_here  # noqa: B018
+
+
+def test_a_refused_value_raises_range_error_and_nothing_is_sent():
+    """Was an ``AsmError`` only, not the ``RangeError`` the docs name; still an AsmError,
+    so ``except AsmError`` written before keeps working. Against a module written from the
+    manuals (tests/responder.py), not the simulator."""
+    from responder import PtyModule
+
+    m = PtyModule(version="1311V111")
+    try:
+        with tmclsh.connect(port=m.path, timeout=0.5) as c:
+            heard = len(m.got)
+            with pytest.raises(tmclsh.RangeError, match="out of range") as exc:
+                c.execute("SAP 140, 0, 12")  # MicrostepResolution: 0..8
+            assert isinstance(exc.value, tmclsh.AsmError)
+            assert isinstance(exc.value, tmclsh.ValidationError)
+            with pytest.raises(tmclsh.ValidationError) as other:
+                c.execute("SAP 4, 3, 100")  # no motor 3: refused, but no range
+            assert not isinstance(other.value, tmclsh.RangeError)
+            with pytest.raises(tmclsh.ValidationError):
+                c.execute("SPA 4, 0, 1")  # no such command
+            assert len(m.got) == heard  # nothing of these reached the module
+            c.execute("SAP 140, 0, 8")
+            assert m.got[-1] == (5, 140, 0, 8)
+    finally:
+        m.close()
+
+
+def test_old_import_paths_are_the_new_modules_with_a_warning():
+    """``from tmclsh.errors import TmclError`` broke every script that caught it when the
+    modules moved; each old path is the new module again, and says where it went."""
+    code = f"""
+import importlib, json, warnings
+moved = {MOVED!r}
+out = {{}}
+with warnings.catch_warnings(record=True) as seen:
+    warnings.simplefilter("always")
+    from tmclsh.errors import TmclError
+    from tmclsh.client import Client
+    from tmclsh.transport import open_serial
+    from tmclsh.modules import load
+    for old, new in moved.items():
+        out[old] = importlib.import_module(old) is importlib.import_module(new)
+import tmclsh, tmclsh.link
+out["TmclError"] = TmclError is tmclsh.TmclError
+out["Client"] = Client is tmclsh.LineClient
+out["open_serial"] = open_serial is tmclsh.link.open_serial
+out["load"] = load("TMCM-1311").name == "TMCM-1311"
+out["warned"] = sorted({{str(w.message).split()[0] for w in seen
+                        if issubclass(w.category, DeprecationWarning)
+                        and "has moved to" in str(w.message)}})
+out["where"] = sorted({{w.filename for w in seen}})
+print(json.dumps(out))
+"""
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env=tmclsh_env(), cwd=str(ROOT), timeout=60)
+    assert run.returncode == 0, run.stderr
+    out = json.loads(run.stdout.splitlines()[-1])
+    where = out.pop("where")  # the warning names the importing line, never tmclsh's shim
+    assert "<string>" in where and not any("tmclsh" in w for w in where), where
+    warned = out.pop("warned")
+    assert all(out.values()), [k for k, v in out.items() if not v]
+    assert set(warned) == set(MOVED) | {"tmclsh.client.Client", "tmclsh.transport",
+                                        "tmclsh.modules"}
+
+
+def test_import_tmclsh_loads_no_part_of_it():
+    """The names are loaded on first use: the command line's start-up pays for none."""
+    run = subprocess.run([sys.executable, "-c", "import sys, tmclsh; tmclsh.__all__; "
+                          "print(sorted(m for m in sys.modules if m.startswith('tmclsh')))"],
+                         capture_output=True, text=True, env=tmclsh_env(), cwd=str(ROOT),
+                         timeout=60)
+    assert run.stdout.split() == ["['tmclsh']"], run.stderr

@@ -1,0 +1,48 @@
+"""Import paths users already used, kept working after the modules moved into layers.
+
+A script written against tmclsh 0.1 imported ``tmclsh.errors`` or ``tmclsh.protocol``; those
+modules now live in ``tmclsh/base/``, ``tmclsh/tmcl/``, ... (HACKING.md). Each old name is a
+small module that calls ``alias`` and becomes the new module itself, not a copy, so
+``except tmclsh.errors.TmclError`` catches what tmclsh raises, and the importer is told,
+once, where the module lives now.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+import warnings
+from collections.abc import Callable
+from types import ModuleType
+
+
+def alias(old: str, new: str) -> ModuleType:
+    """Make the module ``old`` the module ``new`` (in ``sys.modules``), with a warning."""
+    module = alias_warning(old, new)
+    sys.modules[old] = module
+    return module
+
+
+def alias_warning(old: str, new: str) -> ModuleType:
+    """The module ``new``, imported, and the importer told where it lives now."""
+    module = importlib.import_module(new)
+    # 4: the line that imported the old path (the warnings module skips the import
+    # machinery's frames), where Python shows a DeprecationWarning in ``__main__``
+    warnings.warn(f"{old} has moved to {new}: import it from there", DeprecationWarning,
+                  stacklevel=4)
+    return module
+
+
+def forward(old: str, new: str) -> Callable[[str], object]:
+    """The module ``__getattr__`` of an old package (``tmclsh.transport``): its names come
+    from ``new``. The package stays itself, so its old submodules (``tmclsh.transport.serial``)
+    are the small modules beside it that ``alias`` the new ones, never second copies."""
+    module = alias_warning(old, new)
+
+    def __getattr__(name: str) -> object:
+        try:
+            return getattr(module, name)
+        except AttributeError:
+            raise AttributeError(f"module {old!r} has no attribute {name!r}") from None
+
+    return __getattr__

@@ -1,0 +1,5 @@
+"""Moved to ``tmclsh.tmcl.modules``: this name is kept so scripts that import it still work."""
+
+from .._moved import forward
+
+__getattr__ = forward(__name__, "tmclsh.tmcl.modules")

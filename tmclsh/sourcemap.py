@@ -1,0 +1,5 @@
+"""Moved to ``tmclsh.tmcl.sourcemap``: this name is kept so scripts that import it still work."""
+
+from ._moved import alias
+
+alias(__name__, "tmclsh.tmcl.sourcemap")
