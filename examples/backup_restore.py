@@ -1,42 +1,36 @@
-"""Back up a module's axis parameters and restore them.
+"""Back up a module's configuration to a file, then restore what changed since.
 
     python examples/backup_restore.py [PORT | sim]
 
-INTEGRATOR: backup, compare and restore still live in the shell (``.save``, ``.diff``,
-``.restore`` in tmclsh/shell/clone.py); until they are operations tmclsh exports, this
-example reads and writes the parameters itself, from the module data: every axis
-parameter that can be read and written and is not part of the link identity (address,
-baud rate, CAN ids) or the module's running state.
+The file is the one ``.save`` writes (and ``.restore``/``tmclsh -f`` read): every setting the
+module holds, values outside the manual's ranges as it holds them, and its link identity
+(address, baud rate, CAN ids) in a section of its own that a restore leaves alone unless
+``with_link=True``.
 """
 
 from __future__ import annotations
 
 import sys
+import tempfile
+from pathlib import Path
 
 import tmclsh
 
 
-def settings(c: tmclsh.LineClient) -> dict[tuple[str, int], int]:
-    """(parameter name, motor) -> the value the module holds."""
-    saved = {}
-    for p in c.module.axis_params:
-        if p.readable and p.writable and not p.state and not p.link:
-            for motor in range(c.module.motors):
-                saved[(p.name, motor)] = c.value(f"GAP {p.name}, {motor}")
-    return saved
-
-
 def main(port: str | None = None, sim: str | None = None) -> None:
-    with tmclsh.connect(port, sim=sim) as c:
-        backup = settings(c)
-        print(f"backed up {len(backup)} values")
+    with tmclsh.connect(port, sim=sim) as c, tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "module.tmcl"
+        conf = tmclsh.read_configuration(c)
+        tmclsh.write_backup(path, conf.text())
+        print(f"backed up {len(conf.restorable)} settings "
+              f"({len(conf.link)} more are its place on the line)")
         c.execute("SAP MaxPositioningSpeed, 0, 777")  # someone changes one
-        changed = {k: v for k, v in settings(c).items() if backup[k] != v}
-        print(f"changed since: {changed}")
-        for (name, motor), value in backup.items():
-            # "!": the value as the module held it, even one outside the manual's range
-            c.execute(f"!SAP {name}, {motor}, {value}")
-        print(f"restored; differences now: {[k for k, v in settings(c).items() if backup[k] != v]}")
+        saved = tmclsh.read_backup(c, path)
+        changed = tmclsh.compare_backup(c, saved)
+        print("changed since: " + ", ".join(f"{d.slot.name} {d.slot.value} -> {d.live}"
+                                            for d in changed))
+        written, _link = tmclsh.restore_backup(c, changed)
+        print(f"restored {len(written)}; differences now: {len(tmclsh.compare_backup(c, saved))}")
 
 
 if __name__ == "__main__":

@@ -13,8 +13,9 @@ with tmclsh.connect(sim="TMCM-1311") as c:      # or port="/dev/ttyACM0", can="s
 Every name listed here is the API: the client (`connect`, `LineClient`, what it returns),
 the error classes (every one a `TmclError`; a value refused before sending is a
 `RangeError`, any other line refused before sending a `ValidationError`), and the
-operations a script needs without the shell: firmware, scanning a line or bus, stored
-programs, the safety stop, reading CAN logs and another master's traffic. Anything not
+operations a script needs without the shell: a module's configuration (backup, compare,
+restore), firmware, scanning a line or bus, stored programs, the safety stop, reading CAN
+logs and another master's traffic. Anything not
 listed is private to tmclsh and may change between releases.
 
 `import tmclsh` loads none of it: each name is imported the first time it is used, so the
@@ -70,8 +71,18 @@ _LAZY: dict[str, tuple[str, str]] = {
     "CanReader": ("tmclsh.ops.monitor", "CanReader"),
     "SerialTap": ("tmclsh.ops.monitor", "SerialTap"),
     "Filter": ("tmclsh.ops.monitor", "Filter"),
-    # INTEGRATOR: backup/compare/restore and running several units are still in the shell
-    # (shell/clone.py, shell/units.py); when they move to ops/, their names go here.
+    # a module's configuration: read it, its backup file, compare, restore (link identity
+    # left alone unless asked), without a shell
+    "read_configuration": ("tmclsh.ops.backup", "read_configuration"),
+    "write_backup": ("tmclsh.ops.backup", "write_backup"),
+    "read_backup": ("tmclsh.ops.backup", "read_backup"),
+    "compare_backup": ("tmclsh.ops.backup", "compare"),
+    "restore_backup": ("tmclsh.ops.backup", "restore"),
+    "Configuration": ("tmclsh.ops.backup", "Configuration"),
+    "Backup": ("tmclsh.ops.backup", "Backup"),
+    "BackupFileError": ("tmclsh.ops.backup", "BackupFileError"),
+    # reading until the answers are certain (what .watch, .expect and a verify rely on)
+    "read_until_certain": ("tmclsh.ops.certain", "read_until_certain"),
 }
 
 __all__ = ["__version__", *_LAZY]

@@ -599,9 +599,9 @@ message says what was tried and the likely causes, most likely first.
 .PP
 Every module on a shared line hears every byte. What {_b(PROG)} sends in ASCII (the probe
 for a module in ASCII mode at connect, in {_b("scan")} and after {_b(".address")}, and the
-lines of {_b("--ascii")}) is whole nine\-byte blocks, none of them a valid frame: a command
+lines of {_b("--ascii")}) is whole nine\\-byte blocks, none of them a valid frame: a command
 line gets spaces after its address character ({_b("A        GAP 1, 0")}), so a binary
-module on the same line, which counts what it hears in nine\-byte frames, stays in step
+module on the same line, which counts what it hears in nine\\-byte frames, stays in step
 and answers at its own address afterwards. The {_b(".ascii")} terminal sends what is typed.
 .PP
 Bad input never reaches the module: an unknown mnemonic, a wrong type, a value out of the

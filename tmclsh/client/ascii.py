@@ -884,7 +884,7 @@ class AsciiLink:
             raise TmclTimeoutError(lost_check(client, address, "after an answer that did not "
                                               "come, a value whose answer is known was read "
                                               f"to be sure which reply is which: {exc}")) from None
-        client.checks_lost = 0
+        client._checks_lost = 0
         client._ledger.forget()
 
     def _markers(self) -> list[tuple[str, Request, int]]:

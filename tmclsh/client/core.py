@@ -111,8 +111,12 @@ class Client:
         self.timeout = timeout
         """Seconds to wait for each reply (per attempt)."""
         self.retries = retries
+        """How often a request that may be repeated is sent again after no or a garbled
+        answer."""
         self.can_id = can_id if can_id is not None else LINK_DEFAULTS["can_id"]
+        """The CAN id requests go out on (on a CAN link)."""
         self.reply_id = reply_id if reply_id is not None else LINK_DEFAULTS["reply_id"]
+        """The CAN id the module's replies come on (on a CAN link)."""
         # CAN ids besides reply_id whose messages are replies too (a bootloader's 0x7FF)
         self._other_reply_ids: frozenset[int] = frozenset()
         self.module: Module | None = load_module(module) if isinstance(module, str) else module
@@ -136,6 +140,8 @@ class Client:
         # what tmclsh set each motor doing and has not stopped (motion.py): the leave-checks
         # read it, as a motor that reads speed 0 may still be meant to turn
         self.motion = MotionRecord()
+        """What tmclsh told each motor to do and has not stopped (a turning target, a
+        position move): a motor whose speed reads 0 may still be meant to turn."""
         self._events: deque[tuple[Reply, float]] = deque()  # with when each arrived
         self._delivering = threading.RLock()  # held while events go to the listeners
         # when the event being delivered arrived (time.monotonic()), for listeners that
@@ -155,7 +161,9 @@ class Client:
         # one-line notices about what the client did on its own (ended download mode); the
         # shell points it at its output, else they are logged
         self.on_notice: Callable[[str], None] | None = None
-        self.checks_lost = 0  # line checks in a row that got no good answer (lost_check)
+        """Called with each one-line notice of what the client did on its own (the module
+        answers at a new address, download mode ended); None: they are logged."""
+        self._checks_lost = 0  # line checks in a row that got no good answer (lost_check)
         # called when a request finds the link down, to bring it back before the request
         # goes (a --keep-going script waits for a cable plugged back in); it raises
         # TransportError if the link stays down. None: the request fails at once.
@@ -636,7 +644,7 @@ class Client:
             if got is not None:
                 ledger.took_marker(marker, got)
                 self._second(ledger.doubles.answered(marker, got))
-            self.checks_lost = 0
+            self._checks_lost = 0
             ledger.forget()
             for _ in range(extra):  # (crossed off when they come)
                 ledger.expect_late(Request(address, _GET_VERSION, 1, 0, 0), _NORMAL)
@@ -1033,8 +1041,8 @@ def lost_check(client: Client, address: int, why: str) -> str:
     """The words for a line check (after a failure) that got no good answer: the first is a
     lost reply, as a line that loses one now and then does; only a second in a row, with
     no good answer between, is a module that stopped answering."""
-    client.checks_lost += 1
-    if client.checks_lost == 1:
+    client._checks_lost += 1
+    if client._checks_lost == 1:
         return (f"a reply from address {address} was lost ({why}); the next command checks "
                 "the line again")
     return f"address {address} stopped answering: {why}"
