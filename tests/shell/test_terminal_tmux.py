@@ -172,7 +172,9 @@ def test_the_ctrl_t_menu(served, pane, tmp_path):
     menu(p, "f", "log the session to file:")
     p.type(str(log))
     p.keys("Enter")
-    p.wait(f"--- logging the session to {log}")
+    # (a long temporary path wraps at the terminal's edge: read the screen's lines joined)
+    p.wait_for(lambda s: f"--- logging the session to {log}" in s.replace("\n", ""),
+               what="the logging line not on the screen")
     menu(p, "u", "send the lines of file:")
     p.type(str(lines))
     p.keys("Enter")
