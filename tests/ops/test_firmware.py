@@ -391,14 +391,14 @@ def test_too_large_for_the_module_data_is_refused_before_the_restart(memory_in_m
     module = BootModule()
     try:
         image = model_image(size=memory_in_module_data + 256)
-        update = Update({"port": module.path, "timeout": 0.3}, image)
+        update = FirmwareUpdate({"port": module.path, "timeout": 0.3}, image)
         try:
             plan = update.check()
         finally:
             update.close()
         assert plan.fits is False and plan.memory.told_by == "module data"
         assert "lies beyond the TMCM-1311's application memory" in plan.problem
-        update = Update({"port": module.path, "timeout": 0.3}, image)
+        update = FirmwareUpdate({"port": module.path, "timeout": 0.3}, image)
         with pytest.raises(ImageRefused, match=r"^1311V112.hex:\d+: this record lies beyond "
                            r"the TMCM-1311's application memory \(131072 bytes at 0x00004000.."
                            r"0x00023FFF, from its module data\).*does not fit; refused before "
@@ -422,7 +422,7 @@ def test_the_bootloaders_memory_decides_over_the_module_data(memory_in_module_da
         bootmodel_size = bootmodel.SIZE
         bootmodel.SIZE = bootmodel_size // 2  # (this module's memory: half the data's)
         try:
-            update = Update({"port": module.path, "timeout": 0.3},
+            update = FirmwareUpdate({"port": module.path, "timeout": 0.3},
                             model_image(size=bootmodel_size // 2 + 256))
             with pytest.raises(ImageRefused, match="does not fit; refused, nothing was erased"):
                 update.run()
@@ -459,7 +459,7 @@ def test_an_image_starting_in_the_bootloaders_area_is_refused_for_that():
     module = BootModule(in_bootloader=True)
     try:
         image = image_from_hex(hex_image("no string", 3000, 0x1000), "boot.hex")
-        update = Update({"port": module.path, "timeout": 0.1}, image)
+        update = FirmwareUpdate({"port": module.path, "timeout": 0.1}, image)
         try:
             plan = update.check()
         finally:
@@ -482,7 +482,7 @@ def test_a_refused_image_whose_restart_goes_unanswered_says_so():
     module = BootModule()
     module.hooks[205] = lambda m: setattr(m, "silent", True)  # (205 is not acted on)
     try:
-        update = Update({"port": module.path, "timeout": 0.2}, model_image(size=SIZE + 4))
+        update = FirmwareUpdate({"port": module.path, "timeout": 0.2}, model_image(size=SIZE + 4))
         with pytest.raises(ImageRefused, match="does not fit; refused, nothing was erased"):
             update.run()
         update.close()

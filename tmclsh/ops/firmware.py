@@ -748,3 +748,6 @@ def _aside(change: str | None) -> str:
 def _module_name(type_number: int) -> str:
     mod = by_firmware_id(type_number)
     return mod.name if mod is not None else f"TMCM-{type_number}"
+
+
+Update = FirmwareUpdate  # its name before it was exported (scripts/bench.py reads older trees by it)
