@@ -26,8 +26,8 @@ landing inside an import would leave a module half made for every unit after it.
 From Python::
 
     from tmclsh.ops import units
-    plan = [units.Unit(1, "sim", "TMCM-1311"), units.Unit(2, "sim", "TMCM-1140")]
-    for r in units.run(plan, lambda c: c.query("GAP 1, 0")):
+    plan = [units.Unit(1, "port", "/dev/ttyUSB0", 1), units.Unit(2, "port", "/dev/ttyUSB0", 2)]
+    for r in units.run(plan, lambda c: c.value("GAP ActualPosition, 0")):
         print(r.unit.label, r.value, r.error)
 """
 

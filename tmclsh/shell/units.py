@@ -190,9 +190,8 @@ class Run(ops_units.Hooks):
 
     def __init__(self, args: argparse.Namespace, plan: list[Unit], view: View):
         self.args, self.units, self.view = args, plan, view
-        self.settings: dict[int, dict] = {}  # id(client) -> its connection settings
         self.run = ops_units.Run(plan, self._fn, open=self._open, stop=stop_on_interrupt,
-                             hooks=self, interrupts=(Terminated,))
+                                 hooks=self, interrupts=(Terminated,))
 
     def go(self) -> int:
         exit_cleanly_on_signals()
@@ -212,12 +211,11 @@ class Run(ops_units.Hooks):
         # (the connect's frames go to the transcript; not those of a stop after it ended)
         tracer = record.tracer if record.state == "connecting" else None
         client = open_client(settings, notice=record.notice, tracer=tracer)
-        self.settings[id(client)] = settings
+        _CURRENT.settings = settings  # (for _fn, next in this thread)
         return client
 
     def _fn(self, client) -> int:
-        unit = _CURRENT.unit
-        settings = self.settings.pop(id(client))
+        unit, settings = _CURRENT.unit, _CURRENT.settings
         return run_connected(unit_args(unit, self.args), client, settings,
                              prepare=lambda session: self._prepare(unit, session))
 
@@ -229,7 +227,7 @@ class Run(ops_units.Hooks):
             with self.view.record(unit).attached():  # what this thread writes: the unit's
                 yield
         finally:
-            _CURRENT.unit = None
+            _CURRENT.unit = _CURRENT.settings = None
 
     def begin(self, unit: Unit) -> None:
         self.view.record(unit).begin()
@@ -305,4 +303,4 @@ class Run(ops_units.Hooks):
         return EXIT_FAILED
 
 
-_CURRENT = threading.local()  # .unit: the unit the current thread runs
+_CURRENT = threading.local()  # .unit: the unit the current thread runs; .settings: its link's
