@@ -46,7 +46,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
 from ..base import clock, files
-from ..base.errors import TmclError, ValidationError
+from ..base.errors import TmclError, TransportError, ValidationError  # noqa: F401
 from ..ops import watch as sampling
 from ..ops.watch import Item, Reading, Sample, SendClock
 from . import expr, lines, plot, script
