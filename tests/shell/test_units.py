@@ -372,3 +372,59 @@ def test_a_units_line_is_the_files_line_as_its_errors_say(make_pty_sim, run, tmp
     rc, out, err = run(*_ports(sims), "--json", "-f", str(script))
     assert rc == 0, err
     assert all((o["line"], o["of"]) == (3, 3) for o in _objects(out) if o.get("summary"))
+
+
+def test_the_units_lines_are_written_by_one_writer(run, monkeypatch):
+    """Each unit's lines wait in its own buffer; the main thread alone writes them (issue 34:
+    no lock of the whole process taken for each line a unit shows)."""
+    writers: set[str] = set()
+
+    class Recording:
+        def __init__(self):
+            self.text = []
+
+        def write(self, text: str) -> int:
+            writers.add(threading.current_thread().name)
+            self.text.append(text)
+            return len(text)
+
+        def flush(self) -> None:
+            pass
+
+        def isatty(self) -> bool:
+            return False
+
+    out, err = Recording(), Recording()
+    monkeypatch.setattr(sys, "stdout", out)
+    monkeypatch.setattr(sys, "stderr", err)
+    rc = cli.main(["--sim", "TMCM-1311", "--address", "1,2,3", "-c",
+                   "GAP 1, 0; .echo done ${unit}"])
+    assert rc == 0
+    shown = "".join(out.text)
+    for n in (1, 2, 3):
+        assert f"[{n} sim TMCM-1311 @{n}] done {n}" in shown
+    assert writers == {threading.main_thread().name}
+
+
+def test_nothing_is_imported_in_a_units_thread(tmp_path):
+    """A stop lands at a unit's next bytecode: inside an import it would leave a module half
+    made for every unit after it. What the lines and the links need is imported first."""
+    probe = (
+        "import sys, threading\n"
+        "seen = []\n"
+        "class Finder:\n"
+        "    def find_spec(self, name, path=None, target=None):\n"
+        "        if threading.current_thread().name.startswith('unit-line'):\n"
+        "            seen.append(name)\n"
+        "sys.meta_path.insert(0, Finder())\n"
+        "from tmclsh.cli import main as cli\n"
+        "rc = cli.main(sys.argv[1:])\n"
+        "print('IMPORTED', rc, sorted(set(seen)), file=sys.__stderr__)\n")
+    script = tmp_path / "s.tmcl"
+    script.write_text(".let x = GAP 1, 0\n.expect GAP 1, 0 == ${x}\nROR 0, 100\n.sleep 0.01\n"
+                      "MST 0\n.watch GAP 1, 0 --count 1\n")
+    proc = subprocess.run([sys.executable, "-c", probe, "--sim", "TMCM-1311", "--address",
+                           "1,2", "-f", str(script)], capture_output=True, text=True,
+                          env=tmclsh_env(), timeout=120)
+    said = [line for line in proc.stderr.splitlines() if line.startswith("IMPORTED")]
+    assert said == ["IMPORTED 0 []"], proc.stderr

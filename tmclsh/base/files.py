@@ -259,11 +259,14 @@ def _memory_bound(name: str, what: str, limit: int) -> Iterator[None]:
     so two threads' reads never put back each other's."""
     import threading
 
+    if threading.current_thread() is not threading.main_thread():
+        yield  # (and nothing imported: a stop may be raised in a unit's thread, ops/units.py)
+        return
     try:
         import resource
     except ImportError:  # pragma: no cover - not POSIX
         resource = None
-    if resource is None or threading.current_thread() is not threading.main_thread():
+    if resource is None:
         yield
         return
     restore: tuple[int, int] | None = None

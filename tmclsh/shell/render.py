@@ -158,9 +158,14 @@ def _console(stderr: bool = False, color: str = "auto", file: Any = None):
                           markup=False, **kw)
 
 
-# events come from the event poller's thread (--json runs): every write and flush of stdout
-# lines takes this lock, so lines stay whole and held results go out before a later event
-_EMIT_LOCK = threading.RLock()
+def load_rich() -> None:
+    """Import now, in this thread, what a console imports when it first writes (several units
+    at once: a stop raised in a unit's thread must not land inside an import, shell/units.py)."""
+    import io
+
+    console = _console(file=io.StringIO())
+    console.print(Styled("-", "tmcl.note"))
+    console.print("note: :-)", style="tmcl.note")  # (text with colons: its emoji codes)
 
 
 class Output:
@@ -194,6 +199,10 @@ class Output:
         # unit's own streams, so what other threads write for it (the event poller) is its too
         self.stdout: Any = None
         self.stderr: Any = None
+        # events come from the event poller's thread (--json runs): every write and flush of
+        # this output's lines takes this lock, so lines stay whole and held results go out
+        # before a later event (its own: several units' outputs never wait on one another)
+        self._emit_lock = threading.RLock()
 
     # the rich consoles, made when first needed (a test may put its own in place)
     @property
@@ -211,7 +220,7 @@ class Output:
         """Write out the results held back (see ``hold``)."""
         if self._held is None:
             return
-        with _EMIT_LOCK:
+        with self._emit_lock:
             stream, self._held = self._held, None
             if stream is not None:
                 lines = self._held_lines
@@ -222,7 +231,7 @@ class Output:
 
     def _write(self, stream, line: str, hold: bool = True) -> None:
         """One finished line to stdout: written now, or held (see ``hold``)."""
-        with _EMIT_LOCK:
+        with self._emit_lock:
             held = self._held
             if held is not stream and held is not None:
                 self.flush()

@@ -6,22 +6,15 @@ runs the same lines in its own session (its own variables ``${unit}``, ``${port}
 ``${address}``, its own checks and counts), checked against its own module type before
 anything is sent to it, exactly as one ``-c``/``-f`` run is (``main.run_connected``).
 
-How they run: one thread per link. Units on different links run side by side; units sharing
-a line or a bus run in turn on their link's thread (a bus carries one exchange at a time, so
-taking turns costs nothing, and a unit is never in doubt whose reply it read). Threads, not
-processes: a run is waiting on its links far more than it computes (a line at 115200 baud is
-1.6 ms of wire per exchange, tmclsh's own work a few tens of microseconds), so one
-interpreter keeps up with many links; it starts once (a process per unit would pay
-Python's start-up, a quarter of a second of CPU, for each), python-can's in-process virtual
-bus works, and Windows runs the same way. What a unit's thread writes to stdout or stderr,
+How they run (one thread per link, units sharing a line or a bus in turn, the stop raised in
+every unit's thread) is ``ops/units.py``; this is its front end. What a unit's thread writes
+to stdout or stderr,
 wherever in tmclsh it is written, goes to that unit's view (``unitview``): a live table on
 a terminal, lines prefixed with the unit in a pipe, ``"unit"`` in every JSON object.
 
-Ctrl-C, SIGTERM and SIGHUP reach the main thread, which raises ``KeyboardInterrupt`` in
-every unit's thread that is running (``PyThreadState_SetAsyncExc``, at the next bytecode:
-the same exception at the same kind of place as Ctrl-C in a run of one module): each unit
-stops its module with the one stop (``stop.stop_all``) and says so; units not yet started
-are not started. A unit that loses its link or whose module refuses a line fails alone.
+Ctrl-C, SIGTERM and SIGHUP stop every unit: each stops its module with the one stop
+(``stop.stop_all``) and says so; units not yet started are not started. A unit that loses its
+link or whose module refuses a line fails alone.
 """
 
 from __future__ import annotations
@@ -30,64 +23,34 @@ import argparse
 import copy
 import sys
 import threading
-from dataclasses import dataclass, field
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import TYPE_CHECKING
 
 from ..base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE,
                            ConnectError, TmclError, UsageError)
+from ..client.connect import connection_settings, open_client
+from ..ops import units as ops_units
+from ..ops.units import Unit
+from .main import Terminated, exit_cleanly_on_signals, run_connected, stop_on_interrupt
+from . import stop as _stop  # noqa: F401  (here: a unit's thread imports nothing)
 
 if TYPE_CHECKING:
     from .session import Session
-    from .unitview import Record, View
+    from .unitview import View
 
 
-@dataclass(frozen=True)
-class Unit:
-    """One module of a run: ``kind`` is how ``link`` is reached (port, can, sim)."""
-
-    number: int
-    kind: str
-    link: str
-    address: int | None = None  # serial address; None: the default (or the profile's)
-    can_id: int | None = None
-    reply_id: int | None = None
-
-    @property
-    def bus(self) -> tuple[str, str | int]:
-        """What the unit shares with others that must take turns: its line or bus (each
-        simulated unit is a module of its own)."""
-        return (self.kind, self.link if self.kind != "sim" else self.number)
-
-    @property
-    def where(self) -> str:
-        """The unit for people: ``/dev/ttyACM0 @1``, ``virtual:bench id 3``."""
-        if self.kind == "can":
-            return self.link + (f" id {self.can_id}" if self.can_id is not None else "")
-        link = f"sim {self.link}" if self.kind == "sim" else self.link
-        return link + (f" @{self.address}" if self.address is not None else "")
-
-    @property
-    def label(self) -> str:
-        return f"{self.number} {self.where}"
-
-    def tag(self, address: int) -> dict:
-        """The fields every JSON object of the unit carries first."""
-        if self.kind == "can":
-            return {"unit": self.number, "can": self.link,
-                    "can_id": self.can_id if self.can_id is not None else address}
-        return {"unit": self.number, self.kind: self.link, "address": address}
-
-    def args(self, args: argparse.Namespace) -> argparse.Namespace:
-        """The command line as if it named this unit alone."""
-        one = copy.copy(args)
-        one.port = [self.link] if self.kind == "port" else None
-        one.can = self.link if self.kind == "can" else None
-        one.sim = self.link if self.kind == "sim" else None
-        one.address = (self.address,) if self.address is not None else None
-        one.can_id = (self.can_id,) if self.can_id is not None else None
-        one.reply_id = (self.reply_id,) if self.reply_id is not None else None
-        one.all_modules = False
-        return one
+def unit_args(unit: Unit, args: argparse.Namespace) -> argparse.Namespace:
+    """The command line as if it named this unit alone."""
+    one = copy.copy(args)
+    one.port = [unit.link] if unit.kind == "port" else None
+    one.can = unit.link if unit.kind == "can" else None
+    one.sim = unit.link if unit.kind == "sim" else None
+    one.address = (unit.address,) if unit.address is not None else None
+    one.can_id = (unit.can_id,) if unit.can_id is not None else None
+    one.reply_id = (unit.reply_id,) if unit.reply_id is not None else None
+    one.all_modules = False
+    return one
 
 
 def plan_units(args: argparse.Namespace) -> list[Unit]:
@@ -156,7 +119,7 @@ def _links(args: argparse.Namespace, ports: list[str], *, several: bool) -> tupl
         return "sim", [args.sim]
     if not several:
         return "port", [None]  # (one unit: whatever the run of one module finds)
-    from ..client.connect import attached_module_port, connection_settings
+    from ..client.connect import attached_module_port
 
     one = copy.copy(args)
     one.address = one.can_id = one.reply_id = None
@@ -188,192 +151,129 @@ def run_units(args: argparse.Namespace, units: list[Unit]) -> int:
     if args.script == "-":
         raise UsageError("-f - reads standard input once; several units need a script file "
                          "(or -c)")
-    if args.script is not None:
-        _readable(args.script)
+    text = args.command if args.script is None else "\n".join(_readable(args.script))
+    _load_ahead(text)
     from .unitview import make_view
 
     view = make_view(args, units)
     return Run(args, units, view).go()
 
 
-def _readable(path: str) -> None:
+def _readable(path: str) -> list[str]:
     """The script is read by every unit; one that cannot be read is said once (exit 2)."""
     from pathlib import Path
 
     from .script import ScriptError, read_lines
 
-    read_lines(Path(path), lambda message, kind: ScriptError(message, kind))
+    return read_lines(Path(path), lambda message, kind: ScriptError(message, kind))
 
 
-@dataclass
-class _Line:
-    """One link and its units, run in turn on one thread."""
+def _load_ahead(text: str) -> None:
+    """Import here, in the main thread, the feature modules the lines' commands live in (a
+    run of one module imports them when they first run): a stop raised in a unit's thread
+    while it imports would leave the module half made for every other unit."""
+    from . import expr, script  # noqa: F401  (every run evaluates and checks its lines)
+    from .lines import classify, split_text
+    from .render import load_rich
 
-    units: list[Unit]
-    thread: threading.Thread | None = None
-    # set as the thread ends; the main thread waits on it, not on Thread.join: a
-    # KeyboardInterrupt landing in join(timeout) can mark a running thread as ended
-    # (CPython's bpo-45274 handling), and the run would end with a unit still running
-    finished: threading.Event = field(default_factory=threading.Event)
-    current: Unit | None = None  # the unit running (a stop is raised in its thread)
-    raised: bool = False  # a stop was raised in the thread and may not have landed yet
-    lock: threading.Lock = field(default_factory=threading.Lock)
-    # the units whose run ended before any stop (a motor may still turn: a stop of the
-    # whole run reaches them too)
-    done: list[Unit] = field(default_factory=list)
+    load_rich()  # (a unit's notes and warnings are styled, its tables drawn by rich)
+
+    for line in split_text(text):
+        command = classify(line).command
+        if command is not None:
+            command.load()
 
 
-class Run:
-    def __init__(self, args: argparse.Namespace, units: list[Unit], view: View):
-        self.args, self.units, self.view = args, units, view
-        self.stopping: str | None = None  # why the run is being stopped (Ctrl-C, a signal)
-        self.stop_status = EXIT_INTERRUPTED
-        lines: dict[tuple, _Line] = {}
-        for unit in units:
-            lines.setdefault(unit.bus, _Line([])).units.append(unit)
-        self.lines = list(lines.values())
+class Run(ops_units.Hooks):
+    """The shell's front end of ``ops.units.Run``: each unit a run of ``main.run_connected``
+    on its module, shown through the view (``unitview``)."""
+
+    def __init__(self, args: argparse.Namespace, plan: list[Unit], view: View):
+        self.args, self.units, self.view = args, plan, view
+        self.run = ops_units.Run(plan, self._fn, open=self._open, stop=stop_on_interrupt,
+                                 hooks=self, interrupts=(Terminated,))
 
     def go(self) -> int:
-        from .main import Terminated, exit_cleanly_on_signals
-
         exit_cleanly_on_signals()
         with self.view.showing():
-            for line in self.lines:
-                line.thread = threading.Thread(target=self._line, args=(line,),
-                                               name=f"unit-line-{line.units[0].number}",
-                                               daemon=True)
-                line.thread.start()
-            while True:
-                try:
-                    self._wait()
-                    break
-                except KeyboardInterrupt:
-                    self._stop("interrupted", EXIT_INTERRUPTED)
-                except Terminated as exc:
-                    self._stop(exc.why, exc.code)
-            if self.stopping is not None:
-                self._stop_finished()
-        return self._status()
+            results = self.run.go()
+        return self._status(results)
 
-    def _stop_finished(self) -> None:
-        """A stop of the run reaches the units that had already ended too: a script may end
-        with a motor turning ("left running"), and Ctrl-C stops every motor of the run."""
-        for line in self.lines:
-            for unit in line.done:
-                record = self.view.record(unit)
-                for _ in range(3):  # (Ctrl-C again while it stops: it stops all the same)
-                    try:
-                        self._stop_one(unit, record)
-                        break
-                    except KeyboardInterrupt:
-                        self.view.note("stopping every unit; the stops are under way")
+    @property
+    def stop_status(self) -> int:
+        by = self.run.stopped_by
+        return by.code if isinstance(by, Terminated) else EXIT_INTERRUPTED  # type: ignore
 
-    def _stop_one(self, unit: Unit, record: Record) -> None:
-        from ..client.connect import connection_settings, open_client
-        from .main import stop_on_interrupt
+    # -- opening and running a unit (its own thread) -------------------------------------
+    def _open(self, unit: Unit):
+        record = self.view.record(unit)
+        settings = connection_settings(unit_args(unit, self.args))
+        # (the connect's frames go to the transcript; not those of a stop after it ended)
+        tracer = record.tracer if record.state == "connecting" else None
+        client = open_client(settings, notice=record.notice, tracer=tracer)
+        _CURRENT.settings = settings  # (for _fn, next in this thread)
+        return client
 
-        with record.attached():
-            client = None
-            try:
-                client = open_client(connection_settings(unit.args(self.args)),
-                                     notice=record.notice)
-                stop_on_interrupt(client, self.stopping or "interrupted")
-            except (TmclError, OSError) as exc:
-                print(f"tmclsh: could not stop unit {unit.label}: {exc}", file=sys.stderr)
-                record.error(f"not stopped: {exc}")
-            finally:
-                if client is not None:
-                    client.close()
+    def _fn(self, client) -> int:
+        unit, settings = _CURRENT.unit, _CURRENT.settings
+        return run_connected(unit_args(unit, self.args), client, settings,
+                             prepare=lambda session: self._prepare(unit, session))
 
-    def _wait(self) -> None:
-        for line in self.lines:
-            while not line.finished.wait(0.1):
-                self.view.tick()
-
-    def _stop(self, why: str, status: int) -> None:
-        """Stop every unit that runs (each stops its module and says so); none starts."""
-        if self.stopping is not None:
-            self.view.note("stopping every unit; the stops are under way")
-            return
-        self.stopping, self.stop_status = why, status
-        self.view.note(f"{why}: stopping every unit")
-        for line in self.lines:
-            with line.lock:
-                if line.current is not None and line.thread is not None:
-                    line.raised = True
-                    _raise_in(line.thread, KeyboardInterrupt)
-
-    def _line(self, line: _Line) -> None:
+    # -- what the ops runner tells -------------------------------------------------------
+    @contextmanager
+    def attached(self, unit: Unit) -> Iterator[None]:
+        _CURRENT.unit = unit
         try:
-            for unit in line.units:
-                record = self.view.record(unit)
-                with line.lock:
-                    if self.stopping is not None:
-                        record.not_run(self.stopping)
-                        continue
-                    line.current = unit
-                self._unit(line, unit, record)
+            with self.view.record(unit).attached():  # what this thread writes: the unit's
+                yield
         finally:
-            try:
-                for unit in line.units:
-                    self.view.record(unit).not_run(self.stopping or "not reached")
-            finally:
-                line.finished.set()
+            _CURRENT.unit = _CURRENT.settings = None
 
-    def _unit(self, line: _Line, unit: Unit, record: Record) -> None:
-        from ..client.connect import connection_settings, open_client
-        from .main import run_connected, stop_on_interrupt
+    def begin(self, unit: Unit) -> None:
+        self.view.record(unit).begin()
 
-        args = unit.args(self.args)
-        client = None
-        stopped = False
-        with record.attached():  # what this thread writes goes to the unit's view
-            try:
-                try:
-                    record.begin()
-                    settings = connection_settings(args)
-                    client = open_client(settings, notice=record.notice, tracer=record.tracer)
-                    record.connected(client)
-                    status = run_connected(args, client, settings,
-                                           prepare=lambda session: self._prepare(
-                                               unit, record, session))
-                finally:
-                    self._leave(line)  # from here on no stop is raised in this thread
-            except KeyboardInterrupt:
-                stopped = True
-                status = self.stop_status
-            except (TmclError, OSError) as exc:  # no module (or no link) for this unit
-                print(f"tmclsh: {exc}", file=sys.stderr)
-                record.error(str(exc))
-                status = EXIT_CONNECT if client is None else EXIT_FAILED
-            except Exception as exc:  # a bug must not take the other units down
-                print(f"tmclsh: internal error: {exc!r}", file=sys.stderr)
-                record.error(repr(exc))
-                status = EXIT_FAILED
-            try:
-                if client is not None and self.stopping is not None:
-                    # interrupted, or it ended just as the stop came: stopped all the same
-                    stop_on_interrupt(client, self.stopping)
-                    stopped = True
-            finally:
-                if client is not None:
-                    client.close()
-            if client is not None and not stopped:
-                line.done.append(unit)
-            record.end(status if not stopped else self.stop_status, interrupted=self.stopping)
+    def connected(self, unit: Unit, client) -> None:
+        self.view.record(unit).connected(client)
 
-    def _leave(self, line: _Line) -> None:
-        """The unit's run is over: the stop is no longer raised in this thread, and one that
-        was raised but has not landed yet is taken back (the unit is stopped by hand)."""
-        with line.lock:
-            line.current = None
-            if line.raised:
-                line.raised = False
-                _raise_in(threading.current_thread(), None)
+    def failed(self, unit: Unit, exc: BaseException) -> None:
+        record = self.view.record(unit)
+        if isinstance(exc, (TmclError, OSError)):  # no module (or no link) for this unit
+            print(f"tmclsh: {exc}", file=sys.stderr)
+            record.error(str(exc))
+        else:
+            print(f"tmclsh: internal error: {exc!r}", file=sys.stderr)
+            record.error(repr(exc))
 
-    def _prepare(self, unit: Unit, record: Record, session: Session) -> None:
+    def end(self, result: ops_units.Result) -> None:
+        self.view.record(result.unit).end(self._unit_status(result),
+                                          interrupted=self.run.stopping)
+
+    def not_run(self, unit: Unit, why: str) -> None:
+        self.view.record(unit).not_run(why)
+
+    def not_stopped(self, unit: Unit, exc: BaseException) -> None:
+        print(f"tmclsh: could not stop unit {unit.label}: {exc}", file=sys.stderr)
+        self.view.record(unit).error(f"not stopped: {exc}")
+
+    def note(self, text: str) -> None:
+        self.view.note(text)
+
+    def tick(self) -> None:
+        self.view.tick()
+
+    def _unit_status(self, result: ops_units.Result) -> int:
+        if result.stopped:
+            return self.stop_status
+        if result.error is None:
+            return result.value
+        if isinstance(result.error, (TmclError, OSError)) and not result.connected:
+            return EXIT_CONNECT
+        return EXIT_FAILED
+
+    def _prepare(self, unit: Unit, session: Session) -> None:
         """The unit's own session: its variables, its tag on every JSON object, its view told
         of errors and progress."""
+        record = self.view.record(unit)
         client = session.client
         address = client.can_id if client.is_can else client.address
         session.variables.update(unit=unit.number, port=unit.link, address=address)
@@ -385,14 +285,14 @@ class Run:
         if record.tracer is not None:
             session.closers.append(client.add_tracer(record.tracer(client)))
 
-    def _status(self) -> int:
-        records = [self.view.record(u) for u in self.units]
+    def _status(self, results: list[ops_units.Result]) -> int:
+        records = [self.view.record(r.unit) for r in results]
         missing = [r for r in records if r.status == EXIT_CONNECT]
         self.view.finish(records)
         if missing:
             self.view.note("no module for unit " + ", unit ".join(r.unit.label
                                                                   for r in missing))
-        if self.stopping is not None:
+        if self.run.stopping is not None:
             return self.stop_status
         if missing:
             return EXIT_CONNECT
@@ -403,14 +303,4 @@ class Run:
         return EXIT_FAILED
 
 
-def _raise_in(thread: threading.Thread, exc_type: type[BaseException] | None) -> None:
-    """Raise ``exc_type`` in ``thread`` at its next bytecode (what Ctrl-C does to the main
-    thread), so a unit unwinds and stops its module as a run of one module does; None takes
-    back one raised that has not landed yet."""
-    import ctypes
-
-    if thread.ident is None:
-        return
-    ctypes.pythonapi.PyThreadState_SetAsyncExc(
-        ctypes.c_ulong(thread.ident), None if exc_type is None else ctypes.py_object(exc_type))
-
+_CURRENT = threading.local()  # .unit: the unit the current thread runs; .settings: its link's

@@ -3,7 +3,10 @@
 Every unit's thread writes as a run of one module does (``Output``, ``print`` to stderr);
 while units run, ``sys.stdout`` and ``sys.stderr`` are routers that hand what a unit's
 thread writes to that unit's ``Record``, line by line, and what other threads write to the
-real streams. A view then shows the lines:
+real streams. A record keeps its lines in a buffer of its own (its own lock, for its lines
+cut in pieces); the main thread alone takes them out and writes them (``View.drain``, every
+tick and before the run's own words), so units never wait on one another to write. A view
+then shows the lines:
 
 * ``TableView`` (stdout is a terminal): a live table, one row per unit (unit, module and
   firmware, line reached of how many, checks passed and failed, errors, the last error,
@@ -27,18 +30,21 @@ import re
 import sys
 import threading
 import time
+from collections import deque
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
+from .. import __version__
 from ..base.errors import EXIT_CONNECT, EXIT_OK, EXIT_USAGE
+from .trace import Tracer, timestamp
 
 if TYPE_CHECKING:
     import argparse
 
     from .session import Session
-    from .units import Unit
+    from ..ops.units import Unit
 
 _ROUTE = threading.local()  # .record: the Record the current thread writes to
 
@@ -116,6 +122,8 @@ class Record:
         self.why_not = ""
         self._partial = {"out": "", "err": ""}
         self._lines_lock = threading.Lock()  # (the unit's thread and its event poller)
+        # what the view is still to show, in order: (stream, lines), or ("done", None)
+        self.pending: deque[tuple[str, list[str] | None]] = deque()
         self.streams = (_Stream(self, "out"), _Stream(self, "err"))
         self._log: TextIO | None = None
         self._log_lock = threading.Lock()
@@ -138,8 +146,6 @@ class Record:
         if self._log_path is not None:
             self._log_path.parent.mkdir(parents=True, exist_ok=True)
             self._log = open(self._log_path, "w", encoding="utf-8")
-            from .. import __version__
-
             self._log_line("#", f"tmclsh {__version__}, unit {self.unit.label}, started "
                                 f"{time.strftime('%Y-%m-%d %H:%M:%S')}")
 
@@ -164,7 +170,7 @@ class Record:
         if interrupted is not None and status not in (EXIT_OK, EXIT_CONNECT):
             self.why_not = interrupted
         self.flush_lines()
-        self.view.unit_done(self)
+        self.pending.append(("done", None))
         if self._log is not None:
             self._log_line("#", f"ended {time.strftime('%Y-%m-%d %H:%M:%S')}: "
                                 f"{self.result} (exit status {status})")
@@ -176,7 +182,7 @@ class Record:
         """Never started (the run was stopped first); nothing if it ran."""
         if self.state == "waiting":
             self.state, self.why_not = "not run", why
-            self.view.unit_done(self)
+            self.pending.append(("done", None))
 
     # -- lines ---------------------------------------------------------------------------
     def write(self, stream: str, text: str) -> None:
@@ -199,18 +205,14 @@ class Record:
         if self._log is not None:
             for line in lines:
                 self._log_line(stream, line)
-        self.view.lines(self, stream, lines)
+        self.pending.append((stream, lines))
 
     def _log_line(self, kind: str, text: str) -> None:
-        from .trace import timestamp
-
         with self._log_lock:
             if self._log is not None:
                 self._log.write(f"{timestamp()} {kind:<3} {text}\n")
 
     def _tracer(self, client: Any):
-        from .trace import Tracer
-
         def write(line: Any) -> None:
             with self._log_lock:
                 if self._log is not None:
@@ -297,7 +299,6 @@ class View:
         self.log_dir = log_dir
         self.records = {u.number: Record(u, self, log_dir) for u in units}
         self.out, self.err = sys.stdout, sys.stderr  # the real streams
-        self._lock = threading.Lock()
         self._gone = False  # the reader of our output went away: nothing more is written
 
     def record(self, unit: Unit) -> Record:
@@ -322,20 +323,31 @@ class View:
         pass
 
     def tick(self) -> None:
-        pass
+        self.drain()
+
+    def drain(self) -> None:
+        """Show what the units have written since (main thread: the one writer)."""
+        for record in self.records.values():
+            pending = record.pending
+            while pending:
+                stream, lines = pending.popleft()
+                if lines is None:
+                    self.unit_done(record)
+                else:
+                    self.lines(record, stream, lines)
 
     def _write(self, stream: TextIO, text: str) -> None:
         if self._gone:
             return
-        with self._lock:
-            try:
-                stream.write(text)
-                stream.flush()
-            except (OSError, ValueError):  # a closed pipe: the units go on, unheard
-                self._gone = True
+        try:
+            stream.write(text)
+            stream.flush()
+        except (OSError, ValueError):  # a closed pipe: the units go on, unheard
+            self._gone = True
 
     def note(self, text: str) -> None:
         """The run's own words (not a unit's), on stderr."""
+        self.drain()
         self._write(self.err, f"tmclsh: {text}\n")
 
     def lines(self, record: Record, stream: str, lines: list[str]) -> None:
@@ -347,6 +359,7 @@ class View:
         pass
 
     def finish(self, records: list[Record]) -> None:
+        self.drain()
         self._write(self.out, plain_table(records))
 
 
@@ -367,6 +380,7 @@ class JsonView(View):
         self._write(self.out, json.dumps(record.summary(), ensure_ascii=False) + "\n")
 
     def finish(self, records: list[Record]) -> None:
+        self.drain()
         self._write(self.err, plain_table(records))
 
 
@@ -390,10 +404,8 @@ class TableView(View):
     def stop(self) -> None:
         self.live.stop()
 
-    def tick(self) -> None:
-        pass  # (the live display refreshes itself)
-
     def note(self, text: str) -> None:
+        self.drain()
         self._above(f"tmclsh: {text}", "tmcl.warn")
 
     def lines(self, record: Record, stream: str, lines: list[str]) -> None:
@@ -412,6 +424,7 @@ class TableView(View):
             self._write(self.err, text + "\n")
 
     def finish(self, records: list[Record]) -> None:
+        self.drain()
         self.console.print(self._table(final=True))
         if self.hidden and not self.log_dir:
             self.note("results are not shown beside the table: --log-dir DIR keeps each "

@@ -3,7 +3,7 @@
     .watch pos=GAP 1, 0; speed=GAP 3, 0; in0=GIO 0, 0 --interval 0.1 --until "pos >= 5000"
 
 * ``poll(session, items)`` reads once (identical reads within a sample are sent once) and
-  gives a ``Sample``; ``WatchState.add(sample)`` folds it into a frozen ``Snapshot``;
+  gives a ``Sample`` (the sampling is ``ops/watch.py``, on a client; here on the session); ``WatchState.add(sample)`` folds it into a frozen ``Snapshot``;
   ``render(snapshot) -> Table`` is pure (no bus I/O) and runs at a fixed refresh rate.
 * On a terminal: a rich ``Live`` table with value, min, max, rate of change, a sparkline of
   recent values, changed values highlighted. Under ``--json`` or when stdout is not a
@@ -46,9 +46,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
 from ..base import clock, files
-from ..base.errors import TmclError, TransportError, ValidationError
-from ..client.ledger import CONFIRM_ROUNDS
-from ..ops.certain import read_until_certain
+from ..base.errors import TmclError, TransportError, ValidationError  # noqa: F401
+from ..ops import watch as sampling
+from ..ops.watch import Item, Reading, Sample, SendClock
 from . import expr, lines, plot, script
 from . import options
 from .commands import command, options_of
@@ -71,242 +71,33 @@ _NO_KEYS_HELP = "Ctrl-C: stop all and end"
 STOP_KEYS = "sS "  # stop the program and every motor, keep watching
 QUIT_KEYS = "qQ"  # end the watch quietly (so does Esc)
 RECONNECT_EVERY = 0.5  # s between reconnection attempts after the link was lost
-TOGETHER_SLACK = 0.01  # s a row's reads may lie apart beyond the line's own pace, "together"
 
 
-# -- what is watched ---------------------------------------------------------------------
-
-@dataclass(frozen=True)
-class Item:
-    name: str
-    expression: expr.Expression
-
+# -- what is watched, on the session (the sampling itself is ops/watch.py) -------------------
 
 def parse_items(session: Session, text: str) -> list[Item]:
-    """``pos=GAP 1, 0; GIO 0, 0`` -> items; a name is optional (the expression is its name)."""
-    import re
-
-    items: list[Item] = []
-    parts = text.split(";")
-    for i, part in enumerate(parts):
-        part = part.strip()
-        if not part:
-            continue
-        m = re.match(r"([A-Za-z_][A-Za-z0-9_]*)\s*=(?!=)(.*)$", part, re.DOTALL)
-        name, body = (m.group(1), m.group(2)) if m else (None, part)
-        try:
-            expression = expr.parse(session.expand(body))
-            expr.validate(session, expression)
-        except TmclError as exc:
-            if i == 0:
-                raise
-            raise ValidationError(_after_semicolon(parts, i, exc)) from None
-        name = name or expression.text
-        if any(i.name == name for i in items):
-            raise ValidationError(f"{name!r} is watched twice")
-        items.append(Item(name, expression))
-    if not items:
-        raise ValidationError("nothing to watch")
-    return items
-
-
-def _after_semicolon(parts: list[str], i: int, exc: TmclError) -> str:
-    """An expression after a ';' did not parse: perhaps it was meant as the next command."""
-    before = ";".join(parts[:i]).strip()
-    after = ";".join(parts[i:]).strip()
-    return (f"{parts[i].strip()!r} after ';' is not a watch expression ({exc}); .watch takes "
-            f"the rest of its line, ';' separating its expressions. To run {after!r} after "
-            f"the watch, put it on a line of its own:\n  .watch {before}\n  {after}")
+    """``pos=GAP 1, 0; GIO 0, 0`` -> items, ``${...}`` substituted first."""
+    return sampling.parse_items(session.client, text, session.expand)
 
 
 def default_items(session: Session) -> list[Item]:
-    motors = min(session.module.motors, 3)
-    text = "; ".join(f"pos{m}=GAP ActualPosition, {m}; speed{m}=GAP ActualSpeed, {m}"
-                     for m in range(motors))
-    return parse_items(session, text)
-
-
-# -- samples and snapshots -----------------------------------------------------------------
-
-@dataclass(frozen=True)
-class Sample:
-    t: float  # seconds since the watch started: when its first value was read
-    values: dict[str, Number | None]
-    errors: dict[str, str] = field(default_factory=dict)
-    lost: str | None = None  # the link was lost during this sample: why
-    suspect: tuple[str, ...] = ()  # values whose answer may have been another request's
-    times: dict[str, float] = field(default_factory=dict)  # name -> when its value was read
-    together: bool = True  # its values were read back to back (no retry, wait or read again)
-
-
-class SendClock:
-    """When the last request went out (a sent-only tracer: it leaves the receive path as it
-    is). A read's time is the sending of the request whose answer was taken: a retry's, not
-    the first attempt's; and not the answer's arrival, which a slow line holds back while
-    the module read its value at the request. ``fastest``: the quickest exchange seen (a
-    request sent to its answer taken), the measure of "back to back" on this line."""
-
-    def __init__(self) -> None:
-        self.sent = 0.0
-        self.fastest: float | None = None
-
-    def __call__(self, direction: str, raw: bytes, decoded: object) -> None:
-        self.sent = time.monotonic()
-
-    def took(self, sent: float, answered: float) -> None:
-        took = answered - sent
-        if self.fastest is None or took < self.fastest:
-            self.fastest = took
-
-    def together(self, times: Sequence[float]) -> bool:
-        """Whether reads sent at ``times`` followed one another as fast as this line goes:
-        within three of the fastest exchanges per read, plus 10 ms (scheduling)."""
-        if len(times) < 2:
-            return True
-        span = max(times) - min(times)
-        return span <= (len(times) - 1) * 3 * (self.fastest or 0.0) + TOGETHER_SLACK
-
-
-@dataclass
-class _TimedContext(expr.TrackedContext):
-    """A ``TrackedContext`` that notes when each read was made (``read_at``: text ->
-    monotonic time its answered request went out, per ``SendClock``)."""
-
-    clock: SendClock | None = None
-    read_at: dict[str, float] = field(default_factory=dict)
-
-    def read(self, node: expr.Read, text: str) -> Number:
-        if self.cache is not None and text in self.cache:
-            self.used.add(text)
-            return self.cache[text]
-        before = time.monotonic()
-        try:
-            return super().read(node, text)
-        finally:
-            clock = self.clock
-            sent = clock.sent if clock is not None and clock.sent >= before else before
-            if text in self.trace or clock is None:
-                self.read_at[text] = sent
-            if clock is not None and text in self.trace:
-                clock.took(sent, time.monotonic())
+    return sampling.default_items(session.client)
 
 
 def poll(session: Session, items: Sequence[Item], t: float) -> Sample:
-    """One sample: every item evaluated once; a read failing shows as None plus its error.
-    A lost link ends the sample at once (``Sample.lost``). Its answers are judged on what the
-    client knows so far and then once more after a 136 type 1 exchange (see ``_Reading``).
-    ``t``: seconds since the watch began, when this sample starts (its times count from
-    ``time.monotonic() - t``)."""
-    reading = _Reading(session, items, t)
+    """One sample on the session (``ops.watch.poll``): its variables, its reads counted."""
+    reading = _reading(session, items, t)
     reading.settle(confirm=True)
     return reading.sample()
 
 
-class _Lost(Exception):
-    """The link was lost while reading again (the sample ends: ``_Reading.lost``)."""
+def _reading(session: Session, items: Sequence[Item], t: float,
+             clock: SendClock | None = None, start: float | None = None) -> Reading:
+    return Reading(session.client, items, t, clock, start, variables=session.variables,
+                   counted=expr.SessionContext(session).counted)
 
 
-class _Reading:
-    """One sample's reads, with the reply that answered each (``expr.TrackedContext``), so
-    a read whose answer is found in doubt can be read again or marked."""
-
-    def __init__(self, session: Session, items: Sequence[Item], t: float,
-                 clock: SendClock | None = None, start: float | None = None):
-        """``t``: seconds since the watch began (``start``, monotonic), now."""
-        self.session, self.items, self.t = session, items, t
-        self.start = time.monotonic() - t if start is None else start
-        self.ctx = _TimedContext(session, cache={}, clock=clock)
-        self.values: dict[str, Number | None] = {}
-        self.errors: dict[str, str] = {}
-        self.uses: dict[str, set[str]] = {}  # item name -> the reads it used
-        self.suspect: list[str] = []
-        self.reread = 0  # answers read again (found in doubt, then certain or not)
-        self.lost: str | None = None
-        self.judged = False  # every answer judged (a request has followed the last one)
-        for item in items:
-            if not self._evaluate(item):
-                break
-
-    def _evaluate(self, item: Item) -> bool:
-        """Evaluate one item; False if the link was lost (the sample ends)."""
-        ctx = self.ctx
-        ctx.used = set()
-        try:
-            self.values[item.name] = item.expression.evaluate(ctx)
-            self.errors.pop(item.name, None)
-        except TransportError as exc:
-            self.lost = str(exc)
-            return False
-        except TmclError as exc:
-            self.values[item.name] = None
-            self.errors[item.name] = str(exc)
-        finally:
-            self.uses[item.name] = ctx.used
-        return True
-
-    def settle(self, *, confirm: bool, again: bool = True, followed: bool = False) -> None:
-        """Judge the answers: ``confirm`` sends one 136 type 1 first, so the line's last
-        answer has arrived (without it, the last read stays unjudged unless a suspect was
-        found: reading again ends with that exchange). ``again``: read an answer in doubt
-        again (``CONFIRM_ROUNDS`` times at most), else mark it at once (too late to be
-        this sample's value). ``followed``: a request has been sent since the last read
-        (the next sample's), so every answer can be judged without an exchange."""
-        if self.lost is not None or self.judged:
-            return
-        session, ctx = self.session, self.ctx
-        client = session.client
-
-        def read(doubt: set[str] | None) -> dict[int, str]:
-            """Read the reads in doubt again: every item that used one is evaluated again
-            (the others' reads come from this sample's cache)."""
-            assert doubt is not None and ctx.cache is not None
-            self.reread += len(doubt)
-            client._settle(ctx.answered)
-            for seq in [q for q, text in ctx.answered.items() if text in doubt]:
-                del ctx.answered[seq]
-            for text in doubt:
-                ctx.cache.pop(text, None)
-            before = set(ctx.answered)
-            for item in self.items:
-                if self.uses.get(item.name, set()) & doubt and not self._evaluate(item):
-                    raise _Lost
-            return {q: text for q, text in ctx.answered.items() if q not in before}
-
-        try:
-            found = read_until_certain(client, read, first=dict(ctx.answered), confirm=confirm,
-                                       again=CONFIRM_ROUNDS if again else 0)
-        except _Lost:
-            self.judged = confirm or followed or not expr.can_doubt(session)
-            return
-        doubt = found.doubt
-        self.judged = (confirm or followed or not expr.can_doubt(session)
-                       or found.again > 0)
-        if doubt:
-            names = [i.name for i in self.items if self.uses.get(i.name, set()) & doubt]
-            for name in names:
-                self.values[name] = None
-                self.errors.pop(name, None)
-            self.suspect += [n for n in names if n not in self.suspect]
-        if self.judged:
-            session.client._settle(ctx.answered)
-
-    def sample(self) -> Sample:
-        if self.lost is not None:
-            return Sample(self.t, {i.name: None for i in self.items}, {}, lost=self.lost)
-        read_at = self.ctx.read_at
-        times: dict[str, float] = {}
-        for item in self.items:  # (an expression of several reads: midway between them)
-            when = [read_at[r] for r in self.uses.get(item.name, ()) if r in read_at]
-            if when and self.values.get(item.name) is not None:
-                times[item.name] = (min(when) + max(when)) / 2 - self.start
-        used = [read_at[r] for r in set().union(*self.uses.values()) if r in read_at] \
-            if self.uses else []
-        clock = self.ctx.clock
-        together = clock.together(used) if clock is not None else True
-        t = min(times.values()) if times else self.t
-        return Sample(t, dict(self.values), dict(self.errors), suspect=tuple(self.suspect),
-                      times=times, together=together)
-
+# -- snapshots ---------------------------------------------------------------------------
 
 @dataclass(frozen=True)
 class Series:
@@ -753,7 +544,7 @@ class _Watch:
         self.result = WatchResult(0, 0.0, "interrupt")
         self.sink: _Csv | None = None
         self.view: _Live | None = None
-        self.pending: _Reading | None = None  # read, shown once its last answer is judged
+        self.pending: Reading | None = None  # read, shown once its last answer is judged
         self.keys = Keys()
         self.intr = _Interrupt()
         self.clock = SendClock()
@@ -763,7 +554,7 @@ class _Watch:
     def run(self) -> str:
         """Returns why the watch ended: count, until, key, interrupt or pipe.
 
-        A sample is shown once its answers are judged (``_Reading.settle``): its last read
+        A sample is shown once its answers are judged (``Reading.settle``): its last read
         by the next sample's first request, so it is shown one sample late; one that ends
         the watch after a 136 type 1 exchange."""
         next_at = self.start
@@ -775,7 +566,7 @@ class _Watch:
                 if ended is not None:
                     return self._end(ended)
                 continue
-            reading = _Reading(self.session, self.items, time.monotonic() - self.start,
+            reading = _reading(self.session, self.items, time.monotonic() - self.start,
                                self.clock, self.start)
             if self.pending is not None:  # judged by this sample's requests
                 ended = self._deliver(self.pending, followed=True, until=False)
@@ -815,7 +606,7 @@ class _Watch:
                 return self._end(ended)
         return self._end("interrupt")
 
-    def _deliver(self, reading: _Reading, *, confirm: bool = False, followed: bool = False,
+    def _deliver(self, reading: Reading, *, confirm: bool = False, followed: bool = False,
                  until: bool = False) -> str | None:
         """Judge a sample's answers, then show, log and emit it; "count", "until" or "pipe"
         if the watch ends with it. ``followed``: requests have gone out since (the next
