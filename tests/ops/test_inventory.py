@@ -72,8 +72,11 @@ def test_an_inventory_saved_from_a_line_matches_it(run_tmclsh, tmp_path):
         Module(version="0351V103", address=7, line=bus)
         inv = tmp_path / "saved.toml"
         p = run_tmclsh("scan", "--port", bus.path, "--to", "8", *SCAN, "--ascii",
-                       "--save", str(inv))
+                       "--save", str(inv), "--json")
         assert p.returncode == 0, p.stderr
+        rows = [json.loads(line) for line in p.stdout.splitlines()]
+        assert [r["address"] for r in rows[:-1]] == [5, 7, 3]  # (the ASCII pass comes last)
+        assert rows[-1] == {"saved": str(inv), "modules": 3}
         saved = inventory.read_inventory(inv)
         assert [(e.address, e.module, e.mode) for e in saved.modules] == [
             (3, "TMCM-1311", "ascii"), (5, "TMCM-1311", "binary"), (7, "TMCM-351", "binary")]
@@ -143,6 +146,10 @@ BAD = {
     "mode": (entry(1, mode="text"), 'mode is "binary" or "ascii"'),
     "empty": ("", "no [[module]] entries"),
     "outside the range": (entry(9), "outside the scanned range 1..5"),
+    "backup in ascii mode": (entry(1, mode="ascii", extra='backup = "b.tmcl"'),
+                             "binary mode only"),
+    "CAN ids on a serial line": ('[[module]]\ncan_id = 1\ntype = "TMCM-1311"\n',
+                                 "names CAN ids; this link is a serial line"),
 }
 
 

@@ -47,6 +47,7 @@ if TYPE_CHECKING:
 MAX_INVENTORY = 1024 * 1024  # bytes: a line of 255 modules is a few dozen kilobytes
 ADDRESS, CAN_ID = "address", "can_id"
 BINARY, ASCII = "binary", "ascii"
+SETTINGS_RETRIES = 2  # a scan asks once; a backup's reads are the client's, retried as usual
 _KEYS = ("address", "can_id", "type", "firmware", "lowest", "mode", "backup")
 
 # the kinds of difference, in the order a technician deals with them
@@ -237,6 +238,9 @@ def _entry(entry: dict, where: str, path: Path) -> tuple[Expected, str]:
         raise InventoryError(f"{where}: mode is \"binary\" or \"ascii\", not {strings['mode']!r}")
     backup = strings["backup"]
     backup_path = None
+    if backup is not None and mode == ASCII:
+        raise InventoryError(f"{where}: a backup is compared in binary mode only; this entry "
+                             "names ASCII mode")
     if backup is not None:
         backup_path = Path(backup).expanduser()
         if not backup_path.is_absolute():
@@ -388,12 +392,15 @@ def _settings(client: Client, want: Expected, hit: Found, where: str) -> list[Di
         client.can_id = hit.address
     client.module = moddb.load(want.module) if not want.module.isdigit() else None
     client.version = hit.version
+    retries, client.retries = client.retries, max(client.retries, SETTINGS_RETRIES)
     try:
         saved = backup.read_backup(client, want.backup, command=".diff")
         diffs = backup.compare(client, saved)
     except TmclError as exc:
         return [Difference(SETTINGS, hit.address, f"{where}: settings not compared with "
                            f"{want.backup}: {exc}", want, hit, error=str(exc))]
+    finally:
+        client.retries = retries
     if not diffs:
         return []
     shown = "; ".join(f"{d.slot.title()} saved {d.slot.value}, live {d.live}"
