@@ -204,3 +204,34 @@ def test_saved_text_reads_back_as_what_answered():
         (3, "TMCM-1311", None, "binary")]
     # the module in its bootloader is still named by the check
     assert [d.kind for d in inventory.compare(inv, found).differences] == ["bootloader"]
+
+
+def test_a_can_bus_inventory_names_can_ids(monkeypatch, capsys, tmp_path):
+    """On CAN the inventory's numbers are CAN ids (``can_id``), saved and checked so."""
+    import uuid
+
+    from tmclsh.cli import main as cli
+    from tmclsh.sim import Simulator
+    from tmclsh.sim.serve import serve_can
+
+    monkeypatch.setenv("TMCLSH_CONFIG", "/dev/null")
+    channel = f"inv-{uuid.uuid4().hex[:8]}"
+    sim = Simulator("TMCM-1311", 1)
+    server = serve_can(sim, "virtual", channel)
+    inv = tmp_path / "bus.toml"
+    try:
+        assert cli.main(["scan", "--can", f"virtual:{channel}", "--to", "3",
+                         "--save", str(inv)]) == 0
+        assert "can_id = 1" in inv.read_text()
+        assert cli.main(["scan", "--can", f"virtual:{channel}", "--to", "3",
+                         "--expect", str(inv)]) == 0
+        inv.write_text(inv.read_text() + '[[module]]\ncan_id = 2\ntype = "TMCM-351"\n')
+        capsys.readouterr()
+        assert cli.main(["scan", "--can", f"virtual:{channel}", "--to", "3",
+                         "--expect", str(inv), "--json"]) == 1
+    finally:
+        server.close()
+        sim.close()
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert [(r["difference"], r["can_id"]) for r in rows if "difference" in r] == [
+        ("missing", 2)]
