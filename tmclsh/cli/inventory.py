@@ -7,9 +7,9 @@ per difference in a pipe, one JSON object per difference with ``--json``.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 
+from ..base.edges import write_json
 from ..base.errors import EXIT_FAILED, EXIT_OK, UsageError
 
 
@@ -52,7 +52,7 @@ def save(args: argparse.Namespace, found: list, client) -> None:
                                               where=client.describe()))
     n = len(found)
     if args.json:
-        print(json.dumps({"saved": args.save, "modules": n}), flush=True)
+        write_json({"saved": args.save, "modules": n})
     print(f"inventory of {n} module{'s' if n != 1 else ''} saved to {args.save}",
           file=sys.stderr)
     odd = [f.address for f in found if f.answers > 1 or f.bootloader]
@@ -69,9 +69,9 @@ def expect(args: argparse.Namespace, inventory, found: list, client) -> int:
     check = compare(inventory, found, client=client)
     if args.json:
         for diff in check.differences:
-            print(json.dumps(diff.as_json(inventory.ids)), flush=True)
-        print(json.dumps({"inventory": args.expect, "match": check.matches,
-                          "differences": len(check.differences)}), flush=True)
+            write_json(diff.as_json(inventory.ids))
+        write_json({"inventory": args.expect, "match": check.matches,
+                    "differences": len(check.differences)})
     elif check.differences and sys.stdout.isatty():
         _table(check, inventory)
     else:

@@ -106,7 +106,6 @@ def cmd_scan(args: argparse.Namespace) -> int:
     from ..tmcl.modules import baud_rates
     from ..base.errors import ConnectError, TransportError, ValidationError
     from ..ops.scan import ASCII_WIRE_BYTES, address_timeout, answer_at, rate_matters, scan
-
     from . import inventory as inv
 
     if args.first > args.last:
