@@ -44,6 +44,7 @@ PORT_GLOBS = ("/dev/ttyUSB*", "/dev/ttyACM*", "/dev/serial/by-id/*")
 VALUE_KINDS = {
     "port": "ports", "can": "can", "sim": "modules", "module": "modules", "profile": "profiles",
     "script": "files", "file": "files", "output": "files", "module_file": "files",
+    "save": "files", "expect": "files",
 }
 
 
@@ -408,7 +409,9 @@ _SUB_NOTES = {
             "no effect (TCP, a module's own USB port, or modules found at one rate answering "
             "at the next). A module in its bootloader (a firmware update did not "
             "complete) is marked, with the tmclsh firmware command that completes it. Exit "
-            "status 3 when nothing answers.",
+            "status 3 when nothing answers. --save INVENTORY writes what answered as an "
+            "inventory, --expect INVENTORY compares the line with one (see LINE INVENTORY): "
+            "exit 0 match, 1 differences, 3 nothing answered.",
     "firmware": "Writes the firmware image FILE.hex (Intel HEX, as the vendor ships it) to the "
                 "module over its TMCL bootloader. The image is read whole before anything is "
                 "sent, and refused with FILE:LINE and the fault when a record is damaged, when "
@@ -922,7 +925,7 @@ def _limits() -> list[str]:
                  f"are refused unread. Expressions: at most {MAX_LENGTH} characters, "
                  f"{MAX_OPERATORS} operators and {MAX_DEPTH} levels of nesting; number "
                  f"literals at most {MAX_LITERAL} digits. Every file "
-                 "tmclsh writes (asm -o, .record, .watch --csv, .dump, .echo >) is written "
+                 "tmclsh writes (asm -o, scan --save, .record, .watch --csv, .dump, .echo >) is written "
                  "beside its target and renamed over it when complete, so a failed write "
                  "leaves the old file as it was."),
             ".PP",
@@ -1102,6 +1105,47 @@ says if two still answer at one address.
 
 
 _WINDOWS_CONFIG = "%LOCALAPPDATA%\\tmclsh"
+_INVENTORY = f"""\
+.SH LINE INVENTORY
+{_b("tmclsh scan")} {_b("--save")} {_i("INVENTORY")} writes what answered as a TOML file, one
+{_b("[[module]]")} entry per module; {_b("tmclsh scan")} {_b("--expect")} {_i("INVENTORY")}
+compares the line with it after a module was swapped or the line rewired:
+.PP
+.nf
+[[module]]
+address = 1                # can_id = 1 on a CAN bus
+type = "TMCM\\-1311"         # or the type number of a module tmclsh does not know
+firmware = "1311V111"      # exactly; or lowest = "1311V110": that or newer
+mode = "binary"            # or "ascii"
+backup = "axis1.tmcl"      # optional: a .save file its settings must match
+.fi
+.PP
+The inventory is read (at most 1 MiB) and checked whole before anything is sent: an unknown
+key, a module type tmclsh does not know, an address named twice or outside {_b("--from")}..{_b("--to")}
+is one error line and exit status 2. A backup is named relative to the inventory's folder.
+.PP
+Every difference is named: {_b("missing")} (nothing answered), {_b("extra")} (a module the
+inventory does not name), {_b("doubled")} (two modules answer at one address; nothing else
+is compared there), {_b("bootloader")} (a firmware update did not complete), {_b("type")}
+(another type; its firmware is not compared), {_b("firmware")}, {_b("mode")} (in ASCII mode
+where binary was expected, or the reverse) and {_b("settings")} (parameters that differ from
+the backup, each named with its saved and live value). On a terminal they are a table; in a
+pipe one line each ({_b("differs:")} ...), then the count; with {_b("--json")} the scan's rows,
+one object per difference ({_b("difference")}, {_b("address")} or {_b("can_id")},
+{_b("text")}, {_b("expected")}, {_b("found")}; {_b("settings")} for a backup's) and a last
+{{"inventory", "match", "differences"}}. Exit status 0 when the line matches, 1 for any
+difference, 3 when nothing answered.
+.PP
+Nothing is sent that a scan does not send, save that the inventory's addresses silent in
+binary are asked in ASCII mode (as {_b("--ascii")} asks every silent address; a module in
+ASCII mode is saved by {_b("--ascii")} {_b("--save")}), and that a backup's parameters are
+read, never written, from the module it is named for, and only when that module is the type
+named, alone at its address, in binary mode and out of its bootloader. From Python:
+{_b("tmclsh.ops.inventory")} ({_b("read_inventory")}, {_b("inventory_text")},
+{_b("compare")} -> {_b("Check")}).
+"""
+
+
 _PYTHON = f"""\
 .SH PYTHON API
 The shell's client is a Python API too.
@@ -1284,6 +1328,7 @@ def manpage(parser: argparse.ArgumentParser | None = None) -> str:
     out += _configuration()
     out.append(_BACKUPS.rstrip("\n"))
     out.append(_UNITS.rstrip("\n"))
+    out.append(_INVENTORY.rstrip("\n"))
     out += _limits()
     out.append(_PYTHON.rstrip("\n"))
     out.append(_FILES.rstrip("\n"))

@@ -106,9 +106,11 @@ def cmd_scan(args: argparse.Namespace) -> int:
     from ..tmcl.modules import baud_rates
     from ..base.errors import ConnectError, TransportError, ValidationError
     from ..ops.scan import ASCII_WIRE_BYTES, address_timeout, answer_at, rate_matters, scan
+    from . import inventory as inv
 
     if args.first > args.last:
         raise ValidationError(f"--from {args.first} is above --to {args.last}")
+    inventory = inv.before_scan(args)  # (read and checked before the link is opened)
     auto = args.baud == "auto"
     if auto:
         args.baud = None
@@ -120,6 +122,11 @@ def cmd_scan(args: argparse.Namespace) -> int:
     client = Client(transport, address=args.first, host_address=settings["host_address"],
                     timeout=1.0, retries=0, can_id=settings.get("can_id"),
                     reply_id=settings.get("reply_id"))
+    try:
+        inv.check_link(inventory, client)
+    except ValidationError:
+        client.close()
+        raise
     ids = "CAN ids" if client.is_can else "addresses"
     usb = bool(settings.get("port") and _is_usb(settings["port"]))
     rates: list[int | None] = [None]
@@ -170,7 +177,8 @@ def cmd_scan(args: argparse.Namespace) -> int:
                     print(f"address {hit.address:3d}  {hit.module or 'unknown module':<10}  "
                           f"{what} {hit.version or '?'}{at}{mode}{twice}", flush=True)
 
-            options = {"ascii": ascii, "ascii_timeout": ascii_timeout}
+            options = {"ascii": ascii, "ascii_timeout": ascii_timeout,
+                       "ascii_also": inventory.addresses() if inventory else ()}
             if show_progress:
                 hits = _scan_with_progress(client, addresses, timeout,
                                            f"{ids} {args.first}..{args.last} on {where}", row,
@@ -194,6 +202,9 @@ def cmd_scan(args: argparse.Namespace) -> int:
                       f"too: the baud rate has no effect on {transport.url}; stopped",
                       file=sys.stderr)
                 break
+        if found and inventory is not None:  # (settings are read on the scan's link)
+            _scan_summary(found, auto)
+            return inv.expect(args, inventory, found, client)
     finally:
         client.close()
     if not found:
@@ -202,6 +213,14 @@ def cmd_scan(args: argparse.Namespace) -> int:
                    + ("" if auto or client.is_can else "; other baud rates: --baud auto"),
                    EXIT_CONNECT, prefix="")
         return EXIT_CONNECT
+    _scan_summary(found, auto)
+    if args.save is not None:
+        inv.save(args, found, client)
+    return EXIT_OK
+
+
+def _scan_summary(found: list, auto: bool) -> None:
+    """What a scan found, on standard error: where, and each address two modules share."""
     where = ", ".join(str(f.address) + (f" ({f.baud} baud)" if auto else "") for f in found)
     n = len(found)
     print(f"{n} module{'s' if n != 1 else ''} found at {where}", file=sys.stderr)
@@ -210,7 +229,6 @@ def cmd_scan(args: argparse.Namespace) -> int:
             print(f"tmclsh: two modules answer at address {hit.address}: give each its own "
                   "address (one at a time on the line: SGP 66, 0, N), or take one off the line",
                   file=sys.stderr)
-    return EXIT_OK
 
 
 def _connection_words(args: argparse.Namespace) -> str:

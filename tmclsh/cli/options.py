@@ -346,6 +346,14 @@ def build_parser() -> argparse.ArgumentParser:
                     help="also look for modules in ASCII mode at every address that did not "
                          "answer in binary (without it, only when none did: the ASCII pass "
                          "takes as long as the first)")
+    sc.add_argument("--save", metavar="INVENTORY", default=None,
+                    help="write what answered as an inventory (TOML): each module's address "
+                         "or CAN id, type, firmware and mode")
+    sc.add_argument("--expect", metavar="INVENTORY", default=None,
+                    help="compare the line with an inventory and name every difference "
+                         "(missing, extra, another type, other firmware, in its bootloader, "
+                         "in ASCII mode, two modules at one address, settings that differ "
+                         "from a backup): exit 0 match, 1 differences, 3 nothing answered")
     sc.add_argument("--json", action="store_true", default=argparse.SUPPRESS)
 
     fw = sub.add_parser("firmware", help="update the module's firmware over its TMCL "

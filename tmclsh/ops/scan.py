@@ -273,12 +273,16 @@ def _in_ascii_mode(client: Client, addr: int, timeout: float) -> Found | None:
 
 def scan(client: Client, addresses: Iterable[int], *, timeout: float,
          slow_timeout: float = SLOW_TIMEOUT, progress: Progress | None = None,
-         ascii: bool | None = None, ascii_timeout: float | None = None) -> list[Found]:
+         ascii: bool | None = None, ascii_timeout: float | None = None,
+         ascii_also: Iterable[int] = ()) -> list[Found]:
     """Probe every address; ``progress(address, found_or_None)`` after each of the first
     pass. Addresses that answered late or garbled are probed again with ``slow_timeout``;
     an address that answered twice is asked once more (``Found.answers``). On a serial
     line the addresses still silent are then asked in ASCII mode (``ascii``: None when
-    nothing answered in binary, True always, False never), waiting ``ascii_timeout`` each."""
+    nothing answered in binary, True always, False never), waiting ``ascii_timeout`` each;
+    those of ``ascii_also`` that are silent are asked in any case (an inventory names a
+    module there: it may be in its ASCII mode, and the ASCII pass over only those costs
+    little)."""
     addresses = list(addresses)
     found: dict[int, Found] = {}
     again: set[int] = set()
@@ -327,9 +331,11 @@ def scan(client: Client, addresses: Iterable[int], *, timeout: float,
                 a in client.shared or client.answered_twice(a, lately=True))):
             if _answers_twice(client, addr, timeout):  # (a second answer that came later)
                 found[addr] = replace(found[addr], answers=2)
-        if ascii is not False and (ascii or not found) and _has_ascii_mode(client):
-            found.update(_ascii_pass(client, [a for a in addresses if a not in found],
-                                     ascii_timeout or timeout))
+        if _has_ascii_mode(client):
+            everywhere = ascii is not False and (ascii or not found)
+            also = set(ascii_also)
+            silent = [a for a in addresses if a not in found and (everywhere or a in also)]
+            found.update(_ascii_pass(client, silent, ascii_timeout or timeout))
     finally:
         unsubscribe()
     return [found[a] for a in sorted(found)]
