@@ -1386,7 +1386,7 @@ def bench_replay(args: argparse.Namespace) -> dict:
         writer.close()
         capture = replay.read_capture(path)
     assert len(capture.exchanges) == n, len(capture.exchanges)
-    requests = [replay._aim(client, c) for c in capture.exchanges]
+    requests = [replay.aim(client, c) for c in capture.exchanges]
 
     def floor() -> float:
         request = client.request

@@ -18,7 +18,7 @@ import pytest
 import serial
 
 from conftest import ROOT, tmclsh_env
-from responder import CanModule, PtyModule
+from responder import CanModule, PtyModule, reply
 from tmclsh.cli import main as cli
 from tmclsh.ops import replay as rp
 
@@ -102,6 +102,20 @@ def test_a_parameter_changed_in_the_module_is_found_and_named(module, tmp_path, 
     assert "GAP 6, 0" in out and "value 128 -> 99" in out and "1 difference" in out
 
 
+def test_a_module_at_another_address_is_found_where_the_capture_says(tmp_path, capsys):
+    m = PtyModule(version="1161V130", address=5)
+    try:
+        m.values[(4, 0, False)] = 7
+        cap = str(tmp_path / "at5.txt")
+        _bridge_capture(m.path, cap, [request(5, GAP, 4, 0), request(5, 136, 1, 0)])
+        m.got.clear()
+        assert cli.main(["replay", cap, "--port", m.path, "--json"]) == 0  # (no -a 5)
+        assert objects(capsys.readouterr().out)[-1]["addresses"] == [5]
+        assert (GAP, 4, 0, 0) in m.got
+    finally:
+        m.close()
+
+
 def test_writes_are_refused_without_yes_and_named(module, tmp_path, capsys):
     cap = str(tmp_path / "session.txt")
     _bridge_capture(module.path, cap, READS[:1] + [request(1, SAP, 4, 0, 1000),
@@ -128,6 +142,38 @@ def test_writes_are_refused_without_yes_and_named(module, tmp_path, capsys):
     assert SAP in sent and 1 in sent
     assert 3 in sent[sent.index(1):]  # MST after the ROR: the stop
     assert module.values[(4, 0, False)] == 1000
+
+
+def test_ctrl_c_ends_a_replay_that_wrote_with_the_safety_stop(module, tmp_path, capsys):
+    """Paced as captured, the second request is half a minute away; Ctrl-C comes first."""
+    import _thread
+    import threading
+
+    cap = tmp_path / "paced.txt"
+    t = 1_700_000_000.0
+    cap.write_text("".join(f"{when:.6f} {d} {data.hex(' ')}\n" for when, d, data in [
+        (t, "tx", request(1, 1, 0, 0, 500)), (t + 0.001, "rx", reply(1, 500)),
+        (t + 30, "tx", request(1, GAP, 4, 0)), (t + 30.001, "rx", reply(GAP, 51200))]))
+    module.got.clear()
+
+    def interrupt() -> None:
+        deadline = time.monotonic() + 20
+        while not any(g[0] == 1 for g in module.got) and time.monotonic() < deadline:
+            time.sleep(0.02)
+        time.sleep(0.2)
+        _thread.interrupt_main()
+
+    threading.Thread(target=interrupt, daemon=True).start()
+    started = time.monotonic()
+    assert cli.main(["replay", str(cap), "--port", module.path, "--yes", "--as-captured"]) \
+        == 130
+    assert time.monotonic() - started < 25
+    sent = module.commands()
+    assert 1 in sent and 3 in sent[sent.index(1):], sent  # ROR, then MST: the stop
+    assert (GAP, 4, 0, 0) not in module.got  # the rest was not sent
+    captured = capsys.readouterr()
+    assert "replay ended: stopped motor" in captured.err
+    assert "replayed 1 of 2 exchanges" in captured.out and "(interrupted)" in captured.out
 
 
 # -- CAN: python-can's writers on a virtual bus --------------------------------------------------

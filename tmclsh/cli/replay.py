@@ -71,7 +71,7 @@ def _commands(n: int) -> str:
 
 def cmd_replay(args: argparse.Namespace) -> int:
     from ..client.connect import connection_settings, open_client
-    from ..ops.replay import WritesRefused, read_capture, replay
+    from ..ops.replay import WritesRefused, aim, read_capture, replay
 
     as_json = bool(getattr(args, "json", False))
     yes = bool(getattr(args, "yes", False))
@@ -94,6 +94,9 @@ def cmd_replay(args: argparse.Namespace) -> int:
         _listed(say, writes, None, f"{args.capture} holds {_commands(len(writes))}")
         return say.error("replaying them needs --yes; nothing was sent", EXIT_USAGE)
     settings = connection_settings(args)
+    for key, value in capture.settings().items():  # (-a, --can-id given decide)
+        if getattr(args, key, None) is None:
+            settings[key] = value
     try:
         client = open_client(settings)
     except (ConnectError, TransportError) as exc:  # (a port that cannot be opened: no module)
@@ -107,6 +110,9 @@ def cmd_replay(args: argparse.Namespace) -> int:
     table = _Table(say, client.module)
     code = EXIT_OK
     result = None
+    from .firmware import _restore_signals, _unwind_on_signals
+
+    previous = _unwind_on_signals()  # (SIGTERM, SIGHUP: the stop below runs all the same)
     try:
         result = replay(client, capture, as_captured=args.as_captured, writes=yes,
                         done=table.add)
@@ -123,10 +129,11 @@ def cmd_replay(args: argparse.Namespace) -> int:
                 from ..shell.stop import ToStderr, stop_all
 
                 for address in capture.addresses:
-                    _aim_stop(client, address)
+                    aim(client, capture.first_at(address))
                     stop_all(client, ToStderr(), "replay ended")
         finally:
             client.close()
+            _restore_signals(previous)
     if result is not None:
         table.show(result)
         if code == EXIT_OK and result.differences:
@@ -134,14 +141,6 @@ def cmd_replay(args: argparse.Namespace) -> int:
         if as_json:
             say.emit({**result.to_json(), "exit": code})
     return code
-
-
-def _aim_stop(client, address: int) -> None:
-    """The stop goes to each module the replay addressed."""
-    if client.is_can:
-        client.can_id = address
-    else:
-        client.address = address
 
 
 class _Table:

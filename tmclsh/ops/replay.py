@@ -74,6 +74,20 @@ class Capture:
     def addresses(self) -> list[int]:
         return sorted({c.address for c in self.exchanges})
 
+    def first_at(self, address: int) -> Captured:
+        return next(c for c in self.exchanges if c.address == address)
+
+    def settings(self) -> dict[str, int]:
+        """Where the first module of the capture is, as connection settings: the module a
+        replay connects to when the command line names no address."""
+        first = self.exchanges[0]
+        if self.link == CAN:
+            out = {"can_id": first.address}
+            if first.reply_id is not None:
+                out["reply_id"] = first.reply_id
+            return out
+        return {"address": first.address}
+
     def writes(self) -> list[Captured]:
         """The requests that write, store or move (or may: unknown commands): sent only when
         allowed."""
@@ -323,7 +337,7 @@ def replay(client, capture: Capture, *, as_captured: bool = False, writes: bool 
                 wait = (c.t - first) - (monotonic() - start)
                 if wait > 0:
                     sleep(wait)
-            req = _aim(client, c)
+            req = aim(client, c)
             error = ""
             sent = monotonic()
             try:
@@ -350,8 +364,9 @@ def replay(client, capture: Capture, *, as_captured: bool = False, writes: bool 
     return result
 
 
-def _aim(client, c: Captured) -> Request:
-    """The request, to where it went: a serial address, or on CAN the module's ids."""
+def aim(client, c: Captured) -> Request:
+    """The request, to where it went: the client pointed at its serial address, or on CAN
+    at the module's ids (the safety stop after a replay is aimed the same way)."""
     ins = c.instruction
     if client.is_can:
         client.can_id = c.address
