@@ -18,7 +18,7 @@ import pytest
 import serial
 
 from conftest import ROOT, tmclsh_env
-from responder import CanModule, PtyModule, reply
+from responder import CanModule, PtyModule, SharedLine, reply
 from tmclsh.cli import main as cli
 from tmclsh.ops import replay as rp
 
@@ -114,6 +114,27 @@ def test_a_module_at_another_address_is_found_where_the_capture_says(tmp_path, c
         assert (GAP, 4, 0, 0) in m.got
     finally:
         m.close()
+
+
+def test_two_modules_on_one_line_replay_each_at_its_address(tmp_path, capsys):
+    bus = SharedLine()
+    a = PtyModule(version="1161V130", address=1, line=bus)
+    b = PtyModule(version="1161V130", address=5, line=bus)
+    bus.modules += [a, b]
+    try:
+        a.values[(4, 0, False)], b.values[(4, 0, False)] = 11, 55
+        cap = str(tmp_path / "two.txt")
+        _bridge_capture(bus.path, cap, [request(1, GAP, 4, 0), request(5, GAP, 4, 0),
+                                        request(1, GGP, 0, 0)])
+        assert rp.read_capture(cap).addresses == [1, 5]
+        assert cli.main(["replay", cap, "--port", bus.path, "--json"]) == 0
+        assert objects(capsys.readouterr().out)[-1]["differences"] == 0
+        b.values[(4, 0, False)] = 56
+        assert cli.main(["replay", cap, "--port", bus.path, "--json"]) == 1
+        diffs = [o for o in objects(capsys.readouterr().out) if o.get("differs")]
+        assert [(d["address"], d["differences"]) for d in diffs] == [(5, ["value 55 -> 56"])]
+    finally:
+        bus.close()
 
 
 def test_writes_are_refused_without_yes_and_named(module, tmp_path, capsys):

@@ -71,7 +71,7 @@ def _commands(n: int) -> str:
 
 def cmd_replay(args: argparse.Namespace) -> int:
     from ..client.connect import connection_settings, open_client
-    from ..ops.replay import WritesRefused, aim, read_capture, replay
+    from ..ops.replay import Result, aim, read_capture, replay
 
     as_json = bool(getattr(args, "json", False))
     yes = bool(getattr(args, "yes", False))
@@ -109,23 +109,20 @@ def cmd_replay(args: argparse.Namespace) -> int:
             _listed(say, writes, client.module, f"replaying {_commands(len(writes))}")
     table = _Table(say, client.module)
     code = EXIT_OK
-    result = None
+    result = Result(capture)
     from .firmware import _restore_signals, _unwind_on_signals
 
     previous = _unwind_on_signals()  # (SIGTERM, SIGHUP: the stop below runs all the same)
     try:
-        result = replay(client, capture, as_captured=args.as_captured, writes=yes,
-                        done=table.add)
-    except KeyboardInterrupt as exc:
-        result = getattr(exc, "result", None)
+        replay(client, capture, as_captured=args.as_captured, writes=yes, done=table.add,
+               into=result)
+    except KeyboardInterrupt:
         code = EXIT_INTERRUPTED
-    except WritesRefused as exc:  # (said above: not reached)
-        code = say.error(str(exc), EXIT_USAGE)
-    except TmclError as exc:
+    except TmclError as exc:  # (the link lost: what came before is shown below)
         code = say.error(f"{exc}; the replay stopped", EXIT_FAILED)
     finally:
         try:
-            if writes and code != EXIT_USAGE:
+            if writes:
                 from ..shell.stop import ToStderr, stop_all
 
                 for address in capture.addresses:
@@ -134,12 +131,11 @@ def cmd_replay(args: argparse.Namespace) -> int:
         finally:
             client.close()
             _restore_signals(previous)
-    if result is not None:
-        table.show(result)
-        if code == EXIT_OK and result.differences:
-            code = EXIT_FAILED
-        if as_json:
-            say.emit({**result.to_json(), "exit": code})
+    table.show(result)
+    if code == EXIT_OK and result.differences:
+        code = EXIT_FAILED
+    if as_json:
+        say.emit({**result.to_json(), "exit": code})
     return code
 
 

@@ -313,12 +313,14 @@ def _paired(path: str, link: str, source: Iterable[list[Item]]) -> Capture:
 
 def replay(client, capture: Capture, *, as_captured: bool = False, writes: bool = False,
            sleep: Callable[[float], None] = clock.sleep,
-           done: Callable[[Outcome], None] | None = None) -> Result:
+           done: Callable[[Outcome], None] | None = None,
+           into: Result | None = None) -> Result:
     """Send every captured request again, in order, each to the address (on CAN the ids) it
     went to; ``as_captured``: at the capture's pace, else each as soon as the last is
     answered. ``writes``: commands that write, store or move may be sent (else
     ``WritesRefused`` before anything is). ``done`` gets each outcome as it comes. A lost
-    link raises (``TransportError``); Ctrl-C raises with ``result`` on it."""
+    link raises (``TransportError``), Ctrl-C too: ``into``, a ``Result`` of the caller's,
+    holds what was done up to there (``interrupted`` set)."""
     never = capture.never()
     if never:
         c = never[0]
@@ -326,18 +328,25 @@ def replay(client, capture: Capture, *, as_captured: bool = False, writes: bool 
                               f"replayed: {c.never}; nothing was sent")
     if not writes and capture.writes():
         raise WritesRefused(capture.writes())
-    result = Result(capture)
+    result = into if into is not None else Result(capture)
     start = time.monotonic()
     first = capture.exchanges[0].t
     kept = (client.address, client.can_id, client.reply_id, client.downloading)
-    request, monotonic = client.request, time.monotonic
+    plan = _requests(client, capture)
+    request, monotonic, is_can = client.request, time.monotonic, client.is_can
+    outcomes, download = result.outcomes, _download_opcodes()
     try:
-        for c in capture.exchanges:
+        for c, req in plan:
             if as_captured:
                 wait = (c.t - first) - (monotonic() - start)
                 if wait > 0:
                     sleep(wait)
-            req = aim(client, c)
+            if is_can:
+                client.can_id = c.address
+                if c.reply_id is not None:
+                    client.reply_id = c.reply_id
+            else:  # (an answer in doubt is read again from the client's address)
+                client.address = c.address
             error = ""
             sent = monotonic()
             try:
@@ -349,14 +358,14 @@ def replay(client, capture: Capture, *, as_captured: bool = False, writes: bool 
             except TmclError as exc:  # a reply the client refuses (download mode, checksum)
                 reply, error = getattr(exc, "reply", None), str(exc)
             outcome = Outcome(c, reply, monotonic() - sent, error)
-            _follow_download(client, c, reply)
-            result.outcomes.append(outcome)
+            if req.opcode in download:
+                _follow_download(client, c, reply)
+            outcomes.append(outcome)
             if done is not None:
                 done(outcome)
-    except KeyboardInterrupt as exc:
+    except BaseException:
         result.interrupted = True
         result.seconds = time.monotonic() - start
-        exc.result = result  # type: ignore[attr-defined]
         raise
     finally:
         client.address, client.can_id, client.reply_id, client.downloading = kept
@@ -376,6 +385,26 @@ def aim(client, c: Captured) -> Request:
     else:
         address = client.address = c.address
     return Request.make(address, ins.opcode, ins.type, ins.motor, ins.signed_value)
+
+
+def _requests(client, capture: Capture) -> list[tuple[Captured, Request]]:
+    """Every exchange's request, made before the first is sent; the same request is one
+    object (its bytes are made once, as a script's repeated line)."""
+    made: dict[tuple[int, Instruction], Request] = {}
+    out = []
+    for c in capture.exchanges:
+        ins = c.instruction
+        address = client.address if client.is_can else c.address
+        req = made.get((address, ins))
+        if req is None:
+            req = made[(address, ins)] = Request.make(address, ins.opcode, ins.type,
+                                                      ins.motor, ins.signed_value)
+        out.append((c, req))
+    return out
+
+
+def _download_opcodes() -> frozenset[int]:
+    return frozenset(op for op, ctl in isa.controls().items() if ctl.download is not None)
 
 
 def _follow_download(client, c: Captured, reply: Reply | None) -> None:
