@@ -311,10 +311,15 @@ def test_the_simulator_replays_a_capture_of_itself(tmp_path, capsys):
     assert objs[-1]["replayed"] == 5
 
 
-def test_no_module_is_exit_3(tmp_path, capsys):
+def test_no_module_is_exit_3_and_the_one_error_record(tmp_path, capsys):
     cap = str(tmp_path / "sim.txt")
     _sim_capture(cap, ["GAP 4, 0"])
-    assert cli.main(["replay", cap, "--port", str(tmp_path / "no-such-port")]) == 3
+    missing = str(tmp_path / "no-such-port")
+    assert cli.main(["replay", cap, "--port", missing]) == 3
+    assert cli.main(["replay", cap, "--port", missing, "--json"]) == 3
+    (record,) = objects(capsys.readouterr().out)
+    assert list(record)[0] == "line" and record["line"] is None
+    assert missing in record["error"] and record["exit"] == 3
 
 
 def test_candump_lines_and_transcripts_are_read(tmp_path):

@@ -12,9 +12,9 @@ module, 130 Ctrl-C. Whatever ends a replay that sent a write, the safety stop ru
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 
+from ..base.edges import error_record, write_json
 from ..base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE,
                            ConnectError, TmclError, TransportError)
 
@@ -31,14 +31,14 @@ class _Say:
     def emit(self, obj: dict) -> None:
         if self.simulated:
             obj["simulated"] = True
-        print(json.dumps(obj), flush=True)
+        write_json(obj)
 
     def line(self, text: str) -> None:
         print(text, file=sys.stderr, flush=True)
 
     def error(self, text: str, code: int) -> int:
         if self.json:
-            self.emit({"error": text, "exit": code})
+            self.emit(error_record(text, code))
         else:
             self.line(f"tmclsh: {text}")
         return code
@@ -89,7 +89,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
         why = (f"{args.capture} holds {_commands(len(writes))}; replaying them needs --yes; "
                "nothing was sent")
         if as_json:
-            say.emit({"error": why, "writes": _writes_json(writes), "exit": EXIT_USAGE})
+            say.emit(error_record(why, EXIT_USAGE, writes=_writes_json(writes)))
             return EXIT_USAGE
         _listed(say, writes, None, f"{args.capture} holds {_commands(len(writes))}")
         return say.error("replaying them needs --yes; nothing was sent", EXIT_USAGE)
