@@ -145,7 +145,7 @@ def test_bash_registers_the_function(needs_bash, home):
     (["tmclsh", "--ke"], ["--keep-going"]),
     (["tmclsh", "as"], ["asm"]),
     (["tmclsh", ""], ["asm", "disasm", "sim", "ports", "modules", "scan", "firmware",
-                       "monitor", "bridge"]),
+                       "monitor", "replay", "bridge"]),
     (["tmclsh", "--profile", ""], ["bench", "rs485"]),
     (["tmclsh", "--profile", "=", "r"], ["rs485"]),
     (["tmclsh", "-m", "TMCM-13"], ["TMCM-1311"]),
@@ -163,6 +163,7 @@ def test_bash_registers_the_function(needs_bash, home):
     (["tmclsh", "sim", "--can", "virt"], ["virtual:"]),
     (["tmclsh", "--port", "/dev/ttyACM0", "--tr"], ["--trace"]),
     (["tmclsh", "-a", "3", "sc"], ["scan"]),
+    (["tmclsh", "replay", "--as"], ["--as-captured"]),
 ])
 def test_bash_completes(needs_bash, home, words, expected):
     assert bash_complete(words, home) == expected

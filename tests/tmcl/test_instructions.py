@@ -236,3 +236,17 @@ def test_the_old_notes_are_sources_now() -> None:
     ctl = isa.control(128)
     assert ctl.source and "§11.6 'run command with address'" in ctl.source
     assert _WORDS.search(ctl.source) and ctl.note is None
+
+
+def test_what_only_reads_is_the_instruction_sets_fact():
+    """A replay sends these without --yes: reading instructions, RFS STATUS, and the
+    controls marked ``access = "read"`` (134, 135, 136); anything else, and anything
+    unknown, may write, store or move."""
+    from tmclsh.tmcl import instructions as isa
+
+    reads = [(6, 4), (10, 66), (15, 0), (13, isa.by_mnemonic("RFS").types["STATUS"]),
+             (134, 0), (135, 0), (136, 0), (136, 1)]
+    assert all(isa.only_reads(op, t) for op, t in reads)
+    others = [(5, 4), (7, 4), (1, 0), (4, 0), (13, 0), (128, 0), (129, 0), (137, 0),
+              (139, 0), (242, 0x81), (99, 0)]
+    assert not any(isa.only_reads(op, t) for op, t in others)

@@ -485,6 +485,24 @@ _SUB_NOTES = {
               "(137, 242, 205) is no error, and requests sent ahead of their replies are "
               "each paired with their own. Exit status 0; 1 when the module's link goes away; 3 "
               "when the module's port or bus cannot be opened or the bridge cannot serve.",
+    "replay": "Reads CAPTURE (a serial capture written by monitor -o or bridge -o, a "
+              "python-can log of any format it reads, candump's screen lines, or a --log-dir "
+              "transcript), pairs each request with its reply as monitor does, and sends "
+              "every request again, in order, to the module at the address (on CAN the id) "
+              "it went to: a capture of several modules replays each at its own. Each is "
+              "sent as soon as the one before is answered, or with --as-captured at its "
+              "time in the capture. Every exchange whose status or value differs from the "
+              "capture is shown in a table (the command, the captured and the new reply, "
+              "both latencies in ms), then one line of totals; with --json one object per "
+              "difference and a last one with the totals and \"exit\". Commands that only "
+              "read (GAP, GGP, GIO, 134-136, as the instruction set marks them) are sent "
+              "freely; a capture holding any that write, store or move is refused, naming "
+              "them, unless --yes, which names them before anything is sent. A replay that "
+              "sent any of them ends with the safety stop, whatever ends it (Ctrl-C too). "
+              "Replies of eight data bytes on CAN (a TMCM-1260) are read as seven. Exit "
+              "status 0 no differences; 1 differences, or the link lost; 2 a capture that "
+              "cannot be read, or writes without --yes (nothing sent); 3 no module; 130 "
+              "Ctrl-C.",
 }
 
 
@@ -824,6 +842,17 @@ a log; read it again later, only the position reads:
 {_b("tmclsh monitor --can socketcan:can0 -o plc.blf")}
 {_b("tmclsh monitor --port /dev/ttyUSB1 --baud 115200 -m TMCM-1311")}
 {_b("tmclsh monitor --log plc.blf --param ActualPosition")}
+.fi
+.RE
+.PP
+Reproduce what the PLC did: capture it through the bridge, then send the capture to the
+module again and see every reply that differs (writes and moves only with --yes):
+.PP
+.RS 4
+.nf
+{_b("tmclsh bridge --pty --port /dev/ttyACM0 -o plc.txt")}
+{_b("tmclsh replay plc.txt --port /dev/ttyACM0")}
+{_b("tmclsh replay plc.blf --can socketcan:can0 --as-captured --yes")}
 .fi
 .RE
 .PP

@@ -68,6 +68,12 @@ def cmd_bridge(args: argparse.Namespace) -> int:
     return run_bridge(args)
 
 
+def cmd_replay(args: argparse.Namespace) -> int:
+    from .replay import cmd_replay as run
+
+    return run(args)
+
+
 def cmd_ports(args: argparse.Namespace) -> int:
     """One line per serial port: device, USB vendor:product, description, serial number;
     Trinamic devices first and marked."""
@@ -409,7 +415,8 @@ def main(argv: list[str] | None = None) -> int:
         _user_modules(args)
         handler = {"asm": cmd_asm, "disasm": cmd_disasm, "sim": cmd_sim, "ports": cmd_ports,
                    "scan": cmd_scan, "modules": cmd_modules, "firmware": cmd_firmware,
-                   "monitor": cmd_monitor, "bridge": cmd_bridge}.get(args.subcommand or "")
+                   "monitor": cmd_monitor, "bridge": cmd_bridge,
+                   "replay": cmd_replay}.get(args.subcommand or "")
         if handler is not None:
             return handler(args)
         from ..shell.entry import enter

@@ -16,7 +16,7 @@ from ..base.canspec import FROM_PYTHON_CAN, LINK_DEFAULTS as _D
 
 
 SUBCOMMANDS = ("asm", "disasm", "sim", "ports", "scan", "modules", "firmware", "monitor",
-               "bridge")
+               "bridge", "replay")
 
 
 def setting(key: str):
@@ -236,7 +236,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="tmclsh",
         description="Interactive shell for Trinamic TMCL modules (TMCM-1311, TMCM-351, TMCM-1640).",
         epilog="Subcommands: asm, disasm, sim, ports, scan, modules, firmware, monitor, "
-               "bridge ('tmclsh SUBCOMMAND --help').")
+               "bridge, replay ('tmclsh SUBCOMMAND --help').")
     add_connection(p)
     add_options(p)
     run = p.add_mutually_exclusive_group()
@@ -403,6 +403,25 @@ def build_parser() -> argparse.ArgumentParser:
                      help="serial host addresses replies go to (GP 76; default 2, and any "
                           "that answers a request)")
     _add_view(mon)
+
+    rp = sub.add_parser("replay", help="send a captured session to a module again and "
+                                       "report every reply that differs")
+    rp.add_argument("capture", metavar="CAPTURE",
+                    help="what was captured: a serial capture (monitor -o, bridge -o), a "
+                         "python-can log (.asc, .blf, .trc, .log, .csv, ...), candump's "
+                         "screen lines, or a --log-dir transcript")
+    add_connection(rp, nested=True)
+    rp.add_argument("--timeout", type=setting("timeout"), metavar="S",
+                    default=argparse.SUPPRESS,
+                    help=f"reply timeout in seconds (default 1; {_range('timeout')})")
+    rp.add_argument("--as-captured", action="store_true",
+                    help="send each request at its time in the capture (default: each as "
+                         "soon as the one before is answered)")
+    rp.add_argument("-y", "--yes", action="store_true", default=argparse.SUPPRESS,
+                    help="also send the commands that write, store or move (named first; "
+                         "without it such a capture is refused, nothing sent)")
+    rp.add_argument("--json", action="store_true", default=argparse.SUPPRESS,
+                    help="one JSON object per difference, then the result")
 
     br = sub.add_parser("bridge", help="forward another program's frames to a module, "
                                        "decoding each")

@@ -10,7 +10,7 @@ read. Nothing here prints, and nothing is ever sent.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
 from ..link.base import CanFrame, CanTransport, StreamTransport
@@ -81,10 +81,17 @@ def serial_capture(path: str | Path, monitor: Monitor, *,
                    quiet: float = QUIET) -> Iterator[list[Item]]:
     """A capture file (ops/capture.py) read again: a tap's chunks, or a bridge's two
     directions; a silence longer than ``quiet`` between chunks is a silence on the line."""
+    return serial_chunks(read_capture(path), monitor, quiet=quiet)
+
+
+def serial_chunks(chunks: Iterable[tuple[float, str | None, bytes]], monitor: Monitor, *,
+                  quiet: float = QUIET) -> Iterator[list[Item]]:
+    """Chunks of a serial line as ``(time, tx/rx or None, bytes)``, however they were kept
+    (a capture file, a transcript's frames), read as a capture is."""
     tap: SerialTap | None = None
     pair: SerialPair | None = None
     last: float | None = None
-    for t, direction, data in read_capture(path):
+    for t, direction, data in chunks:
         if last is not None and t - last > quiet:
             if tap is not None:
                 yield tap.quiet(last + quiet)

@@ -167,6 +167,7 @@ class ControlSpec:
     download: str | None = None  # enter | leave: it starts or ends download mode
     reply: str | None = None  # "none": no reply comes (137, 205, 242)
     boot: str | None = None  # its role in a firmware update (bootloader.toml)
+    access: str | None = None  # read: it only reads (134, 135, 136)
 
     def on(self, module: ModuleRef) -> bool:
         return _offered(self.modules, module)
@@ -217,7 +218,8 @@ def _tables() -> tuple[dict[int, InstructionSpec], dict[int, ControlSpec], dict[
                                          c.get("idempotent", False),
                                          c.get("starts_motion", False), c.get("confirm"),
                                          c.get("not_a_line"), c.get("ascii_word"),
-                                         c.get("download"), c.get("reply"), c.get("boot"))
+                                         c.get("download"), c.get("reply"), c.get("boot"),
+                                         c.get("access"))
                 for c in data["control"]}
     return by_opcode, controls, dict(data["interrupts"])
 
@@ -285,6 +287,17 @@ def reading(opcode: int, type_: int) -> bool:
     again."""
     spec = _tables()[0].get(opcode)
     return spec is not None and spec.reads_with(type_)
+
+
+@cache
+def only_reads(opcode: int, type_: int) -> bool:
+    """Does this request only read (a replay sends it without asking)? A reading
+    instruction, or a control command whose entry says ``access = "read"``; anything else
+    may write, store or move, and anything unknown is taken to."""
+    if reading(opcode, type_):
+        return True
+    ctl = _tables()[1].get(opcode)
+    return ctl is not None and ctl.access == "read"
 
 
 @cache
