@@ -158,7 +158,7 @@ def cmd_replace(args: argparse.Namespace) -> int:
         view.report(replacement.report, resume_command(args), code)
         return code
     except ConnectError as exc:
-        return refuse(f"{exc}; {replacement.situation('identify')}", EXIT_CONNECT)
+        return refuse(f"{exc}; nothing was written", EXIT_CONNECT)
     except ReplaceError as exc:
         return refuse(f"{exc}; nothing was sent", EXIT_USAGE)
     finally:

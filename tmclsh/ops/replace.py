@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..base.errors import (ConnectError, InBootloaderError, NoAnswerError, TmclError,
-                           ValidationError)
+                           TransportError, ValidationError)
 from ..tmcl import instructions as isa
 from ..tmcl import modules as moddb
 from ..tmcl.frames import Instruction
@@ -171,7 +171,7 @@ class Replacement:
                     self._end(Outcome(name, STOPPED, f"{why} during this step"))
                     raise
                 except ConnectError as exc:
-                    if name == "identify":
+                    if name == "identify" or (name == "firmware" and not self.new_found):
                         raise  # no module to replace, or none to replace it with
                     outcome = Outcome(name, FAILED, str(exc))
                 except TmclError as exc:
@@ -223,10 +223,17 @@ class Replacement:
                 self.new = None
 
     # -- the links ------------------------------------------------------------------------
-    def _open(self, settings: dict):
+    def _open(self, settings: dict, which: str):
         from ..client.connect import open_client
 
-        return open_client(dict(settings), notice=self.notice)
+        try:
+            return open_client(dict(settings), notice=self.notice)
+        except InBootloaderError:
+            raise
+        except ConnectError as exc:
+            raise type(exc)(f"the {which} module: {exc}") from None
+        except TransportError as exc:  # no such port: no module to talk to
+            raise ConnectError(f"the {which} module: {exc}") from None
 
     def _connect_new(self) -> None:
         """The new module's client; one found in its bootloader (an update that broke off)
@@ -234,7 +241,7 @@ class Replacement:
         rate) is left to the firmware step."""
         self._close_new()
         try:
-            c = self._open(self.target)
+            c = self._open(self.target, "new")
         except InBootloaderError as exc:
             self.new_version = exc.version
             parsed = parse_string(exc.version)
@@ -302,7 +309,7 @@ class Replacement:
     def _read_old(self) -> Old:
         if isinstance(self.source, Path):
             return self._read_backup_source(self.source)
-        c = self._open(self.source)
+        c = self._open(self.source, "old")
         try:
             module = c.require_module()
             version = bk.firmware(c)
