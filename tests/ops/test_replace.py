@@ -292,3 +292,67 @@ def test_command_line_json_report_and_exit_statuses(modules, tmp_path):
     ask = _run(["replace", "--from", old.path, "--to", new.path])
     assert ask.returncode == 2 and "--yes" in ask.stderr
     only_read(old)
+
+
+# -- against the simulator: a new module left in its bootloader, an old one's backup ---------
+
+def sim_old(make_pty_sim):
+    """A simulated old module: an older firmware, settings changed, a stored program."""
+    import tmclsh
+    from tmclsh.ops import program
+    from tmclsh.tmcl import asm
+    from tmclsh.tmcl.frames import Request
+
+    sim, path = make_pty_sim()
+    sim.version_string, sim.firmware_version = "1311V110", 110
+    with tmclsh.connect(port=path, timeout=0.5) as c:
+        c.request(Request(1, 5, 4, 0, 1234))  # SAP 4, 0, 1234
+        c.request(Request(1, 5, 6, 0, 100))  # SAP 6, 0, 100
+        program.upload(c, asm.assemble("SAP 4, 0, 500\nWAIT TICKS, 0, 10\nJA 0\n",
+                                       c.require_module()))
+    return sim, path
+
+
+def test_onto_a_simulated_module_left_in_its_bootloader(make_pty_sim):
+    from tmclsh.sim.boot import Bootloader
+
+    old, old_path = sim_old(make_pty_sim)
+    new, new_path = make_pty_sim(bootloader=True)
+    img = image_from_hex(hex_image("1311V110", 20000, Bootloader.START), "1311V110.hex")
+    report = Replacement({"port": old_path, "timeout": 0.5},
+                         {"port": new_path, "timeout": 0.5}, image=img).run()
+    assert report.ok, report.to_json()
+    assert "bootloader" in report.steps[0].text and report.steps[1].state == DONE
+    assert not new.in_bootloader and new.version_string == "1311V110"
+    # a second tmclsh process reads the new module: the same settings and program
+    gap = [_run(["--port", p, "-c", "GAP 4, 0; GAP 6, 0"]).stdout for p in (old_path, new_path)]
+    assert gap[0] == gap[1] and "1234" in gap[1]
+    assert [i.to_bytes() for i in new.vm.memory[:3]] == [i.to_bytes() for i in old.vm.memory[:3]]
+
+
+def test_from_a_backup_with_its_program(make_pty_sim, tmp_path):
+    import tmclsh
+    from tmclsh.ops import backup, program
+    from tmclsh.tmcl import asm
+
+    old, old_path = sim_old(make_pty_sim)
+    new, new_path = make_pty_sim()
+    with tmclsh.connect(port=old_path, timeout=0.5) as c:
+        conf = backup.read_configuration(c)
+        image_ = program.read_program(c)
+        (tmp_path / "m.program.tmcl").write_text(asm.disassemble(image_, c.require_module()))
+        backup.write_backup(tmp_path / "m.tmcl", conf.text("m.program.tmcl"))
+    old.close()  # gone: the backup is all there is
+    got = _run(["replace", "--from", str(tmp_path / "m.tmcl"), "--to", new_path, "--yes"])
+    # the backup says 1311V110, the new module runs 1311V111: the image is asked for
+    assert got.returncode == 1 and "1311V110" in got.stdout
+    hexfile = tmp_path / "fw.hex"
+    from tmclsh.sim.boot import Bootloader
+
+    hexfile.write_text(hex_image("1311V110", 20000, Bootloader.START))
+    got = _run(["replace", "--from", str(tmp_path / "m.tmcl"), "--to", new_path, "--yes",
+                "--firmware", str(hexfile)])
+    assert got.returncode == 0, got.stdout + got.stderr
+    assert re.search(r"^program\s+done", got.stdout, re.M)
+    after = _run(["--port", new_path, "-c", "GAP 4, 0"]).stdout
+    assert "1234" in after
