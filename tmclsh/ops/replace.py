@@ -28,6 +28,7 @@ import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..base.errors import (ConnectError, InBootloaderError, NoAnswerError, TmclError,
                            TransportError, ValidationError)
@@ -37,6 +38,9 @@ from ..tmcl.frames import Instruction
 from ..tmcl.version import parse_string
 from . import backup as bk
 from . import program as prog
+
+if TYPE_CHECKING:
+    from ..tmcl.bootloader import Image
 
 STEPS = ("identify", "firmware", "configuration", "program", "verify")
 # a step's outcome
@@ -125,7 +129,7 @@ class Replacement:
     new module's settings; ``image``: the firmware image (``tmcl.bootloader.Image``) that
     brings the new module to the old version, if needed."""
 
-    def __init__(self, source: dict | Path, target: dict, *, image=None,
+    def __init__(self, source: dict | Path, target: dict, *, image: Image | None = None,
                  with_link: bool = False, force: bool = False,
                  on_step: Callable[[Outcome], None] | None = None,
                  notice: Callable[[str], None] | None = None,
@@ -139,7 +143,7 @@ class Replacement:
         self.on_step = on_step or (lambda o: None)
         self.notice = notice or (lambda text: None)
         self.confirm = confirm
-        self.report = Report(source_name or str(source), target_name or str(target))
+        self.report = Report(source_name or _name(source), target_name or _name(target))
         self.old: Old | None = None
         self.new = None  # the new module's client, while connected
         self.new_module: moddb.Module | None = None
@@ -461,8 +465,9 @@ class Replacement:
     def _program(self) -> Outcome:
         old = self.old.program
         if old is None:
-            return Outcome("program", SKIPPED, "the old module's program is not known (the "
-                                               "backup names none): the new one's left alone")
+            return Outcome("program", SKIPPED, "the old module's program was not read (a "
+                                               "backup that names none, or ASCII mode): the "
+                                               "new module's left alone")
         if not old:
             return Outcome("program", SKIPPED, "the old module holds no stored program")
         c = self._client()
@@ -517,6 +522,15 @@ class Replacement:
         program = f" and the program ({len(old)} instructions)" if old else ""
         return Outcome("verify", DONE, f"{len(backup.slots)} settings{program} read back "
                                        f"equal to the old module's; firmware {version}", data)
+
+
+def _name(where: dict | Path) -> str:
+    """A connection or backup as the report names it."""
+    if isinstance(where, Path):
+        return str(where)
+    link = where.get("port") or (f"can:{where['can']}" if where.get("can") else None) or \
+        f"sim:{where.get('sim')}"
+    return f"{link} address {where.get('address') or 1}"
 
 
 def validate(source: dict | Path, target: dict) -> None:
