@@ -356,3 +356,14 @@ def test_from_a_backup_with_its_program(make_pty_sim, tmp_path):
     assert re.search(r"^program\s+done", got.stdout, re.M)
     after = _run(["--port", new_path, "-c", "GAP 4, 0"]).stdout
     assert "1234" in after
+
+
+def test_forced_onto_another_type_carries_settings_by_name_and_nothing_else(modules):
+    old, new = modules(), modules("1640V210")
+    report = replace(old, new, image=image(), force=True)[0].run()
+    assert report.ok, report.to_json()
+    states = {o.step: o.state for o in report.steps}
+    assert states["firmware"] == SKIPPED and states["program"] == SKIPPED
+    assert "units differ" in report.steps[2].text  # pps is no rpm: skipped, said so
+    assert new.app_version == "1640V210" and new.erases == 0 and not new.stored
+    only_read(old)

@@ -306,6 +306,9 @@ class Replacement:
                                data))
         return Outcome("identify", DONE, text, data)
 
+    def _other_type(self) -> bool:
+        return self.new_module is not None and self.new_module.name != self.old.module.name
+
     def _new_in_bootloader(self) -> bool:
         parsed = parse_string(self.new_version or "")
         return parsed is not None and parsed.bootloader
@@ -357,7 +360,7 @@ class Replacement:
         old = self.old
         assert old is not None
         want = parse_string(old.firmware)
-        if self.new_module is not None and self.new_module.name != old.module.name:
+        if self._other_type():
             return Outcome("firmware", SKIPPED, "another module type (forced): its firmware "
                                                 f"{self.new_version} left as it is")
         if want is None or want.bootloader:
@@ -416,8 +419,8 @@ class Replacement:
     def _read_backup(self) -> bk.Backup:
         if self.backup is None:
             c = self._client()
-            other = self.new_module is not None and self.new_module.name != self.old.module.name
-            self.backup = bk.read_backup(c, self.old.backup, force=other and self.force,
+            self.backup = bk.read_backup(c, self.old.backup,
+                                         force=self._other_type() and self.force,
                                          command="replace", with_link=self.with_link)
         return self.backup
 
@@ -470,6 +473,11 @@ class Replacement:
                                                "new module's left alone")
         if not old:
             return Outcome("program", SKIPPED, "the old module holds no stored program")
+        if self._other_type():
+            return Outcome("program", SKIPPED,
+                           f"another module type (forced): the old program ({len(old)} "
+                           f"instructions) is not carried, its parameter and port numbers are "
+                           f"the {self.old.module.name}'s; the new module's left alone")
         c = self._client()
         held = prog.read_program(c)
         if prog.same_image(held, old):
@@ -501,7 +509,7 @@ class Replacement:
         data: dict = {"settings": len(backup.slots), "differences": [d.to_json() for d in diffs]}
         problems = [f"{d.slot.title()} reads {d.live}, the old module held {d.slot.value}"
                     for d in diffs]
-        old = self.old.program
+        old = None if self._other_type() else self.old.program
         if old:
             held = prog.read_program(c)
             data["instructions"] = len(held)
@@ -513,8 +521,7 @@ class Replacement:
         data["firmware"] = version
         want = parse_string(self.old.firmware)
         have = parse_string(version)
-        same_type = self.new_module is None or self.new_module.name == self.old.module.name
-        if (same_type and want is not None and have is not None and not want.bootloader
+        if (not self._other_type() and want is not None and have is not None and not want.bootloader
                 and have.number != want.number):
             problems.append(f"it runs {version}, not the old module's {self.old.firmware}")
         if problems:
