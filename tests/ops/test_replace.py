@@ -27,8 +27,10 @@ from fieldmodule import FieldModule
 from tmclsh.ops.backup import readable_slots
 from tmclsh.ops.replace import DONE, FAILED, NOT_RUN, SKIPPED, STEPS, STOPPED, Replacement
 from tmclsh.tmcl import modules as moddb
+from tmclsh.sim.boot import Bootloader
 from tmclsh.tmcl.bootloader import image_from_hex
 
+START_SIM = Bootloader.START
 TMCLSH = str(Path(sys.executable).with_name("tmclsh"))
 # what reading a module sends: 136 (version), GAP, GGP, 134 (program memory), 135 (status)
 READS = {136, 6, 10, 134, 135}
@@ -367,3 +369,21 @@ def test_forced_onto_another_type_carries_settings_by_name_and_nothing_else(modu
     assert "units differ" in report.steps[2].text  # pps is no rpm: skipped, said so
     assert new.app_version == "1640V210" and new.erases == 0 and not new.stored
     only_read(old)
+
+
+def test_with_link_the_new_module_moves_and_the_same_run_again_finds_it(make_pty_sim):
+    old, old_path = sim_old(make_pty_sim)
+    new, new_path = make_pty_sim(address=2)
+    img = image_from_hex(hex_image("1311V110", 20000, START_SIM), "1311V110.hex")
+
+    def run():
+        return Replacement({"port": old_path, "timeout": 0.5},
+                           {"port": new_path, "timeout": 0.5, "address": 2}, image=img,
+                           with_link=True).run()
+
+    report = run()
+    assert report.ok, report.to_json()
+    assert new.address == 1 and "address 1" in report.steps[2].text
+    again = run()  # (as after a stop: --to-address 2 no longer answers)
+    assert again.ok, again.to_json()
+    assert [o.state for o in again.steps] == [DONE, SKIPPED, SKIPPED, SKIPPED, DONE]

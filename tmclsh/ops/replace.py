@@ -109,6 +109,7 @@ class Old:
     backup: Path  # its configuration as a backup file (read back by read_backup)
     program: list[Instruction] | None  # None: not known (a backup without one, ASCII mode)
     described: str
+    address: int | None = None  # where it answered (a backup's header: where it was saved)
 
 
 def is_backup(source: str) -> bool:
@@ -253,14 +254,33 @@ class Replacement:
             self.new_found = True
             return
         except NoAnswerError:
-            if self.image is None:
+            moved = self._moved()
+            if moved is not None:
+                c = moved
+            elif self.image is None:
                 raise
-            self.new_version, self.new_module, self.new_found = None, None, False
-            return
+            else:
+                self.new_version, self.new_module, self.new_found = None, None, False
+                return
         self.new = c
         self.new_module = c.require_module()
         self.new_version = c.version or bk.firmware(c)
         self.new_found = True
+
+    def _moved(self):
+        """With ``with_link``, a run that carried the link identity already has moved the
+        new module to the old one's address: looked for there (a client, or None)."""
+        where = self.old.address if self.old is not None else None
+        if not self.with_link or where is None or where == (self.target.get("address") or 1):
+            return None
+        try:
+            c = self._open({**self.target, "address": where}, "new")
+        except ConnectError:
+            return None
+        self.notice(f"the new module answers at address {where}, the old one's: moved there "
+                    "by --with-link before")
+        self.target["address"] = where
+        return c
 
     def _client(self):
         if self.new is None:
@@ -327,7 +347,7 @@ class Replacement:
             path = Path(self._dir.name) / "old.tmcl"
             bk.write_backup(path, conf.text())
             return Old(module, version, path, program,
-                       f"{module.name} at address {c.address} on {c.describe()}")
+                       f"{module.name} at address {c.address} on {c.describe()}", c.address)
         finally:
             c.close()
 
@@ -352,8 +372,10 @@ class Replacement:
         if head.get("program"):
             where = path.parent / head["program"]
             program = list(asm.assemble_file(where, module).instructions)
+        address = head.get("address", "")
         return Old(module, head.get("firmware") or "unknown", path, program,
-                   f"the backup {path.name} of a {module.name}")
+                   f"the backup {path.name} of a {module.name}",
+                   int(address) if address.isdigit() else None)
 
     # -- 2. firmware ----------------------------------------------------------------------
     def _firmware(self) -> Outcome:
@@ -438,6 +460,9 @@ class Replacement:
         data = {"written": self.written, "stored": stored, "outside_range": outside,
                 "differences": [w.to_json() for w in done]}
         notes = []
+        if self.with_link:
+            notes.append(f"its link identity carried too: it answers at address "
+                         f"{c.address}")
         if backup.left_alone:
             n = len(backup.left_alone)
             notes.append(f"its link identity ({n} setting{'s' if n != 1 else ''}: address, "
