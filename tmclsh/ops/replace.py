@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..base.errors import (ConnectError, InBootloaderError, NoAnswerError, TmclError,
-                           TransportError, ValidationError)
+                           TmclTimeoutError, TransportError, ValidationError)
 from ..tmcl import instructions as isa
 from ..tmcl import modules as moddb
 from ..tmcl.frames import Instruction
@@ -159,8 +159,9 @@ class Replacement:
     # -- running the steps ----------------------------------------------------------------
     def run(self) -> Report:
         """Every step in order until one fails. A step interrupted (Ctrl-C, SIGTERM as
-        SystemExit) or losing its link is recorded as stopped, ``report.situation`` says
-        where both modules stand, and the exception is raised again (a lost link's is not)."""
+        SystemExit) or losing its link is recorded as stopped, a step that fails as failed;
+        ``report.situation`` says where both modules stand. Ctrl-C and SIGTERM are raised
+        again once recorded; no module to talk to at the start is a ``ConnectError``."""
         handlers = {"identify": self._identify, "firmware": self._firmware,
                     "configuration": self._configuration, "program": self._program,
                     "verify": self._verify}
@@ -180,7 +181,7 @@ class Replacement:
                         raise  # no module to replace, or none to replace it with
                     outcome = Outcome(name, FAILED, str(exc))
                 except TmclError as exc:
-                    outcome = Outcome(name, FAILED, str(exc))
+                    outcome = Outcome(name, STOPPED if _link_lost(exc) else FAILED, str(exc))
                 self.report.steps.append(outcome)
                 self.on_step(outcome)
                 if outcome.state in (FAILED, STOPPED):
@@ -212,7 +213,8 @@ class Replacement:
                               if self.written else "no setting was written to the new module"),
             "program": (self.upload_error.memory_text() if self.upload_error is not None
                         else "its program memory as the upload left it"),
-            "verify": "the new module was written completely; its read-back did not end",
+            "verify": "written as the steps above say (what reads back differently is "
+                      "named in the verify step)",
         }[step]
         return f"{OLD_UNCHANGED}; new module: {new}"
 
@@ -236,7 +238,11 @@ class Replacement:
         except InBootloaderError:
             raise
         except ConnectError as exc:
-            raise type(exc)(f"the {which} module: {exc}") from None
+            try:
+                again = type(exc)(f"the {which} module: {exc}")
+            except TypeError:  # (a subclass that takes more than its message)
+                again = ConnectError(f"the {which} module: {exc}")
+            raise again from None
         except TransportError as exc:  # no such port: no module to talk to
             raise ConnectError(f"the {which} module: {exc}") from None
 
@@ -554,6 +560,13 @@ class Replacement:
         program = f" and the program ({len(old)} instructions)" if old else ""
         return Outcome("verify", DONE, f"{len(backup.slots)} settings{program} read back "
                                        f"equal to the old module's; firmware {version}", data)
+
+
+def _link_lost(exc: BaseException) -> bool:
+    """A lost link or a module gone silent (also behind an upload's error): the step was
+    stopped by it, not failed by what the module said."""
+    lost = (TransportError, TmclTimeoutError)
+    return isinstance(exc, lost) or isinstance(exc.__cause__, lost)
 
 
 def _name(where: dict | Path) -> str:
