@@ -413,7 +413,7 @@ class Replacement:
             need = (f"an image of {want.text} for the {self.old.module.name}"
                     if want is not None else f"an image for the {self.old.module.name}")
             raise Stop(Outcome("firmware", FAILED,
-                               f"the new module {now}, the old one {self.old.firmware}: "
+                               f"the new module {now}, the old one ran {self.old.firmware}: "
                                f"give --firmware FILE.hex, {need}; nothing was written",
                                {"needed": want.text if want is not None else None}))
         if want is not None:
