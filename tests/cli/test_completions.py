@@ -145,7 +145,7 @@ def test_bash_registers_the_function(needs_bash, home):
     (["tmclsh", "--ke"], ["--keep-going"]),
     (["tmclsh", "as"], ["asm"]),
     (["tmclsh", ""], ["asm", "disasm", "sim", "ports", "modules", "scan", "firmware",
-                       "monitor", "replay", "bridge"]),
+                       "replace", "monitor", "replay", "bridge"]),
     (["tmclsh", "--profile", ""], ["bench", "rs485"]),
     (["tmclsh", "--profile", "=", "r"], ["rs485"]),
     (["tmclsh", "-m", "TMCM-13"], ["TMCM-1311"]),

@@ -450,6 +450,35 @@ _SUB_NOTES = {
                 "left alone. Exit status 0 when updated (or nothing to do), 1 when refused or "
                 "stopped, 2 for an unreadable image or a missing --yes (nothing sent), 3 when "
                 "no module answers, 130 when interrupted.",
+    "replace": "Replaces a module in the field: the new module (--to) gets the old one's "
+               "firmware version, settings and stored program, in five steps, each reported "
+               "as done, skipped, failed, stopped or not run. identify: the old module (--from "
+               "a port, or can:IFACE:CHANNEL; or a backup file .save wrote, with its "
+               ".program.tmcl beside it when the header names one) is read: type, firmware, "
+               "every setting (values outside the manual's ranges as it holds them), the "
+               "stored program; the new one is identified, also when left in its bootloader "
+               "by an update that broke off. Another module type is refused unless --force, "
+               "which carries the settings by parameter name where the units agree (as "
+               ".restore --force) and leaves the firmware alone. firmware: when the new "
+               "module runs another version, the image --firmware names is written as "
+               "tmclsh firmware writes it (it must carry the old module's version); without "
+               "one the step says which image is needed and stops, nothing written. "
+               "configuration: what differs is written (SAP/SGP, read back) and stored "
+               "(STAP/STGP); the new module's link identity (address, baud rate, CAN ids, "
+               "ASCII start-up) stays its own unless --with-link. program: the old program is "
+               "uploaded (132, 133) and verified (134), unless the new module holds it "
+               "already. verify: every setting and the program are read back from the new "
+               "module and compared with the old module's, and its firmware version. The "
+               "old module is only ever read. One report on standard output (a table on a "
+               "terminal; with --json one object: \"replace\", \"steps\" with \"step\", "
+               "\"outcome\", \"text\", and \"resume\" and \"exit\"); each step's line on "
+               "standard error as it ends. Interrupted at any step (Ctrl-C, SIGTERM, a lost "
+               "link) or stopped by a failed step, tmclsh says where both modules stand and "
+               "the one command that completes the job: the same command with --yes, which "
+               "skips what is done already. Without a terminal to answer the question, --yes "
+               "is needed. Exit status 0 when replaced and verified, 1 when a step failed, 2 "
+               "for bad arguments (nothing sent), 3 when a module does not answer, 130 when "
+               "interrupted.",
     "monitor": "Listens and sends nothing, ever. One line per exchange (time, address or CAN "
                "id, the request with parameter names, the reply with its status in words, "
                "the time between them), one line for each event, reply without its request, "
@@ -831,6 +860,16 @@ command again to complete an update that broke off:
 .nf
 {_b("tmclsh firmware TMCM-1311_V1.12.hex --port /dev/ttyACM0")}
 {_b("tmclsh firmware TMCM-1311_V1.12.hex --port /dev/ttyACM0 --check")}
+.fi
+.RE
+.PP
+Replace a module in the field: the old one on one USB port, the new one on another; its
+firmware brought to the old version, its settings and program copied, all read back:
+.PP
+.RS 4
+.nf
+{_b("tmclsh replace --from /dev/ttyACM0 --to /dev/ttyACM1 --firmware TMCM-1311_V1.10.hex")}
+{_b("tmclsh replace --from old-module.tmcl --to /dev/ttyACM1 --yes --json")}
 .fi
 .RE
 .PP

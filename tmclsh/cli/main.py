@@ -342,6 +342,12 @@ def cmd_firmware(args: argparse.Namespace) -> int:
     return run(args)
 
 
+def cmd_replace(args: argparse.Namespace) -> int:
+    from .replace import cmd_replace as run
+
+    return run(args)
+
+
 # -- entry point -------------------------------------------------------------------------
 
 def show_manual(parser: argparse.ArgumentParser) -> int:
@@ -415,8 +421,8 @@ def main(argv: list[str] | None = None) -> int:
         _user_modules(args)
         handler = {"asm": cmd_asm, "disasm": cmd_disasm, "sim": cmd_sim, "ports": cmd_ports,
                    "scan": cmd_scan, "modules": cmd_modules, "firmware": cmd_firmware,
-                   "monitor": cmd_monitor, "bridge": cmd_bridge,
-                   "replay": cmd_replay}.get(args.subcommand or "")
+                   "replace": cmd_replace, "monitor": cmd_monitor,
+                   "bridge": cmd_bridge, "replay": cmd_replay}.get(args.subcommand or "")
         if handler is not None:
             return handler(args)
         from ..shell.entry import enter

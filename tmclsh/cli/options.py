@@ -15,8 +15,8 @@ from ..base import limits
 from ..base.canspec import FROM_PYTHON_CAN, LINK_DEFAULTS as _D
 
 
-SUBCOMMANDS = ("asm", "disasm", "sim", "ports", "scan", "modules", "firmware", "monitor",
-               "bridge", "replay")
+SUBCOMMANDS = ("asm", "disasm", "sim", "ports", "scan", "modules", "firmware", "replace",
+               "monitor", "bridge", "replay")
 
 
 def setting(key: str):
@@ -235,8 +235,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="tmclsh",
         description="Interactive shell for Trinamic TMCL modules (TMCM-1311, TMCM-351, TMCM-1640).",
-        epilog="Subcommands: asm, disasm, sim, ports, scan, modules, firmware, monitor, "
-               "bridge, replay ('tmclsh SUBCOMMAND --help').")
+        epilog="Subcommands: asm, disasm, sim, ports, scan, modules, firmware, replace, "
+               "monitor, bridge, replay ('tmclsh SUBCOMMAND --help').")
     add_connection(p)
     add_options(p)
     run = p.add_mutually_exclusive_group()
@@ -374,6 +374,39 @@ def build_parser() -> argparse.ArgumentParser:
                     help="do not ask before erasing (needed where nobody can answer)")
     fw.add_argument("--json", action="store_true", default=argparse.SUPPRESS,
                     help="one JSON object per step, then the result")
+
+    rp = sub.add_parser("replace", help="replace a module: the old one's firmware version, "
+                                        "settings and stored program onto a new one, read "
+                                        "back; the old module is only read")
+    rp.add_argument("--from", dest="source", metavar="CONNECTION|BACKUP", required=True,
+                    help="the old module: a serial port or pyserial URL, can:IFACE:CHANNEL, or "
+                         "a backup file .save wrote (its .program.tmcl beside it, if named)")
+    rp.add_argument("--to", dest="target", metavar="CONNECTION", required=True,
+                    help="the new module: a serial port or pyserial URL, or can:IFACE:CHANNEL")
+    rp.add_argument("--from-address", type=_address, metavar="N", default=1,
+                    help=f"the old module's address (default 1; {_range('address')})")
+    rp.add_argument("--to-address", type=_address, metavar="N", default=1,
+                    help=f"the new module's address (default 1; {_range('address')})")
+    rp.add_argument("--firmware", metavar="FILE.hex",
+                    help="the image of the old module's firmware version (Intel HEX), written "
+                         "when the new module runs another version; without it, the step "
+                         "says which image is needed and stops")
+    rp.add_argument("--with-link", action="store_true",
+                    help="carry the old module's link identity too (address, baud rate, CAN "
+                         "ids, ASCII start-up): the new module moves to the old one's place")
+    rp.add_argument("--force", action="store_true",
+                    help="replace a module of another type: settings carried by parameter "
+                         "name where the units agree (as .restore --force), firmware left alone")
+    rp.add_argument("--baud", type=setting("baud"), metavar="N", default=argparse.SUPPRESS,
+                    help=f"baud rate of both serial links (default 9600; {_range('baud')})")
+    rp.add_argument("--timeout", type=setting("timeout"), metavar="S",
+                    default=argparse.SUPPRESS,
+                    help=f"reply timeout in seconds (default 1; {_range('timeout')})")
+    rp.add_argument("-y", "--yes", action="store_true", default=argparse.SUPPRESS,
+                    help="do not ask before writing to the new module (needed where nobody "
+                         "can answer)")
+    rp.add_argument("--json", action="store_true", default=argparse.SUPPRESS,
+                    help="the report as one JSON object")
 
     mon = sub.add_parser("monitor", help="decode TMCL traffic tmclsh does not send: a CAN "
                                          "bus, a serial tap, a log file (sends nothing)")
