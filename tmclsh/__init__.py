@@ -14,7 +14,8 @@ Every name listed here is the API: the client (`connect`, `LineClient`, what it 
 the error classes (every one a `TmclError`; a value refused before sending is a
 `RangeError`, any other line refused before sending a `ValidationError`), and the
 operations a script needs without the shell: a module's configuration (backup, compare,
-restore), firmware, scanning a line or bus, stored programs, the safety stop, reading CAN
+restore), several modules at once, expressions and watch samples, a line's inventory,
+replaying a capture, replacing a module, firmware, scanning a line or bus, stored programs, the safety stop, reading CAN
 logs and another master's traffic. Anything not
 listed is private to tmclsh and may change between releases.
 
@@ -83,6 +84,21 @@ _LAZY: dict[str, tuple[str, str]] = {
     "BackupFileError": ("tmclsh.ops.backup", "BackupFileError"),
     # reading until the answers are certain (what .watch, .expect and a verify rely on)
     "read_until_certain": ("tmclsh.ops.certain", "read_until_certain"),
+    # several modules at once: a function run on each unit, the stop reaching every one
+    "run_units": ("tmclsh.ops.units", "run"),
+    "Unit": ("tmclsh.ops.units", "Unit"),
+    # expressions and watch samples on a client
+    "evaluate": ("tmclsh.ops.expr", "evaluate"),
+    "watch_items": ("tmclsh.ops.watch", "parse_items"),
+    "watch_sample": ("tmclsh.ops.watch", "poll"),
+    # what should answer on a line, and how the line differs
+    "read_inventory": ("tmclsh.ops.inventory", "read_inventory"),
+    "compare_inventory": ("tmclsh.ops.inventory", "compare"),
+    # a captured session sent again, the replies compared
+    "read_capture": ("tmclsh.ops.replay", "read_capture"),
+    "replay": ("tmclsh.ops.replay", "replay"),
+    # a module replaced in the field
+    "Replacement": ("tmclsh.ops.replace", "Replacement"),
 }
 
 __all__ = ["__version__", *_LAZY]

@@ -331,7 +331,7 @@ def replay(client, capture: Capture, *, as_captured: bool = False, writes: bool 
     result = into if into is not None else Result(capture)
     start = time.monotonic()
     first = capture.exchanges[0].t
-    kept = (client.address, client.can_id, client.reply_id, client.downloading)
+    kept = (client.address, client.can_id, client.reply_id, client._downloading)
     plan = _requests(client, capture)
     request, monotonic, is_can = client.request, time.monotonic, client.is_can
     outcomes, download = result.outcomes, _download_opcodes()
@@ -368,7 +368,7 @@ def replay(client, capture: Capture, *, as_captured: bool = False, writes: bool 
         result.seconds = time.monotonic() - start
         raise
     finally:
-        client.address, client.can_id, client.reply_id, client.downloading = kept
+        client.address, client.can_id, client.reply_id, client._downloading = kept
     result.seconds = time.monotonic() - start
     return result
 
@@ -412,4 +412,4 @@ def _follow_download(client, c: Captured, reply: Reply | None) -> None:
     what the capture holds too, not a module left in download mode."""
     ctl = isa.control(c.instruction.opcode)
     if ctl is not None and ctl.download is not None and reply is not None and reply.ok:
-        client.downloading = ctl.download == "enter"
+        client._downloading = ctl.download == "enter"
