@@ -61,6 +61,7 @@ from .ledger import CONFIRM_ROUNDS, Ledger, Suspect
 from .motion import MotionRecord, watched_opcodes
 
 if TYPE_CHECKING:
+    from ..link.ascii import AsciiFraming
     from ..link.framing import CanFraming, SerialFraming
 
 log = logging.getLogger(__name__)
@@ -114,7 +115,7 @@ class Client:
         # a 132 was answered that no 133 has ended yet, outside tmclsh.ops.program (a line
         # typed or a script's): close() ends it, so the module is not left storing what it gets
         self.left_downloading = False
-        self.ascii_link = None  # set by tmclsh.client.ascii when the module is driven in ASCII
+        self._ascii_link = None  # (the ascii_link property)
         # while a write moves the module (client/reach.py): its answer may come from the new
         # module address, go to the new host address, or come on the new CAN reply id
         self.also_from: int | None = None
@@ -164,7 +165,10 @@ class Client:
                       "discarded": 0, "events": 0, "retries": 0, "reconnects": 0,
                       "flushed": 0, "unsolicited": 0, "suspect": 0,
                       "judged": 0}
-        self.framing: SerialFraming | CanFraming = transport.framing(self)
+        # the transport's framing, and the one requests go through: the ASCII link's while
+        # the module is driven in its ASCII mode (the ascii_link property swaps them)
+        self._binary_framing: SerialFraming | CanFraming = transport.framing(self)
+        self.framing: SerialFraming | CanFraming | AsciiFraming = self._binary_framing
 
     # -- subscriptions ------------------------------------------------------------------
     def add_listener(self, fn: Listener) -> Callable[[], None]:
@@ -366,6 +370,29 @@ class Client:
         return "ascii" if self.ascii_link is not None else "binary"
 
     @property
+    def ascii_link(self):
+        """The module's ASCII mode while the client drives it (tmclsh.client.ascii.AsciiLink),
+        else None. Setting it swaps the framing: the link's ``framing`` (command lines), or
+        back to the transport's, whose leftovers from before are stale."""
+        return self._ascii_link
+
+    @ascii_link.setter
+    def ascii_link(self, link) -> None:
+        with self._lock:
+            self._ascii_link = link
+            lines = getattr(link, "framing", None)
+            if lines is not None:
+                self.framing = lines
+            elif self.framing is not self._binary_framing:
+                self._binary_framing.clear()
+                self.framing = self._binary_framing
+
+    @property
+    def _by_line(self) -> bool:
+        """Do requests go as ASCII command lines (the framing is the ASCII link's)?"""
+        return self.framing is not self._binary_framing
+
+    @property
     def is_can(self) -> bool:
         return self.transport.kind == "can"
 
@@ -426,8 +453,8 @@ class Client:
                 if (self._bring_up_next or self._check_download) and not self.downloading:
                     self._before_next(req)
                 try:
-                    if self.ascii_link is not None:
-                        reply = self.ascii_link.transact(req, timeout)
+                    if self._by_line:
+                        reply = self._line_request(req, timeout)
                     else:
                         reply = self._request(req, timeout,
                                               self.retries if retries is None else retries)
@@ -562,6 +589,37 @@ class Client:
             if self.tracers:
                 _tell(self.tracers, "note", b"", f"retry {attempt} of {tries - 1}")
 
+    def _line_request(self, req: Request, timeout: float) -> Reply:
+        """``req`` as an ASCII command line (the framing is the ASCII link's), its answer
+        judged by the one rule (``_judge``) before anyone sees it: an answer that may be a
+        copy of the one before, and every reading of a setting (an ASCII reply carries no
+        checksum: a digit changed on the line is found out only by a second read)."""
+        reply = self._line_once(req, timeout)
+        if self._judging:  # (a judge's own exchange)
+            return reply
+        module = self.module
+        if self.framing.copy or (module is not None and module.reads_setting(
+                isa.by_opcode(req.opcode), req.type, req.motor)):
+            return self._judge(req, reply, timeout, self.retries)
+        return reply
+
+    def _line_once(self, req: Request, timeout: float) -> Reply:
+        """One answer to ``req`` on the ASCII line, retried on a timeout as the binary path
+        retries (only a command the instruction set calls idempotent)."""
+        tries = 1 + (self.retries if idempotent(req) else 0)
+        last: TmclTimeoutError | None = None
+        for attempt in range(tries):
+            try:
+                return self.framing.exchange(req, _NORMAL, timeout)
+            except TmclTimeoutError as exc:
+                last = exc
+                if attempt + 1 < tries:
+                    self.trace("note", b"", f"retry {attempt + 1} of {tries - 1}")
+        assert last is not None
+        if tries > 1:
+            raise TmclTimeoutError(f"{last} (after {tries} attempts)")
+        raise last
+
     def _flush_input(self) -> None:
         """Before a request: what is already waiting cannot be its answer. Take it in
         (events are kept), drop the rest, count it."""
@@ -639,11 +697,11 @@ class Client:
         the line to go quiet takes longer than the exchange.
 
         On the module's ASCII line the same rule holds, through the ASCII link's exchanges
-        (``AsciiLink.once``, ``AsciiLink.mark``); there every reading of a setting is judged,
+        (``_line_once``, ``AsciiFraming.mark``); there every reading of a setting is judged,
         copy or not: an ASCII reply has no checksum, and a digit changed on the line is
         found out only by a second read that disagrees."""
         ledger = self.ledger
-        ascii_link = self.ascii_link
+        by_line = self._by_line
         first = ledger.replies
         self.stats["judged"] += 1
         self._judging = True
@@ -651,8 +709,8 @@ class Client:
             if not isa.reading(req.opcode, req.type):
                 marker = Request(req.address, _GET_VERSION, 1, 0, 0)
                 noise = self.stats["discarded"]
-                if ascii_link is not None:
-                    got = ascii_link.mark(timeout)
+                if by_line:
+                    got = self.framing.mark(timeout)
                 else:
                     try:
                         got = self.framing.exchange(marker, _NORMAL, timeout)
@@ -671,8 +729,8 @@ class Client:
                 return reply
             for _ in range(CONFIRM_ROUNDS):
                 found = ledger.found
-                again = (self._request(req, timeout, retries) if ascii_link is None
-                         else ascii_link.once(req, timeout))
+                again = (self._line_once(req, timeout) if by_line
+                         else self._request(req, timeout, retries))
                 if again is None:
                     break
                 if (again == reply and ledger.found == found
@@ -733,13 +791,13 @@ class Client:
         what waits is taken in, and one more exchange made (136 type 1) when the last answer
         may be such a copy (the module answers in order). Readers read those again
         (``CONFIRM_ROUNDS`` times at most) or say they are in doubt, then ``settle`` them.
-        In ASCII mode what waits is taken in (AsciiLink.absorb); its readings of settings
+        In ASCII mode what waits is taken in (AsciiFraming.absorb); its readings of settings
         were judged as they were read."""
         if not answered:
             return set()
-        if confirm and self.ascii_link is not None:
+        if confirm and self._by_line:
             with self._lock:
-                self.ascii_link.absorb()
+                self.framing.absorb()
         elif confirm:
             self.poll()  # what waits already is taken in (nothing is sent, nothing awaited)
             # the exchange only if the last answer may be the reply before it, taken again;
@@ -764,7 +822,7 @@ class Client:
         if not self._lock.acquire(blocking=False):
             return
         try:
-            if self.ascii_link is None and self.transport.is_open and self.framing.waiting():
+            if not self._by_line and self.transport.is_open and self.framing.waiting():
                 self.framing.absorb()
         finally:
             self._lock.release()
@@ -781,8 +839,8 @@ class Client:
         with self._lock:
             if not self.transport.is_open:
                 return
-            if self.ascii_link is not None:
-                self.ascii_link.absorb(watch=True)
+            if self._by_line:
+                self.framing.absorb(watch=True)
                 return
             ledger = self.ledger
             quiet = self.framing.quiet_time()
@@ -883,7 +941,9 @@ class Client:
                     raise
                 time.sleep(min(0.1, max(0.0, deadline - time.monotonic())))
         self._down = False
-        self.framing = self.transport.framing(self)
+        # (a module driven in ASCII mode is found again in whichever mode it is in now:
+        # bringup.again)
+        self.framing = self._binary_framing = self.transport.framing(self)
         self.ledger.reset()  # (an answer still to come may come on the new link too)
 
     @property

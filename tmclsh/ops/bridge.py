@@ -29,7 +29,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from ..base.errors import TransportError
-from ..client.ascii import char_address
+from ..link.ascii import char_address
 from ..link.base import CanFrame, CanTransport, StreamTransport
 from ..tmcl import instructions as isa
 from ..tmcl.decoder import FRAME, FRAME_PIECE, FrameDecoder

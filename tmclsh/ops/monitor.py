@@ -25,7 +25,7 @@ from collections import Counter, deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
-from ..client.ascii import next_line, parse_reply
+from ..link.ascii import next_line, parse_reply
 from ..tmcl.decoder import FRAME, FRAME_PIECE, NOISE, FrameDecoder, printable
 from ..tmcl.frames import Instruction, Reply, ReplyKind
 from ..tmcl.modules import Module, identify
