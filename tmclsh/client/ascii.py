@@ -31,7 +31,7 @@ from ..link.ascii import (  # noqa: F401  (the codec's names, for those who impo
     GP_HOST_ADDRESS, MAX_ADDRESS, STARTUP_ASCII_BIT, AsciiFraming, Echo, LineKind, Mode,
     address_char, ascii_commands, ascii_probe_bytes, ascii_probe_line, binary_answer,
     char_address, classify_line, command_bytes, decode_line, describe_gp67, echo_candidates,
-    echo_mode, format_request, gp67_value, has_valid_frame, next_line, not_in_ascii,
+    echo_mode, format_request, gp67_value, line_for, has_valid_frame, next_line, not_in_ascii,
     parse_reply, probe_frame, read_quiet, reply_part, reply_summary, starts_in_ascii,
     take_lines)
 from ..link.base import StreamTransport
@@ -423,14 +423,11 @@ class AsciiLink:
         return self.control(Control.STOP_APPLICATION, timeout)
 
     def control(self, opcode: int, timeout: float | None = None) -> Reply:
-        """A control command by the word the module's ASCII mode has for it (the instruction
-        set's ``ascii_word``: RUN for 129, STOP for 128)."""
-        ctl = isa.control(opcode)
-        word = ctl.ascii_word if ctl is not None else None
-        if word is None:
-            raise not_in_ascii(Request(self.client.address, opcode, 0, 0, 0))
-        reply = self.command(word, timeout, opcode=opcode,
-                             request=Request(self.client.address, opcode, 0, 0, 0))
+        """A control command by the line the module's ASCII mode has for it (the
+        instruction set's ``ascii_word``: RUN for 129, STOP for 128; ``line_for``)."""
+        req = Request(self.client.address, opcode, 0, 0, 0)
+        word = line_for(req, self.client.module)
+        reply = self.command(word, timeout, opcode=opcode, request=req)
         if not status_ok(reply.status):
             raise StatusError(reply.status, reply, f"{word}: module answered status "
                                                    f"{reply.status}: {reply.status_text}")

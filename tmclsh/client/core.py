@@ -387,6 +387,12 @@ class Client:
                 self._binary_framing.clear()
                 self.framing = self._binary_framing
 
+    def refusal(self, req: Request) -> str | None:
+        """Why ``req`` cannot be sent on the link as it is now (None: it can): the module's
+        ASCII mode knows only some commands (the instruction set says which). Asked by an
+        operation before it sends the first of several requests, so it sends none."""
+        return self.framing.refusal(req)
+
     @property
     def _by_line(self) -> bool:
         """Do requests go as ASCII command lines (the framing is the ASCII link's)?"""

@@ -93,6 +93,12 @@ class LineClient(Client):
                 del cache[next(iter(cache))]
         ins = enc.instruction
         hit = (enc, Request.make(self.address, ins.opcode, ins.type, ins.motor, ins.value))
+        if ascii_mode:
+            # a typed line goes as typed: a raw 128, 129 or 135 is refused (with the word
+            # the ASCII mode has for it), not sent as the line an operation's request is
+            from ..link.ascii import format_request
+
+            format_request(hit[1], mod)
         cache[line] = hit
         return hit
 

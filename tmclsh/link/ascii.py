@@ -205,6 +205,21 @@ def format_request(req: Request, module: Module | None = None) -> str:
     return f"{spec.mnemonic} {ops}" if ops else spec.mnemonic
 
 
+def line_for(req: Request, module: Module | None = None) -> str:
+    """The command line that does what ``req`` does, for the ASCII framing: a control
+    command's word (``ascii_word``: RUN, STOP, for the types ``ascii_types`` names) or the
+    line that asks the same (``ascii_line``: 135 is ``GGP 128, 0``), both from the
+    instruction set; else the command's text (``format_request``, which refuses what the
+    ASCII mode does not accept)."""
+    ctl = isa.control(req.opcode) if isa.by_opcode(req.opcode) is None else None
+    if ctl is not None and (module is None or ctl.on(module)):
+        if ctl.ascii_word and (ctl.ascii_types is None or req.type in ctl.ascii_types):
+            return ctl.ascii_word
+        if ctl.ascii_line:
+            return ctl.ascii_line
+    return format_request(req, module)
+
+
 def command_bytes(address: int, text: str) -> bytes:
     """The command line for ``text``, padded with spaces after the address character to a
     whole number of nine-byte blocks (``command_bytes(1, "GAP 1, 0") == b"A        GAP 1,
@@ -486,11 +501,20 @@ class AsciiFraming:
                  absorb: bool = True) -> Reply:
         """``req`` as a command line (``format_request``), its answer parsed into the Reply a
         binary frame gives (opcode taken from the request), written in the ledger."""
-        text = format_request(req, self.owner.module)
+        text = line_for(req, self.owner.module)
         if kind != ReplyKind.NORMAL:  # pragma: no cover - 134/136/137 not ASCII
             raise not_in_ascii(req)
         return self.command(text, timeout, opcode=req.opcode, address=req.address,
                             request=req)
+
+    def refusal(self, req: Request) -> str | None:
+        """Why ``req`` cannot go as a command line (None: it can), asked before a run of
+        requests starts, so that nothing of it is sent."""
+        try:
+            line_for(req, self.owner.module)
+        except ValidationError as exc:
+            return str(exc)
+        return None
 
     def absorb(self, timeout: float = 0.0, *, flushing: bool = False,
                watch: bool = False) -> bool:
