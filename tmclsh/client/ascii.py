@@ -456,3 +456,11 @@ class AsciiLink:
         leave = "BIN at exit" if self.active and self.on_exit == Mode.BINARY else \
             f"left in {self.on_exit.value} mode at exit"
         return f"ASCII mode, {self.echo.text} ({found}; {leave})"
+
+
+def leave_binary(client: Client) -> None:
+    """Leave the module in binary mode when the client is done with it, if it is driven in
+    its ASCII mode now (whoever switched it there is gone: a bridge's program)."""
+    link = client.ascii_link
+    if link is not None:
+        link.on_exit = Mode.BINARY

@@ -402,6 +402,22 @@ class Client:
     def is_can(self) -> bool:
         return self.transport.kind == "can"
 
+    def cut_by(self, breaks: str | None) -> bool:
+        """Whether writing a parameter whose ``breaks`` (module data: any, can, serial,
+        ascii) is that may cut the link in use with nothing to follow: a CAN bit rate on
+        CAN, the ASCII echo while the module is driven in its ASCII mode. A CAN id written
+        over a serial line cuts nothing here."""
+        return (breaks == "any" or (breaks == "can" and self.is_can)
+                or (breaks == "serial" and not self.is_can)
+                or (breaks == "ascii" and self.ascii_link is not None))
+
+    @property
+    def judges_as_read(self) -> bool:
+        """Are answers judged as they are read, so a reader need not confirm them again
+        (``in_doubt``)? On the module's ASCII line: every reading of a setting is read
+        twice, the replies are lines in order."""
+        return self.ascii_link is not None
+
     @property
     def connected(self) -> bool:
         """The link is up: open, and no request met a failure of it since it was opened.

@@ -175,7 +175,7 @@ def _put_right(transport, left: Left, monitor: Monitor, args, is_can: bool,
                lost: str | None) -> None:
     """The program can no longer reach the module: end what its exchanges left behind."""
     from ..client import bringup
-    from ..client.ascii import Mode
+    from ..client.ascii import leave_binary
     from ..client.core import Client
     from .stop import ToStderr, stop_all
 
@@ -198,8 +198,8 @@ def _put_right(transport, left: Left, monitor: Monitor, args, is_can: bool,
                         reply_id=getattr(args, "reply_id", None))
         try:
             bringup.bring_up(client, strict=False)  # (leaves download mode, finds ASCII)
-            if client.ascii_link is not None and address in left.ascii:
-                client.ascii_link.on_exit = Mode.BINARY
+            if address in left.ascii:
+                leave_binary(client)
             if address in left.started:
                 stop_all(client, ToStderr(), "bridge closed")
         except TmclError as exc:

@@ -33,6 +33,7 @@ from ..base.errors import EXIT_USAGE, AsmError, RangeError, TmclError, Validatio
 from ..tmcl.modules import Module, Parameter
 from ..client import reach
 from ..client.text import AS_TYPED
+from ..ops import program
 from ..tmcl.frames import Control, Request, status_ok, status_text
 from . import options
 from .commands import command, find, options_of
@@ -439,7 +440,7 @@ def cmd_save(session: Session, argtext: str) -> None:
     if path.is_dir():
         raise CloneError(f"cannot write {path}: it is a directory")
     prog_path = _program_path(path) if "--program" in given else None
-    if prog_path is not None and session.client.mode == "ascii":
+    if prog_path is not None and not program.carried(session.client, Control.READ_MEMORY):
         raise ValidationError("--program reads program memory (134), which needs binary mode "
                               "(.mode binary)")
     _may_overwrite(session, [path, prog_path], "--yes" in given)  # before anything is read
@@ -620,7 +621,6 @@ def read_backup(session: Session, path: Path, *, force: bool, command: str,
             f"{path} is a backup of a {backup.module_name}, this is a {live.name}; {verb} by "
             f"parameter name with {command} {path} --force (parameters the {live.name} does "
             "not have are skipped)", "check")
-    ascii_mode = session.client.mode == "ascii"
     # .diff compares whatever the file holds; .restore writes a value outside the manual's
     # range only where the file says so (``!``, as .save writes the module's own) or --force
     anything = command == ".diff" or force
@@ -629,7 +629,7 @@ def read_backup(session: Session, path: Path, *, force: bool, command: str,
         for shell_line in split_line(raw):  # comments off, `;` between lines
             as_typed = anything or shell_line.startswith(AS_TYPED)
             try:
-                _read_line(session, backup, path, number, shell_line, source, live, ascii_mode,
+                _read_line(session, backup, path, number, shell_line, source, live,
                            as_typed)
             except BackupFileError as exc:
                 refused.append(exc)
@@ -651,12 +651,10 @@ def read_backup(session: Session, path: Path, *, force: bool, command: str,
 
 
 def _read_line(session: Session, backup: Backup, path: Path, number: int, text: str,
-               source: Module | None, live: Module, ascii_mode: bool,
-               as_typed: bool = False) -> None:
+               source: Module | None, live: Module, as_typed: bool = False) -> None:
     line = _parse(path, number, text, source or live)
     try:
-        enc = asm.encode(line, source or live, direct=True, ascii=ascii_mode,
-                         as_typed=as_typed)
+        enc = session.client.check(line, source or live, as_typed=as_typed)
     except AsmError as exc:
         raise _refuse(path, number, exc.message, exc.kind) from None
     ins = enc.instruction
@@ -748,12 +746,11 @@ def replay_lines(session: Session, path: Path | str, lines: list[str]) -> list[s
         module = session.module
     except TmclError:
         return lines
-    ascii_mode = session.client.mode == "ascii"
     left: list[Slot] = []
     kept = list(lines)
     for number, raw in enumerate(lines, 1):
         texts = split_line(raw)
-        rest = [t for t in texts if not _writes_link(t, module, ascii_mode, number, left)]
+        rest = [t for t in texts if not _writes_link(session, t, module, number, left)]
         if len(rest) != len(texts):
             kept[number - 1] = "; ".join(rest)
     if left:
@@ -762,7 +759,7 @@ def replay_lines(session: Session, path: Path | str, lines: list[str]) -> list[s
     return kept
 
 
-def _writes_link(text: str, module: Module, ascii_mode: bool, number: int,
+def _writes_link(session: Session, text: str, module: Module, number: int,
                  left: list[Slot]) -> bool:
     """Whether one shell line writes a parameter of the module's link identity (noted)."""
     if text.startswith(".") or "${" in text:
@@ -771,7 +768,7 @@ def _writes_link(text: str, module: Module, ascii_mode: bool, number: int,
         line = asm.parse_line(text.removeprefix(AS_TYPED), number)
         if line.mnemonic is None:
             return False
-        enc = asm.encode(line, module, direct=True, ascii=ascii_mode, as_typed=True)
+        enc = session.client.check(line, module, as_typed=True)
     except TmclError:
         return False
     p = enc.parameter
@@ -917,10 +914,7 @@ def _cuts(client: Client, param: Parameter | None) -> bool:
     """Whether writing ``param`` may cut the link in use with nothing to follow (``breaks``
     in the module data): a CAN bit rate on CAN, the ASCII echo while talking ASCII. A CAN id
     written over a serial line cuts nothing here."""
-    where = param.breaks if param is not None and param.link else None
-    return (where == "any" or (where == "can" and client.is_can)
-            or (where == "serial" and not client.is_can)
-            or (where == "ascii" and client.mode == "ascii"))
+    return client.cut_by(param.breaks if param is not None and param.link else None)
 
 
 def _left_alone_json(backup: Backup) -> list[dict[str, object]]:

@@ -625,7 +625,7 @@ class TrackedContext(SessionContext):
 def can_doubt(session: Session) -> bool:
     """Whether answers can be in doubt on this link (not in ASCII mode, whose replies are
     lines in order)."""
-    return session.client.mode != "ascii"
+    return not session.client.judges_as_read
 
 
 def encode_read(session: Session, text: str) -> Encoded:
