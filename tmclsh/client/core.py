@@ -34,7 +34,8 @@ TMCL replies carry no sequence number, so the client keeps the link honest itsel
 
 The client owns the only receive path: trace, watch and the debugger subscribe with
 ``add_tracer`` and ``add_listener``. How frames are read off the wire is the framing's
-(tmclsh.link.framing, one per wire shape); what may still arrive and which answers are in
+(tmclsh.link.framing, one per wire shape; tmclsh.link.ascii for the module's ASCII command
+line, swapped in by ``ascii_link``); what may still arrive and which answers are in
 doubt is the ledger's (ledger.py); bringing a module up, at connect and after a reconnect,
 is bringup.py's; TMCL lines as text are text.py's, on top of this.
 """

@@ -495,6 +495,7 @@ class AsciiFraming:
         self._pending.clear()
 
     def quiet_time(self) -> float:
+        """(The end of a run is watched by ``absorb(watch=True)``, which waits for quiet.)"""
         return 0.05
 
     def exchange(self, req: Request, kind: ReplyKind, timeout: float,
@@ -519,12 +520,16 @@ class AsciiFraming:
     def absorb(self, timeout: float = 0.0, *, flushing: bool = False,
                watch: bool = False) -> bool:
         """Take in what waits on the line (nothing is sent): a reply among it is a late one,
-        judged as before a request. ``watch`` (or ``timeout``): first wait until the line
-        has been quiet a moment (the end of a run: an answer displaced by the last one comes
-        right behind it). False if nothing came."""
+        judged as before a request. ``watch``: first wait until the line has been quiet a
+        moment (the end of a run: an answer displaced by the last one comes right behind
+        it); ``timeout``: what comes within it, if nothing waits. False if nothing came."""
         t = self._line()
-        data = read_quiet(t, 0.05, max(0.5, timeout)) if watch or timeout else \
-            t.read_available()
+        if watch:
+            data = read_quiet(t, 0.05, 0.5)
+        elif timeout:
+            data = read_quiet(t, timeout, timeout)
+        else:
+            data = t.read_available()
         self._buf += data
         self._take_in()
         return bool(data)
