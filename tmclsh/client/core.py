@@ -170,6 +170,7 @@ class Client:
         # the module is driven in its ASCII mode (the ascii_link property swaps them)
         self._binary_framing: SerialFraming | CanFraming = transport.framing(self)
         self.framing: SerialFraming | CanFraming | AsciiFraming = self._binary_framing
+        self._by_line = False  # the framing is the ASCII link's (set with ascii_link)
 
     # -- subscriptions ------------------------------------------------------------------
     def add_listener(self, fn: Listener) -> Callable[[], None]:
@@ -387,6 +388,8 @@ class Client:
             elif self.framing is not self._binary_framing:
                 self._binary_framing.clear()
                 self.framing = self._binary_framing
+            # requests go as ASCII command lines (one attribute read on the request path)
+            self._by_line = self.framing is not self._binary_framing
 
     def refusal(self, req: Request) -> str | None:
         """Why ``req`` cannot be sent on the link as it is now (None: it can): the module's
@@ -394,10 +397,6 @@ class Client:
         operation before it sends the first of several requests, so it sends none."""
         return self.framing.refusal(req)
 
-    @property
-    def _by_line(self) -> bool:
-        """Do requests go as ASCII command lines (the framing is the ASCII link's)?"""
-        return self.framing is not self._binary_framing
 
     @property
     def is_can(self) -> bool:
@@ -967,6 +966,7 @@ class Client:
         # (a module driven in ASCII mode is found again in whichever mode it is in now:
         # bringup.again)
         self.framing = self._binary_framing = self.transport.framing(self)
+        self._by_line = False
         self.ledger.reset()  # (an answer still to come may come on the new link too)
 
     @property

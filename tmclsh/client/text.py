@@ -71,7 +71,7 @@ class LineClient(Client):
         checked against; another module or mode starts the cache afresh. Lines that fail are
         checked again every time. ``${...}`` is expanded by the shell before it gets here."""
         mod = self.module if self.module is not None else self.require_module()
-        ascii_mode = self.ascii_link is not None
+        ascii_mode = self._ascii_link is not None  # (the attribute: every line asks)
         cache = self._encoded
         if mod is not self._encoded_for[0] or ascii_mode is not self._encoded_for[1]:
             cache.clear()
