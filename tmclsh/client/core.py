@@ -979,7 +979,8 @@ class Client:
         return bool(self.tracers or self.sent_tracers)
 
     def absorb(self) -> None:
-        """Take in what is pending on a binary line: events are kept, all else is stale."""
+        """Take in what is pending on the line (the framing's rules): events are kept, all
+        else is stale; a reply among it is a late one."""
         with self._lock:
             self.framing.absorb()
 
