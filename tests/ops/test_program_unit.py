@@ -14,6 +14,10 @@ from tmclsh.base.errors import ValidationError
 from tmclsh.ops.program import AppStatus, UploadError
 from tmclsh.tmcl.frames import Instruction
 from tmclsh.link import open_serial
+from tmclsh.client.ascii import AsciiLink
+from tmclsh.tmcl.frames import Request
+
+from responder import OK, AsciiModeModule
 
 M1311 = modules.load("TMCM-1311")
 
@@ -73,43 +77,74 @@ def test_upload_refuses_oversize_before_sending(idle_client) -> None:
         program.upload(idle_client, [])
 
 
-class _Link:
-    """The shape tmclsh.client.ascii offers for the program: control(opcode), sent as the
-    word the instruction set gives it."""
+class _ProgramModule(AsciiModeModule):
+    """A module in its ASCII mode, from the manual (TMCM-1311 §4.4.3): RUN and STOP start
+    and stop the stored program, GGP 128 reads the application status, GGP 130 the program
+    counter; nothing else of
+    the program's control commands exists there."""
 
-    def __init__(self):
-        self.calls = []
+    def __init__(self, **kw):
+        self.state = 0
+        super().__init__(**kw)
 
-    def control(self, opcode, timeout=None):
-        from tmclsh.tmcl import instructions as isa
-
-        self.calls.append(isa.control(opcode).ascii_word)
-
-
-def test_ascii_mode_allows_only_run_and_stop(idle_client) -> None:
-    idle_client.ascii_link = _Link()
-    try:
-        for call in (lambda: program.step(idle_client), lambda: program.reset(idle_client),
-                     lambda: program.upload(idle_client, [Instruction(28)]),
-                     lambda: program.read_program(idle_client),
-                     lambda: program.continue_to(idle_client, {3})):
-            with pytest.raises(ValidationError, match="needs binary mode.*RUN and STOP"):
-                call()
-        assert idle_client.ascii_link.calls == []  # nothing went through the ASCII link
-    finally:
-        idle_client.ascii_link = None
+    def line(self, text: str) -> str | None:
+        word = text[1:].strip().upper().replace(" ", "")
+        answer = f"{chr(0x40 + self.host)}{self.char} {OK}"
+        if text.startswith(self.char) and word in ("RUN", "STOP"):
+            self.state = 1 if word == "RUN" else 0
+            return f"{answer} 0"
+        if text.startswith(self.char) and word == "GGP128,0":
+            return f"{answer} {self.state}"
+        if text.startswith(self.char) and word == "GGP130,0":
+            return f"{answer} 0"  # (the program counter)
+        return super().line(text)
 
 
-def test_ascii_run_from_address_needs_binary(idle_client) -> None:
-    link = idle_client.ascii_link = _Link()
-    try:
-        program.run(idle_client)
-        program.stop(idle_client)
-        with pytest.raises(ValidationError, match="from an address.*needs binary mode"):
-            program.run(idle_client, 5)
-        assert link.calls == ["RUN", "STOP"]
-    finally:
-        idle_client.ascii_link = None
+@pytest.fixture
+def ascii_module():
+    module = _ProgramModule()
+    c = LineClient(open_serial(module.path), module="TMCM-1311", timeout=1.0, retries=0)
+    AsciiLink.attach(c)
+    yield module, c
+    c.close()
+    module.close()
+
+
+def _lines(module) -> list[str]:
+    return [raw.decode("latin-1")[1:].strip() for raw in module.log if isinstance(raw, bytes)]
+
+
+def test_ascii_mode_allows_only_run_and_stop(ascii_module) -> None:
+    """What the module's ASCII mode does not know is refused before anything is sent (the
+    framing says so, from the instruction set), not by asking which mode the link is in."""
+    module, c = ascii_module
+    before = list(module.log)
+    for call in (lambda: program.step(c), lambda: program.reset(c),
+                 lambda: program.upload(c, [Instruction(28)]),
+                 lambda: program.read_program(c),
+                 lambda: program.continue_to(c, {3})):
+        with pytest.raises(ValidationError, match="needs binary mode.*RUN.*STOP"):
+            call()
+    assert module.log == before  # nothing was sent
+
+
+def test_ascii_run_stop_status_are_the_instruction_sets_lines(ascii_module) -> None:
+    """129 type 0 goes as RUN, 128 as STOP, 135 as GGP 128, 0 (``ascii_word``,
+    ``ascii_line``); 129 type 1 has no ASCII line and is refused, nothing sent."""
+    module, c = ascii_module
+    program.run(c)
+    assert program.status(c).state == "run"
+    program.stop(c)
+    assert program.status(c).state == "stop"
+    asked = _lines(module)
+    assert [x for x in asked if x in ("RUN", "STOP", "GGP 128, 0")] == \
+        ["RUN", "GGP 128, 0", "STOP", "GGP 128, 0"]
+    before = list(module.log)
+    with pytest.raises(ValidationError, match="from an address.*needs binary mode"):
+        program.run(c, 5)
+    assert module.log == before
+    # the client's request path does it for any caller, not only these operations
+    assert c.request(Request(1, 129, 0, 0, 0)).status == 100 and module.state == 1
 
 
 def test_end_marker_and_image_compare() -> None:

@@ -17,6 +17,8 @@ from tmclsh.shell.render import Output
 from tmclsh.shell.session import Abort, Session
 from tmclsh.link import open_serial
 
+from responder import AsciiModeModule
+
 DEMO = Path(__file__).resolve().parents[2] / "scripts" / "programs" / "demo" / "demo-counter.tmc"
 
 
@@ -159,14 +161,24 @@ def test_vars_range_checked(session) -> None:
         session.run_line(".vars 5..2")
 
 
-def test_ascii_mode_errors_are_clear(session) -> None:
-    session.client.ascii_link = object()  # (nothing may go through it here)
+def test_ascii_mode_errors_are_clear() -> None:
+    """A module in its ASCII mode (a module written from the manual): what it does not know
+    is refused with a clear line, and nothing reaches it."""
+    from tmclsh.client.ascii import AsciiLink
+
+    module = AsciiModeModule()
+    c = LineClient(open_serial(module.path), module="TMCM-1311", timeout=1.0, retries=0)
     try:
+        AsciiLink.attach(c)
+        s = Session(c, Output())
+        heard = list(module.log)
         for line in (".step", ".reset", f".upload {DEMO} --yes", ".dump"):
             with pytest.raises(ValidationError, match="binary mode"):
-                session.run_line(line)
+                s.run_line(line)
+        assert module.log == heard
     finally:
-        session.client.ascii_link = None
+        c.close()
+        module.close()
 
 
 def test_source_map_show_and_off(mapped, capsys) -> None:

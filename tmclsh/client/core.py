@@ -34,7 +34,8 @@ TMCL replies carry no sequence number, so the client keeps the link honest itsel
 
 The client owns the only receive path: trace, watch and the debugger subscribe with
 ``add_tracer`` and ``add_listener``. How frames are read off the wire is the framing's
-(tmclsh.link.framing, one per wire shape); what may still arrive and which answers are in
+(tmclsh.link.framing, one per wire shape; tmclsh.link.ascii for the module's ASCII command
+line, swapped in by ``ascii_link``); what may still arrive and which answers are in
 doubt is the ledger's (ledger.py); bringing a module up, at connect and after a reconnect,
 is bringup.py's; TMCL lines as text are text.py's, on top of this.
 """
@@ -62,6 +63,7 @@ from .ledger import CONFIRM_ROUNDS, Ledger, Suspect
 from .motion import MotionRecord, watched_opcodes
 
 if TYPE_CHECKING:
+    from ..link.ascii import AsciiFraming
     from ..link.framing import CanFraming, SerialFraming
 
 log = logging.getLogger(__name__)
@@ -128,8 +130,7 @@ class Client:
         # a 132 was answered that no 133 has ended yet, outside tmclsh.ops.program (a line
         # typed or a script's): close() ends it, so the module is not left storing what it gets
         self._left_downloading = False
-        self.ascii_link = None  # set by tmclsh.client.ascii when the module is driven in ASCII
-        """The ASCII-mode link while the module is driven in its ASCII mode, else None."""
+        self._ascii_link = None  # (the ascii_link property)
         # while a write moves the module (client/reach.py): its answer may come from the new
         # module address, go to the new host address, or come on the new CAN reply id
         self._also_from: int | None = None
@@ -186,7 +187,11 @@ class Client:
                       "judged": 0}
         """Counters of what happened on the link since it was opened: requests sent,
         timeouts, checksum errors, resynchronisations, retries, events, ..."""
-        self._framing: SerialFraming | CanFraming = transport.framing(self)
+        # the transport's framing, and the one requests go through: the ASCII link's while
+        # the module is driven in its ASCII mode (the ascii_link property swaps them)
+        self._binary_framing: SerialFraming | CanFraming = transport.framing(self)
+        self._framing: SerialFraming | CanFraming | AsciiFraming = self._binary_framing
+        self._by_line = False  # the framing is the ASCII link's (set with ascii_link)
 
     # -- subscriptions ------------------------------------------------------------------
     def add_listener(self, fn: Listener) -> Callable[[], None]:
@@ -389,9 +394,52 @@ class Client:
         return "ascii" if self.ascii_link is not None else "binary"
 
     @property
+    def ascii_link(self):
+        """The module's ASCII mode while the client drives it (tmclsh.client.ascii.AsciiLink),
+        else None. Setting it swaps the framing: the link's ``framing`` (command lines), or
+        back to the transport's, whose leftovers from before are stale."""
+        return self._ascii_link
+
+    @ascii_link.setter
+    def ascii_link(self, link) -> None:
+        with self._lock:
+            self._ascii_link = link
+            lines = getattr(link, "framing", None)
+            if lines is not None:
+                self._framing = lines
+            elif self._framing is not self._binary_framing:
+                self._binary_framing.clear()
+                self._framing = self._binary_framing
+            # requests go as ASCII command lines (one attribute read on the request path)
+            self._by_line = self._framing is not self._binary_framing
+
+    def refusal(self, req: Request) -> str | None:
+        """Why ``req`` cannot be sent on the link as it is now (None: it can): the module's
+        ASCII mode knows only some commands (the instruction set says which). Asked by an
+        operation before it sends the first of several requests, so it sends none."""
+        return self._framing.refusal(req)
+
+
+    @property
     def is_can(self) -> bool:
         """The link is a CAN bus (addresses are CAN ids there)."""
         return self.transport.kind == "can"
+
+    def cut_by(self, breaks: str | None) -> bool:
+        """Whether writing a parameter whose ``breaks`` (module data: any, can, serial,
+        ascii) is that may cut the link in use with nothing to follow: a CAN bit rate on
+        CAN, the ASCII echo while the module is driven in its ASCII mode. A CAN id written
+        over a serial line cuts nothing here."""
+        return (breaks == "any" or (breaks == "can" and self.is_can)
+                or (breaks == "serial" and not self.is_can)
+                or (breaks == "ascii" and self.ascii_link is not None))
+
+    @property
+    def judges_as_read(self) -> bool:
+        """Are answers judged as they are read, so a reader need not confirm them again
+        (``in_doubt``)? On the module's ASCII line: every reading of a setting is read
+        twice, the replies are lines in order."""
+        return self.ascii_link is not None
 
     @property
     def connected(self) -> bool:
@@ -451,8 +499,8 @@ class Client:
                 if (self._bring_up_next or self._check_download) and not self._downloading:
                     self._before_next(req)
                 try:
-                    if self.ascii_link is not None:
-                        reply = self.ascii_link.transact(req, timeout)
+                    if self._by_line:
+                        reply = self._line_request(req, timeout)
                     else:
                         reply = self._request(req, timeout,
                                               self.retries if retries is None else retries)
@@ -587,6 +635,37 @@ class Client:
             if self._tracers:
                 _tell(self._tracers, "note", b"", f"retry {attempt} of {tries - 1}")
 
+    def _line_request(self, req: Request, timeout: float) -> Reply:
+        """``req`` as an ASCII command line (the framing is the ASCII link's), its answer
+        judged by the one rule (``_judge``) before anyone sees it: an answer that may be a
+        copy of the one before, and every reading of a setting (an ASCII reply carries no
+        checksum: a digit changed on the line is found out only by a second read)."""
+        reply = self._line_once(req, timeout)
+        if self._judging:  # (a judge's own exchange)
+            return reply
+        module = self.module
+        if self._framing.copy or (module is not None and module.reads_setting(
+                isa.by_opcode(req.opcode), req.type, req.motor)):
+            return self._judge(req, reply, timeout, self.retries)
+        return reply
+
+    def _line_once(self, req: Request, timeout: float) -> Reply:
+        """One answer to ``req`` on the ASCII line, retried on a timeout as the binary path
+        retries (only a command the instruction set calls idempotent)."""
+        tries = 1 + (self.retries if idempotent(req) else 0)
+        last: TmclTimeoutError | None = None
+        for attempt in range(tries):
+            try:
+                return self._framing.exchange(req, _NORMAL, timeout)
+            except TmclTimeoutError as exc:
+                last = exc
+                if attempt + 1 < tries:
+                    self._trace("note", b"", f"retry {attempt + 1} of {tries - 1}")
+        assert last is not None
+        if tries > 1:
+            raise TmclTimeoutError(f"{last} (after {tries} attempts)")
+        raise last
+
     def _flush_input(self) -> None:
         """Before a request: what is already waiting cannot be its answer. Take it in
         (events are kept), drop the rest, count it."""
@@ -665,11 +744,11 @@ class Client:
         the line to go quiet takes longer than the exchange.
 
         On the module's ASCII line the same rule holds, through the ASCII link's exchanges
-        (``AsciiLink.once``, ``AsciiLink.mark``); there every reading of a setting is judged,
+        (``_line_once``, ``AsciiFraming.mark``); there every reading of a setting is judged,
         copy or not: an ASCII reply has no checksum, and a digit changed on the line is
         found out only by a second read that disagrees."""
         ledger = self._ledger
-        ascii_link = self.ascii_link
+        by_line = self._by_line
         first = ledger.replies
         self.stats["judged"] += 1
         self._judging = True
@@ -677,8 +756,8 @@ class Client:
             if not isa.reading(req.opcode, req.type):
                 marker = Request(req.address, _GET_VERSION, 1, 0, 0)
                 noise = self.stats["discarded"]
-                if ascii_link is not None:
-                    got = ascii_link.mark(timeout)
+                if by_line:
+                    got = self._framing.mark(timeout)
                 else:
                     try:
                         got = self._framing.exchange(marker, _NORMAL, timeout)
@@ -697,8 +776,8 @@ class Client:
                 return reply
             for _ in range(CONFIRM_ROUNDS):
                 found = ledger.found
-                again = (self._request(req, timeout, retries) if ascii_link is None
-                         else ascii_link.once(req, timeout))
+                again = (self._line_once(req, timeout) if by_line
+                         else self._request(req, timeout, retries))
                 if again is None:
                     break
                 if (again == reply and ledger.found == found
@@ -759,13 +838,13 @@ class Client:
         what waits is taken in, and one more exchange made (136 type 1) when the last answer
         may be such a copy (the module answers in order). Readers read those again
         (``CONFIRM_ROUNDS`` times at most) or say they are in doubt, then ``settle`` them.
-        In ASCII mode what waits is taken in (AsciiLink.absorb); its readings of settings
+        In ASCII mode what waits is taken in (AsciiFraming.absorb); its readings of settings
         were judged as they were read."""
         if not answered:
             return set()
-        if confirm and self.ascii_link is not None:
+        if confirm and self._by_line:
             with self._lock:
-                self.ascii_link.absorb()
+                self._framing.absorb()
         elif confirm:
             self.poll()  # what waits already is taken in (nothing is sent, nothing awaited)
             # the exchange only if the last answer may be the reply before it, taken again;
@@ -790,7 +869,7 @@ class Client:
         if not self._lock.acquire(blocking=False):
             return
         try:
-            if self.ascii_link is None and self.transport.is_open and self._framing.waiting():
+            if not self._by_line and self.transport.is_open and self._framing.waiting():
                 self._framing.absorb()
         except TransportError:
             self._down = True  # found here as a request would have found it
@@ -810,8 +889,8 @@ class Client:
         with self._lock:
             if not self.transport.is_open:
                 return
-            if self.ascii_link is not None:
-                self.ascii_link.absorb(watch=True)
+            if self._by_line:
+                self._framing.absorb(watch=True)
                 return
             ledger = self._ledger
             quiet = self._framing.quiet_time()
@@ -913,8 +992,15 @@ class Client:
                     raise
                 time.sleep(min(0.1, max(0.0, deadline - time.monotonic())))
         self._down = False
-        self._framing = self.transport.framing(self)
+        # (a module driven in ASCII mode is found again in whichever mode it is in now:
+        # bringup.again)
+        self._framing = self._binary_framing = self.transport.framing(self)
+        self._by_line = False
         self._ledger.reset()  # (an answer still to come may come on the new link too)
+
+    def _lost_check(self, address: int, why: str) -> str:
+        """``lost_check`` for the framings (the ASCII link's line check)."""
+        return lost_check(self, address, why)
 
     @property
     def bring_up_pending(self) -> bool:
@@ -932,7 +1018,8 @@ class Client:
         return bool(self._tracers or self._sent_tracers)
 
     def _absorb(self) -> None:
-        """Take in what is pending on a binary line: events are kept, all else is stale."""
+        """Take in what is pending on the line (the framing's rules): events are kept, all
+        else is stale; a reply among it is a late one."""
         with self._lock:
             self._framing.absorb()
 

@@ -10,8 +10,8 @@ reply that arrives when nothing waits for it makes the last answer given a *susp
 One ledger per client; everything that asks "is this answer certain?" asks it here:
 ``Client.in_doubt`` for a reader's own reads (``.watch``, ``.expect``, the safety stop's
 read-back, an upload's verify), ``take_suspects`` for the shell's report after a line.
-The framing (tmclsh.link.framing) writes to it as it reads the line, and so does the ASCII
-link (tmclsh.client.ascii) on the module's ASCII command line, whose replies name no command
+The framings (tmclsh.link.framing) write to it as they read the line, and so does the ASCII
+framing (tmclsh.link.ascii) on the module's ASCII command line, whose replies name no command
 (``by_command`` false): there any late reply may be taken for any request; nothing here does
 I/O. Which addresses two modules answer at is counted here too (``Doubles``), from the same
 replies.

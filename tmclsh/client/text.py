@@ -71,7 +71,7 @@ class LineClient(Client):
         checked against; another module or mode starts the cache afresh. Lines that fail are
         checked again every time. ``${...}`` is expanded by the shell before it gets here."""
         mod = self.module if self.module is not None else self.require_module()
-        ascii_mode = self.ascii_link is not None
+        ascii_mode = self._ascii_link is not None  # (the attribute: every line asks)
         cache = self._encoded
         if mod is not self._encoded_for[0] or ascii_mode is not self._encoded_for[1]:
             cache.clear()
@@ -93,8 +93,25 @@ class LineClient(Client):
                 del cache[next(iter(cache))]
         ins = enc.instruction
         hit = (enc, Request.make(self.address, ins.opcode, ins.type, ins.motor, ins.value))
+        if ascii_mode:
+            # a typed line goes as typed: a raw 128, 129 or 135 is refused (with the word
+            # the ASCII mode has for it), not sent as the line an operation's request is
+            from ..link.ascii import format_request
+
+            format_request(hit[1], mod)
         cache[line] = hit
         return hit
+
+    def check(self, line: asm.Line, module: Module | None = None, *,
+              as_typed: bool = False) -> asm.Encoded:
+        """A parsed line checked as this client would send it (nothing is sent): against
+        ``module`` (default: the client's), and against what the link carries (the module's
+        ASCII mode accepts only some commands)."""
+        from ..tmcl import asm
+
+        mod = module if module is not None else self.require_module()
+        return asm.encode(line, mod, direct=True, ascii=self.ascii_link is not None,
+                          as_typed=as_typed)
 
     def _send_encoded(self, enc: asm.Encoded, req: Request, *,
                      timeout: float | None = None) -> Reply | None:

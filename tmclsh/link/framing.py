@@ -113,6 +113,11 @@ class SerialFraming:
         """Forget what is buffered (the line was in another mode, or reset)."""
         self.decoder.clear()
 
+    def refusal(self, req: Request) -> str | None:
+        """Why ``req`` cannot be sent on this framing (None: it can; every request fits in a
+        frame; the ASCII framing's refuses what the module's ASCII mode does not know)."""
+        return None
+
     def quiet_time(self) -> float:
         """How long a line must be silent before nothing more is on its way: two frames'
         wire time at its baud rate (0 where bytes do not travel at one)."""
@@ -358,6 +363,9 @@ class CanFraming:
 
     def quiet_time(self) -> float:
         return 0.0
+
+    def refusal(self, req: Request) -> str | None:
+        return None
 
     def exchange(self, req: Request, kind: ReplyKind, timeout: float,
                  absorb: bool = True) -> Reply | None:

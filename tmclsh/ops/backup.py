@@ -498,7 +498,6 @@ def read_backup(client: Client, path: Path | str, *, force: bool = False,
             f"{path} is a backup of a {backup.module_name}, this is a {live.name}; {verb} by "
             f"parameter name with {command} {path} --force (parameters the {live.name} does "
             "not have are skipped)", "check")
-    ascii_mode = client.mode == "ascii"
     # .diff compares whatever the file holds; .restore writes a value outside the manual's
     # range only where the file says so (``!``, as .save writes the module's own) or --force
     anything = command == ".diff" or force
@@ -507,7 +506,7 @@ def read_backup(client: Client, path: Path | str, *, force: bool = False,
         for shell_line in split(raw):  # comments off, `;` between lines
             as_typed = anything or shell_line.startswith(AS_TYPED)
             try:
-                _read_line(backup, path, number, shell_line, source, live, ascii_mode,
+                _read_line(client, backup, path, number, shell_line, source, live,
                            as_typed)
             except BackupFileError as exc:
                 refused.append(exc)
@@ -528,13 +527,11 @@ def read_backup(client: Client, path: Path | str, *, force: bool = False,
     return backup
 
 
-def _read_line(backup: Backup, path: Path, number: int, text: str,
-               source: Module | None, live: Module, ascii_mode: bool,
-               as_typed: bool = False) -> None:
+def _read_line(client: Client, backup: Backup, path: Path, number: int, text: str,
+               source: Module | None, live: Module, as_typed: bool = False) -> None:
     line = _parse(path, number, text, source or live)
     try:
-        enc = asm.encode(line, source or live, direct=True, ascii=ascii_mode,
-                         as_typed=as_typed)
+        enc = client.check(line, source or live, as_typed=as_typed)
     except AsmError as exc:
         raise _refuse(path, number, exc.message, exc.kind) from None
     ins = enc.instruction
@@ -612,8 +609,8 @@ def left_alone_text(slots: list[Slot]) -> str:
     return ", ".join(f"{s.name or s.label} = {s.value}" for s in slots)
 
 
-def writes_link(text: str, module: Module, ascii_mode: bool, number: int,
-                 left: list[Slot]) -> bool:
+def writes_link(client: Client, text: str, module: Module, number: int,
+                left: list[Slot]) -> bool:
     """Whether one shell line writes a parameter of the module's link identity (noted)."""
     if text.startswith(".") or "${" in text:
         return False
@@ -621,7 +618,7 @@ def writes_link(text: str, module: Module, ascii_mode: bool, number: int,
         line = asm.parse_line(text.removeprefix(AS_TYPED), number)
         if line.mnemonic is None:
             return False
-        enc = asm.encode(line, module, direct=True, ascii=ascii_mode, as_typed=True)
+        enc = client.check(line, module, as_typed=True)
     except TmclError:
         return False
     p = enc.parameter
@@ -691,10 +688,7 @@ def cuts(client: Client, param: Parameter | None) -> bool:
     """Whether writing ``param`` may cut the link in use with nothing to follow (``breaks``
     in the module data): a CAN bit rate on CAN, the ASCII echo while talking ASCII. A CAN id
     written over a serial line cuts nothing here."""
-    where = param.breaks if param is not None and param.link else None
-    return (where == "any" or (where == "can" and client.is_can)
-            or (where == "serial" and not client.is_can)
-            or (where == "ascii" and client.mode == "ascii"))
+    return client.cut_by(param.breaks if param is not None and param.link else None)
 
 
 def restore_order(client: Client, diffs: list[Difference]) -> list[Difference]:

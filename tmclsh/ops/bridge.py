@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 from ..base.errors import TransportError
 from ..base.spill import Spill
-from ..client.ascii import char_address
+from ..link.ascii import char_address
 from ..link.base import CanFrame, CanTransport, StreamTransport
 from ..tmcl import instructions as isa
 from ..tmcl.decoder import CAN_VERSION, FRAME_PIECE, FrameDecoder, can_reply

@@ -90,7 +90,7 @@ class TrackedContext(Context):
 def can_doubt(client: Any) -> bool:
     """Whether answers can be in doubt on this link (not in ASCII mode, whose replies are
     lines in order)."""
-    return client.mode != "ascii"
+    return not client.judges_as_read
 
 
 def encode_read(client: Any, text: str) -> Encoded:

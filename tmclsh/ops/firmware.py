@@ -348,7 +348,8 @@ class FirmwareUpdate:
             if not self._look_in_bootloader():
                 raise
             return
-        if c.ascii_link is not None:
+        if c.refusal(Request(c.address, isa.boot_command("enter"), 0, 0, 0)) is not None:
+            # (the link cannot carry 242: the module answers in its ASCII mode)
             raise FirmwareError(f"the module at address {c.address} is in its ASCII mode: "
                                 "switch it back to binary mode first (tmclsh -c '.mode "
                                 "binary --keep')")

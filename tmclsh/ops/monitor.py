@@ -26,7 +26,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
 from ..base.canspec import LINK_DEFAULTS
-from ..client.ascii import next_line, parse_reply
+from ..link.ascii import next_line, parse_reply
 from ..tmcl.decoder import (CAN_DATA, CAN_VERSION, FRAME, FRAME_PIECE, NOISE, WHOLE, FrameDecoder,
                             can_reply, printable)
 from ..tmcl.frames import Instruction, Reply, ReplyKind

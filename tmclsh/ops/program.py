@@ -19,9 +19,10 @@ These firmwares have no breakpoint command: :func:`continue_to` runs to a breakp
 stepping the module and reading the program counter after every step.
 
 In ASCII mode the module knows only ``RUN`` and ``STOP`` for its program (TMCM-1311 manual
-§4.4.3); :func:`run` and :func:`stop` use the ASCII link's ``run()``/``stop_program()`` then,
-:func:`status` reads GP 128/130 (GGP works in ASCII mode), and everything else raises a
-:class:`~tmclsh.base.errors.ValidationError` saying binary mode is needed.
+§4.4.3), and GP 128 for 135: the instruction set says so (``ascii_word``, ``ascii_line``) and
+the link's framing sends those lines for 128, 129 type 0 and 135, so nothing here asks which
+mode the link is in. What the link cannot carry raises a
+:class:`~tmclsh.base.errors.ValidationError` before anything is sent (``require_binary``).
 
 Example::
 
@@ -55,7 +56,6 @@ log = logging.getLogger(__name__)
 
 # GGP <type>, 0: the program's global parameters (bank 0)
 GGP = int(isa.parameter_command("global", "read").opcode)
-GP_APPLICATION_STATUS = 128
 GP_DOWNLOAD_MODE = 129
 GP_PROGRAM_COUNTER = 130
 USER_VARIABLE_BANK = 2
@@ -179,11 +179,20 @@ def _span(r: range) -> str:
 
 # -- checks ------------------------------------------------------------------------------
 
-def require_binary(client, what: str) -> None:
-    """Refuse control commands other than RUN/STOP while the link is in ASCII mode."""
-    if client.mode == "ascii":
-        raise ValidationError(f"{what} needs binary mode; in ASCII mode the module only knows "
-                              "RUN and STOP for its program (switch with .mode binary)")
+def carried(client, opcode: int, type_: int = 0) -> bool:
+    """Can the link carry this control command as it is now (``Client.refusal``)? The
+    module's ASCII mode knows RUN and STOP of the program's control commands, and 135 as
+    GP 128, as the instruction set says (``ascii_word``, ``ascii_line``)."""
+    return client.refusal(Request(client.address, opcode, type_, 0, 0)) is None
+
+
+def require_binary(client, what: str, opcode: int, *more: int, type_: int = 0) -> None:
+    """Refuse, before the first of its requests is sent, what the link cannot carry as it
+    is now (``carried``)."""
+    for op in (opcode, *more):
+        why = client.refusal(Request(client.address, op, type_, 0, 0))
+        if why is not None:
+            raise ValidationError(f"{what} needs binary mode: {why}")
 
 
 def require_alone(client) -> None:
@@ -255,7 +264,8 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
     """
     instructions, start = _image(program, origin)
     module = client.require_module()
-    require_binary(client, "uploading a program (132/133)")
+    require_binary(client, "uploading a program (132/133)", Control.START_DOWNLOAD,
+                   Control.QUIT_DOWNLOAD)
     require_alone(client)
     if not instructions:
         raise ValidationError("the program has no instructions; nothing to upload")
@@ -334,7 +344,7 @@ def _quit_download(client, timeout: float | None) -> tuple[bool, str | None]:
 
 def end_download(client, *, timeout: float | None = None) -> None:
     """133 on its own: end a download mode left behind (e.g. by a link lost mid-upload)."""
-    require_binary(client, "quit download (133)")
+    require_binary(client, "quit download (133)", Control.QUIT_DOWNLOAD)
     client._downloading = True  # until it is answered, the module may store what it gets
     ended = False
     try:
@@ -348,7 +358,7 @@ def end_download(client, *, timeout: float | None = None) -> None:
 
 def read_instruction(client, address: int, *, timeout: float | None = None) -> Instruction:
     """The instruction stored at ``address`` (134)."""
-    require_binary(client, "reading program memory (134)")
+    require_binary(client, "reading program memory (134)", _READ_MEMORY)
     reply = _send(client, _READ_MEMORY, 0, 0, address, timeout=timeout)
     if reply is None or reply.stored is None:
         raise TmclError(f"no program-memory reply for address {address}")
@@ -370,7 +380,7 @@ def read_program(client, start: int = 0, count: int | None = None, *,
     :func:`is_end_marker`, not included) or the end of memory.
     """
     module = client.require_module()
-    require_binary(client, "reading program memory (134)")
+    require_binary(client, "reading program memory (134)", _READ_MEMORY)
     size = module.program_memory
     if not 0 <= start < size:
         raise ValidationError(f"address {start} is outside program memory 0..{size - 1}")
@@ -434,47 +444,35 @@ def same_image(a: Sequence[Instruction], b: Sequence[Instruction]) -> bool:
 
 # -- running -----------------------------------------------------------------------------
 
-def _ascii_control(client, opcode: int):
-    """A control command through the module's ASCII mode (its ``ascii_word``: RUN, STOP)."""
-    return client.ascii_link.control(opcode)
-
-
 def run(client, address: int | None = None) -> None:
-    """129: type 0 runs from the current address, type 1 from ``address``."""
+    """129: type 0 runs from the current address, type 1 from ``address`` (on the module's
+    ASCII line: RUN, which runs from the current address only)."""
     module = client.require_module()
     if address is not None and not 0 <= address < module.program_memory:
         raise ValidationError(f"address {address} is outside program memory "
                               f"0..{module.program_memory - 1}")
-    if client.mode == "ascii":
-        if address is not None:
-            raise ValidationError("running from an address (129 type 1) needs binary mode; "
-                                  "ASCII RUN starts from the current address (switch with "
-                                  ".mode binary)")
-        _ascii_control(client, Control.RUN_APPLICATION)
-        return
     if address is None:
         _ok(_send(client, Control.RUN_APPLICATION, 0), "run (129)")
     else:
+        require_binary(client, "running from an address (129 type 1)",
+                       Control.RUN_APPLICATION, type_=1)
         _ok(_send(client, Control.RUN_APPLICATION, 1, 0, address), f"run from {address} (129)")
 
 
 def stop(client) -> None:
     """128: stop the running (or stepped) application."""
-    if client.mode == "ascii":
-        _ascii_control(client, Control.STOP_APPLICATION)
-        return
     _ok(_send(client, Control.STOP_APPLICATION), "stop (128)")
 
 
 def reset(client) -> None:
     """131: program counter to 0, application stopped."""
-    require_binary(client, "reset (131)")
+    require_binary(client, "reset (131)", Control.RESET_APPLICATION)
     _ok(_send(client, Control.RESET_APPLICATION), "reset (131)")
 
 
 def step(client) -> None:
     """130: execute the next instruction."""
-    require_binary(client, "stepping (130)")
+    require_binary(client, "stepping (130)", Control.STEP_APPLICATION)
     _ok(_send(client, Control.STEP_APPLICATION), "step (130)")
 
 
@@ -485,12 +483,9 @@ def program_counter(client) -> int:
 
 
 def status(client) -> AppStatus:
-    """135 (GP 128 in ASCII mode) and the program counter (GP 130)."""
-    if client.mode == "ascii":
-        code = _ok(_send(client, GGP, GP_APPLICATION_STATUS, 0),
-                   "application status (GGP 128)").value
-    else:
-        code = _ok(_send(client, Control.GET_STATUS), "application status (135)").value
+    """135 (GP 128 on the module's ASCII line: the instruction set's ``ascii_line``) and the
+    program counter (GP 130)."""
+    code = _ok(_send(client, Control.GET_STATUS), "application status (135)").value
     return AppStatus(state_name(code), program_counter(client), code)
 
 
@@ -521,7 +516,7 @@ def step_one(client, *, pc: int | None = None,
     only) until it moves, calling ``on_wait(pc)`` once first (Ctrl-C interrupts the wait;
     the module stays in step mode). ``pc``: the program counter before the step, if known.
     """
-    require_binary(client, "stepping (130)")
+    require_binary(client, "stepping (130)", Control.STEP_APPLICATION)
     if pc is None:
         pc = program_counter(client)
     step(client)
@@ -557,7 +552,8 @@ def continue_to(client, breakpoints: Iterable[int], *, max_steps: int | None = N
     module stays in step mode, at an instruction boundary). ``instruction_at(address)`` gives
     the stored instruction (default: read with 134, once per address).
     """
-    require_binary(client, "running to a breakpoint (130 steps)")
+    require_binary(client, "running to a breakpoint (130 steps)",
+                   Control.STEP_APPLICATION)
     targets = set(breakpoints)
     cache: dict[int, Instruction] = {}
 
@@ -623,4 +619,5 @@ __all__ = ["AppState", "AppStatus", "Mismatch", "UploadResult", "UploadError", "
            "upload", "end_download", "verify_image", "read_program", "read_instruction", "is_end_marker",
            "same_image", "run", "stop", "reset", "step", "status", "program_counter",
            "download_mode", "continue_to", "step_one", "is_wait", "check_fits", "require_binary",
+           "carried",
            "user_variable_range", "read_user_variables", "state_name"]

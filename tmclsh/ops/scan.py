@@ -58,7 +58,7 @@ MARGIN_USB = 0.006  # the module's own USB port (CDC), TCP: a USB frame or a net
 MARGIN_RS485 = 0.025  # a USB-RS485 adapter (FTDI latency timer up to 16 ms) + the module
 CAN_TIMEOUT = 0.05  # see the module docstring
 # what crosses the line for one address in the ASCII pass: the probe line (AGGP 67, 0 CR,
-# padded with spaces to two nine-byte blocks: client/ascii.py), its echo (a module may echo
+# padded with spaces to two nine-byte blocks: link/ascii.py), its echo (a module may echo
 # every character) and the reply (BA 100 0 CR, a longer value)
 ASCII_WIRE_BYTES = 2 * 2 * SERIAL_FRAME_LEN + 14
 SLOW_TIMEOUT = 0.25  # the second pass: addresses that answered late or garbled

@@ -20,7 +20,7 @@ from ..client.motion import Commanded
 from ..tmcl import instructions as isa
 from ..tmcl.frames import Control
 from .certain import read_until_certain
-from .program import GGP, GP_APPLICATION_STATUS, AppState, _ascii_control, _ok, _send
+from .program import AppState, _ok, _send
 
 
 _MST, _GAP = int(isa.Opcode.MST), int(isa.Opcode.GAP)
@@ -150,15 +150,12 @@ def _has(client, opcode: int) -> bool:
 
 
 def _program_running(client, timeout: float, retries: int | None = None) -> bool | None:
-    """135 (GP 128 in ASCII mode): True if the stored program runs, None if unknown."""
-    if client.mode != "ascii" and not _has(client, Control.GET_STATUS):
+    """135 (GP 128 on the module's ASCII line, which the framing sends for it): True if the
+    stored program runs, None if unknown."""
+    if not _has(client, Control.GET_STATUS):
         return False
     try:
-        if client.mode == "ascii":
-            reply = _send(client, GGP, GP_APPLICATION_STATUS, 0, timeout=timeout,
-                          retries=retries)
-        else:
-            reply = _send(client, Control.GET_STATUS, timeout=timeout, retries=retries)
+        reply = _send(client, Control.GET_STATUS, timeout=timeout, retries=retries)
         return _ok(reply, "application status").value == AppState.RUN
     except TmclError:
         return None
@@ -264,12 +261,9 @@ def _stop_everything(client, settle: float, sleep: Callable[[float], None]) -> S
     report = StopReport()
     t = min(client.timeout, 0.5)
     running = _program_running(client, t)
-    if running is not False and (client.mode == "ascii" or _has(client, Control.STOP_APPLICATION)):
+    if running is not False and _has(client, Control.STOP_APPLICATION):
         try:
-            if client.mode == "ascii":
-                _ascii_control(client, Control.STOP_APPLICATION)
-            else:
-                _ok(_send(client, Control.STOP_APPLICATION, timeout=t), "stop (128)")
+            _ok(_send(client, Control.STOP_APPLICATION, timeout=t), "stop (128)")
             report.program = "stopped" if running else None
         except TmclError as exc:
             report.program_error = str(exc)

@@ -197,7 +197,7 @@ def _put_right(transport, left: Left, monitor: Monitor, args, is_can: bool,
     ``capture`` (``-o``) gets the frames sent for that too, so a replayed capture ends as
     the module was left."""
     from ..client import bringup
-    from ..client.ascii import Mode
+    from ..client.ascii import leave_binary
     from ..client.core import Client
     from .stop import ToStderr, stop_all
 
@@ -222,8 +222,8 @@ def _put_right(transport, left: Left, monitor: Monitor, args, is_can: bool,
             client.add_tracer(_capturing(capture, client, is_can))
         try:
             bringup.bring_up(client, strict=False)  # (leaves download mode, finds ASCII)
-            if client.ascii_link is not None and address in left.ascii:
-                client.ascii_link.on_exit = Mode.BINARY
+            if address in left.ascii:
+                leave_binary(client)
             if address in left.started:
                 stop_all(client, ToStderr(), "bridge closed")
         except TmclError as exc:

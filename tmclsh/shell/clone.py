@@ -17,11 +17,13 @@ from typing import TYPE_CHECKING
 from ..base.errors import TmclError, ValidationError
 from ..client.text import AS_TYPED
 from ..ops import backup as ops
+from ..ops import program
 # (the names others import from here: tests, scripts/bench.py, which also reads old trees)
 from ..ops.backup import (BACKUP_MARK, READ, STORE, WRITE, Backup,  # noqa: F401
                           BackupFileError, CloneError, Difference, Slot, Written,
                           left_alone_text, readable_slots)
 from ..tmcl import asm
+from ..tmcl.frames import Control
 from ..tmcl.modules import Module
 from . import options
 from .commands import command, find, options_of
@@ -215,7 +217,7 @@ def cmd_save(session: Session, argtext: str) -> None:
     if path.is_dir():
         raise CloneError(f"cannot write {path}: it is a directory")
     prog_path = _program_path(path) if "--program" in given else None
-    if prog_path is not None and session.client.mode == "ascii":
+    if prog_path is not None and not program.carried(session.client, Control.READ_MEMORY):
         raise ValidationError("--program reads program memory (134), which needs binary mode "
                               "(.mode binary)")
     _may_overwrite(session, [path, prog_path], "--yes" in given)  # before anything is read
@@ -287,12 +289,11 @@ def replay_lines(session: Session, path: Path | str, lines: list[str]) -> list[s
         module = session.module
     except TmclError:
         return lines
-    ascii_mode = session.client.mode == "ascii"
     left: list[Slot] = []
     kept = list(lines)
     for number, raw in enumerate(lines, 1):
         texts = split_line(raw)
-        rest = [t for t in texts if not ops.writes_link(t, module, ascii_mode, number, left)]
+        rest = [t for t in texts if not ops.writes_link(session.client, t, module, number, left)]
         if len(rest) != len(texts):
             kept[number - 1] = "; ".join(rest)
     if left:

@@ -32,7 +32,7 @@ from ..ops import program
 from ..base.errors import AsmError, TmclError, ValidationError
 from ..client.core import shared_text
 from ..ops.program import AppStatus, UploadError
-from ..tmcl.frames import Instruction
+from ..tmcl.frames import Control, Instruction
 from . import options
 from .commands import command, options_of
 from .render import paged, paging
@@ -177,7 +177,7 @@ def _cached_instruction(session: Session, address: int) -> Instruction | None:
     dbg = state(session)
     if address in dbg.memory:
         return dbg.memory[address]
-    if session.client.mode == "ascii":
+    if not program.carried(session.client, Control.READ_MEMORY):
         return None
     module = session.module
     if not 0 <= address < module.program_memory:
@@ -447,7 +447,8 @@ def cmd_upload(session: Session, argtext: str) -> None:
     pos, opts = options.parse_words(argtext, options_of(".upload"))
     if len(pos) != 1:
         raise ValidationError("usage: .upload FILE [--at ADDR] [--yes] [--no-verify]")
-    program.require_binary(session.client, "uploading a program (132/133)")
+    program.require_binary(session.client, "uploading a program (132/133)",
+                           Control.START_DOWNLOAD, Control.QUIT_DOWNLOAD)
     module = session.module
     origin = _number(str(opts["--at"]), "--at") if "--at" in opts else 0
     path = _resolve_file(session, pos[0])
@@ -578,7 +579,8 @@ def cmd_dump(session: Session, argtext: str) -> None:
         raise ValidationError("-o needs a FILE")
     if len(pos) > 1:
         raise ValidationError("usage: .dump [[-o] FILE] [--at ADDR] [--count N]")
-    program.require_binary(session.client, "reading program memory (134)")
+    program.require_binary(session.client, "reading program memory (134)",
+                           Control.READ_MEMORY)
     module = session.module
     start = _number(str(opts["--at"]), "--at") if "--at" in opts else 0
     count = _number(str(opts["--count"]), "--count") if "--count" in opts else None
@@ -668,7 +670,7 @@ def cmd_source_map(session: Session, argtext: str) -> None:
     path = _resolve_file(session, pos[0])
     prog = asm.load_program(path, module, origin)
     message = f"{_show_path(str(path))} mapped to {origin}..{origin + len(prog) - 1}"
-    if session.client.mode != "ascii" and len(prog):
+    if len(prog) and program.carried(session.client, Control.READ_MEMORY):
         mm = program.verify_image(session.client, prog.instructions, origin)
         if mm is not None:
             loc = prog.loc(mm.address)
@@ -691,7 +693,8 @@ def cmd_run(session: Session, argtext: str) -> None:
     _not_repeating(session)
     address = None
     if argtext.strip():
-        program.require_binary(session.client, "running from an address (129 type 1)")
+        program.require_binary(session.client, "running from an address (129 type 1)",
+                               Control.RUN_APPLICATION, type_=1)
         address, _desc = resolve(session, argtext, line_numbers=False)
     program.run(session.client, address)
     st = _read_status(session)
@@ -733,7 +736,7 @@ def cmd_where(session: Session, argtext: str) -> None:
 @command(".step")
 def cmd_step(session: Session, argtext: str) -> None:
     n = int(limits.parse("count", argtext, ".step N")) if argtext.strip() else 1
-    program.require_binary(session.client, "stepping (130)")
+    program.require_binary(session.client, "stepping (130)", Control.STEP_APPLICATION)
     pc: int | None = program.program_counter(session.client)
     _check_something_to_step(session, pc)
     session.state.repeat_on_empty = ".step" if n == 1 else f".step {n}"
@@ -785,8 +788,9 @@ def refresh_program_state(session: Session) -> None:
     session.state.program_state = None
     _not_repeating(session)
     client = session.client
-    if not client.connected or client.module is None or client.mode == "ascii":
-        return
+    if (not client.connected or client.module is None
+            or not program.carried(client, Control.STEP_APPLICATION)):
+        return  # (nothing to debug where the program cannot be stepped: ASCII mode)
     try:
         _read_status(session)
     except TmclError:
@@ -824,7 +828,8 @@ def cmd_continue(session: Session, argtext: str) -> None:
         session.out.info("no breakpoints: running at full speed (129)")
         report(session, _read_status(session), displays=False)
         return
-    program.require_binary(session.client, "running to a breakpoint (130 steps)")
+    program.require_binary(session.client, "running to a breakpoint (130 steps)",
+                           Control.STEP_APPLICATION)
     current = program.status(session.client)
     if current.state == "run":
         program.stop(session.client)

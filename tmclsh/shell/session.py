@@ -529,7 +529,7 @@ def _unsure(client: Client, req, exc: TmclError, sent: bool) -> TmclError:
     usable answer: say whether the module may have executed it, so it is not typed again
     blindly (a relative move would go twice as far)."""
     name = _name(req)
-    if sent or client.mode == "ascii":
+    if sent:
         more = (f"{name} is not sent again by itself: the module may have executed it; "
                 "check (for example GAP ActualPosition) before sending it again")
     else:

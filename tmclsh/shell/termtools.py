@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TextIO
 
-from ..client.ascii import address_char
+from ..link.ascii import address_char
 from ..base.errors import ValidationError
 
 MENU_KEY = 0x14  # Ctrl-T, as in tio and miniterm

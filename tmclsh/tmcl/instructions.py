@@ -168,6 +168,8 @@ class ControlSpec:
     reply: str | None = None  # "none": no reply comes (137, 205, 242)
     boot: str | None = None  # its role in a firmware update (bootloader.toml)
     access: str | None = None  # read: it only reads (134, 135, 136)
+    ascii_types: tuple[int, ...] | None = None  # the types ascii_word does (None: all)
+    ascii_line: str | None = None  # in ASCII mode, this line asks the same (135: GGP 128)
 
     def on(self, module: ModuleRef) -> bool:
         return _offered(self.modules, module)
@@ -219,9 +221,14 @@ def _tables() -> tuple[dict[int, InstructionSpec], dict[int, ControlSpec], dict[
                                          c.get("starts_motion", False), c.get("confirm"),
                                          c.get("not_a_line"), c.get("ascii_word"),
                                          c.get("download"), c.get("reply"), c.get("boot"),
-                                         c.get("access"))
+                                         c.get("access"), _types(c.get("ascii_types")),
+                                         c.get("ascii_line"))
                 for c in data["control"]}
     return by_opcode, controls, dict(data["interrupts"])
+
+
+def _types(raw: list[int] | None) -> tuple[int, ...] | None:
+    return tuple(raw) if raw is not None else None
 
 
 def _spec(raw: dict) -> InstructionSpec:
