@@ -65,6 +65,7 @@ from .motion import MotionRecord, watched_opcodes
 if TYPE_CHECKING:
     from ..link.ascii import AsciiFraming
     from ..link.framing import CanFraming, SerialFraming
+    from ..tmcl.asm import Encoded, Line
 
 log = logging.getLogger(__name__)
 
@@ -424,6 +425,17 @@ class Client:
     def is_can(self) -> bool:
         """The link is a CAN bus (addresses are CAN ids there)."""
         return self.transport.kind == "can"
+
+    def check(self, line: Line, module: Module | None = None, *,
+              as_typed: bool = False) -> Encoded:
+        """A parsed line checked as this client would send it (nothing is sent): against
+        ``module`` (default: the client's), and against what the link carries (the module's
+        ASCII mode accepts only some commands)."""
+        from ..tmcl import asm
+
+        mod = module if module is not None else self.require_module()
+        return asm.encode(line, mod, direct=True, ascii=self.ascii_link is not None,
+                          as_typed=as_typed)
 
     def cut_by(self, breaks: str | None) -> bool:
         """Whether writing a parameter whose ``breaks`` (module data: any, can, serial,

@@ -102,17 +102,6 @@ class LineClient(Client):
         cache[line] = hit
         return hit
 
-    def check(self, line: asm.Line, module: Module | None = None, *,
-              as_typed: bool = False) -> asm.Encoded:
-        """A parsed line checked as this client would send it (nothing is sent): against
-        ``module`` (default: the client's), and against what the link carries (the module's
-        ASCII mode accepts only some commands)."""
-        from ..tmcl import asm
-
-        mod = module if module is not None else self.require_module()
-        return asm.encode(line, mod, direct=True, ascii=self.ascii_link is not None,
-                          as_typed=as_typed)
-
     def _send_encoded(self, enc: asm.Encoded, req: Request, *,
                      timeout: float | None = None) -> Reply | None:
         """Send a checked line's request; a write that moves the module (its address, CAN
