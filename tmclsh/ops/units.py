@@ -33,7 +33,6 @@ From Python::
 
 from __future__ import annotations
 
-import ctypes
 import importlib
 import threading
 from collections.abc import Callable, Iterator
@@ -191,6 +190,8 @@ class Run:
         self.lines = list(lines.values())
 
     def go(self) -> list[Result]:
+        import ctypes  # noqa: F401  (here, not at start-up: _raise_in uses it in units' threads)
+
         _load_transports(self.units)
         for line in self.lines:
             line.thread = threading.Thread(target=self._line, args=(line,),
@@ -342,6 +343,8 @@ def _raise_in(thread: threading.Thread, exc_type: type[BaseException] | None) ->
     """Raise ``exc_type`` in ``thread`` at its next bytecode (what Ctrl-C does to the main
     thread), so a unit unwinds and stops its module as a run of one module does; None takes
     back one raised that has not landed yet."""
+    import ctypes  # loaded by Run.go, before any unit's thread
+
     if thread.ident is None:
         return
     ctypes.pythonapi.PyThreadState_SetAsyncExc(

@@ -7,14 +7,12 @@ Adding a module means adding a data file. Lookups accept numbers and names
 
 from __future__ import annotations
 
-import difflib
 import re
 from dataclasses import dataclass, field
 from functools import cache, cached_property
-from importlib import resources
 from pathlib import Path
 
-from ...base.datafiles import load_toml
+from ...base.datafiles import load_toml, package_files
 from ...base.errors import RangeError, ValidationError
 from ..instructions import GENERIC, InstructionSpec, all_instructions, controls, family
 from ..version import TYPE_FIRST, decode_type1, parse_string
@@ -340,6 +338,8 @@ class Module:
                 ranked.append((_RANK_SUBSEQUENCE, p))
         if not ranked:
             names = {_normalise(p.name): p for p in pool}
+            import difflib  # only when nothing closer matched
+
             for close in difflib.get_close_matches(nq, list(names), n=5, cutoff=0.6):
                 ranked.append((_RANK_FUZZY, names[close]))
         return ranked
@@ -512,7 +512,7 @@ def _find_user(name: str) -> Module | None:
 
 @cache
 def _built_in_names() -> tuple[str, ...]:
-    files = resources.files(__package__)
+    files = package_files(__package__)
     names = []
     for entry in files.iterdir():
         if entry.name.endswith(".toml"):
@@ -552,7 +552,7 @@ def load(name: str) -> Module:
 def _load(file_name: str) -> Module | None:
     """A built-in module: read as a user's file is, through the same schema check (run when
     the file is parsed, not on every start: the parsed data is cached by content)."""
-    entry = resources.files(__package__).joinpath(file_name)
+    entry = package_files(__package__).joinpath(file_name)
     if not entry.is_file():
         return None
     return Module(load_toml(__package__, file_name, check=lambda text: check_text(
