@@ -91,9 +91,22 @@ def test_errors_in_a_pipe_are_plain_lines(make_pty_sim):
 ON_DEMAND = ("tomllib", "platformdirs", "importlib.resources", "zipfile", "difflib", "ctypes")
 
 
+@pytest.fixture(params=["simulator", "responder"])
+def a_1311(request, make_pty_sim):
+    """The simulator, or a module written from the manuals answering as a TMCM-1311."""
+    if request.param == "simulator":
+        yield make_pty_sim()[1]
+        return
+    from responder import PtyModule
+
+    module = PtyModule(version="1311V111")
+    yield module.path
+    module.close()
+
+
 @pytest.mark.skipif(sys.platform != "linux", reason="platformdirs answers elsewhere")
-def test_port_path_loads_the_data_cache_not_the_parsers(make_pty_sim, tmp_path):
-    _, path = make_pty_sim()
+def test_port_path_loads_the_data_cache_not_the_parsers(a_1311, tmp_path):
+    path = a_1311
     env = {"XDG_CACHE_HOME": str(tmp_path / "cache")}
     args = ("--port", path, "-m", "TMCM-1311", "-c", "GAP 1, 0")
     first = subprocess.run([sys.executable, "-m", "tmclsh", *args], capture_output=True,
