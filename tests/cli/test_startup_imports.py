@@ -87,8 +87,9 @@ def test_errors_in_a_pipe_are_plain_lines(make_pty_sim):
 # what the -c path used to load before its first request, each now loaded where it is needed:
 # the TOML parser (a data file parsed, a config file that has text), platformdirs (a platform
 # other than Linux's XDG places), importlib.resources (a package inside a zip file), difflib
-# (a mistyped word), ctypes (several units)
-ON_DEMAND = ("tomllib", "platformdirs", "importlib.resources", "zipfile", "difflib", "ctypes")
+# (a mistyped word), ctypes (several units), tempfile and shutil (a file written, help laid out)
+ON_DEMAND = ("tomllib", "platformdirs", "importlib.resources", "zipfile", "difflib", "ctypes",
+             "tempfile", "shutil")
 
 
 @pytest.fixture(params=["simulator", "responder"])

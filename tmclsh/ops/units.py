@@ -190,7 +190,10 @@ class Run:
         self.lines = list(lines.values())
 
     def go(self) -> list[Result]:
-        import ctypes  # noqa: F401  (here, not at start-up: _raise_in uses it in units' threads)
+        # here, in the main thread, not at start-up: _raise_in uses ctypes in the units'
+        # threads, and a unit writing a file imports tempfile (base/files.write_file)
+        import ctypes  # noqa: F401
+        import tempfile  # noqa: F401
 
         _load_transports(self.units)
         for line in self.lines:
