@@ -28,9 +28,10 @@ runpy.run_module("tmclsh", run_name="__main__", alter_sys=True)
 """
 
 
-def loaded(*args: str, input: str | None = None) -> tuple[subprocess.CompletedProcess, set]:
+def loaded(*args: str, input: str | None = None, env: dict[str, str] | None = None
+           ) -> tuple[subprocess.CompletedProcess, set]:
     proc = subprocess.run([sys.executable, "-c", RUNNER, *args], capture_output=True, text=True,
-                          input=input, timeout=60, env=tmclsh_env(), cwd=str(ROOT))
+                          input=input, timeout=60, env=tmclsh_env(**(env or {})), cwd=str(ROOT))
     last = proc.stderr.rstrip().splitlines()[-1]
     assert last.startswith("MODULES "), proc.stderr
     return proc, set(json.loads(last[len("MODULES "):]))
@@ -81,3 +82,38 @@ def test_errors_in_a_pipe_are_plain_lines(make_pty_sim):
     assert proc.stderr.splitlines()[0].startswith("error: ") and "motor 7" in proc.stderr
     assert "ActualPosition" in proc.stdout
     assert heavy(modules) == []
+
+
+# what the -c path used to load before its first request, each now loaded where it is needed:
+# the TOML parser (a data file parsed, a config file that has text), platformdirs (a platform
+# other than Linux's XDG places), importlib.resources (a package inside a zip file), difflib
+# (a mistyped word), ctypes (several units), tempfile and shutil (a file written, help laid out)
+ON_DEMAND = ("tomllib", "platformdirs", "importlib.resources", "zipfile", "difflib", "ctypes",
+             "tempfile", "shutil")
+
+
+@pytest.fixture(params=["simulator", "responder"])
+def a_1311(request, make_pty_sim):
+    """The simulator, or a module written from the manuals answering as a TMCM-1311."""
+    if request.param == "simulator":
+        yield make_pty_sim()[1]
+        return
+    from responder import PtyModule
+
+    module = PtyModule(version="1311V111")
+    yield module.path
+    module.close()
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="platformdirs answers elsewhere")
+def test_port_path_loads_the_data_cache_not_the_parsers(a_1311, tmp_path):
+    path = a_1311
+    env = {"XDG_CACHE_HOME": str(tmp_path / "cache")}
+    args = ("--port", path, "-m", "TMCM-1311", "-c", "GAP 1, 0")
+    first = subprocess.run([sys.executable, "-m", "tmclsh", *args], capture_output=True,
+                           text=True, timeout=60, env=tmclsh_env(**env), cwd=str(tmp_path))
+    assert first.returncode == 0, first.stderr  # (this run parsed and cached the data files)
+    assert list((tmp_path / "cache" / "tmclsh" / "data").glob("tmcm1311-*.marshal"))
+    proc, modules = loaded(*args, env=env)
+    assert proc.returncode == 0 and proc.stdout.startswith("ActualPosition"), proc.stderr
+    assert sorted(m for m in modules if m.startswith(ON_DEMAND)) == []

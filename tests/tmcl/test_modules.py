@@ -327,6 +327,23 @@ def test_global_entries_do_not_overlap(module: str) -> None:
 
 
 @pytest.mark.parametrize("module", MODULES)
+def test_a_136_answer_builds_only_the_module_it_names(module: str, monkeypatch) -> None:
+    """Telling a module by its version string (every bring-up) reads the others' names and
+    ids, not their whole tables: a start-up builds one module's."""
+    version = modules.load(module).version_string
+    built = []
+    real = modules._load
+
+    def counted(file_name: str):
+        built.append(file_name)
+        return real(file_name)
+
+    monkeypatch.setattr(modules, "_load", counted)
+    assert modules.from_version_string(version).name == module
+    assert built == [modules._file_name(module)]
+
+
+@pytest.mark.parametrize("module", MODULES)
 def test_module_header(module: str) -> None:
     mod = modules.load(module)
     assert mod.name == module and mod.motors >= 1 and mod.program_memory > 0

@@ -19,10 +19,10 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 from functools import cache
-from importlib import resources
 from pathlib import Path
 
 from . import limits
+from .dirs import user_dir
 from .canspec import LINK_DEFAULTS
 from .errors import UsageError, ValidationError
 from .limits import SettingError
@@ -77,17 +77,13 @@ _FALSE = ("0", "false", "no", "off", "")
 def config_dir() -> Path:
     """The platform's config directory: $XDG_CONFIG_HOME/tmclsh (~/.config/tmclsh) on Linux,
     ~/Library/Application Support/tmclsh on macOS, %LOCALAPPDATA%\\tmclsh on Windows."""
-    import platformdirs
-
-    return Path(platformdirs.user_config_dir("tmclsh", appauthor=False))
+    return user_dir("config")
 
 
 def state_dir() -> Path:
     """Where the history is kept: $XDG_STATE_HOME/tmclsh (~/.local/state/tmclsh) on Linux,
     the platform's own place elsewhere."""
-    import platformdirs
-
-    return Path(platformdirs.user_state_dir("tmclsh", appauthor=False))
+    return user_dir("state")
 
 
 def config_file() -> Path:
@@ -102,7 +98,9 @@ def history_file() -> Path:
 
 def default_config_text() -> str:
     """The commented default configuration (``tmclsh/default.toml``)."""
-    return resources.files(__package__).joinpath("default.toml").read_text("utf-8")
+    from .datafiles import package_files
+
+    return package_files(__package__).joinpath("default.toml").read_text("utf-8")
 
 
 @cache
@@ -163,6 +161,8 @@ def _unknown(where: str, what: str, bad: set, known: tuple[str, ...]) -> Validat
 
 def parse_config(text: str, path: Path) -> Config:
     """Parse and check the text of a config file (``path`` is only for messages)."""
+    if not text.strip():  # an empty file (TMCLSH_CONFIG=/dev/null): nothing to parse
+        return _config_from({}, path)
     import tomllib  # here: without a config file a start-up does not load it
 
     from .files import toml_limits
@@ -174,6 +174,11 @@ def parse_config(text: str, path: Path) -> Config:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SettingError(f"{path}: {exc}") from None
+    return _config_from(data, path)
+
+
+def _config_from(data: dict, path: Path) -> Config:
+    """The settings and profiles of a config file's data, checked."""
     extra = set(data) - {"settings", "profiles"}
     if extra:
         raise _unknown(str(path), "table(s)", extra, ("settings", "profiles"))

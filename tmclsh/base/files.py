@@ -17,7 +17,6 @@ failed write never leaves a half-written file where a good one was. Failures are
 from __future__ import annotations
 
 import os
-import tempfile
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -380,6 +379,8 @@ class AtomicWriter:
                 fd = os.open(target, os.O_WRONLY)
                 tmp = str(target)
             else:
+                import tempfile  # (with shutil and random: 4 ms of a start that writes nothing)
+
                 fd, tmp = tempfile.mkstemp(dir=target.parent if str(target.parent) else ".",
                                            prefix=f".{target.name}.", suffix=".tmp")
         except (OSError, ValueError) as exc:

@@ -8,6 +8,8 @@ can drift from the other. It imports nothing heavy.
 from __future__ import annotations
 
 import argparse
+import os
+import sys
 from collections.abc import Sequence
 
 from .. import __version__
@@ -231,8 +233,39 @@ def add_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--debug", action="store_true", help="show tracebacks instead of one-line errors")
 
 
+def _columns() -> int:
+    """The terminal's width as argparse reads it (``COLUMNS``, else the terminal on stdout,
+    else 80), without importing shutil for it: 2 ms of every start, for help text that a
+    run which is not asking for help never lays out."""
+    try:
+        columns = int(os.environ.get("COLUMNS", ""))
+    except ValueError:
+        columns = 0
+    if columns <= 0:
+        try:
+            columns = os.get_terminal_size(sys.__stdout__.fileno()).columns
+        except (AttributeError, ValueError, OSError):
+            columns = 0
+    return columns if columns > 0 else 80
+
+
+class _Formatter(argparse.HelpFormatter):
+    def __init__(self, prog: str, indent_increment: int = 2, max_help_position: int = 24,
+                 width: int | None = None, **kw) -> None:
+        super().__init__(prog, indent_increment, max_help_position,
+                         _columns() - 2 if width is None else width, **kw)
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser with ``_Formatter`` (its subcommands' parsers too: argparse makes
+    them of the same class)."""
+
+    def __init__(self, *args, formatter_class: type = _Formatter, **kw) -> None:
+        super().__init__(*args, formatter_class=formatter_class, **kw)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = _Parser(
         prog="tmclsh",
         description="Interactive shell for Trinamic TMCL modules (TMCM-1311, TMCM-351, TMCM-1640).",
         epilog="Subcommands: asm, disasm, sim, ports, scan, modules, firmware, replace, "

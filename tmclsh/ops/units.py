@@ -33,7 +33,6 @@ From Python::
 
 from __future__ import annotations
 
-import ctypes
 import importlib
 import threading
 from collections.abc import Callable, Iterator
@@ -191,6 +190,11 @@ class Run:
         self.lines = list(lines.values())
 
     def go(self) -> list[Result]:
+        # here, in the main thread, not at start-up: _raise_in uses ctypes in the units'
+        # threads, and a unit writing a file imports tempfile (base/files.write_file)
+        import ctypes  # noqa: F401
+        import tempfile  # noqa: F401
+
         _load_transports(self.units)
         for line in self.lines:
             line.thread = threading.Thread(target=self._line, args=(line,),
@@ -342,6 +346,8 @@ def _raise_in(thread: threading.Thread, exc_type: type[BaseException] | None) ->
     """Raise ``exc_type`` in ``thread`` at its next bytecode (what Ctrl-C does to the main
     thread), so a unit unwinds and stops its module as a run of one module does; None takes
     back one raised that has not landed yet."""
+    import ctypes  # loaded by Run.go, before any unit's thread
+
     if thread.ident is None:
         return
     ctypes.pythonapi.PyThreadState_SetAsyncExc(

@@ -7,7 +7,6 @@ checked against the module's database before anything is sent.
 
 from __future__ import annotations
 
-import difflib
 import re
 import sys
 import time
@@ -48,6 +47,8 @@ def _as_statement(question: str) -> str:
 def unknown_command(word: str) -> str:
     """The error for a mistyped dot-command, naming the commands it is close to (as a
     mistyped mnemonic gets)."""
+    import difflib  # only for a mistyped word: not at start-up
+
     names = [name for cmd in commands.all_commands() for name in cmd.names()]
     close = difflib.get_close_matches(word.lower(), names, n=3, cutoff=0.6)
     near = f"did you mean {', '.join(close)}? " if close else ""

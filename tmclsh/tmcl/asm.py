@@ -23,7 +23,6 @@ Source syntax (the TMCL-IDE's, as the manuals print it):
 
 from __future__ import annotations
 
-import difflib
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -374,6 +373,8 @@ def _check_int32(value: int, line: Line, col: int) -> None:
 
 
 def _suggest(word: str, choices) -> str:
+    import difflib  # only for a word that is wrong: not at start-up
+
     close = difflib.get_close_matches(word.upper(), [c.upper() for c in choices], n=3, cutoff=0.5)
     return f"; did you mean {', '.join(close)}?" if close else ""
 

@@ -7,14 +7,12 @@ Adding a module means adding a data file. Lookups accept numbers and names
 
 from __future__ import annotations
 
-import difflib
 import re
 from dataclasses import dataclass, field
 from functools import cache, cached_property
-from importlib import resources
 from pathlib import Path
 
-from ...base.datafiles import load_toml
+from ...base.datafiles import load_toml, package_files
 from ...base.errors import RangeError, ValidationError
 from ..instructions import GENERIC, InstructionSpec, all_instructions, controls, family
 from ..version import TYPE_FIRST, decode_type1, parse_string
@@ -340,6 +338,8 @@ class Module:
                 ranked.append((_RANK_SUBSEQUENCE, p))
         if not ranked:
             names = {_normalise(p.name): p for p in pool}
+            import difflib  # only when nothing closer matched
+
             for close in difflib.get_close_matches(nq, list(names), n=5, cutoff=0.6):
                 ranked.append((_RANK_FUZZY, names[close]))
         return ranked
@@ -511,13 +511,19 @@ def _find_user(name: str) -> Module | None:
 
 
 @cache
-def _built_in_names() -> tuple[str, ...]:
-    files = resources.files(__package__)
-    names = []
-    for entry in files.iterdir():
+def _built_in_ids() -> dict[str, int]:
+    """Each built-in module's name and firmware id, from its data without its tables built:
+    a module told by its 136 answer builds only the one it names."""
+    ids = {}
+    for entry in package_files(__package__).iterdir():
         if entry.name.endswith(".toml"):
-            names.append(load_toml(__package__, entry.name)["module"]["name"])
-    return tuple(sorted(names))
+            info = load_toml(__package__, entry.name)["module"]
+            ids[info["name"]] = info["firmware_id"]
+    return ids
+
+
+def _built_in_names() -> tuple[str, ...]:
+    return tuple(sorted(_built_in_ids()))
 
 
 def built_in() -> list[str]:
@@ -552,7 +558,7 @@ def load(name: str) -> Module:
 def _load(file_name: str) -> Module | None:
     """A built-in module: read as a user's file is, through the same schema check (run when
     the file is parsed, not on every start: the parsed data is cached by content)."""
-    entry = resources.files(__package__).joinpath(file_name)
+    entry = package_files(__package__).joinpath(file_name)
     if not entry.is_file():
         return None
     return Module(load_toml(__package__, file_name, check=lambda text: check_text(
@@ -560,7 +566,10 @@ def _load(file_name: str) -> Module | None:
 
 
 def by_firmware_id(firmware_id: int) -> Module | None:
+    built_in = _built_in_ids()
     for name in available():
+        if built_in.get(name, firmware_id) != firmware_id and _find_user(name) is None:
+            continue  # (another type: its tables are not built for nothing)
         mod = load(name)
         if mod.firmware_id == firmware_id:
             return mod

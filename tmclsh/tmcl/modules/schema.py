@@ -9,7 +9,6 @@ the text the way TOML lays it out (headers, then ``key = value`` lines).
 from __future__ import annotations
 
 import re
-import tomllib
 from pathlib import Path
 
 from ...base.errors import ValidationError
@@ -197,6 +196,8 @@ def check_text(text: str, path: str) -> None:
 
 def parse(text: str, path: str) -> dict:
     """A module file's text as data, checked against the schema; ModuleFileError if not."""
+    import tomllib  # only when a file is parsed: a cached built-in table is not
+
     from ...base.files import toml_limits
 
     beyond = toml_limits(text)
