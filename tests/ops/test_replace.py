@@ -348,6 +348,9 @@ def test_from_a_backup_with_its_program(make_pty_sim, tmp_path):
     got = _run(["replace", "--from", str(tmp_path / "m.tmcl"), "--to", new_path, "--yes"])
     # the backup says 1311V110, the new module runs 1311V111: the image is asked for
     assert got.returncode == 1 and "1311V110" in got.stdout
+    # no old module was read, only its backup: where things stand says so
+    assert f"the old module's backup {tmp_path / 'm.tmcl'} was only read" in got.stderr
+    assert "the old module was only read" not in got.stderr
     hexfile = tmp_path / "fw.hex"
     from tmclsh.sim.boot import Bootloader
 
