@@ -292,11 +292,13 @@ class Session:
     def report_error(self, line: str | None, exc: BaseException) -> None:
         """Say what went wrong with ``line`` (once: an error already shown is not said
         again), with FILE:LINE while a script runs."""
-        if getattr(exc, "shown", False):
-            return
         where = ""
         if self.location is not None:
             where = f"{self.location[0]}:{self.location[1]}: "
+        if getattr(exc, "shown", False):
+            # (said already, but still this line's error: a unit's "last error" names it)
+            self.out.saw_error(f"{where}{exc}")
+            return
         self.out.error(line, f"{where}{exc}", getattr(exc, "record", None))
 
     # -- confirmation -------------------------------------------------------------------
