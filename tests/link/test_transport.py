@@ -79,6 +79,15 @@ def test_a_network_url_that_cannot_be_opened_is_said_in_users_words(url, said):
     assert "Could not open port" not in str(err.value)
 
 
+def test_a_file_that_is_no_serial_port_is_said_to_be_none(tmp_path):
+    # (pyserial: "Could not configure port: (25, 'Inappropriate ioctl for device')")
+    path = tmp_path / "capture.txt"
+    path.write_text("not a port\n")
+    with pytest.raises(TransportError) as err:
+        open_serial(str(path))
+    assert str(err.value) == f"cannot open {path}: not a serial port (see 'tmclsh ports')"
+
+
 def test_a_port_is_opened_by_one_program_only(pty_sim):
     sim, path = pty_sim
     with open_serial(path):

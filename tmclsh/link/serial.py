@@ -267,6 +267,8 @@ def _friendly(url: str, exc: Exception) -> str:
         return f"cannot open {url}: the port is in use by another program"
     if "No such file" in text:
         return f"cannot open {url}: no such port (see 'tmclsh ports')"
+    if "Inappropriate ioctl" in text:  # (ENOTTY: a regular file, /dev/null)
+        return f"cannot open {url}: not a serial port (see 'tmclsh ports')"
     if "Connection refused" in text:
         return f"cannot open {url}: connection refused (is the server running?)"
     where = _network_address(url)
