@@ -61,6 +61,33 @@ def test_missing_port_and_bad_urls_say_what_is_wrong(tmp_path):
         open_serial("loop://", 0)
 
 
+@pytest.mark.parametrize("url, said", [
+    ("socket://127.0.0.1:99999", "the port must be a number 1..65535 (socket://HOST:PORT)"),
+    ("socket://127.0.0.1:abc", "the port must be a number 1..65535 (socket://HOST:PORT)"),
+    ("socket://127.0.0.1", "no port number: give socket://HOST:PORT"),
+    ("socket://[::1:1", "not a valid address (Invalid IPv6 URL); give socket://HOST:PORT"),
+    # .invalid never resolves (RFC 2606), with or without a network
+    ("socket://nohost.invalid:1", "no host named 'nohost.invalid' is known"),
+    ("rfc2217://nohost.invalid:1", "no host named 'nohost.invalid' is known"),
+])
+def test_a_network_url_that_cannot_be_opened_is_said_in_users_words(url, said):
+    # pyserial's own text named its internals ("'debug|info|warning|error'", "'<=' not
+    # supported ...") and repeated the URL
+    with pytest.raises(TransportError) as err:
+        open_serial(url)
+    assert str(err.value).startswith(f"cannot open {url}: {said}")
+    assert "Could not open port" not in str(err.value)
+
+
+def test_a_file_that_is_no_serial_port_is_said_to_be_none(tmp_path):
+    # (pyserial: "Could not configure port: (25, 'Inappropriate ioctl for device')")
+    path = tmp_path / "capture.txt"
+    path.write_text("not a port\n")
+    with pytest.raises(TransportError) as err:
+        open_serial(str(path))
+    assert str(err.value) == f"cannot open {path}: not a serial port (see 'tmclsh ports')"
+
+
 def test_a_port_is_opened_by_one_program_only(pty_sim):
     sim, path = pty_sim
     with open_serial(path):

@@ -348,6 +348,9 @@ def test_from_a_backup_with_its_program(make_pty_sim, tmp_path):
     got = _run(["replace", "--from", str(tmp_path / "m.tmcl"), "--to", new_path, "--yes"])
     # the backup says 1311V110, the new module runs 1311V111: the image is asked for
     assert got.returncode == 1 and "1311V110" in got.stdout
+    # no old module was read, only its backup: where things stand says so
+    assert f"the old module's backup {tmp_path / 'm.tmcl'} was only read" in got.stderr
+    assert "the old module was only read" not in got.stderr
     hexfile = tmp_path / "fw.hex"
     from tmclsh.sim.boot import Bootloader
 
@@ -387,3 +390,17 @@ def test_with_link_the_new_module_moves_and_the_same_run_again_finds_it(make_pty
     again = run()  # (as after a stop: --to-address 2 no longer answers)
     assert again.ok, again.to_json()
     assert [o.state for o in again.steps] == [DONE, SKIPPED, SKIPPED, SKIPPED, DONE]
+
+
+def test_from_a_file_that_is_not_a_backup_is_refused_as_such(modules, tmp_path):
+    """A capture or a script given to --from was opened as a serial port ("Could not
+    configure port: (25, 'Inappropriate ioctl for device')")."""
+    new = modules("1311V111")
+    other = tmp_path / "plc.txt"
+    other.write_text("1796421018.647436 tx 01 06 04 00 00 00 00 00 0b\n")
+    new.heard.clear()
+    got = _run(["replace", "--from", str(other), "--to", new.path, "--yes"])
+    assert got.returncode == 2, got.stdout + got.stderr
+    assert (f"--from {other}: a file, but not a backup .save wrote" in got.stderr
+            and "nothing was sent" in got.stderr and "ioctl" not in got.stderr)
+    assert new.heard == []

@@ -165,6 +165,27 @@ def test_writes_are_refused_without_yes_and_named(module, tmp_path, capsys):
     assert module.values[(4, 0, False)] == 1000
 
 
+def test_the_closing_stop_of_several_modules_says_whose_motors_each_line_names(tmp_path,
+                                                                               capsys):
+    bus = SharedLine()
+    a = PtyModule(version="1161V130", address=1, line=bus)
+    b = PtyModule(version="1161V130", address=5, line=bus)
+    bus.modules += [a, b]
+    try:
+        cap = str(tmp_path / "two.txt")
+        _bridge_capture(bus.path, cap, [request(1, SAP, 4, 0, 1000), request(5, GAP, 4, 0)])
+        assert cli.main(["replay", cap, "--port", bus.path]) == 2
+        # one command: said in the singular
+        assert "holds 1 command that writes, stores or moves" in capsys.readouterr().err
+        assert cli.main(["replay", cap, "--port", bus.path, "--yes"]) == 0
+        err = capsys.readouterr().err
+        # "replay ended: stopped motor 0" twice said nothing of which module's motor 0
+        assert "replay ended (address 1): stopped motor" in err, err
+        assert "replay ended (address 5): stopped motor" in err, err
+    finally:
+        bus.close()
+
+
 def test_ctrl_c_ends_a_replay_that_wrote_with_the_safety_stop(module, tmp_path, capsys):
     """Paced as captured, the second request is half a minute away; Ctrl-C comes first."""
     import _thread

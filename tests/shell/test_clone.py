@@ -641,3 +641,27 @@ def test_save_from_independent_responder(responder, tmp_path):
     assert {f[1] for f in responder.log} == {6, 10}
     # (one more read where an answer was the one before it, byte for byte: Client._judge)
     assert len(responder.log) == len(list(readable_slots(mod))) + client.stats["judged"]
+
+
+def test_cli_backup_replayed_without_yes_is_refused_before_anything_is_written(
+        responder, run_tmclsh, tmp_path):
+    """A backup holds bank 0 global parameters, each asked before it writes the EEPROM; with
+    -f and no --yes nobody can answer. Asked only at that line, the replay stopped halfway
+    (the SAP lines before it written) and pointed at --keep-going, which fails every one of
+    them the same way; refused whole, the module is as it was."""
+    responder.version = "1311V111"
+    path = tmp_path / "b.tmcl"
+    r = run_tmclsh("--port", responder.path, "-m", "TMCM-1311", "-c", f".save {path}")
+    assert r.returncode == 0, r.stderr
+    lines = path.read_text("utf-8").splitlines()
+    first_sgp = next(n for n, line in enumerate(lines, 1) if line.startswith("SGP "))
+    responder.got.clear()
+    r = run_tmclsh("--port", responder.path, "-m", "TMCM-1311", "-f", str(path))
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert (f"{path}:{first_sgp}: SGP " in r.stderr and "writes the module's EEPROM, and "
+            "nobody can answer here: replay the configuration backup with --yes" in r.stderr)
+    assert "nothing was sent" in r.stderr and "--keep-going" not in r.stdout + r.stderr
+    assert not [g for g in responder.got if g[0] in (5, 9)]  # not one SAP or SGP
+    r = run_tmclsh("--port", responder.path, "-m", "TMCM-1311", "--yes", "-f", str(path))
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert [g for g in responder.got if g[0] == 9]  # with --yes: written, the EEPROM's too

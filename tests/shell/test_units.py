@@ -428,3 +428,25 @@ def test_nothing_is_imported_in_a_units_thread(tmp_path):
                           env=tmclsh_env(), timeout=120)
     said = [line for line in proc.stderr.splitlines() if line.startswith("IMPORTED")]
     assert said == ["IMPORTED 0 []"], proc.stderr
+
+
+def test_a_unit_whose_diff_differs_names_it_as_its_last_error(run, tmp_path):
+    """``.diff --exit-code`` fails a unit whose module differs; its table said so, and the
+    unit's "last error" said nothing (errors 1, result failed, and an empty column)."""
+    from responder import PtyModule
+
+    same, other = PtyModule(version="1311V111"), PtyModule(version="1311V111")
+    try:
+        same.values[(4, 0, False)], other.values[(4, 0, False)] = 1000, 5
+        saved = tmp_path / "b.tmcl"
+        saved.write_text("SAP MaxPositioningSpeed, 0, 1000\n")
+        rc, out, err = run("--port", same.path, "--port", other.path, "-m", "TMCM-1311",
+                           "--json", "-c", f".diff {saved} --exit-code")
+        assert rc == 1, out + err
+        summaries = {o["unit"]: o for o in _objects(out) if o.get("summary")}
+        assert summaries[1]["result"] == "passed" and summaries[1]["error"] is None
+        assert summaries[2]["result"] == "failed"
+        assert "1 parameter differs from" in (summaries[2]["error"] or ""), summaries[2]
+    finally:
+        same.close()
+        other.close()

@@ -1095,6 +1095,9 @@ A backup replayed with {_b("-f")} stops, as any script, at the first line the mo
 and then points to {_b("--keep-going")} (replay the rest) and {_b(".restore")} (write what
 differs, listing every refusal); another module type's backup is refused before anything is
 sent, saying whose backup it is and pointing to {_b(".restore")} {_i("FILE")} {_b("--force")}.
+Its bank 0 global parameters write the EEPROM, which is asked first: where nobody can answer
+(no terminal, {_b("--json")}) and without {_b("--yes")}, the backup is refused before anything
+is sent, naming the first such line, rather than stopping there with half of it written.
 .PP
 A module known by parameter names only (a module file imported from PyTrinamic: no ranges,
 every parameter {_b("state")}) has nothing a backup could restore: {_b(".save")} names what it

@@ -17,7 +17,7 @@ import sys
 from pathlib import Path
 
 from ..base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE,
-                           ConnectError, TmclError)
+                           ConnectError, TmclError, UsageError)
 from .firmware import _restore_signals, _unwind_on_signals
 
 CAN_PREFIX = "can:"
@@ -130,8 +130,14 @@ def cmd_replace(args: argparse.Namespace) -> int:
     try:
         if args.firmware:
             image = read_image(args.firmware)
-        source = Path(args.source) if is_backup(args.source) else \
-            settings_of(args.source, args.from_address, args)
+        if is_backup(args.source):
+            source = Path(args.source)
+        elif Path(args.source).is_file():  # (a port is a device, never a regular file)
+            raise UsageError(f"--from {args.source}: a file, but not a backup .save wrote (its "
+                             "first line is '// tmclsh configuration backup'); give that "
+                             "backup, or the old module's port")
+        else:
+            source = settings_of(args.source, args.from_address, args)
         target = settings_of(args.target, args.to_address, args)
         validate(source, target)
     except TmclError as exc:

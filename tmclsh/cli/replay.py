@@ -66,7 +66,9 @@ def _listed(say: _Say, writes: list, module, head: str) -> None:
 
 
 def _commands(n: int) -> str:
-    return f"{n} command{'s' if n != 1 else ''} that write, store or move"
+    if n == 1:
+        return "1 command that writes, stores or moves"
+    return f"{n} commands that write, store or move"
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
@@ -125,9 +127,12 @@ def cmd_replay(args: argparse.Namespace) -> int:
             if writes:
                 from ..shell.stop import ToStderr, stop_all
 
+                several = len(capture.addresses) > 1
                 for address in capture.addresses:
                     aim(client, capture.first_at(address))
-                    stop_all(client, ToStderr(), "replay ended")
+                    # (each module's stop says whose motors it names when there are several)
+                    where = f" ({'CAN id' if client.is_can else 'address'} {address})"
+                    stop_all(client, ToStderr(), "replay ended" + (where if several else ""))
         finally:
             client.close()
             _restore_signals(previous)

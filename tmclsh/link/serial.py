@@ -19,6 +19,7 @@ import os
 import select
 import sys
 import time
+from urllib.parse import urlsplit
 
 import serial as pyserial
 
@@ -266,6 +267,43 @@ def _friendly(url: str, exc: Exception) -> str:
         return f"cannot open {url}: the port is in use by another program"
     if "No such file" in text:
         return f"cannot open {url}: no such port (see 'tmclsh ports')"
+    if "Inappropriate ioctl" in text:  # (ENOTTY: a regular file, /dev/null)
+        return f"cannot open {url}: not a serial port (see 'tmclsh ports')"
     if "Connection refused" in text:
         return f"cannot open {url}: connection refused (is the server running?)"
+    where = _network_address(url)
+    if where is not None:
+        return f"cannot open {url}: {where}"
+    if any(s in text for s in _NO_SUCH_HOST):
+        host = urlsplit(url).hostname
+        return f"cannot open {url}: no host named {host!r} is known (a typo, or no network?)"
+    # pyserial repeats the URL in its own words: said once
+    text = text.removeprefix(f"Could not open port {url}: ")
     return f"cannot open {url}: {text}"
+
+
+# how a failed name lookup reads on Linux, macOS and Windows
+_NO_SUCH_HOST = ("Name or service not known", "nodename nor servname", "getaddrinfo failed",
+                 "No address associated", "Temporary failure in name resolution")
+
+
+def _network_address(url: str) -> str | None:
+    """What is wrong with a socket:// or rfc2217:// URL's host and port, in words: pyserial
+    reports a missing or impossible port number with text from its own internals."""
+    scheme = url.partition("://")[0].lower()
+    if scheme not in ("socket", "rfc2217"):
+        return None
+    try:
+        parts = urlsplit(url)
+        port = parts.port
+    except ValueError as exc:
+        if "Port" in str(exc):
+            return f"the port must be a number 1..65535 ({scheme}://HOST:PORT)"
+        return f"not a valid address ({exc}); give {scheme}://HOST:PORT"
+    if not parts.hostname:
+        return f"no host: give {scheme}://HOST:PORT"
+    if port is None:
+        return f"no port number: give {scheme}://HOST:PORT"
+    if not 0 < port < 65536:
+        return f"the port must be a number 1..65535 ({scheme}://HOST:PORT)"
+    return None

@@ -46,6 +46,8 @@ STEPS = ("identify", "firmware", "configuration", "program", "verify")
 # a step's outcome
 DONE, SKIPPED, FAILED, STOPPED, NOT_RUN = "done", "skipped", "failed", "stopped", "not run"
 OLD_UNCHANGED = "the old module was only read: it is as it was"
+# the same when the old module is known from its backup: no module was read at all
+BACKUP_UNCHANGED = "the old module's backup {} was only read"
 
 
 class ReplaceError(TmclError):
@@ -216,7 +218,9 @@ class Replacement:
             "verify": "written as the steps above say (what reads back differently is "
                       "named in the verify step)",
         }[step]
-        return f"{OLD_UNCHANGED}; new module: {new}"
+        old = (BACKUP_UNCHANGED.format(self.report.source) if isinstance(self.source, Path)
+               else OLD_UNCHANGED)
+        return f"{old}; new module: {new}"
 
     def close(self) -> None:
         self._close_new()

@@ -102,9 +102,9 @@ class WritesRefused(ValidationError):
 
     def __init__(self, writes: list[Captured]):
         self.writes = writes
-        super().__init__(f"the capture holds {len(writes)} command"
-                         f"{'s' if len(writes) != 1 else ''} that write, store or move; "
-                         "nothing was sent")
+        what = ("1 command that writes, stores or moves" if len(writes) == 1
+                else f"{len(writes)} commands that write, store or move")
+        super().__init__(f"the capture holds {what}; nothing was sent")
 
 
 @dataclass(slots=True)

@@ -302,6 +302,37 @@ def replay_lines(session: Session, path: Path | str, lines: list[str]) -> list[s
     return kept
 
 
+def needs_yes(session: Session, lines: list[str]) -> tuple[int, str] | None:
+    """A configuration backup replayed where nobody can answer and without --yes: its first
+    line that would ask (a bank 0 global parameter writes the EEPROM) and the question. Asked
+    only at that line, the replay would stop halfway, the module's configuration half the
+    backup's and half its own; refused before anything is sent, it is as it was."""
+    if not lines or not lines[0].startswith(BACKUP_MARK) or session.can_answer():
+        return None
+    from .session import confirmation
+
+    try:
+        module = session.module
+    except TmclError:
+        return None
+    ascii_mode = session.client.mode == "ascii"
+    for number, raw in enumerate(lines, 1):
+        for text in split_line(raw):
+            if text.startswith(".") or "${" in text:
+                continue
+            try:
+                line = asm.parse_line(text.removeprefix(AS_TYPED), number)
+                if line.mnemonic is None:
+                    continue
+                enc = asm.encode(line, module, direct=True, ascii=ascii_mode, as_typed=True)
+            except TmclError:
+                continue  # (the script's own checks report it at its line)
+            question = confirmation(enc)
+            if question is not None:
+                return number, question
+    return None
+
+
 def replay_hint(session: Session, path: Path | str, lines: list[str], *,
                 stopped: bool) -> str | None:
     """What to do instead, when replaying a configuration backup with -f went wrong: it was

@@ -55,9 +55,11 @@ _VIEWS = {".watch", ".plot", ".history", ".help", ".record"}  # not replayed by 
 # What stopped a script before anything was sent, as the summary names it
 SYNTAX, RANGE, CHECK, NO_FILE, UNREADABLE = ("syntax", "range", "check", "no such file",
                                              "unreadable")
+UNANSWERED = "unanswered"  # a backup's line would ask, and nobody can answer (no --yes)
 _KIND_TEXT = {SYNTAX: "syntax error", RANGE: "a value out of range",
               CHECK: "a line the module would refuse", NO_FILE: "no such file",
-              UNREADABLE: "cannot read the file"}
+              UNREADABLE: "cannot read the file",
+              UNANSWERED: "a line that asks first, and no --yes"}
 
 
 class ScriptError(TmclError):
@@ -664,7 +666,8 @@ def run_file(session: Session, path: str) -> int:
     except ScriptError as exc:
         _report_plain(session, exc)
         status, kind = EXIT_USAGE, exc.kind
-        _backup_hint(session, path, written, stopped=True)
+        if kind != UNANSWERED:  # (which says what to do itself)
+            _backup_hint(session, path, written, stopped=True)
     except ModuleGoneError as exc:  # (--keep-going: line after line went unanswered)
         session.report_error(None, exc)
         status = EXIT_CONNECT
@@ -787,9 +790,18 @@ def as_replayed(session: Session, path: Path | str, lines: list[str]) -> list[st
     --with-link (shell/clone.py: replay_lines); any other script is run as written."""
     if not lines or not lines[0].startswith("//") or session.client is None:
         return lines
-    from .clone import replay_lines
+    from .clone import needs_yes, replay_lines
+    from .session import as_statement
 
-    return replay_lines(session, path, lines)
+    lines = replay_lines(session, path, lines)
+    asks = needs_yes(session, lines)
+    if asks is not None:
+        number, question = asks
+        raise ScriptSyntaxError(
+            str(path), number, f"{as_statement(question)}, and nobody can answer here: "
+            f"replay the configuration backup with --yes (or write what differs: .restore "
+            f"{path} --yes); nothing was sent", UNANSWERED)
+    return lines
 
 
 def run_source(session: Session, path: str) -> bool:

@@ -38,10 +38,27 @@ GONE_AFTER = 4
 
 
 
-def _as_statement(question: str) -> str:
+def as_statement(question: str) -> str:
     """``store X in the EEPROM?`` -> ``store X in the EEPROM``: where nobody can answer, the
     question is said as what was not done."""
     return question.strip().removesuffix("?").removesuffix("; continue").strip()
+
+
+def confirmation(enc: asm.Encoded) -> str | None:
+    """The question asked before sending ``enc`` (the instruction set's ``confirm``), or
+    None: the one rule, for the session and for a backup checked before it is replayed."""
+    p, ins = enc.parameter, enc.instruction
+    spec = enc.spec or isa.control(ins.opcode)
+    if spec is None:
+        return None
+    if spec.confirm == "store":
+        what = p.name if p is not None else f"parameter {ins.type}"
+        return f"store {what} permanently in the module's EEPROM?"
+    if spec.confirm == "storable" and p is not None and p.storable and p.bank == 0:
+        return f"{spec.mnemonic} {p.name} writes the module's EEPROM; continue?"
+    if spec.confirm == "factory":
+        return "restore FACTORY DEFAULTS (all settings and the stored program are lost)?"
+    return None
 
 
 def unknown_command(word: str) -> str:
@@ -276,11 +293,13 @@ class Session:
     def report_error(self, line: str | None, exc: BaseException) -> None:
         """Say what went wrong with ``line`` (once: an error already shown is not said
         again), with FILE:LINE while a script runs."""
-        if getattr(exc, "shown", False):
-            return
         where = ""
         if self.location is not None:
             where = f"{self.location[0]}:{self.location[1]}: "
+        if getattr(exc, "shown", False):
+            # (said already, but still this line's error: a unit's "last error" names it)
+            self.out.saw_error(f"{where}{exc}")
+            return
         self.out.error(line, f"{where}{exc}", getattr(exc, "record", None))
 
     # -- confirmation -------------------------------------------------------------------
@@ -295,7 +314,7 @@ class Session:
             if self.ask(question):
                 return
             raise Abort("cancelled; nothing was sent")
-        raise Abort(f"not done without confirmation: {_as_statement(question)}; pass --yes "
+        raise Abort(f"not done without confirmation: {as_statement(question)}; pass --yes "
                     "to allow it")
 
     # -- variables ----------------------------------------------------------------------
@@ -511,14 +530,14 @@ class Session:
         refusal = getattr(spec, "not_a_line", None)
         if refusal:
             raise ValidationError(f"{ins.opcode} ({spec.name}) is not sent as a line: {refusal}")
-        if spec.confirm == "store":
-            what = p.name if p is not None else f"parameter {ins.type}"
-            self.confirm(f"store {what} permanently in the module's EEPROM?")
-        elif spec.confirm == "storable" and p is not None and p.storable and p.bank == 0:
-            self.confirm(f"{spec.mnemonic} {p.name} writes the module's EEPROM; "
-                         "continue?")
-        elif spec.confirm == "factory":
-            self.confirm("restore FACTORY DEFAULTS (all settings and the stored program are lost)?")
+        question = confirmation(enc)
+        if question is not None:
+            self.confirm(question)
+
+    def can_answer(self) -> bool:
+        """Would a question be answered (--yes, or someone at the terminal)? Where not, a
+        run that would ask is better refused before it sends anything."""
+        return self.yes or (self.ask is not None and self.interactive)
 
     def _record(self, line: str, outcome: str) -> None:
         for fn in list(self.recorders):
