@@ -362,9 +362,7 @@ class Simulator:
         self._power_up(True)
 
     def _register_global_live(self) -> None:
-        vm = self.vm
-
-        rt = self.runtime
+        vm, rt = self.vm, self.runtime
 
         def set_tick(bank: int, value: int) -> int:
             rt.tick_base = rt.t - value / 1000.0
@@ -456,6 +454,7 @@ class Simulator:
             self.firmware_version = found.number or 0
             self._power_up(True)
 
+    # -- module time (runtime.py) ---------------------------------------------------------------
     def clock(self) -> float:
         """Module time of the step being executed: WAIT ticks count on the same clock as
         motion, timers and the tick timer, however long one update is."""

@@ -53,6 +53,8 @@ class SerialFront:
         self._rx.clear()
 
     def receive(self, data: bytes) -> None:
+        """Bytes from the host, read in the mode the module is in: a frame or line that
+        switches the mode hands the bytes after it to the other reader."""
         while data:
             data = self._receive_ascii(data) if self.ascii else self._receive_binary(data)
 
