@@ -50,7 +50,7 @@ sys.path.insert(0, str(ROOT))
 from tmclsh.client.text import LineClient  # noqa: E402
 from tmclsh.link import open_serial  # noqa: E402
 from tmclsh.sim import Simulator  # noqa: E402
-from tmclsh.sim.device import parse_rates  # noqa: E402
+from tmclsh.sim.faults import parse_rates  # noqa: E402
 from tmclsh.sim.serve import serve_pty  # noqa: E402
 
 MIXES = (

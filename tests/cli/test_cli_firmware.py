@@ -128,10 +128,10 @@ def test_killed_mid_write_then_the_same_command_completes(sim_hex):
     class Watched(Simulator):
         writes = 0
 
-        def _boot_dispatch(self, ins):
-            if ins.opcode == 201:
+        def _dispatch(self, ins, channel):
+            if self.in_bootloader and ins.opcode == 201:
                 Watched.writes += 1
-            return super()._boot_dispatch(ins)
+            return super()._dispatch(ins, channel)
 
     sim = Watched("TMCM-1311")
     server = serve_pty(sim)

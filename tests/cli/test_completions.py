@@ -15,6 +15,8 @@ from pathlib import Path
 import pytest
 
 from tmclsh.cli import main as cli, docs
+from tmclsh.cli import completions
+from tmclsh.cli.doc_model import can_interfaces
 
 ROOT = Path(__file__).resolve().parents[2]
 BASH = ROOT / "completions" / "tmclsh"
@@ -61,7 +63,7 @@ def flags(parser=None) -> list[str]:
 @pytest.mark.parametrize("shell", docs.SHELLS)
 def test_committed_script_is_generated(shell, monkeypatch):
     # the CAN interface names come from the installed python-can; compare the rest exactly
-    monkeypatch.setattr(docs, "can_interfaces", committed_can_interfaces)
+    monkeypatch.setattr(completions, "can_interfaces", committed_can_interfaces)
     assert SCRIPTS[shell].read_text() == docs.completion_script(shell), (
         f"{SCRIPTS[shell].relative_to(ROOT)} is out of date: run scripts/gen-docs")
 
@@ -71,7 +73,7 @@ def test_can_interfaces_come_from_python_can():
 
     committed = committed_can_interfaces()
     assert {"socketcan", "virtual", "pcan", "slcan"} <= set(committed)
-    assert docs.can_interfaces() == sorted(VALID_INTERFACES)
+    assert can_interfaces() == sorted(VALID_INTERFACES)
 
 
 @pytest.mark.parametrize("shell", docs.SHELLS)
@@ -89,7 +91,7 @@ def test_every_option_subcommand_and_module_is_offered(shell):
 
 
 def test_completions_option_prints_the_committed_script(capsys, monkeypatch):
-    monkeypatch.setattr(docs, "can_interfaces", committed_can_interfaces)
+    monkeypatch.setattr(completions, "can_interfaces", committed_can_interfaces)
     for shell in docs.SHELLS:
         assert cli.main(["--completions", shell]) == 0
         assert capsys.readouterr().out == SCRIPTS[shell].read_text()

@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 
 from tmclsh.cli import main as cli, docs
+from tmclsh.cli.doc_roff import _inline
 from tmclsh.base import config
 from tmclsh.shell import commands
 
@@ -29,7 +30,7 @@ def man() -> str:
 
 
 def roff(text: str) -> str:
-    return docs._inline(text)
+    return _inline(text)
 
 
 def all_flags() -> list[str]:

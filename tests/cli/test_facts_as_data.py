@@ -22,9 +22,9 @@ COMMAND_NAMES = MNEMONICS | {c.name for c in Control}
 
 # (file, what is found): why it is no decision taken by a spelt-out command
 ALLOWED = {
-    ("cli/docs.py", "'BIN'"): "the man page's text names the ASCII terminal's BIN",
-    ("cli/docs.py", "'SAP'"): "the man page's text names the lines a backup holds",
-    ("cli/docs.py", "'SGP'"): "the man page's text names the lines a backup holds",
+    ("cli/man_guide.py", "'BIN'"): "the man page's text names the ASCII terminal's BIN",
+    ("cli/man_reference.py", "'SAP'"): "the man page's text names the lines a backup holds",
+    ("cli/man_reference.py", "'SGP'"): "the man page's text names the lines a backup holds",
     ("shell/render.py", "ins.opcode == Control.GET_VERSION"):
         "a raw 136 type 1 typed at the prompt: its value is read by the version decoder "
         "(tmcl/version.py), the one place that knows its layout",

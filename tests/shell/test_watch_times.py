@@ -16,7 +16,7 @@ from tmclsh.client.text import LineClient
 from tmclsh.link import open_serial
 from tmclsh.shell.render import Output
 from tmclsh.shell.session import Session
-from tmclsh.sim import device
+from tmclsh.sim import output
 
 SPEED = 20000  # pps
 # steps: 0.2 s of motion, for the scheduling of a busy machine between a request's time and
@@ -29,7 +29,7 @@ SLACK = 4000
 def faulty(make_pty_sim, monkeypatch):
     """A session on a turning TMCM-1311 whose replies are then dropped (10 %) or held back
     0.1..0.35 s (10 %), seeded; the client's timeout 0.5 s, so a dropped reply is a retry."""
-    monkeypatch.setattr(device, "RANDOM_DELAY", (0.1, 0.35))
+    monkeypatch.setattr(output, "RANDOM_DELAY", (0.1, 0.35))
     sim, path = make_pty_sim()
     client = LineClient(open_serial(path), module="TMCM-1311", timeout=0.5, retries=3)
     session = Session(client, Output(), yes=True)

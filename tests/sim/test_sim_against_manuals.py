@@ -310,7 +310,7 @@ class Recorder(dict):
 
     def __setitem__(self, key, value) -> None:
         if self.get(key) != value:
-            self.changes.append((self.sim._t, key, value))
+            self.changes.append((self.sim.clock(), key, value))
         super().__setitem__(key, value)
 
     def periods(self, bank: int, port: int) -> list[float]:

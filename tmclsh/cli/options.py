@@ -42,7 +42,7 @@ _baud = setting("baud")
 
 
 def _faults(text: str) -> dict[str, float]:
-    from ..sim.device import parse_rates  # only when --faults is given
+    from ..sim.faults import parse_rates  # only when --faults is given
 
     try:
         return parse_rates(text)

@@ -17,6 +17,7 @@ direct mode, or a command not possible in the current state (e.g. in download mo
 
 from __future__ import annotations
 
-from .device import Faults, SimBus, Simulator
+from .device import SimBus, Simulator
+from .faults import Faults
 
 __all__ = ["Faults", "SimBus", "Simulator"]

@@ -53,6 +53,28 @@ class _Init:
     applied: bool = False  # its result written where the module keeps it
 
 
+def _wrap32(value: int) -> int:
+    return (value + 2**31) % 2**32 - 2**31
+
+
+def _angle(turns: float) -> int:
+    """An electrical angle in turns as the module reads it: -32767..32767 a turn."""
+    value = round(turns * ANGLE_FULL_TURN) % ANGLE_FULL_TURN
+    value = value - ANGLE_FULL_TURN if value >= ANGLE_FULL_TURN // 2 else value
+    return max(value, -(ANGLE_FULL_TURN // 2 - 1))
+
+
+def _max(store: ParamStore, name: str) -> int:
+    p = store.by_name(AXIS, name)
+    return 0 if p is None or p.max is None else p.max
+
+
+def _motor_fullsteps(store: ParamStore) -> int:
+    """The simulated motor's full steps a turn: the default of the module's AP 202."""
+    p = store.by_name(AXIS, "MotorResolution")
+    return p.default if p is not None and p.default else 200
+
+
 def simulated_notes(module: Module) -> dict[tuple[str, str], str]:
     """``(kind, name) -> sentence``: what the simulator does for each parameter it derives or
     invents on ``module`` (for ``help``/``.param``); built on a model of its own, no device."""
@@ -449,22 +471,14 @@ class Derived:
                 1 << b for b in standstill if not a.moving), accept=True, note=(
                 "The standstill bit follows the motor; the error bits (overtemperature, short, "
                 "open load, stallGuard2) stay 0: the simulated motor is sound and unloaded."))
-        self._axis("SmartEnergyActualCurrent", lambda a, m: self._max("SmartEnergyActualCurrent"),
+        self._axis("SmartEnergyActualCurrent", lambda a, m: _max(self.store, "SmartEnergyActualCurrent"),
                    accept=True, note="coolStep is not simulated: the full current scale.")
 
-    def _max(self, name: str) -> int:
-        p = self.store.by_name(AXIS, name)
-        return 0 if p is None or p.max is None else p.max
-
     # -- encoder and closed loop (TMCM-1311 AP 129/132/133/202/209/210) --------------------------
-    def _motor_fullsteps(self) -> int:
-        p = self.store.by_name(AXIS, "MotorResolution")
-        return p.default if p is not None and p.default else 200
-
     def encoder_counts(self, a: Axis, m: int) -> int:
         """The simulated encoder: ENCODER_INCREMENTS per turn of the simulated motor."""
         microsteps = 2 ** self.get("MicrostepResolution", m)
-        turns = a.pos / (self._motor_fullsteps() * microsteps)
+        turns = a.pos / (_motor_fullsteps(self.store) * microsteps)
         return round(turns * ENCODER_INCREMENTS)
 
     def encoder_state(self, m: int) -> int:
@@ -505,7 +519,7 @@ class Derived:
                 if init is not None and init.ok and not init.applied \
                         and self.clock() >= init.done_at:
                     found = round(ENCODER_INCREMENTS * self.get("MotorResolution", m)
-                                  / self._motor_fullsteps())
+                                  / _motor_fullsteps(self.store))
                     self._set_ram("EncoderResolution", m, found)
                     init.applied = True
                 return self._ram("EncoderResolution", m)
@@ -536,14 +550,10 @@ class Derived:
                 self._encoder_offset[m] = v - self.encoder_counts(a, m)
                 return Status.OK
 
-            self._axis("EncoderCounter", lambda a, m: self._wrap32(
+            self._axis("EncoderCounter", lambda a, m: _wrap32(
                 self.encoder_counts(a, m) + self._encoder_offset[m]), set_counter,
                 note=f"Simulated: an encoder of {ENCODER_INCREMENTS} increments per turn on "
                      "a motor of 200 full steps, counting with the motor's position.")
-
-    @staticmethod
-    def _wrap32(value: int) -> int:
-        return (value + 2**31) % 2**32 - 2**31
 
     # -- torque mode (TMCM-1311 AP 14/19, TMCM-1640 AP 155) -------------------------------------
     def enter_torque(self, a: Axis, m: int, current: int) -> None:
@@ -604,15 +614,9 @@ class Derived:
         turns = a.pos / self.steps_per_turn(m)
         return (turns * max(self.get("MotorPoles", m) // 2, 1)) % 1.0
 
-    @staticmethod
-    def _angle(turns: float) -> int:
-        value = round(turns * ANGLE_FULL_TURN) % ANGLE_FULL_TURN
-        value = value - ANGLE_FULL_TURN if value >= ANGLE_FULL_TURN // 2 else value
-        return max(value, -(ANGLE_FULL_TURN // 2 - 1))
-
     def hall_angle(self, a: Axis, m: int) -> int:
         sector = math.floor(self.electrical_angle(a, m) * HALL_SECTORS)
-        return self._angle(sector / HALL_SECTORS)
+        return _angle(sector / HALL_SECTORS)
 
     def _register_bldc(self) -> None:
         if self.has("ActualMotorCurrent"):
@@ -626,13 +630,13 @@ class Derived:
         self._axis("ActualHallAngle", self.hall_angle, accept=True,
                    note=angle_note + ", in the hall sensors' six sectors.")
         self._axis("ActualEncoderAngle",
-                   lambda a, m: self._angle(self.electrical_angle(a, m)), accept=True,
+                   lambda a, m: _angle(self.electrical_angle(a, m)), accept=True,
                    note=angle_note + ".")
         commutation = self.store.by_name(AXIS, "CommutationMode")
         encoder_modes = {n for n, t in (commutation.values.items() if commutation else ())
                          if "encoder" in t.lower() or "controlled" in t.lower()}
         self._axis("ActualControlledAngle", lambda a, m: (
-            self._angle(self.electrical_angle(a, m))
+            _angle(self.electrical_angle(a, m))
             if self.get("CommutationMode", m) in encoder_modes else self.hall_angle(a, m)),
             accept=True, note=angle_note + ": the encoder angle in encoder and controlled "
             "commutation, else the hall angle.")
