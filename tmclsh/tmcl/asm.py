@@ -230,12 +230,40 @@ class Line:
         return self.mnemonic is not None and self.mnemonic.isdigit()
 
 
+# The common line, a command and up to three decimal numbers (``SGP 3, 2, 100``): read by
+# one pattern into what the tokens and the parser make of it (a program is mostly these).
+# Anything else (a label, a name, a sign, a comment, hex) goes the general way.
+_PLAIN = re.compile(r"\s*([A-Za-z_][A-Za-z0-9_.]*)(?:\s+([0-9]{1,%d})(?:\s*,\s*([0-9]{1,%d})"
+                    r"(?:\s*,\s*([0-9]{1,%d}))?)?)?\s*" % ((_MAX_LITERAL,) * 3), re.ASCII)
+
+
+def _plain_line(text: str, number: int | None, file: str | None, m: re.Match) -> Line:
+    line = Line(text=text, number=number, file=file, mnemonic=m.group(1).upper(),
+                mnemonic_col=m.start(1) + 1)
+    operands = line.operands
+    for g in (2, 3, 4):
+        digits = m.group(g)
+        if digits is None:
+            break
+        operands.append(Expr("num", m.start(g) + 1, value=int(digits), text=digits))
+    return line
+
+
 def parse_line(text: str, number: int | None = None, file: str | None = None) -> Line:
     """Parse one line of TMCL source (or one typed command) without resolving any name.
 
     Accepts ``Label:``, ``Label: CMD ...``, ``Name = expr``, ``#include FILE``, ``CMD a, b, c``
     and a comma straight after the mnemonic (``EI, 255`` as the manuals print some examples).
     """
+    if "//" not in text and len(text) <= MAX_LINE_LENGTH:
+        plain = _PLAIN.fullmatch(text.rstrip("\r\n"))
+        if plain is not None:
+            return _plain_line(text, number, file, plain)
+    return _parse_line(text, number, file)
+
+
+def _parse_line(text: str, number: int | None, file: str | None) -> Line:
+    """Any line, token by token (``parse_line``'s general way)."""
     body, comment = strip_comment(text.rstrip("\r\n"))
     line = Line(text=text, number=number, file=file, comment=comment)
     stripped = body.strip()
