@@ -238,17 +238,20 @@ class Monitor:
             s.unpaired += 1
             return [seen]
         before: list[Item] = []
-        if request in self.waiting:
+        waiting = self.waiting
+        if waiting and waiting[0] is request:  # (the oldest answered: nothing passed over)
+            del waiting[0]
+        elif request in waiting:
             before = self._passed_over(request)
-            self.waiting.remove(request)
+            waiting.remove(request)
         else:
             seen.late = True
             s.late += 1
             s.unanswered -= 1
             self.recent.remove(request)
-        seen.latency = t - request.t
+        latency = seen.latency = t - request.t
         ex = Exchange(request, seen)
-        if not seen.late and (s.slowest is None or seen.latency > s.slowest.latency):
+        if not seen.late and (s.slowest is None or latency > s.slowest.latency):
             s.slowest = ex
         if can_id is None:
             self.hosts.add(reply.host)
@@ -257,7 +260,7 @@ class Monitor:
         if address is not None:
             self.addresses.add(address)
         self._learn(request, reply)
-        return before + [seen, ex]
+        return before + [seen, ex] if before else [seen, ex]
 
     def _passed_over(self, request: Seen) -> list[Item]:
         """A module answers in the order it was asked: requests to it still waiting from

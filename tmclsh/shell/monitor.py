@@ -82,6 +82,8 @@ class View:
         written in batches (a log's hundred thousand lines cost a write each otherwise);
         ``flush`` writes what is held, which a live run does after each read."""
         if self.json:
+            if item.__class__ is Exchange and item.reply is not None:
+                return False  # (its frames were written as they came: most exchanges)
             text = self._json(item)
             if text is None:
                 return False
@@ -403,19 +405,14 @@ def show_items(items: Iterable[Item], view: View, filt: Filter, summary: Summary
                limits: Limits | None) -> bool:
     """Show what passes the filter; True once the count is reached."""
     show = view.show
-    if not filt.active:  # (the common case, without a call a frame)
-        filt = _everything
+    every = not filt.active  # (the common case, without a call a frame)
     for item in items:
-        if filt(item) and show(item):
+        if (every or filt(item)) and show(item):
             summary.shown += 1
             if limits is not None and limits.count is not None \
                     and summary.shown >= limits.count:
                 return True
     return False
-
-
-def _everything(item: Item) -> bool:
-    return True
 
 
 def load_module(name: str | None) -> Module | None:
