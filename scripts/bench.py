@@ -802,6 +802,7 @@ def bench_upload(args: argparse.Namespace) -> dict:
 FIRMWARE_SIZE = 64 * 1024  # bytes of the image (the 64 KiB)
 FIRMWARE_START = 0x8000  # where the simulated bootloader's memory starts (tmclsh/sim/README.md)
 FIRMWARE_PAGE = 0x800
+FIRMWARE_POLL = 0.1  # s each 136 to a restarting module is given (bootloader.toml's switch_s)
 
 
 def _firmware_hex(folder: str, version: str) -> str:
@@ -894,14 +895,24 @@ def bench_firmware(args: argparse.Namespace) -> dict:
             try:
                 write, read = ser.write, ser.read
                 t0 = time.perf_counter()
+                restarting = False
                 for kind, frame in frames:
                     write(frame)
-                    if kind == "rt":
+                    if kind == "w":  # 242, 205: the module restarts (what reaches it
+                        restarting = True  # meanwhile is lost): the next 136 is asked
+                        continue  # until answered, FIRMWARE_POLL s each, as tmclsh asks
+                    if restarting:
+                        ser.timeout = FIRMWARE_POLL
                         reply = read(9)
-                        if len(reply) != 9:
-                            raise RuntimeError(f"raw update: no reply to {frame.hex()}")
-                    # (242, 205: the module restarts; the simulator is back at once, and
-                    # the next frame, a 136, is answered: neither side waits by the clock)
+                        while len(reply) != 9:
+                            ser.reset_input_buffer()
+                            write(frame)
+                            reply = read(9)
+                        ser.timeout, restarting = 1.0, False
+                        continue
+                    reply = read(9)
+                    if len(reply) != 9:
+                        raise RuntimeError(f"raw update: no reply to {frame.hex()}")
                 took = time.perf_counter() - t0
                 assert reply[1:5] == b"1311" and reply[5:6] == b"V", reply  # it runs again
             finally:
