@@ -494,3 +494,51 @@ def test_a_refused_image_whose_restart_goes_unanswered_says_so():
             "when the module is switched off and on")
     finally:
         module.close()
+
+
+# -- the restarts waited for by asking, not by the clock (issue 34) ---------------------------
+
+class RestartingModule(BootModule):
+    """The table's bootloader, deaf to the first request after each restart (242, 205): what
+    reaches a restarting module is lost."""
+
+    def reset_to(self, bootloader: bool) -> None:
+        super().reset_to(bootloader)
+        self.deaf = 1
+
+    def answer(self, raw: bytes) -> bytes | None:
+        if getattr(self, "deaf", 0):
+            self.deaf -= 1
+            return None
+        return super().answer(raw)
+
+
+def test_a_restart_is_waited_for_by_asking_not_by_a_fixed_sleep(monkeypatch):
+    import termios
+
+    import tmclsh.ops.firmware as fw
+
+    import time
+    from types import SimpleNamespace
+
+    slept: list[float] = []  # what the update slept (its own clock only, not the model's)
+
+    def sleep(seconds: float) -> None:
+        slept.append(seconds)
+        time.sleep(seconds)
+
+    monkeypatch.setattr(fw, "time", SimpleNamespace(sleep=sleep, monotonic=time.monotonic))
+    # (its application at the bootloader's baud rate: the line's rate never changes)
+    module = RestartingModule(app_speed=termios.B115200)
+    try:
+        image = model_image()
+        update, result, steps = run({"port": module.path, "baud": 115200}, image)
+        assert (result.old_version, result.new_version) == ("1311V111", "1311V112")
+        assert module.app_version == "1311V112" and not module.in_bootloader
+        # the first 136 after each restart was lost, and asked again
+        versions = [i for i, c in enumerate(module.commands()) if c == 136]
+        assert len(versions) >= 4
+        # nothing waited by the clock: each restart was waited for by asking
+        assert slept == []
+    finally:
+        module.close()

@@ -313,3 +313,54 @@ def test_requests_sent_ahead_of_their_replies_are_paired_in_order():
                              (3, 9)]
     s = reader.monitor.summary
     assert (s.unanswered, s.late, s.unpaired) == (1, 0, 0)
+
+
+# -- a log read at the reader's pace (issue 34) -------------------------------------------------
+
+class _Writes:
+    """A stream that counts the writes it is given."""
+
+    def __init__(self) -> None:
+        self.parts: list[str] = []
+
+    def write(self, text: str) -> None:
+        self.parts.append(text)
+
+    def flush(self) -> None:
+        pass
+
+
+def _shown(path, *, batch: int | None, plain: bool) -> _Writes:
+    from tmclsh.link.canlog import read_log
+    from tmclsh.ops import listen
+    from tmclsh.ops.monitor import CanReader, Filter, Monitor
+    from tmclsh.shell.monitor import View, show_items
+
+    monitor = Monitor()
+    reader = CanReader(monitor)
+    if plain:  # the general path alone, as before the common pair had its own
+        reader._plain_reply = lambda *args: None
+    stream = _Writes()
+    view = View(monitor, json_mode=True, stream=stream)
+    if batch is not None:
+        view.batch = batch
+    filt = Filter((), (), (), monitor)
+    for items in listen.can_log(read_log(str(path)), reader):
+        show_items(items, view, filt, monitor.summary, None)
+    view.summary(monitor.summary)
+    return stream
+
+
+def test_a_log_is_written_in_batches_with_what_the_general_path_says(tmp_path):
+    path = tmp_path / "bus.asc"
+    with can.Logger(str(path)) as log:
+        for i in range(300):
+            for m in _traffic():
+                m.timestamp += i
+                log.on_message_received(m)
+    batched = _shown(path, batch=None, plain=False)
+    one_by_one = _shown(path, batch=1, plain=True)
+    lines = "".join(one_by_one.parts).splitlines()
+    assert len(lines) == 300 * 18 + 1
+    assert "".join(batched.parts).splitlines() == lines  # the same lines, the same order
+    assert len(batched.parts) < len(lines) / 100  # ... in a few writes, not one a line

@@ -453,3 +453,47 @@ def test_no_command_takes_a_value_in_a_field_it_does_not_use(module) -> None:
                     direct=direct)
         checked += 1
     assert checked >= 20  # the commands of the module, not a handful
+
+
+# -- the plain line's fast path (issue 34) -----------------------------------------------------
+
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+_SPACE = st.sampled_from(["", " ", "  ", "\t", " \t "])
+_NUMBER = st.one_of(st.integers(0, 2**40).map(str), st.sampled_from(["0", "007", "9" * 40,
+                                                                      "9" * 41]))
+
+
+@st.composite
+def _plain_ish(draw) -> str:
+    """Lines the fast path takes, and their near misses (a sign, hex, a missing comma, a
+    label, a comment, a comma after the command, digits glued to a name)."""
+    word = draw(st.sampled_from(["SGP", "sap", "MVP", "STOP", "x_1.y", "WAIT", "GAP1"]))
+    numbers = draw(st.lists(_NUMBER, max_size=4))
+    seps = [draw(st.sampled_from([", ", ",", " , ", " ", ",,"])) for _ in numbers]
+    text = draw(_SPACE) + word
+    if numbers:
+        text += draw(st.sampled_from([" ", "\t", ", ", ""])) + numbers[0]
+        for sep, n in zip(seps[1:], numbers[1:]):
+            text += sep + draw(st.sampled_from(["", "-", "$", "0x", "+"])) + n
+    text += draw(st.sampled_from(["", " ", "\n", "\r\n", " // note", ":", " = 1"]))
+    return draw(_SPACE) + text
+
+
+@settings(max_examples=400, deadline=None)
+@given(_plain_ish())
+def test_the_plain_lines_fast_path_reads_what_the_general_way_reads(text) -> None:
+    try:
+        want = asm._parse_line(text, 3, "x.tmc")
+    except AsmError as exc:
+        with pytest.raises(AsmError) as got:
+            asm.parse_line(text, 3, "x.tmc")
+        assert str(got.value) == str(exc)
+        return
+    assert asm.parse_line(text, 3, "x.tmc") == want
+
+
+def test_the_fast_path_takes_the_plain_lines() -> None:
+    for text in ("SGP 3, 2, 100", "  mvp 0,0, 51200\n", "STOP", "ROR 0 , 500"):
+        assert asm._PLAIN.fullmatch(text.rstrip("\r\n")) is not None, text

@@ -237,6 +237,8 @@ class FirmwareUpdate:
         self.data_memory: Memory | None = None  # the module data's, known before any restart
         self.written = 0
         self._user_link: tuple | None = None
+        self._restart_asked = False  # 242 or 205 went out: the next 136s find it restarting
+        self._restart_sent: float | None = None  # when the last 242 or 205 was sent
 
     # -- the link -----------------------------------------------------------------------
     def _setting(self, key: str, default):
@@ -270,6 +272,13 @@ class FirmwareUpdate:
         c.address, c.host_address, c.can_id, c.reply_id = address, host, can_id, reply_id
         now = line_baud(c.transport)
         if baud is not None and now is not None and baud != now:
+            if self._restart_sent is not None:
+                # 242 or 205 may still be on its way out (an adapter's buffer): the rate
+                # changes under it only after the bootloader's switch time (bootloader.toml)
+                left = (self._restart_sent + self.boot.switch_s + 10 * 9 / now
+                        - time.monotonic())
+                if left > 0:
+                    time.sleep(left)
             c.transport.set_baudrate(baud)
             c._forget_stale()  # nothing sent at the other rate can still arrive
 
@@ -279,10 +288,13 @@ class FirmwareUpdate:
         return (b.address, b.host_address, b.can_id, b.can_reply_id, baud)
 
     def _restarting(self) -> None:
-        """After 242 or 205 (no reply says it arrived): the frame leaves the line at the rate
-        it was sent at, and the module restarts (what reaches it meanwhile is lost)."""
-        baud = line_baud(self.client.transport)
-        time.sleep(self.boot.switch_s + (10 * 9 / baud if baud else 0.0))
+        """After 242 or 205 (no reply says it arrived): the module restarts. Nothing waits
+        for it by the clock: ``_ask_version`` asks until it answers, each request given
+        ``switch_s`` (what reaches a restarting module is lost, and is asked again), so a
+        module back at once is not kept waiting; only a change of the line's baud rate
+        waits for the frame to have left (``_set_link``)."""
+        self._restart_sent = time.monotonic()
+        self._restart_asked = True
 
     def _usb(self) -> bool:
         from ..link import trinamic_ports
@@ -316,10 +328,14 @@ class FirmwareUpdate:
         at most ``within`` s; the string (asked twice when it says bootloader)."""
         c = self.client
         end = time.monotonic() + within
+        # a module restarting after 242/205 is asked at the bootloader's pace (switch_s);
+        # one that should be up already at the link's
+        wait = min(c.timeout, self.boot.switch_s if self._restart_asked else POLL)
+        self._restart_asked = False
         while True:
             try:
                 reply = c.request(Request(c.address, _GET_VERSION, 0, 0, 0),
-                                  timeout=min(c.timeout, POLL), retries=0)
+                                  timeout=wait, retries=0)
             except (TmclTimeoutError, ChecksumError):
                 reply = None
             except TransportError:

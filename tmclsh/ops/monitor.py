@@ -238,17 +238,20 @@ class Monitor:
             s.unpaired += 1
             return [seen]
         before: list[Item] = []
-        if request in self.waiting:
+        waiting = self.waiting
+        if waiting and waiting[0] is request:  # (the oldest answered: nothing passed over)
+            del waiting[0]
+        elif request in waiting:
             before = self._passed_over(request)
-            self.waiting.remove(request)
+            waiting.remove(request)
         else:
             seen.late = True
             s.late += 1
             s.unanswered -= 1
             self.recent.remove(request)
-        seen.latency = t - request.t
+        latency = seen.latency = t - request.t
         ex = Exchange(request, seen)
-        if not seen.late and (s.slowest is None or seen.latency > s.slowest.latency):
+        if not seen.late and (s.slowest is None or latency > s.slowest.latency):
             s.slowest = ex
         if can_id is None:
             self.hosts.add(reply.host)
@@ -257,7 +260,7 @@ class Monitor:
         if address is not None:
             self.addresses.add(address)
         self._learn(request, reply)
-        return before + [seen, ex]
+        return before + [seen, ex] if before else [seen, ex]
 
     def _passed_over(self, request: Seen) -> list[Item]:
         """A module answers in the order it was asked: requests to it still waiting from
@@ -665,6 +668,18 @@ class CanReader:
     def feed(self, t: float, arb: int, data: bytes, *, extended: bool = False,
              error: bool = False, remote: bool = False) -> list[Item]:
         m = self.monitor
+        if not (extended or error or remote or self.held):
+            # the common pair, request then its reply, without the general path's searches
+            # (a log is read at the reader's pace: this is most of what it costs)
+            waiting = m.waiting
+            if not waiting or t - waiting[0].t <= m.timeout:
+                if arb in self.request_ids:
+                    if len(data) >= _CAN_LEN:
+                        return self._request(t, arb, data)
+                elif arb in self.reply_ids and len(waiting) == 1:
+                    got = self._plain_reply(t, arb, data, waiting[0])
+                    if got is not None:
+                        return got
         out: list[Item] = []
         if self.held and t - self.held[0].t > m.timeout:
             out += self._release(t)
@@ -703,6 +718,33 @@ class CanReader:
         # (a request to a module that still waits says nothing of the one before: requests
         # may be sent ahead of their replies; the reply to a later one does: Monitor.reply)
         return self.monitor.request(t, data, ins, arb, can_id=arb)
+
+    def _plain_reply(self, t: float, arb: int, data: bytes, request: Seen) -> list[Item] | None:
+        """A reply on a known reply id to the one request waiting, when it is a plain
+        answer to it (no version string, no event, no read-back, the same command, an id
+        that may answer it): what ``_reply`` makes of it, found without its searches.
+        None: not that case, ``_reply`` decides."""
+        n = len(data)
+        if not (n == _CAN_LEN or n == CAN_VERSION and not printable(data)) \
+                or request.bad_sum or data[1] not in STATUSES:
+            return None
+        ins = request.instruction
+        if expects(ins) is not _NORMAL:
+            return None
+        seven = bytes(data[:_CAN_LEN])
+        reply = self._replies.get(seven)
+        if reply is None:
+            reply = Reply.from_frame(b"\0" + seven)  # (host 0: the reply id says it)
+            if len(self._replies) >= _CACHE:
+                self._replies.clear()
+            self._replies[seven] = reply
+        if reply.opcode != ins.opcode or is_event(reply.status, reply.opcode):
+            return None
+        on = self.answered_on.get(request.can_id)
+        if on is not None and on != arb:
+            return None
+        self.answered_on[request.can_id] = arb
+        return self.monitor.reply(t, data, reply, request, can_id=arb)
 
     def _answers(self, arb: int, opcode: int | None) -> Callable[[Seen], bool]:
         """Whether a waiting request is the one a reply on ``arb`` answers: its command (any,

@@ -413,9 +413,17 @@ def verify_image(client, instructions: Sequence[Instruction], start: int = 0, *,
     got: dict[int, Instruction] = {}
 
     def read(todo: set[int] | None) -> dict[int, int]:
+        # (thousands of reads at the line's pace: what read_instruction checks and builds
+        # for one read is done once a round, the loop only sends and keeps the answers)
+        require_binary(client, "reading program memory (134)")
         read_at: dict[int, int] = {}  # Client._replies after the read -> the cell's index
+        request, make, module = client.request, Request.make, client.address
         for n, idx in enumerate(range(total) if todo is None else sorted(todo)):
-            got[idx] = read_instruction(client, start + idx, timeout=timeout)
+            address = start + idx
+            reply = request(make(module, _READ_MEMORY, 0, 0, address), timeout=timeout)
+            if reply is None or reply.stored is None:
+                raise TmclError(f"no program-memory reply for address {address}")
+            got[idx] = reply.stored
             read_at[client._replies] = idx
             if progress is not None and todo is None:
                 progress("verify", n + 1, total)

@@ -54,6 +54,9 @@ def took(seconds: float | None) -> str:
     return f"{seconds * 1000:.2f} ms" if seconds < 1 else f"{seconds:.3f} s"
 
 
+_BATCH = 512  # lines held before they are written together
+
+
 class View:
     """Items for people (lines) or programs (JSON objects), written to ``stream``."""
 
@@ -68,26 +71,45 @@ class View:
         self._rich = not json_mode and (color == "always" or (
             color != "never" and is_terminal(self.stream)))
         self._words: dict[tuple, Any] = {}
+        self._pending: list[str] = []  # plain lines not yet written (``flush`` writes them)
+        # lines held before they are written together; 1 where each line is a write of its
+        # own (a live run's writer counts the lines a reader did not take by its writes)
+        self.batch = _BATCH
 
     # -- writing --------------------------------------------------------------------------
     def show(self, item: Item) -> bool:
-        """Write ``item`` if it makes a line of its own; True if it did."""
+        """Take ``item`` if it makes a line of its own; True if it did. Plain lines are
+        written in batches (a log's hundred thousand lines cost a write each otherwise);
+        ``flush`` writes what is held, which a live run does after each read."""
         if self.json:
+            if item.__class__ is Exchange and item.reply is not None:
+                return False  # (its frames were written as they came: most exchanges)
             text = self._json(item)
             if text is None:
                 return False
-            self.stream.write(text)
-            return True
-        line = self.line(item)
-        if line is None:
-            return False
-        if self._rich:
-            self.console.print(line, highlight=False, markup=False, soft_wrap=True)
         else:
-            self.stream.write(line.plain + "\n")
+            line = self.line(item)
+            if line is None:
+                return False
+            if self._rich:
+                self._write_pending()
+                self.console.print(line, highlight=False, markup=False, soft_wrap=True)
+                return True
+            text = line.plain + "\n"
+        pending = self._pending
+        pending.append(text)
+        if len(pending) >= self.batch:
+            self._write_pending()
         return True
 
+    def _write_pending(self) -> None:
+        if self._pending:
+            text = "".join(self._pending)
+            self._pending.clear()
+            self.stream.write(text)
+
     def flush(self) -> None:
+        self._write_pending()
         try:
             self.stream.flush()
         except (OSError, ValueError):
@@ -219,8 +241,8 @@ class View:
 
     def _body(self, seen: Seen, frame: str) -> str:
         """The object's fields but its times, made once per kind of frame and its bytes."""
-        mod = self._module(seen)
         req = seen.answers
+        mod = self.monitor.module_for(req.address if req is not None else seen.address)
         key = ("json", frame, seen.raw, req.raw if req is not None else None, id(mod),
                seen.address, seen.can_id, seen.direction)
         body = self._words.get(key)
@@ -274,6 +296,7 @@ class View:
 
     # -- the end --------------------------------------------------------------------------
     def summary(self, summary: Summary, err=None) -> None:
+        self._write_pending()
         if self.json:
             self.stream.write(json.dumps({"summary": summary.to_json()}) + "\n")
             self.flush()
@@ -381,8 +404,10 @@ def restore(previous: dict) -> None:
 def show_items(items: Iterable[Item], view: View, filt: Filter, summary: Summary,
                limits: Limits | None) -> bool:
     """Show what passes the filter; True once the count is reached."""
+    show = view.show
+    every = not filt.active  # (the common case, without a call a frame)
     for item in items:
-        if filt(item) and view.show(item):
+        if (every or filt(item)) and show(item):
             summary.shown += 1
             if limits is not None and limits.count is not None \
                     and summary.shown >= limits.count:
@@ -534,8 +559,10 @@ def off_the_wire(capture, close_capture):
 def live_output(view: View) -> SpillWriter:
     """What a live run shows goes through a writer that never blocks: a reader that stops
     reading (a paused pager, a full pipe) loses lines, counted, and never the wire's pace."""
+    view.flush()
     out = SpillWriter(view.stream)
     view.stream = out
+    view.batch = 1
     return out
 
 
