@@ -71,7 +71,7 @@ _LAZY: dict[str, tuple[str, str]] = {
     "Monitor": ("tmclsh.ops.monitor", "Monitor"),
     "CanReader": ("tmclsh.ops.monitor", "CanReader"),
     "SerialTap": ("tmclsh.ops.monitor", "SerialTap"),
-    "Filter": ("tmclsh.ops.monitor", "Filter"),
+    "Filter": ("tmclsh.ops.filter", "Filter"),
     # a module's configuration: read it, its backup file, compare, restore (link identity
     # left alone unless asked), without a shell
     "read_configuration": ("tmclsh.ops.backup", "read_configuration"),

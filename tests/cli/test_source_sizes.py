@@ -22,12 +22,10 @@ OTHERS = "another engineer is restructuring it now (issue 32)"
 # path under tmclsh/ -> why it may still be over MAX_LINES
 LONG_FILES = {
     "client/core.py": OTHERS + ": the ASCII mode becoming a framing in link/",
-    "client/ascii.py": OTHERS + ": the ASCII mode becoming a framing in link/",
     "shell/builtin.py": OTHERS + ": the shell's folders",
     "shell/debugger.py": OTHERS + ": the shell's folders",
     "shell/script.py": OTHERS + ": the shell's folders",
     "shell/terminal.py": OTHERS + ": the shell's folders",
-    "tmcl/asm.py": "split by what it does with the assembler's fast path (issue 34, i34-perf)",
 }
 # (path, class) -> why it may still have more than MAX_METHODS methods
 BIG_CLASSES = {

@@ -333,7 +333,8 @@ class _Writes:
 def _shown(path, *, batch: int | None, plain: bool) -> _Writes:
     from tmclsh.link.canlog import read_log
     from tmclsh.ops import listen
-    from tmclsh.ops.monitor import CanReader, Filter, Monitor
+    from tmclsh.ops.filter import Filter
+    from tmclsh.ops.monitor import CanReader, Monitor
     from tmclsh.shell.monitor import View, show_items
 
     monitor = Monitor()

@@ -22,7 +22,8 @@ from hypothesis import strategies as st
 
 from conftest import ROOT, tmclsh_env
 from responder import PtyModule, reply, valid, version_reply
-from tmclsh.ops.monitor import (EVENT, NOISE_RUN, REPLY, REQUEST, TEXT, Exchange, Filter,
+from tmclsh.ops.filter import Filter
+from tmclsh.ops.monitor import (EVENT, NOISE_RUN, REPLY, REQUEST, TEXT, Exchange,
                                 Monitor, SerialPair, SerialTap)
 from tmclsh.tmcl.modules import load
 

@@ -94,7 +94,7 @@ def _ops(text: str) -> list[int]:
 def _params(text: str) -> list[str | int]:
     """``--param ActualPosition,4``: parameter names (checked against the module data) or
     numbers."""
-    from ..ops.monitor import parameter_known
+    from ..ops.filter import parameter_known
 
     out: list[str | int] = []
     for word in (w.strip() for w in text.split(",")):

@@ -25,7 +25,8 @@ from ..base.canspec import LINK_DEFAULTS
 from ..base.errors import (EXIT_FAILED, EXIT_OK, ConnectError, TmclError, TransportError, UsageError,
                            ValidationError)
 from ..ops.bridge import CAN_RX, CAN_TX, LOST, TICK, CanBridge, Left, SerialBridge
-from ..ops.monitor import DEFAULT_HOST, RX, TX, CanReader, Filter, Monitor, SerialPair
+from ..ops.filter import Filter
+from ..ops.monitor import DEFAULT_HOST, RX, TX, CanReader, Monitor, SerialPair
 from .monitor import (Limits, View, _capture, end_live_output, interruptible, live_output,
                       load_module, off_the_wire, restore, show_items)
 
