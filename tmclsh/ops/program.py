@@ -415,7 +415,7 @@ def verify_image(client, instructions: Sequence[Instruction], start: int = 0, *,
     def read(todo: set[int] | None) -> dict[int, int]:
         # (thousands of reads at the line's pace: what read_instruction checks and builds
         # for one read is done once a round, the loop only sends and keeps the answers)
-        require_binary(client, "reading program memory (134)")
+        require_binary(client, "reading program memory (134)", _READ_MEMORY)
         read_at: dict[int, int] = {}  # Client._replies after the read -> the cell's index
         request, make, module = client.request, Request.make, client.address
         for n, idx in enumerate(range(total) if todo is None else sorted(todo)):
