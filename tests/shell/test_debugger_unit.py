@@ -12,9 +12,9 @@ import pytest
 from tmclsh.tmcl import asm
 from tmclsh.client.text import LineClient
 from tmclsh.base.errors import AsmError, ValidationError
-from tmclsh.shell import debugger
+from tmclsh.shell.features import debugger
 from tmclsh.shell.render import Output
-from tmclsh.shell.session import Abort, Session
+from tmclsh.shell.lang.session import Abort, Session
 from tmclsh.link import open_serial
 
 DEMO = Path(__file__).resolve().parents[2] / "scripts" / "programs" / "demo" / "demo-counter.tmc"
@@ -36,7 +36,7 @@ def mapped(session):
 
 
 def test_commands_registered() -> None:
-    from tmclsh.shell import commands
+    from tmclsh.shell.lang import commands
 
     commands.load_all()
     for name in (".upload", ".dump", ".disasm", ".run", ".stop", ".reset", ".status", ".step",

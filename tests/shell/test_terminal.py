@@ -12,9 +12,9 @@ from tmclsh.client.ascii import AsciiLink, Echo, LineKind, Mode
 from tmclsh.client.text import LineClient
 from tmclsh.base.errors import ValidationError
 from tmclsh.tmcl.frames import Request
-from tmclsh.shell import terminal as tm
+from tmclsh.shell.features import terminal as tm
 from tmclsh.shell.render import Output
-from tmclsh.shell.session import Abort, Session
+from tmclsh.shell.lang.session import Abort, Session
 from tmclsh.sim import Simulator
 from tmclsh.link.sim import SimTransport
 

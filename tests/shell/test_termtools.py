@@ -9,8 +9,8 @@ import re
 import pytest
 
 from tmclsh.base.errors import ValidationError
-from tmclsh.shell import termtools as tt
-from tmclsh.shell import terminal as tm
+from tmclsh.shell.features import termtools as tt
+from tmclsh.shell.features import terminal as tm
 
 
 def test_hex_lines():

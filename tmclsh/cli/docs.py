@@ -194,7 +194,7 @@ def can_interfaces() -> list[str]:
 
 
 def shell_commands() -> list:
-    from ..shell import commands
+    from ..shell.lang import commands
 
     return commands.all_commands()
 
@@ -566,7 +566,7 @@ def _details(text: str) -> list[str]:
 
 def _category_layout() -> tuple[tuple[str, ...], dict[str, str]]:
     """The order and titles of the command categories, as ``.help`` shows them."""
-    from ..shell.commands import CATEGORIES
+    from ..shell.lang.commands import CATEGORIES
 
     return tuple(name for name, _ in CATEGORIES), dict(CATEGORIES)
 
@@ -976,7 +976,7 @@ def _limits() -> list[str]:
     from ..base.files import (MAX_DEPTH as MAX_NESTING, MAX_DIGITS, MAX_FILE, MAX_LINE,
                               MAX_LINES, MAX_READ_MEMORY, SIGNAL_GRACE, size_text)
     from ..base.limits import LIMITS
-    from ..shell.expr import MAX_DEPTH, MAX_LENGTH, MAX_LITERAL, MAX_OPERATORS
+    from ..shell.lang.expr import MAX_DEPTH, MAX_LENGTH, MAX_LITERAL, MAX_OPERATORS
 
     out = [".SH LIMITS",
            "Every number a user sets is checked against one table, whether it comes from an "

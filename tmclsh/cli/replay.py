@@ -123,7 +123,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     finally:
         try:
             if writes:
-                from ..shell.stop import ToStderr, stop_all
+                from ..shell.features.stop import ToStderr, stop_all
 
                 for address in capture.addresses:
                     aim(client, capture.first_at(address))

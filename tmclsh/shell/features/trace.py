@@ -16,18 +16,18 @@ import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from ..tmcl import asm
-from ..tmcl import instructions as isa
-from ..base.errors import FrameError
-from ..tmcl.modules import Module
-from ..tmcl.decoder import FRAME_PIECE, can_reply, pieces
-from ..tmcl.frames import (INSTRUCTION_LEN, SERIAL_FRAME_LEN, VERSION_STRING_LEN, Instruction,
+from ...tmcl import asm
+from ...tmcl import instructions as isa
+from ...base.errors import FrameError
+from ...tmcl.modules import Module
+from ...tmcl.decoder import FRAME_PIECE, can_reply, pieces
+from ...tmcl.frames import (INSTRUCTION_LEN, SERIAL_FRAME_LEN, VERSION_STRING_LEN, Instruction,
                            Reply, Request, Status, checksum, parse_hex, to_signed32)
 
-from .render import describe_instruction, describe_reply
+from ..render import describe_instruction, describe_reply
 
 if TYPE_CHECKING:
-    from .session import Session
+    from ..lang.session import Session
 
 _ARROW = {"tx": "tx>", "rx": "<rx", "drop": "!! ", "note": "-- "}
 
@@ -291,7 +291,7 @@ def decode_hex(text: str, module: Module | None) -> list[tuple[bytes, list[Readi
     hint = HINTS.get(words[0].lower()) if words else None
     if hint is not None:
         text = text.split(None, 1)[1] if len(words) > 1 else ""
-    from ..link.canlog import parse_line
+    from ...link.canlog import parse_line
 
     can = parse_line(text)
     if can is not None:

@@ -32,20 +32,20 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-from ..tmcl import instructions as isa
-from ..client.ascii import (BS, CR, GP_ASCII_MODE, GP_BANK, ECHO_NAMES, AsciiLink, Echo, LineKind,
+from ...tmcl import instructions as isa
+from ...client.ascii import (BS, CR, GP_ASCII_MODE, GP_BANK, ECHO_NAMES, AsciiLink, Echo, LineKind,
                             Mode, address_char, ascii_commands, classify_line, describe_gp67,
                             echo_mode, gp67_value, next_line, reply_part, reply_summary,
                             starts_in_ascii)
-from ..base.errors import StatusError, ValidationError
-from ..tmcl.frames import Reply, Request, status_ok
-from . import options
-from .commands import command, options_of
+from ...base.errors import StatusError, ValidationError
+from ...tmcl.frames import Reply, Request, status_ok
+from ..lang import options
+from ..lang.commands import command, options_of
 from .termtools import (MENU_KEY, MenuState, SessionLog, Stamper, choose, file_lines, hex_hint,
                         hex_lines, is_bin, is_quit, menu_hint, menu_text)
 
 if TYPE_CHECKING:
-    from .session import Session
+    from ..lang.session import Session
 
 ESCAPE_KEY = 0x1D  # Ctrl-]
 CTRL_C = 0x03
@@ -222,14 +222,14 @@ class Painter:
     """Style names to ANSI sequences (through the rich theme), or plain text."""
 
     def __init__(self, color: bool | None = None):
-        from .style import color_enabled
+        from ..style import color_enabled
 
         self.color = (color_enabled() and sys.stdout.isatty()) if color is None else color
         self._console = None
         if self.color:
             from rich.console import Console
 
-            from .style import rich_theme
+            from ..style import rich_theme
 
             self._console = Console(theme=rich_theme(), force_terminal=True,
                                     color_system="standard")
@@ -361,7 +361,7 @@ class Terminal:
             self._reader = None
 
     def _read_loop(self) -> None:
-        from ..base.errors import TransportError
+        from ...base.errors import TransportError
 
         while not self._stop.is_set():
             try:
@@ -493,8 +493,8 @@ class Terminal:
 
     def back_to_binary(self) -> None:
         """After the user's BIN: the link is binary frames again; tmclsh leaves it so."""
-        from ..base.errors import TmclError
-        from ..tmcl.frames import Control
+        from ...base.errors import TmclError
+        from ...tmcl.frames import Control
 
         client = self.session.client
         self.link.detach(send_bin=False)
@@ -539,7 +539,7 @@ class _Leave(Exception):
 def _history():
     from prompt_toolkit.history import FileHistory, InMemoryHistory
 
-    from ..base.config import state_dir
+    from ...base.config import state_dir
 
     try:
         d = state_dir()
@@ -573,7 +573,7 @@ def ascii_completions(session: Session, text: str) -> list[AsciiCompletion]:
     """Completions for the terminal's line: the commands ASCII mode accepts, symbolic types,
     and parameters, motors and ports *by number* (the module's ASCII parser knows no names;
     typing a name finds its number)."""
-    from .completer import (AxisParam, Candidate, GlobalParam, Mnemonic, candidates, current_word,
+    from ..repl.completer import (AxisParam, Candidate, GlobalParam, Mnemonic, candidates, current_word,
                             param_meta, ranked, suggest)
 
     mod = session.client.module
@@ -664,7 +664,7 @@ def run_line_mode(term: Terminal) -> None:
     from prompt_toolkit.key_binding import KeyBindings
     from prompt_toolkit.patch_stdout import patch_stdout
 
-    from .style import prompt_style
+    from ..style import prompt_style
 
     session = term.session
     kb = KeyBindings()
@@ -894,7 +894,7 @@ def run_raw_mode(term: Terminal) -> None:
 
 
 def _ask_yes_no(question: str, default: bool) -> bool:
-    from .ask import ask_yes_no
+    from ..repl.ask import ask_yes_no
 
     return ask_yes_no(question, default)
 
@@ -1111,7 +1111,7 @@ def _show_gp67(session: Session, value: int, note: str | None) -> None:
         return
     from rich.text import Text
 
-    from .render import render_bits
+    from ..render import render_bits
 
     text = Text()
     text.append("GP 67 ASCIIMode", style="tmcl.name")

@@ -26,19 +26,19 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Iterator
 
-from ..tmcl import asm, sourcemap
-from ..base import files, limits
-from ..ops import program
-from ..base.errors import AsmError, TmclError, ValidationError
-from ..client.core import shared_text
-from ..ops.program import AppStatus, UploadError
-from ..tmcl.frames import Instruction
-from . import options
-from .commands import command, options_of
-from .render import paged, paging
+from ...tmcl import asm, sourcemap
+from ...base import files, limits
+from ...ops import program
+from ...base.errors import AsmError, TmclError, ValidationError
+from ...client.core import shared_text
+from ...ops.program import AppStatus, UploadError
+from ...tmcl.frames import Instruction
+from ..lang import options
+from ..lang.commands import command, options_of
+from ..render import paged, paging
 
 if TYPE_CHECKING:
-    from .session import Session
+    from ..lang.session import Session
 
 CATEGORY = "program"
 LIST_CONTEXT = 5  # lines shown either side of the current one by .list

@@ -11,20 +11,20 @@ import difflib
 import re
 from typing import TYPE_CHECKING
 
-from ..tmcl import instructions as isa
-from ..base import limits
-from ..base.errors import StatusError, TmclError, TmclTimeoutError, TransportError, ValidationError
-from ..tmcl.modules import Module, Parameter, available, identify, load, type1_of
-from ..tmcl.version import LAYOUTS, TYPE_FIRST, VERSION_FIRST, decode_type1, parse_string
-from ..tmcl.frames import Control, Request, status_ok
-from . import options
-from .commands import CATEGORIES, all_commands, command, find, options_of
-from .completer import Candidate, param_meta
-from .render import paged
-from .session import reconnected
+from ...tmcl import instructions as isa
+from ...base import limits
+from ...base.errors import StatusError, TmclError, TmclTimeoutError, TransportError, ValidationError
+from ...tmcl.modules import Module, Parameter, available, identify, load, type1_of
+from ...tmcl.version import LAYOUTS, TYPE_FIRST, VERSION_FIRST, decode_type1, parse_string
+from ...tmcl.frames import Control, Request, status_ok
+from ..lang import options
+from ..lang.commands import CATEGORIES, all_commands, command, find, options_of
+from ..repl.completer import Candidate, param_meta
+from ..render import paged
+from ..lang.session import reconnected
 
 if TYPE_CHECKING:
-    from .session import Session
+    from ..lang.session import Session
 
 _GAP = isa.Opcode.GAP
 _GGP = isa.Opcode.GGP
@@ -110,7 +110,7 @@ def cmd_help(session: Session, arg: str) -> None:
     if cmd is not None:
         return _help_command(session, cmd)
     if word.startswith("."):
-        from .session import unknown_command
+        from ..lang.session import unknown_command
 
         raise ValidationError(unknown_command(word))
     spec = isa.by_mnemonic(word)
@@ -397,7 +397,7 @@ def _params_by_number(mod: Module, number: int) -> list[Parameter]:
 # -- .quit -------------------------------------------------------------------------------
 
 def _quit(session: Session, arg: str) -> None:
-    from .session import QuitShell
+    from ..lang.session import QuitShell
 
     raise QuitShell()
 
@@ -525,7 +525,7 @@ def read_param(session: Session, p: Parameter, motor_or_number: int | None = Non
 def _current(session: Session, p: Parameter, number: int | None
              ) -> list[tuple[str, str, int | None]]:
     """``[("motor 0", "1000 pps", 1000), ...]``, or one row saying why there is no value."""
-    from .render import _unsigned, value_text
+    from ..render import _unsigned, value_text
 
     if not p.readable:
         return [("", "write-only: cannot be read", None)]
@@ -579,7 +579,7 @@ def _show_params(session: Session, params: list[Parameter], numbered: int | None
         grid.add_row("  range", rng)
         grid.add_row("  access", f"{p.access} ({_access_words(p.access)})")
         if p.default is not None:
-            from .render import value_text
+            from ..render import value_text
 
             grid.add_row("  default", value_text(p.default, p))
         if p.values:
@@ -620,7 +620,7 @@ def _simulated_note(session: Session, p: Parameter) -> str | None:
     mod = session.module
     if mod.generic:
         return None
-    from ..sim.derived import simulated_notes
+    from ...sim.derived import simulated_notes
 
     return simulated_notes(mod).get((p.kind, p.name))
 
@@ -729,7 +729,7 @@ def range_short(p: Parameter) -> str:
 
 def _value_only(value: int, p: Parameter) -> str:
     """The value and its meaning, without the unit (the table has a unit column)."""
-    from .render import _unsigned
+    from ..render import _unsigned
 
     value = _unsigned(value, p)
     meaning = p.describe_value(value)
@@ -892,10 +892,10 @@ def cmd_decode(session: Session, arg: str) -> None:
 
 @command(".connect")
 def cmd_connect(session: Session, arg: str) -> None:
-    from ..base.canspec import FROM_PYTHON_CAN
-    from ..link.spec import LinkSpec
-    from ..client.bringup import bring_up
-    from ..base.errors import ConnectError
+    from ...base.canspec import FROM_PYTHON_CAN
+    from ...link.spec import LinkSpec
+    from ...client.bringup import bring_up
+    from ...base.errors import ConnectError
 
     client = session.client
     words = arg.split()
@@ -976,7 +976,7 @@ def cmd_address(session: Session, arg: str) -> None:
                                                          if client.is_can else ""))
         return
     n = _address_value(session, text)
-    from ..client.bringup import switch_address
+    from ...client.bringup import switch_address
 
     switch_address(client, n)  # brought up as at connect; the old one kept if it fails
     mod, version = client.module, client.version
@@ -990,7 +990,7 @@ def _address_value(session: Session, text: str) -> int:
     try:
         return int(limits.parse("address", text, ".address"))
     except limits.SettingError:
-        from .expr import evaluate
+        from ..lang.expr import evaluate
 
         value = evaluate(session, text)  # (its error names what is wrong: a variable, ...)
         return int(limits.check("address", value, ".address"))
@@ -1049,7 +1049,7 @@ def cmd_version(session: Session, arg: str) -> None:
     session.stats.commands += 2
     value = binary.value & 0xFFFFFFFF if binary is not None and binary.ok else None
     client.version = version or client.version
-    from .render import version_text
+    from ..render import version_text
 
     found = identify(version, value)
     mod = found if found is not None and not found.generic else None
