@@ -3,7 +3,7 @@
 The table (``COMMANDS`` below) is plain data: name, syntax, help, completion, category,
 details, aliases, bare. ``.help``, the completer, the lexer and the man page read it without
 importing a feature module, so ``-c`` and ``-f`` start without the REPL's libraries. A
-feature module (``shell/features/``: ``builtin``, ``scripting``, ...) is imported the first time one of its commands
+feature module (``shell/features/``: ``help``, ``scripting``, ...) is imported the first time one of its commands
 runs, or when the completer needs a completion function that lives there.
 
 Adding a command is one ``Command(...)`` entry in ``COMMANDS`` plus the handler in its
@@ -203,10 +203,10 @@ CATEGORIES: tuple[tuple[str, str], ...] = (
 # are listed by name, categories in their first appearance.
 
 COMMANDS: tuple[Command, ...] = (
-    Command('.clear', 'builtin', '.clear',
+    Command('.clear', 'help', '.clear',
             'clear the screen; Ctrl-L at the prompt does the same',
             details=('Clears the terminal; in a pipe or a file nothing is written.')),
-    Command('.help', 'builtin', '.help [--source] [COMMAND|MNEMONIC|NUMBER|PARAMETER]',
+    Command('.help', 'help', '.help [--source] [COMMAND|MNEMONIC|NUMBER|PARAMETER]',
             'show help: all commands, one command, a TMCL instruction, or a parameter',
             complete='complete_help', bare=True,
             details=('`help SAP` explains an instruction; `help 140` shows axis parameter '
@@ -219,15 +219,15 @@ COMMANDS: tuple[Command, ...] = (
                      'unclear or disagree, and what tmclsh assumes), like .param --source.'),
             reconnects=False,
             options=(Option("--source", help="also how it was read from the manuals"),)),
-    Command('.quit', 'builtin', '.quit',
+    Command('.quit', 'help', '.quit',
             'leave the shell (also Ctrl-D)',
             bare=True,
             reconnects=False),
-    Command('.exit', 'builtin', '.exit',
+    Command('.exit', 'help', '.exit',
             'leave the shell (same as .quit)',
             bare=True, same_as='.quit',
             reconnects=False),
-    Command('.param', 'builtin', '.param [--source] QUERY',
+    Command('.param', 'params', '.param [--source] QUERY',
             'explain a parameter: number, name or part of a name, with its current value',
             complete='complete_param', category='parameters',
             details=('QUERY may be a number (140), a name (MicrostepResolution), part of one '
@@ -237,18 +237,18 @@ COMMANDS: tuple[Command, ...] = (
                      'manual (where the manual is unclear or wrong, and what tmclsh '
                      'assumes).'),
             options=(Option("--source", help="also how it was read from the manual"),)),
-    Command('.params', 'builtin', '.params [axis|global] [FILTER]',
+    Command('.params', 'params', '.params [axis|global] [FILTER]',
             'table of all parameters with their live values (one GAP/GGP each)',
             complete='complete_params', category='parameters',
             details=('FILTER narrows the list by number or (part of a) name. On a multi-axis '
                      'module each motor gets its own value column.')),
-    Command('.trace', 'builtin', '.trace [on|off]',
+    Command('.trace', 'trace', '.trace [on|off]',
             'show every frame in hex, decoded, on stderr',
             complete=[('on', 'start tracing'), ('off', 'stop tracing')], category='protocol',
             details=('Without an argument it toggles. Lines show time, direction (tx> / '
                      '<rx), the bytes and what they mean. --trace does the same from the '
                      'start.')),
-    Command('.decode', 'builtin', '.decode [request|reply|memory|version] HEX|CANLINE',
+    Command('.decode', 'trace', '.decode [request|reply|memory|version] HEX|CANLINE',
             'decode bytes or a CAN log line pasted from elsewhere: request or reply, '
             'checksum, 134/136 layouts',
             complete=[('request', 'read the bytes as a request'),
@@ -265,7 +265,7 @@ COMMANDS: tuple[Command, ...] = (
                      "of its line (pasted bytes may be separated by ';') up to a ';' that "
                      "another dot-command follows (.decode A; .decode B). tmclsh monitor "
                      'decodes whole logs and live buses.')),
-    Command('.connect', 'builtin', '.connect [PORT | sim [MODULE] | can [IFACE:CHANNEL]]',
+    Command('.connect', 'connection', '.connect [PORT | sim [MODULE] | can [IFACE:CHANNEL]]',
             'reconnect, or switch to another port, simulator or CAN bus',
             complete='complete_connect', category='connection',
             details=('Without an argument the current link is closed and opened again (after '
@@ -277,7 +277,7 @@ COMMANDS: tuple[Command, ...] = (
             changes_link=True,
             reconnects=False,
             expands=True),
-    Command('.address', 'builtin', '.address [N]',
+    Command('.address', 'connection', '.address [N]',
             'talk to the module with address N on the same bus',
             complete='complete_address', category='connection',
             details=('The new address is checked with a 136 (version) request; if nothing '
@@ -286,7 +286,7 @@ COMMANDS: tuple[Command, ...] = (
                      '.repeat 3 as i / .address i + 1 / GAP 1, 0 / .end.'),
             changes_link=True,
             expands=True),
-    Command('.module', 'builtin', '.module [NAME]',
+    Command('.module', 'connection', '.module [NAME]',
             'show the module type, or override it',
             complete='complete_module', category='connection',
             details=('The type normally comes from the 136 version string. Overriding it '
@@ -294,7 +294,7 @@ COMMANDS: tuple[Command, ...] = (
                      'against.'),
             changes_link=True,
             expands=True),
-    Command('.version', 'builtin', '.version',
+    Command('.version', 'connection', '.version',
             'ask the module for its firmware version (command 136)',
             category='connection',
             details=('Reads the string (136 type 0) and the binary value (type 1), and says '
@@ -307,7 +307,7 @@ COMMANDS: tuple[Command, ...] = (
                      'shown (nothing is sent).\n'
                      'JSON: {"version", "binary", "module", "binary_type", "binary_version", '
                      '"agrees"}, and "layout" when read\nin the other order.')),
-    Command('.stopall', 'builtin', '.stopall',
+    Command('.stopall', 'connection', '.stopall',
             'stop everything: the stored program (128) if it runs, then every motor (MST), '
             'each read back until its speed is 0; Ctrl-C does the same',
             category='motion'),
