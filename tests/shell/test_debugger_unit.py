@@ -12,7 +12,7 @@ import pytest
 from tmclsh.tmcl import asm
 from tmclsh.client.text import LineClient
 from tmclsh.base.errors import AsmError, ValidationError
-from tmclsh.shell.features import debugger
+from tmclsh.shell.features import debugger, upload
 from tmclsh.shell.render import Output
 from tmclsh.shell.lang.session import Abort, Session
 from tmclsh.link import open_serial
@@ -182,5 +182,5 @@ def test_completion(mapped, tmp_path, monkeypatch) -> None:
     (tmp_path / "b.bin").write_bytes(b"")
     (tmp_path / "sub").mkdir()
     monkeypatch.chdir(tmp_path)
-    got = debugger.complete_file(mapped, "")
+    got = upload.complete_file(mapped, "")
     assert "a.tmc" in got and "sub/" in got and "b.bin" not in got

@@ -454,7 +454,7 @@ COMMANDS: tuple[Command, ...] = (
                      Option("--count", "N", "stop after N samples"),
                      Option("--until", "EXPR", "stop once EXPR holds"),
                      Option("--csv", "FILE", "log every sample to FILE"))),
-    Command('.upload', 'debugger', '.upload FILE [--at ADDR] [--yes] [--no-verify]',
+    Command('.upload', 'upload', '.upload FILE [--at ADDR] [--yes] [--no-verify]',
             'assemble FILE for this module, store it in program memory and verify it',
             complete='complete_file', category='program',
             details=('Assembles FILE for the connected module (a .bin TMCL-IDE image or .hex '
@@ -480,7 +480,7 @@ COMMANDS: tuple[Command, ...] = (
                      Option("--yes", help="overwrite a program that is there", aliases=("-y",)),
                      Option("--no-verify", help="do not read it back")),
             expands=True),
-    Command('.dump', 'debugger', '.dump [[-o] FILE] [--at ADDR] [--count N]',
+    Command('.dump', 'upload', '.dump [[-o] FILE] [--at ADDR] [--count N]',
             'read the stored program back (134) and show it as source, or write it to FILE',
             aliases=('.disasm',), complete='complete_file', category='program',
             details=('Reads program memory with 134 from ADDR (default 0) up to the end '
@@ -504,7 +504,7 @@ COMMANDS: tuple[Command, ...] = (
                      Option("--at", "ADDR", "from this address"),
                      Option("--count", "N", "this many instructions")),
             expands=True),
-    Command('.source-map', 'debugger', '.source-map [FILE [--at ADDR] | --off]',
+    Command('.source-map', 'upload', '.source-map [FILE [--at ADDR] | --off]',
             'use FILE as the source of the stored program (lines and labels in the debugger)',
             complete='complete_file', category='program',
             details=("Assembles FILE and associates it with the program in the module's "
