@@ -222,6 +222,7 @@ def test_ascii_terminal_ctrl_c_stops_the_program_and_says_what_reads_back(pty_mo
     program drove the motor again a moment later."""
     from tmclsh.client.ascii import AsciiLink
     from tmclsh.shell.features import terminal as tm
+    from tmclsh.shell.features import termview as tv
 
     c, _ = pty_module
     start_program(c)
@@ -229,7 +230,7 @@ def test_ascii_terminal_ctrl_c_stops_the_program_and_says_what_reads_back(pty_mo
     try:
         notes: list[str] = []
         term = tm.Terminal(Session(c, Output()), link, tm.TerminalOptions(), notes.append,
-                           tm.Painter(color=False))
+                           tv.Painter(color=False))
         term.stop_motors()
         assert "".join(notes).strip() == ("--- stored program stopped; stopped motor 0 "
                                           "(MST; speed reads 0)")

@@ -146,11 +146,12 @@ def test_the_watch(dropped, capsys, keys):
 
 def test_the_ascii_terminal(dropped):
     from tmclsh.shell.features import terminal as tm
+    from tmclsh.shell.features import termview as tv
 
     sim, session, url = dropped
     notes: list[str] = []
     term = tm.Terminal(session, None, tm.TerminalOptions(), notes.append,
-                       tm.Painter(color=False))
+                       tv.Painter(color=False))
     term.stop_motors()
     _stopped_and_said(sim, "\n".join(notes), url)
 
