@@ -23,7 +23,7 @@ from typing import Any
 
 from ...base.canspec import LINK_DEFAULTS
 from ...base.errors import (EXIT_FAILED, EXIT_OK, ConnectError, TmclError, TransportError, UsageError,
-                           ValidationError)
+                            ValidationError)
 from ...ops.bridge import CAN_RX, CAN_TX, LOST, TICK, CanBridge, Left, SerialBridge
 from ...ops.monitor import DEFAULT_HOST, RX, TX, CanReader, Filter, Monitor, SerialPair
 from .monitor import (Limits, View, _capture, end_live_output, interruptible, live_output,

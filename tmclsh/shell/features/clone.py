@@ -19,8 +19,8 @@ from ...client.text import AS_TYPED
 from ...ops import backup as ops
 # (the names others import from here: tests, scripts/bench.py, which also reads old trees)
 from ...ops.backup import (BACKUP_MARK, READ, STORE, WRITE, Backup,  # noqa: F401
-                          BackupFileError, CloneError, Difference, Slot, Written,
-                          left_alone_text, readable_slots)
+                           BackupFileError, CloneError, Difference, Slot, Written,
+                           left_alone_text, readable_slots)
 from ...tmcl import asm
 from ...tmcl.modules import Module
 from ..lang import options

@@ -27,10 +27,10 @@ from collections.abc import Iterable
 from typing import Any
 
 from ...base.errors import (EXIT_FAILED, EXIT_OK, ConnectError, TmclError, TransportError,
-                           UsageError, ValidationError)
+                            UsageError, ValidationError)
 from ...base.spill import Spill, SpillWriter
 from ...ops.monitor import (DEFAULT_REPLY_ID, EVENT, NOISE_RUN, OTHER, REPLY, REQUEST, RX,
-                           TEXT, TX, CanReader, Exchange, Filter, Item, Monitor, Seen, Summary)
+                            TEXT, TX, CanReader, Exchange, Filter, Item, Monitor, Seen, Summary)
 from ...tmcl import asm
 from ...tmcl.frames import Request
 from ...tmcl.modules import Module

@@ -78,8 +78,8 @@ def ascii_completions(session: Session, text: str) -> list[AsciiCompletion]:
     """Completions for the terminal's line: the commands ASCII mode accepts, symbolic types,
     and parameters, motors and ports *by number* (the module's ASCII parser knows no names;
     typing a name finds its number)."""
-    from ..repl.completer import (AxisParam, Candidate, GlobalParam, Mnemonic, candidates, current_word,
-                            param_meta, ranked, suggest)
+    from ..repl.completer import (AxisParam, Candidate, GlobalParam, Mnemonic, candidates,
+                                  current_word, param_meta, ranked, suggest)
 
     mod = session.client.module
     body = text

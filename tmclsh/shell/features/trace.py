@@ -22,7 +22,7 @@ from ...base.errors import FrameError, ValidationError
 from ...tmcl.modules import Module
 from ...tmcl.decoder import FRAME_PIECE, can_reply, pieces
 from ...tmcl.frames import (INSTRUCTION_LEN, SERIAL_FRAME_LEN, VERSION_STRING_LEN, Instruction,
-                           Reply, Request, Status, checksum, parse_hex, to_signed32)
+                            Reply, Request, Status, checksum, parse_hex, to_signed32)
 from ..lang.commands import command
 from ..render import describe_instruction, describe_reply
 

@@ -28,7 +28,7 @@ from contextlib import contextmanager
 from typing import TYPE_CHECKING
 
 from ...base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE,
-                           ConnectError, TmclError, UsageError)
+                            ConnectError, TmclError, UsageError)
 from ...client.connect import connection_settings, open_client
 from ...ops import units as ops_units
 from ...ops.units import Unit

@@ -7,7 +7,7 @@ import sys
 from collections.abc import Callable
 
 from ...base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE,
-                           ModuleGoneError, TmclError)
+                            ModuleGoneError, TmclError)
 from ..render import Output
 from .session import QuitShell, Session, frames_sent
 

@@ -22,7 +22,7 @@ from ...client.text import LineClient as Client
 from ...client.text import Result
 from ...link.framing import name_of as _name
 from ...base.errors import (EXIT_CONNECT, AsmError, ChecksumError, ModuleGoneError, StatusError,
-                           TmclError, TmclTimeoutError, TransportError, ValidationError)
+                            TmclError, TmclTimeoutError, TransportError, ValidationError)
 from ...tmcl.frames import Request
 from ...tmcl.modules import Module
 from ...tmcl.status import OK_STATUSES
