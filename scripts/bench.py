@@ -79,6 +79,21 @@ def tm(name: str):
     return importlib.import_module(name if new_layout else _OLD_LAYOUT[name])
 
 
+def shell_module(name: str):
+    """The measured tree's shell module ``name`` (as this tree calls it,
+    ``tmclsh.shell.lang.session``); before the shell's folders (``repl/``, ``lang/``,
+    ``features/``) it was ``tmclsh.shell.session``."""
+    import importlib
+
+    import tmclsh
+
+    parts = name.split(".")
+    folders = (Path(tmclsh.__file__).parent / "shell" / "lang").is_dir()
+    if not folders and len(parts) > 3 and parts[2] in ("repl", "lang", "features"):
+        name = ".".join(parts[:2] + parts[3:])
+    return importlib.import_module(name)
+
+
 def client_class():
     """The client that takes TMCL lines (``LineClient``; ``Client`` before the split)."""
     text = tm("tmclsh.client.text")
@@ -1036,9 +1051,9 @@ def bench_watch(args: argparse.Namespace) -> dict:
     import io
 
     LineClient = client_class()
-    from tmclsh.shell import watch
-    from tmclsh.shell.render import Output
-    from tmclsh.shell.session import Session
+    watch = shell_module("tmclsh.shell.features.watch")
+    Output = shell_module("tmclsh.shell.render").Output
+    Session = shell_module("tmclsh.shell.lang.session").Session
     open_serial = tm("tmclsh.link").open_serial
 
     count = args.count // 4 or 1
@@ -1220,9 +1235,10 @@ def bench_save(args: argparse.Namespace) -> dict:
     LineClient = client_class()
     load = tm("tmclsh.tmcl.modules").load
     Request = tm("tmclsh.tmcl.frames").Request
-    from tmclsh.shell.clone import READ, readable_slots
-    from tmclsh.shell.render import Output
-    from tmclsh.shell.session import Session
+    clone = shell_module("tmclsh.shell.features.clone")
+    READ, readable_slots = clone.READ, clone.readable_slots
+    Output = shell_module("tmclsh.shell.render").Output
+    Session = shell_module("tmclsh.shell.lang.session").Session
     open_serial = tm("tmclsh.link").open_serial
 
     module = load(args.module)

@@ -18,7 +18,7 @@ import pytest
 from tmclsh.cli import main as cli, docs
 from tmclsh.cli.doc_roff import _inline
 from tmclsh.base import config
-from tmclsh.shell import commands
+from tmclsh.shell.lang import commands
 
 ROOT = Path(__file__).resolve().parents[2]
 MAN = ROOT / "man" / "tmclsh.1"
@@ -86,7 +86,7 @@ def test_exit_statuses_match_the_code(man):
 
     assert codes == [cli.EXIT_OK, cli.EXIT_FAILED, cli.EXIT_USAGE, cli.EXIT_CONNECT, 130,
                      128 + signal.SIGHUP, 128 + signal.SIGTERM]  # tests/shell/test_signals.py
-    from tmclsh.shell import main as shell_main, script
+    from tmclsh.shell.lang import main as shell_main, script
 
     assert (script.EXIT_OK, script.EXIT_FAILED, script.EXIT_USAGE) == (
         cli.EXIT_OK, cli.EXIT_FAILED, cli.EXIT_USAGE)

@@ -14,9 +14,9 @@ from pathlib import Path
 
 import pytest
 
-from tmclsh.shell import script
+from tmclsh.shell.lang import script
 from tmclsh.shell.render import Output
-from tmclsh.shell.session import Session
+from tmclsh.shell.lang.session import Session
 
 ROOT = Path(__file__).resolve().parents[2]
 SCRIPTS = ROOT / "scripts"

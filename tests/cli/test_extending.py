@@ -19,7 +19,7 @@ ENTRY = ("    Command('.hello', 'hello', '.hello [NAME]', 'greet the module (a t
          "            complete=['world'], category='general'),\n")
 HANDLER = '''"""A dot-command added the way HACKING.md says."""
 
-from .commands import command
+from ..lang.commands import command
 
 
 @command(".hello")
@@ -50,12 +50,12 @@ def tree(tmp_path_factory):
     root = tmp_path_factory.mktemp("extended")
     shutil.copytree(ROOT / "tmclsh", root / "tmclsh",
                     ignore=shutil.ignore_patterns("__pycache__"))
-    table = root / "tmclsh" / "shell" / "commands.py"
+    table = root / "tmclsh" / "shell" / "lang" / "commands.py"
     text = table.read_text(encoding="utf-8")
     end = "\n)\n\nREGISTRY:"
     assert text.count(end) == 1  # the end of COMMANDS
     table.write_text(text.replace(end, "\n" + ENTRY + ")\n\nREGISTRY:"), encoding="utf-8")
-    (root / "tmclsh" / "shell" / "hello.py").write_text(HANDLER, encoding="utf-8")
+    (root / "tmclsh" / "shell" / "features" / "hello.py").write_text(HANDLER, encoding="utf-8")
     (root / "tmclsh" / "tmcl" / "modules" / "tmcm9999.toml").write_text(MODULE,
                                                                         encoding="utf-8")
     return root
@@ -83,7 +83,7 @@ def test_the_new_command_is_in_help_and_runs(tree):
 
 
 def test_the_new_command_completes(tree):
-    code = ("from tmclsh.shell.completer import candidates, complete_arg, ranked, suggest\n"
+    code = ("from tmclsh.shell.repl.completer import candidates, complete_arg, ranked, suggest\n"
             "names = [c.text for s in suggest('.hel')\n"
             "         for c in ranked('.hel', candidates(s, '.hel', None, None))]\n"
             "print(names[0], [c.text for c in complete_arg(None, '.hello', '')])")

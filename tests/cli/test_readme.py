@@ -16,7 +16,7 @@ from tmclsh.tmcl import asm
 from tmclsh.cli import main as cli
 from tmclsh.client import connect as connection
 from tmclsh.tmcl.modules import load
-from tmclsh.shell import commands
+from tmclsh.shell.lang import commands
 
 ROOT = Path(__file__).resolve().parents[2]
 README = (ROOT / "README.md").read_text(encoding="utf-8")

@@ -55,8 +55,9 @@ def test_port_path_imports_nothing_heavy(make_pty_sim, extra):
     assert heavy(modules) == []
     assert not any(m.startswith("tmclsh.sim") for m in modules)
     # the dot-command features are not loaded either: no line needed one
-    assert not any(m.startswith(("tmclsh.shell.builtin", "tmclsh.shell.completer",
-                                 "tmclsh.shell.app", "tmclsh.shell.watch")) for m in modules)
+    assert not any(m.startswith(("tmclsh.shell.features.help", "tmclsh.shell.features.params",
+                                 "tmclsh.shell.features.connection", "tmclsh.shell.repl.completer",
+                                 "tmclsh.shell.repl.app", "tmclsh.shell.features.watch")) for m in modules)
 
 
 def test_sim_script_and_stdin_paths_import_nothing_heavy(tmp_path):

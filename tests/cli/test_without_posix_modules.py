@@ -63,9 +63,9 @@ def test_repl_setup_without_termios(tmp_path):
         from prompt_toolkit.input import DummyInput
         from prompt_toolkit.output import DummyOutput
         import tmclsh
-        from tmclsh.shell.app import build_prompt_session, run_repl
+        from tmclsh.shell.repl.app import build_prompt_session, run_repl
         from tmclsh.shell.render import Output
-        from tmclsh.shell.session import Session
+        from tmclsh.shell.lang.session import Session
 
         client = tmclsh.connect(sim="TMCM-1311")
         session = Session(client, Output())
@@ -105,9 +105,9 @@ def test_watch_keys_in_raw_mode_ctrl_c_is_a_key_that_stops_the_motors(fast_clien
     import threading
     import time
 
-    from tmclsh.shell import watch
+    from tmclsh.shell.features import watch
     from tmclsh.shell.render import Output
-    from tmclsh.shell.session import Session
+    from tmclsh.shell.lang.session import Session
 
     session = Session(fast_client, Output(json_mode=True))
     session.run_line("ROR 0, 40000")

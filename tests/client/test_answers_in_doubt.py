@@ -24,7 +24,7 @@ import sys
 
 from rich.console import Console
 
-from tmclsh.shell import watch
+from tmclsh.shell.features import watch
 from tmclsh.shell.style import rich_theme
 
 from conftest import ROOT, tmclsh_env

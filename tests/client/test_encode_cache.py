@@ -13,7 +13,7 @@ from tmclsh.base.errors import AsmError, TmclTimeoutError
 from tmclsh.tmcl.modules import load
 from tmclsh.tmcl.frames import Instruction
 from tmclsh.shell.render import Output
-from tmclsh.shell.session import Session
+from tmclsh.shell.lang.session import Session
 
 SAP, GAP = 5, 6
 

@@ -199,7 +199,7 @@ def test_connect_with_an_unknown_module_closes_the_port():
 def _ascii_then_connect(make_pty_sim, *, a_starts_in_ascii: bool):
     from tmclsh.client.connect import open_client
     from tmclsh.shell.render import Output
-    from tmclsh.shell.session import Session
+    from tmclsh.shell.lang.session import Session
 
     sim_a, path_a = make_pty_sim(ascii_startup=a_starts_in_ascii)
     sim_b, path_b = make_pty_sim()
@@ -232,7 +232,7 @@ def test_ascii_mode_on_the_module_connected_to_is_its_own(make_pty_sim):
     mode (the mode it was found in), not in A's."""
     from tmclsh.client.connect import open_client
     from tmclsh.shell.render import Output
-    from tmclsh.shell.session import Session
+    from tmclsh.shell.lang.session import Session
 
     sim_a, path_a = make_pty_sim(ascii_startup=True)
     sim_b, path_b = make_pty_sim()
@@ -252,7 +252,7 @@ def test_connect_to_a_silent_port_keeps_the_link_and_says_what_was_tried(capsys)
     import os
 
     from tmclsh.shell.render import Output
-    from tmclsh.shell.session import Session
+    from tmclsh.shell.lang.session import Session
 
     master, slave = os.openpty()
     m = Module(version="1311V111")
@@ -341,7 +341,7 @@ def test_an_unanswered_relative_move_says_it_may_have_been_executed():
     (a technician would type it again and the motor would move twice as far)."""
     from tmclsh.base.errors import TmclTimeoutError
     from tmclsh.shell.render import Output
-    from tmclsh.shell.session import Session
+    from tmclsh.shell.lang.session import Session
 
     m = LosesMoveReplies(version="1311V111")
     c = LineClient(open_serial(m.path), module="TMCM-1311", timeout=0.2, retries=2)
@@ -440,7 +440,7 @@ def test_after_a_reconnect_the_first_line_is_checked_against_the_module_there(ve
     The same type (another firmware version): nothing said, the line runs."""
     from tmclsh.base.errors import ValidationError
     from tmclsh.shell.render import Output
-    from tmclsh.shell.session import Session
+    from tmclsh.shell.lang.session import Session
 
     from responder import TcpModule
 
@@ -469,7 +469,7 @@ def test_after_a_reconnect_the_first_line_is_checked_against_the_module_there(ve
 
 def test_connect_to_a_module_in_ascii_mode_recognises_it(make_pty_sim, capsys):
     from tmclsh.shell.render import Output
-    from tmclsh.shell.session import Session
+    from tmclsh.shell.lang.session import Session
 
     _, path_a = make_pty_sim()
     _, path_b = make_pty_sim(ascii_startup=True)
@@ -585,9 +585,9 @@ def test_a_run_whose_last_answer_was_displaced_fails(json_mode, capsys, tmp_path
     another request's)."""
     import argparse
 
-    from tmclsh.shell.main import _run_unattended
+    from tmclsh.shell.lang.main import _run_unattended
     from tmclsh.shell.render import Output
-    from tmclsh.shell.session import Session
+    from tmclsh.shell.lang.session import Session
 
     m = Axes()
     m.dup_late.add((9, 0, 2))
@@ -630,7 +630,7 @@ def test_a_raw_139_line_does_not_strand_the_module_in_ascii_mode(make_pty_sim):
     it in ASCII mode after exit. It is refused, pointing to .mode ascii."""
     from tmclsh.base.errors import TmclError
     from tmclsh.shell.render import Output
-    from tmclsh.shell.session import Session
+    from tmclsh.shell.lang.session import Session
 
     sim, path = make_pty_sim()
     c = LineClient(open_serial(path), module="TMCM-1311", timeout=0.3)

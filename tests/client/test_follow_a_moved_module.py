@@ -17,7 +17,7 @@ from responder import OK, CanModule, PtyModule, reply
 from tmclsh.client.text import LineClient
 from tmclsh.link import open_can, open_serial
 from tmclsh.shell.render import Output
-from tmclsh.shell.session import Session
+from tmclsh.shell.lang.session import Session
 
 SGP = 9
 

@@ -98,10 +98,10 @@ def test_forced_generic_names_the_type_from_136(module_1161, config_home, run_tm
 
 def test_banner_and_toolbar_say_numbers_only():
     from tmclsh.client.text import LineClient
-    from tmclsh.shell.app import banner
+    from tmclsh.shell.repl.app import banner
     from tmclsh.shell.render import Output
-    from tmclsh.shell.session import Session
-    from tmclsh.shell.toolbar import create_toolbar_tokens_func
+    from tmclsh.shell.lang.session import Session
+    from tmclsh.shell.repl.toolbar import create_toolbar_tokens_func
 
     m = TcpModule(version="1161V130")
     try:

@@ -11,9 +11,9 @@ import time
 import pytest
 
 from tmclsh.client.text import LineClient
-from tmclsh.shell import watch
+from tmclsh.shell.features import watch
 from tmclsh.shell.render import Output
-from tmclsh.shell.session import Session
+from tmclsh.shell.lang.session import Session
 from tmclsh.sim import Simulator
 from tmclsh.sim.serve import serve_tcp
 from tmclsh.tmcl.frames import Request
@@ -178,7 +178,7 @@ def lost_after(server, url: str, first: str, then: str) -> tuple[LineClient, Ses
 
 
 def test_the_first_command_after_a_watch_reconnects(tcp_sim):
-    from tmclsh.shell.app import run_one
+    from tmclsh.shell.repl.app import run_one
 
     _, server, url = tcp_sim
     client, session = lost_after(server, url, "GAP 4, 0", "GAP 4, 0")  # what a watch met
@@ -205,7 +205,7 @@ def test_stopall_after_a_lost_link_brings_it_back_and_stops(tcp_sim, capsys):
 def lost_in_the_repl(tcp_sim):
     """A session whose cable was pulled under a REPL line: the line failed and the REPL
     marked the link lost. Yields (client, session, url)."""
-    from tmclsh.shell.app import run_one
+    from tmclsh.shell.repl.app import run_one
 
     _, server, url = tcp_sim
     client = LineClient(open_serial(url), module="TMCM-1311", timeout=0.3)
@@ -224,7 +224,7 @@ def lost_in_the_repl(tcp_sim):
 def test_a_link_brought_back_elsewhere_is_not_reconnected_again(lost_in_the_repl, capsys, how):
     """A watch (or .connect) that brought the lost link back clears the REPL's mark: the next
     line runs on that link, with no second reconnect and no second "reconnected to"."""
-    from tmclsh.shell.app import run_one
+    from tmclsh.shell.repl.app import run_one
 
     client, session, _ = lost_in_the_repl
     if how == "watch":
@@ -243,7 +243,7 @@ def test_a_link_brought_back_elsewhere_is_not_reconnected_again(lost_in_the_repl
 
 
 def test_the_repl_reconnects_once_and_clears_its_mark(lost_in_the_repl, capsys):
-    from tmclsh.shell.app import run_one
+    from tmclsh.shell.repl.app import run_one
 
     client, session, url = lost_in_the_repl
     capsys.readouterr()
@@ -254,7 +254,7 @@ def test_the_repl_reconnects_once_and_clears_its_mark(lost_in_the_repl, capsys):
 
 
 def test_ctrl_c_after_a_lost_link_reconnects_and_says_why_it_stopped(tcp_sim, capsys):
-    from tmclsh.shell.stop import stop_session as stop_all
+    from tmclsh.shell.features.stop import stop_session as stop_all
 
     sim, server, url = tcp_sim
     client, session = lost_after(server, url, "ROR 0, 30000", "GAP 1, 0")

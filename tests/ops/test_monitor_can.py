@@ -236,7 +236,7 @@ def test_a_reply_of_eight_data_bytes_reads_the_same_everywhere(tmp_path, capsys)
     from responder import CanModule
 
     from tmclsh.client.connect import connect
-    from tmclsh.shell.trace import decode_hex
+    from tmclsh.shell.features.trace import decode_hex
 
     captured = bytes.fromhex("01 64 06 00 00 03 e8 56")  # 7 bytes, then their sum
     # .decode, of the candump line a user pastes
@@ -335,7 +335,7 @@ def _shown(path, *, batch: int | None, plain: bool) -> _Writes:
     from tmclsh.ops import listen
     from tmclsh.ops.filter import Filter
     from tmclsh.ops.monitor import CanReader, Monitor
-    from tmclsh.shell.monitor import View, show_items
+    from tmclsh.shell.features.monitor import View, show_items
 
     monitor = Monitor()
     reader = CanReader(monitor)

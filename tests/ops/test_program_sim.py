@@ -20,9 +20,9 @@ from tmclsh.client.text import LineClient
 from tmclsh.base.errors import TmclError, ValidationError
 from tmclsh.ops.program import UploadError
 from tmclsh.tmcl.frames import Instruction
-from tmclsh.shell import debugger
+from tmclsh.shell.features import debugger
 from tmclsh.shell.render import Output
-from tmclsh.shell.session import Session
+from tmclsh.shell.lang.session import Session
 from tmclsh.sim import Simulator
 from tmclsh.link.sim import SimTransport
 from manuals import listing

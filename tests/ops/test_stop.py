@@ -17,7 +17,7 @@ from tmclsh.ops import program
 from tmclsh.ops import stop as stop_ops
 from tmclsh.client.text import LineClient
 from tmclsh.shell.render import Output
-from tmclsh.shell.session import Session
+from tmclsh.shell.lang.session import Session
 from tmclsh.link import open_serial
 
 from conftest import ROOT, patience, read_until, tmclsh_env
@@ -136,7 +136,7 @@ def test_a_motor_that_keeps_turning_is_named(stubborn):
 # -- leaving the shell -----------------------------------------------------------------------
 
 def test_leaving_while_a_motor_turns_asks(pty_module, capsys):
-    from tmclsh.shell.app import may_leave
+    from tmclsh.shell.repl.app import may_leave
 
     c, _ = pty_module
     s = Session(c, Output(), interactive=True)
@@ -221,7 +221,8 @@ def test_ascii_terminal_ctrl_c_stops_the_program_and_says_what_reads_back(pty_mo
     """Ctrl-C in the .ascii terminal sent MST only and said "motors stopped: 0": the stored
     program drove the motor again a moment later."""
     from tmclsh.client.ascii import AsciiLink
-    from tmclsh.shell import terminal as tm
+    from tmclsh.shell.features import terminal as tm
+    from tmclsh.shell.features import termview as tv
 
     c, _ = pty_module
     start_program(c)
@@ -229,7 +230,7 @@ def test_ascii_terminal_ctrl_c_stops_the_program_and_says_what_reads_back(pty_mo
     try:
         notes: list[str] = []
         term = tm.Terminal(Session(c, Output()), link, tm.TerminalOptions(), notes.append,
-                           tm.Painter(color=False))
+                           tv.Painter(color=False))
         term.stop_motors()
         assert "".join(notes).strip() == ("--- stored program stopped; stopped motor 0 "
                                           "(MST; speed reads 0)")

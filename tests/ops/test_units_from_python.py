@@ -110,7 +110,7 @@ def test_ctrl_c_stops_every_units_motor_and_starts_no_other():
 
 def test_the_shell_and_python_share_the_unit():
     """The shell plans its units as ops.units.Unit: one kind of unit, one runner."""
-    from tmclsh.shell import units as shell_units
+    from tmclsh.shell.features import units as shell_units
 
     assert shell_units.Unit is units.Unit
     assert units.Unit(3, "sim", "TMCM-1311").label == "3 sim TMCM-1311"

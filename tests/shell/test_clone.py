@@ -21,9 +21,9 @@ from tmclsh.tmcl import modules
 from tmclsh.client.ascii import AsciiLink
 from tmclsh.client.text import LineClient
 from tmclsh.base.errors import TmclError
-from tmclsh.shell.clone import CloneError, readable_slots
+from tmclsh.shell.features.clone import CloneError, readable_slots
 from tmclsh.shell.render import Output
-from tmclsh.shell.session import Abort, Session
+from tmclsh.shell.lang.session import Abort, Session
 from tmclsh.sim import Simulator
 from tmclsh.link import open_serial
 

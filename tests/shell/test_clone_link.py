@@ -19,7 +19,7 @@ from tmclsh.base.errors import ValidationError
 from tmclsh.client.text import LineClient
 from tmclsh.link import open_serial
 from tmclsh.shell.render import Output
-from tmclsh.shell.session import Session
+from tmclsh.shell.lang.session import Session
 
 from responder import CanModule, PtyModule
 

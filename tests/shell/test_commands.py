@@ -16,12 +16,12 @@ import pytest
 
 import tmclsh.shell
 from conftest import ROOT, tmclsh_env
-from tmclsh.shell import commands
+from tmclsh.shell.lang import commands
 
 
 def _import_every_shell_module() -> None:
-    for info in pkgutil.iter_modules(tmclsh.shell.__path__):
-        importlib.import_module(f"tmclsh.shell.{info.name}")
+    for info in pkgutil.walk_packages(tmclsh.shell.__path__, "tmclsh.shell."):
+        importlib.import_module(info.name)
 
 
 def test_every_handler_has_an_entry_in_the_table() -> None:
@@ -32,7 +32,7 @@ def test_every_handler_has_an_entry_in_the_table() -> None:
             continue  # a test's own command
         feature = module.rsplit(".", 1)[1]
         assert name in described, (
-            f"{module} has a handler for {name} but COMMANDS in tmclsh/shell/commands.py has "
+            f"{module} has a handler for {name} but COMMANDS in tmclsh/shell/lang/commands.py has "
             f"no entry for it: add Command({name!r}, {feature!r}, SYNTAX, HELP, ...) there and "
             f"register the handler with @command({name!r}) only")
         assert described[name].feature == feature, (
@@ -42,7 +42,7 @@ def test_every_handler_has_an_entry_in_the_table() -> None:
 
 def test_every_entry_has_a_handler_and_its_completion() -> None:
     for cmd in commands.COMMANDS:
-        module = importlib.import_module(f"tmclsh.shell.{cmd.feature}")
+        module = importlib.import_module(f"{commands.FEATURE_PACKAGE}.{cmd.feature}")
         assert commands.HANDLERS.get(cmd.name) == module.__name__, (
             f"COMMANDS describes {cmd.name} in the feature {cmd.feature!r}, but "
             f"{module.__name__} has no @command({cmd.name!r}) handler")
@@ -66,16 +66,16 @@ def test_the_table_is_read_without_importing_a_feature() -> None:
     command imports its own feature and no other."""
     code = (
         "import sys\n"
-        "from tmclsh.shell import commands\n"
+        "from tmclsh.shell.lang import commands\n"
         "names = [c.name for c in commands.all_commands()]\n"
         "assert '.watch' in names and commands.find('help').bare\n"
-        "features = [f'tmclsh.shell.{f}' for f in commands.FEATURES]\n"
+        "features = [f'{commands.FEATURE_PACKAGE}.{f}' for f in commands.FEATURES]\n"
         "print(sorted(f for f in features if f in sys.modules))\n"
         "commands.find('.sleep').handler\n"
         "print(sorted(f for f in features if f in sys.modules))\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.splitlines()
-    assert out == ["[]", "['tmclsh.shell.script']"]
+    assert out == ["[]", "['tmclsh.shell.features.scripting']"]
 
 
 def test_an_undescribed_handler_is_refused_with_a_clear_message() -> None:

@@ -10,9 +10,9 @@ from prompt_toolkit.completion import CompleteEvent
 from prompt_toolkit.document import Document
 
 from tmclsh.tmcl.modules import load
-from tmclsh.shell import commands
-from tmclsh.shell.session import SessionState
-from tmclsh.shell.completer import (AxisParam, CommandArg, GlobalParam, Interrupt, IoBank, IoPort,
+from tmclsh.shell.lang import commands
+from tmclsh.shell.lang.session import SessionState
+from tmclsh.shell.repl.completer import (AxisParam, CommandArg, GlobalParam, Interrupt, IoBank, IoPort,
                                     Label, Mnemonic, MotorNumber, ParamBank, ParamValue,
                                     ShellCommand, SymbolicType, TmclCompleter, current_word,
                                     suggest)

@@ -12,9 +12,9 @@ import pytest
 from tmclsh.tmcl import asm
 from tmclsh.client.text import LineClient
 from tmclsh.base.errors import AsmError, ValidationError
-from tmclsh.shell import debugger
+from tmclsh.shell.features import debugger, upload
 from tmclsh.shell.render import Output
-from tmclsh.shell.session import Abort, Session
+from tmclsh.shell.lang.session import Abort, Session
 from tmclsh.link import open_serial
 
 from responder import AsciiModeModule
@@ -38,7 +38,7 @@ def mapped(session):
 
 
 def test_commands_registered() -> None:
-    from tmclsh.shell import commands
+    from tmclsh.shell.lang import commands
 
     commands.load_all()
     for name in (".upload", ".dump", ".disasm", ".run", ".stop", ".reset", ".status", ".step",
@@ -194,5 +194,5 @@ def test_completion(mapped, tmp_path, monkeypatch) -> None:
     (tmp_path / "b.bin").write_bytes(b"")
     (tmp_path / "sub").mkdir()
     monkeypatch.chdir(tmp_path)
-    got = debugger.complete_file(mapped, "")
+    got = upload.complete_file(mapped, "")
     assert "a.tmc" in got and "sub/" in got and "b.bin" not in got

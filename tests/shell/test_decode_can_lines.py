@@ -14,7 +14,7 @@ import pytest
 from tmclsh.base.errors import TmclError
 from tmclsh.client.connect import connect
 from tmclsh.shell.render import Output
-from tmclsh.shell.session import Session
+from tmclsh.shell.lang.session import Session
 
 
 @pytest.fixture

@@ -1,4 +1,4 @@
-"""The shell's expression language (tmclsh.shell.expr): grammar, semantics, errors, safety.
+"""The shell's expression language (tmclsh.shell.lang.expr): grammar, semantics, errors, safety.
 
 Pure tests: reads go to a small recording context here; reads against the simulator are in
 test_script.py.
@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tmclsh.base.errors import ValidationError
-from tmclsh.shell import expr
+from tmclsh.shell.lang import expr
 
 
 class Ctx:

@@ -29,9 +29,9 @@ pytestmark = pytest.mark.slow  # a fuzzer: .ci/run runs it after the README's co
 from tmclsh.base.errors import TmclError
 from tmclsh.tmcl.modules import load
 from tmclsh.tmcl.frames import Control
-from tmclsh.shell import commands
+from tmclsh.shell.lang import commands
 from tmclsh.shell.render import Output
-from tmclsh.shell.session import QuitShell, Session
+from tmclsh.shell.lang.session import QuitShell, Session
 from tmclsh.link import open_sim
 
 # TMCLSH_FUZZ_EXAMPLES=5000 TMCLSH_FUZZ_RANDOM=1 for a longer hunt than CI's

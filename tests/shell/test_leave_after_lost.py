@@ -4,9 +4,9 @@ answer (yet): the prompt keeps the module's name, and Ctrl-D says what it waits 
 from __future__ import annotations
 
 from tmclsh.client.connect import connect
-from tmclsh.shell import app
+from tmclsh.shell.repl import app
 from tmclsh.shell.render import Output
-from tmclsh.shell.session import Session
+from tmclsh.shell.lang.session import Session
 
 
 def test_a_silent_module_after_a_reconnect_keeps_its_name_and_leaving_says_why_it_waits(

@@ -74,9 +74,9 @@ def test_ascii_config_offers_nothing_the_module_lacks(run_tmclsh):
     finally:
         module.close()
     # the 1311 has it: shown, and offered in completion; the 1640 offers nothing
-    from tmclsh.shell.completer import complete_arg
+    from tmclsh.shell.repl.completer import complete_arg
     from tmclsh.shell.render import Output
-    from tmclsh.shell.session import Session
+    from tmclsh.shell.lang.session import Session
     import tmclsh
 
     for name, offered in (("TMCM-1311", True), ("TMCM-1640", False)):
@@ -222,7 +222,7 @@ def test_wait_under_the_simulators_faults_never_ends_in_empty_brackets(make_pty_
     from tmclsh.client.text import LineClient
     from tmclsh.link import open_serial
     from tmclsh.shell.render import Output
-    from tmclsh.shell.session import Session
+    from tmclsh.shell.lang.session import Session
 
     sim, path = make_pty_sim()
     client = LineClient(open_serial(path), module="TMCM-1311", timeout=0.1, retries=0)

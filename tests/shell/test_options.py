@@ -1,5 +1,5 @@
 """The dot-commands' options: declared once in the command table, read by one parser
-(shell/options.py) for every command, offered by the completer, and named in the syntax line
+(shell/lang/options.py) for every command, offered by the completer, and named in the syntax line
 that ``.help`` and the man page show."""
 
 from __future__ import annotations
@@ -9,9 +9,9 @@ import re
 import pytest
 
 from tmclsh.base.errors import ValidationError
-from tmclsh.shell import commands, options
-from tmclsh.shell.completer import complete_arg
-from tmclsh.shell.options import Option
+from tmclsh.shell.lang import commands, options
+from tmclsh.shell.repl.completer import complete_arg
+from tmclsh.shell.lang.options import Option
 
 WATCH = (Option("--interval", "S"), Option("--until", "EXPR"), Option("--csv", "FILE"))
 

@@ -17,9 +17,9 @@ from prompt_toolkit.input import create_pipe_input
 from prompt_toolkit.output.plain_text import PlainTextOutput
 
 from tmclsh.client.connect import connect
-from tmclsh.shell import app
+from tmclsh.shell.repl import app
 from tmclsh.shell.render import Output
-from tmclsh.shell.session import Session
+from tmclsh.shell.lang.session import Session
 
 TAB, ENTER, CTRL_C, CTRL_D = "\t", "\r", "\x03", "\x04"
 
@@ -205,7 +205,7 @@ def test_ctrl_c_at_the_prompt_stops_the_motor_and_clears_the_line(repl):
 @pytest.fixture
 def slow_command():
     """A command that runs until interrupted (like a long .watch)."""
-    from tmclsh.shell import commands
+    from tmclsh.shell.lang import commands
 
     started = threading.Event()
 

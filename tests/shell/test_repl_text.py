@@ -12,9 +12,9 @@ from hypothesis import strategies as st
 
 from tmclsh.client.connect import connect
 from tmclsh.base.errors import TmclError
-from tmclsh.shell.lines import split_line, strip_comment
+from tmclsh.shell.lang.lines import split_line, strip_comment
 from tmclsh.shell.render import Output
-from tmclsh.shell.session import Session
+from tmclsh.shell.lang.session import Session
 
 from responder import Responder, reply, version_reply
 
@@ -170,7 +170,7 @@ def test_semicolon_separates_commands_that_cannot_contain_one(capsys):
 
 
 def test_every_command_says_whether_it_owns_its_line():
-    from tmclsh.shell import commands
+    from tmclsh.shell.lang import commands
 
     commands.load_all()
     owners = {c.name for c in commands.all_commands() if c.owns_line}
@@ -218,7 +218,7 @@ def test_hash_keeps_its_meaning_in_assembler_source_and_the_lexer(tmp_path):
     from pygments.token import Comment
 
     from tmclsh.tmcl import asm, modules
-    from tmclsh.shell.lexer import TmclLexer
+    from tmclsh.shell.repl.lexer import TmclLexer
 
     (tmp_path / "inc.tmcl").write_text("Speed = 1000\n")
     main = tmp_path / "main.tmcl"

@@ -1,4 +1,4 @@
-"""Scripts (tmclsh.shell.script) against the simulator: variables, expressions with module
+"""Scripts (tmclsh.shell.lang.script) against the simulator: variables, expressions with module
 reads, checks, waits, blocks, includes, errors with FILE:LINE and exit status, summary,
 stdin, recording and history.
 """
@@ -19,9 +19,9 @@ from conftest import ROOT, patience, tmclsh_env
 from tmclsh.cli import main as cli
 from tmclsh.client.text import LineClient
 from tmclsh.base.errors import ValidationError
-from tmclsh.shell import script
+from tmclsh.shell.lang import script
 from tmclsh.shell.render import Output
-from tmclsh.shell.session import Session
+from tmclsh.shell.lang.session import Session
 from tmclsh.link import open_sim
 
 

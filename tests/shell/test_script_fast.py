@@ -9,9 +9,9 @@ import sys
 import textwrap
 import time
 
-from tmclsh.shell import script
+from tmclsh.shell.lang import script
 from tmclsh.shell.render import Output
-from tmclsh.shell.session import Session
+from tmclsh.shell.lang.session import Session
 
 SCRIPT = """\
 GAP 1, 0

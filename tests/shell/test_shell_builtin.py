@@ -10,7 +10,7 @@ import pytest
 from tmclsh.client.connect import connect
 from tmclsh.base.errors import StatusError, TmclError, TmclTimeoutError, ValidationError
 from tmclsh.shell.render import Output
-from tmclsh.shell.session import Abort, QuitShell, Session
+from tmclsh.shell.lang.session import Abort, QuitShell, Session
 
 
 class Frames:
@@ -57,7 +57,7 @@ def run(s: Session, *lines: str) -> None:
 # -- help --------------------------------------------------------------------------------
 
 def test_help_lists_every_registered_command_by_category(session, capsys):
-    from tmclsh.shell.commands import all_commands
+    from tmclsh.shell.lang.commands import all_commands
 
     run(session, ".help")
     out = capsys.readouterr().out
@@ -400,7 +400,7 @@ def test_help_for_a_number_nothing_answers_to_is_an_error():
 
 
 def _takes_nothing():
-    from tmclsh.shell import commands
+    from tmclsh.shell.lang import commands
 
     return [c.name for c in commands.REGISTRY.values() if c.syntax == c.name]
 

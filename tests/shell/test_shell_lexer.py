@@ -5,7 +5,7 @@ from __future__ import annotations
 from pygments.token import Comment, Error, Keyword, Name, Number, Punctuation
 
 from tmclsh.tmcl.modules import load
-from tmclsh.shell.lexer import TmclLexer, highlight
+from tmclsh.shell.repl.lexer import TmclLexer, highlight
 
 
 def tokens(text: str, module=None) -> list[tuple[object, str]]:

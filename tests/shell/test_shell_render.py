@@ -15,7 +15,7 @@ from tmclsh.tmcl.modules import type1_of as binary_version
 from tmclsh.shell.render import (render_event, render_result, result_json,
                                  value_text, version_text)
 from tmclsh.shell.render import describe_instruction
-from tmclsh.shell.trace import decode_hex, format_frame
+from tmclsh.shell.features.trace import decode_hex, format_frame
 
 M = load("TMCM-1311")
 M1640 = load("TMCM-1640")

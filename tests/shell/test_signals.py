@@ -101,7 +101,7 @@ def test_a_signal_wrapped_in_another_error_is_still_the_stop(monkeypatch, capsys
     (a dataclass being built raises RuntimeError from it; seen in CI: a traceback and exit 1
     with the motor turning). It is still the signal: the one stop, its exit status."""
     from tmclsh.cli.main import main
-    from tmclsh.shell import main as shell_main
+    from tmclsh.shell.lang import main as shell_main
 
     def killed_mid_import(args, client, settings):
         client.execute("ROR 0, 30000")

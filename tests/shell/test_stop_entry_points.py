@@ -1,4 +1,4 @@
-"""The safety stop is one stop (shell/stop.py over ops/stop.py): from every place a user can
+"""The safety stop is one stop (shell/features/stop.py over ops/stop.py): from every place a user can
 ask for it, against a link that dropped under a turning motor, it brings the link back first,
 stops the motor, and says so in the same words.
 
@@ -23,9 +23,9 @@ from test_repl import CTRL_C, ENTER, Repl, Screen
 
 from tmclsh.client.text import LineClient
 from tmclsh.link import open_serial
-from tmclsh.shell import watch
+from tmclsh.shell.features import watch
 from tmclsh.shell.render import Output
-from tmclsh.shell.session import Session
+from tmclsh.shell.lang.session import Session
 from tmclsh.sim import Simulator
 from tmclsh.sim.serve import serve_tcp
 
@@ -84,7 +84,7 @@ def test_ctrl_c_at_the_prompt(dropped):
 def test_ctrl_c_while_a_command_runs(dropped):
     from prompt_toolkit.input import create_pipe_input
 
-    from tmclsh.shell import commands
+    from tmclsh.shell.lang import commands
 
     sim, session, url = dropped
     started = threading.Event()
@@ -145,12 +145,13 @@ def test_the_watch(dropped, capsys, keys):
 
 
 def test_the_ascii_terminal(dropped):
-    from tmclsh.shell import terminal as tm
+    from tmclsh.shell.features import terminal as tm
+    from tmclsh.shell.features import termview as tv
 
     sim, session, url = dropped
     notes: list[str] = []
     term = tm.Terminal(session, None, tm.TerminalOptions(), notes.append,
-                       tm.Painter(color=False))
+                       tv.Painter(color=False))
     term.stop_motors()
     _stopped_and_said(sim, "\n".join(notes), url)
 

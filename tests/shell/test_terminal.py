@@ -12,9 +12,11 @@ from tmclsh.client.ascii import AsciiLink, Echo, LineKind, Mode
 from tmclsh.client.text import LineClient
 from tmclsh.base.errors import ValidationError
 from tmclsh.tmcl.frames import Request
-from tmclsh.shell import terminal as tm
+from tmclsh.shell.features import terminal as tm
+from tmclsh.shell.features import termloops as tl
+from tmclsh.shell.features import termview as tv
 from tmclsh.shell.render import Output
-from tmclsh.shell.session import Abort, Session
+from tmclsh.shell.lang.session import Abort, Session
 from tmclsh.sim import Simulator
 from tmclsh.link.sim import SimTransport
 
@@ -42,11 +44,11 @@ def text(segments) -> str:
     ("17", "A17"),
 ])
 def test_with_address(typed, sent):
-    assert tm.with_address(typed, 1) == sent
+    assert tv.with_address(typed, 1) == sent
 
 
 def test_with_address_other_module():
-    assert tm.with_address("GAP 1, 0", 3) == "CGAP 1, 0"
+    assert tv.with_address("GAP 1, 0", 3) == "CGAP 1, 0"
 
 
 # -- the line view ------------------------------------------------------------------------------------
@@ -61,7 +63,7 @@ SENT = b"AGAP 1, 0\r"
     b"AGAP 1, 0\r\nBA 100 -5000\r\n",
 ])
 def test_line_view_hides_echo_and_decodes(stream):
-    view = tm.LineView()
+    view = tv.LineView()
     view.expect(SENT)
     shown = []
     for i in range(len(stream)):  # byte by byte: nothing may depend on chunking
@@ -72,7 +74,7 @@ def test_line_view_hides_echo_and_decodes(stream):
 
 
 def test_line_view_other_lines_and_errors():
-    view = tm.LineView()
+    view = tv.LineView()
     view.expect(b"AXYZ\r")
     shown = view.feed(b"AXYZ\rBA 2 0\rhello\r\x01junk")
     assert [s.kind for s in shown] == [LineKind.ECHO, LineKind.REPLY, LineKind.OTHER]
@@ -84,7 +86,7 @@ def test_line_view_other_lines_and_errors():
 
 # -- the raw view -------------------------------------------------------------------------------------
 
-def feed_all(view: tm.RawView, *chunks) -> str:
+def feed_all(view: tv.RawView, *chunks) -> str:
     out = []
     for chunk in chunks:
         if isinstance(chunk, tuple):
@@ -96,37 +98,37 @@ def feed_all(view: tm.RawView, *chunks) -> str:
 
 def test_raw_view_backspace_echo():
     # char echo with a typo erased: the module's own \b \b passes through
-    got = feed_all(tm.RawView(), b"AGAX", b"\b \b", b"P 1, 0", (b"AGAP 1, 0",), b"\rBA 100 -5000\r")
+    got = feed_all(tv.RawView(), b"AGAX", b"\b \b", b"P 1, 0", (b"AGAP 1, 0",), b"\rBA 100 -5000\r")
     assert got == "AGAX\b \bP 1, 0\r\nBA 100 -5000   ok, value -5000\r\n"
 
 
 def test_raw_view_breaks_line_when_cr_not_echoed():
-    view = tm.RawView()
+    view = tv.RawView()
     got = feed_all(view, b"A", (b"AGAP 1, 0",), b"GAP 1, 0", b"BA 100 7\r")
     assert got == "AGAP 1, 0\r\nBA 100 7   ok, value 7\r\n"
     # the Enter is known before the echo arrived (fast typing): still right
-    got = feed_all(tm.RawView(), (b"AMST 0",), b"AMST 0BA 100 0\r")
+    got = feed_all(tv.RawView(), (b"AMST 0",), b"AMST 0BA 100 0\r")
     assert got == "AMST 0\r\nBA 100 0   ok, value 0\r\n"
 
 
 def test_raw_view_line_and_no_echo():
-    assert feed_all(tm.RawView(), (b"AGAP 1, 0",), b"AGAP 1, 0\rBA 4 0\r") == \
+    assert feed_all(tv.RawView(), (b"AGAP 1, 0",), b"AGAP 1, 0\rBA 4 0\r") == \
         "AGAP 1, 0\r\nBA 4 0   error 4: invalid value\r\n"
-    assert feed_all(tm.RawView(), (b"AGAP 1, 0",), b"BA 100 0\r\n") == \
+    assert feed_all(tv.RawView(), (b"AGAP 1, 0",), b"BA 100 0\r\n") == \
         "BA 100 0   ok, value 0\r\n"
 
 
 def test_raw_view_non_printable_and_local_echo():
-    view = tm.RawView()
+    view = tv.RawView()
     assert text(view.feed(b"\x01x\r")) == "\\x01x\r\n"
     assert text(view.local(b"AG\x7f")) == "AG\b \b"
     assert text(view.local(b"\r")) == "\r\n"
 
 
 def test_translate_keys():
-    assert tm.translate_keys(b"AG\x7fP\r") == [b"A", b"G", b"\x08", b"P", b"\r"]
-    assert tm.translate_keys(b"\x1b[A\x1b[1;5Cx\x1bOPy") == [b"x", b"y"]  # arrows, F1 dropped
-    assert tm.translate_keys(b"a\x03\x1d\n") == [b"a", tm.CTRL_C, tm.ESCAPE_KEY, b"\r"]
+    assert tl.translate_keys(b"AG\x7fP\r") == [b"A", b"G", b"\x08", b"P", b"\r"]
+    assert tl.translate_keys(b"\x1b[A\x1b[1;5Cx\x1bOPy") == [b"x", b"y"]  # arrows, F1 dropped
+    assert tl.translate_keys(b"a\x03\x1d\n") == [b"a", tl.CTRL_C, tl.ESCAPE_KEY, b"\r"]
 
 
 def test_parse_options():
@@ -140,8 +142,8 @@ def test_parse_options():
 
 def test_painter_plain_and_colour():
     segs = [("tmcl.ok", "ok"), ("", " x")]
-    assert tm.Painter(color=False)(segs) == "ok x"
-    coloured = tm.Painter(color=True)(segs)
+    assert tv.Painter(color=False)(segs) == "ok x"
+    coloured = tv.Painter(color=True)(segs)
     assert coloured.endswith(" x") and "\x1b[" in coloured and "ok" in coloured
 
 
@@ -168,7 +170,7 @@ def test_completions(session):
     sim, s = session()
 
     def texts(line):
-        return [c.text for c in tm.ascii_completions(s, line)]
+        return [c.text for c in tl.ascii_completions(s, line)]
 
     first = texts("")
     assert {"GAP", "SAP", "MVP", "BIN", "RUN", "STOP"} <= set(first)
@@ -252,8 +254,8 @@ def test_terminal_line_mode_in_process(session):
     s.client.request(Request(1, 5, 1, 0, -5000))
     link = AsciiLink.attach(s.client)
     out: list[str] = []
-    term = tm.Terminal(s, link, tm.TerminalOptions(), out.append, tm.Painter(color=False))
-    tm.run_plain_lines(term, ["GAP 1, 0", "XYZ", "", "AGGP 67, 0", "CGAP 1, 0"])
+    term = tm.Terminal(s, link, tm.TerminalOptions(), out.append, tv.Painter(color=False))
+    tl.run_plain_lines(term, ["GAP 1, 0", "XYZ", "", "AGGP 67, 0", "CGAP 1, 0"])
     lines = "".join(out).splitlines()
     assert lines == ["BA 100 -5000   ok, value -5000", "BA 2 0   error 2: invalid command",
                      "BA 100 0   ok, value 0"]  # nothing answers address C

@@ -9,8 +9,10 @@ import re
 import pytest
 
 from tmclsh.base.errors import ValidationError
-from tmclsh.shell import termtools as tt
-from tmclsh.shell import terminal as tm
+from tmclsh.shell.features import termtools as tt
+from tmclsh.shell.features import terminal as tm
+from tmclsh.shell.features import termloops as tl
+from tmclsh.shell.features import termview as tv
 
 
 def test_hex_lines():
@@ -97,7 +99,7 @@ class _Term:
     def __init__(self):
         self.link = _Link()
         self.menu = tt.MenuState()
-        self.raw_view = tm.RawView()
+        self.raw_view = tv.RawView()
         self.left_ascii = False
         self.notes: list[str] = []
         self.session = type("S", (), {"client": type("C", (), {"address": 1})()})()
@@ -115,13 +117,13 @@ class _Term:
         pass
 
 
-def press(keys: tm.RawKeys, data: bytes) -> list[str | None]:
-    return [keys.press(k) for k in tm.translate_keys(data)]
+def press(keys: tl.RawKeys, data: bytes) -> list[str | None]:
+    return [keys.press(k) for k in tl.translate_keys(data)]
 
 
 def test_raw_keys_go_through_but_menu_and_quit_do_not():
     term = _Term()
-    keys = tm.RawKeys(term)  # type: ignore[arg-type]
+    keys = tl.RawKeys(term)  # type: ignore[arg-type]
     press(keys, b"AGAP 1, 0\r")
     assert bytes(term.link.sent) == b"AGAP 1, 0\r"
     term.link.sent.clear()
@@ -138,6 +140,6 @@ def test_raw_keys_go_through_but_menu_and_quit_do_not():
 
 def test_raw_bin_leaves():
     term = _Term()
-    keys = tm.RawKeys(term)  # type: ignore[arg-type]
+    keys = tl.RawKeys(term)  # type: ignore[arg-type]
     assert press(keys, b"ABIN\r")[-1] == "leave"
     assert term.left_ascii and term.link.sent == b"ABIN\r"

@@ -7,9 +7,9 @@ import re
 
 import pytest
 
-from tmclsh.shell.session import Session
-from tmclsh.shell.toolbar import toolbar_fragments
-from tmclsh.shell.trace import enable_trace
+from tmclsh.shell.lang.session import Session
+from tmclsh.shell.repl.toolbar import toolbar_fragments
+from tmclsh.shell.features.trace import enable_trace
 
 
 def text(session: Session, columns: int) -> str:

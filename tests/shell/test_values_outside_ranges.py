@@ -26,7 +26,7 @@ from tmclsh.base.errors import TmclError
 from tmclsh.client.text import LineClient
 from tmclsh.link import open_serial
 from tmclsh.shell.render import Output
-from tmclsh.shell.session import Session
+from tmclsh.shell.lang.session import Session
 
 SAP, GAP, SGP = 5, 6, 9
 
@@ -112,7 +112,7 @@ def test_the_note_on_values_outside_the_ranges_is_said_once_per_run(module, tmp_
                                                                     capsys, monkeypatch):
     """Issue 35: every unit's .save printed a four-line note; on fresh modules these are
     unset defaults. One short note per run, a count on each save, the details in the file."""
-    from tmclsh.shell import clone
+    from tmclsh.shell.features import clone
 
     monkeypatch.setattr(clone, "_SAID", set())
     s = session_on(module)

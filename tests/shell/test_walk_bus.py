@@ -48,7 +48,7 @@ def test_address_refuses_clearly(bus, run_tmclsh):
 def test_a_text_variable_goes_into_lines_and_not_into_numbers(client):
     from tmclsh.base.errors import ValidationError
     from tmclsh.shell.render import Output
-    from tmclsh.shell.session import Session
+    from tmclsh.shell.lang.session import Session
 
     session = Session(client, Output(json_mode=True))
     session.variables["port"] = "/dev/ttyACM0"

@@ -1,4 +1,4 @@
-"""Watch expressions (tmclsh.shell.watch) and .plot (tmclsh.shell.plot).
+"""Watch expressions (tmclsh.shell.features.watch) and .plot (tmclsh.shell.features.plot).
 
 Pure parts (sparkline, snapshot folding, rendering, braille) are tested without a module; the
 polling loop runs against a fast simulator; keys are typed into a real pty.
@@ -18,9 +18,10 @@ import pytest
 from rich.console import Console
 
 from tmclsh.base.errors import TmclError, ValidationError
-from tmclsh.shell import expr, plot, watch
+from tmclsh.shell.features import plot, watch
+from tmclsh.shell.lang import expr
 from tmclsh.shell.render import Output
-from tmclsh.shell.session import Session
+from tmclsh.shell.lang.session import Session
 from tmclsh.shell.style import rich_theme
 from conftest import patience
 
@@ -296,7 +297,7 @@ def test_ctrl_c_stops_the_motor_and_ends_the_watch(session, capsys):
 
 
 def test_watch_in_a_script_is_checked_before_the_run(session, tmp_path, capsys):
-    from tmclsh.shell import script
+    from tmclsh.shell.lang import script
 
     bad = tmp_path / "bad.tmcl"
     bad.write_text("MVP ABS, 0, 1000\n.watch x=GAP 99, 0 --count 1\n")

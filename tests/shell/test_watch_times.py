@@ -15,7 +15,7 @@ import pytest
 from tmclsh.client.text import LineClient
 from tmclsh.link import open_serial
 from tmclsh.shell.render import Output
-from tmclsh.shell.session import Session
+from tmclsh.shell.lang.session import Session
 from tmclsh.sim import output
 
 SPEED = 20000  # pps
@@ -85,7 +85,7 @@ def test_each_value_carries_the_time_it_was_read(faulty, tmp_path):
 
 
 def test_plot_of_a_watch_log_draws_the_values_not_their_times(client, tmp_path):
-    from tmclsh.shell import plot
+    from tmclsh.shell.features import plot
 
     s = Session(client, Output())
     log = tmp_path / "run.csv"

@@ -15,7 +15,7 @@ from tmclsh.base.errors import TmclError
 from tmclsh.tmcl.modules import load
 from tmclsh.tmcl.frames import Control, Instruction, Request
 from tmclsh.shell.render import Output
-from tmclsh.shell.session import Session
+from tmclsh.shell.lang.session import Session
 from tmclsh.sim import Simulator
 from tmclsh.link.sim import SimTransport
 

@@ -2,7 +2,7 @@
 
 ``time.sleep`` blocks in C: an exception raised in the sleeping thread from another one (the
 stop of a run of several units raises KeyboardInterrupt in each unit's thread, as Ctrl-C does
-in the main thread; shell/units.py) lands only when it returns. Slept in slices, it lands
+in the main thread; shell/features/units.py) lands only when it returns. Slept in slices, it lands
 within a slice. A signal still ends the sleep at once in the main thread.
 """
 

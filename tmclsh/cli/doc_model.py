@@ -168,7 +168,7 @@ def can_interfaces() -> list[str]:
 
 
 def shell_commands() -> list:
-    from ..shell import commands
+    from ..shell.lang import commands
 
     return commands.all_commands()
 

@@ -98,7 +98,7 @@ class Report:
             self._bar = None
 
     def ask(self, question: str) -> bool:
-        from ..shell.ask import ask_yes_no
+        from ..shell.repl.ask import ask_yes_no
 
         self._end_bar()
         return ask_yes_no(question)

@@ -57,13 +57,13 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
 
 def cmd_monitor(args: argparse.Namespace) -> int:
-    from ..shell.monitor import run_monitor
+    from ..shell.features.monitor import run_monitor
 
     return run_monitor(args)
 
 
 def cmd_bridge(args: argparse.Namespace) -> int:
-    from ..shell.bridge import run_bridge
+    from ..shell.features.bridge import run_bridge
 
     return run_bridge(args)
 
@@ -425,7 +425,7 @@ def main(argv: list[str] | None = None) -> int:
                    "bridge": cmd_bridge, "replay": cmd_replay}.get(args.subcommand or "")
         if handler is not None:
             return handler(args)
-        from ..shell.entry import enter
+        from ..shell.lang.entry import enter
 
         return enter(args)  # the REPL, -c, -f or several units
     except BrokenPipeError:  # `tmclsh modules | head`: the reader has gone; stop quietly

@@ -210,7 +210,7 @@ def _details(text: str) -> list[str]:
 
 def _category_layout() -> tuple[tuple[str, ...], dict[str, str]]:
     """The order and titles of the command categories, as ``.help`` shows them."""
-    from ..shell.commands import CATEGORIES
+    from ..shell.lang.commands import CATEGORIES
 
     return tuple(name for name, _ in CATEGORIES), dict(CATEGORIES)
 

@@ -53,7 +53,7 @@ def _limits() -> list[str]:
     from ..base.files import (MAX_DEPTH as MAX_NESTING, MAX_DIGITS, MAX_FILE, MAX_LINE,
                               MAX_LINES, MAX_READ_MEMORY, SIGNAL_GRACE, size_text)
     from ..base.limits import LIMITS
-    from ..shell.expr import MAX_DEPTH, MAX_LENGTH, MAX_LITERAL, MAX_OPERATORS
+    from ..shell.lang.expr import MAX_DEPTH, MAX_LENGTH, MAX_LITERAL, MAX_OPERATORS
 
     out = [".SH LIMITS",
            "Every number a user sets is checked against one table, whether it comes from an "

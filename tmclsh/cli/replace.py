@@ -148,7 +148,7 @@ def cmd_replace(args: argparse.Namespace) -> int:
                       "was sent", EXIT_USAGE)
     confirm = None
     if not yes:
-        from ..shell.ask import ask_yes_no
+        from ..shell.repl.ask import ask_yes_no
 
         confirm = ask_yes_no
     replacement = Replacement(source, target, image=image, with_link=args.with_link,

@@ -125,7 +125,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     finally:
         try:
             if writes:
-                from ..shell.stop import ToStderr, stop_all
+                from ..shell.features.stop import ToStderr, stop_all
 
                 several = len(capture.addresses) > 1
                 for address in capture.addresses:

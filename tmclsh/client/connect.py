@@ -47,7 +47,7 @@ def connection_settings(args: argparse.Namespace) -> dict:
 
 def _one(key: str, value):
     """One value of an option that takes several (``--port`` repeated, ``--address 1,2``):
-    several name units, which only ``-c`` and ``-f`` run (``shell/units.py``)."""
+    several name units, which only ``-c`` and ``-f`` run (``shell/features/units.py``)."""
     if not isinstance(value, (list, tuple)):
         return value
     if len(value) > 1:

@@ -1,6 +1,6 @@
 """A module's configuration, from Python: back it up, write and read the backup file, compare
 it with the module, restore what differs. Plain functions on a client, never printing; the
-shell's ``.save``/``.diff``/``.restore`` (``tmclsh.shell.clone``) are their front ends.
+shell's ``.save``/``.diff``/``.restore`` (``tmclsh.shell.features.clone``) are their front ends.
 
 The backup is a plain tmclsh script, so it is replayed, diffed and edited like any other: one
 ``SAP``/``SGP`` line per writable configuration parameter, everything else (read-only values,

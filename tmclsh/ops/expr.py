@@ -1,7 +1,7 @@
 """Expressions evaluated on a module, from Python: names from a mapping of variables, reads
 sent on a client (``tmcl/expr.py`` parses; this is the half that talks to the module). The
 shell's ``.let``, ``.expect``, ``.wait`` and ``.watch`` give it the session's client and
-variables (``shell/expr.py``); a watch's sampling (``ops/watch.py``) needs nothing more.
+variables (``shell/lang/expr.py``); a watch's sampling (``ops/watch.py``) needs nothing more.
 
 From Python::
 

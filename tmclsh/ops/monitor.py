@@ -5,7 +5,7 @@ bus, a serial tap on an RS485 line, a log file) or sits in the middle (a bridge)
 hears is read here into ``Seen`` items, one per frame or run of bytes that is none, and into
 ``Exchange`` items, a request with the reply that answers it (or none) and the time between.
 Nothing here sends or prints: the readers take bytes or CAN frames with their times, the
-front end (shell/monitor.py) shows what they return.
+front end (shell/features/monitor.py) shows what they return.
 
 * ``Monitor`` pairs replies with requests, learns which module answers at an address (its
   136 answers), and counts what it saw (``Summary``).

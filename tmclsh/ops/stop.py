@@ -1,7 +1,7 @@
 """The safety stop: stop the stored program and every motor, and say what reads back.
 
 The one stop behind every entry point: Ctrl-C at the prompt and in ``-c``/``-f``,
-``.stopall``, the watch's stop key, the ASCII terminal's Ctrl-C (shell/stop.py is its one
+``.stopall``, the watch's stop key, the ASCII terminal's Ctrl-C (shell/features/stop.py is its one
 front end). A stored program that runs would drive the motors again right after MST, so it
 is stopped first; then MST to every motor; then each motor's actual speed is read back until
 it is 0 (a motor ramps down) or a few seconds have passed. "Stopped" is said of a motor only

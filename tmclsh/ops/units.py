@@ -2,7 +2,7 @@
 
 A *unit* is one (link, address) pair. ``run(units, fn)`` opens each unit's module, calls
 ``fn(client)`` on it and returns each unit's ``Result`` (what ``fn`` returned, or what went
-wrong), never printing; the shell's several-module ``-c``/``-f`` (``shell/units.py``) is a
+wrong), never printing; the shell's several-module ``-c``/``-f`` (``shell/features/units.py``) is a
 front end that passes a whole shell run as ``fn`` and shows each unit through its view.
 
 How they run: one thread per link. Units on different links run side by side; units sharing

@@ -1,6 +1,6 @@
 """A watch's sampling, from Python: expressions over module reads, read once per sample, each
 answer judged before it is shown as the module's value. Plain code on a client and a mapping
-of variables, never printing; ``.watch`` (``shell/watch.py``) keeps the display, the plot,
+of variables, never printing; ``.watch`` (``shell/features/watch.py``) keeps the display, the plot,
 the CSV file and the keys.
 
 * ``poll(client, items, t)`` reads once (identical reads within a sample are sent once) and

@@ -160,7 +160,7 @@ def _console(stderr: bool = False, color: str = "auto", file: Any = None):
 
 def load_rich() -> None:
     """Import now, in this thread, what a console imports when it first writes (several units
-    at once: a stop raised in a unit's thread must not land inside an import, shell/units.py)."""
+    at once: a stop raised in a unit's thread must not land inside an import, shell/features/units.py)."""
     import io
 
     console = _console(file=io.StringIO())
@@ -191,7 +191,7 @@ class Output:
         self._held_lines: list[str] = []
         self._held_at = 0.0
         self._memo: dict[tuple, tuple] = {}  # see result
-        # a unit of several (shell/units.py): the fields every JSON object starts with
+        # a unit of several (shell/features/units.py): the fields every JSON object starts with
         # ({"unit": 2, "port": ..., "address": ...}), and who is told of each error said
         self.tag: dict[str, Any] | None = None
         self.on_error: Callable[[str], None] | None = None

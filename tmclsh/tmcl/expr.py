@@ -1,6 +1,6 @@
 """The shell's expression language, parsed: a small, safe evaluator (never Python's
 ``eval``). Pure code: a read is evaluated through a ``Context`` (``ops/expr.py`` sends it
-on a client; the shell gives it the session's variables, ``shell/expr.py``).
+on a client; the shell gives it the session's variables, ``shell/lang/expr.py``).
 
 Used by ``.let``, ``.expect``, ``.wait``, ``.if``, ``.repeat``, ``.watch`` and ``${...}`` in
 any line. Grammar (keywords and read mnemonics are case-insensitive)::

@@ -1,6 +1,6 @@
 """Cutting text into shell lines, as pure code: comments off, then ``;`` between lines.
 
-The rules are the shell language's (``tmclsh.shell.lines`` states them and adds which
+The rules are the shell language's (``tmclsh.shell.lang.lines`` states them and adds which
 commands own the rest of their line); they live here, below the shell, so that what reads a
 file of shell lines without a shell (a configuration backup: ``tmclsh.ops.backup``) cuts it
 exactly as the shell does.
@@ -62,7 +62,7 @@ def split_line(text: str, owns_line: Callable[[str], bool] = lambda _text: False
     """One physical line as the shell lines in it (comment removed, ``;`` separating).
 
     ``owns_line(line)`` tells whether a line starts with a command that takes the rest of
-    the line, ``;`` included (the shell's commands: ``tmclsh.shell.lines``; none here), and
+    the line, ``;`` included (the shell's commands: ``tmclsh.shell.lang.lines``; none here), and
     ``owned_until(line)`` where such a line ends all the same (the ``;`` before another
     command; None: at its end)."""
     rest = strip_comment(text)

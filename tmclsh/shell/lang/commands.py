@@ -3,7 +3,7 @@
 The table (``COMMANDS`` below) is plain data: name, syntax, help, completion, category,
 details, aliases, bare. ``.help``, the completer, the lexer and the man page read it without
 importing a feature module, so ``-c`` and ``-f`` start without the REPL's libraries. A
-feature module (``builtin``, ``script``, ...) is imported the first time one of its commands
+feature module (``shell/features/``: ``help``, ``scripting``, ...) is imported the first time one of its commands
 runs, or when the completer needs a completion function that lives there.
 
 Adding a command is one ``Command(...)`` entry in ``COMMANDS`` plus the handler in its
@@ -32,7 +32,7 @@ if TYPE_CHECKING:
 
 @dataclass(eq=False)
 class Command:
-    """One dot-command. ``feature`` names the module in this package whose
+    """One dot-command. ``feature`` names the module in ``shell/features/`` whose
     ``@command(name)`` is the handler; ``complete`` is a list of words or (word, meta) pairs,
     or the name of a completion function in that module; ``same_as`` names the command whose
     handler this one shares (``.exit`` is ``.quit``), so help lists them together. A new
@@ -62,7 +62,7 @@ class Command:
     # the name of a function ``check(session, argtext)`` in the feature module that checks
     # the arguments before a script runs (nothing sent), raising what the command would
     check: str = ""
-    # its options (shell/options.py reads them; the completer offers them)
+    # its options (shell/lang/options.py reads them; the completer offers them)
     options: tuple[Option, ...] = ()
     # ``${...}`` in its arguments is replaced before the handler runs (a port, a file name,
     # an address from a variable: ``.connect ${port}``, ``.save unit-${unit}.tmcl``); the
@@ -85,7 +85,7 @@ class Command:
         if self._handler is None:
             _import_feature(self.feature)
             if self._handler is None:
-                raise LookupError(f"tmclsh.shell.{self.feature} has no @command({self.name!r}) "
+                raise LookupError(f"{FEATURE_PACKAGE}.{self.feature} has no @command({self.name!r}) "
                                   "handler")
         return self._handler
 
@@ -109,8 +109,12 @@ class Command:
         return source
 
 
+# the folder of the feature modules, beside this one's (``tmclsh.shell.features``)
+FEATURE_PACKAGE = __package__.rpartition(".")[0] + ".features"
+
+
 def _import_feature(feature: str):
-    return importlib.import_module(f"{__package__}.{feature}")
+    return importlib.import_module(f"{FEATURE_PACKAGE}.{feature}")
 
 
 def command(name: str, syntax: str | None = None, help: str | None = None, *,
@@ -129,7 +133,7 @@ def command(name: str, syntax: str | None = None, help: str | None = None, *,
         if syntax is None:
             if cmd is None:
                 raise LookupError(f"{fn.__module__} registers a handler for {name!r}, which has "
-                                  "no entry in COMMANDS (tmclsh/shell/commands.py)")
+                                  "no entry in COMMANDS (tmclsh/shell/lang/commands.py)")
             cmd._handler = fn
         else:
             if cmd is not None and cmd.feature != "":
@@ -199,10 +203,10 @@ CATEGORIES: tuple[tuple[str, str], ...] = (
 # are listed by name, categories in their first appearance.
 
 COMMANDS: tuple[Command, ...] = (
-    Command('.clear', 'builtin', '.clear',
+    Command('.clear', 'help', '.clear',
             'clear the screen; Ctrl-L at the prompt does the same',
             details=('Clears the terminal; in a pipe or a file nothing is written.')),
-    Command('.help', 'builtin', '.help [--source] [COMMAND|MNEMONIC|NUMBER|PARAMETER]',
+    Command('.help', 'help', '.help [--source] [COMMAND|MNEMONIC|NUMBER|PARAMETER]',
             'show help: all commands, one command, a TMCL instruction, or a parameter',
             complete='complete_help', bare=True,
             details=('`help SAP` explains an instruction; `help 140` shows axis parameter '
@@ -215,15 +219,15 @@ COMMANDS: tuple[Command, ...] = (
                      'unclear or disagree, and what tmclsh assumes), like .param --source.'),
             reconnects=False,
             options=(Option("--source", help="also how it was read from the manuals"),)),
-    Command('.quit', 'builtin', '.quit',
+    Command('.quit', 'help', '.quit',
             'leave the shell (also Ctrl-D)',
             bare=True,
             reconnects=False),
-    Command('.exit', 'builtin', '.exit',
+    Command('.exit', 'help', '.exit',
             'leave the shell (same as .quit)',
             bare=True, same_as='.quit',
             reconnects=False),
-    Command('.param', 'builtin', '.param [--source] QUERY',
+    Command('.param', 'params', '.param [--source] QUERY',
             'explain a parameter: number, name or part of a name, with its current value',
             complete='complete_param', category='parameters',
             details=('QUERY may be a number (140), a name (MicrostepResolution), part of one '
@@ -233,18 +237,18 @@ COMMANDS: tuple[Command, ...] = (
                      'manual (where the manual is unclear or wrong, and what tmclsh '
                      'assumes).'),
             options=(Option("--source", help="also how it was read from the manual"),)),
-    Command('.params', 'builtin', '.params [axis|global] [FILTER]',
+    Command('.params', 'params', '.params [axis|global] [FILTER]',
             'table of all parameters with their live values (one GAP/GGP each)',
             complete='complete_params', category='parameters',
             details=('FILTER narrows the list by number or (part of a) name. On a multi-axis '
                      'module each motor gets its own value column.')),
-    Command('.trace', 'builtin', '.trace [on|off]',
+    Command('.trace', 'trace', '.trace [on|off]',
             'show every frame in hex, decoded, on stderr',
             complete=[('on', 'start tracing'), ('off', 'stop tracing')], category='protocol',
             details=('Without an argument it toggles. Lines show time, direction (tx> / '
                      '<rx), the bytes and what they mean. --trace does the same from the '
                      'start.')),
-    Command('.decode', 'builtin', '.decode [request|reply|memory|version] HEX|CANLINE',
+    Command('.decode', 'trace', '.decode [request|reply|memory|version] HEX|CANLINE',
             'decode bytes or a CAN log line pasted from elsewhere: request or reply, '
             'checksum, 134/136 layouts',
             complete=[('request', 'read the bytes as a request'),
@@ -261,7 +265,7 @@ COMMANDS: tuple[Command, ...] = (
                      "of its line (pasted bytes may be separated by ';') up to a ';' that "
                      "another dot-command follows (.decode A; .decode B). tmclsh monitor "
                      'decodes whole logs and live buses.')),
-    Command('.connect', 'builtin', '.connect [PORT | sim [MODULE] | can [IFACE:CHANNEL]]',
+    Command('.connect', 'connection', '.connect [PORT | sim [MODULE] | can [IFACE:CHANNEL]]',
             'reconnect, or switch to another port, simulator or CAN bus',
             complete='complete_connect', category='connection',
             details=('Without an argument the current link is closed and opened again (after '
@@ -273,7 +277,7 @@ COMMANDS: tuple[Command, ...] = (
             changes_link=True,
             reconnects=False,
             expands=True),
-    Command('.address', 'builtin', '.address [N]',
+    Command('.address', 'connection', '.address [N]',
             'talk to the module with address N on the same bus',
             complete='complete_address', category='connection',
             details=('The new address is checked with a 136 (version) request; if nothing '
@@ -282,7 +286,7 @@ COMMANDS: tuple[Command, ...] = (
                      '.repeat 3 as i / .address i + 1 / GAP 1, 0 / .end.'),
             changes_link=True,
             expands=True),
-    Command('.module', 'builtin', '.module [NAME]',
+    Command('.module', 'connection', '.module [NAME]',
             'show the module type, or override it',
             complete='complete_module', category='connection',
             details=('The type normally comes from the 136 version string. Overriding it '
@@ -290,7 +294,7 @@ COMMANDS: tuple[Command, ...] = (
                      'against.'),
             changes_link=True,
             expands=True),
-    Command('.version', 'builtin', '.version',
+    Command('.version', 'connection', '.version',
             'ask the module for its firmware version (command 136)',
             category='connection',
             details=('Reads the string (136 type 0) and the binary value (type 1), and says '
@@ -303,11 +307,11 @@ COMMANDS: tuple[Command, ...] = (
                      'shown (nothing is sent).\n'
                      'JSON: {"version", "binary", "module", "binary_type", "binary_version", '
                      '"agrees"}, and "layout" when read\nin the other order.')),
-    Command('.stopall', 'builtin', '.stopall',
+    Command('.stopall', 'connection', '.stopall',
             'stop everything: the stored program (128) if it runs, then every motor (MST), '
             'each read back until its speed is 0; Ctrl-C does the same',
             category='motion'),
-    Command('.repeat', 'script', '.repeat COUNT [as NAME]',
+    Command('.repeat', 'scripting', '.repeat COUNT [as NAME]',
             'repeat the following lines until .end',
             category='script',
             details=('Runs the lines up to the matching .end COUNT times (an expression). '
@@ -317,7 +321,7 @@ COMMANDS: tuple[Command, ...] = (
                      '  MVP REL, 0, 1000\n'
                      '  .wait GAP 8, 0 == 1\n'
                      '  .end')),
-    Command('.if', 'script', '.if EXPR',
+    Command('.if', 'scripting', '.if EXPR',
             'run the following lines (until .elif/.else/.end) if EXPR is true',
             category='script',
             details=('  .if GIO 0, 0 == 1\n'
@@ -325,16 +329,16 @@ COMMANDS: tuple[Command, ...] = (
                      '  .else\n'
                      '  .echo input 0 is low\n'
                      '  .end')),
-    Command('.elif', 'script', '.elif EXPR',
+    Command('.elif', 'scripting', '.elif EXPR',
             'inside .if: the next condition',
             category='script'),
-    Command('.else', 'script', '.else',
+    Command('.else', 'scripting', '.else',
             'inside .if: lines run when no condition was true',
             category='script'),
-    Command('.end', 'script', '.end',
+    Command('.end', 'scripting', '.end',
             'close a .repeat or .if block',
             category='script'),
-    Command('.onerror', 'script', '.onerror LINE | .onerror off',
+    Command('.onerror', 'scripting', '.onerror LINE | .onerror off',
             'in a script: a line to run if the script stops at an error',
             category='script',
             details=('  .onerror MST 0\n'
@@ -342,12 +346,12 @@ COMMANDS: tuple[Command, ...] = (
                      'error stops the script (not with --keep-going), and is forgotten when '
                      'the script ends.'),
             check='check_onerror'),
-    Command('.source', 'script', '.source FILE',
+    Command('.source', 'scripting', '.source FILE',
             'run a script file in this session',
             category='script',
             details=('Lines of the file run as if typed; errors stop it with FILE:LINE. '
                      "Inside a script the path is relative to that script's folder.")),
-    Command('.let', 'script', '.let NAME = EXPR',
+    Command('.let', 'scripting', '.let NAME = EXPR',
             'set a variable (use it as ${NAME} or in expressions)',
             category='script',
             details=('EXPR is arithmetic, comparisons, and/or/not over numbers, variables '
@@ -357,7 +361,7 @@ COMMANDS: tuple[Command, ...] = (
                      '  SAP 4, 0, ${speed * 2}\n'
                      '.let alone lists the variables.'),
             check='check_let'),
-    Command('.expect', 'script', '.expect EXPR',
+    Command('.expect', 'scripting', '.expect EXPR',
             'check a condition; the script fails if it is false',
             category='script',
             details=('  .expect GAP 1, 0 == 5000\n'
@@ -369,7 +373,7 @@ COMMANDS: tuple[Command, ...] = (
                      'true|false, "values": {READ: value}} ("in_doubt": [READ] in place of '
                      'the values; a failure also has "error").'),
             check='check_expect'),
-    Command('.wait', 'script', '.wait EXPR [--timeout S] [--interval S]',
+    Command('.wait', 'scripting', '.wait EXPR [--timeout S] [--interval S]',
             'poll until a condition holds (default timeout 30 s, interval 0.05 s)',
             category='script',
             details=('  .wait GAP 8, 0 == 1 --timeout 10\n'
@@ -388,17 +392,17 @@ COMMANDS: tuple[Command, ...] = (
             check='check_wait',
             options=(Option("--timeout", "S", "give up after S seconds (none: never)"),
                      Option("--interval", "S", "seconds between polls"))),
-    Command('.sleep', 'script', '.sleep SECONDS',
+    Command('.sleep', 'scripting', '.sleep SECONDS',
             'pause up to a day (seconds may be a fraction or an expression)',
             category='script',
             check='check_sleep'),
-    Command('.echo', 'script', '.echo TEXT [> FILE | >> FILE]',
+    Command('.echo', 'scripting', '.echo TEXT [> FILE | >> FILE]',
             'print a line (${...} expanded), or write it to a file',
             category='script',
             details=('  .echo position is ${GAP 1, 0}\n'
                      '  .echo SAP 4, 0, ${GAP 4, 0} >> restore.tmcl\n'
                      "'>' replaces the file, '>>' appends; quote text that holds '>'.")),
-    Command('.record', 'script', '.record FILE | .record off',
+    Command('.record', 'scripting', '.record FILE | .record off',
             'record what you type to a script file',
             complete=['off'], category='script',
             details=('Every line typed from now on is written to FILE (results as // '
@@ -409,7 +413,7 @@ COMMANDS: tuple[Command, ...] = (
                      "ends ('.record off' or leaving the shell); if it cannot be written, "
                      'the old FILE stays as it was.'),
             expands=True),
-    Command('.history', 'script', '.history [N]',
+    Command('.history', 'scripting', '.history [N]',
             'show the lines of this session (the last N)',
             category='script'),
     Command('.plot', 'plot', '.plot [CSV] [--only NAME,...] [--height N] [--width N]',
@@ -450,7 +454,7 @@ COMMANDS: tuple[Command, ...] = (
                      Option("--count", "N", "stop after N samples"),
                      Option("--until", "EXPR", "stop once EXPR holds"),
                      Option("--csv", "FILE", "log every sample to FILE"))),
-    Command('.upload', 'debugger', '.upload FILE [--at ADDR] [--yes] [--no-verify]',
+    Command('.upload', 'upload', '.upload FILE [--at ADDR] [--yes] [--no-verify]',
             'assemble FILE for this module, store it in program memory and verify it',
             complete='complete_file', category='program',
             details=('Assembles FILE for the connected module (a .bin TMCL-IDE image or .hex '
@@ -476,7 +480,7 @@ COMMANDS: tuple[Command, ...] = (
                      Option("--yes", help="overwrite a program that is there", aliases=("-y",)),
                      Option("--no-verify", help="do not read it back")),
             expands=True),
-    Command('.dump', 'debugger', '.dump [[-o] FILE] [--at ADDR] [--count N]',
+    Command('.dump', 'upload', '.dump [[-o] FILE] [--at ADDR] [--count N]',
             'read the stored program back (134) and show it as source, or write it to FILE',
             aliases=('.disasm',), complete='complete_file', category='program',
             details=('Reads program memory with 134 from ADDR (default 0) up to the end '
@@ -500,7 +504,7 @@ COMMANDS: tuple[Command, ...] = (
                      Option("--at", "ADDR", "from this address"),
                      Option("--count", "N", "this many instructions")),
             expands=True),
-    Command('.source-map', 'debugger', '.source-map [FILE [--at ADDR] | --off]',
+    Command('.source-map', 'upload', '.source-map [FILE [--at ADDR] | --off]',
             'use FILE as the source of the stored program (lines and labels in the debugger)',
             complete='complete_file', category='program',
             details=("Assembles FILE and associates it with the program in the module's "

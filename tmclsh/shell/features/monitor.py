@@ -26,17 +26,17 @@ import time
 from collections.abc import Iterable
 from typing import Any
 
-from ..base.errors import (EXIT_FAILED, EXIT_OK, ConnectError, TmclError, TransportError,
-                           UsageError, ValidationError)
-from ..base.spill import Spill, SpillWriter
-from ..ops.filter import Filter
-from ..ops.monitor import (DEFAULT_REPLY_ID, EVENT, NOISE_RUN, OTHER, REPLY, REQUEST, RX,
-                           TEXT, TX, CanReader, Exchange, Item, Monitor, Seen, Summary)
-from ..tmcl import asm
-from ..tmcl.frames import Request
-from ..tmcl.modules import Module
-from ..tmcl.status import status_ok, status_text
-from .render import Styled, describe_instruction, describe_reply, event_motors, is_terminal
+from ...base.errors import (EXIT_FAILED, EXIT_OK, ConnectError, TmclError, TransportError,
+                            UsageError, ValidationError)
+from ...base.spill import Spill, SpillWriter
+from ...ops.filter import Filter
+from ...ops.monitor import (DEFAULT_REPLY_ID, EVENT, NOISE_RUN, OTHER, REPLY, REQUEST, RX,
+                            TEXT, TX, CanReader, Exchange, Item, Monitor, Seen, Summary)
+from ...tmcl import asm
+from ...tmcl.frames import Request
+from ...tmcl.modules import Module
+from ...tmcl.status import status_ok, status_text
+from ..render import Styled, describe_instruction, describe_reply, event_motors, is_terminal
 from .trace import timestamp
 
 _MEMO = 4096  # words kept per frame's bytes (a log repeats the same frames)
@@ -119,7 +119,7 @@ class View:
     @property
     def console(self):
         if self._console is None:
-            from .render import _console
+            from ..render import _console
 
             # (a live run's stream is a SpillWriter: the console writes through it too)
             file = self.stream if isinstance(self.stream, SpillWriter) else None
@@ -312,7 +312,7 @@ def _line(obj: dict[str, Any], req: Seen, mod: Module | None) -> None:
     """``"line"``: the request as the shell takes it; ``"param"``: the parameter it names."""
     text, comment = asm.disassemble_instruction(req.instruction, mod)
     obj["line"] = text
-    from .render import param_for
+    from ..render import param_for
 
     param = param_for(req.instruction, mod)
     if param is not None:
@@ -419,14 +419,14 @@ def show_items(items: Iterable[Item], view: View, filt: Filter, summary: Summary
 def load_module(name: str | None) -> Module | None:
     if not name:
         return None
-    from ..tmcl.modules import load
+    from ...tmcl.modules import load
 
     return load(name)
 
 
 def run_monitor(args) -> int:
     """``tmclsh monitor``: listen, show, summarise (sends nothing, ever)."""
-    from ..ops import listen
+    from ...ops import listen
 
     module = load_module(getattr(args, "module", None))
     timeout = getattr(args, "timeout", None) or 1.0
@@ -453,15 +453,15 @@ def run_monitor(args) -> int:
         out = live_output(view)
     try:
         if can_spec is not None:
-            from ..link.spec import LinkSpec
+            from ...link.spec import LinkSpec
 
             link = LinkSpec.parse(can=can_spec, bitrate=getattr(args, "bitrate", None))
             transport = _open(link.open)
             reader: Any = CanReader(monitor, args.can_id, args.reply_id)
             source = listen.can_bus(transport, reader, capture=capture)
         elif port is not None:
-            from ..link.spec import LinkSpec
-            from ..ops.monitor import SerialTap
+            from ...link.spec import LinkSpec
+            from ...ops.monitor import SerialTap
 
             link = LinkSpec.parse(port=port, baud=getattr(args, "baud", None))
             baud = link.baud
@@ -470,7 +470,7 @@ def run_monitor(args) -> int:
             source = listen.serial_tap(transport, reader, quiet=listen.quiet_time(baud),
                                        capture=capture)
         elif is_can:
-            from ..link.canlog import read_log
+            from ...link.canlog import read_log
 
             reader = CanReader(monitor, args.can_id, args.reply_id)
             source = listen.can_log(read_log(log_path), reader, capture=capture)
@@ -498,7 +498,7 @@ def run_monitor(args) -> int:
 
 def _readable(path: str) -> None:
     """A log that cannot be opened is one line before anything is shown."""
-    from ..base.files import FileError
+    from ...base.files import FileError
 
     try:
         with open(path, "rb"):
@@ -508,7 +508,7 @@ def _readable(path: str) -> None:
 
 
 def _can_log(path: str) -> bool:
-    from ..link.canlog import readable
+    from ...link.canlog import readable
 
     return readable(path)
 
@@ -526,11 +526,11 @@ def _capture(path: str | None, is_can: bool):
     if not path:
         return None, lambda: None
     if is_can:
-        from ..link.canlog import LogWriter
+        from ...link.canlog import LogWriter
 
         writer: Any = LogWriter(path)
         return writer.write, writer.close
-    from ..ops.capture import CaptureWriter
+    from ...ops.capture import CaptureWriter
 
     writer = CaptureWriter(path)
     return writer.write, writer.close

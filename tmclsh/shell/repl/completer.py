@@ -16,14 +16,14 @@ from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, NamedTuple
 
-from ..tmcl import instructions as isa
-from ..tmcl.modules import Module, Parameter
-from . import commands
-from ..client.text import AS_TYPED
-from .lines import comment_at
+from ...tmcl import instructions as isa
+from ...tmcl.modules import Module, Parameter
+from ..lang import commands
+from ...client.text import AS_TYPED
+from ..lang.lines import comment_at
 
 if TYPE_CHECKING:
-    from .session import Session
+    from ..lang.session import Session
 
 # -- step 1: what comes next (pure) ------------------------------------------------------
 
@@ -527,7 +527,7 @@ def candidates(s: Suggestion, word: str, module: Module | None,
                 if n not in s.extra]
         return out
     if isinstance(s, Function):
-        from .expr import FUNCTIONS
+        from ..lang.expr import FUNCTIONS
 
         return [Candidate(f"{n}(", "function", display=f"{n}()") for n in FUNCTIONS]
     if module is None:

@@ -15,8 +15,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TextIO
 
-from ..link.ascii import address_char
-from ..base.errors import ValidationError
+from ...link.ascii import address_char
+from ...base.errors import ValidationError
 
 MENU_KEY = 0x14  # Ctrl-T, as in tio and miniterm
 
@@ -175,7 +175,7 @@ def file_lines(name: str) -> list[str]:
     path = Path(name.strip()).expanduser()
     if not name.strip():
         raise ValidationError("no file name given; nothing sent")
-    from ..base import files
+    from ...base import files
 
     if not path.exists():
         raise ValidationError(f"no such file: {path}")

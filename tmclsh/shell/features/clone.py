@@ -14,23 +14,23 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ..base.errors import TmclError, ValidationError
-from ..client.text import AS_TYPED
-from ..ops import backup as ops
-from ..ops import program
+from ...base.errors import TmclError, ValidationError
+from ...client.text import AS_TYPED
+from ...ops import backup as ops
+from ...ops import program
 # (the names others import from here: tests, scripts/bench.py, which also reads old trees)
-from ..ops.backup import (BACKUP_MARK, READ, STORE, WRITE, Backup,  # noqa: F401
-                          BackupFileError, CloneError, Difference, Slot, Written,
-                          left_alone_text, readable_slots)
-from ..tmcl import asm
-from ..tmcl.frames import Control
-from ..tmcl.modules import Module
-from . import options
-from .commands import command, find, options_of
-from .lines import split_line
+from ...ops.backup import (BACKUP_MARK, READ, STORE, WRITE, Backup,  # noqa: F401
+                           BackupFileError, CloneError, Difference, Slot, Written,
+                           left_alone_text, readable_slots)
+from ...tmcl import asm
+from ...tmcl.frames import Control
+from ...tmcl.modules import Module
+from ..lang import options
+from ..lang.commands import command, find, options_of
+from ..lang.lines import split_line
 
 if TYPE_CHECKING:
-    from .session import Session
+    from ..lang.session import Session
 
 CATEGORY = "configuration"
 
@@ -38,7 +38,7 @@ CATEGORY = "configuration"
 # -- argument parsing --------------------------------------------------------------------
 
 def _args(argtext: str, command: str) -> tuple[str, set[str]]:
-    """FILE and the options given (shell/options.py, as the table declares them)."""
+    """FILE and the options given (shell/lang/options.py, as the table declares them)."""
     usage = find(command).syntax  # type: ignore[union-attr]
     try:
         pos, given = options.parse_words(argtext, options_of(command))
@@ -121,7 +121,7 @@ def _program_path(path: Path) -> Path:
 
 
 def _program_text(session: Session) -> tuple[str, int]:
-    from ..ops import program
+    from ...ops import program
 
     c = session.client
     module = session.module
@@ -160,7 +160,7 @@ def _may_overwrite(session: Session, paths: list[Path | None], yes: bool) -> Non
         session.confirm(f"{names} {'exists' if one else 'exist'}; overwrite "
                         f"{'it' if one else 'them'}?")
         return
-    from .session import Abort
+    from ..lang.session import Abort
 
     raise Abort(f"{names} {'exists' if one else 'exist'}; not overwritten: add --yes to "
                 f"replace {'it' if one else 'them'}, or save under another name")

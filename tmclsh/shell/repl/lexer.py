@@ -27,8 +27,8 @@ from pygments.lexer import Lexer
 from pygments.token import (Comment, Error, Keyword, Name, Number, Operator, Punctuation, Text,
                             Whitespace)
 
-from ..tmcl import instructions as isa
-from ..tmcl.modules import Module, available, load
+from ...tmcl import instructions as isa
+from ...tmcl.modules import Module, available, load
 
 _TOKEN = re.compile(r"""
     (?P<ws>[ \t\r\f\v]+)
@@ -49,7 +49,7 @@ _TOKEN = re.compile(r"""
 @cache
 def _bare() -> frozenset[str]:
     """Shell words accepted without the dot (help, quit, exit), from the command table."""
-    from . import commands
+    from ..lang import commands
 
     return frozenset(commands.bare_words())
 
@@ -186,7 +186,7 @@ def highlight(text: str, module: Module | None = None):
     """``text`` (TMCL source, a disassembly, a typed line) as a rich ``Text``."""
     from rich.text import Text as RichText
 
-    from .style import color_enabled, token_style
+    from ..style import color_enabled, token_style
 
     out = RichText()
     lexer = TmclLexer(module)

@@ -9,16 +9,16 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
-from ..base import limits
-from ..ops import expr as ops_expr
-from ..ops.expr import can_doubt as _can_doubt
-from ..tmcl.expr import (COMPARISONS, FUNCTIONS, KEYWORDS, MAX_DEPTH,
-                         MAX_LENGTH, MAX_LITERAL, MAX_OPERATORS, Binary, Call, Context,
-                         ExprError, Expression, Name, Node, Num, Number, Read, Token, Unary,
-                         format_number, parse, read_mnemonics, tokenize)
+from ...base import limits
+from ...ops import expr as ops_expr
+from ...ops.expr import can_doubt as _can_doubt
+from ...tmcl.expr import (COMPARISONS, FUNCTIONS, KEYWORDS, MAX_DEPTH,
+                          MAX_LENGTH, MAX_LITERAL, MAX_OPERATORS, Binary, Call, Context,
+                          ExprError, Expression, Name, Node, Num, Number, Read, Token, Unary,
+                          format_number, parse, read_mnemonics, tokenize)
 
 if TYPE_CHECKING:
-    from ..tmcl.asm import Encoded
+    from ...tmcl.asm import Encoded
     from .session import Session
 
 __all__ = ["COMPARISONS", "FUNCTIONS", "KEYWORDS", "MAX_DEPTH", "MAX_LENGTH", "MAX_LITERAL",

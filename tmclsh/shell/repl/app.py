@@ -25,21 +25,21 @@ import sys
 from contextlib import nullcontext
 from typing import TYPE_CHECKING
 
-from .. import __version__
-from ..base.errors import TmclError, TransportError
-from .session import Abort, QuitShell, reconnected
+from ... import __version__
+from ...base.errors import TmclError, TransportError
+from ..lang.session import Abort, QuitShell, reconnected
 
 if TYPE_CHECKING:
     from prompt_toolkit import PromptSession
 
-    from .session import Session
+    from ..lang.session import Session
 
 log = logging.getLogger(__name__)
 
 # -- parts -------------------------------------------------------------------------------
 
 def history_path():
-    from ..base.config import state_dir
+    from ...base.config import state_dir
 
     return state_dir() / "history"
 
@@ -48,7 +48,7 @@ def repl_settings() -> dict:
     """The ``[settings]`` of the config file over the packaged defaults (``default.toml``):
     color, editing_mode, history_size. A broken file was reported at start-up already."""
     try:
-        from ..base.config import load_settings
+        from ...base.config import load_settings
 
         return load_settings()
     except (TmclError, OSError, ImportError):
@@ -85,7 +85,7 @@ def history_entries(path) -> list[str]:
     """The entries of a history file in prompt_toolkit's ``FileHistory`` format (an entry is
     its run of ``+`` lines), newest first, from its last ``HISTORY_BYTES`` only; an entry
     longer than ``files.MAX_LINE`` is dropped, bytes that are not UTF-8 are replaced."""
-    from ..base import files
+    from ...base import files
 
     data = files.read_tail(path, HISTORY_BYTES, "history")
     entries: list[str] = []
@@ -163,7 +163,7 @@ def build_prompt_session(session: Session, **kw) -> PromptSession:
     from .completer import TmclCompleter
     from .keys import tmcl_bindings
     from .lexer import TmclLexer
-    from .style import prompt_style
+    from ..style import prompt_style
     from .toolbar import create_toolbar_tokens_func
 
     from prompt_toolkit.enums import EditingMode
@@ -250,8 +250,8 @@ LEAVE_OPTIONS = [("stop", "stop everything first, then leave"),
 def may_leave(session: Session) -> bool:
     """Leaving while a motor turns or the stored program runs: ask (stop first / leave
     running / cancel). True when the shell may end."""
-    from ..ops.stop import activity
-    from .stop import stop_session
+    from ...ops.stop import activity
+    from ..features.stop import stop_session
 
     client = session.client
     choose = getattr(session, "choose", None)
@@ -321,7 +321,7 @@ def run_repl(session: Session, prompt_session: PromptSession | None = None) -> i
     """The interactive shell; returns the exit status (0)."""
     from prompt_toolkit.patch_stdout import patch_stdout
 
-    from .stop import stop_session
+    from ..features.stop import stop_session
 
     session.interactive = True
     session.ask = ask_yes_no
@@ -383,8 +383,8 @@ def run_text(session: Session, text: str) -> bool:
 
 def run_one(session: Session, text: str) -> bool:
     """One line with every failure turned into a message; False after ``.quit``."""
-    from .lines import classify
-    from .stop import stop_session
+    from ..lang.lines import classify
+    from ..features.stop import stop_session
 
     line = classify(text)
     # a lost link (also one a .watch met) is brought back before the next TMCL line

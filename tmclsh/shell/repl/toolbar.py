@@ -13,7 +13,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from .session import Session
+    from ..lang.session import Session
 
 Fragments = list[tuple[str, str]]
 
@@ -64,7 +64,7 @@ _SHRINK = ("hints", "hints", "hints", "trace_off", "binary", "program", "retry",
 def toolbar_fragments(session: Session, columns: int) -> Fragments:
     """The toolbar for a terminal ``columns`` wide: every item that fits, whole words only
     (prompt_toolkit would cut the line at the edge: ``^D qu`` looks broken)."""
-    from .trace import trace_enabled
+    from ..features.trace import trace_enabled
 
     c = session.client
     items: dict[str, Item] = {}

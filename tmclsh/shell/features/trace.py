@@ -16,18 +16,18 @@ import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from ..tmcl import asm
-from ..tmcl import instructions as isa
-from ..base.errors import FrameError
-from ..tmcl.modules import Module
-from ..tmcl.decoder import FRAME_PIECE, can_reply, pieces
-from ..tmcl.frames import (INSTRUCTION_LEN, SERIAL_FRAME_LEN, VERSION_STRING_LEN, Instruction,
-                           Reply, Request, Status, checksum, parse_hex, to_signed32)
-
-from .render import describe_instruction, describe_reply
+from ...tmcl import asm
+from ...tmcl import instructions as isa
+from ...base.errors import FrameError, ValidationError
+from ...tmcl.modules import Module
+from ...tmcl.decoder import FRAME_PIECE, can_reply, pieces
+from ...tmcl.frames import (INSTRUCTION_LEN, SERIAL_FRAME_LEN, VERSION_STRING_LEN, Instruction,
+                            Reply, Request, Status, checksum, parse_hex, to_signed32)
+from ..lang.commands import command
+from ..render import describe_instruction, describe_reply
 
 if TYPE_CHECKING:
-    from .session import Session
+    from ..lang.session import Session
 
 _ARROW = {"tx": "tx>", "rx": "<rx", "drop": "!! ", "note": "-- "}
 
@@ -291,7 +291,7 @@ def decode_hex(text: str, module: Module | None) -> list[tuple[bytes, list[Readi
     hint = HINTS.get(words[0].lower()) if words else None
     if hint is not None:
         text = text.split(None, 1)[1] if len(words) > 1 else ""
-    from ..link.canlog import parse_line
+    from ...link.canlog import parse_line
 
     can = parse_line(text)
     if can is not None:
@@ -321,3 +321,41 @@ def decode_hex(text: str, module: Module | None) -> list[tuple[bytes, list[Readi
 
 __all__ = ["enable_trace", "disable_trace", "trace_enabled", "format_frame", "decode_hex",
            "decode_frame", "describe_instruction", "describe_reply"]
+
+
+# -- .trace and .decode --------------------------------------------------------------------
+
+@command(".trace")
+def cmd_trace(session: Session, arg: str) -> None:
+    word = arg.strip().lower()
+    if word not in ("", "on", "off"):
+        raise ValidationError(f".trace takes on or off, not {arg.strip()!r}")
+    on = (not trace_enabled(session)) if not word else word == "on"
+    if on:
+        enable_trace(session)
+        session.out.info("trace on: frames are shown on stderr")
+    else:
+        disable_trace(session)
+        session.out.info("trace off")
+
+
+@command(".decode")
+def cmd_decode(session: Session, arg: str) -> None:
+    from rich.text import Text
+
+    frames = decode_hex(arg, session.client.module)
+    out = session.out
+    for frame, readings in frames:
+        if out.json:
+            out.emit({"bytes": frame.hex(" "), "readings": [
+                {"kind": r.kind, "text": r.text, "checksum": r.checksum} for r in readings]})
+            continue
+        out.print(Text(frame.hex(" "), style="tmcl.value"))
+        for r in readings:
+            line = Text("  ")
+            line.append(r.kind, style="tmcl.name")
+            line.append(f": {r.text}")
+            out.print(line)
+            if r.checksum:
+                out.print(Text(f"    checksum {r.checksum}",
+                               style="tmcl.ok" if r.checksum.startswith("ok") else "tmcl.error"))

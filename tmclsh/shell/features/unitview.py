@@ -1,4 +1,4 @@
-"""What the user sees of several units at once (shell/units.py runs them).
+"""What the user sees of several units at once (shell/features/units.py runs them).
 
 Every unit's thread writes as a run of one module does (``Output``, ``print`` to stderr);
 while units run, ``sys.stdout`` and ``sys.stderr`` are routers that hand what a unit's
@@ -36,15 +36,15 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
-from .. import __version__
-from ..base.errors import EXIT_CONNECT, EXIT_OK, EXIT_USAGE
+from ... import __version__
+from ...base.errors import EXIT_CONNECT, EXIT_OK, EXIT_USAGE
 from .trace import Tracer, timestamp
 
 if TYPE_CHECKING:
     import argparse
 
-    from .session import Session
-    from ..ops.units import Unit
+    from ..lang.session import Session
+    from ...ops.units import Unit
 
 _ROUTE = threading.local()  # .record: the Record the current thread writes to
 
@@ -393,7 +393,7 @@ class TableView(View):
         from rich.console import Console
         from rich.live import Live
 
-        from .style import rich_theme
+        from ..style import rich_theme
 
         self.console = Console(file=self.out, highlight=False, theme=rich_theme())
         self.live = Live(console=self.console, get_renderable=self._table,

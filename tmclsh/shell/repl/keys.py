@@ -19,7 +19,7 @@ from prompt_toolkit.filters import completion_is_selected, has_completions
 from prompt_toolkit.key_binding import KeyBindings
 
 if TYPE_CHECKING:
-    from .session import Session
+    from ..lang.session import Session
 
 
 def tmcl_bindings(session: Session) -> KeyBindings:
@@ -28,7 +28,7 @@ def tmcl_bindings(session: Session) -> KeyBindings:
     @kb.add("c-c")
     def _stop(event) -> None:
         """Stop every motor, clear the line."""
-        from .stop import stop_session
+        from ..features.stop import stop_session
 
         event.current_buffer.reset()
         run_in_terminal(lambda: stop_session(session, "Ctrl-C"))

@@ -6,9 +6,9 @@ import argparse
 import sys
 from collections.abc import Callable
 
-from ..base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE,
-                           ModuleGoneError, TmclError)
-from .render import Output
+from ...base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE,
+                            ModuleGoneError, TmclError)
+from ..render import Output
 from .session import QuitShell, Session, frames_sent
 
 
@@ -17,7 +17,7 @@ def refused_line(session: Session, lines: list[str]) -> tuple[str, TmclError] | 
     """The first of ``lines`` the module would refuse, checked before any is sent (as a
     script is): a typo in the last line of ``-c "MVP ...; SPA ..."`` must not leave the move
     of the first one running. Lines with ``${...}`` are checked when they run."""
-    from ..base.errors import ValidationError
+    from ...base.errors import ValidationError
     from .lines import classify
     from .session import encode_typed, unknown_command
 
@@ -84,7 +84,7 @@ def run_lines(session: Session, lines: list[str]) -> int:
 
 
 def run_shell(args: argparse.Namespace) -> int:
-    from ..client.connect import connection_settings, open_client
+    from ...client.connect import connection_settings, open_client
 
     exit_cleanly_on_signals()
     settings = connection_settings(args)
@@ -92,14 +92,14 @@ def run_shell(args: argparse.Namespace) -> int:
     # nobody watches (-c, -f, piped input) fails instead (exit 3)
     tracer = None
     if args.trace:  # the connect's own frames too (136, the download mode check, ...)
-        from .trace import connect_tracer as tracer
+        from ..features.trace import connect_tracer as tracer
     try:
         client = open_client(settings, fallback=_interactive(args), notice=_notice,
                              tracer=tracer)
     except TmclError as exc:
         print(f"tmclsh: {exc}", file=sys.stderr)
         if args.json:  # stdout stays JSON: the failure is a record there too
-            from ..base.edges import error_record, write_json
+            from ...base.edges import error_record, write_json
 
             write_json(error_record(str(exc), EXIT_CONNECT))
         return EXIT_CONNECT
@@ -116,7 +116,7 @@ def run_shell(args: argparse.Namespace) -> int:
         stop_on_interrupt(client)
         return EXIT_INTERRUPTED
     except BrokenPipeError:  # whoever read our output has gone (`tmclsh -c ... | head`)
-        from ..base.edges import reader_gone
+        from ...base.edges import reader_gone
 
         return reader_gone()
     finally:
@@ -140,7 +140,7 @@ def _signal_behind(exc: BaseException) -> BaseException | None:
 def stop_on_interrupt(client, why: str = "interrupted") -> None:
     """Ctrl-C, SIGTERM or SIGHUP in -c/-f (and SIGTERM/SIGHUP at the prompt): the one stop
     (stop.py), said on stderr."""
-    from .stop import ToStderr, stop_all
+    from ..features.stop import ToStderr, stop_all
 
     stop_all(client, ToStderr(), why)
 
@@ -157,8 +157,8 @@ def run_connected(args: argparse.Namespace, client, settings: dict, *,
                   prepare: Callable[[Session], None] | None = None) -> int:
     """The session on a connected client: ``-c``, ``-f``, or the prompt; ``prepare(session)``
     before the first line (a unit of several gives its session its own variables and view,
-    shell/units.py). Exit status."""
-    from ..base.config import load_settings
+    shell/features/units.py). Exit status."""
+    from ...base.config import load_settings
 
     shell_settings = load_settings()
     out = Output(json_mode=bool(args.json), color=str(shell_settings.get("color", "auto")))
@@ -171,20 +171,20 @@ def run_connected(args: argparse.Namespace, client, settings: dict, *,
     if client.module is not None and client.module.generic:
         out.warn(f"{client.module.type_name}: {client.module.NOTICE}")  # once, at the start
     client.on_notice = out.warn  # what the client does on its own (ends download mode)
-    if not interactive:  # who and where, for scripts run on several (shell/units.py sets them)
+    if not interactive:  # who and where, for scripts run on several (shell/features/units.py sets them)
         address = client.can_id if client.is_can else client.address
         session.variables.update(unit=1, address=address, port=_link_text(settings))
     if prepare is not None:
         prepare(session)
     if args.trace:
-        from .trace import enable_trace
+        from ..features.trace import enable_trace
 
         enable_trace(session)
     try:
         if not interactive:
             status = _run_unattended(args, session)
         else:
-            from .app import run_repl
+            from ..repl.app import run_repl
 
             status = run_repl(session)
     except BaseException:
@@ -250,8 +250,8 @@ def _watch_for_starts(client):
     """A tracer noting whether anything that starts motion was sent (the instruction set's
     ``starts_motion``, and a write to a parameter whose data says it does: SAP 2, the target
     speed a velocity mode follows); returns the question."""
-    from ..tmcl.frames import Request
-    from ..tmcl.instructions import starting_opcodes
+    from ...tmcl.frames import Request
+    from ...tmcl.instructions import starting_opcodes
 
     starts = starting_opcodes()
     writes = _motion_parameters(client)
@@ -275,7 +275,7 @@ def _watch_for_starts(client):
 def _motion_parameters(client) -> frozenset[tuple[int, int]]:
     """(write command, parameter number) of the parameters whose data says writing them can
     start the motor."""
-    from ..tmcl import instructions as isa
+    from ...tmcl import instructions as isa
 
     mod = client.module
     if mod is None or mod.generic:
@@ -291,7 +291,7 @@ def _note_left_running(session: Session) -> None:
     """A script that ends while a motor turns, or one it told to turn reads still (stalled,
     not started yet), or the program runs, says so on stderr, and on stdout with --json (it
     leaves them so: that may well be what it was for)."""
-    from ..ops.stop import activity
+    from ...ops.stop import activity
 
     client = session.client
     if not client.connected:

@@ -14,12 +14,12 @@ from __future__ import annotations
 import sys
 from typing import TYPE_CHECKING, Protocol
 
-from ..base.errors import TmclError
+from ...base.errors import TmclError
 
 if TYPE_CHECKING:
-    from ..client.core import Client
-    from ..ops.stop import StopReport
-    from .session import Session
+    from ...client.core import Client
+    from ...ops.stop import StopReport
+    from ..lang.session import Session
 
 
 class Say(Protocol):
@@ -57,7 +57,7 @@ def stop_all(client: Client, say: Say, why: str = "", *,
     """Stop the stored program and every motor, bringing a lost link back first, and say
     what the module reports afterwards. ``why`` (``Ctrl-C``, ``interrupted``) starts every
     line said. Returns the report (None when nothing could be asked). Never raises."""
-    from ..ops.stop import stop_everything
+    from ...ops.stop import stop_everything
 
     prefix = f"{why}: " if why else ""
 
@@ -85,7 +85,7 @@ def stop_all(client: Client, say: Say, why: str = "", *,
         say.warn(f"{prefix}not connected ({report.link_error}); nothing could be stopped")
         return report
     if report.reconnected:
-        from .session import reconnected
+        from ..lang.session import reconnected
 
         say.info(reconnected(client))
     if session is not None and report.program is not None and report.program_error is None:

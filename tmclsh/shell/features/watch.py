@@ -45,17 +45,18 @@ from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
-from ..base import clock, files
-from ..base.errors import TmclError, TransportError, ValidationError  # noqa: F401
-from ..ops import watch as sampling
-from ..ops.watch import Item, Reading, Sample, SendClock
-from . import expr, lines, plot, script
-from . import options
-from .commands import command, options_of
-from .session import reconnected
+from ...base import clock, files
+from ...base.errors import TmclError, TransportError, ValidationError  # noqa: F401
+from ...ops import watch as sampling
+from ...ops.watch import Item, Reading, Sample, SendClock
+from ..lang import expr, lines, script
+from . import plot
+from ..lang import options
+from ..lang.commands import command, options_of
+from ..lang.session import reconnected
 
 if TYPE_CHECKING:
-    from .session import Session
+    from ..lang.session import Session
 
 Number = int | float
 

@@ -8,7 +8,7 @@ shown on another thread, and lines a reader does not take (a paused pager, a ful
 dropped and counted in the summary, never frames or the forwarding's pace.
 
 When the bridge closes, the program on the other side loses the module: what its exchanges
-left behind is ended then, as tmclsh ends its own (the one safety stop, shell/stop.py): a
+left behind is ended then, as tmclsh ends its own (the one safety stop, shell/features/stop.py): a
 motor or the stored program it started is stopped, download mode it entered is left (133),
 and ASCII mode it entered is left for binary mode.
 """
@@ -21,12 +21,12 @@ import threading
 import time
 from typing import Any
 
-from ..base.canspec import LINK_DEFAULTS
-from ..base.errors import (EXIT_FAILED, EXIT_OK, ConnectError, TmclError, TransportError, UsageError,
-                           ValidationError)
-from ..ops.bridge import CAN_RX, CAN_TX, LOST, TICK, CanBridge, Left, SerialBridge
-from ..ops.filter import Filter
-from ..ops.monitor import DEFAULT_HOST, RX, TX, CanReader, Monitor, SerialPair
+from ...base.canspec import LINK_DEFAULTS
+from ...base.errors import (EXIT_FAILED, EXIT_OK, ConnectError, TmclError, TransportError, UsageError,
+                            ValidationError)
+from ...ops.bridge import CAN_RX, CAN_TX, LOST, TICK, CanBridge, Left, SerialBridge
+from ...ops.filter import Filter
+from ...ops.monitor import DEFAULT_HOST, RX, TX, CanReader, Monitor, SerialPair
 from .monitor import (Limits, View, _capture, end_live_output, interruptible, live_output,
                       load_module, off_the_wire, restore, show_items)
 
@@ -105,7 +105,7 @@ def run_bridge(args) -> int:
 
 
 def _open_module(args, port: str | None, can_spec: str | None):
-    from ..link.spec import LinkSpec
+    from ...link.spec import LinkSpec
 
     try:
         return LinkSpec.parse(port, can_spec, baud=getattr(args, "baud", None),
@@ -197,9 +197,9 @@ def _put_right(transport, left: Left, monitor: Monitor, args, is_can: bool,
     """The program can no longer reach the module: end what its exchanges left behind.
     ``capture`` (``-o``) gets the frames sent for that too, so a replayed capture ends as
     the module was left."""
-    from ..client import bringup
-    from ..client.ascii import leave_binary
-    from ..client.core import Client
+    from ...client import bringup
+    from ...client.ascii import leave_binary
+    from ...client.core import Client
     from .stop import ToStderr, stop_all
 
     for address in left.addresses:
@@ -237,7 +237,7 @@ def _put_right(transport, left: Left, monitor: Monitor, args, is_can: bool,
 def _capturing(capture, client, is_can: bool):
     """A tracer that writes what the closing stop sends and gets to the ``-o`` capture, as
     the bridge writes what it forwards (bytes with their direction; CAN frames)."""
-    from ..link.base import CanFrame
+    from ...link.base import CanFrame
 
     def trace(direction: str, raw: bytes, decoded: object) -> None:
         if direction not in ("tx", "rx", "drop") or not isinstance(raw, (bytes, bytearray)):

@@ -12,11 +12,11 @@ def enter(args: argparse.Namespace) -> int:
     """Several modules named (``plan_units``) run as units, else the one module's run:
     whichever way in, the run ends with one exit status."""
     from .main import run_shell
-    from .units import plan_units
+    from ..features.units import plan_units
 
     units = plan_units(args)
     if len(units) > 1:
-        from .units import run_units
+        from ..features.units import run_units
 
         return run_units(args, units)
     return run_shell(args)

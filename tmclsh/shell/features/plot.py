@@ -14,13 +14,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ..base import files
-from ..base.errors import ValidationError
-from . import expr, options
-from .commands import command, options_of
+from ...base import files
+from ...base.errors import ValidationError
+from ..lang import expr, options
+from ..lang.commands import command, options_of
 
 if TYPE_CHECKING:
-    from .session import Session
+    from ..lang.session import Session
 
 Number = int | float
 

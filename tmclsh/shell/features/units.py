@@ -27,16 +27,16 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import TYPE_CHECKING
 
-from ..base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE,
-                           ConnectError, TmclError, UsageError)
-from ..client.connect import connection_settings, open_client
-from ..ops import units as ops_units
-from ..ops.units import Unit
-from .main import Terminated, exit_cleanly_on_signals, run_connected, stop_on_interrupt
+from ...base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE,
+                            ConnectError, TmclError, UsageError)
+from ...client.connect import connection_settings, open_client
+from ...ops import units as ops_units
+from ...ops.units import Unit
+from ..lang.main import Terminated, exit_cleanly_on_signals, run_connected, stop_on_interrupt
 from . import stop as _stop  # noqa: F401  (here: a unit's thread imports nothing)
 
 if TYPE_CHECKING:
-    from .session import Session
+    from ..lang.session import Session
     from .unitview import View
 
 
@@ -62,7 +62,7 @@ def plan_units(args: argparse.Namespace) -> list[Unit]:
     if getattr(args, "all_modules", False):
         if args.can or args.sim:
             raise UsageError("--all takes the attached USB modules; not with --can or --sim")
-        from ..link import TRINAMIC_VID, trinamic_ports
+        from ...link import TRINAMIC_VID, trinamic_ports
 
         attached = [p.device for p in trinamic_ports()]
         if not attached:
@@ -119,7 +119,7 @@ def _links(args: argparse.Namespace, ports: list[str], *, several: bool) -> tupl
         return "sim", [args.sim]
     if not several:
         return "port", [None]  # (one unit: whatever the run of one module finds)
-    from ..client.connect import attached_module_port
+    from ...client.connect import attached_module_port
 
     one = copy.copy(args)
     one.address = one.can_id = one.reply_id = None
@@ -163,7 +163,7 @@ def _readable(path: str) -> list[str]:
     """The script is read by every unit; one that cannot be read is said once (exit 2)."""
     from pathlib import Path
 
-    from .script import ScriptError, read_lines
+    from ..lang.script import ScriptError, read_lines
 
     return read_lines(Path(path), lambda message, kind: ScriptError(message, kind))
 
@@ -172,9 +172,9 @@ def _load_ahead(text: str) -> None:
     """Import here, in the main thread, the feature modules the lines' commands live in (a
     run of one module imports them when they first run): a stop raised in a unit's thread
     while it imports would leave the module half made for every other unit."""
-    from . import expr, script  # noqa: F401  (every run evaluates and checks its lines)
-    from .lines import classify, split_text
-    from .render import load_rich
+    from ..lang import expr, script  # noqa: F401  (every run evaluates and checks its lines)
+    from ..lang.lines import classify, split_text
+    from ..render import load_rich
 
     load_rich()  # (a unit's notes and warnings are styled, its tables drawn by rich)
 

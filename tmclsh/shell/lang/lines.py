@@ -22,8 +22,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import NamedTuple
 
-from ..tmcl.textlines import comment_at, separators, strip_comment  # noqa: F401 (users of this file)
-from ..tmcl.textlines import split_line as _split_line
+from ...tmcl.textlines import comment_at, separators, strip_comment  # noqa: F401 (users of this file)
+from ...tmcl.textlines import split_line as _split_line
 from . import commands
 
 

@@ -17,8 +17,8 @@ import shlex
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from ..base import limits
-from ..base.errors import ValidationError
+from ...base import limits
+from ...base.errors import ValidationError
 
 
 @dataclass(frozen=True)

@@ -14,20 +14,20 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from ..tmcl import asm
-from ..tmcl import instructions as isa
-from ..client.core import idempotent, shared_text
-from ..client.text import LineClient as Client
-from ..client.text import Result
-from ..link.framing import name_of as _name
-from ..base.errors import (EXIT_CONNECT, AsmError, ChecksumError, ModuleGoneError, StatusError,
-                           TmclError, TmclTimeoutError, TransportError, ValidationError)
-from ..tmcl.frames import Request
-from ..tmcl.modules import Module
-from ..tmcl.status import OK_STATUSES
+from ...tmcl import asm
+from ...tmcl import instructions as isa
+from ...client.core import idempotent, shared_text
+from ...client.text import LineClient as Client
+from ...client.text import Result
+from ...link.framing import name_of as _name
+from ...base.errors import (EXIT_CONNECT, AsmError, ChecksumError, ModuleGoneError, StatusError,
+                            TmclError, TmclTimeoutError, TransportError, ValidationError)
+from ...tmcl.frames import Request
+from ...tmcl.modules import Module
+from ...tmcl.status import OK_STATUSES
 from . import commands
 from .lines import Line, classify, split_text
-from .render import Output
+from ..render import Output
 
 _VAR = re.compile(r"\$\{([^}]*)\}")
 ANSWERED = 64  # recent replies whose line a later suspect report can name
@@ -128,7 +128,7 @@ class SessionState:
     pager: bool = False  # long output goes through the pager (the REPL's setting)
     script_depth: int = 0  # scripts (.source, blocks) being run inside one another
     onerror: Any = None  # (node, line) a script runs when a line fails (.onerror)
-    record: Any = None  # the script.Recorder of .record
+    record: Any = None  # the scripting.Recorder of .record
     capture: Callable[[Session, str], bool] | None = None  # a block (.repeat/.if) collecting
     debugger: Any = None  # the debugger's DebuggerState
     program: Any = None  # a program whose labels completion offers
@@ -204,7 +204,7 @@ class Session:
         self._deadline: float | None = None
         self.state.evaluate = _evaluate
         # told (lines done, lines in all) after each line of -c and of a -f script (a unit's
-        # live table, shell/units.py); None: nobody asks
+        # live table, shell/features/units.py); None: nobody asks
         self.progress: Callable[[int, int], None] | None = None
         # lines failed in a row for want of an answer, and client._replies when the count
         # began (failed_unanswered)
