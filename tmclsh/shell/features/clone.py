@@ -309,7 +309,7 @@ def needs_yes(session: Session, lines: list[str]) -> tuple[int, str] | None:
     backup's and half its own; refused before anything is sent, it is as it was."""
     if not lines or not lines[0].startswith(BACKUP_MARK) or session.can_answer():
         return None
-    from .session import confirmation
+    from ..lang.session import confirmation
 
     try:
         module = session.module
