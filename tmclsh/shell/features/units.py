@@ -32,7 +32,8 @@ from ...base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from ...client.connect import connection_settings, open_client
 from ...ops import units as ops_units
 from ...ops.units import Unit
-from ..lang.main import Terminated, exit_cleanly_on_signals, run_connected, stop_on_interrupt
+from ..lang import main as shell_main
+from ..lang.main import Terminated, exit_cleanly_on_signals, stop_on_interrupt
 from . import stop as _stop  # noqa: F401  (here: a unit's thread imports nothing)
 
 if TYPE_CHECKING:
@@ -216,8 +217,9 @@ class Run(ops_units.Hooks):
 
     def _fn(self, client) -> int:
         unit, settings = _CURRENT.unit, _CURRENT.settings
-        return run_connected(unit_args(unit, self.args), client, settings,
-                             prepare=lambda session: self._prepare(unit, session))
+        # (looked up at each call, not bound at import: the one -c/-f run, whoever set it)
+        return shell_main.run_connected(unit_args(unit, self.args), client, settings,
+                                        prepare=lambda session: self._prepare(unit, session))
 
     # -- what the ops runner tells -------------------------------------------------------
     @contextmanager
