@@ -149,6 +149,13 @@ def _baud_or_auto(text: str) -> int | str:
     return "auto" if text.strip().lower() == "auto" else _baud(text)
 
 
+def _add_timeout(p: argparse.ArgumentParser) -> None:
+    """A subcommand's own --timeout (left out of the namespace when not given, so the
+    settings' and the profile's value stands)."""
+    p.add_argument("--timeout", type=setting("timeout"), metavar="S", default=argparse.SUPPRESS,
+                   help=f"reply timeout in seconds (default 1; {_range('timeout')})")
+
+
 def add_connection(p: argparse.ArgumentParser, *, auto_baud: bool = False,
                    nested: bool = False) -> None:
     """The connection options; ``nested`` (a subcommand's copy): an option not given leaves
@@ -397,9 +404,7 @@ def build_parser() -> argparse.ArgumentParser:
     fw.add_argument("-a", "--address", type=_address, metavar="N", default=argparse.SUPPRESS,
                     help=f"module address (default 1; {_range('address')}); a module in its "
                          "bootloader is also looked for at address 1, 115200 baud")
-    fw.add_argument("--timeout", type=setting("timeout"), metavar="S",
-                    default=argparse.SUPPRESS,
-                    help=f"reply timeout in seconds (default 1; {_range('timeout')})")
+    _add_timeout(fw)
     fw.add_argument("--check", action="store_true",
                     help="say what would happen (module type and firmware now, image type and "
                          "version, whether it fits) and write nothing")
@@ -432,9 +437,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "name where the units agree (as .restore --force), firmware left alone")
     rp.add_argument("--baud", type=setting("baud"), metavar="N", default=argparse.SUPPRESS,
                     help=f"baud rate of both serial links (default 9600; {_range('baud')})")
-    rp.add_argument("--timeout", type=setting("timeout"), metavar="S",
-                    default=argparse.SUPPRESS,
-                    help=f"reply timeout in seconds (default 1; {_range('timeout')})")
+    _add_timeout(rp)
     rp.add_argument("-y", "--yes", action="store_true", default=argparse.SUPPRESS,
                     help="do not ask before writing to the new module (needed where nobody "
                          "can answer)")
@@ -477,9 +480,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "python-can log (.asc, .blf, .trc, .log, .csv, ...), candump's "
                          "screen lines, or a --log-dir transcript")
     add_connection(rp, nested=True)
-    rp.add_argument("--timeout", type=setting("timeout"), metavar="S",
-                    default=argparse.SUPPRESS,
-                    help=f"reply timeout in seconds (default 1; {_range('timeout')})")
+    _add_timeout(rp)
     rp.add_argument("--as-captured", action="store_true",
                     help="send each request at its time in the capture (default: each as "
                          "soon as the one before is answered)")
