@@ -35,4 +35,7 @@ if __name__ == "__main__":
     if len(sys.argv) < 2:
         sys.exit(__doc__)
     where = sys.argv[2] if len(sys.argv) > 2 else None
-    main(sys.argv[1], sim="TMCM-1311") if where == "sim" else main(sys.argv[1], where)
+    try:
+        main(sys.argv[1], sim="TMCM-1311") if where == "sim" else main(sys.argv[1], where)
+    except tmclsh.TmclError as exc:  # a bad file, no module, a lost link: one line
+        sys.exit(f"firmware_check: {exc}")

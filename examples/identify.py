@@ -23,4 +23,7 @@ def main(port: str | None = None, sim: str | None = None) -> None:
 
 if __name__ == "__main__":
     where = sys.argv[1] if len(sys.argv) > 1 else None
-    main(sim="TMCM-1311") if where == "sim" else main(where)
+    try:
+        main(sim="TMCM-1311") if where == "sim" else main(where)
+    except tmclsh.TmclError as exc:  # a bad file, no module, a lost link: one line
+        sys.exit(f"identify: {exc}")

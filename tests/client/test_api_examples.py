@@ -65,3 +65,26 @@ def test_check_a_firmware_image(tmp_path, version, last):
     assert out[0].startswith(f"image {image}: 5000 bytes at 0x") and f"['{version}']" in out[0]
     assert out[1] == "module TMCM-1311 runs 1311V111"
     assert out[2].startswith(last)
+
+
+def failing(name: str, *args: str) -> str:
+    run = subprocess.run([sys.executable, str(EXAMPLES / name), *args], capture_output=True,
+                         text=True, env=tmclsh_env(), cwd=str(ROOT), timeout=120)
+    assert run.returncode == 1 and "Traceback" not in run.stderr, run.stderr
+    assert run.stdout == "" and len(run.stderr.strip().splitlines()) == 1, run.stderr
+    return run.stderr
+
+
+def test_an_image_cut_short_is_one_line_and_no_module_is_asked(tmp_path):
+    text = hex_image("1311V112", 5000)
+    cut = tmp_path / "cut.hex"
+    cut.write_text(text[: text.rindex(":", 0, len(text) // 2)])  # whole records, no end record
+    err = failing("firmware_check.py", str(cut), str(tmp_path / "no-such-port"))
+    assert err.startswith(f"firmware_check: {cut}")
+
+
+@pytest.mark.parametrize("name", ["identify.py", "read_write.py", "move.py",
+                                  "backup_restore.py"])
+def test_no_module_there_is_one_line(tmp_path, name):
+    err = failing(name, str(tmp_path / "no-such-port"))
+    assert "no such port" in err
