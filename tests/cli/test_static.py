@@ -42,3 +42,18 @@ def test_no_undefined_names(folder):
     for path in dict.fromkeys(files):
         pyflakes.checkPath(str(path), report)
     assert not report.found, "\n".join(report.found)
+
+
+def test_no_merge_left_its_conflict_markers():
+    """A merge once left ``<<<<<<< HEAD`` in HACKING.md's table, where a reader took both
+    sides for the truth; no tracked text file may keep a marker line."""
+    import subprocess
+    names = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True,
+                           check=False).stdout.split()
+    if not names:
+        pytest.skip("not a git checkout: no list of tracked files")
+    found = [f"{name}:{n}" for name in names if name.endswith((".md", ".py", ".toml", ".txt"))
+             for n, line in enumerate((ROOT / name).read_text(encoding="utf-8",
+                                                               errors="replace").splitlines(), 1)
+             if line.startswith(("<<<<<<< ", ">>>>>>> ")) or line == "======="]
+    assert not found, "conflict markers: " + ", ".join(found)
