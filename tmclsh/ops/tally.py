@@ -35,12 +35,13 @@ _VALUED = ("axis_param", "global_param", "port", "coordinate")
 
 @dataclass(frozen=True, slots=True)
 class Slowest:
-    """The exchange that took longest: its time, the seconds it took, the request in the
-    shell's words."""
+    """The exchange that took longest: its time, the seconds it took, the request as the
+    shell writes it, and as it was sent."""
 
     t: float
     latency: float
     command: str
+    instruction: Instruction
 
 
 @dataclass(frozen=True, slots=True)
@@ -200,7 +201,7 @@ class Tally:
             slowest = None
             if mod.slowest is not None:
                 latency, t, ins = mod.slowest
-                slowest = Slowest(t, latency, disassemble_instruction(ins, module)[0])
+                slowest = Slowest(t, latency, disassemble_instruction(ins, module)[0], ins)
             out.append(Row(address, can, module.name if module is not None else None,
                            mod.exchanges, self._rate(mod, now), dict(mod.errors),
                            mod.unanswered, mod.unpaired, slowest,
