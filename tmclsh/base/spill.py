@@ -103,6 +103,11 @@ class SpillWriter:
     def dropped(self) -> int:
         return self._spill.dropped
 
+    @property
+    def waiting(self) -> int:
+        """Writes taken and not yet written (a live view skips a redraw while there are)."""
+        return self._spill.waiting
+
     def write(self, text: str) -> int:
         self._spill.put(text)
         return len(text)

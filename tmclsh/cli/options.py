@@ -127,6 +127,14 @@ def _add_view(p: argparse.ArgumentParser) -> None:
                    help="one JSON object per frame (op, type, motor, value; status and "
                         "latency on replies), a summary object at the end")
     g.add_argument("--hex", action="store_true", help="also the bytes of every frame")
+    table = g.add_mutually_exclusive_group()
+    table.add_argument("--table", dest="table", action="store_true", default=None,
+                       help="a live table per module at the bottom of the terminal (exchanges, "
+                            "per second, errors by name, the slowest exchange, the last value "
+                            "of each parameter) while the lines scroll above it (default: on "
+                            "when stdout is a terminal, without --json)")
+    table.add_argument("--no-table", dest="table", action="store_false",
+                       help="only the lines, also on a terminal")
     g.add_argument("--address", type=id_list("can_id"), metavar="LIST",
                    help="only these module addresses or CAN ids (1,2,5 or 1-8)")
     g.add_argument("--op", type=_ops, metavar="LIST",

@@ -782,6 +782,13 @@ def param_for(ins: Instruction, module: Module | None):
     return None
 
 
+def took(seconds: float | None) -> str:
+    """How long an exchange took, in the unit that reads best."""
+    if seconds is None:
+        return ""
+    return f"{seconds * 1000:.2f} ms" if seconds < 1 else f"{seconds:.3f} s"
+
+
 def describe_reply(reply: Reply, module: Module | None = None,
                    request: Request | None = None) -> str:
     """``100 ok, value 1000 (MaxPositioningSpeed = 1000 pps)``, ``event: ...``."""

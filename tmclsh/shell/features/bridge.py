@@ -27,8 +27,9 @@ from ...base.errors import (EXIT_FAILED, EXIT_OK, ConnectError, TmclError, Trans
 from ...ops.bridge import CAN_RX, CAN_TX, LOST, TICK, CanBridge, Left, SerialBridge
 from ...ops.filter import Filter
 from ...ops.monitor import DEFAULT_HOST, RX, TX, CanReader, Monitor, SerialPair
-from .monitor import (Limits, View, _capture, end_live_output, interruptible, live_output,
-                      load_module, off_the_wire, restore, show_items)
+from .livetable import wanted
+from .monitor import (Limits, View, _capture, end_live_output, end_table, interruptible,
+                      live_output, live_table, load_module, off_the_wire, restore, show_items)
 
 
 FORWARDING_SWITCH = 0.0002  # s a thread may hold the interpreter while another waits
@@ -49,8 +50,10 @@ def run_bridge(args) -> int:
     reply_id = getattr(args, "reply_id", None) or LINK_DEFAULTS["reply_id"]
     host = getattr(args, "host_address", None)
     host = DEFAULT_HOST if host is None else host
+    json_mode = bool(getattr(args, "json", False))
+    with_table = wanted(args, json_mode)
     transport = _open_module(args, port, can_spec)
-    view = View(monitor, json_mode=bool(getattr(args, "json", False)), hex_bytes=args.hex)
+    view = View(monitor, json_mode=json_mode, hex_bytes=args.hex)
     try:
         capture, close_capture = _capture(args.output, is_can)
     except BaseException:
@@ -60,6 +63,7 @@ def run_bridge(args) -> int:
     # up with is dropped and counted, never a frame on the wire)
     capture, close_capture, capture_dropped = off_the_wire(capture, close_capture)
     out = live_output(view)
+    table = live_table(with_table, view, monitor, out, True)
     serve: dict[str, Any] = {"pty": True} if args.pty else {"tcp": args.tcp}
     if is_can:
         reader: Any = CanReader(monitor, [can_id] if can_id is not None else None,
@@ -82,6 +86,8 @@ def run_bridge(args) -> int:
     sys.stdout.flush()
     print(f"bridging {bridge.endpoint} <-> {transport.describe()}; Ctrl-C ends",
           file=sys.stderr, flush=True)
+    if table is not None:
+        table.start()
     # the forwarding threads wait for the interpreter while the teller reads and shows
     # what was forwarded: a short switch interval bounds that wait (the default 5 ms would
     # be the forwarding's worst case)
@@ -99,6 +105,7 @@ def run_bridge(args) -> int:
             close_capture()  # (after the closing stop: a replayed capture shows it too)
             monitor.summary.capture_dropped = capture_dropped()
             transport.close()
+            end_table(view)  # (again: once only, if _forward did not end it)
             end_live_output(view, out, monitor.summary)
     view.summary(monitor.summary)
     return EXIT_OK if told.lost is None else EXIT_FAILED
@@ -162,6 +169,7 @@ def _forward(bridge, told: _Told) -> None:
             bridge.close()  # (what was forwarded before is told)
         with bridge.lock:
             told.show(told.reader.end(time.time()))
+        end_table(told.view)  # (before what is said on stderr from here on)
         if told.lost is not None:
             print(f"bridge: {told.lost}", file=sys.stderr)
     finally:

@@ -36,7 +36,8 @@ from ...tmcl import asm
 from ...tmcl.frames import Request
 from ...tmcl.modules import Module
 from ...tmcl.status import status_ok, status_text
-from ..render import Styled, describe_instruction, describe_reply, event_motors, is_terminal
+from ..render import (Styled, describe_instruction, describe_reply, event_motors, is_terminal,
+                      took)
 from .trace import timestamp
 
 _MEMO = 4096  # words kept per frame's bytes (a log repeats the same frames)
@@ -47,12 +48,6 @@ def when(t: float) -> str:
     """A frame's time: the clock for live traffic and absolute log times, else the log's
     own seconds."""
     return timestamp(t) if t >= 1e8 else f"{t:12.6f}"
-
-
-def took(seconds: float | None) -> str:
-    if seconds is None:
-        return ""
-    return f"{seconds * 1000:.2f} ms" if seconds < 1 else f"{seconds:.3f} s"
 
 
 _BATCH = 512  # lines held before they are written together
@@ -73,6 +68,9 @@ class View:
             color != "never" and is_terminal(self.stream)))
         self._words: dict[tuple, Any] = {}
         self._pending: list[str] = []  # plain lines not yet written (``flush`` writes them)
+        # the live table on a terminal (shell/features/livetable.py): it counts what is
+        # shown, and the lines go to it, to scroll above it
+        self.table = None
         # lines held before they are written together; 1 where each line is a write of its
         # own (a live run's writer counts the lines a reader did not take by its writes)
         self.batch = _BATCH
@@ -92,6 +90,9 @@ class View:
             line = self.line(item)
             if line is None:
                 return False
+            if self.table is not None:
+                self.table.line(line)
+                return True
             if self._rich:
                 self._write_pending()
                 self.console.print(line, highlight=False, markup=False, soft_wrap=True)
@@ -407,12 +408,16 @@ def show_items(items: Iterable[Item], view: View, filt: Filter, summary: Summary
     """Show what passes the filter; True once the count is reached."""
     show = view.show
     every = not filt.active  # (the common case, without a call a frame)
+    table = view.table
     for item in items:
-        if (every or filt(item)) and show(item):
-            summary.shown += 1
-            if limits is not None and limits.count is not None \
-                    and summary.shown >= limits.count:
-                return True
+        if every or filt(item):
+            if table is not None:
+                table.take(item)
+            if show(item):
+                summary.shown += 1
+                if limits is not None and limits.count is not None \
+                        and summary.shown >= limits.count:
+                    return True
     return False
 
 
@@ -441,6 +446,9 @@ def run_monitor(args) -> int:
     if log_path is not None:
         _readable(log_path)
     json_mode = bool(getattr(args, "json", False))
+    from .livetable import wanted
+
+    with_table = wanted(args, json_mode)
     is_can = can_spec is not None or (log_path is not None and _can_log(log_path))
     view = View(monitor, json_mode=json_mode, hex_bytes=args.hex)
     capture, close_capture = _capture(args.output, is_can)
@@ -451,6 +459,7 @@ def run_monitor(args) -> int:
     if live:  # (a log is read at the reader's pace: nothing is dropped)
         capture, close_capture, capture_dropped = off_the_wire(capture, close_capture)
         out = live_output(view)
+    table = live_table(with_table, view, monitor, out, live)
     try:
         if can_spec is not None:
             from ...link.spec import LinkSpec
@@ -480,6 +489,8 @@ def run_monitor(args) -> int:
         if live:
             print(f"listening on {transport.describe()} (nothing is sent); Ctrl-C ends",
                   file=sys.stderr, flush=True)
+        if table is not None:
+            table.start()
         failed = _run(source, reader if live else None, view, filt, monitor,
                       Limits(args.count, args.duration, not live), live)
     finally:
@@ -487,6 +498,7 @@ def run_monitor(args) -> int:
             transport.close()
         close_capture()
         monitor.summary.capture_dropped = capture_dropped()
+        end_table(view)
         if out is not None:
             end_live_output(view, out, monitor.summary)
     if failed is not None:  # (what was heard until then is still summed up)
@@ -574,8 +586,31 @@ def end_live_output(view: View, out: SpillWriter, summary: Summary) -> None:
         out.close()
     except KeyboardInterrupt:
         pass
-    summary.dropped = out.dropped
+    summary.dropped = out.dropped + (view.table.dropped if view.table is not None else 0)
     view.stream = out.stream
+
+
+def live_table(wanted: bool, view: View, monitor: Monitor, out: SpillWriter | None,
+               live: bool):
+    """The live table per module (shell/features/livetable.py), when it is wanted: what
+    ``view`` shows goes to it, drawn through ``out`` for live traffic (never holding it
+    up), straight to the terminal for a log. None: the lines alone, as ever."""
+    if not wanted:
+        return None
+    from .livetable import LiveTable
+
+    view.table = LiveTable(monitor, out if out is not None else view.stream,
+                           clock=time.time if live else None, color=view._color)
+    return view.table
+
+
+def end_table(view: View) -> None:
+    """The last lines and the table as the run ended, left on the screen."""
+    if view.table is not None:
+        try:
+            view.table.stop()
+        except KeyboardInterrupt:
+            pass
 
 
 def _run(source, reader, view: View, filt: Filter, monitor: Monitor, limits: Limits,
@@ -588,12 +623,15 @@ def _run(source, reader, view: View, filt: Filter, monitor: Monitor, limits: Lim
     failed = None
     try:
         try:
+            table = view.table
             for items in source:
                 if show_items(items, view, filt, summary, limits) \
                         or limits.reached(summary.shown, summary):
                     break
                 if live:
                     view.flush()
+                elif table is not None:
+                    table.tick()
         except KeyboardInterrupt:
             pass
         except TmclError as exc:
