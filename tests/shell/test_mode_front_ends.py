@@ -39,6 +39,17 @@ def toolbar(session: Session, columns: int = 120) -> list[tuple[str, str]]:
     return toolbar_fragments(session, columns)
 
 
+def completions(session: Session, text: str) -> list[str]:
+    from prompt_toolkit.completion import CompleteEvent
+    from prompt_toolkit.document import Document
+
+    from tmclsh.shell.repl.completer import TmclCompleter
+
+    c = TmclCompleter(session=session, module=session.client.module)
+    return [x.text for x in c.get_completions(Document(text),
+                                              CompleteEvent(completion_requested=True))]
+
+
 def words(fragments: list[tuple[str, str]]) -> str:
     return "".join(text for _, text in fragments)
 
@@ -53,6 +64,7 @@ def test_ascii_mode_is_shown_everywhere_and_binary_goes_unsaid(found_in_ascii, c
     narrow = len(f"{where} | TMCM-1311 @1 | ASCII")
     assert words(toolbar(s, narrow)) == f"{where} | TMCM-1311 @1 | ASCII"
     assert " · ASCII mode" in banner(s).plain
+    assert {"GAP", "SAP", "MVP"} <= set(completions(s, ""))  # (none of them is sent)
     s.run_line(".mode")
     said = capsys.readouterr().out
     assert "mode: ASCII mode" in said and "found in ascii mode" in said
