@@ -404,3 +404,27 @@ def test_from_a_file_that_is_not_a_backup_is_refused_as_such(modules, tmp_path):
     assert (f"--from {other}: a file, but not a backup .save wrote" in got.stderr
             and "nothing was sent" in got.stderr and "ioctl" not in got.stderr)
     assert new.heard == []
+
+
+def test_from_an_old_module_in_its_ascii_mode(make_pty_sim):
+    """The old module driven in its ASCII mode has no 134 to read its program with (the
+    link refuses it): the settings are carried, the program is said to be unknown rather
+    than copied as empty, and the old module is left in ASCII mode, as it was found."""
+    import tmclsh
+    from tmclsh.client.ascii import switch
+
+    old, old_path = sim_old(make_pty_sim)
+    old.version_string, old.firmware_version = "1311V111", 111  # (no firmware step)
+    with tmclsh.connect(port=old_path, timeout=0.5) as c:
+        switch(c, "ascii", keep=True)
+    assert old.ascii_active
+    new, new_path = make_pty_sim()
+    report = Replacement({"port": old_path, "timeout": 0.5},
+                         {"port": new_path, "timeout": 0.5}).run()
+    steps = {s.step: s for s in report.steps}
+    assert steps["configuration"].state == DONE, report.to_json()
+    assert steps["program"].state == SKIPPED and "not read" in steps["program"].text
+    assert new.vm.memory[:3] == [None, None, None]  # (nothing stored)
+    assert old.ascii_active
+    gap = [_run(["--port", p, "-c", "GAP 4, 0"]).stdout for p in (old_path, new_path)]
+    assert "1234" in gap[1]

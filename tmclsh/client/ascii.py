@@ -16,6 +16,11 @@ whole nine-byte blocks (link/ascii.py says why).
 
 The probes and the mode switches read the transport themselves, under the client's lock:
 they run while neither framing is the module's yet.
+
+What the mode's front ends (``.mode``, ``.ascii``, ``.ascii-config``) decide is here too
+(``drive``, ``switch``, ``mode_record``, ``mode_text``, ``echo_written``, the link's
+``after_bin`` and ``settle``): a front end only parses and prints, and never works out again
+which mode the client is in. Everyone else reads ``Client.mode``'s facts (link/modes.py).
 """
 
 from __future__ import annotations
@@ -360,6 +365,29 @@ class AsciiLink:
                 raise TransportError(f"the module at address {client.address} did not return "
                                      "to binary mode after BIN") from None
 
+    def after_bin(self) -> None:
+        """The module left its ASCII mode by a BIN the client did not send (typed on the
+        terminal): take the binary framing back, in step, and leave the module in binary
+        mode at exit. A 136 type 1 proves it answers binary frames (TmclError if not)."""
+        client = self.client
+        self.detach(send_bin=False)
+        client._resync_next()
+        self.on_exit = Mode.BINARY
+        client.request(Request(client.address, Control.GET_VERSION, 1, 0, 0))
+
+    @property
+    def found_in_binary(self) -> bool:
+        """The module was in binary mode when the link took it over: leaving the terminal
+        proposes BIN, to leave it as it was found."""
+        return self.found == Mode.BINARY
+
+    def settle(self, to_binary: bool) -> None:
+        """The mode chosen on leaving the terminal, now and at exit: binary (BIN sent now)
+        or ASCII (the module stays in it, also after the client closes)."""
+        if to_binary:
+            self.detach(send_bin=True)
+        self.on_exit = Mode.BINARY if to_binary else Mode.ASCII
+
     def close(self) -> None:
         """Leave the module in the mode it was found in (or ``on_exit``). Called by
         ``Client.close`` (and when ``.connect`` leaves the link); safe to call more than
@@ -479,3 +507,58 @@ def leave_binary(client: Client) -> None:
     link = client.ascii_link
     if link is not None:
         link.on_exit = Mode.BINARY
+
+
+# -- what the front ends of the mode ask (.mode, .ascii, .ascii-config) -------------------------
+
+def drive(client: Client, *, tell: bool = True) -> tuple[AsciiLink, str | None]:
+    """Drive ``client`` through the module's ASCII mode (``AsciiLink.attach``): the link,
+    and what was done to the module for it, for the user (None: it was driven so already)."""
+    link = client.ascii_link
+    if link is not None:
+        return link, None
+    link = AsciiLink.attach(client, tell=tell)
+    return link, ("module entered ASCII mode (command 139)" if link.entered
+                  else "module was already in ASCII mode")
+
+
+def switch(client: Client, want: str, *, keep: bool = False) -> None:
+    """Drive ``client`` in the mode named ``want`` ("ascii" or "binary"; BIN is sent when it
+    leaves ASCII mode). ``keep``: leave the module in that mode when the client closes."""
+    mode = Mode(want)
+    if mode == Mode.ASCII:
+        AsciiLink.attach(client)
+    elif client.ascii_link is not None:
+        client.ascii_link.detach(send_bin=True)
+    link = AsciiLink.for_client(client)
+    if keep and link is not None:
+        link.on_exit = mode
+
+
+def mode_record(client: Client) -> dict[str, object]:
+    """The mode as JSON fields: the mode in use and, once an ASCII link was made, its echo,
+    the mode the module was found in and the one it is left in at exit."""
+    obj: dict[str, object] = {"mode": client.mode}
+    link = AsciiLink.for_client(client)
+    if link is not None:
+        obj.update(echo=link.echo.name.lower(), found=link.found.value,
+                   on_exit=link.on_exit.value)
+    return obj
+
+
+def mode_text(client: Client) -> str:
+    """The mode in words: the ASCII link's description, or binary and what happens at exit."""
+    if client.ascii_link is not None:
+        return client.ascii_link.describe()
+    link = AsciiLink.for_client(client)
+    if link is None or link.on_exit != Mode.ASCII:
+        return "binary"
+    return "binary" + (" (module was found in ASCII mode: 139 is sent at exit)"
+                       if link.found == Mode.ASCII else
+                       " (back to ASCII mode at exit, as chosen when leaving .ascii)")
+
+
+def echo_written(client: Client) -> None:
+    """GP 67 was written: a link driving the module now reads its echo mode again."""
+    if client.ascii_link is not None:
+        client.ascii_link.refresh_echo()

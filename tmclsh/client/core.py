@@ -391,8 +391,10 @@ class Client:
 
     @property
     def mode(self) -> str:
-        """``"binary"`` (TMCL frames) or ``"ascii"`` (the module's ASCII mode)."""
-        return "ascii" if self.ascii_link is not None else "binary"
+        """How the module is talked to now: ``"binary"`` (TMCL frames) or ``"ascii"`` (its
+        ASCII mode), the framing's ``tmclsh.link.modes.LinkMode``, a ``str`` that carries
+        what differs between the two (front ends read those facts, not the name)."""
+        return self._framing.mode
 
     @property
     def ascii_link(self):

@@ -46,6 +46,7 @@ from ..tmcl import instructions as isa
 from ..tmcl.decoder import is_frame
 from ..tmcl.frames import (INT32_MIN, SERIAL_FRAME_LEN, UINT32_MAX, Control, Reply, ReplyKind,
                            Request, Status, status_ok, to_signed32)
+from .modes import ASCII
 
 if TYPE_CHECKING:
     from ..tmcl.modules import Module
@@ -464,6 +465,8 @@ class AsciiFraming:
     a read whose answer is known (``_marker``). ``echo`` and ``gp67`` are what GP 67 said.
     ``stats`` may be shared with whoever keeps counting across framings.
     """
+
+    mode = ASCII  # (Client.mode: the facts of the mode this framing talks)
 
     def __init__(self, transport: StreamTransport, owner: Owner, *, echo: Echo = Echo.CHAR,
                  gp67: int | None = None, stats: dict[str, int] | None = None):

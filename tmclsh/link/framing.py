@@ -24,6 +24,7 @@ from ..base.errors import ChecksumError, TmclTimeoutError
 from ..tmcl.decoder import (CAN_VERSION, FRAME, FRAME_PIECE, NOISE, FrameDecoder, can_reply,
                             is_frame, is_version_string)
 from ..tmcl.frames import Control, Reply, ReplyKind, Request, Status
+from .modes import BINARY
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -96,6 +97,8 @@ def _echo_of(raw: bytes, seen: bytes) -> bool:
 
 class SerialFraming:
     """Nine-byte frames on a byte stream, read through the one frame decoder."""
+
+    mode = BINARY  # (Client.mode: the facts of the mode this framing talks)
 
     def __init__(self, transport: StreamTransport, owner: Owner):
         self.transport = transport
@@ -350,6 +353,8 @@ class SerialFraming:
 
 class CanFraming:
     """Seven data bytes to the module's CAN id, replies on the reply id."""
+
+    mode = BINARY
 
     def __init__(self, transport: CanTransport, owner: Owner):
         self.transport = transport

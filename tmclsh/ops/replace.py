@@ -34,7 +34,7 @@ from ..base.errors import (ConnectError, InBootloaderError, NoAnswerError, TmclE
                            TmclTimeoutError, TransportError, ValidationError)
 from ..tmcl import instructions as isa
 from ..tmcl import modules as moddb
-from ..tmcl.frames import Instruction
+from ..tmcl.frames import Control, Instruction
 from ..tmcl.version import parse_string
 from . import backup as bk
 from . import program as prog
@@ -352,7 +352,8 @@ class Replacement:
             version = bk.firmware(c)
             conf = bk.read_configuration(c)
             program = None
-            if c.mode != "ascii" and module.program_memory:
+            # (the module's ASCII mode has no 134: no program is known, not an empty one)
+            if module.program_memory and prog.carried(c, Control.READ_MEMORY):
                 program = prog.read_program(c)
             path = Path(self._dir.name) / "old.tmcl"
             bk.write_backup(path, conf.text())

@@ -315,7 +315,6 @@ def needs_yes(session: Session, lines: list[str]) -> tuple[int, str] | None:
         module = session.module
     except TmclError:
         return None
-    ascii_mode = session.client.mode == "ascii"
     for number, raw in enumerate(lines, 1):
         for text in split_line(raw):
             if text.startswith(".") or "${" in text:
@@ -324,7 +323,7 @@ def needs_yes(session: Session, lines: list[str]) -> tuple[int, str] | None:
                 line = asm.parse_line(text.removeprefix(AS_TYPED), number)
                 if line.mnemonic is None:
                     continue
-                enc = asm.encode(line, module, direct=True, ascii=ascii_mode, as_typed=True)
+                enc = session.client.check(line, module, as_typed=True)
             except TmclError:
                 continue  # (the script's own checks report it at its line)
             question = confirmation(enc)

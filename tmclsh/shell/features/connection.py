@@ -195,9 +195,10 @@ def cmd_module(session: Session, arg: str) -> None:
 @command(".version")
 def cmd_version(session: Session, arg: str) -> None:
     client = session.client
-    if client.mode == "ascii":
-        return _version_in_ascii(session)
-    reply = client.request(Request(client.address, Control.GET_VERSION, 0, 0, 0))
+    ask = Request(client.address, Control.GET_VERSION, 0, 0, 0)
+    if client.refusal(ask) is not None:
+        return _version_not_carried(session)
+    reply = client.request(ask)
     version = reply.version if reply is not None else None
     binary = client.request(Request(client.address, Control.GET_VERSION, 1, 0, 0))
     session.stats.commands += 2
@@ -261,21 +262,22 @@ def _layout_of_string(value: int, from_string: tuple[int, int | None] | None,
                  and decode_type1(value, layout) == from_string), None)
 
 
-def _version_in_ascii(session: Session) -> None:
-    """136 has no ASCII form: say the version read in binary mode at connect (nothing sent),
-    or how to read it."""
+def _version_not_carried(session: Session) -> None:
+    """The link as it is now cannot carry 136 (the module's ASCII mode has no form of it):
+    say the version read in binary mode at connect (nothing sent), or how to read it."""
     client = session.client
-    how = ".mode binary, .version, .mode ascii reads it again"
+    mode = client.mode
+    how = f".mode binary, .version, .mode {mode} reads it again"
     if not client.version:
-        raise ValidationError("the firmware version (136) cannot be read in ASCII mode and was "
-                              f"not read at connect; {how}")
+        raise ValidationError(f"the firmware version (136) cannot be read in {mode.label} mode "
+                              f"and was not read at connect; {how}")
     mod = client.module.name if client.module is not None else None
     if session.out.json:
         session.out.emit({"version": client.version, "binary": None, "module": mod,
                           "read_at_connect": True})
         return
     session.out.print(f"firmware {client.version}" + (f" ({mod})" if mod else ""), markup=False)
-    session.out.info(f"(as read at connect: 136 has no ASCII form; {how})")
+    session.out.info(f"(as read at connect: 136 has no {mode.label} form; {how})")
 
 
 # -- motion ------------------------------------------------------------------------------

@@ -175,9 +175,9 @@ def judge(session: Session, expression: expr.Expression, *, again: bool = True,
     more exchange (136 type 1, ``confirm``) gives the chance to. A read in doubt is read
     again (the whole condition, ``CONFIRM_ROUNDS`` times at most, if ``again``).
     The suspects a check dealt with are taken from the client (not reported again)."""
-    # ASCII replies carry no checksum: the client reads settings twice, but motion state and
-    # inputs once, so the condition itself must come out the same on two evaluations
-    twice = getattr(session.client, "mode", "binary") == "ascii"
+    # replies without a checksum (ASCII): the client reads settings twice, but motion state
+    # and inputs once, so the condition itself must come out the same on two evaluations
+    twice = not session.client.mode.checksummed
     answered: dict[int, str] = {}
     seen: list[tuple[bool, str, str, dict[str, expr.Number]]] = []  # each evaluation
     outcome: bool | None = None

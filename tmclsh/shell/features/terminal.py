@@ -32,7 +32,8 @@ from typing import TYPE_CHECKING
 
 from ...tmcl import instructions as isa
 from ...client.ascii import (CR, GP_ASCII_MODE, GP_BANK, ECHO_NAMES, AsciiLink, Echo, LineKind,
-                             Mode, address_char, ascii_commands, describe_gp67, echo_mode,
+                             address_char, ascii_commands, describe_gp67, drive, echo_mode,
+                             echo_written, mode_record, mode_text, switch,
                              gp67_value, starts_in_ascii)
 from ...base.errors import StatusError, ValidationError
 from ...tmcl.frames import Request, status_ok
@@ -296,14 +297,9 @@ class Terminal:
     def back_to_binary(self) -> None:
         """After the user's BIN: the link is binary frames again; tmclsh leaves it so."""
         from ...base.errors import TmclError
-        from ...tmcl.frames import Control
 
-        client = self.session.client
-        self.link.detach(send_bin=False)
-        client._resync_next()
-        self.link.on_exit = Mode.BINARY
         try:
-            client.request(Request(client.address, Control.GET_VERSION, 1, 0, 0))
+            self.link.after_bin()
         except TmclError as exc:
             self.note(f"BIN sent, but the module does not answer binary commands ({exc})")
             return
@@ -353,16 +349,14 @@ def cmd_ascii(session: Session, argtext: str) -> None:
     tty_in = sys.stdin.isatty() and sys.stdout.isatty()
     if opts.raw and not tty_in:
         raise ValidationError(".ascii --raw needs a terminal")
-    was_ascii = client.ascii_link is not None
-    link = client.ascii_link or AsciiLink.attach(client, tell=not opts.raw)
+    link, news = drive(client, tell=not opts.raw)
     if opts.raw:  # straight to the terminal: no prompt to draw around, no proxy's delay
         term = Terminal(session, link, opts, real_write(sys.__stdout__),
                         write_note=real_write(sys.__stderr__))
     else:
         term = Terminal(session, link, opts, _stdout_write, write_note=_stderr_write)
-    if not was_ascii:
-        term.note("module entered ASCII mode (command 139)" if link.entered
-                  else "module was already in ASCII mode")
+    if news is not None:
+        term.note(news)
     term.banner()
     try:
         if opts.raw:
@@ -394,16 +388,14 @@ def _leave(term: Terminal, interactive: bool) -> None:
     link = term.link
     send_bin = term.opts.send_bin
     if send_bin is None:
-        default = link.found == Mode.BINARY
+        default = link.found_in_binary
         send_bin = _ask_yes_no("--- send BIN (module back to binary mode)?", default) \
             if interactive else default
     # the answer also decides the mode tmclsh leaves the module in when it exits
+    link.settle(to_binary=send_bin)
     if send_bin:
-        link.detach(send_bin=True)
-        link.on_exit = Mode.BINARY
         term.note("BIN sent: module in binary mode")
     else:
-        link.on_exit = Mode.ASCII
         term.note("module stays in ASCII mode, also when tmclsh exits (the shell talks to "
                   "it in ASCII; .mode binary switches back)")
 
@@ -422,36 +414,16 @@ def cmd_mode(session: Session, argtext: str) -> None:
     if len(words) > 1 or (words and words[0].lower() not in ("ascii", "binary")):
         raise ValidationError(".mode takes ascii or binary (and --keep)")
     if words:
-        want = Mode(words[0].lower())
-        if want == Mode.ASCII and client.ascii_link is None:
-            AsciiLink.attach(client)
-        elif want == Mode.BINARY and client.ascii_link is not None:
-            client.ascii_link.detach(send_bin=True)
-        link = AsciiLink.for_client(client)
-        if keep and link is not None:
-            link.on_exit = want
+        switch(client, words[0].lower(), keep=keep)
     _show_mode(session)
 
 
 def _show_mode(session: Session) -> None:
     client = session.client
-    link = AsciiLink.for_client(client)
     if session.out.json:
-        obj: dict = {"mode": client.mode}
-        if link is not None:
-            obj.update(echo=link.echo.name.lower(), found=link.found.value,
-                       on_exit=link.on_exit.value)
-        session.out.emit(obj)
+        session.out.emit(mode_record(client))
         return
-    if client.ascii_link is not None:
-        session.out.print(f"mode: {client.ascii_link.describe()}", markup=False)
-    else:
-        extra = ""
-        if link is not None and link.on_exit == Mode.ASCII:
-            extra = (" (module was found in ASCII mode: 139 is sent at exit)"
-                     if link.found == Mode.ASCII else
-                     " (back to ASCII mode at exit, as chosen when leaving .ascii)")
-        session.out.print(f"mode: binary{extra}", markup=False)
+    session.out.print(f"mode: {mode_text(client)}", markup=False)
 
 
 def _no_ascii_interface(session: Session) -> str | None:
@@ -512,8 +484,7 @@ def cmd_ascii_config(session: Session, argtext: str) -> None:
     session.stats.commands += 1
     if reply is not None and not status_ok(reply.status):
         raise StatusError(reply.status, reply)
-    if client.ascii_link is not None:
-        client.ascii_link.refresh_echo()
+    echo_written(client)
     value = _read_gp67(session)
     _show_gp67(session, value, f"was {current}")
     if not session.out.json:

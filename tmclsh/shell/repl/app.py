@@ -142,8 +142,8 @@ def prompt_message(session: Session):
         mod = c.module.name if c.module is not None else "tmcl"
         style = "class:prompt.sim" if c.transport.simulated else "class:prompt"
         parts = [(style, f"{mod}:{c.address}")]
-        if c.mode == "ascii":
-            parts.append(("class:prompt.state", " ascii"))
+        if c.mode.marked:  # (the usual mode goes unsaid)
+            parts.append(("class:prompt.state", f" {c.mode}"))
         text = program_state_text(session) or ""
         if text.startswith(("run", "step")):  # the debugger's "run", "step @12"
             parts.append(("class:prompt.state", f" [{text}]"))
@@ -303,8 +303,8 @@ def banner(session: Session):
         out.append(" (built-in simulator, no hardware)")
     else:
         out.append(f" on {c.describe()}")
-    if c.mode == "ascii":
-        out.append(" · ASCII mode")
+    if c.mode.marked:
+        out.append(f" · {c.mode.label} mode")
     if c.version:
         out.append(f" · firmware {c.version}")
     out.append("\n")

@@ -12,7 +12,7 @@ Completion never talks to the device: it reads ``client.module`` as loaded, neve
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, NamedTuple
 
@@ -490,15 +490,23 @@ def labels_of(session: Session | None) -> dict[str, int]:
     return {}
 
 
+def _offered(session: Session | None) -> Callable[[isa.InstructionSpec], bool]:
+    """Which commands the link carries as it is now (the mode's facts: the module's ASCII
+    mode knows only some); without a session, all."""
+    if session is None:
+        return lambda _spec: True
+    return session.client.mode.offers
+
+
 def candidates(s: Suggestion, word: str, module: Module | None,
                session: Session | None = None) -> list[Candidate]:
     """Candidates for one suggestion, unranked (the order is the tie-break)."""
     numeric = bool(re.fullmatch(r"\d+", word))
     if isinstance(s, Mnemonic):
         specs = module.instructions if module is not None else isa.all_instructions()
-        ascii_mode = session is not None and session.client.mode == "ascii"
+        offered = _offered(session)
         return [Candidate(sp.mnemonic, sp.summary) for sp in specs
-                if sp.direct and (sp.ascii or not ascii_mode)]
+                if sp.direct and offered(sp)]
     if isinstance(s, ShellCommand):
         out = []
         for cmd in commands.all_commands():
@@ -514,12 +522,11 @@ def candidates(s: Suggestion, word: str, module: Module | None,
                 if not s.only or n in s.only]
     if isinstance(s, ReadMnemonic):
         specs = module.instructions if module is not None else isa.all_instructions()
-        ascii_mode = session is not None and session.client.mode == "ascii"
+        offered = _offered(session)
         return [Candidate(sp.mnemonic, sp.summary if sp.reads else
                           f"{sp.mnemonic} {'|'.join(sp.read_types)}, {sp.motor_kind}: "
                           f"{sp.summary.lower()}")
-                for sp in specs if (sp.reads or sp.read_types) and sp.direct
-                and (sp.ascii or not ascii_mode)]
+                for sp in specs if (sp.reads or sp.read_types) and sp.direct and offered(sp)]
     if isinstance(s, Variable):
         values = dict(getattr(session, "variables", None) or {})
         out = [Candidate(n, "watched value") for n in s.extra]

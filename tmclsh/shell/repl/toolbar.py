@@ -57,7 +57,7 @@ _HINTS: Item = [
 
 # What goes first when the terminal is narrow (least useful first): each step shortens one
 # item to its next form. The connection and the module never go.
-_SHRINK = ("hints", "hints", "hints", "trace_off", "binary", "program", "retry", "hints",
+_SHRINK = ("hints", "hints", "hints", "trace_off", "mode", "program", "retry", "hints",
            "connection", "trace_on")
 
 
@@ -82,10 +82,9 @@ def toolbar_fragments(session: Session, columns: int) -> Fragments:
                                [("class:bottom-toolbar.on", f" {short} ")]]
     mod = c.module.label if c.module is not None else "module ?"
     items["module"] = [[("class:bottom-toolbar", f"{mod} @{c.address}")]]
-    if c.mode == "ascii":
-        items["ascii"] = [[("class:bottom-toolbar.on", "ASCII")]]
-    else:
-        items["binary"] = [[("class:bottom-toolbar", "binary")], []]
+    mode = c.mode  # a marked mode (ASCII) is lit and kept; the usual one goes early
+    items["mode"] = ([[("class:bottom-toolbar.on", mode.label)]] if mode.marked
+                     else [[("class:bottom-toolbar", mode.label)], []])
     if trace_enabled(session):
         items["trace_on"] = [[("class:bottom-toolbar.on", "trace on")], []]
     else:
