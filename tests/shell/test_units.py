@@ -406,6 +406,53 @@ def test_the_units_lines_are_written_by_one_writer(run, monkeypatch):
     assert writers == {threading.main_thread().name}
 
 
+def test_what_the_units_said_since_a_tick_goes_out_in_one_write(monkeypatch):
+    """32 units' lines of one tick are one write and one flush of the real stream, not one
+    per unit (each a system call the units' threads wait on); a line to the other stream
+    between them keeps its place."""
+    from tmclsh.ops.units import Unit
+    from tmclsh.shell.features.unitview import PrefixView
+
+    calls: list[tuple[str, str]] = []
+
+    class Counting:
+        def __init__(self, name: str):
+            self.name = name
+
+        def write(self, text: str) -> int:
+            calls.append((self.name, text))
+            return len(text)
+
+        def flush(self) -> None:
+            calls.append((self.name, "<flush>"))
+
+        def isatty(self) -> bool:
+            return False
+
+    monkeypatch.setattr(sys, "stdout", Counting("out"))
+    monkeypatch.setattr(sys, "stderr", Counting("err"))
+    units = [Unit(n, "port", f"/dev/ttyX{n}", 1) for n in range(1, 33)]
+    view = PrefixView(units, None)
+    for unit in units:
+        view.record(unit).write("out", f"GAP 1, 0 -> {unit.number}\nsecond\n")
+    view.drain()
+    writes = [text for name, text in calls if text != "<flush>"]
+    assert [name for name, _ in calls] == ["out", "out"] and len(writes) == 1
+    assert writes[0].splitlines()[:3] == ["[1 /dev/ttyX1 @1] GAP 1, 0 -> 1",
+                                          "[1 /dev/ttyX1 @1] second",
+                                          "[2 /dev/ttyX2 @1] GAP 1, 0 -> 2"]
+    assert len(writes[0].splitlines()) == 64
+    calls.clear()
+    view.record(units[0]).write("out", "a\n")
+    view.record(units[1]).write("err", "warning: b\n")
+    view.record(units[2]).write("out", "c\n")
+    view.record(units[3]).write("out", "d\n")
+    view.drain()
+    assert [(name, text) for name, text in calls if text != "<flush>"] == [
+        ("out", "[1 /dev/ttyX1 @1] a\n"), ("err", "[2 /dev/ttyX2 @1] warning: b\n"),
+        ("out", "[3 /dev/ttyX3 @1] c\n[4 /dev/ttyX4 @1] d\n")]
+
+
 def test_nothing_is_imported_in_a_units_thread(tmp_path):
     """A stop lands at a unit's next bytecode: inside an import it would leave a module half
     made for every unit after it. What the lines and the links need is imported first."""
