@@ -453,9 +453,17 @@ def test_what_the_units_said_since_a_tick_goes_out_in_one_write(monkeypatch):
         ("out", "[3 /dev/ttyX3 @1] c\n[4 /dev/ttyX4 @1] d\n")]
 
 
-def test_nothing_is_imported_in_a_units_thread(tmp_path):
+FEATURES = (".let x = GAP 1, 0\n.expect GAP 1, 0 == ${x}\nROR 0, 100\n.sleep 0.01\nMST 0\n"
+            ".watch GAP 1, 0 --count 1\n")
+
+
+@pytest.mark.parametrize("config, lines", [(None, FEATURES),
+                                           ('[settings]\ncolor = "never"\n', "GAP 1, 0\n")],
+                         ids=["features", "a config file"])
+def test_nothing_is_imported_in_a_units_thread(tmp_path, config, lines):
     """A stop lands at a unit's next bytecode: inside an import it would leave a module half
-    made for every unit after it. What the lines and the links need is imported first."""
+    made for every unit after it. What the lines and the links need is imported first; the
+    config file is read once, before (parsing it imports a TOML parser)."""
     probe = (
         "import sys, threading\n"
         "seen = []\n"
@@ -468,11 +476,20 @@ def test_nothing_is_imported_in_a_units_thread(tmp_path):
         "rc = cli.main(sys.argv[1:])\n"
         "print('IMPORTED', rc, sorted(set(seen)), file=sys.__stderr__)\n")
     script = tmp_path / "s.tmcl"
-    script.write_text(".let x = GAP 1, 0\n.expect GAP 1, 0 == ${x}\nROR 0, 100\n.sleep 0.01\n"
-                      "MST 0\n.watch GAP 1, 0 --count 1\n")
+    script.write_text(lines)
+    env = tmclsh_env()
+    if config is not None:
+        (tmp_path / "config.toml").write_text(config)
+        env["TMCLSH_CONFIG"] = str(tmp_path / "config.toml")
+        # the module data cached as a user's machine has it (else parsing the module files
+        # imports the TOML parser first, in the main thread, and hides the config file's)
+        warm = subprocess.run([sys.executable, "-m", "tmclsh", "--sim", "TMCM-1311", "-c",
+                               "GAP 1, 0"], capture_output=True, text=True, env=env,
+                              timeout=120)
+        assert warm.returncode == 0, warm.stderr
     proc = subprocess.run([sys.executable, "-c", probe, "--sim", "TMCM-1311", "--address",
                            "1,2", "-f", str(script)], capture_output=True, text=True,
-                          env=tmclsh_env(), timeout=120)
+                          env=env, timeout=120)
     said = [line for line in proc.stderr.splitlines() if line.startswith("IMPORTED")]
     assert said == ["IMPORTED 0 []"], proc.stderr
 

@@ -27,6 +27,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import TYPE_CHECKING
 
+from ...base.config import load_config
 from ...base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE,
                             ConnectError, TmclError, UsageError)
 from ...client.connect import connection_settings, open_client
@@ -191,6 +192,9 @@ class Run(ops_units.Hooks):
 
     def __init__(self, args: argparse.Namespace, plan: list[Unit], view: View):
         self.args, self.units, self.view = args, plan, view
+        # read here, once: parsing the file imports a TOML parser (not in a unit's thread),
+        # and every unit runs with the same settings
+        self.config = load_config()
         self.run = ops_units.Run(plan, self._fn, open=self._open, stop=stop_on_interrupt,
                                  hooks=self, interrupts=(Terminated,))
 
@@ -208,7 +212,7 @@ class Run(ops_units.Hooks):
     # -- opening and running a unit (its own thread) -------------------------------------
     def _open(self, unit: Unit):
         record = self.view.record(unit)
-        settings = connection_settings(unit_args(unit, self.args))
+        settings = connection_settings(unit_args(unit, self.args), self.config)
         # (the connect's frames go to the transcript; not those of a stop after it ended)
         tracer = record.tracer if record.state == "connecting" else None
         client = open_client(settings, notice=record.notice, tracer=tracer)
@@ -219,7 +223,8 @@ class Run(ops_units.Hooks):
         unit, settings = _CURRENT.unit, _CURRENT.settings
         # (looked up at each call, not bound at import: the one -c/-f run, whoever set it)
         return shell_main.run_connected(unit_args(unit, self.args), client, settings,
-                                        prepare=lambda session: self._prepare(unit, session))
+                                        prepare=lambda session: self._prepare(unit, session),
+                                        config=self.config)
 
     # -- what the ops runner tells -------------------------------------------------------
     @contextmanager
