@@ -457,9 +457,11 @@ FEATURES = (".let x = GAP 1, 0\n.expect GAP 1, 0 == ${x}\nROR 0, 100\n.sleep 0.0
             ".watch GAP 1, 0 --count 1\n")
 
 
-@pytest.mark.parametrize("config, lines", [(None, FEATURES),
-                                           ('[settings]\ncolor = "never"\n', "GAP 1, 0\n")],
-                         ids=["features", "a config file"])
+@pytest.mark.parametrize("config, lines", [
+    (None, FEATURES),
+    ('[settings]\ncolor = "never"\n', "GAP 1, 0\n"),
+    (None, "// a jig's test, first line a comment (as a backup's)\nGAP 1, 0\nGAP 250, 0\n"),
+], ids=["features", "a config file", "a comment first"])
 def test_nothing_is_imported_in_a_units_thread(tmp_path, config, lines):
     """A stop lands at a unit's next bytecode: inside an import it would leave a module half
     made for every unit after it. What the lines and the links need is imported first; the
@@ -491,7 +493,26 @@ def test_nothing_is_imported_in_a_units_thread(tmp_path, config, lines):
                            "1,2", "-f", str(script)], capture_output=True, text=True,
                           env=env, timeout=120)
     said = [line for line in proc.stderr.splitlines() if line.startswith("IMPORTED")]
-    assert said == ["IMPORTED 0 []"], proc.stderr
+    status = 2 if "GAP 250" in lines else 0  # (refused: the module has no parameter 250)
+    assert said == [f"IMPORTED {status} []"], proc.stderr
+
+
+def test_tmcl_lines_alone_start_no_temporary_files_module(tmp_path):
+    """Only a command writes a file: a run of TMCL lines alone does not import tempfile (and
+    shutil, random, bz2, lzma) before its units start; one with a command does."""
+    probe = ("import sys\n"
+             "from tmclsh.cli import main as cli\n"
+             "rc = cli.main(sys.argv[1:])\n"
+             "print('TEMPFILE', rc, 'tempfile' in sys.modules, file=sys.__stderr__)\n")
+    for lines, loaded in (("GAP 1, 0\nSAP 4, 0, 1000\n", False),
+                          ("GAP 1, 0\n.echo ${unit}\n", True)):
+        script = tmp_path / "s.tmcl"
+        script.write_text(lines)
+        proc = subprocess.run([sys.executable, "-c", probe, "--sim", "TMCM-1311", "--address",
+                               "1,2", "-f", str(script)], capture_output=True, text=True,
+                              env=tmclsh_env(), timeout=120)
+        said = [line for line in proc.stderr.splitlines() if line.startswith("TEMPFILE")]
+        assert said == [f"TEMPFILE 0 {loaded}"], proc.stderr
 
 
 def test_a_unit_whose_diff_differs_names_it_as_its_last_error(run, tmp_path):
