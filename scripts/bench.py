@@ -1748,9 +1748,9 @@ def main(argv: list[str] | None = None) -> int:
                         "client rows, twice that many lines in the script rows)")
     p.add_argument("--rounds", type=int, default=5, help="rounds per benchmark (default 5)")
     p.add_argument("--pairs", type=int, default=0,
-                   help="raw/path block pairs of the client and script rows (default: "
+                   help="raw/path block pairs of the client, script and units rows (default: "
                         "20x --rounds for the client rows; 4x for the script rows, fewer once "
-                        "35 s have passed)")
+                        "35 s have passed; --rounds for the units row)")
     p.add_argument("--module", default="TMCM-1311", help="simulated module (default TMCM-1311)")
     p.add_argument("--units", type=int, action="append", metavar="N",
                    help="the units row's unit counts, once each (default: 8 and 32)")
