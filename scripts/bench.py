@@ -32,7 +32,9 @@ floors for comparison, the issue's GAP round trip (the row's note), its mean (a 
 a mean) and the script's own frames in its order (GAP 1 / GAP 4 / SAP 4 / GIO 0, each costing
 the simulator differently). CPU per round trip (per script line) is
 reported beside the wall clock the same way, pair by pair: a loaded machine adds waiting
-to the wall clock far more than CPU time. The other rows alternate whole rounds and take the
+to the wall clock far more than CPU time. The units row pairs the same way, whole runs: N
+raw pyserial processes run together, then tmclsh with N units, ..., raw (8 and 32 by
+default, ``--units N`` for others). The other rows alternate whole rounds and take the
 best round's figure (other work on the machine only ever adds time); start-up rows are the
 fastest of several runs.
 
@@ -449,11 +451,11 @@ SCRIPT_LINES = (  # the script rows' lines, in order, and the frames they send (
 # a 1-frame run subtracted). Timed so, a raw process's round trip measures 1.1-1.4x the
 # long-lived benchmark's median one on this VM (same frames, same pyserial calls): a tmclsh
 # process pays that too, and it is no cost of tmclsh.
-RAW_SCRIPT = """\
+_RAW_SCRIPT = """\
 import sys, serial
 port, count = sys.argv[1], int(sys.argv[2])
 frames = [bytes.fromhex(h) for h in sys.argv[3:]]
-ser = serial.serial_for_url(port, baudrate=int(%d), timeout=1.0)
+ser = serial.serial_for_url(port, baudrate=int(%d), timeout=%r)
 write, read, out = ser.write, ser.read, sys.stdout.write
 for i in range(count):
     write(frames[i %% len(frames)])
@@ -461,7 +463,11 @@ for i in range(count):
     if len(reply) != 9:
         sys.exit("raw script: read timed out")
     out(reply.hex() + "\\n")
-""" % BAUD
+"""
+RAW_SCRIPT = _RAW_SCRIPT % (BAUD, 1.0)
+# (many processes on two busy cores: one may wait its turn for over a second, which is the
+# load's time, not a lost reply; tmclsh's retries would hide such a wait, a raw read cannot)
+RAW_UNITS_SCRIPT = _RAW_SCRIPT % (BAUD, 10.0)
 
 
 def _script_row(args: argparse.Namespace, json_mode: bool) -> dict:
@@ -1117,28 +1123,38 @@ def bench_scan(args: argparse.Namespace) -> dict:
 
 # -- many modules at once ------------------------------------------------------------------------
 
-UNITS = 8
+UNIT_COUNTS = (8, 32)  # the issue's two figures (--units N measures others)
 UNIT_LINES = 500
+UNITS_TARGET = 1.1  # issue 34: N units at most 1.1x N raw pyserial processes run together
 
 
-@benchmark("units", f"{UNITS} units on {UNITS} ptys vs one unit, a {UNIT_LINES}-line script, "
-                    f"the simulator paced at {BAUD} baud")
+def _unit_counts(args: argparse.Namespace) -> tuple[int, ...]:
+    return tuple(args.units) if getattr(args, "units", None) else UNIT_COUNTS
+
+
+@benchmark("units", f"{' and '.join(map(str, UNIT_COUNTS))} units vs as many raw pyserial "
+                    f"processes run together, a {UNIT_LINES}-line script, each module paced "
+                    f"at {BAUD} baud")
 def bench_units(args: argparse.Namespace) -> dict:
-    """Wall time of ``tmclsh --port P1 ... --port P8 -f SCRIPT`` (eight units, each its own
+    """Wall time of ``tmclsh --port P1 ... --port PN -f SCRIPT`` (N units, each its own
     pty-served simulator in its own process, every line paced at 115200 baud: 1.6 ms of wire
-    per exchange) over that of ``tmclsh --port P1 -f SCRIPT`` (one unit), whole processes,
-    output to a file; and the CPU time per line per unit of the eight beside that of one
-    unit running as many lines (8 x 500) alone, start-up subtracted with a 1-line run of
-    the same (children's rusage: (long - short) / lines, over eight for the eight). Both CPU
-    figures are differences of the same size: a process's start-up CPU swings by tens of
-    milliseconds from run to run, as much as one unit's 500 lines take, so a 500-line run
-    alone would measure mostly that noise. Each round runs the five in an order that turns
-    round every round; the wall figure is the median of the rounds' ratios, the CPU figures
-    the differences of the medians of each run's CPU over the rounds. The simulators' own
-    CPU is not in either figure (they are the modules)."""
+    per exchange), whole process, output to a file, against the machine's own floor: N raw
+    pyserial processes (``RAW_SCRIPT``: the script's frames, each reply written out) started
+    together, each against its own module, timed together from the first start to the last
+    end. On two cores the floor is itself well above one process's time (N interpreters
+    start, and the N simulators need CPU too): the ratio to it is what tmclsh adds.
+
+    Blocks alternate, raw, tmclsh, raw, ..., raw (``bracket``): each tmclsh block's ratio is
+    over the mean of the raw blocks either side, the row's figure the median of those pair
+    ratios, for 8 and for 32 units (``--units N`` names others). Beside it, from the same
+    blocks: tmclsh's N units over one unit running the same script (wall), and the CPU per
+    line per unit of tmclsh's run against the raw processes' (children's rusage, start-up
+    subtracted with a 1-line run of each: (long - short) / (N x (lines - 1))). The
+    simulators' own CPU is in neither figure (they are the modules)."""
     import resource
 
-    rounds = args.rounds
+    counts = _unit_counts(args)
+    pairs = args.pairs or args.rounds
     tmp = Path(args.state_dir)
 
     def script(name: str, lines: int) -> Path:
@@ -1148,69 +1164,106 @@ def bench_units(args: argparse.Namespace) -> dict:
         return path
 
     long_script, short_script = script("long", UNIT_LINES), script("short", 1)
-    alone_script = script("alone", UNITS * UNIT_LINES)  # one unit, the eight's lines
-    out_file = tmp / "units.out"
+    frames = [frame.hex() for _, frame in SCRIPT_LINES]
 
     def children_cpu() -> float:
         kids = resource.getrusage(resource.RUSAGE_CHILDREN)
         return kids.ru_utime + kids.ru_stime
 
-    def run(paths: list[str], script: Path) -> tuple[float, float]:
+    def tmclsh_run(paths: list[str], script_: Path) -> tuple[float, float]:
+        """One tmclsh process running ``script_`` on every path's module: wall and CPU s."""
         argv = tmclsh_cmd(*(a for p in paths for a in ("--port", p)), "-m", args.module,
-                          "-f", str(script))
-        with open(out_file, "w") as out:
+                          "-f", str(script_))
+        with open(tmp / "units.out", "w") as out:
             c0, t0 = children_cpu(), time.perf_counter()
             proc = subprocess.run(argv, stdout=out, stderr=subprocess.PIPE, text=True,
-                                  env=tree_env(args), cwd=args.state_dir, timeout=300)
+                                  env=tree_env(args), cwd=args.state_dir, timeout=600)
             took, used = time.perf_counter() - t0, children_cpu() - c0
         if proc.returncode != 0:
             raise RuntimeError(f"units run failed: {proc.stderr[-500:]}")
         return took, used
 
-    sims = [SimProcess(args.module, baud=BAUD) for _ in range(UNITS)]
+    def raw_run(paths: list[str], lines: int) -> tuple[float, float]:
+        """One raw pyserial process per path, all started together, timed together."""
+        outs = [open(tmp / f"units-raw-{i}.out", "w") for i in range(len(paths))]
+        try:
+            c0, t0 = children_cpu(), time.perf_counter()
+            procs = [subprocess.Popen([sys.executable, "-c", RAW_UNITS_SCRIPT, p, str(lines),
+                                       *frames], stdout=out, stderr=subprocess.PIPE,
+                                      text=True, cwd=args.state_dir)
+                     for p, out in zip(paths, outs)]
+            errors = [proc.communicate(timeout=600)[1] for proc in procs]
+            took, used = time.perf_counter() - t0, children_cpu() - c0
+        finally:
+            for out in outs:
+                out.close()
+        for proc, err in zip(procs, errors):
+            if proc.returncode != 0:
+                raise RuntimeError(f"raw units run failed: {err[-500:]}")
+        return took, used
+
+    sims = [SimProcess(args.module, baud=BAUD) for _ in range(max(counts))]
+    result: dict = {"benchmark": "units", "lines": UNIT_LINES,
+                    "load_start": round(os.getloadavg()[0], 2)}
+    rows: list[dict] = []
     try:
-        paths = [s.path for s in sims]
-        say(f"units: {rounds} rounds of {UNITS} units and 1 unit, {UNIT_LINES}-line, "
-            f"{UNITS * UNIT_LINES}-line (1 unit) and 1-line scripts, simulators paced at "
-            f"{BAUD} baud; {load_note()}")
-        run(paths, short_script)  # warm the caches
-        run(paths[:1], short_script)
-        jobs = [("one", long_script), ("all", long_script), ("one", alone_script),
-                ("one", short_script), ("all", short_script)]
-        walls: list[float] = []
-        cpu_of: dict[tuple[str, Path], list[float]] = {job: [] for job in jobs}
-        for rnd in range(rounds):
-            got = {}
-            for who, script_ in (jobs if rnd % 2 == 0 else jobs[::-1]):
-                got[(who, script_)] = run(paths if who == "all" else paths[:1], script_)
-            one, all_ = got[("one", long_script)], got[("all", long_script)]
-            walls.append(all_[0] / one[0])
-            for job, (_, used) in got.items():
-                cpu_of[job].append(used)
-            if args.verbose:
-                say(f"  round {rnd + 1}: one {one[0]:.3f} s, {UNITS} units {all_[0]:.3f} s "
-                    f"({walls[-1]:.2f}x); CPU of the runs: one alone "
-                    f"{got[('one', alone_script)][1]:.3f}/{got[('one', short_script)][1]:.3f} s, "
-                    f"{UNITS} units {all_[1]:.3f}/{got[('all', short_script)][1]:.3f} s")
+        for n in counts:
+            paths = [s.path for s in sims[:n]]
+            say(f"units {n}: {pairs} pairs (raw, tmclsh, ..., raw) of {n} raw pyserial "
+                f"processes run together and tmclsh with {n} units, {UNIT_LINES}-line and "
+                f"1-line scripts, simulators paced at {BAUD} baud; {load_note()}")
+            tmclsh_run(paths, short_script)  # warm the caches
+            raw_run(paths, 1)
+
+            def raw_block(i: int, paths: list[str] = paths) -> Block:
+                jobs = ("short", "long") if i % 2 == 0 else ("long", "short")
+                got = {job: raw_run(paths, UNIT_LINES if job == "long" else 1)
+                       for job in jobs}
+                return {"s": got["long"][0], "lines_s": got["long"][0] - got["short"][0],
+                        "cpu": got["long"][1], "cpu_short": got["short"][1]}
+
+            def path_block(i: int, paths: list[str] = paths) -> Block:
+                jobs = [("all", long_script), ("one", long_script), ("all", short_script)]
+                got = {job: tmclsh_run(paths if job[0] == "all" else paths[:1], job[1])
+                       for job in (jobs if i % 2 == 0 else jobs[::-1])}
+                long_, short = got[("all", long_script)], got[("all", short_script)]
+                return {"s": long_[0], "lines_s": long_[0] - short[0],
+                        "one_s": got[("one", long_script)][0], "cpu": long_[1],
+                        "cpu_short": short[1]}
+
+            raws, tms = bracket(pairs, raw_block, path_block, args.verbose)
+            walls = spread(pair_ratios(raws, tms, "s", "s"))
+            lines = spread(pair_ratios(raws, tms, "lines_s", "lines_s"))
+            over_one = spread([p["s"] / p["one_s"] for p in tms])
+            per_line = n * (UNIT_LINES - 1)
+            cpu_raw = (median_of(raws, "cpu") - median_of(raws, "cpu_short")) / per_line
+            cpu_tm = (median_of(tms, "cpu") - median_of(tms, "cpu_short")) / per_line
+            load = round(os.getloadavg()[0], 2)
+            say(f"  {n} raw processes together {median_of(raws, 's'):.3f} s, tmclsh {n} units "
+                f"{median_of(tms, 's'):.3f} s: {show_spread(walls, len(tms))}")
+            say(f"  start-up left out (a 1-line run's wall subtracted from each): "
+                f"{show_spread(lines, len(tms))}")
+            say(f"  {n} units over one unit, wall: {show_spread(over_one, len(tms))}; one "
+                f"unit {median_of(tms, 'one_s'):.3f} s")
+            say(f"  CPU per line per unit: raw process {cpu_raw * 1e6:.1f} us, tmclsh "
+                f"{cpu_tm * 1e6:.1f} us; {load_note()}")
+            figures = {"units": n, "pairs": len(tms),
+                       "raw_s": round(median_of(raws, "s"), 3),
+                       "tmclsh_s": round(median_of(tms, "s"), 3), **rounded(walls),
+                       "one_unit_s": round(median_of(tms, "one_s"), 3),
+                       **rounded(lines, "lines_"), **rounded(over_one, "over_one_"),
+                       "cpu_us_raw": round(cpu_raw * 1e6, 1),
+                       "cpu_us_tmclsh": round(cpu_tm * 1e6, 1), "load": load}
+            del figures["ratio"]  # the row's value
+            rows.append(row(figures, f"{n} units on {n} ptys, {UNIT_LINES} lines at {BAUD} "
+                                     f"baud, wall", walls["ratio"], "x raw processes",
+                            UNITS_TARGET, f"start-up left out {lines['ratio']:.2f}x; "
+                                          f"{over_one['ratio']:.2f}x one unit"))
     finally:
         for s in sims:
             s.close()
-    med = {job: statistics.median(v) for job, v in cpu_of.items()}
-    lines = UNITS * UNIT_LINES - 1  # (lines beyond the short run's one, either way)
-    one_cpu = (med[("one", alone_script)] - med[("one", short_script)]) / lines
-    all_cpu = (med[("all", long_script)] - med[("all", short_script)]) / (UNITS * (UNIT_LINES - 1))
-    wall, cpu = statistics.median(walls), all_cpu / one_cpu
-    say(f"  {UNITS} units over one unit, wall: {wall:.2f}x (rounds {min(walls):.2f}.."
-        f"{max(walls):.2f}); CPU per line per unit: one unit {one_cpu * 1e6:.1f} us, "
-        f"{UNITS} units {all_cpu * 1e6:.1f} us: {cpu:.2f}x")
-    result = {"benchmark": "units", "units": UNITS, "lines": UNIT_LINES, "rounds": rounds,
-              "wall_ratio": round(wall, 3), "cpu_ratio": round(cpu, 3),
-              "cpu_us_one": round(one_cpu * 1e6, 1), "cpu_us_each_of_all": round(all_cpu * 1e6, 1),
-              "load": round(os.getloadavg()[0], 2)}
-    row(result, f"{UNITS} units on {UNITS} ptys, {UNIT_LINES} lines at {BAUD} baud, wall",
-        wall, "x one unit", 1.25)
-    result["rows"] = [row({}, f"{UNITS} units, CPU per line per unit", cpu,
-                          "x one unit's", 1.0)]
+    result.update(rows[0])
+    result["rows"] = rows[1:]
     return result
 
 
@@ -1695,10 +1748,12 @@ def main(argv: list[str] | None = None) -> int:
                         "client rows, twice that many lines in the script rows)")
     p.add_argument("--rounds", type=int, default=5, help="rounds per benchmark (default 5)")
     p.add_argument("--pairs", type=int, default=0,
-                   help="raw/path block pairs of the client and script rows (default: "
+                   help="raw/path block pairs of the client, script and units rows (default: "
                         "20x --rounds for the client rows; 4x for the script rows, fewer once "
-                        "35 s have passed)")
+                        "35 s have passed; --rounds for the units row)")
     p.add_argument("--module", default="TMCM-1311", help="simulated module (default TMCM-1311)")
+    p.add_argument("--units", type=int, action="append", metavar="N",
+                   help="the units row's unit counts, once each (default: 8 and 32)")
     p.add_argument("--tree", type=Path, default=ROOT,
                    help="the tmclsh checkout to measure (default: this one)")
     p.add_argument("-v", "--verbose", action="store_true", help="per-round figures")
@@ -1714,6 +1769,8 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"unknown benchmark(s) {', '.join(unknown)}; known: {', '.join(BENCHMARKS)}")
     if args.count < 1 or args.rounds < 1 or args.pairs < 0:
         p.error("--count and --rounds must be at least 1, --pairs at least 0")
+    if any(n < 1 for n in args.units or ()):
+        p.error("--units must be at least 1")
     args.tree = args.tree.resolve()
     sys.path.insert(0, str(args.tree))
     import compileall

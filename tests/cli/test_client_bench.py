@@ -83,10 +83,24 @@ def test_benchmarks_are_listed_and_unknown_names_refused():
     assert p.returncode == 2 and "unknown benchmark" in p.stderr
 
 
-def test_units_benchmark_has_both_rows():
-    (result,), stderr = run_bench("units", "--rounds", "1")
-    assert result["benchmark"] == "units" and result["units"] == 8 and result["lines"] == 500
-    assert result["value"] == result["wall_ratio"] > 0 and result["target"] == 1.25
-    (cpu,) = result["rows"]
-    assert cpu["value"] == result["cpu_ratio"] and cpu["target"] == 1.0
-    assert "8 units over one unit, wall" in stderr
+def test_units_benchmark_has_a_row_per_count_against_raw_processes():
+    # two small counts (the row's own are 8 and 32): the shape, not the figures
+    (result,), stderr = run_bench("units", "--units", "2", "--units", "3", "--rounds", "1")
+    assert result["benchmark"] == "units" and result["lines"] == 500
+    assert result["units"] == 2 and result["unit"] == "x raw processes"
+    assert result["target"] == 1.1 and isinstance(result["ok"], bool)
+    (three,) = result["rows"]
+    assert three["units"] == 3 and three["target"] == 1.1
+    for r in (result, three):
+        check_pairs(r, 1, "lines_", "over_one_")
+        assert r["raw_s"] > 0 and r["tmclsh_s"] > 0 and r["one_unit_s"] > 0
+        assert "start-up left out" in r["note"] and "one unit" in r["note"]
+    assert "2 raw processes together" in stderr and "3 raw processes together" in stderr
+    assert "3 units over one unit, wall" in stderr
+
+
+def test_units_counts_must_be_positive():
+    p = subprocess.run([sys.executable, str(ROOT / "scripts" / "bench.py"), "units",
+                        "--units", "0"], capture_output=True, text=True, env=tmclsh_env(),
+                       timeout=30)
+    assert p.returncode == 2 and "--units must be at least 1" in p.stderr

@@ -406,9 +406,66 @@ def test_the_units_lines_are_written_by_one_writer(run, monkeypatch):
     assert writers == {threading.main_thread().name}
 
 
-def test_nothing_is_imported_in_a_units_thread(tmp_path):
+def test_what_the_units_said_since_a_tick_goes_out_in_one_write(monkeypatch):
+    """32 units' lines of one tick are one write and one flush of the real stream, not one
+    per unit (each a system call the units' threads wait on); a line to the other stream
+    between them keeps its place."""
+    from tmclsh.ops.units import Unit
+    from tmclsh.shell.features.unitview import PrefixView
+
+    calls: list[tuple[str, str]] = []
+
+    class Counting:
+        def __init__(self, name: str):
+            self.name = name
+
+        def write(self, text: str) -> int:
+            calls.append((self.name, text))
+            return len(text)
+
+        def flush(self) -> None:
+            calls.append((self.name, "<flush>"))
+
+        def isatty(self) -> bool:
+            return False
+
+    monkeypatch.setattr(sys, "stdout", Counting("out"))
+    monkeypatch.setattr(sys, "stderr", Counting("err"))
+    units = [Unit(n, "port", f"/dev/ttyX{n}", 1) for n in range(1, 33)]
+    view = PrefixView(units, None)
+    for unit in units:
+        view.record(unit).write("out", f"GAP 1, 0 -> {unit.number}\nsecond\n")
+    view.drain()
+    writes = [text for name, text in calls if text != "<flush>"]
+    assert [name for name, _ in calls] == ["out", "out"] and len(writes) == 1
+    assert writes[0].splitlines()[:3] == ["[1 /dev/ttyX1 @1] GAP 1, 0 -> 1",
+                                          "[1 /dev/ttyX1 @1] second",
+                                          "[2 /dev/ttyX2 @1] GAP 1, 0 -> 2"]
+    assert len(writes[0].splitlines()) == 64
+    calls.clear()
+    view.record(units[0]).write("out", "a\n")
+    view.record(units[1]).write("err", "warning: b\n")
+    view.record(units[2]).write("out", "c\n")
+    view.record(units[3]).write("out", "d\n")
+    view.drain()
+    assert [(name, text) for name, text in calls if text != "<flush>"] == [
+        ("out", "[1 /dev/ttyX1 @1] a\n"), ("err", "[2 /dev/ttyX2 @1] warning: b\n"),
+        ("out", "[3 /dev/ttyX3 @1] c\n[4 /dev/ttyX4 @1] d\n")]
+
+
+FEATURES = (".let x = GAP 1, 0\n.expect GAP 1, 0 == ${x}\nROR 0, 100\n.sleep 0.01\nMST 0\n"
+            ".watch GAP 1, 0 --count 1\n")
+
+
+@pytest.mark.parametrize("config, lines", [
+    (None, FEATURES),
+    ('[settings]\ncolor = "never"\n', "GAP 1, 0\n"),
+    (None, "// a jig's test, first line a comment (as a backup's)\nGAP 1, 0\nGAP 250, 0\n"),
+], ids=["features", "a config file", "a comment first"])
+def test_nothing_is_imported_in_a_units_thread(tmp_path, config, lines):
     """A stop lands at a unit's next bytecode: inside an import it would leave a module half
-    made for every unit after it. What the lines and the links need is imported first."""
+    made for every unit after it. What the lines and the links need is imported first; the
+    config file is read once, before (parsing it imports a TOML parser)."""
     probe = (
         "import sys, threading\n"
         "seen = []\n"
@@ -421,13 +478,41 @@ def test_nothing_is_imported_in_a_units_thread(tmp_path):
         "rc = cli.main(sys.argv[1:])\n"
         "print('IMPORTED', rc, sorted(set(seen)), file=sys.__stderr__)\n")
     script = tmp_path / "s.tmcl"
-    script.write_text(".let x = GAP 1, 0\n.expect GAP 1, 0 == ${x}\nROR 0, 100\n.sleep 0.01\n"
-                      "MST 0\n.watch GAP 1, 0 --count 1\n")
+    script.write_text(lines)
+    env = tmclsh_env()
+    if config is not None:
+        (tmp_path / "config.toml").write_text(config)
+        env["TMCLSH_CONFIG"] = str(tmp_path / "config.toml")
+        # the module data cached as a user's machine has it (else parsing the module files
+        # imports the TOML parser first, in the main thread, and hides the config file's)
+        warm = subprocess.run([sys.executable, "-m", "tmclsh", "--sim", "TMCM-1311", "-c",
+                               "GAP 1, 0"], capture_output=True, text=True, env=env,
+                              timeout=120)
+        assert warm.returncode == 0, warm.stderr
     proc = subprocess.run([sys.executable, "-c", probe, "--sim", "TMCM-1311", "--address",
                            "1,2", "-f", str(script)], capture_output=True, text=True,
-                          env=tmclsh_env(), timeout=120)
+                          env=env, timeout=120)
     said = [line for line in proc.stderr.splitlines() if line.startswith("IMPORTED")]
-    assert said == ["IMPORTED 0 []"], proc.stderr
+    status = 2 if "GAP 250" in lines else 0  # (refused: the module has no parameter 250)
+    assert said == [f"IMPORTED {status} []"], proc.stderr
+
+
+def test_tmcl_lines_alone_start_no_temporary_files_module(tmp_path):
+    """Only a command writes a file: a run of TMCL lines alone does not import tempfile (and
+    shutil, random, bz2, lzma) before its units start; one with a command does."""
+    probe = ("import sys\n"
+             "from tmclsh.cli import main as cli\n"
+             "rc = cli.main(sys.argv[1:])\n"
+             "print('TEMPFILE', rc, 'tempfile' in sys.modules, file=sys.__stderr__)\n")
+    for lines, loaded in (("GAP 1, 0\nSAP 4, 0, 1000\n", False),
+                          ("GAP 1, 0\n.echo ${unit}\n", True)):
+        script = tmp_path / "s.tmcl"
+        script.write_text(lines)
+        proc = subprocess.run([sys.executable, "-c", probe, "--sim", "TMCM-1311", "--address",
+                               "1,2", "-f", str(script)], capture_output=True, text=True,
+                              env=tmclsh_env(), timeout=120)
+        said = [line for line in proc.stderr.splitlines() if line.startswith("TEMPFILE")]
+        assert said == [f"TEMPFILE 0 {loaded}"], proc.stderr
 
 
 def test_a_unit_whose_diff_differs_names_it_as_its_last_error(run, tmp_path):

@@ -20,11 +20,16 @@ if TYPE_CHECKING:
     import argparse
     from collections.abc import Callable
 
+    from ..base.config import Config
+
 
 SIM_DEFAULT = "TMCM-1311"  # the module --sim simulates when neither it nor -m names one
 
 
-def connection_settings(args: argparse.Namespace) -> dict:
+def connection_settings(args: argparse.Namespace, config: Config | None = None) -> dict:
+    """The link settings the command line, the environment and the config file give;
+    ``config``: the config file read already (several units read it once, in the main
+    thread: parsing it imports a TOML parser, which no unit's thread may do)."""
     from ..base.config import load_config, resolve
 
     cli = {k: getattr(args, k, None) for k in
@@ -35,7 +40,7 @@ def connection_settings(args: argparse.Namespace) -> dict:
     given = [f"--{k}" for k in ("port", "can", "sim") if cli[k] is not None]
     if len(given) > 1:  # one before a subcommand, one after it (argparse sees two parsers)
         raise UsageError(f"{given[0]} and {given[1]} both name the link; give one of them")
-    settings = resolve(cli, load_config())
+    settings = resolve(cli, load_config() if config is None else config)
     if settings.get("sim") == "":  # a bare --sim: simulate the module -m names
         module = settings.get("module")
         settings["sim"] = module if module and module.lower() != "generic" else SIM_DEFAULT

@@ -172,13 +172,16 @@ class _Line:
 class Run:
     """One run of ``fn`` on ``units`` (see the module docstring); ``go()`` returns the
     results in the units' order. ``stopping``: why the run was stopped (None: it was not),
-    ``stopped_by``: the exception that stopped it."""
+    ``stopped_by``: the exception that stopped it. ``writes_files``: ``fn`` may write a file
+    (its temporary file's module is imported before the threads start; a front end that
+    knows its units write none spares every run that start)."""
 
     def __init__(self, units: list[Unit], fn: Callable[[Any], Any], *,
                  open: Callable[[Unit], Any] = open_unit,
                  stop: Callable[[Any, str], None] = _stop, hooks: Hooks | None = None,
-                 interrupts: tuple[type[BaseException], ...] = ()):
+                 interrupts: tuple[type[BaseException], ...] = (), writes_files: bool = True):
         self.units, self.fn, self.open, self.stop = units, fn, open, stop
+        self.writes_files = writes_files
         self.hooks = hooks if hooks is not None else Hooks()
         self.interrupts = (KeyboardInterrupt, *interrupts)
         self.stopping: str | None = None
@@ -193,7 +196,8 @@ class Run:
         # here, in the main thread, not at start-up: _raise_in uses ctypes in the units'
         # threads, and a unit writing a file imports tempfile (base/files.write_file)
         import ctypes  # noqa: F401
-        import tempfile  # noqa: F401
+        if self.writes_files:
+            import tempfile  # noqa: F401
 
         _load_transports(self.units)
         for line in self.lines:

@@ -27,6 +27,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import TYPE_CHECKING
 
+from ...base.config import Config, load_config
 from ...base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE,
                             ConnectError, TmclError, UsageError)
 from ...client.connect import connection_settings, open_client
@@ -153,11 +154,14 @@ def run_units(args: argparse.Namespace, units: list[Unit]) -> int:
         raise UsageError("-f - reads standard input once; several units need a script file "
                          "(or -c)")
     text = args.command if args.script is None else "\n".join(_readable(args.script))
-    _load_ahead(text)
+    # read here, once: parsing the file imports a TOML parser (not in a unit's thread), and
+    # every unit runs with the same settings
+    config = load_config()
+    commands = _load_ahead(text)
     from .unitview import make_view
 
     view = make_view(args, units)
-    return Run(args, units, view).go()
+    return Run(args, units, view, config, writes_files=commands).go()
 
 
 def _readable(path: str) -> list[str]:
@@ -169,30 +173,41 @@ def _readable(path: str) -> list[str]:
     return read_lines(Path(path), lambda message, kind: ScriptError(message, kind))
 
 
-def _load_ahead(text: str) -> None:
+def _load_ahead(text: str) -> bool:
     """Import here, in the main thread, the feature modules the lines' commands live in (a
     run of one module imports them when they first run): a stop raised in a unit's thread
-    while it imports would leave the module half made for every other unit."""
+    while it imports would leave the module half made for every other unit. True: the lines
+    hold commands (only a command writes a file: without one, the temporary files' modules
+    stay out of the start every unit waits for)."""
     from ..lang import expr, script  # noqa: F401  (every run evaluates and checks its lines)
     from ..lang.lines import classify, split_text
     from ..render import load_rich
 
-    load_rich()  # (a unit's notes and warnings are styled, its tables drawn by rich)
-
+    if text.startswith("//"):  # (a configuration backup replayed: script.as_replayed)
+        from . import clone  # noqa: F401
+    commands = False
     for line in split_text(text):
         command = classify(line).command
         if command is not None:
             command.load()
+            commands = True
+    # (a unit's notes, errors and trace lines are styled, its tables drawn by rich: even in a
+    # pipe, some of them go through rich)
+    load_rich()
+    return commands
 
 
 class Run(ops_units.Hooks):
     """The shell's front end of ``ops.units.Run``: each unit a run of ``main.run_connected``
     on its module, shown through the view (``unitview``)."""
 
-    def __init__(self, args: argparse.Namespace, plan: list[Unit], view: View):
+    def __init__(self, args: argparse.Namespace, plan: list[Unit], view: View,
+                 config: Config | None = None, *, writes_files: bool = True):
         self.args, self.units, self.view = args, plan, view
+        self.config = config if config is not None else load_config()  # (see run_units)
         self.run = ops_units.Run(plan, self._fn, open=self._open, stop=stop_on_interrupt,
-                                 hooks=self, interrupts=(Terminated,))
+                                 hooks=self, interrupts=(Terminated,),
+                                 writes_files=writes_files)
 
     def go(self) -> int:
         exit_cleanly_on_signals()
@@ -208,7 +223,7 @@ class Run(ops_units.Hooks):
     # -- opening and running a unit (its own thread) -------------------------------------
     def _open(self, unit: Unit):
         record = self.view.record(unit)
-        settings = connection_settings(unit_args(unit, self.args))
+        settings = connection_settings(unit_args(unit, self.args), self.config)
         # (the connect's frames go to the transcript; not those of a stop after it ended)
         tracer = record.tracer if record.state == "connecting" else None
         client = open_client(settings, notice=record.notice, tracer=tracer)
@@ -219,7 +234,8 @@ class Run(ops_units.Hooks):
         unit, settings = _CURRENT.unit, _CURRENT.settings
         # (looked up at each call, not bound at import: the one -c/-f run, whoever set it)
         return shell_main.run_connected(unit_args(unit, self.args), client, settings,
-                                        prepare=lambda session: self._prepare(unit, session))
+                                        prepare=lambda session: self._prepare(unit, session),
+                                        config=self.config)
 
     # -- what the ops runner tells -------------------------------------------------------
     @contextmanager

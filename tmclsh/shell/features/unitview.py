@@ -5,8 +5,10 @@ while units run, ``sys.stdout`` and ``sys.stderr`` are routers that hand what a 
 thread writes to that unit's ``Record``, line by line, and what other threads write to the
 real streams. A record keeps its lines in a buffer of its own (its own lock, for its lines
 cut in pieces); the main thread alone takes them out and writes them (``View.drain``, every
-tick and before the run's own words), so units never wait on one another to write. A view
-then shows the lines:
+tick and before the run's own words), so units never wait on one another to write, and what
+every unit said since the last tick goes out as one write and one flush for each run of
+lines to the same stream (not one for each unit: 32 units would be 32 system calls a tick,
+each taking the interpreter from the units' threads). A view then shows the lines:
 
 * ``TableView`` (stdout is a terminal): a live table, one row per unit (unit, module and
   firmware, line reached of how many, checks passed and failed, errors, the last error,
@@ -300,6 +302,11 @@ class View:
         self.records = {u.number: Record(u, self, log_dir) for u in units}
         self.out, self.err = sys.stdout, sys.stderr  # the real streams
         self._gone = False  # the reader of our output went away: nothing more is written
+        # while draining: what is to be written, and to which stream (one write for a run
+        # of text to one stream; a change of stream writes what was held, so stdout and
+        # stderr keep their order in one file)
+        self._held: list[str] | None = None
+        self._held_stream: TextIO | None = None
 
     def record(self, unit: Unit) -> Record:
         return self.records[unit.number]
@@ -327,16 +334,40 @@ class View:
 
     def drain(self) -> None:
         """Show what the units have written since (main thread: the one writer)."""
-        for record in self.records.values():
-            pending = record.pending
-            while pending:
-                stream, lines = pending.popleft()
-                if lines is None:
-                    self.unit_done(record)
-                else:
-                    self.lines(record, stream, lines)
+        self._held = []
+        try:
+            for record in self.records.values():
+                pending = record.pending
+                while pending:
+                    stream, lines = pending.popleft()
+                    if lines is None:
+                        self.unit_done(record)
+                    else:
+                        self.lines(record, stream, lines)
+        finally:
+            self._send_held()
+            self._held = None
+
+    def _send_held(self) -> None:
+        held, stream = self._held, self._held_stream
+        if held and stream is not None:
+            text = "".join(held)
+            held.clear()
+            self._put(stream, text)
 
     def _write(self, stream: TextIO, text: str) -> None:
+        if self._gone:
+            return
+        held = self._held
+        if held is not None:
+            if stream is not self._held_stream:
+                self._send_held()
+                self._held_stream = stream
+            held.append(text)
+            return
+        self._put(stream, text)
+
+    def _put(self, stream: TextIO, text: str) -> None:
         if self._gone:
             return
         try:
@@ -419,6 +450,7 @@ class TableView(View):
         from rich.text import Text
 
         if self.err.isatty():
+            self._send_held()  # (what came before it, first)
             self.console.print(Text(text, style=style or ""), soft_wrap=True)
         else:
             self._write(self.err, text + "\n")

@@ -5,11 +5,15 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from ...base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE,
                             ModuleGoneError, TmclError)
 from ..render import Output
 from .session import QuitShell, Session, frames_sent
+
+if TYPE_CHECKING:
+    from ...base.config import Config
 
 
 
@@ -154,13 +158,14 @@ def _notice(text: str) -> None:
 
 
 def run_connected(args: argparse.Namespace, client, settings: dict, *,
-                  prepare: Callable[[Session], None] | None = None) -> int:
+                  prepare: Callable[[Session], None] | None = None,
+                  config: Config | None = None) -> int:
     """The session on a connected client: ``-c``, ``-f``, or the prompt; ``prepare(session)``
     before the first line (a unit of several gives its session its own variables and view,
-    shell/features/units.py). Exit status."""
+    shell/features/units.py, with ``config``, the config file it read once). Exit status."""
     from ...base.config import load_settings
 
-    shell_settings = load_settings()
+    shell_settings = load_settings(config)
     out = Output(json_mode=bool(args.json), color=str(shell_settings.get("color", "auto")))
     interactive = _interactive(args)
     # `confirm = false` in the config file is a standing --yes
