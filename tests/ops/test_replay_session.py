@@ -98,12 +98,12 @@ def fill(m: LineModule, seed: int = 7) -> None:
     m.refuse.add(REFUSED)
 
 
-def capture(m: LineModule, path: str, requests: list[tuple[int, int, int, int]]) -> None:
-    """The master's session through ``tmclsh bridge --pty --port MODULE -o PATH``, ended
+def capture(port: str, path: str, requests: list[tuple[int, int, int, int]]) -> None:
+    """The master's session through ``tmclsh bridge --pty --port PORT -o PATH``, ended
     with Ctrl-C as a user ends it (the bridge tells and writes everything it forwarded
     before it exits)."""
     proc = subprocess.Popen([sys.executable, "-m", "tmclsh", "bridge", "--pty", "--port",
-                             m.path, "-o", path], stdout=subprocess.PIPE,
+                             port, "-o", path], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env=tmclsh_env(),
                             cwd=str(ROOT))
     lines: list[str] = []
@@ -175,7 +175,7 @@ def check_session(tmp_path, n: int) -> None:
         fill(m)
         requests = session(n)
         cap = str(tmp_path / "session.txt")
-        capture(m, cap, requests)
+        capture(m.path, cap, requests)
         from tmclsh.ops.replay import read_capture
 
         exchanges = read_capture(cap).exchanges
