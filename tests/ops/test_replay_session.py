@@ -227,3 +227,50 @@ def test_a_bridge_capture_of_a_varied_session_replays_and_plants_are_named(tmp_p
 @pytest.mark.slow
 def test_fifty_thousand_exchanges_captured_by_the_monitor_replay(tmp_path):
     check_session(tmp_path, 50_000)
+
+
+# -- CAN: candump's screen lines in the shape of the vendor library's tracker ---------------------
+
+def candump_line(can_id: int, data: bytes) -> str:
+    return f"  can0  {can_id:03X}   [{len(data)}]  {data.hex(' ').upper()}\n"
+
+
+def test_a_candump_with_eight_byte_frames_and_doubled_replies_replays(tmp_path, capsys):
+    """The shape of the candump pasted in the vendor library's issue tracker (PyTrinamic
+    over socketcan, a TMCM-1260): every request eight data bytes (the serial checksum, the
+    address counted, after the seven), every reply eight (a 0 after the seven), and each
+    reply twice (two modules answering one id). Replayed to a module answering in eight
+    bytes: no difference; a value changed in it since: that exchange named."""
+    import can
+
+    from tmclsh.cli import main as cli
+    from responder import CanModule
+
+    values = {4: 2000000000, 5: 200000, 6: 128, 1: -20000}
+    session = [(SAP, 5, 0, values[5]), (GAP, 4, 0, 0), (GAP, 6, 0, 0), (SAP, 4, 0, values[4]),
+               (GAP, 1, 0, 0), (GAP, 5, 0, 0), (GGP, 66, 0, 0)]
+    lines = []
+    for cmd, typ, motor, value in session:
+        seven = struct.pack(">BBBi", cmd, typ, motor, value)
+        lines.append(candump_line(1, seven + bytes([(1 + sum(seven)) & 0xFF])))
+        answer = values.get(typ, 0) if cmd == GAP else (0 if cmd == GGP else value)
+        data = struct.pack(">BBBi", 1, OK, cmd, answer) + b"\x00"
+        lines += [candump_line(2, data)] * 2
+    dump = tmp_path / "candump.txt"
+    dump.write_text("".join(lines))
+    channel = "replay-vendor-dump"
+    m = CanModule(can.Bus(interface="virtual", channel=channel), version="1260V115",
+                  eighth="zero")
+    try:
+        m.values.update({(t, 0, False): v for t, v in values.items()})
+        args = ["replay", str(dump), "--can", f"virtual:{channel}", "--yes", "--json"]
+        assert cli.main(args) == 0
+        end = objects(capsys.readouterr().out)[-1]
+        assert (end["replayed"], end["differences"], end["link"]) == (7, 0, "can"), end
+        m.values[(1, 0, False)] = 12345  # the motor moved since
+        assert cli.main(args) == 1
+        diffs = [o for o in objects(capsys.readouterr().out) if o.get("differs")]
+        assert [(d["index"], d["op"], d["type"], d["differences"]) for d in diffs] == [
+            (5, GAP, 1, ["value -20000 -> 12345"])]
+    finally:
+        m.close()
