@@ -120,7 +120,6 @@ def test_two_modules_on_one_line_replay_each_at_its_address(tmp_path, capsys):
     bus = SharedLine()
     a = PtyModule(version="1161V130", address=1, line=bus)
     b = PtyModule(version="1161V130", address=5, line=bus)
-    bus.modules += [a, b]
     try:
         a.values[(4, 0, False)], b.values[(4, 0, False)] = 11, 55
         cap = str(tmp_path / "two.txt")
@@ -170,7 +169,6 @@ def test_the_closing_stop_of_several_modules_says_whose_motors_each_line_names(t
     bus = SharedLine()
     a = PtyModule(version="1161V130", address=1, line=bus)
     b = PtyModule(version="1161V130", address=5, line=bus)
-    bus.modules += [a, b]
     try:
         cap = str(tmp_path / "two.txt")
         _bridge_capture(bus.path, cap, [request(1, SAP, 4, 0, 1000), request(5, GAP, 4, 0)])
