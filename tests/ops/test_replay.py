@@ -47,7 +47,6 @@ def _bridge_capture(module_path: str, out: str, frames: list[bytes]) -> None:
             for f in frames:
                 master.write(f)
                 assert len(master.read(9)) == 9
-        time.sleep(0.3)  # (the last reply is written to the capture before the signal)
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=30)
         assert proc.returncode == 0, err
