@@ -166,8 +166,8 @@ def test_writes_are_refused_without_yes_and_named(module, tmp_path, capsys):
 def test_the_closing_stop_of_several_modules_says_whose_motors_each_line_names(tmp_path,
                                                                                capsys):
     bus = SharedLine()
-    a = PtyModule(version="1161V130", address=1, line=bus)
-    b = PtyModule(version="1161V130", address=5, line=bus)
+    PtyModule(version="1161V130", address=1, line=bus)  # (each joins the line itself)
+    PtyModule(version="1161V130", address=5, line=bus)
     try:
         cap = str(tmp_path / "two.txt")
         _bridge_capture(bus.path, cap, [request(1, SAP, 4, 0, 1000), request(5, GAP, 4, 0)])
