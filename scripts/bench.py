@@ -1511,13 +1511,16 @@ def bench_replay(args: argparse.Namespace) -> dict:
     finally:
         client.close()
     per_s = 1e6 / best["replay"]
+    floor_per_s = 1e6 / best["request"]
+    target_per_s = 1e6 / REPLAY_TARGET_US
     say(f"  Client.request {best['request']:.2f} us an exchange; replay {best['replay']:.2f} "
-        f"us: {per_s:,.0f} exchanges/s")
+        f"us: {per_s:,.0f} exchanges/s (target {target_per_s:,.0f}/s)")
     result = {"benchmark": "replay", "exchanges": n, "floor_us": round(best["request"], 3),
-              "replay_us": round(best["replay"], 3), "per_s": round(per_s)}
+              "replay_us": round(best["replay"], 3), "per_s": round(per_s),
+              "floor_per_s": round(floor_per_s), "target_per_s": round(target_per_s)}
     return row(result, "replay to the simulator, per exchange", best["replay"], "us",
-               REPLAY_TARGET_US, f"{per_s:,.0f}/s; Client.request alone "
-               f"{best['request']:.1f} us")
+               REPLAY_TARGET_US, f"{per_s:,.0f}/s, target {target_per_s:,.0f}/s; floor "
+               f"Client.request alone {best['request']:.1f} us ({floor_per_s:,.0f}/s)")
 
 
 BRIDGE_TARGET_US = 200.0  # the figure: at most 0.2 ms added per exchange

@@ -150,11 +150,12 @@ class BootModule(BootLogic, Responder):
 
     def __init__(self, version: str = "1311V111", *, address: int = 1, in_bootloader=False,
                  app_speed: int = termios.B9600, boot_speed: int = termios.B115200,
-                 boot_version: str = "107", tcp: bool = False):
+                 boot_version: str = "107", tcp: bool = False, line=None):
         self._setup(version, address, in_bootloader, boot_version)
         self.app_speed, self.boot_speed = app_speed, boot_speed
-        Responder.__init__(self, speed=None if tcp else (
-            boot_speed if in_bootloader else app_speed), tcp=tcp)
+        # (on a SharedLine the line's speed is not looked at: both answer at any rate)
+        Responder.__init__(self, speed=None if tcp or line is not None else (
+            boot_speed if in_bootloader else app_speed), tcp=tcp, line=line)
 
     def reset_to(self, bootloader: bool) -> None:
         self.in_bootloader = bootloader

@@ -241,8 +241,20 @@ def _run(args: list[str], **kw) -> subprocess.CompletedProcess:
                           stdin=subprocess.DEVNULL, **kw)
 
 
+# where a fresh run is in each step, by what the new module hears: identify reads GGP once,
+# the firmware step writes the image (201), the configuration step writes settings (SAP), the
+# program step starts the upload (132), verify reads every setting again (its first GGP is
+# the 82nd the new module hears: 1 identify, 2 firmware, 78 configuration)
+KILL_AT = [("identify", 10, 1), ("firmware", 201, 40), ("configuration", 5, 3),
+           ("program", 132, 1), ("verify", 10, 82)]
+
+
+@pytest.mark.parametrize("step,command,count", KILL_AT, ids=[k[0] for k in KILL_AT])
 def test_command_line_killed_during_a_step_names_the_command_that_completes_it(modules,
-                                                                            tmp_path):
+                                                                            tmp_path, step,
+                                                                            command, count):
+    from conftest import delivered
+
     old, new = modules(), modules("1311V111")
     hexfile = tmp_path / "1311V110.hex"
     hexfile.write_text(hex_image("1311V110", 5000, START))
@@ -251,17 +263,19 @@ def test_command_line_killed_during_a_step_names_the_command_that_completes_it(m
     proc = subprocess.Popen([TMCLSH, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             stdin=subprocess.DEVNULL, text=True)
     sent = threading.Event()
+    heard = []
 
-    def kill(m):  # SIGTERM while the program upload starts; its reply waits for the signal
-        if not sent.is_set():
+    def kill(m):  # SIGTERM during the step; the module's reply waits until it has landed
+        heard.append(1)
+        if len(heard) == count and not sent.is_set():
             sent.set()
             os.kill(proc.pid, signal.SIGTERM)
-            threading.Event().wait(1.0)
+            delivered(proc.pid, signal.SIGTERM)
 
-    new.hooks[132] = kill
+    new.hooks[command] = kill
     out, err = proc.communicate(timeout=300)
     assert sent.is_set() and proc.returncode == 128 + signal.SIGTERM, err
-    assert re.search(r"^program\s+stopped", out, re.M), out
+    assert re.search(rf"^{step}\s+stopped", out, re.M), out
     assert "the old module was only read" in err
     command = re.search(r"to complete the replacement, run: (.*)$", err, re.M).group(1)
     words = shlex.split(command)

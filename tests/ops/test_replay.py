@@ -17,7 +17,7 @@ import can
 import pytest
 import serial
 
-from conftest import ROOT, tmclsh_env
+from conftest import ROOT, patience, tmclsh_env
 from responder import CanModule, PtyModule, SharedLine, reply
 from tmclsh.cli import main as cli
 from tmclsh.ops import replay as rp
@@ -47,7 +47,6 @@ def _bridge_capture(module_path: str, out: str, frames: list[bytes]) -> None:
             for f in frames:
                 master.write(f)
                 assert len(master.read(9)) == 9
-        time.sleep(0.3)  # (the last reply is written to the capture before the signal)
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=30)
         assert proc.returncode == 0, err
@@ -120,7 +119,6 @@ def test_two_modules_on_one_line_replay_each_at_its_address(tmp_path, capsys):
     bus = SharedLine()
     a = PtyModule(version="1161V130", address=1, line=bus)
     b = PtyModule(version="1161V130", address=5, line=bus)
-    bus.modules += [a, b]
     try:
         a.values[(4, 0, False)], b.values[(4, 0, False)] = 11, 55
         cap = str(tmp_path / "two.txt")
@@ -168,9 +166,8 @@ def test_writes_are_refused_without_yes_and_named(module, tmp_path, capsys):
 def test_the_closing_stop_of_several_modules_says_whose_motors_each_line_names(tmp_path,
                                                                                capsys):
     bus = SharedLine()
-    a = PtyModule(version="1161V130", address=1, line=bus)
-    b = PtyModule(version="1161V130", address=5, line=bus)
-    bus.modules += [a, b]
+    PtyModule(version="1161V130", address=1, line=bus)  # (each joins the line itself)
+    PtyModule(version="1161V130", address=5, line=bus)
     try:
         cap = str(tmp_path / "two.txt")
         _bridge_capture(bus.path, cap, [request(1, SAP, 4, 0, 1000), request(5, GAP, 4, 0)])
@@ -220,14 +217,26 @@ def test_ctrl_c_ends_a_replay_that_wrote_with_the_safety_stop(module, tmp_path, 
 
 # -- CAN: python-can's writers on a virtual bus --------------------------------------------------
 
-def _record(channel: str, path: str, drive) -> None:
-    """What crosses the bus while ``drive()`` runs, written by python-can's own writer."""
+def _record(channel: str, path: str, drive, heard, replies: frozenset = frozenset({2})) -> None:
+    """What crosses the bus while ``drive()`` runs, written by python-can's own writer; it
+    ends once the writer has taken every request the modules heard (``heard()`` of them)
+    and a reply (a frame on one of ``replies``) to each, however long a busy machine takes
+    to hand them over."""
     listener = can.Bus(interface="virtual", channel=channel)
     writer = can.Logger(path)
-    notifier = can.Notifier(listener, [writer])
+    seen = {"requests": 0, "replies": 0}
+
+    class Count(can.Listener):
+        def on_message_received(self, msg: can.Message) -> None:
+            seen["replies" if msg.arbitration_id in replies else "requests"] += 1
+
+    notifier = can.Notifier(listener, [writer, Count()])  # (the writer first: in order)
     try:
         drive()
-        time.sleep(0.2)  # (the last reply reaches the writer)
+        deadline = time.monotonic() + patience(30)
+        while min(seen.values()) < heard() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert min(seen.values()) >= heard() > 0, (seen, heard())
     finally:
         notifier.stop()
         writer.stop()
@@ -253,7 +262,7 @@ def test_a_can_log_replays_and_eight_byte_replies_are_paired(eighth, tmp_path, c
             finally:
                 c.close()
 
-        _record(channel, log, drive)
+        _record(channel, log, drive, lambda: len(m.got))
         cap = rp.read_capture(log)
         assert cap.link == "can" and all(c.reply is not None for c in cap.exchanges)
         assert cli.main(["replay", log, "--can", f"virtual:{channel}", "--json"]) == 0
@@ -287,7 +296,8 @@ def test_several_modules_replay_each_at_its_own_id(tmp_path, capsys):
                 finally:
                     c.close()
 
-        _record(channel, log, drive)
+        _record(channel, log, drive, lambda: len(a.got) + len(b.got),
+                replies=frozenset({2, 4}))
         cap = rp.read_capture(log)
         assert cap.addresses == [1, 3]
         a.got.clear()

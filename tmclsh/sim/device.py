@@ -27,7 +27,7 @@ from collections.abc import Callable, Iterable
 
 from ..tmcl import instructions as isa
 from ..tmcl.modules import Module, by_firmware_id, load
-from ..tmcl.frames import Instruction, Reply, Request, Status, to_signed32
+from ..tmcl.frames import Instruction, Reply, Request, Status, reply_frame, to_signed32
 from ..tmcl.version import encode_type1
 from .boot import Bootloader
 from .commands import Commands
@@ -406,6 +406,10 @@ class Simulator:
 
     def _send_reply(self, channel: str, module: int, opcode: int, ans: Answer) -> None:
         if self._suppressed():
+            return
+        if channel != CAN and ans.version is None and ans.stored is None:
+            self.out.queue(SERIAL, reply_frame(self.host_address, module, ans.status, opcode,
+                                               ans.value), reply=True)
             return
         reply = Reply(self.host_address, module, ans.status, opcode, to_signed32(ans.value),
                       version=ans.version, stored=ans.stored)

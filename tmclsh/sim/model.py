@@ -302,11 +302,19 @@ class ParamStore:
     # -- direct access for the command layer ----------------------------------------------
     def get(self, kind: str, name: str, index: int = 0, default: int = 0) -> int:
         """Current value of a parameter by name (``default`` when the module lacks it)."""
-        p = self.by_name(kind, name)
+        # (``read`` without its access check, inlined: the module's own settings are read
+        # this way several times for every request it answers)
+        p = self._names.get((kind, name))
         if p is None:
             return default
         idx = p.bank if kind == GLOBAL else index
-        return self.read(kind, p.number, idx, check_access=False)[1]
+        key = (kind, idx, p.number)
+        if key not in self._params:
+            return 0
+        live = self.live.get(key)
+        if live is not None:
+            return live.get(idx)
+        return self.ram.get(key, 0)
 
     def has(self, kind: str, name: str) -> bool:
         return self.by_name(kind, name) is not None

@@ -126,6 +126,8 @@ class Output:
 
     def drain(self) -> None:
         """Hand over everything that is due."""
+        if not self._outq:
+            return  # (most calls: a read finds the reply handed over when it was queued)
         with self._lock:
             now = time.monotonic()
             serial = bytearray()  # what is due goes out in one piece, as a UART sends it
