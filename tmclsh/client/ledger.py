@@ -87,7 +87,8 @@ class Doubles:
         marks.append(n)
         self.replies[addr] = n + 1
         self.last = (addr, req.opcode, req.type)
-        if reply is not None and self._version_differs(addr, reply):
+        if reply is not None and reply.opcode == _GET_VERSION and self._version_differs(
+                addr, reply):
             return self._found(addr)
         if n + 1 - marks[0] >= 2 * SHARED_AFTER and len(marks) == SHARED_AFTER:
             return self._found(addr)
@@ -295,6 +296,8 @@ class Ledger:
         if not self.recent:
             return False
         r, rep = self.recent[-1]
+        if rep.value != reply.value:
+            return False  # (the common case, asked per request: both sames compare values)
         # (a marker's reply, r None, names its command on the binary link, and no other
         # request takes it; an ASCII reply names none: a copy of it is taken for anything)
         return self._same(rep, reply) and (r is not None or not self.by_command) and r != req
@@ -303,9 +306,12 @@ class Ledger:
         """``reply`` was returned as ``req``'s answer (``copy``: ``may_be_a_copy`` said so)."""
         self.replies += 1
         run = self.run
-        if run and self._key(run[-1][1].address, run[-1][1].opcode) != self._key(
-                req.address, req.opcode):
-            self.in_step()  # (a late reply of the run before cannot be taken for this one)
+        if run:
+            # (``_key`` unrolled: once per request)
+            before = run[-1][1]
+            if before.address != req.address or (self.by_command
+                                                 and before.opcode != req.opcode):
+                self.in_step()  # (a late reply of the run before cannot be taken for this one)
         run.append((self.replies, req, reply))
         if copy:
             self.copy_at = self.replies

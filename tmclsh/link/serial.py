@@ -153,7 +153,14 @@ class SerialTransport(StreamTransport):
         fd = self._fd
         if fd is None:
             return super().transact(data, size, timeout)
-        self.write(data)
+        try:  # (write's common case, written out: once per request)
+            n = os.write(fd, data)
+        except BlockingIOError:
+            n = 0  # output buffer full: write() waits for room as pyserial does
+        except OSError as exc:
+            raise self._lost("write", exc) from exc
+        if n != len(data):
+            self.write(data[n:])
         # the reply mostly comes whole: one wait, one read; anything else as read() does it
         start = time.monotonic()
         try:

@@ -101,6 +101,7 @@ def _check_value(value: int) -> None:
 _SERIAL_HEAD = struct.Struct(">BBBBi")
 _new = object.__new__
 _set = object.__setattr__
+_STATUS_OK = int(Status.OK)  # (a plain int: a read-back's status, once per 134 answer)
 
 
 def to_signed32(value: int) -> int:
@@ -285,7 +286,7 @@ class Reply:
         r = _new(cls)
         _set(r, "host", host)
         _set(r, "module", module)
-        _set(r, "status", int(Status.OK))
+        _set(r, "status", _STATUS_OK)
         _set(r, "opcode", opcode)
         _set(r, "value", value)
         _set(r, "version", None)
