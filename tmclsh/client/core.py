@@ -626,8 +626,7 @@ class Client:
                     continue
                 if reply is None:
                     return None
-                copy = not self._downloading and ledger.may_be_a_copy(req, reply)
-                ledger.took(req, reply, copy=copy)
+                copy = ledger.took(req, reply, copy=None, downloading=self._downloading)
                 found = ledger.doubles.answered(req, reply)
                 if found is not None:
                     self._second(found)

@@ -302,8 +302,16 @@ class Ledger:
         # request takes it; an ASCII reply names none: a copy of it is taken for anything)
         return self._same(rep, reply) and (r is not None or not self.by_command) and r != req
 
-    def took(self, req: Request, reply: Reply, *, copy: bool = False) -> None:
-        """``reply`` was returned as ``req``'s answer (``copy``: ``may_be_a_copy`` said so)."""
+    def took(self, req: Request, reply: Reply, *, copy: bool | None = False,
+             downloading: bool = False) -> bool:
+        """``reply`` was returned as ``req``'s answer (``copy``: ``may_be_a_copy`` said so;
+        None: asked here, never while ``downloading``, whose frames are stored, not read).
+        Returns ``copy``. (Once per request: the client's common case is one call.)"""
+        if copy is None:
+            recent = self.recent
+            copy = False
+            if not downloading and recent and recent[-1][1].value == reply.value:
+                copy = self.may_be_a_copy(req, reply)
         self.replies += 1
         run = self.run
         if run:
@@ -316,6 +324,7 @@ class Ledger:
         if copy:
             self.copy_at = self.replies
         self.recent.append((req, reply))
+        return copy
 
     def took_a_copy(self) -> bool:
         """Was the answer just returned taken as one that may be a copy (``took``)? Then it

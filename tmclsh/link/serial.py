@@ -35,6 +35,7 @@ try:  # bytes waiting on a POSIX descriptor (what pyserial's in_waiting asks, mi
 except ImportError:  # pragma: no cover - Windows: pyserial's in_waiting
     _FIONREAD = None
 _FOUR_ZEROS = bytes(4)
+_BYTEORDER = sys.byteorder  # (asked before every request)
 
 WRITE_TIMEOUT = 2.0  # a write that cannot finish in this time means the port is stuck
 
@@ -243,7 +244,7 @@ class SerialTransport(StreamTransport):
         if fd is not None and _FIONREAD is not None:
             # the client asks before every request: one ioctl, without pyserial's layers
             try:
-                return int.from_bytes(fcntl.ioctl(fd, _FIONREAD, _FOUR_ZEROS), sys.byteorder)
+                return int.from_bytes(fcntl.ioctl(fd, _FIONREAD, _FOUR_ZEROS), _BYTEORDER)
             except OSError as exc:
                 raise self._lost("status query", exc) from exc
         try:
