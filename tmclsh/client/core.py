@@ -523,12 +523,15 @@ class Client:
                     raise
             if req.opcode in _MOTION and reply is not None and not self._downloading:
                 self.motion.take(self.module, req, reply.status)
-            if req.opcode >= _FIRST_CONTROL and reply is not None and reply.ok:
-                ctl = isa.control(req.opcode)  # (a typed 132 with no 133 after it)
-                if ctl is not None and ctl.download == "enter" and not self._downloading:
-                    self._left_downloading = True
-                elif ctl is not None and ctl.download == "leave":
+            op = req.opcode
+            if op >= _FIRST_CONTROL and reply is not None and (
+                    op == _QUIT_DOWNLOAD or op == isa.download_command("enter")) and reply.ok:
+                # (a typed 132 with no 133 after it; asked of 132 and 133 alone: an upload's
+                # verify sends thousands of 134)
+                if op == _QUIT_DOWNLOAD:
                     self._left_downloading = False
+                elif not self._downloading:
+                    self._left_downloading = True
             if reply is not None and reply.status == _LOADED and not self._downloading:
                 raise DownloadModeError(
                     _LOADED, reply,
@@ -625,9 +628,10 @@ class Client:
                     continue
                 if reply is None:
                     return None
-                copy = not self._downloading and ledger.may_be_a_copy(req, reply)
-                ledger.took(req, reply, copy=copy)
-                self._second(ledger.doubles.answered(req, reply))
+                copy = ledger.took(req, reply, copy=None, downloading=self._downloading)
+                found = ledger.doubles.answered(req, reply)
+                if found is not None:
+                    self._second(found)
                 self._answered_at = time.monotonic()
                 if copy and not self._judging:
                     return self._judge(req, reply, timeout, retries)

@@ -87,7 +87,8 @@ class Doubles:
         marks.append(n)
         self.replies[addr] = n + 1
         self.last = (addr, req.opcode, req.type)
-        if reply is not None and self._version_differs(addr, reply):
+        if reply is not None and reply.opcode == _GET_VERSION and self._version_differs(
+                addr, reply):
             return self._found(addr)
         if n + 1 - marks[0] >= 2 * SHARED_AFTER and len(marks) == SHARED_AFTER:
             return self._found(addr)
@@ -295,21 +296,35 @@ class Ledger:
         if not self.recent:
             return False
         r, rep = self.recent[-1]
+        if rep.value != reply.value:
+            return False  # (the common case, asked per request: both sames compare values)
         # (a marker's reply, r None, names its command on the binary link, and no other
         # request takes it; an ASCII reply names none: a copy of it is taken for anything)
         return self._same(rep, reply) and (r is not None or not self.by_command) and r != req
 
-    def took(self, req: Request, reply: Reply, *, copy: bool = False) -> None:
-        """``reply`` was returned as ``req``'s answer (``copy``: ``may_be_a_copy`` said so)."""
+    def took(self, req: Request, reply: Reply, *, copy: bool | None = False,
+             downloading: bool = False) -> bool:
+        """``reply`` was returned as ``req``'s answer (``copy``: ``may_be_a_copy`` said so;
+        None: asked here, never while ``downloading``, whose frames are stored, not read).
+        Returns ``copy``. (Once per request: the client's common case is one call.)"""
+        if copy is None:
+            recent = self.recent
+            copy = False
+            if not downloading and recent and recent[-1][1].value == reply.value:
+                copy = self.may_be_a_copy(req, reply)
         self.replies += 1
         run = self.run
-        if run and self._key(run[-1][1].address, run[-1][1].opcode) != self._key(
-                req.address, req.opcode):
-            self.in_step()  # (a late reply of the run before cannot be taken for this one)
+        if run:
+            # (``_key`` unrolled: once per request)
+            before = run[-1][1]
+            if before.address != req.address or (self.by_command
+                                                 and before.opcode != req.opcode):
+                self.in_step()  # (a late reply of the run before cannot be taken for this one)
         run.append((self.replies, req, reply))
         if copy:
             self.copy_at = self.replies
         self.recent.append((req, reply))
+        return copy
 
     def took_a_copy(self) -> bool:
         """Was the answer just returned taken as one that may be a copy (``took``)? Then it

@@ -110,7 +110,7 @@ class SerialFraming:
     # -- what waits --------------------------------------------------------------------
     def waiting(self) -> bool:
         """Is anything waiting to be read (one cheap check before a request)?"""
-        return bool(self.decoder.buf) or bool(self._pending())
+        return bool(self.decoder.buf or self._pending())
 
     def clear(self) -> None:
         """Forget what is buffered (the line was in another mode, or reset)."""
@@ -144,7 +144,6 @@ class SerialFraming:
         if o._sent_tracers and req.opcode in o._sent_wanted:
             o._trace_sent(raw, req)
         dec = self.decoder
-        dec.forget_noise()
         host = dec.host = o.host_address  # (the client's may change between requests)
         buf = dec.buf
         deadline = time.monotonic() + timeout
@@ -198,6 +197,9 @@ class SerialFraming:
             wait = deadline - time.monotonic()
         else:
             wait = timeout
+        # the decoder reads from here on (the common case above never needs it): noise
+        # before this request does not make its first window suspect
+        dec.forget_noise()
         junk = bytearray()
         garbled = False  # bytes that were no frame came since the last whole frame
         memory = kind == _MEMORY

@@ -35,6 +35,7 @@ try:  # bytes waiting on a POSIX descriptor (what pyserial's in_waiting asks, mi
 except ImportError:  # pragma: no cover - Windows: pyserial's in_waiting
     _FIONREAD = None
 _FOUR_ZEROS = bytes(4)
+_BYTEORDER = sys.byteorder  # (asked before every request)
 
 WRITE_TIMEOUT = 2.0  # a write that cannot finish in this time means the port is stuck
 
@@ -153,7 +154,14 @@ class SerialTransport(StreamTransport):
         fd = self._fd
         if fd is None:
             return super().transact(data, size, timeout)
-        self.write(data)
+        try:  # (write's common case, written out: once per request)
+            n = os.write(fd, data)
+        except BlockingIOError:
+            n = 0  # output buffer full: write() waits for room as pyserial does
+        except OSError as exc:
+            raise self._lost("write", exc) from exc
+        if n != len(data):
+            self.write(data[n:])
         # the reply mostly comes whole: one wait, one read; anything else as read() does it
         start = time.monotonic()
         try:
@@ -236,7 +244,7 @@ class SerialTransport(StreamTransport):
         if fd is not None and _FIONREAD is not None:
             # the client asks before every request: one ioctl, without pyserial's layers
             try:
-                return int.from_bytes(fcntl.ioctl(fd, _FIONREAD, _FOUR_ZEROS), sys.byteorder)
+                return int.from_bytes(fcntl.ioctl(fd, _FIONREAD, _FOUR_ZEROS), _BYTEORDER)
             except OSError as exc:
                 raise self._lost("status query", exc) from exc
         try:

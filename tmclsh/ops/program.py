@@ -235,9 +235,10 @@ def _ok(reply, what: str, expect: Iterable[int] = (Status.OK,)):
     return reply
 
 
-# a plain int: Request.make takes its fast path only for plain ints (Control is an IntEnum),
-# and a verify sends this once per instruction
+# plain ints: Request.make takes its fast path only for plain ints (Control is an IntEnum),
+# and a verify sends this once per instruction; an upload's every frame is answered LOADED
 _READ_MEMORY = int(Control.READ_MEMORY)
+_LOADED = int(Status.LOADED)
 
 
 def _send(client, opcode: int, type_: int = 0, motor: int = 0, value: int = 0, *,
@@ -273,6 +274,9 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
     total = len(instructions)
     acked = sent = 0
     failure: BaseException | None = None
+    # thousands of frames at the line's pace: what does not change during the download is
+    # looked up once (the module's address included: every frame goes to the one that got 132)
+    request, make, address = client.request, Request.make, client.address
     began = time.monotonic()
     client._downloading = True  # no retries: a repeated frame would be stored twice
     try:
@@ -280,8 +284,11 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
             f"start download (132) at address {start}")
         for ins in instructions:
             sent += 1
-            reply = _send(client, ins.opcode, ins.type, ins.motor, ins.value, timeout=timeout)
-            _ok(reply, f"instruction at address {start + acked}", (Status.LOADED,))
+            # (an Instruction holds plain ints in range, its value signed: make's fast path)
+            reply = request(make(address, ins.opcode, ins.type, ins.motor, ins.value),
+                            timeout=timeout)
+            if reply is None or reply.status != _LOADED:
+                _ok(reply, f"instruction at address {start + acked}", (Status.LOADED,))
             acked += 1
             if progress is not None:
                 progress("upload", acked, total)
@@ -434,7 +441,9 @@ def verify_image(client, instructions: Sequence[Instruction], start: int = 0, *,
     for idx, want in enumerate(instructions):
         if idx in doubtful:
             return Mismatch(start + idx, want, got[idx], doubtful=True, shared=shared)
-        if got[idx].to_bytes() != want.to_bytes():
+        # (equal Instructions are equal bytes, their values held signed; only what is not
+        # equal is compared as bytes, so an unnormalised value is no false difference)
+        if got[idx] != want and got[idx].to_bytes() != want.to_bytes():
             # a difference is said only when a second read says the same (a copy of another
             # frame that no suspect gave away would otherwise be named the cell's content)
             again = read_instruction(client, start + idx, timeout=timeout)

@@ -96,11 +96,11 @@ def _check_value(value: int) -> None:
         raise ValueError(f"value must fit 32 bits ({INT32_MIN}..{UINT32_MAX}), got {value!r}")
 
 
-# the first eight bytes of a serial frame, either direction; frozen dataclasses are filled the
-# way dataclasses fill them themselves by the hot-path constructors below
+# the first eight bytes of a serial frame, either direction; frozen dataclasses are filled
+# by the hot-path constructors below through their slots' descriptors (after the classes)
 _SERIAL_HEAD = struct.Struct(">BBBBi")
 _new = object.__new__
-_set = object.__setattr__
+_STATUS_OK = int(Status.OK)  # (a plain int: a read-back's status, once per 134 answer)
 
 
 def to_signed32(value: int) -> int:
@@ -200,12 +200,12 @@ class Request:
                 and 0 <= address <= 255 and 0 <= opcode <= 255 and 0 <= type <= 255
                 and 0 <= motor <= 255 and INT32_MIN <= value <= INT32_MAX):
             req = _new(cls)
-            _set(req, "address", address)
-            _set(req, "opcode", opcode)
-            _set(req, "type", type)
-            _set(req, "motor", motor)
-            _set(req, "value", value)
-            _set(req, "_frame", None)
+            _req_address(req, address)
+            _req_opcode(req, opcode)
+            _req_type(req, type)
+            _req_motor(req, motor)
+            _req_value(req, value)
+            _req_frame(req, None)
             return req
         return cls(address, opcode, type, motor, value)
 
@@ -216,7 +216,7 @@ class Request:
             body = _SERIAL_HEAD.pack(self.address, self.opcode, self.type, self.motor,
                                      self.value)
             frame = body + bytes((sum(body) & 0xFF,))
-            _set(self, "_frame", frame)
+            _req_frame(self, frame)
         return frame
 
     def to_can(self) -> bytes:
@@ -278,13 +278,13 @@ class Reply:
         is one byte or a signed 32-bit value, so there is nothing left to check (hot path)."""
         r = _new(cls)
         host, module, status, opcode, value = _SERIAL_HEAD.unpack_from(frame)
-        _set(r, "host", host)
-        _set(r, "module", module)
-        _set(r, "status", status)
-        _set(r, "opcode", opcode)
-        _set(r, "value", value)
-        _set(r, "version", None)
-        _set(r, "stored", None)
+        _reply_host(r, host)
+        _reply_module(r, module)
+        _reply_status(r, status)
+        _reply_opcode(r, opcode)
+        _reply_value(r, value)
+        _reply_version(r, None)
+        _reply_stored(r, None)
         return r
 
     @classmethod
@@ -294,18 +294,18 @@ class Reply:
         per instruction)."""
         host, op, type_, motor, value = _SERIAL_HEAD.unpack_from(frame)
         stored = _new(Instruction)
-        _set(stored, "opcode", op)
-        _set(stored, "type", type_)
-        _set(stored, "motor", motor)
-        _set(stored, "value", value)
+        _ins_opcode(stored, op)
+        _ins_type(stored, type_)
+        _ins_motor(stored, motor)
+        _ins_value(stored, value)
         r = _new(cls)
-        _set(r, "host", host)
-        _set(r, "module", module)
-        _set(r, "status", int(Status.OK))
-        _set(r, "opcode", opcode)
-        _set(r, "value", value)
-        _set(r, "version", None)
-        _set(r, "stored", stored)
+        _reply_host(r, host)
+        _reply_module(r, module)
+        _reply_status(r, _STATUS_OK)
+        _reply_opcode(r, opcode)
+        _reply_value(r, value)
+        _reply_version(r, None)
+        _reply_stored(r, stored)
         return r
 
     @property
@@ -393,6 +393,18 @@ class Reply:
             return f"<- host {self.host} stored {self.stored}"
         return (f"<- host {self.host} module {self.module} status {self.status} "
                 f"({self.status_text}) op {self.opcode} value {self.value}")
+
+
+# The hot-path constructors above fill the frozen slots through the slots' own descriptors:
+# ``object.__setattr__`` looks each name up first, a third of a request's making.
+(_req_address, _req_opcode, _req_type, _req_motor, _req_value, _req_frame) = (
+    Request.__dict__[f].__set__ for f in ("address", "opcode", "type", "motor", "value",
+                                          "_frame"))
+(_reply_host, _reply_module, _reply_status, _reply_opcode, _reply_value, _reply_version,
+ _reply_stored) = (Reply.__dict__[f].__set__ for f in ("host", "module", "status", "opcode",
+                                                        "value", "version", "stored"))
+(_ins_opcode, _ins_type, _ins_motor, _ins_value) = (
+    Instruction.__dict__[f].__set__ for f in ("opcode", "type", "motor", "value"))
 
 
 def hexdump(data: bytes) -> str:

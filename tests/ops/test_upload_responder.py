@@ -1,0 +1,135 @@
+"""An upload and its verify against a module written from the manual (``tests/responder.py``),
+not the simulator: the request path's fast lanes for thousands of frames (issue 34) keep every
+safety property. Each frame is stored once and answered LOADED, a refused frame ends the upload
+and download mode, the verify compares every word, and a copy of one read-back taken for the
+next cell's answer never passes that cell.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from tmclsh.client.text import LineClient
+from tmclsh.link import open_serial
+from tmclsh.ops import program
+from tmclsh.ops.program import UploadError
+from tmclsh.tmcl.frames import Instruction
+
+from responder import LOADED, INVALID_VALUE, Responder, fields, reply
+
+START, QUIT, READ = 132, 133, 134
+
+
+class ProgramModule(Responder):
+    """A TMCM-1311 with program memory, as the manual's control commands describe it: 132
+    starts download mode at the value's address, every frame then is stored (status 101, its
+    value echoed) until 133; 134 answers the stored instruction in the legacy layout (reply
+    address, then the seven stored bytes, then the checksum). ``refuse_at``: the address
+    whose frame is answered status 4 and not stored. ``stored_instead``: address -> the
+    seven bytes the cell holds whatever was sent (a cell that went bad). ``copy_first``:
+    addresses whose 134 is answered by a copy of the read-back before, then its own (a line
+    that repeats a reply, late)."""
+
+    def __init__(self, **kw):
+        self.memory: dict[int, bytes] = {}
+        self.downloading = False
+        self.at = 0
+        self.stores: list[int] = []  # every address a frame was stored at, in order
+        self.refuse_at: int | None = None
+        self.stored_instead: dict[int, bytes] = {}
+        self.copy_first: set[int] = set()
+        self.last_read = b""
+        super().__init__(**kw)
+
+    def answer(self, raw: bytes) -> bytes | None:
+        addr, cmd, _, _, value = fields(raw)
+        if addr != 1:
+            return None
+        if cmd == START:
+            self.downloading, self.at = True, value
+            return reply(cmd, value)
+        if cmd == QUIT:
+            self.downloading = False
+            return reply(cmd, 0)
+        if self.downloading and cmd < 128:
+            if self.at == self.refuse_at:
+                return reply(cmd, value, INVALID_VALUE)
+            self.memory[self.at] = self.stored_instead.get(self.at, raw[1:8])
+            self.stores.append(self.at)
+            self.at += 1
+            return reply(cmd, value, LOADED)
+        if cmd == READ:
+            body = bytes([2]) + self.memory.get(value, bytes(7))
+            own = body + bytes([sum(body) & 0xFF])
+            out = (self.last_read + own) if value in self.copy_first else own
+            self.last_read = own
+            return out
+        return super().answer(raw)
+
+
+@pytest.fixture
+def module():
+    m = ProgramModule()
+    yield m
+    m.close()
+
+
+@pytest.fixture
+def client(module):
+    c = LineClient(open_serial(module.path), module="TMCM-1311", timeout=1.0, retries=2)
+    yield c
+    c.close()
+
+
+def _program(n: int) -> list[Instruction]:
+    """``n`` instructions with values of every sign and width (SGP n, 2, value)."""
+    return [Instruction(9, i % 56, 2, (-1) ** i * (i * 977_123 % 2**31)) for i in range(n)]
+
+
+def test_every_frame_stored_once_and_every_word_verified(module, client):
+    prog = _program(300)
+    result = program.upload(client, prog, origin=5)
+    assert result.verified is True and result.mismatch is None
+    assert module.stores == list(range(5, 305))  # each once, in order, none repeated
+    assert [module.memory[5 + i] for i in range(300)] == [i.to_bytes() for i in prog]
+    assert not module.downloading
+    assert client.stats["timeouts"] == 0
+
+
+def test_a_refused_frame_ends_the_upload_and_download_mode(module, client):
+    module.refuse_at = 40
+    with pytest.raises(UploadError) as info:
+        program.upload(client, _program(100))
+    err = info.value
+    assert (err.acked, err.sent, err.download_ended) == (40, 40, True)
+    assert "instruction at address 40" in str(err)
+    assert module.stores == list(range(40))  # nothing after the refused frame was sent
+    assert not module.downloading
+
+
+@pytest.mark.parametrize("where", [0, 3, 6])  # the opcode, the motor, the value's top byte
+def test_verify_names_the_one_word_that_differs(module, client, where):
+    prog = _program(60)
+    bad = bytearray(prog[33].to_bytes())
+    bad[where] ^= 0x80
+    module.stored_instead[33] = bytes(bad)
+    result = program.upload(client, prog)
+    assert result.verified is False
+    assert result.mismatch is not None
+    assert (result.mismatch.address, result.mismatch.doubtful) == (33, False)
+    assert result.mismatch.actual.to_bytes() == bytes(bad)
+
+
+def test_a_copy_of_the_read_back_before_never_passes_a_cell(module, client):
+    # cells 20 and 21 are to hold the same instruction; 21 went bad on the module, and the
+    # line brings a copy of 20's read-back first when 21 is read: the copy matches what 21
+    # should hold, and must not be taken for 21's answer
+    prog = _program(40)
+    prog[21] = prog[20]
+    bad = bytearray(prog[21].to_bytes())
+    bad[6] ^= 0x01
+    module.stored_instead[21] = bytes(bad)
+    module.copy_first.add(21)
+    result = program.upload(client, prog)
+    assert result.verified is False
+    assert result.mismatch is not None and result.mismatch.address == 21
