@@ -179,10 +179,10 @@ class Request:
         # (its fields passed the same checks when the request was made: the simulator asks
         # this of every request it hears)
         ins = _new(Instruction)
-        _set(ins, "opcode", self.opcode)
-        _set(ins, "type", self.type)
-        _set(ins, "motor", self.motor)
-        _set(ins, "value", self.value)
+        _ins_opcode(ins, self.opcode)
+        _ins_type(ins, self.type)
+        _ins_motor(ins, self.motor)
+        _ins_value(ins, self.value)
         return ins
 
     @property
