@@ -20,7 +20,6 @@ colour, and a start-up does not pay for rich.
 
 from __future__ import annotations
 
-import json
 import os
 import re
 import sys
@@ -216,6 +215,15 @@ class Output:
     def console(self, value) -> None:
         self._console = value
 
+    def set_color(self, color: str) -> None:
+        """The ``color`` setting from now on ("never": the consoles made already lose their
+        colour too; those made later are made so)."""
+        self._color = color
+        if color == "never":
+            for console in (self._console, self._err):
+                if console is not None:
+                    console.no_color = True
+
     def flush(self) -> None:
         """Write out the results held back (see ``hold``)."""
         if self._held is None:
@@ -292,6 +300,8 @@ class Output:
             obj = {**self.tag, **obj}
         if self.simulated():
             obj = {**obj, "simulated": True}
+        import json  # (imported by the first JSON line: text output never needs it)
+
         self._write_json(json.dumps(obj, ensure_ascii=False) + "\n")
 
     # -- people -------------------------------------------------------------------------
@@ -370,6 +380,8 @@ class Output:
                 obj = {**self.tag, **obj}
             if self.simulated():
                 obj["simulated"] = True
+            import json  # (as in emit)
+
             line = json.dumps(obj, ensure_ascii=False) + "\n"
             self._write_json(line)
         else:
