@@ -10,7 +10,8 @@ import os
 import sys
 
 from ..base.errors import EXIT_CONNECT, EXIT_FAILED, EXIT_OK, EXIT_USAGE
-from .options import SUBCOMMANDS, build_parser, parse_args
+# (build_parser and parse_args: names scripts and tests take from here)
+from .options import SUBCOMMANDS, build_parser, parse_args, read_command_line  # noqa: F401
 
 
 # -- subcommands -------------------------------------------------------------------------
@@ -404,8 +405,7 @@ def _user_modules(args: argparse.Namespace) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    parser = build_parser()
-    args = parse_args(parser, argv)
+    parser, args = read_command_line(argv)
     debug = getattr(args, "debug", False)
     from ..base.edges import reader_gone
     from ..base.errors import TmclError, UsageError, exit_status
