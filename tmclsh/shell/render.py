@@ -31,7 +31,6 @@ from functools import wraps
 from typing import Any
 
 from ..base.edges import error_record
-from ..tmcl import asm
 from ..tmcl import instructions as isa
 from ..client.text import Result
 from ..tmcl.modules import Module, Parameter, type1_of
@@ -777,6 +776,8 @@ def describe_instruction(ins: Instruction, module: Module | None) -> str:
                                                     ("value", ins.signed_value)) if v]
             return f"{ins.opcode} {_control_name(ins.opcode)}" + (
                 f" ({', '.join(fields)})" if fields else "")
+    from ..tmcl import asm  # (the disassembler: a trace, .decode)
+
     text, comment = asm.disassemble_instruction(ins, module)
     return f"{text}  // {comment}" if comment else text
 
