@@ -221,3 +221,54 @@ def test_the_first_prompt_waits_for_no_rich_pygments_stop_or_units(a_1311, tmp_p
     late = ("rich", "pygments", "tmclsh.shell.repl.completer", "tmclsh.shell.repl.lexer",
             "tmclsh.ops.stop", "tmclsh.ops.units")
     assert sorted(m for m in modules if m.split(".")[0] in late or m in late) == []
+
+
+# -- the collector while tmclsh starts ------------------------------------------------------
+
+# count the collector's runs from the moment the start holds it; at each release say how
+# many there were and whether it was held
+GC_RUNNER = """
+import gc, runpy, sys
+from tmclsh.base import startup
+runs = []
+gc.callbacks.append(lambda phase, info: runs.append(info) if phase == "start" else None)
+hold, release = startup.hold, startup.release
+def held():
+    hold()
+    runs.clear()
+def released():
+    print(f"RELEASED {len(runs)} {gc.isenabled()}", file=sys.stderr)
+    release()
+    print(f"AFTER {gc.isenabled()}", file=sys.stderr)
+startup.hold, startup.release = held, released
+sys.argv = ["tmclsh", *sys.argv[1:]]
+runpy.run_module("tmclsh", run_name="__main__", alter_sys=True)
+"""
+
+
+def test_the_collector_waits_while_tmclsh_starts_and_runs_for_the_lines(a_1311):
+    """From the first import to the first line the garbage collector does not run (it walked
+    the start's objects again and again: 5 ms of a -c run); the lines run with it on."""
+    proc = subprocess.run([sys.executable, "-c", GC_RUNNER, "--port", a_1311, "-m",
+                           "TMCM-1311", "-c", "GAP 1, 0"], capture_output=True, text=True,
+                          timeout=60, env=tmclsh_env(), cwd=str(ROOT))
+    assert proc.returncode == 0 and proc.stdout.startswith("ActualPosition"), proc.stderr
+    said = [line.split() for line in proc.stderr.splitlines()
+            if line.startswith(("RELEASED", "AFTER"))]
+    assert said[:2] == [["RELEASED", "0", "False"], ["AFTER", "True"]], proc.stderr
+
+
+def test_the_collector_runs_again_whatever_way_the_command_line_ends(capsys):
+    """In a process that calls the entry (a test, a script): on again after a subcommand, an
+    error and the completions."""
+    import gc
+
+    from tmclsh.cli import main as cli
+
+    assert gc.isenabled()
+    assert cli.main(["--completions", "bash"]) == 0 and gc.isenabled()
+    with pytest.raises(SystemExit):
+        cli.main(["bogus"])
+    assert gc.isenabled()
+    assert cli.main(["modules"]) == 0 and gc.isenabled()
+    capsys.readouterr()

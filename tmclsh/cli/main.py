@@ -404,7 +404,17 @@ def _user_modules(args: argparse.Namespace) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
+    from ..base import startup
+
+    if argv is None:  # the process's own command line (not a caller's list: a test, a script)
+        startup.hold()  # (the collector, while tmclsh starts: base/startup.py)
+    try:
+        return _main(sys.argv[1:] if argv is None else argv)
+    finally:
+        startup.release()
+
+
+def _main(argv: list[str]) -> int:
     parser, args = read_command_line(argv)
     debug = getattr(args, "debug", False)
     from ..base.edges import reader_gone
@@ -424,6 +434,9 @@ def main(argv: list[str] | None = None) -> int:
                    "replace": cmd_replace, "monitor": cmd_monitor,
                    "bridge": cmd_bridge, "replay": cmd_replay}.get(args.subcommand or "")
         if handler is not None:
+            from ..base import startup
+
+            startup.release()
             return handler(args)
         from ..shell.lang.entry import enter
 

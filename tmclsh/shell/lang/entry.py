@@ -25,8 +25,10 @@ def enter(args: argparse.Namespace) -> int:
 
     units = plan_units(args)
     if len(units) > 1:
+        from ...base import startup
         from ..features.units import run_units
 
+        startup.release()
         return run_units(args, units)
     return run_shell(args)
 

@@ -436,12 +436,15 @@ def _after_first_prompt(ps: PromptSession, work: Callable[[], None]) -> None:
 def warm_up(session: Session) -> None:
     """What the first commands need and the start did not wait for: the safety stop Ctrl-C
     sends (``ops/stop.py``, so the first Ctrl-C does not wait for an import), rich for the
-    first result, the lexer for the first key, the completer for the first Tab."""
+    first result, the lexer for the first key, the completer for the first Tab; then the
+    garbage collector held off during the start runs again."""
+    from ...base import startup
     from ...ops import stop  # noqa: F401
     from ..render import load_rich
     from . import completer, lexer  # noqa: F401
 
     load_rich()
+    startup.release()  # (the start is over: base/startup.py)
 
 
 def run_text(session: Session, text: str) -> bool:
