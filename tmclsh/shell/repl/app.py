@@ -426,9 +426,13 @@ def run_repl(session: Session, prompt_session: PromptSession | None = None) -> i
 def _after_first_prompt(ps: PromptSession, work: Callable[[], None]) -> None:
     """``work`` once, as soon as the first prompt is on the screen (prompt_toolkit has drawn
     and flushed it): what it costs falls in the moment the user reads the prompt."""
+    done = False
+
     def once(_app: object) -> None:
-        ps.app.after_render -= once
-        work()
+        nonlocal done  # (a flag, not the handler taken off: the event is being fired)
+        if not done:
+            done = True
+            work()
 
     ps.app.after_render += once
 
