@@ -617,16 +617,29 @@ def bench_script_json(args: argparse.Namespace) -> dict:
 
 # -- start-up ---------------------------------------------------------------------------------
 
-def _fastest(argv: list[str], env: dict, runs: int, cwd: str) -> float:
+def _fastest(argv: list[str], env: dict, runs: int, cwd: str,
+             cpu: list[float] | None = None) -> float:
+    """The fastest of ``runs`` whole processes (wall seconds); each one's CPU seconds (user
+    and system, from the kernel's count for ended children) appended to ``cpu``."""
     best = float("inf")
     for _ in range(runs):
+        c0 = _children_cpu()
         t0 = time.perf_counter()
         proc = subprocess.run(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
                               cwd=cwd, timeout=60)
         best = min(best, time.perf_counter() - t0)
+        if cpu is not None:
+            cpu.append(_children_cpu() - c0)
         if proc.returncode != 0:
             raise RuntimeError(f"{argv} failed: {proc.stderr.decode()[-500:]}")
     return best
+
+
+def _children_cpu() -> float:
+    import resource
+
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return kids.ru_utime + kids.ru_stime
 
 
 PROCESS_TARGET = 4.0  # issue 34: a cold -c at most 4x the interpreter importing pyserial
@@ -639,17 +652,22 @@ def bench_process(args: argparse.Namespace) -> dict:
     with SimProcess(args.module) as sim:
         argv = tmclsh_cmd("--port", sim.path, "-m", args.module, "-c", "GAP 1, 0")
         _fastest(argv, env, 1, args.state_dir)  # the data cache, the page cache
+        cpu: dict[str, list[float]] = {"python": [], "tmclsh": []}
         best = alternate(args.rounds, {
             "python": lambda: _fastest([sys.executable, "-c", "import serial"], env, runs // 2,
-                                       args.state_dir),
-            "tmclsh": lambda: _fastest(argv, env, runs // 2, args.state_dir)}, args.verbose)
+                                       args.state_dir, cpu["python"]),
+            "tmclsh": lambda: _fastest(argv, env, runs // 2, args.state_dir, cpu["tmclsh"])},
+            args.verbose)
     ratio = best["tmclsh"] / best["python"]
+    # CPU: the least each process took (the wall clock on a busy machine waits for others)
+    cpu_ratio = min(cpu["tmclsh"]) / min(cpu["python"])
     say(f"process: python -c 'import serial' {best['python'] * 1e3:.1f} ms, tmclsh -c "
-        f"{best['tmclsh'] * 1e3:.1f} ms: {ratio:.2f}x")
+        f"{best['tmclsh'] * 1e3:.1f} ms: {ratio:.2f}x; CPU {min(cpu['python']) * 1e3:.0f} ms "
+        f"and {min(cpu['tmclsh']) * 1e3:.0f} ms: {cpu_ratio:.2f}x ({load_note()})")
     return row({"benchmark": "process", "python_ms": round(best["python"] * 1e3, 1),
-                "tmclsh_ms": round(best["tmclsh"] * 1e3, 1)},
+                "tmclsh_ms": round(best["tmclsh"] * 1e3, 1), "cpu_ratio": round(cpu_ratio, 3)},
                'tmclsh --port P -m TMCM-1311 -c "GAP 1, 0", whole process', ratio,
-               'x python -c "import serial"', PROCESS_TARGET)
+               'x python -c "import serial"', PROCESS_TARGET, f"CPU {cpu_ratio:.2f}x")
 
 
 HEAVY = ("prompt_toolkit", "rich", "pygments", "asyncio", "can")
@@ -688,12 +706,28 @@ def bench_repl(args: argparse.Namespace) -> dict:
     """Seconds from starting ``tmclsh --port P -m TMCM-1311`` on a pseudo-terminal to the
     prompt appearing on it, beside a bare ``PromptSession().prompt()`` showing the same
     prompt on the same kind of terminal, the two alternating (the fastest of several starts
-    each); the row is the ratio."""
+    each); the row is the ratio. Beside it the CPU time each had spent when its prompt
+    appeared (the kernel's count of the process's threads, ``/proc/PID/task/*/schedstat``):
+    on a busy machine the steadier figure (it leaves out the waits, the module's answers
+    to the connect among them)."""
     import pty
     import re
     import select
 
-    def start(argv: list[str]) -> float:
+    cpu_at_prompt: dict[str, list[float]] = {"prompt_toolkit": [], "tmclsh": []}
+
+    def cpu_of(pid: int) -> float:
+        """Seconds on a CPU of every thread of ``pid`` so far (nan where Linux does not say)."""
+        total = 0
+        try:
+            for task in os.listdir(f"/proc/{pid}/task"):
+                with open(f"/proc/{pid}/task/{task}/schedstat") as f:
+                    total += int(f.read().split()[0])
+        except (OSError, ValueError, IndexError):
+            return float("nan")
+        return total / 1e9
+
+    def start(argv: list[str], who: str = "") -> float:
         pid, fd = pty.fork()
         if pid == 0:
             env = tree_env(args, TERM="xterm", COLUMNS="100", LINES="30")
@@ -716,6 +750,8 @@ def bench_repl(args: argparse.Namespace) -> dict:
                 seen += chunk
                 if re.search(rb"TMCM-\d+:\d+(\x1b\[[0-9;?]*[a-zA-Z])*>", seen):
                     took = time.perf_counter() - t0
+                    if who:
+                        cpu_at_prompt[who].append(cpu_of(pid))
                     break
             os.write(fd, b"\x04")  # Ctrl-D: leave
             deadline = time.time() + 5
@@ -743,15 +779,20 @@ def bench_repl(args: argparse.Namespace) -> dict:
         shell = tmclsh_cmd("--port", sim.path, "-m", args.module)
         start(shell)
         start(bare)  # the page cache and the data cache warm for both
-        best = alternate(runs, {"prompt_toolkit": lambda: start(bare),
-                                "tmclsh": lambda: start(shell)}, args.verbose)
+        best = alternate(runs, {"prompt_toolkit": lambda: start(bare, "prompt_toolkit"),
+                                "tmclsh": lambda: start(shell, "tmclsh")}, args.verbose)
     ratio = best["tmclsh"] / best["prompt_toolkit"]
+    cpu = {who: min(v) for who, v in cpu_at_prompt.items()}
+    cpu_ratio = cpu["tmclsh"] / cpu["prompt_toolkit"]
     say(f"repl: first prompt after {best['tmclsh']:.3f} s, a bare prompt_toolkit prompt after "
-        f"{best['prompt_toolkit']:.3f} s: {ratio:.2f}x (fastest of {runs})")
+        f"{best['prompt_toolkit']:.3f} s: {ratio:.2f}x (fastest of {runs}); CPU at the prompt "
+        f"{cpu['tmclsh'] * 1e3:.0f} ms and {cpu['prompt_toolkit'] * 1e3:.0f} ms: "
+        f"{cpu_ratio:.2f}x ({load_note()})")
     return row({"benchmark": "repl", "tmclsh_s": round(best["tmclsh"], 3),
-                "prompt_toolkit_s": round(best["prompt_toolkit"], 3)},
+                "prompt_toolkit_s": round(best["prompt_toolkit"], 3),
+                "cpu_ratio": round(cpu_ratio, 3)},
                "REPL: start to first prompt", ratio, "x PromptSession().prompt()", REPL_TARGET,
-               f"{best['tmclsh']:.3f} s")
+               f"{best['tmclsh']:.3f} s; CPU {cpu_ratio:.2f}x")
 
 
 # -- program upload ---------------------------------------------------------------------------
@@ -936,7 +977,7 @@ def bench_firmware(args: argparse.Namespace) -> dict:
             ser = serial.serial_for_url(path, baudrate=BAUD, timeout=1.0)
             try:
                 write, read = ser.write, ser.read
-                t0 = time.perf_counter()
+                t0, c0 = time.perf_counter(), time.process_time()
                 restarting = False
                 for kind, frame in frames:
                     write(frame)
@@ -956,6 +997,7 @@ def bench_firmware(args: argparse.Namespace) -> dict:
                     if len(reply) != 9:
                         raise RuntimeError(f"raw update: no reply to {frame.hex()}")
                 took = time.perf_counter() - t0
+                cpu["raw"].append(time.process_time() - c0)
                 assert reply[1:5] == b"1311" and reply[5:6] == b"V", reply  # it runs again
             finally:
                 ser.close()
@@ -965,9 +1007,10 @@ def bench_firmware(args: argparse.Namespace) -> dict:
             image = boot.read_image(_firmware_hex(folder, next(_FIRMWARE_VERSIONS)))
             update = firmware.Update({"port": path, "baud": BAUD, "timeout": 1.0}, image)
             try:
-                t0 = time.perf_counter()
+                t0, c0 = time.perf_counter(), time.process_time()
                 result = update.run()
                 took = time.perf_counter() - t0
+                cpu["tmclsh"].append(time.process_time() - c0)
             finally:
                 update.close()
             assert result.written == FIRMWARE_SIZE and not result.nothing_to_do, result
@@ -981,6 +1024,9 @@ def bench_firmware(args: argparse.Namespace) -> dict:
             # machine's round trip drifts within seconds, so the row's figure is the median
             # of the rounds' ratios, not a ratio of two bests measured apart
             ratios, raws, ours = [], [], []
+            # each round's CPU seconds of this process (steadier than the wall clock on a
+            # busy machine: what the two sides themselves spend, the simulator's apart)
+            cpu: dict[str, list[float]] = {"raw": [], "tmclsh": []}
             for rnd in range(rounds):
                 if rnd % 2:
                     ours.append(tmclsh_round(sim.path))
@@ -990,16 +1036,20 @@ def bench_firmware(args: argparse.Namespace) -> dict:
                     ours.append(tmclsh_round(sim.path))
                 ratios.append(ours[-1] / raws[-1])
                 if args.verbose:
-                    say(f"  round {rnd + 1}: raw {raws[-1]:.3f} s, tmclsh {ours[-1]:.3f} s: "
+                    say(f"  round {rnd + 1}: raw {raws[-1]:.3f} s (cpu {cpu['raw'][-1]:.3f}), "
+                        f"tmclsh {ours[-1]:.3f} s (cpu {cpu['tmclsh'][-1]:.3f}): "
                         f"{ratios[-1]:.2f}x")
     ratio = statistics.median(ratios)
+    cpu_ratio = statistics.median(o / r for o, r in zip(cpu["tmclsh"], cpu["raw"]))
     say(f"  raw {min(raws):.3f}..{max(raws):.3f} s, tmclsh {min(ours):.3f}..{max(ours):.3f} s;"
-        f" ratio per round {min(ratios):.2f}..{max(ratios):.2f}, median {ratio:.2f}x")
+        f" ratio per round {min(ratios):.2f}..{max(ratios):.2f}, median {ratio:.2f}x; "
+        f"CPU median {cpu_ratio:.2f}x ({load_note()})")
     result = {"benchmark": "firmware", "bytes": FIRMWARE_SIZE, "raw_s": round(min(raws), 3),
-              "tmclsh_s": round(min(ours), 3),
+              "tmclsh_s": round(min(ours), 3), "cpu_ratio": round(cpu_ratio, 3),
               **rounded(spread(ratios))}
     return row(result, f"firmware update of {FIRMWARE_SIZE // 1024} KiB", ratio, "x raw", 1.1,
-               note=f"median of {rounds} rounds, {min(ratios):.2f}..{max(ratios):.2f}")
+               note=f"median of {rounds} rounds, {min(ratios):.2f}..{max(ratios):.2f}; "
+                    f"CPU {cpu_ratio:.2f}x")
 
 
 @benchmark("firmware-pytrinamic", "64 KiB firmware update: tmclsh firmware vs PyTrinamic's "

@@ -272,3 +272,27 @@ def test_python_m_tmclsh_config(tmp_path, bench):
     config.config_file().write_text("[settings]\nbogus = 1\n")
     out = run()
     assert out.returncode == 1 and "unknown setting(s) bogus" in out.stderr
+
+
+def test_an_empty_config_is_read_without_the_guard_a_parser_needs(tmp_path, monkeypatch):
+    """The guard around a config file's parser (a watching thread, a pipe, the memory
+    limit: base/files.bounded_read) is for text a parser reads; an empty file (the
+    TMCLSH_CONFIG=/dev/null of scripts and tests) is read at every start without it."""
+    from contextlib import contextmanager
+
+    from tmclsh.base import files
+
+    guarded: list[str] = []
+
+    @contextmanager
+    def counting(name, what="file", limit=files.MAX_READ_MEMORY):
+        guarded.append(name)
+        yield
+
+    monkeypatch.setattr(files, "bounded_read", counting)
+    empty = tmp_path / "empty.toml"
+    empty.write_text("\n  \n")
+    assert load_config(empty).settings == {} and guarded == []
+    full = tmp_path / "full.toml"
+    full.write_text('[settings]\ncolor = "never"\n')
+    assert load_config(full).settings["color"] == "never" and guarded == [str(full)]

@@ -107,3 +107,33 @@ def test_stdin_that_is_not_a_terminal_runs_as_a_script(tmp_path):
     p = tmclsh("--sim", stdin="SAP 4, 0, 321\nGAP 4, 0\n", tmp=tmp_path)
     assert p.returncode == 0, p.stderr
     assert "MaxPositioningSpeed = 321 pps" in p.stdout
+
+
+def test_a_shell_run_is_read_without_the_subcommands_parsers_and_says_the_same(capsys):
+    """``-c``, ``-f`` and the prompt are read by a parser without the eleven subcommands'
+    parsers (most of what the parser costs at every start); a subcommand, help, an error,
+    ``--man`` (abbreviated too) and ``--completions`` by the whole one, with its words."""
+    import argparse
+
+    import pytest
+
+    from tmclsh.cli.options import SUBCOMMANDS, build_parser, read_command_line
+
+    def subparsers(parser: argparse.ArgumentParser) -> set[str]:
+        return {name for a in parser._actions if isinstance(a, argparse._SubParsersAction)
+                for name in a.choices}
+
+    parser, args = read_command_line(["--port", "/dev/ttyACM0", "-c", "GAP 1, 0"])
+    assert subparsers(parser) == set() and args.command == "GAP 1, 0" and args.subcommand is None
+    parser, args = read_command_line(["-c", "scan"])  # (a word that is a subcommand's name)
+    assert args.command == "scan"
+    for argv in (["scan"], ["ports"], ["--ma"], ["--completions", "bash"]):
+        parser, _ = read_command_line(argv)
+        assert subparsers(parser) == set(SUBCOMMANDS), argv
+    for argv in (["--help"], ["--baud", "fast", "-c", "GAP 1, 0"], ["bogus"]):
+        with pytest.raises(SystemExit) as read:
+            read_command_line(argv)
+        said = capsys.readouterr()
+        with pytest.raises(SystemExit) as whole:
+            build_parser().parse_args(argv)
+        assert (read.value.code, said) == (whole.value.code, capsys.readouterr()), argv

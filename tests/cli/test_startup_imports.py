@@ -10,6 +10,7 @@ with output to a pipe as in a script.
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 
@@ -21,8 +22,12 @@ HEAVY = ("prompt_toolkit", "rich", "pygments", "asyncio", "can")
 
 # run tmclsh's main() as `python -m tmclsh` would, then write sys.modules to stderr's last line
 RUNNER = """
-import atexit, json, runpy, sys
-atexit.register(lambda: print("MODULES " + json.dumps(sorted(sys.modules)), file=sys.stderr))
+import atexit, runpy, sys
+def dump():
+    names = sorted(sys.modules)  # (before json is imported for writing them)
+    import json
+    print("MODULES " + json.dumps(names), file=sys.stderr)
+atexit.register(dump)
 sys.argv = ["tmclsh", *sys.argv[1:]]
 runpy.run_module("tmclsh", run_name="__main__", alter_sys=True)
 """
@@ -118,3 +123,152 @@ def test_port_path_loads_the_data_cache_not_the_parsers(a_1311, tmp_path):
     proc, modules = loaded(*args, env=env)
     assert proc.returncode == 0 and proc.stdout.startswith("ActualPosition"), proc.stderr
     assert sorted(m for m in modules if m.startswith(ON_DEMAND)) == []
+
+
+# loaded where they are used, not at every start: the units' machinery (a command line that
+# names several units), logging (something logged), json (a JSON line written)
+NOT_FOR_ONE_MODULE = ("tmclsh.ops.units", "tmclsh.shell.features.units", "logging", "json")
+
+
+def test_a_run_of_one_module_loads_no_units_logging_or_json(a_1311):
+    proc, modules = loaded("--port", a_1311, "-m", "TMCM-1311", "-c", "GAP 1, 0")
+    assert proc.returncode == 0 and proc.stdout.startswith("ActualPosition"), proc.stderr
+    assert sorted(m for m in modules if m in NOT_FOR_ONE_MODULE) == []
+
+
+def test_several_units_are_still_told_apart(a_1311):
+    """A link given twice is a command line naming several units: read as such (here
+    refused, as two units on one link), not as a run of one module."""
+    proc, _ = loaded("--port", a_1311, "--port", a_1311, "-c", "GAP 1, 0")
+    assert proc.returncode == 2 and f"--port {a_1311} is given twice" in proc.stderr
+
+
+# -- the prompt's start -------------------------------------------------------------------
+
+# run the shell on a terminal; at the moment its first prompt is on the screen (warm_up,
+# which prompt_toolkit calls once it has drawn it) write sys.modules to the file named first
+PROMPT_RUNNER = """
+import json, runpy, sys
+from tmclsh.shell.repl import app
+out, warm_up = sys.argv.pop(1), app.warm_up
+def at_first_prompt(session):
+    with open(out + ".tmp", "w") as f:
+        json.dump(sorted(sys.modules), f)
+    import os
+    os.replace(out + ".tmp", out)
+    warm_up(session)
+app.warm_up = at_first_prompt
+sys.argv = ["tmclsh", *sys.argv[1:]]
+runpy.run_module("tmclsh", run_name="__main__", alter_sys=True)
+"""
+
+
+def modules_at_first_prompt(tmp_path, *args: str) -> tuple[set, str]:
+    """What the shell had imported when its first prompt was on the (pseudo-)terminal, and
+    what the terminal showed by then."""
+    import pty
+    import select
+    import time
+
+    from conftest import patience
+
+    snapshot = tmp_path / "modules.json"
+    env = tmclsh_env(TERM="xterm", COLUMNS="100", LINES="30", XDG_STATE_HOME=str(tmp_path))
+    pid, fd = pty.fork()
+    if pid == 0:  # (the child: the shell on the terminal)
+        os.chdir(ROOT)
+        os.execve(sys.executable, [sys.executable, "-c", PROMPT_RUNNER, str(snapshot), *args],
+                  env)
+    screen = b""
+    try:
+        deadline = time.monotonic() + patience(30)
+        while not snapshot.exists() and time.monotonic() < deadline:
+            if select.select([fd], [], [], 0.1)[0]:
+                try:
+                    chunk = os.read(fd, 4096)
+                except OSError:
+                    break
+                if b"\x1b[6n" in chunk:
+                    os.write(fd, b"\x1b[1;1R")  # (the cursor position prompt_toolkit asks)
+                screen += chunk
+        assert snapshot.exists(), f"no prompt; the terminal showed {screen[-400:]!r}"
+        os.write(fd, b"\x04")  # Ctrl-D: leave
+        deadline = time.monotonic() + patience(30)
+        while not os.waitpid(pid, os.WNOHANG)[0]:
+            assert time.monotonic() < deadline, "the shell did not end on Ctrl-D"
+            if select.select([fd], [], [], 0.1)[0]:
+                try:
+                    os.read(fd, 4096)  # (what it writes while leaving)
+                except OSError:
+                    pass
+        pid = 0
+    finally:
+        os.close(fd)
+        if pid:
+            os.kill(pid, 9)
+            os.waitpid(pid, 0)
+    return set(json.loads(snapshot.read_text())), screen.decode(errors="replace")
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="needs a pseudo-terminal")
+def test_the_first_prompt_waits_for_no_rich_pygments_stop_or_units(a_1311, tmp_path):
+    """The banner is drawn by prompt_toolkit, the prompt's own library; rich (the first
+    result), pygments (the lexer: the first key), the completer (the first Tab), the stop
+    (the first Ctrl-C) and the units' machinery come after the prompt is on the screen."""
+    modules, screen = modules_at_first_prompt(tmp_path, "--port", a_1311, "-m", "TMCM-1311")
+    assert "TMCM-1311" in screen and "at address 1" in screen and "Ctrl-D quits" in screen
+    assert "prompt_toolkit" in modules
+    late = ("rich", "pygments", "tmclsh.shell.repl.completer", "tmclsh.shell.repl.lexer",
+            "tmclsh.ops.stop", "tmclsh.ops.units")
+    assert sorted(m for m in modules if m.split(".")[0] in late or m in late) == []
+
+
+# -- the collector while tmclsh starts ------------------------------------------------------
+
+# count the collector's runs from the moment the start holds it; at each release say how
+# many there were and whether it was held
+GC_RUNNER = """
+import gc, runpy, sys
+from tmclsh.base import startup
+runs = []
+gc.callbacks.append(lambda phase, info: runs.append(info) if phase == "start" else None)
+hold, release = startup.hold, startup.release
+def held():
+    hold()
+    runs.clear()
+def released():
+    print(f"RELEASED {len(runs)} {gc.isenabled()}", file=sys.stderr)
+    release()
+    print(f"AFTER {gc.isenabled()}", file=sys.stderr)
+startup.hold, startup.release = held, released
+sys.argv = ["tmclsh", *sys.argv[1:]]
+runpy.run_module("tmclsh", run_name="__main__", alter_sys=True)
+"""
+
+
+def test_the_collector_waits_while_tmclsh_starts_and_runs_for_the_lines(a_1311):
+    """From the first import to the first line the garbage collector does not run (it walked
+    the start's objects again and again: 5 ms of a -c run); the lines run with it on."""
+    proc = subprocess.run([sys.executable, "-c", GC_RUNNER, "--port", a_1311, "-m",
+                           "TMCM-1311", "-c", "GAP 1, 0"], capture_output=True, text=True,
+                          timeout=60, env=tmclsh_env(), cwd=str(ROOT))
+    assert proc.returncode == 0 and proc.stdout.startswith("ActualPosition"), proc.stderr
+    said = [line.split() for line in proc.stderr.splitlines()
+            if line.startswith(("RELEASED", "AFTER"))]
+    assert said[:2] == [["RELEASED", "0", "False"], ["AFTER", "True"]], proc.stderr
+
+
+def test_the_collector_runs_again_whatever_way_the_command_line_ends(capsys):
+    """In a process that calls the entry (a test, a script): on again after a subcommand, an
+    error and the completions."""
+    import gc
+
+    from tmclsh.cli import main as cli
+
+    assert gc.isenabled()
+    assert cli.main(["--completions", "bash"]) == 0 and gc.isenabled()
+    with pytest.raises(SystemExit):
+        cli.main(["bogus"])
+    assert gc.isenabled()
+    assert cli.main(["modules"]) == 0 and gc.isenabled()
+    capsys.readouterr()

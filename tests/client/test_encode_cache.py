@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from tmclsh.tmcl import asm
+from tmclsh.tmcl import asmline as asm  # (where the client reads a line: parse_line, encode)
 from tmclsh.client import text as client_module
 from tmclsh.client.ascii import AsciiLink
 from tmclsh.base.errors import AsmError, TmclTimeoutError

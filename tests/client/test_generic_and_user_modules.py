@@ -110,7 +110,7 @@ def test_banner_and_toolbar_say_numbers_only():
 
         client = start(LineClient(open_serial(m.url), timeout=1))
         session = Session(client, Output())
-        assert "TMCM-1161 (no parameter data: numbers only)" in banner(session).plain
+        assert "TMCM-1161 (no parameter data: numbers only)" in "".join(f[1] for f in banner(session))
         text = "".join(f[1] for f in create_toolbar_tokens_func(session)())
         assert "TMCM-1161 (no parameter data: numbers only)" in text
         client.close()

@@ -5,6 +5,8 @@ not agree; a link lost and a module gone silent in the middle, then the same upd
 
 from __future__ import annotations
 
+import os
+import threading
 import uuid
 
 import pytest
@@ -364,6 +366,67 @@ def test_a_usb_module_is_found_again_under_its_port_name(make_pty_sim, monkeypat
     _, result, _ = run({"port": path}, sim_image())
     assert reopened == ["bootloader", "starting"]
     assert result.new_version == "1311V112" == version_of(sim)
+
+
+class UsbModule(BootModule):
+    """A module on its own USB port, written from what the bus does: its port (``port``, a
+    link to the pty, as udev names one) is gone from the moment it restarts (242, 205)
+    until it is back on the bus a moment later, under the same name."""
+
+    def __init__(self, port, **kw):
+        super().__init__(**kw)
+        self.port = str(port)
+        os.symlink(self.path, self.port)
+        self.back: list[threading.Timer] = []
+
+    def reset_to(self, bootloader: bool) -> None:
+        super().reset_to(bootloader)
+        os.unlink(self.port)  # (it leaves the bus)
+        back = threading.Timer(0.2, os.symlink, (self.path, self.port))
+        back.start()
+        self.back.append(back)
+
+    def close(self) -> None:
+        for back in self.back:
+            back.join()
+        super().close()
+
+
+def test_a_usb_module_is_opened_again_once_it_has_left_not_after_a_fixed_wait(
+        tmp_path, monkeypatch):
+    """After 242 and 205 the updater watches the port go and opens it again when it is
+    back: none of its own waits is a fixed one (it slept 1 s after each restart before)."""
+    import termios
+    import time
+    from types import SimpleNamespace
+
+    import tmclsh.ops.firmware as fw
+
+    slept: list[float] = []
+
+    def sleep(seconds: float) -> None:
+        slept.append(seconds)
+        time.sleep(seconds)
+
+    monkeypatch.setattr(fw, "time", SimpleNamespace(sleep=sleep, monotonic=time.monotonic))
+    monkeypatch.setattr(FirmwareUpdate, "_usb", lambda self: True)
+    reopened = []
+    real = FirmwareUpdate._reopen
+
+    def counting(self):
+        reopened.append(self.state)
+        real(self)
+
+    monkeypatch.setattr(FirmwareUpdate, "_reopen", counting)
+    module = UsbModule(tmp_path / "ttyACM0", app_speed=termios.B115200)
+    try:
+        image = model_image()
+        _, result, _ = run({"port": module.port, "baud": 115200}, image)
+        assert (result.old_version, result.new_version) == ("1311V111", "1311V112")
+        assert reopened == ["bootloader", "starting"]
+        assert max(slept, default=0) < 0.1, slept  # (only looks at the port, never a wait)
+    finally:
+        module.close()
 
 
 # -- the image measured before the restart (issue 31) --------------------------------------

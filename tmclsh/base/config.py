@@ -229,6 +229,10 @@ def load_config(path: Path | None = None) -> Config:
         raise SettingError(str(exc)) from None
     except OSError as exc:  # a path the OS refuses to look at (too long, no permission)
         raise SettingError(f"cannot read {path}: {exc.strerror}") from None
+    if not text.strip():
+        # nothing for a parser to read (TMCLSH_CONFIG=/dev/null, an empty file): no guard
+        # is set up for it (a watching thread, a pipe, the memory limit), at every start
+        return parse_config(text, path)
     with bounded_read(str(path), "config file"):
         return parse_config(text, path)
 

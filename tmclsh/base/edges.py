@@ -10,7 +10,6 @@ shell's lines, ``scan``, ``firmware``, ``monitor``, ``bridge``): ``{"line": ...,
 
 from __future__ import annotations
 
-import json
 import os
 import sys
 from typing import Any, TextIO
@@ -32,6 +31,8 @@ def error_record(message: str, status: int | None = None, *, line: str | None = 
 def write_json(obj: dict[str, Any], stream: TextIO | None = None) -> None:
     """One JSON object as one line, flushed at once: a program reading the pipe sees each
     result as it happens, not when a buffer fills."""
+    import json  # (here: a run that writes no JSON does not import it)
+
     out = stream if stream is not None else sys.stdout
     out.write(json.dumps(obj) + "\n")
     out.flush()

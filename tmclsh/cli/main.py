@@ -10,7 +10,8 @@ import os
 import sys
 
 from ..base.errors import EXIT_CONNECT, EXIT_FAILED, EXIT_OK, EXIT_USAGE
-from .options import SUBCOMMANDS, build_parser, parse_args
+# (build_parser and parse_args: names scripts and tests take from here)
+from .options import SUBCOMMANDS, build_parser, parse_args, read_command_line  # noqa: F401
 
 
 # -- subcommands -------------------------------------------------------------------------
@@ -403,9 +404,18 @@ def _user_modules(args: argparse.Namespace) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    parser = build_parser()
-    args = parse_args(parser, argv)
+    from ..base import startup
+
+    if argv is None:  # the process's own command line (not a caller's list: a test, a script)
+        startup.hold()  # (the collector, while tmclsh starts: base/startup.py)
+    try:
+        return _main(sys.argv[1:] if argv is None else argv)
+    finally:
+        startup.release()
+
+
+def _main(argv: list[str]) -> int:
+    parser, args = read_command_line(argv)
     debug = getattr(args, "debug", False)
     from ..base.edges import reader_gone
     from ..base.errors import TmclError, UsageError, exit_status
@@ -424,6 +434,9 @@ def main(argv: list[str] | None = None) -> int:
                    "replace": cmd_replace, "monitor": cmd_monitor,
                    "bridge": cmd_bridge, "replay": cmd_replay}.get(args.subcommand or "")
         if handler is not None:
+            from ..base import startup
+
+            startup.release()
             return handler(args)
         from ..shell.lang.entry import enter
 

@@ -279,8 +279,43 @@ class _Parser(argparse.ArgumentParser):
         super().__init__(*args, formatter_class=formatter_class, **kw)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(
+class _WholeParserNeeded(Exception):
+    """What the shell's parser cannot answer alone: help, an error (a subcommand's name is
+    one to it), the man page or the completions."""
+
+
+class _ShellParser(_Parser):
+    """The parser without the subcommands' parsers (``build_parser(subcommands=False)``):
+    whatever it would say, the whole parser says instead."""
+
+    def print_help(self, file=None) -> None:
+        raise _WholeParserNeeded
+
+    def error(self, message: str):  # type: ignore[override]
+        raise _WholeParserNeeded
+
+
+def read_command_line(argv: Sequence[str]) -> tuple[argparse.ArgumentParser,
+                                                    argparse.Namespace]:
+    """The parser and what it read from ``argv``. A run of the shell (the prompt, ``-c``,
+    ``-f``) is read without building the eleven subcommands' parsers, which are most of the
+    parser's cost at every start; anything else (a subcommand, help, an error, ``--man``,
+    ``--completions``) is read by the whole parser, so it says what it always said."""
+    try:
+        parser = build_parser(subcommands=False)
+        args = parse_args(parser, argv)
+        if not (args.man or args.completions):
+            return parser, args
+    except _WholeParserNeeded:
+        pass
+    parser = build_parser()
+    return parser, parse_args(parser, argv)
+
+
+def build_parser(subcommands: bool = True) -> argparse.ArgumentParser:
+    """The command line; ``subcommands=False``: without the subcommands' own parsers (for
+    ``read_command_line``, which turns to the whole one for anything that names one)."""
+    p = (_Parser if subcommands else _ShellParser)(
         prog="tmclsh",
         description="Interactive shell for Trinamic TMCL modules (TMCM-1311, TMCM-351, TMCM-1640).",
         epilog="Subcommands: asm, disasm, sim, ports, scan, modules, firmware, replace, "
@@ -298,6 +333,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "where 'man tmclsh' cannot find it: an editable install has none)")
     p.add_argument("--version", action="version", version=f"tmclsh {__version__}")
     sub = p.add_subparsers(dest="subcommand", metavar="SUBCOMMAND")
+    if not subcommands:
+        return p
 
     a = sub.add_parser("asm", help="assemble a TMCL program")
     a.add_argument("file", metavar="FILE")

@@ -42,7 +42,6 @@ is bringup.py's; TMCL lines as text are text.py's, on top of this.
 
 from __future__ import annotations
 
-import logging
 import threading
 import time
 from collections import deque
@@ -51,6 +50,7 @@ from typing import TYPE_CHECKING, TypeVar
 
 from ..base import clock
 from ..base.canspec import LINK_DEFAULTS
+from ..base.logs import Logger
 from ..base.errors import (ChecksumError, DownloadModeError, TmclTimeoutError, TransportError,
                            ValidationError)
 from ..link.base import Transport
@@ -67,7 +67,7 @@ if TYPE_CHECKING:
     from ..link.framing import CanFraming, SerialFraming
     from ..tmcl.asm import Encoded, Line
 
-log = logging.getLogger(__name__)
+log = Logger(__name__)  # (logging imported when it first logs)
 
 Tracer = Callable[[str, bytes, object], None]
 Listener = Callable[[Reply], None]

@@ -82,7 +82,7 @@ class LineClient(Client):
             if req.address == self.address:
                 return hit
         else:
-            from ..tmcl import asm
+            from ..tmcl import asmline as asm  # (one line's reading and encoding)
 
             as_typed = line.startswith(AS_TYPED)
             parsed = asm.parse_line(line[1:] if as_typed else line)

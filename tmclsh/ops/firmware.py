@@ -34,6 +34,7 @@ firmware first.
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -64,6 +65,10 @@ UPDATED = "updated"  # the new firmware answers
 _OK = int(Status.OK)
 _GET_VERSION = int(Control.GET_VERSION)
 POLL = 0.3  # s per version request while a module restarts
+# a USB module restarting leaves the bus within this long (it was the fixed wait before its
+# port was opened again; now only the bound of watching it go), looked at this often
+USB_GONE_S = 1.0
+USB_LOOK = 0.01
 
 
 class FirmwareError(TmclError):
@@ -239,6 +244,10 @@ class FirmwareUpdate:
         self._user_link: tuple | None = None
         self._restart_asked = False  # 242 or 205 went out: the next 136s find it restarting
         self._restart_sent: float | None = None  # when the last 242 or 205 was sent
+        # the link is a module's own USB port (asked once, at connect: after 242 the port
+        # may have left the list already), and what stood at its path when last opened
+        self._on_usb = False
+        self._device_seen: tuple[int, int] | None = None
 
     # -- the link -----------------------------------------------------------------------
     def _setting(self, key: str, default):
@@ -355,6 +364,9 @@ class FirmwareUpdate:
             return
         c = self._connect()
         self._user_link = self._link()
+        self._on_usb = self._usb()
+        if self._on_usb:
+            self._device_seen = _device(c.transport.url)
         try:
             bring_up(c, strict=False)
         except InBootloaderError as exc:
@@ -566,7 +578,7 @@ class FirmwareUpdate:
         self.entered = True
         self._request("enter", *self.boot.key)
         self._restarting()
-        usb = self._usb()
+        usb = self._on_usb
         if usb:
             self._reopen()
         self._set_link(*self._boot_link())
@@ -580,11 +592,20 @@ class FirmwareUpdate:
         self.progress(Step("enter", f"in its bootloader ({version})"))
 
     def _reopen(self) -> None:
-        """A USB module leaves the bus when it restarts and comes back under the same name."""
+        """A USB module leaves the bus when it restarts and comes back under the same name:
+        its port is closed, watched until the device it was has gone (nothing at its path,
+        or another device there), for ``USB_GONE_S`` at most, and opened again as soon as
+        it is back (``reconnect`` tries until ``usb_reconnect_s``). Nothing waits by the
+        clock: opened before the old device has gone, the port would be the one leaving."""
         c = self.client
+        url = c.transport.url
         c.transport.close()
-        time.sleep(1.0)
+        end = time.monotonic() + USB_GONE_S
+        while (self._device_seen is not None and _device(url) == self._device_seen
+               and time.monotonic() < end):
+            time.sleep(USB_LOOK)
         c.reconnect(wait=self.boot.usb_reconnect_s, bring_up=False)
+        self._device_seen = _device(url)
 
     def _info(self) -> Memory:
         info = self.boot.info
@@ -665,7 +686,7 @@ class FirmwareUpdate:
 
     def _reach_application(self) -> None:
         c = self.client
-        usb = self._usb()
+        usb = self._on_usb
         if usb:
             self._reopen()
         self._set_link(*self._user_link)
@@ -694,7 +715,7 @@ class FirmwareUpdate:
                 return
             self._request("start")
             self._restarting()
-            usb = self._usb()
+            usb = self._on_usb
             if usb:
                 self._reopen()
             self._set_link(*self._user_link)
@@ -750,6 +771,16 @@ class FirmwareUpdate:
     def close(self) -> None:
         if self.client is not None:
             self.client.close()
+
+
+def _device(path: str) -> tuple[int, int] | None:
+    """What stands at a port's path now (its inode and device numbers; a device that left
+    and came back is a new node), None when nothing does."""
+    try:
+        st = os.stat(path)
+    except (OSError, ValueError):
+        return None
+    return st.st_ino, st.st_rdev
 
 
 def _verb(change: str | None) -> str:

@@ -39,7 +39,6 @@ Example::
 
 from __future__ import annotations
 
-import logging
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
@@ -47,12 +46,13 @@ from dataclasses import dataclass
 from ..tmcl import instructions as isa
 from ..tmcl.asm import Program
 from ..base.errors import StatusError, TmclError, TmclTimeoutError, TransportError, ValidationError
+from ..base.logs import Logger
 from ..tmcl.frames import AppState, Control, Instruction, Request, Status
 from ..client.core import shared_text
 from .certain import read_until_certain
 
 
-log = logging.getLogger(__name__)
+log = Logger(__name__)  # (logging imported when it first logs)
 
 # GGP <type>, 0: the program's global parameters (bank 0)
 GGP = int(isa.parameter_command("global", "read").opcode)

@@ -20,7 +20,6 @@ colour, and a start-up does not pay for rich.
 
 from __future__ import annotations
 
-import json
 import os
 import re
 import sys
@@ -32,7 +31,6 @@ from functools import wraps
 from typing import Any
 
 from ..base.edges import error_record
-from ..tmcl import asm
 from ..tmcl import instructions as isa
 from ..client.text import Result
 from ..tmcl.modules import Module, Parameter, type1_of
@@ -216,6 +214,15 @@ class Output:
     def console(self, value) -> None:
         self._console = value
 
+    def set_color(self, color: str) -> None:
+        """The ``color`` setting from now on ("never": the consoles made already lose their
+        colour too; those made later are made so)."""
+        self._color = color
+        if color == "never":
+            for console in (self._console, self._err):
+                if console is not None:
+                    console.no_color = True
+
     def flush(self) -> None:
         """Write out the results held back (see ``hold``)."""
         if self._held is None:
@@ -292,6 +299,8 @@ class Output:
             obj = {**self.tag, **obj}
         if self.simulated():
             obj = {**obj, "simulated": True}
+        import json  # (imported by the first JSON line: text output never needs it)
+
         self._write_json(json.dumps(obj, ensure_ascii=False) + "\n")
 
     # -- people -------------------------------------------------------------------------
@@ -370,6 +379,8 @@ class Output:
                 obj = {**self.tag, **obj}
             if self.simulated():
                 obj["simulated"] = True
+            import json  # (as in emit)
+
             line = json.dumps(obj, ensure_ascii=False) + "\n"
             self._write_json(line)
         else:
@@ -765,6 +776,8 @@ def describe_instruction(ins: Instruction, module: Module | None) -> str:
                                                     ("value", ins.signed_value)) if v]
             return f"{ins.opcode} {_control_name(ins.opcode)}" + (
                 f" ({', '.join(fields)})" if fields else "")
+    from ..tmcl import asm  # (the disassembler: a trace, .decode)
+
     text, comment = asm.disassemble_instruction(ins, module)
     return f"{text}  // {comment}" if comment else text
 

@@ -40,6 +40,9 @@ PROMPT_STYLE = {
     "prompt": "ansicyan bold",
     "prompt.sim": "ansiyellow bold",
     "prompt.state": "ansimagenta",
+    "banner.title": "bold",                              # the banner above the first prompt
+    "banner.name": "ansicyan",                           # (as tmcl.name in RICH_THEME)
+    "banner.sim": "ansiyellow bold",                     # (as tmcl.sim)
     "pygments.keyword": "ansibrightblue bold",           # mnemonics
     "pygments.keyword.pseudo": "ansiyellow",             # .commands, help, quit
     "pygments.name.builtin": "ansimagenta",              # ABS REL COORD, TI_TIMER0

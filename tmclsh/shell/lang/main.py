@@ -187,6 +187,9 @@ def run_connected(args: argparse.Namespace, client, settings: dict, *,
         enable_trace(session)
     try:
         if not interactive:
+            from ...base import startup
+
+            startup.release()  # (the work begins: base/startup.py)
             status = _run_unattended(args, session)
         else:
             from ..repl.app import run_repl

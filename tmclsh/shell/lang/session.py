@@ -12,9 +12,8 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from ...tmcl import asm
 from ...tmcl import instructions as isa
 from ...client.core import idempotent, shared_text
 from ...client.text import LineClient as Client
@@ -28,6 +27,9 @@ from ...tmcl.status import OK_STATUSES
 from . import commands
 from .lines import Line, classify, split_text
 from ..render import Output
+
+if TYPE_CHECKING:  # (a line is encoded by the client: client/text.py)
+    from ...tmcl import asm
 
 _VAR = re.compile(r"\$\{([^}]*)\}")
 ANSWERED = 64  # recent replies whose line a later suspect report can name

@@ -22,6 +22,7 @@ import functools
 import logging
 import os
 import sys
+from collections.abc import Callable
 from contextlib import nullcontext
 from typing import TYPE_CHECKING
 
@@ -157,17 +158,13 @@ def build_prompt_session(session: Session, **kw) -> PromptSession:
     """The PromptSession with all parts; ``kw`` goes to PromptSession (tests pass input/output)."""
     from prompt_toolkit import PromptSession
     from prompt_toolkit.auto_suggest import AutoSuggestFromHistory
-    from prompt_toolkit.lexers import PygmentsLexer
     from prompt_toolkit.shortcuts import CompleteStyle
 
-    from .completer import TmclCompleter
     from .keys import tmcl_bindings
-    from .lexer import TmclLexer
     from ..style import prompt_style
     from .toolbar import create_toolbar_tokens_func
 
     from prompt_toolkit.enums import EditingMode
-    from prompt_toolkit.output import ColorDepth
 
     settings = repl_settings()
     if "history" not in kw:
@@ -175,15 +172,13 @@ def build_prompt_session(session: Session, **kw) -> PromptSession:
         kw["history"] = make_history(size if isinstance(size, int) else None)
     if settings.get("editing_mode") == "vi":
         kw.setdefault("editing_mode", EditingMode.VI)
-    if settings.get("color") == "never":
-        kw.setdefault("color_depth", ColorDepth.DEPTH_1_BIT)
-    elif settings.get("color") == "always":  # prompt_toolkit would follow NO_COLOR itself
-        kw.setdefault("color_depth", ColorDepth.DEPTH_8_BIT)
+    if color_depth(settings) is not None:
+        kw.setdefault("color_depth", color_depth(settings))
     return PromptSession(
         message=prompt_message(session),
         auto_suggest=AutoSuggestFromHistory(),
-        lexer=PygmentsLexer(TmclLexer, sync_from_start=True),
-        completer=TmclCompleter(session),
+        lexer=lazy_lexer(),
+        completer=lazy_completer(session),
         complete_while_typing=False,  # Tab completes; no menu popping up over every number
         complete_style=CompleteStyle.COLUMN,
         reserve_space_for_menu=8,
@@ -194,6 +189,45 @@ def build_prompt_session(session: Session, **kw) -> PromptSession:
         refresh_interval=0.5,  # the toolbar follows trace/program state (no bus I/O)
         **kw,
     )
+
+
+def lazy_lexer():
+    """The TMCL lexer (``lexer.py``, on pygments) made when the line first holds text: an
+    empty line has nothing to colour, so the first prompt does not wait for pygments."""
+    from prompt_toolkit.lexers import Lexer
+
+    class LazyLexer(Lexer):
+        made = None
+
+        def lex_document(self, document):
+            if self.made is None:
+                if not document.text:
+                    return lambda lineno: []
+                from prompt_toolkit.lexers import PygmentsLexer
+
+                from .lexer import TmclLexer
+
+                self.made = PygmentsLexer(TmclLexer, sync_from_start=True)
+            return self.made.lex_document(document)
+
+    return LazyLexer()
+
+
+def lazy_completer(session: Session):
+    """The completer (``completer.py``) made at the first Tab, not before the first prompt."""
+    from prompt_toolkit.completion import Completer
+
+    class LazyCompleter(Completer):
+        made = None
+
+        def get_completions(self, document, complete_event):
+            if self.made is None:
+                from .completer import TmclCompleter
+
+                self.made = TmclCompleter(session)
+            return self.made.get_completions(document, complete_event)
+
+    return LazyCompleter()
 
 
 def _dumb_echo(ps: PromptSession) -> None:
@@ -287,32 +321,54 @@ def ask_yes_no(question: str) -> bool:
     return ask(question, default=False)
 
 
-def banner(session: Session):
-    from rich.text import Text
-
+def banner(session: Session) -> list[tuple[str, str]]:
+    """The lines above the first prompt, as prompt_toolkit's (style, text) pieces: the
+    prompt's own library draws them, as it draws the toolbar, so the first prompt does not
+    wait for rich (imported when a result is first shown)."""
     c = session.client
-    out = Text()
-    out.append(f"tmclsh {__version__}", style="bold")
-    out.append(" · ")
+    out = [("class:banner.title", f"tmclsh {__version__}"), ("", " · ")]
     mod = c.module.label if c.module is not None else "unknown module"
-    out.append(mod, style="tmcl.name")
-    out.append(f" at address {c.address}")
+    out += [("class:banner.name", mod), ("", f" at address {c.address}")]
     if c.transport.simulated:
-        out.append(" · ")
-        out.append("SIMULATED", style="tmcl.sim")
-        out.append(" (built-in simulator, no hardware)")
+        out += [("", " · "), ("class:banner.sim", "SIMULATED"),
+                ("", " (built-in simulator, no hardware)")]
     else:
-        out.append(f" on {c.describe()}")
+        out.append(("", f" on {c.describe()}"))
     if c.mode.marked:
-        out.append(f" · {c.mode.label} mode")
+        out.append(("", f" · {c.mode.label} mode"))
     if c.version:
-        out.append(f" · firmware {c.version}")
-    out.append("\n")
+        out.append(("", f" · firmware {c.version}"))
+    out.append(("", "\n"))
     for i, word in enumerate((".help", "help SAP", "help 140")):
-        out.append(" · " if i else "")
-        out.append(word, style="tmcl.name")
-    out.append(" · Tab completes · Ctrl-C stops all motors · Ctrl-D quits")
+        out += [("", " · " if i else ""), ("class:banner.name", word)]
+    out.append(("", " · Tab completes · Ctrl-C stops all motors · Ctrl-D quits"))
     return out
+
+
+def show_banner(session: Session, settings: dict) -> None:
+    """The banner, in the colours the prompt takes (the ``color`` setting, NO_COLOR)."""
+    from prompt_toolkit import print_formatted_text
+    from prompt_toolkit.formatted_text import FormattedText
+
+    from ..style import prompt_style
+
+    session.out.flush()
+    print_formatted_text(FormattedText(banner(session)), style=prompt_style(),
+                         color_depth=color_depth(settings),
+                         file=session.out.stdout or sys.stdout,
+                         include_default_pygments_style=False)
+
+
+def color_depth(settings: dict):
+    """prompt_toolkit's colour depth for the ``color`` setting (None: its own choice, which
+    follows NO_COLOR and the terminal)."""
+    from prompt_toolkit.output import ColorDepth
+
+    if settings.get("color") == "never":
+        return ColorDepth.DEPTH_1_BIT
+    if settings.get("color") == "always":  # prompt_toolkit would follow NO_COLOR itself
+        return ColorDepth.DEPTH_8_BIT
+    return None
 
 
 # -- the loop ----------------------------------------------------------------------------
@@ -326,9 +382,10 @@ def run_repl(session: Session, prompt_session: PromptSession | None = None) -> i
     session.interactive = True
     session.ask = ask_yes_no
     session.choose = ask_choice
-    session.state.pager = repl_settings().get("pager", True) is not False
-    if repl_settings().get("color") == "never":
-        session.out.console.no_color = session.out.err.no_color = True
+    settings = repl_settings()
+    session.state.pager = settings.get("pager", True) is not False
+    if settings.get("color") == "never":
+        session.out.set_color("never")
     from prompt_toolkit.utils import is_dumb_terminal
 
     ps = prompt_session or build_prompt_session(session)
@@ -336,7 +393,8 @@ def run_repl(session: Session, prompt_session: PromptSession | None = None) -> i
     dumb = prompt_session is None and is_dumb_terminal()
     if dumb:
         _dumb_echo(ps)
-    session.out.print(banner(session), soft_wrap=False)
+    show_banner(session, settings)
+    _after_first_prompt(ps, lambda: warm_up(session))
     unlisten = client.add_listener(session.out.event)
     client.poll()  # (the last answer of the bring-up may have come twice: said now)
     session.report_shared()
@@ -363,6 +421,34 @@ def run_repl(session: Session, prompt_session: PromptSession | None = None) -> i
         unlisten()
         client.stop_event_poller()
     return 0
+
+
+def _after_first_prompt(ps: PromptSession, work: Callable[[], None]) -> None:
+    """``work`` once, as soon as the first prompt is on the screen (prompt_toolkit has drawn
+    and flushed it): what it costs falls in the moment the user reads the prompt."""
+    done = False
+
+    def once(_app: object) -> None:
+        nonlocal done  # (a flag, not the handler taken off: the event is being fired)
+        if not done:
+            done = True
+            work()
+
+    ps.app.after_render += once
+
+
+def warm_up(session: Session) -> None:
+    """What the first commands need and the start did not wait for: the safety stop Ctrl-C
+    sends (``ops/stop.py``, so the first Ctrl-C does not wait for an import), rich for the
+    first result, the lexer for the first key, the completer for the first Tab; then the
+    garbage collector held off during the start runs again."""
+    from ...base import startup
+    from ...ops import stop  # noqa: F401
+    from ..render import load_rich
+    from . import completer, lexer  # noqa: F401
+
+    load_rich()
+    startup.release()  # (the start is over: base/startup.py)
 
 
 def run_text(session: Session, text: str) -> bool:
