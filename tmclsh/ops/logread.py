@@ -147,8 +147,10 @@ def pairs(reader: CanReader, frames: Iterable[CanFrame], *,
                         shape = req.shapes.get(key)
                         if shape is None:
                             shape = req.shapes[key] = req.shape(arb, seven)
-                        if shape and answered_on.get(parb, arb) == arb:
-                            answered_on[parb] = arb
+                        on = answered_on.get(parb)
+                        if shape and (on == arb or on is None):
+                            if on is None:
+                                answered_on[parb] = arb
                             pending = None
                             latency = t - pt
                             if latency > slowest:
@@ -160,7 +162,6 @@ def pairs(reader: CanReader, frames: Iterable[CanFrame], *,
                             counted += 1
                             last = t
                             statuses[seven[1]] += 1
-                            addresses.add(parb)
                             out.append((pt, t, data, _unpack(seven)[3], shape))
                             if len(out) >= batch:
                                 settle()
@@ -175,6 +176,7 @@ def pairs(reader: CanReader, frames: Iterable[CanFrame], *,
                     if len(known) >= 4096:
                         known.clear()
                     req = known[(arb, data)] = _Request(t, arb, data)
+                    addresses.add(arb)  # (as the monitor's request does, when it comes)
                 if req.plain:
                     pending = (t, arb, data, req)
                     continue
