@@ -156,14 +156,21 @@ def _session(path, eighth: str | None) -> list[tuple[int, int, int, int]]:
 
 @pytest.mark.parametrize("suffix,eighth", [(".blf", None), (".asc", "sum"), (".log", "zero")])
 def test_a_log_of_a_module_from_the_manuals_reads_the_same_both_ways(tmp_path, capsys,
-                                                                       suffix, eighth):
+                                                                       monkeypatch, suffix,
+                                                                       eighth):
+    from tmclsh.ops import logread
+
     path = tmp_path / f"bus{suffix}"
     asked = _session(path, eighth)
+    taken = []
+    monkeypatch.setattr(logread, "pairs", lambda *a, **kw: taken.append(1) or pairs(*a, **kw))
     runs = {}
     for name, extra in (("json", ["--json"]), ("text", []), ("hex", ["--hex"])):
         # (--count: the general path, frame by frame, to choose where to stop)
         for path_taken, more in (("pairs", []), ("general", ["--count", "100000"])):
+            before = len(taken)
             assert cli.main(["monitor", "--log", str(path), *extra, *more]) == 0
+            assert len(taken) - before == (path_taken == "pairs")
             got = capsys.readouterr()
             runs[name, path_taken] = (got.out, got.err)
     for name in ("json", "text", "hex"):
