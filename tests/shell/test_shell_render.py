@@ -154,3 +154,17 @@ def test_decode_several_frames_and_checksums():
     assert frames[0][1][0].checksum.startswith("ok")
     reply = next(r for r in frames[1][1] if r.kind == "reply")
     assert reply.checksum == "WRONG: 0x59, should be 0x58"
+
+
+def test_a_time_of_day_worded_once_a_second_reads_as_worded_each_time():
+    """``timestamp`` keeps the last second's clock (a log has thousands of frames a second):
+    every time, in order or not, across second boundaries, reads as worded afresh."""
+    import time
+
+    from tmclsh.shell.features.trace import timestamp
+
+    times = [1_700_000_000 + k / 7 for k in range(40)] + [1_700_000_000.9999, 1_700_000_001.0,
+                                                         1_600_000_000.5, 1_700_000_000.25]
+    for t in times:
+        assert timestamp(t) == (time.strftime("%H:%M:%S", time.localtime(t))
+                                + f".{int(t * 1000) % 1000:03d}")

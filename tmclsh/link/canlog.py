@@ -69,14 +69,15 @@ def read_log(path: str | Path) -> Iterator[CanFrame]:
         # (the loop a log's every frame takes: python-can's message read into a frame and
         # its plain cases checked inline; anything else goes through ``_checked``'s words)
         finite = math.isfinite
+        make = tuple.__new__  # (CanFrame's own __new__ is a Python function: a call a frame)
         try:
             for msg in reader:
                 t, arb, data = msg.timestamp, msg.arbitration_id, msg.data
                 count += 1
                 if type(t) is float and finite(t) and type(arb) is int \
                         and 0 <= arb < 0x20000000 and len(data) <= MAX_DATA:
-                    yield CanFrame(t, arb, bytes(data), msg.is_extended_id,
-                                   msg.is_error_frame, msg.is_remote_frame)
+                    yield make(CanFrame, (t, arb, bytes(data), msg.is_extended_id,
+                                          msg.is_error_frame, msg.is_remote_frame))
                 else:
                     yield _checked(frame_of(msg), path, count)
         except (ValidationError, MemoryError):  # (the bound says the memory's own line)

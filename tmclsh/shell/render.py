@@ -812,15 +812,32 @@ def describe_reply(reply: Reply, module: Module | None = None,
     if reply.is_event:
         motors = [str(m) for m in range(8) if reply.value >> m & 1]
         return f"event: target position reached, motor {', '.join(motors) or '-'}"
+    head, param = reply_head(reply, module, request)
+    return reply_words(head, reply.value, param)
+
+
+def reply_head(reply: Reply, module: Module | None = None,
+               request: Request | None = None) -> tuple[str, Parameter | None]:
+    """A reply with a value in words up to the value (``100 ok, GAP value ``), and the
+    parameter whose meaning follows the value, if any: the same for every reply of one
+    status to one request, so a log's thousands of them are worded once (``reply_words``
+    puts a value in)."""
     spec = isa.by_opcode(reply.opcode)
     what = spec.mnemonic if spec else (f"{reply.opcode}" if not isa.is_control(reply.opcode) else
                                         f"{reply.opcode} ({_control_name(reply.opcode)})")
-    text = f"{reply.status} {status_text(reply.status)}, {what} value {reply.value}"
+    head = f"{reply.status} {status_text(reply.status)}, {what} value "
     if request is not None and request.opcode == reply.opcode and reply.ok:
         param = param_for(request.instruction, module)
         if param is not None and spec is not None and spec.reads:
-            text += f" ({param.name} = {value_text(reply.value, param)})"
-    return text
+            return head, param
+    return head, None
+
+
+def reply_words(head: str, value: int, param: Parameter | None) -> str:
+    """``describe_reply`` of a reply with a value, from its ``reply_head``."""
+    if param is None:
+        return f"{head}{value}"
+    return f"{head}{value} ({param.name} = {value_text(value, param)})"
 
 
 def _control_name(opcode: int) -> str:

@@ -62,10 +62,10 @@ def can_reply(data: bytes | bytearray, version: bool = True) -> bytes | None:
     so are the first seven of eight: some modules send DLC 8 (a TMCM-1260's candump shows
     it), the eighth their sum or padding. None: no TMCL reply has this length."""
     n = len(data)
-    if n == CAN_VERSION and version and printable(data):
-        return bytes(data)
-    if n == CAN_VERSION or n == CAN_DATA:
-        return bytes(data[:CAN_DATA])
+    if n == CAN_DATA:
+        return bytes(data)  # (bytes given are the bytes returned, not a copy)
+    if n == CAN_VERSION:
+        return bytes(data) if version and printable(data) else bytes(data[:CAN_DATA])
     return None
 
 

@@ -99,6 +99,9 @@ def _check_value(value: int) -> None:
 # the first eight bytes of a serial frame, either direction; frozen dataclasses are filled
 # by the hot-path constructors below through their slots' descriptors (after the classes)
 _SERIAL_HEAD = struct.Struct(">BBBBi")
+# a CAN reply's seven bytes: module, status, command, value (the serial frame's fields after
+# its host byte, read the same way)
+CAN_REPLY = struct.Struct(">BBBi")
 _new = object.__new__
 _STATUS_OK = int(Status.OK)  # (a plain int: a read-back's status, once per 134 answer)
 

@@ -75,6 +75,12 @@ def version_answer(ins: Instruction, reply: Reply) -> tuple[str | None, int | No
     return None, None
 
 
+def teaches(ins: Instruction) -> bool:
+    """An exchange that tells a listener more than itself: what the module is (136) or that
+    the line turns to text (139); every other answered request only answers."""
+    return ins.opcode == _GET_VERSION or ins.opcode == _ENTER_ASCII
+
+
 def enters_ascii(ins: Instruction) -> bool:
     """After this request is accepted the module reads text lines, not frames (139)."""
     return ins.opcode == _ENTER_ASCII

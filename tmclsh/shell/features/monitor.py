@@ -30,6 +30,7 @@ from ...base.errors import (EXIT_FAILED, EXIT_OK, ConnectError, TmclError, Trans
                             UsageError, ValidationError)
 from ...base.spill import Spill, SpillWriter
 from ...ops.filter import Filter
+from ...ops.logread import Shape
 from ...ops.monitor import (DEFAULT_REPLY_ID, EVENT, NOISE_RUN, OTHER, REPLY, REQUEST, RX,
                             TEXT, TX, CanReader, Exchange, Item, Monitor, Seen, Summary)
 from ...tmcl import asm
@@ -37,7 +38,7 @@ from ...tmcl.frames import Request
 from ...tmcl.modules import Module
 from ...tmcl.status import status_ok, status_text
 from ..render import (Styled, describe_instruction, describe_reply, event_motors, is_terminal,
-                      took)
+                      reply_head, reply_words, took)
 from .trace import timestamp
 
 _MEMO = 4096  # words kept per frame's bytes (a log repeats the same frames)
@@ -51,6 +52,9 @@ def when(t: float) -> str:
 
 
 _BATCH = 512  # lines held before they are written together
+# where a reply's value and bytes go in the fields every pair of a shape shares (no field
+# of a frame holds a NUL)
+_VALUE, _BYTES = "\0value", "\0bytes"
 
 
 class View:
@@ -71,6 +75,8 @@ class View:
         # the live table on a terminal (shell/features/livetable.py): it counts what is
         # shown, and the lines go to it, to scroll above it
         self.table = None
+        self._pairs: dict[Shape, tuple] = {}  # what the pairs of a shape say (``show_all``)
+        self._latencies: dict[float, str] = {}  # a pair's latency as it is written
         # lines held before they are written together; 1 where each line is a write of its
         # own (a live run's writer counts the lines a reader did not take by its writes)
         self.batch = _BATCH
@@ -103,6 +109,97 @@ class View:
         if len(pending) >= self.batch:
             self._write_pending()
         return True
+
+    def show_all(self, items: list) -> int:
+        """Show every item (nothing chooses per line), a plain pair of a log
+        (ops/logread.py) as its exchange's line or its two frames' objects, worded from
+        what its shape's pairs share; how many lines or objects that made."""
+        shown = 0
+        pending = self._pending
+        words = self._pair_words
+        known = self._pairs
+        fixed, learnt = self.monitor.module, self.monitor.modules.get  # (module_for, inline)
+        show = self.show
+        latencies = self._latencies
+        if len(latencies) >= _MEMO:
+            latencies.clear()
+        if self.json:
+            for item in items:
+                if item.__class__ is not tuple:
+                    shown += show(item)
+                    continue
+                t1, t2, data, value, shape = item
+                mod = fixed if fixed is not None else learnt(shape.request.address)
+                w = known.get(shape)
+                if w is None or w[0] is not mod:
+                    w = words(shape, mod)
+                latency = t2 - t1
+                said = latencies.get(latency)  # (a log's latencies repeat: worded once)
+                if said is None:
+                    said = latencies[latency] = f"{latency:.6f}"
+                pending.append(f'{{"t": {t1:.6f}, {w[1]}}}\n{{"t": {t2:.6f}, {w[2]}{value}'
+                               f'{w[3]}{data.hex(" ")}{w[4]}, "latency": {said}}}\n')
+                shown += 2
+        else:
+            hexed = self.hex
+            for item in items:
+                if item.__class__ is not tuple:
+                    shown += show(item)
+                    continue
+                t1, t2, data, value, shape = item
+                mod = fixed if fixed is not None else learnt(shape.request.address)
+                w = known.get(shape)
+                if w is None or w[0] is not mod:
+                    w = words(shape, mod)
+                if w[2] is None:
+                    pending.append(self._exchange_line(shape.exchange(t1, t2, data)).plain
+                                   + "\n")
+                    shown += 1
+                    continue
+                said = f"{w[2]}{value}" if w[3] is None else reply_words(w[2], value, w[3])
+                if hexed:
+                    said = f"[{data.hex(' ')}] {said}"
+                latency = t2 - t1
+                after = latencies.get(latency)
+                if after is None:
+                    after = latencies[latency] = took(latency)
+                pending.append(f"{when(t1)}{w[1]}{said}{w[4]}{after}\n")
+                shown += 1
+        if len(pending) >= self.batch:
+            self._write_pending()
+        return shown
+
+    def _pair_words(self, shape: Shape, mod: Module | None) -> tuple:
+        """What every pair of ``shape`` says, from the general path's fields and words:
+        (the module, then for JSON the request's fields, the reply's before its value,
+        between it and its bytes, after them; for people the line between the time and the
+        reply's words, the reply's words up to its value (None: the general path words
+        each pair), its parameter, the line after them up to the latency)."""
+        req = shape.request
+        reply = shape.reply
+        if self.json:
+            rep = Seen(req.t, REPLY, b"", req.address, shape.reply_id, reply=reply, answers=req)
+            fields = self._fields(rep, REPLY, mod)
+            fields["value"], fields["bytes"] = _VALUE, _BYTES
+            text = json.dumps(fields, ensure_ascii=False)[1:-1]
+            head, rest = text.split(json.dumps(_VALUE))
+            mid, tail = rest.split(json.dumps(_BYTES))
+            w: tuple = (mod, self._body(req, REQUEST), head, mid + '"', '"' + tail)
+        else:
+            before = f" {self._where(req)}  " + (f"[{req.raw.hex(' ')}] " if self.hex else "")
+            before += self._request_words(req) + "  =>  "
+            after = (f"  (on id {shape.reply_id})" if shape.reply_id != DEFAULT_REPLY_ID
+                     else "") + "  "
+            head, param = None, None
+            if not reply.is_event:  # (a status 128 to another command: described as one)
+                ins = req.instruction
+                head, param = reply_head(reply, mod, Request.make(
+                    0, ins.opcode, ins.type, ins.motor, ins.value))
+            w = (mod, before, head, param, after)
+        if len(self._pairs) >= _MEMO:
+            self._pairs.clear()
+        self._pairs[shape] = w
+        return w
 
     def _write_pending(self) -> None:
         if self._pending:
@@ -406,9 +503,12 @@ def restore(previous: dict) -> None:
 def show_items(items: Iterable[Item], view: View, filt: Filter, summary: Summary,
                limits: Limits | None) -> bool:
     """Show what passes the filter; True once the count is reached."""
-    show = view.show
     every = not filt.active  # (the common case, without a call a frame)
     table = view.table
+    if every and table is None and (limits is None or limits.count is None):
+        summary.shown += view.show_all(items)
+        return False
+    show = view.show
     for item in items:
         if every or filt(item):
             if table is not None:
@@ -482,7 +582,14 @@ def run_monitor(args) -> int:
             from ...link.canlog import read_log
 
             reader = CanReader(monitor, args.can_id, args.reply_id)
-            source = listen.can_log(read_log(log_path), reader, capture=capture)
+            if filt.active or args.count is not None or args.duration is not None \
+                    or view._rich or view.table is not None:  # (each frame's items as
+                # they come, to choose by or to count in the table)
+                source = listen.can_log(read_log(log_path), reader, capture=capture)
+            else:  # (the plain pairs in tuples, read and written in batches)
+                from ...ops.logread import pairs
+
+                source = pairs(reader, read_log(log_path), capture=capture)
         else:
             reader = None
             source = listen.serial_capture(log_path, monitor)

@@ -34,9 +34,17 @@ _ARROW = {"tx": "tx>", "rx": "<rx", "drop": "!! ", "note": "-- "}
 
 # -- trace lines -------------------------------------------------------------------------
 
+_clock: tuple[int, str] = (-1, "")  # the last whole second worded: a log has many a second
+
+
 def timestamp(now: float | None = None) -> str:
+    global _clock
     now = time.time() if now is None else now
-    return time.strftime("%H:%M:%S", time.localtime(now)) + f".{int(now * 1000) % 1000:03d}"
+    clock = _clock
+    second = int(now) if 0 <= now < 1e12 else -1  # (the second localtime reads: rounded down)
+    if second != clock[0] or second < 0:
+        clock = _clock = (second, time.strftime("%H:%M:%S", time.localtime(now)))
+    return f"{clock[1]}.{int(now * 1000) % 1000:03d}"
 
 
 def format_frame(direction: str, raw: bytes, decoded: object, module: Module | None = None,
