@@ -142,9 +142,11 @@ _SUB_NOTES = {
                "the lines alone, and off a terminal or with --json there is no table. "
                "Ctrl-C or SIGTERM ends it with a summary (frames, errors, status "
                "counts, the slowest exchange) on standard error, or a last {\"summary\": "
-               "...} object. Exit status 0; 1 when the adapter goes away or a log cannot "
-               "be read on (after the summary of what came before); 3 when the port or bus "
-               "cannot be opened.",
+               "...} object; so does its reader leaving (monitor | head): the next line "
+               "it would show ends it, the summary on standard error. Exit status 0; 1 when "
+               "the adapter goes away, a log cannot be read on (after the summary of what "
+               "came before) or the reader of standard output has gone; 3 when the port or "
+               "bus cannot be opened.",
     "bridge": "Another program connects to the pseudo-terminal or TCP port as to the module; "
               "every frame it sends and every byte the module answers is forwarded unchanged "
               "(on --can: the request's seven instruction bytes to the module's CAN id, the "
