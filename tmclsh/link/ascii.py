@@ -183,15 +183,11 @@ def not_in_ascii(req: Request) -> ValidationError:
     tmcl = [c for c in ascii_commands() if c not in own]
     # (the module's own lines are listed with what sends them: typed at the prompt, BIN, RUN
     # and STOP are not TMCL lines and would be refused in turn)
-    sends = [_SHELL_SENDS.get(w, w) for w in own]
+    sends = [isa.ASCII_ONLY_SENT_BY.get(w, w) for w in own]
     return ValidationError(f"{name} cannot be sent in ASCII mode (the module accepts only "
                            f"{', '.join(tmcl)}, and {', '.join(own[:-1])} and {own[-1]}, "
                            f"which {', '.join(sends[:-1])} and {sends[-1]} send){hint}; "
                            "switch to binary mode with .mode binary to send it")
-
-
-# what the shell sends each of the module's own ASCII-mode lines with
-_SHELL_SENDS = {"BIN": ".mode binary", "RUN": ".run", "STOP": ".stop"}
 
 
 def format_request(req: Request, module: Module | None = None) -> str:
