@@ -28,9 +28,21 @@ def alias_warning(old: str, new: str) -> ModuleType:
     module = importlib.import_module(new)
     # 4: the line that imported the old path (the warnings module skips the import
     # machinery's frames), where Python shows a DeprecationWarning in ``__main__``
-    warnings.warn(f"{old} has moved to {new}: import it from there", DeprecationWarning,
-                  stacklevel=4)
+    warnings.warn(moved_text(old, new), DeprecationWarning, stacklevel=4)
     return module
+
+
+def moved_text(old: str, new: str) -> str:
+    """Where to import from now: the new place alone would send a script from one private
+    path to another, so what ``import tmclsh`` offers of it is named as coming from there."""
+    from . import _LAZY
+
+    public = [name for name, (where, _) in _LAZY.items() if where == new]  # (as listed there)
+    if not public:
+        return f"{old} has moved to {new}: import it from there"
+    names = ", ".join(public[:4]) + (", ..." if len(public) > 4 else "")
+    return (f"{old} has moved to {new}, which is private and may change: import {names} "
+            "from tmclsh, its public API")
 
 
 def forward(old: str, new: str) -> Callable[[str], object]:

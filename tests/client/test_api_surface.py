@@ -120,6 +120,22 @@ print(json.dumps(out))
                                         "tmclsh.modules"}
 
 
+def test_the_warning_of_an_old_path_points_to_the_public_api():
+    """``tmclsh.errors has moved to tmclsh.base.errors: import it from there`` sent scripts
+    to a module the README calls private: what tmclsh offers of it imports from tmclsh."""
+    code = ("import warnings\n"
+            "with warnings.catch_warnings(record=True) as seen:\n"
+            "    warnings.simplefilter('always')\n"
+            "    import tmclsh.errors\n"
+            "print([str(w.message) for w in seen if w.category is DeprecationWarning][0])\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env=tmclsh_env(), cwd=str(ROOT), timeout=60)
+    assert run.returncode == 0, run.stderr
+    said = run.stdout.strip()
+    assert said.startswith("tmclsh.errors has moved to tmclsh.base.errors"), said
+    assert "from tmclsh, its public API" in said and "TmclError" in said, said
+
+
 def test_import_tmclsh_loads_no_part_of_it():
     """The names are loaded on first use: the command line's start-up pays for none."""
     run = subprocess.run([sys.executable, "-c", "import sys, tmclsh; tmclsh.__all__; "

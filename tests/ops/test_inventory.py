@@ -104,6 +104,7 @@ def test_settings_that_differ_from_the_backup_are_named(run_tmclsh, tmp_path):
         assert diff["difference"] == "settings" and diff["address"] == 1
         assert [(s["number"], s["saved"], s["live"]) for s in diff["settings"]] == [
             (5, 2000, 0)]
+        assert "address 1: 1 setting differs from " in diff["text"], diff["text"]
         # only the parameters the backup names were read (and nothing written)
         assert sorted({(c, t) for c, t, *_ in module.got if c != VERSION}) == [
             (GAP, 4), (GAP, 5)]

@@ -339,3 +339,39 @@ def test_a_live_tap_whose_output_nobody_reads_keeps_reading_the_line():
     assert (summary["requests"], summary["replies"], summary["unanswered"]) == (n, n, 0)
     shown = sum(1 for text in out.splitlines() if '"frame"' in text)
     assert summary["dropped_lines"] > 0 and shown + summary["dropped_lines"] == 2 * n
+
+
+def test_a_live_tap_ends_when_the_reader_of_its_output_has_gone():
+    """``monitor --port TAP | head -3``: once ``head`` has its lines and leaves, the monitor
+    ends (quietly, exit 1, as other tools on a broken pipe) instead of listening on for
+    ever with nobody to tell; its summary still reaches stderr."""
+    import threading
+
+    from conftest import patience
+
+    tap_master, tap_slave = os.openpty()
+    tty.setraw(tap_slave)
+    proc = _monitor("--port", os.ttyname(tap_slave))
+    stop = threading.Event()
+
+    def line() -> None:  # a master polling a module, as long as the test runs
+        while not stop.is_set():
+            os.write(tap_master, request(1, 6, 1) + reply(6, 7))
+            time.sleep(0.02)
+    try:
+        _wait_listening(proc)
+        threading.Thread(target=line, daemon=True).start()
+        assert "GAP 1, 0" in proc.stdout.readline()
+        proc.stdout.close()  # the reader has what it wanted, and goes
+        proc.wait(timeout=patience(30))
+        err = proc.stderr.read()
+    finally:
+        stop.set()
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        os.close(tap_master)
+        os.close(tap_slave)
+    assert proc.returncode == 1, err
+    assert "Traceback" not in err and "Broken pipe" not in err, err
+    assert " frames in " in err, err

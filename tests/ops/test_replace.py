@@ -417,6 +417,8 @@ def test_from_a_file_that_is_not_a_backup_is_refused_as_such(modules, tmp_path):
     assert got.returncode == 2, got.stdout + got.stderr
     assert (f"--from {other}: a file, but not a backup .save wrote" in got.stderr
             and "nothing was sent" in got.stderr and "ioctl" not in got.stderr)
+    # it says what a backup begins with, not that this file begins so
+    assert "(a backup's first line is '// tmclsh configuration backup')" in got.stderr
     assert new.heard == []
 
 

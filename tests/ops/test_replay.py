@@ -170,10 +170,9 @@ def test_the_closing_stop_of_several_modules_says_whose_motors_each_line_names(t
     PtyModule(version="1161V130", address=5, line=bus)
     try:
         cap = str(tmp_path / "two.txt")
-        _bridge_capture(bus.path, cap, [request(1, SAP, 4, 0, 1000), request(5, GAP, 4, 0)])
+        _bridge_capture(bus.path, cap, [request(1, SAP, 4, 0, 1000), request(5, SAP, 4, 0, 5)])
         assert cli.main(["replay", cap, "--port", bus.path]) == 2
-        # one command: said in the singular
-        assert "holds 1 command that writes, stores or moves" in capsys.readouterr().err
+        assert "holds 2 commands that write, store or move" in capsys.readouterr().err
         assert cli.main(["replay", cap, "--port", bus.path, "--yes"]) == 0
         err = capsys.readouterr().err
         # "replay ended: stopped motor 0" twice said nothing of which module's motor 0
@@ -181,6 +180,47 @@ def test_the_closing_stop_of_several_modules_says_whose_motors_each_line_names(t
         assert "replay ended (address 5): stopped motor" in err, err
     finally:
         bus.close()
+
+
+def test_the_closing_stop_leaves_alone_an_address_the_capture_only_read(tmp_path, capsys):
+    bus = SharedLine()
+    a = PtyModule(version="1161V130", address=1, line=bus)
+    b = PtyModule(version="1161V130", address=5, line=bus)
+    try:
+        cap = str(tmp_path / "two.txt")
+        _bridge_capture(bus.path, cap, [request(1, SAP, 4, 0, 1000), request(5, GAP, 4, 0)])
+        # one command: said in the singular
+        assert cli.main(["replay", cap, "--port", bus.path]) == 2
+        assert "holds 1 command that writes, stores or moves" in capsys.readouterr().err
+        a.got.clear()
+        b.got.clear()
+        assert cli.main(["replay", cap, "--port", bus.path, "--yes"]) == 0
+        err = capsys.readouterr().err
+        assert "replay ended (address 1): stopped motor" in err, err
+        assert "(address 5)" not in err, err
+        assert 3 in a.commands() and b.commands() == [GAP], b.got  # (no MST at 5)
+    finally:
+        bus.close()
+
+
+def test_an_address_that_never_answered_gets_no_stop_and_no_alarm(module, tmp_path, capsys):
+    # a master asked at address 5, where no module is (a capture by hand, as the bridge
+    # writes it): the stop after the replay's write at 1 does not wait out address 5's
+    # retries and report a module "stopped answering" that never was there
+    cap = tmp_path / "lone.txt"
+    lines = ["# tmclsh capture of a serial line: time (s since the epoch), tx/rx where the "
+             "link tells, bytes in hex"]
+    t = 1796427344.0
+    for i, req in enumerate([request(1, SAP, 4, 0, 1000), request(5, GAP, 1, 0)]):
+        lines.append(f"{t + i:.6f} tx {req.hex(' ')}")
+        if req[0] == 1:
+            lines.append(f"{t + i + 0.001:.6f} rx {reply(SAP, 1000).hex(' ')}")
+    cap.write_text("\n".join(lines) + "\n")
+    assert rp.read_capture(str(cap)).addresses == [1, 5]
+    cli.main(["replay", str(cap), "--port", module.path, "--yes", "--timeout", "0.2"])
+    err = capsys.readouterr().err
+    assert "replay ended (address 1): stopped motor" in err, err
+    assert "address 5" not in err and "check the connection" not in err, err
 
 
 def test_ctrl_c_ends_a_replay_that_wrote_with_the_safety_stop(module, tmp_path, capsys):

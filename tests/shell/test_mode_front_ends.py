@@ -101,3 +101,19 @@ def test_version_in_ascii_mode_sends_nothing_and_says_how(found_in_ascii):
                              r"\.mode ascii reads it again"):
         s.run_line(".version")
     assert module.log == heard
+
+
+def test_what_ascii_mode_refuses_names_the_shell_commands_for_its_own_lines(found_in_ascii):
+    """136 refused in ASCII mode listed BIN, RUN and STOP among what the module accepts; typed
+    at the prompt, each was refused in turn ('unknown command', 'did you mean .run?', 'only
+    inside a stored program'). The refusal says which shell command sends each, and BIN
+    typed is pointed to .mode binary; nothing is sent."""
+    s, module = found_in_ascii
+    heard = list(module.log)
+    with pytest.raises(ValidationError) as exc:
+        s.run_line("136")
+    said = str(exc.value)
+    assert "BIN, RUN and STOP, which .mode binary, .run and .stop send" in said, said
+    with pytest.raises(ValidationError, match=r"'BIN'.*\.mode binary"):
+        s.run_line("BIN")
+    assert module.log == heard

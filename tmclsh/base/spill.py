@@ -97,6 +97,7 @@ class SpillWriter:
 
     def __init__(self, stream: Any, bound: int = 2000):
         self.stream = stream
+        self.gone = False  # the reader went away (a broken pipe: ``| head`` has ended)
         self._spill = Spill(self._write, bound, name="output")
 
     @property
@@ -113,11 +114,15 @@ class SpillWriter:
         return len(text)
 
     def _write(self, text: str) -> None:
+        if self.gone:
+            return
         try:
             self.stream.write(text)
             if not self._spill.waiting:
                 self.stream.flush()
-        except (OSError, ValueError):  # (the reader went away: nothing more to show)
+        except BrokenPipeError:  # (the reader went away: nothing more to show; a run that
+            self.gone = True     # only shows, as a monitor, ends on it)
+        except (OSError, ValueError):
             pass
 
     def flush(self) -> None:

@@ -133,9 +133,9 @@ def cmd_replace(args: argparse.Namespace) -> int:
         if is_backup(args.source):
             source = Path(args.source)
         elif Path(args.source).is_file():  # (a port is a device, never a regular file)
-            raise UsageError(f"--from {args.source}: a file, but not a backup .save wrote (its "
-                             "first line is '// tmclsh configuration backup'); give that "
-                             "backup, or the old module's port")
+            raise UsageError(f"--from {args.source}: a file, but not a backup .save wrote (a "
+                             "backup's first line is '// tmclsh configuration backup'); give "
+                             "that backup, or the old module's port")
         else:
             source = settings_of(args.source, args.from_address, args)
         target = settings_of(args.target, args.to_address, args)

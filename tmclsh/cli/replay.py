@@ -128,7 +128,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
                 from ..shell.features.stop import ToStderr, stop_all
 
                 several = len(capture.addresses) > 1
-                for address in capture.addresses:
+                for address in capture.written():
                     aim(client, capture.first_at(address))
                     # (each module's stop says whose motors it names when there are several)
                     where = f" ({'CAN id' if client.is_can else 'address'} {address})"

@@ -179,9 +179,15 @@ def not_in_ascii(req: Request) -> ValidationError:
     ctl = isa.control(req.opcode)
     word = ctl.ascii_word if ctl is not None else None
     hint = f"; in ASCII mode, {word} does it ({isa.ASCII_ONLY[word]})" if word else ""
+    own = list(isa.ASCII_ONLY_COMMANDS)
+    tmcl = [c for c in ascii_commands() if c not in own]
+    # (the module's own lines are listed with what sends them: typed at the prompt, BIN, RUN
+    # and STOP are not TMCL lines and would be refused in turn)
+    sends = [isa.ASCII_ONLY_SENT_BY.get(w, w) for w in own]
     return ValidationError(f"{name} cannot be sent in ASCII mode (the module accepts only "
-                           f"{', '.join(ascii_commands())}){hint}; switch to binary mode with "
-                           ".mode binary to send it")
+                           f"{', '.join(tmcl)}, and {', '.join(own[:-1])} and {own[-1]}, "
+                           f"which {', '.join(sends[:-1])} and {sends[-1]} send){hint}; "
+                           "switch to binary mode with .mode binary to send it")
 
 
 def format_request(req: Request, module: Module | None = None) -> str:

@@ -408,6 +408,6 @@ def _settings(client: Client, want: Expected, hit: Found, where: str) -> list[Di
     more = f"; and {len(diffs) - 3} more" if len(diffs) > 3 else ""
     n = len(diffs)
     return [Difference(SETTINGS, hit.address,
-                       f"{where}: {n} setting{'s' if n != 1 else ''} differ from "
+                       f"{where}: {n} setting{'s differ' if n != 1 else ' differs'} from "
                        f"{want.backup}: {shown}{more}", want, hit, tuple(diffs))]
 

@@ -96,6 +96,13 @@ class Capture:
     def never(self) -> list[Captured]:
         return [c for c in self.exchanges if c.never is not None]
 
+    def written(self) -> list[int]:
+        """The addresses (CAN ids) the writes went to: where a replay's closing stop goes.
+        A module the capture only read from was set moving by nothing the replay sent, and a
+        stop sent there would halt what another cause runs (or, where nothing answers, wait
+        out its retries and report a module that never was there)."""
+        return sorted({c.address for c in self.writes()})
+
 
 class WritesRefused(ValidationError):
     """The capture holds commands that write, store or move, and writes were not allowed."""

@@ -386,4 +386,6 @@ Opcode = _opcode_enum()
 ASCII_ONLY = {"BIN": "leave ASCII mode (binary mode again)",
               "RUN": "start the stored TMCL program", "STOP": "stop the running TMCL program"}
 ASCII_ONLY_COMMANDS = tuple(ASCII_ONLY)
+# the shell command that sends each (typed at the prompt they are no TMCL lines)
+ASCII_ONLY_SENT_BY = {"BIN": ".mode binary", "RUN": ".run", "STOP": ".stop"}
 ASCII_BIN = "BIN"

@@ -136,7 +136,9 @@ class LiveTable:
                 return
             console = live.console
             console.size = self._size()
-            live.update(self._table(rows, final), refresh=not lines)
+            # (refreshed even when lines follow: rich's print draws the table as of the last
+            # refresh below them, so traffic that never pauses would leave it as it began)
+            live.update(self._table(rows, final), refresh=True)
             if lines:
                 console.print(*lines, sep="\n", soft_wrap=True)
             self._flush()

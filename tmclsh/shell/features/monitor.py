@@ -608,6 +608,12 @@ def run_monitor(args) -> int:
         end_table(view)
         if out is not None:
             end_live_output(view, out, monitor.summary)
+    if out is not None and out.gone:  # (the reader of stdout has gone: end quietly, as
+        from ...base.edges import reader_gone  # other tools do; a monitor only listens)
+
+        if not json_mode:
+            view.summary(monitor.summary)  # (on stderr, still the user's)
+        return reader_gone()
     if failed is not None:  # (what was heard until then is still summed up)
         print(f"tmclsh: {failed}", file=sys.stderr, flush=True)
     if failed is None or monitor.summary.frames or monitor.summary.noise:
@@ -737,6 +743,8 @@ def _run(source, reader, view: View, filt: Filter, monitor: Monitor, limits: Lim
                     break
                 if live:
                     view.flush()
+                    if getattr(view.stream, "gone", False):
+                        break  # (`monitor | head`: what it heard no one reads any more)
                 elif table is not None:
                     table.tick()
         except KeyboardInterrupt:

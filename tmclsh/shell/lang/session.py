@@ -93,6 +93,9 @@ def prepare_typed(client: Client, text: str) -> tuple[asm.Encoded, Request]:
 
 def _dot_command_meant(text: str, exc: AsmError) -> TmclError:
     word = text.split(None, 1)[0] if text.split() else ""
+    if word.upper() == isa.ASCII_BIN and exc.message.startswith("unknown command"):
+        return ValidationError(f"{word!r} is the module's own ASCII-mode line, not a TMCL "
+                               "command; .mode binary sends it")
     cmd = commands.find("." + word.lower()) if word.isalpha() else None
     if cmd is None or not exc.message.startswith("unknown command"):
         return exc
