@@ -126,7 +126,7 @@ complete -c tmclsh -n '__fish_seen_subcommand_from scan' -l from -x -d ''
 complete -c tmclsh -n '__fish_seen_subcommand_from scan' -l to -x -d ''
 complete -c tmclsh -n '__fish_seen_subcommand_from scan' -l timeout -x -d 'per-address timeout (default: from the link, the wire time of a request and its reply at the baud rate plus a margin; 0.001..60 s)'
 complete -c tmclsh -n '__fish_seen_subcommand_from scan' -l ascii -d 'also look for modules in ASCII mode at every address that did not answer in binary (without it, only when none did: the ASCII pass takes as long as the first)'
-complete -c tmclsh -n '__fish_seen_subcommand_from scan' -l save -r -F -d 'write what answered as an inventory (TOML): each module\'s address or CAN id, type, firmware and mode'
+complete -c tmclsh -n '__fish_seen_subcommand_from scan' -l save -r -F -d 'write what answered as an inventory (TOML): each module\'s address or CAN id, type, firmware and mode (a file that exists is not replaced)'
 complete -c tmclsh -n '__fish_seen_subcommand_from scan' -l expect -r -F -d 'compare the line with an inventory and name every difference (missing, extra, another type, other firmware, in its bootloader, in ASCII mode, two modules at one address, settings that differ from a backup): exit 0 match, 1 differences, 3 nothing answered'
 complete -c tmclsh -n '__fish_seen_subcommand_from scan' -l json -d ''
 

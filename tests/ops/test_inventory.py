@@ -174,6 +174,14 @@ def test_save_and_expect_together_is_a_usage_error(run_tmclsh, tmp_path):
     assert p.returncode == 2 and "give one of them" in p.stderr
 
 
+def test_save_over_an_inventory_that_exists_is_refused_and_it_is_kept(run_tmclsh, tmp_path):
+    inv = tmp_path / "line.toml"
+    inv.write_text("# edited by hand\n")
+    p = run_tmclsh("scan", "--sim", "--save", str(inv))
+    assert p.returncode == 2 and f"{inv} exists: not replaced" in p.stderr, p.stderr
+    assert len(p.stderr.splitlines()) == 1 and inv.read_text() == "# edited by hand\n"
+
+
 def test_an_unbounded_inventory_is_refused(tmp_path):
     with pytest.raises(inventory.InventoryError, match="/dev/zero"):
         inventory.read_inventory("/dev/zero")

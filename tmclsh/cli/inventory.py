@@ -21,6 +21,8 @@ def before_scan(args: argparse.Namespace):
     if args.save is not None and args.expect is not None:
         raise UsageError("--save writes an inventory, --expect compares with one; give one "
                          "of them")
+    if args.save is not None:
+        _check_new(args.save)
     if args.expect is None:
         return None
     inventory = read_inventory(args.expect)
@@ -30,6 +32,16 @@ def before_scan(args: argparse.Namespace):
         raise UsageError(f"{args.expect} names {words}, outside the scanned range "
                          f"{args.first}..{args.last} (--from/--to take them in)")
     return inventory
+
+
+def _check_new(path: str) -> None:
+    """An inventory is edited by hand (a ``backup =`` line, ``lowest`` firmware), so a scan
+    does not write over one: refused before anything is sent, as ``.save`` asks first."""
+    from pathlib import Path
+
+    if Path(path).exists():
+        raise UsageError(f"{path} exists: not replaced (an inventory may hold lines written "
+                         "by hand); remove it or give --save another file")
 
 
 def check_link(inventory, client) -> None:

@@ -433,7 +433,8 @@ def build_parser(subcommands: bool = True) -> argparse.ArgumentParser:
                          "takes as long as the first)")
     sc.add_argument("--save", metavar="INVENTORY", default=None,
                     help="write what answered as an inventory (TOML): each module's address "
-                         "or CAN id, type, firmware and mode")
+                         "or CAN id, type, firmware and mode (a file that exists is not "
+                         "replaced)")
     sc.add_argument("--expect", metavar="INVENTORY", default=None,
                     help="compare the line with an inventory and name every difference "
                          "(missing, extra, another type, other firmware, in its bootloader, "
