@@ -354,8 +354,9 @@ def _answers_after_all(client: Client, expected: Module | None, strict: bool,
     link = client.ascii_link
     echo = f" ({link.echo.text}; it stays in ASCII mode at exit)" if link else ""
     client._notice(f"the module at address {client.address} is in its ASCII mode (it ignores "
-                  "binary commands: a 139 put it there, or GP 67 makes it start in it): talking to it through ASCII "
-                  f"mode{echo}; '.mode binary --keep' switches it back to binary for good")
+                   "binary commands: a 139 put it there, or GP 67 makes it start in it): "
+                   f"talking to it through ASCII mode{echo}; '.mode binary --keep' switches "
+                   "it back to binary for good")
     return False
 
 
