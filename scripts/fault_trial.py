@@ -27,8 +27,8 @@ tests/client/test_ascii_proxy.py runs a short version.
 
 ``--api`` reads through the Python API instead (``tmclsh.connect()`` and
 ``LineClient.execute`` in a process of its own, with ``--ascii`` too): a value is flagged in
-line when its ``Result.in_doubt`` says so, later when ``Client._take_suspects`` names it after
-a later read, or ``Client._confirm_last`` at the end.
+line when its ``Result.in_doubt`` says so, later when ``Doubts.take_suspects`` names it after
+a later read, or ``Doubts.confirm_last`` at the end.
 """
 
 from __future__ import annotations
@@ -154,7 +154,7 @@ read_as = {}  # reply seq -> the line it answered
 
 
 def later():
-    for s in client._take_suspects():
+    for s in client._doubts.take_suspects():
         print(json.dumps({"line": read_as.get(s.seq), "suspect": True}))
 
 
@@ -173,7 +173,7 @@ try:
             rec["in_doubt"] = True
         print(json.dumps(rec))
         later()
-    client._confirm_last()
+    client._doubts.confirm_last()
     later()
 finally:
     client.close()

@@ -3,7 +3,7 @@
 On a line that brings a reply twice, the copy may come after the next request, ahead of that
 request's own answer: same command, same layout, so it is taken for that answer; the real
 answer then comes while nothing waits for it, and the client reports the reply taken as
-suspect (``Client._suspect_seqs``). The watch reads such a value again within its sample, or
+suspect (``Doubts.suspect_seqs``). The watch reads such a value again within its sample, or
 shows it as ``?``; a check reads again and judges on a certain answer, or says the answer is
 in doubt.
 

@@ -143,3 +143,47 @@ def test_import_tmclsh_loads_no_part_of_it():
                          capture_output=True, text=True, env=tmclsh_env(), cwd=str(ROOT),
                          timeout=60)
     assert run.stdout.split() == ["['tmclsh']"], run.stderr
+
+
+# The client's public names when its jobs beside the request path moved into components of
+# its own (client/taps.py, doubt.py, shared.py, lifecycle.py; issue 32's last split): scripts
+# and the API reference use them on the client, whichever component does the work.
+CLIENT_NAMES = {
+    "add_listener", "add_tracer", "address", "answered_twice", "ascii_link",
+    "bring_up_pending", "can_id", "check", "close", "connected", "cut_by", "describe",
+    "doubt_on_last", "encode", "execute", "host_address", "identify", "in_doubt", "is_can",
+    "judges_as_read", "lock", "mode", "module", "motion", "on_notice", "poll", "prepare",
+    "reconnect", "refusal", "reply_id", "request", "require_module", "retries", "send",
+    "shared", "shared_news", "start_event_poller", "stats", "stop_event_poller",
+    "take_shared", "timeout", "transport", "value", "version", "wait_until"}
+
+
+def test_the_client_keeps_its_public_names_and_what_they_do():
+    """Each public name is still the client's (and no component is public), and the names
+    whose work moved do it through the client: tracing, answers in doubt, shared addresses,
+    a reconnect and its bring-up, closing. Against a module written from the manuals."""
+    from responder import PtyModule
+
+    m = PtyModule(version="1311V111")
+    try:
+        with tmclsh.connect(port=m.path, timeout=0.5) as c:
+            public = {n for n in dir(c) if not n.startswith("_")}
+            assert public == CLIENT_NAMES, (public - CLIENT_NAMES, CLIENT_NAMES - public)
+            seen: list[str] = []
+            untrace = c.add_tracer(lambda direction, raw, decoded: seen.append(direction))
+            c.value("GAP 4, 0")
+            assert seen == ["tx", "rx"]
+            untrace()
+            c.value("GAP 4, 0")
+            assert seen == ["tx", "rx"]
+            assert c.in_doubt({c._replies: "speed"}) == set() and not c.doubt_on_last()
+            assert c.shared == frozenset() and not c.shared_news and c.take_shared() == []
+            assert not c.answered_twice(c.address)
+            c.reconnect()
+            assert c.bring_up_pending and c.connected and c.stats["reconnects"] == 1
+            m.got.clear()
+            c.value("GAP 4, 0")  # brought up again first (136), then the line
+            assert not c.bring_up_pending and m.got[0][0] == 136 and m.got[-1][0] == 6
+        assert not c.connected and not c.transport.is_open
+    finally:
+        m.close()

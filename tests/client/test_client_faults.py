@@ -272,7 +272,7 @@ def _outcomes(make_pty_sim, trace: bool, seed: int) -> list:
                 got.append((req.opcode, r.status, r.value))
             except TmclError as exc:
                 got.append((req.opcode, type(exc).__name__))
-            got.extend(("suspect", s.seq, s.reply.value) for s in c._take_suspects())
+            got.extend(("suspect", s.seq, s.reply.value) for s in c._doubts.take_suspects())
     finally:
         c.close()
     return got

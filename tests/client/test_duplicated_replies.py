@@ -49,9 +49,9 @@ def drive(c: LineClient, n: int) -> tuple[set[int], set[int], int]:
             continue
         if reply.value != v:
             wrong.add(c._replies)
-        suspect |= {s.seq for s in c._take_suspects()}
+        suspect |= {s.seq for s in c._doubts.take_suspects()}
     c.request(Request(1, SGP, 0, 2, 0))  # the last displaced answer is found by the next request
-    suspect |= {s.seq for s in c._take_suspects()}
+    suspect |= {s.seq for s in c._doubts.take_suspects()}
     return wrong, suspect, failed
 
 
@@ -89,12 +89,12 @@ def test_counted_duplicates(dup_client):
     sim.faults.dup_next = 1
     assert c.request(Request(1, SGP, 0, 2, 6)).value == 6
     assert c.request(Request(1, SGP, 0, 2, 7)).value == 7  # the copy of 6 was dropped first
-    assert c.stats["flushed"] == 9 and not c._take_suspects()
+    assert c.stats["flushed"] == 9 and not c._doubts.take_suspects()
     sim.faults.dup_late_next = 1
     assert c.request(Request(1, SGP, 0, 2, 8)).value == 8
     assert c.request(Request(1, SGP, 0, 2, 9)).value == 8  # indistinguishable: the copy
     assert c.request(Request(1, SGP, 0, 2, 10)).value == 10  # ... but the answer to 9 came after
-    (s,) = c._take_suspects()
+    (s,) = c._doubts.take_suspects()
     assert s.request.value == 9 and s.reply.value == 8
 
 
@@ -227,7 +227,7 @@ def test_a_displaced_answer_that_arrives_damaged_still_casts_doubt(dup_client):
     assert c.request(Request(1, SGP, 0, 2, 21)).value == 21
     sim.faults.corrupt_next = 1  # the real answer to 22 comes damaged, after the copy of 21
     assert c.request(Request(1, SGP, 0, 2, 22)).value == 21
-    (s,) = c._take_suspects()  # (found by the marker the copy is judged with)
+    (s,) = c._doubts.take_suspects()  # (found by the marker the copy is judged with)
     assert s.request.value == 22 and s.reply.value == 21
     assert c.request(Request(1, SGP, 0, 2, 23)).value == 23
 

@@ -86,7 +86,7 @@ def test_a_displaced_answer_equal_to_an_older_one_is_still_suspect(axes):
     shown = c.value("GAP 3, 2")
     seq = c._replies
     c.value("GAP 3, 0")  # the next request finds the answer that came late
-    suspects = c._take_suspects()
+    suspects = c._doubts.take_suspects()
     assert shown == 5000 or any(s.seq == seq for s in suspects), (shown, suspects)
 
 
@@ -194,7 +194,7 @@ def test_connect_with_an_unknown_module_closes_the_port():
         m.close()
 
 
-# -- .connect while the link is in ASCII mode (Client._switch_transport) -------------------
+# -- .connect while the link is in ASCII mode (Lifecycle.switch_transport) -------------------
 
 def _ascii_then_connect(make_pty_sim, *, a_starts_in_ascii: bool):
     from tmclsh.client.connect import open_client
@@ -389,7 +389,7 @@ def test_events_reach_listeners_in_order_with_the_poller_running():
     first = threading.Event()
 
     def listener(reply):
-        t = c._event_time
+        t = c._taps.event_time
         if not first.is_set():
             first.set()
             time.sleep(0.3)
@@ -499,7 +499,7 @@ def test_a_failure_while_closing_is_one_line_not_a_traceback():
         "c = tmclsh.connect(sim='TMCM-1311')\n"
         "def restore():\n"
         "    raise StatusError(2, None, 'the module refused to enter ASCII mode (139)')\n"
-        "c._close_hooks.append(restore)\n"
+        "c._lifecycle.close_hooks.append(restore)\n"
         "c.close()\n")
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                        timeout=30, env=tmclsh_env(), cwd=str(ROOT))
@@ -675,7 +675,7 @@ def test_stop_never_says_stopped_for_a_turning_motor_under_late_copies():
             m.ignores_mst = {k for k in range(3) if rng.random() < 0.5}
             report = stop_ops.stop_everything(c, settle=0.05, sleep=lambda s: None)
             lies += [(i, mo) for mo in report.stopped if m.values[(SPEED, mo, False)]]
-            c._take_suspects()
+            c._doubts.take_suspects()
         assert not lies
         assert c.stats["suspect"] > 20  # the fault did its part
     finally:
@@ -697,14 +697,14 @@ def test_the_end_of_a_run_watches_the_line_once_for_the_same_last_answer(pty_cli
         return absorb(timeout, **kw)
 
     c._framing.absorb = spy
-    c._confirm_last()
+    c._doubts.confirm_last()
     first, waits[:] = list(waits), []
-    c._confirm_last()
+    c._doubts.confirm_last()
     assert first and first[0] > 0, first
     assert waits and all(w == 0 for w in waits), waits
     c.send(6, 1, 0)  # a new answer is watched for again
     waits.clear()
-    c._confirm_last()
+    c._doubts.confirm_last()
     assert waits[0] > 0
 
 

@@ -119,7 +119,7 @@ def test_a_copy_taken_for_a_read_is_read_again_before_it_is_returned(client):
     sim.faults.dup_late_next = 1  # the answer to GGP 0 (11) again, after the next request
     assert c.value("GGP 0, 2") == 11
     assert c.value("GGP 1, 2") == 22
-    assert not c._take_suspects()
+    assert not c._doubts.take_suspects()
     # the copy was sent, and the answer behind it came while nothing waited for it (as
     # evidence against the copy, or as a copy of the answer read again: timing decides)
     assert sim.faults.dup_late_next == 0 and c.stats["unsolicited"] >= 1
@@ -143,7 +143,7 @@ def test_the_copy_is_found_when_the_answer_behind_it_is_lost_too(client):
 
     sim._send_reply = sending
     assert c.value("GGP 1, 2") == 22
-    assert dropped and not c._take_suspects()
+    assert dropped and not c._doubts.take_suspects()
     assert c.stats["unsolicited"] == 0  # nothing showed it but the value read again
 
 
@@ -156,7 +156,7 @@ def test_a_copy_then_the_real_answer_after_another_copy_is_still_found(client):
     assert seen
     # every read of it brings the copies first: never two agreeing answers with nothing
     # against them, so it is returned in doubt, never as a plain 11
-    assert c2.value == 22 or [s.seq for s in c._take_suspects()] == [c._replies]
+    assert c2.value == 22 or [s.seq for s in c._doubts.take_suspects()] == [c._replies]
 
 
 def test_a_line_that_brings_the_same_copy_first_every_time_is_said_in_the_line(pty_sim,
@@ -188,7 +188,7 @@ def test_from_python_an_answer_left_in_doubt_says_so_in_its_result(client):
     every_time_after(sim, 11, 22, [11])
     r = c.execute("GGP 1, 2")
     assert r.value == 11 and r.in_doubt
-    assert [s.seq for s in c._take_suspects()] == [c._replies]
+    assert [s.seq for s in c._doubts.take_suspects()] == [c._replies]
     assert not c.execute("GGP 0, 2").in_doubt
 
 
@@ -200,7 +200,7 @@ def test_a_write_that_may_have_taken_a_copy_is_followed_by_a_marker(client):
     assert c.execute("SGP 3, 2, 5").value == 5
     r = c.request(Request(1, SGP, 4, 2, 5))  # the reply to SGP 3 (5) again, then its own
     assert r.value == 5
-    (s,) = c._take_suspects()
+    (s,) = c._doubts.take_suspects()
     assert s.seq == c._replies and s.request.type == 4
 
 

@@ -39,7 +39,7 @@ def two(request):
 
 def _settle(c: Client) -> None:
     """Let the last reply behind the last answer come, and take it in (generous bound)."""
-    c._confirm_last()
+    c._doubts.confirm_last()
 
 
 @pytest.mark.parametrize("versions", [None, ("1311V111", "1311V111")],

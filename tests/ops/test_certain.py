@@ -39,7 +39,7 @@ def test_only_the_doubtful_are_read_again_and_their_new_answer_counts():
     assert log == [["a", "b", "c"], ["b"]]
     assert found.doubt == set() and found.again == 1 and found.accepted
     assert sorted(found.answered.values()) == ["a", "b", "c"]
-    assert len(found.taken) == 4  # the replaced answer too (for Client._settle)
+    assert len(found.taken) == 4  # the replaced answer too (for Doubts.settle)
 
 
 def test_what_stays_in_doubt_after_the_bound_is_returned_not_raised():

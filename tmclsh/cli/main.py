@@ -157,7 +157,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
         for i, rate in enumerate(rates):
             if rate is not None:
                 transport.set_baudrate(rate)
-                client._forget_stale()  # nothing sent at another rate can still arrive
+                client._lifecycle.forget_stale()  # nothing sent at another rate can still arrive
             timeout = args.timeout or address_timeout(transport, usb=usb)
             ascii_timeout = args.timeout or address_timeout(transport, usb=usb,
                                                             nbytes=ASCII_WIRE_BYTES)

@@ -116,7 +116,8 @@ def probe_mode(client: Client, timeout: float | None = None) -> Probe:
             client._trace("drop", data, "no binary answer to the mode probe")
         late = end_line(client, timeout)
         if _binary_answer(late, addr, Control.GET_VERSION) is not None:
-            client._resync_next()  # a slow binary module: resynchronise before its next use
+            # a slow binary module: resynchronise before its next use
+            client._lifecycle.resync_next()
             return Probe(Mode.BINARY, host=host)
         return probe_ascii(client, timeout)
 
@@ -174,7 +175,7 @@ def probe_ascii(client: Client, timeout: float | None = None) -> Probe:
                 f"not {host}; use --host-address {other_host}")
         rest = bytes(buf)
         if has_valid_frame(rest):
-            client._resync_next()
+            client._lifecycle.resync_next()
             return Probe(Mode.BINARY, host=host, binary_garbage=True)
         raise TmclTimeoutError(f"no module answered at address {addr} "
                                f"({address_char(addr)}) in binary or ASCII mode "
@@ -192,7 +193,7 @@ def _tell_no_checksum(client: Client) -> None:
     repeated at every connect is one the user learns to skip."""
     if not _told[0]:
         _told[0] = True
-        client._notice(NO_CHECKSUM)
+        client._taps.notice(NO_CHECKSUM)
 
 
 class AsciiLink:
@@ -220,7 +221,7 @@ class AsciiLink:
                                     stats=self.stats)
         # Client.close runs its close hooks while the transport is still open: restore the
         # mode there even after .mode binary detached the link
-        client._close_hooks.append(self._on_client_close)
+        client._lifecycle.close_hooks.append(self._on_client_close)
 
     # -- attaching ----------------------------------------------------------------------
     @classmethod
@@ -277,7 +278,7 @@ class AsciiLink:
                             "stays in binary mode")
                     if probe.mode != Mode.ASCII:
                         sent_139 = False  # binary frames came back: it did not take
-                        client._resync_next()
+                        client._lifecycle.resync_next()
                         raise TransportError(f"the module at address {client.address} did not "
                                              "enter ASCII mode after command 139")
                 echo = echo_mode(probe.gp67) if probe.gp67 is not None else Echo.CHAR
@@ -290,7 +291,7 @@ class AsciiLink:
                     _tell_no_checksum(client)
                 link.entered = entered
                 link.framing.clear()
-                client._clear_input()
+                client._lifecycle.clear_input()
                 client._ledger.forget()  # (what the binary link still expected cannot come)
                 client._ledger.by_command = False  # ASCII replies name no command
                 client.ascii_link = link
@@ -302,7 +303,7 @@ class AsciiLink:
                         cls._bin(client)
                     except Exception:
                         pass
-                    client._resync_next()
+                    client._lifecycle.resync_next()
                 raise
         log.info("ASCII mode on address %d (%s; found in %s mode)", client.address,
                  link.echo.text, link.found.value)
@@ -314,7 +315,7 @@ class AsciiLink:
         t = _transport(client)
         raw = Request(client.address, Control.ENTER_ASCII, 0, 0, 0).to_bytes()
         if t.pending():
-            client._absorb()  # stale replies dropped, events kept
+            client._lifecycle.absorb()  # stale replies dropped, events kept
         t.write(raw)
         client.stats["sent"] += 1
         client._trace("tx", raw, "enter ASCII mode (139)")
@@ -340,7 +341,7 @@ class AsciiLink:
         got = _read_quiet(t, 0.05, timeout)
         if got:
             client._trace("rx", got, "after BIN")
-        client._resync_next()
+        client._lifecycle.resync_next()
 
     # -- leaving ------------------------------------------------------------------------
     @property
@@ -371,7 +372,7 @@ class AsciiLink:
         mode at exit. A 136 type 1 proves it answers binary frames (TmclError if not)."""
         client = self.client
         self.detach(send_bin=False)
-        client._resync_next()
+        client._lifecycle.resync_next()
         self.on_exit = Mode.BINARY
         client.request(Request(client.address, Control.GET_VERSION, 1, 0, 0))
 

@@ -57,7 +57,7 @@ def start(client: Client, *, ascii: bool = False) -> Client:
 
 def bring_up(client: Client, *, ascii: bool = False, strict: bool = True) -> None:
     """What ``start`` does, leaving the client open when it fails (the shell's ``.connect``
-    after ``Client._switch_transport``: the link stays, its module unknown). The module the
+    after ``Lifecycle.switch_transport``: the link stays, its module unknown). The module the
     client holds is the one expected; ``strict``: another type answering is an error (at
     connect), else it is taken (after a reconnect, ``.address``)."""
     expected = client.module
@@ -85,10 +85,10 @@ def again(client: Client, req: Request) -> ValidationError | None:
     new = client.module
     if old is None or new is None or new.name == old.name:
         return None
-    client._notice(f"another module answers at address {client.address} on "
-                  f"{client.describe()} since the link came back: a {new.label}, version "
-                  f"{client.version} (it was a {old.name}); lines are checked against its "
-                  "data from now on")
+    client._taps.notice(f"another module answers at address {client.address} on "
+                       f"{client.describe()} since the link came back: a {new.label}, version "
+                       f"{client.version} (it was a {old.name}); lines are checked against its "
+                       "data from now on")
     if req.opcode >= _FIRST_CONTROL:
         return None
     return ValidationError(
@@ -154,9 +154,9 @@ def leave_download_mode(client: Client) -> bool:
         raise StatusError(status, reply, f"the module at address {client.address} is in "
                           "download mode (it stores commands instead of executing them) "
                           f"and refused to leave it (133): status {status}")
-    client._notice(f"the module at address {client.address} was in download mode (an upload "
-                  "was cut short?): ended it with 133; the program stored on it may be "
-                  "incomplete")
+    client._taps.notice(f"the module at address {client.address} was in download mode (an upload "
+                       "was cut short?): ended it with 133; the program stored on it may be "
+                       "incomplete")
     return True
 
 
@@ -300,9 +300,9 @@ def _adopt_version(client: Client, version: str, by_binary: Module | None = None
     mod = named_by(version)  # data if tmclsh has it, else numbers only
     if by_binary is not None and (mod is None or mod.generic):
         # the string names no type tmclsh knows, the checksummed binary version does
-        client._notice(f"the module's version string {version!r} names no module type "
-                      f"tmclsh knows; its binary version (136 type 1) says {by_binary.name}: "
-                      f"using its data (-m to say otherwise)")
+        client._taps.notice(f"the module's version string {version!r} names no module type "
+                           f"tmclsh knows; its binary version (136 type 1) says {by_binary.name}: "
+                           f"using its data (-m to say otherwise)")
         mod = by_binary
     if mod is None:
         raise ValidationError(f"unknown module type in version string {version!r}: tell "
@@ -349,14 +349,14 @@ def _answers_after_all(client: Client, expected: Module | None, strict: bool,
             ascii_tried=True)) from exc
     if probe.mode == Mode.BINARY:
         return True
-    client._forget_stale()  # a module in ASCII mode sends no late binary replies
+    client._lifecycle.forget_stale()  # a module in ASCII mode sends no late binary replies
     _attach_ascii(client, expected, strict, probe)
     link = client.ascii_link
     echo = f" ({link.echo.text}; it stays in ASCII mode at exit)" if link else ""
-    client._notice(f"the module at address {client.address} is in its ASCII mode (it ignores "
-                   "binary commands: a 139 put it there, or GP 67 makes it start in it): "
-                   f"talking to it through ASCII mode{echo}; '.mode binary --keep' switches "
-                   "it back to binary for good")
+    client._taps.notice(f"the module at address {client.address} is in its ASCII mode (it ignores "
+                        "binary commands: a 139 put it there, or GP 67 makes it start in it): "
+                        f"talking to it through ASCII mode{echo}; '.mode binary --keep' switches "
+                        "it back to binary for good")
     return False
 
 

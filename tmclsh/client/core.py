@@ -33,24 +33,26 @@ TMCL replies carry no sequence number, so the client keeps the link honest itsel
   nothing) is retried for every request.
 
 The client owns the only receive path: trace, watch and the debugger subscribe with
-``add_tracer`` and ``add_listener``. How frames are read off the wire is the framing's
-(tmclsh.link.framing, one per wire shape; tmclsh.link.ascii for the module's ASCII command
-line, swapped in by ``ascii_link``); what may still arrive and which answers are in
-doubt is the ledger's (ledger.py); bringing a module up, at connect and after a reconnect,
-is bringup.py's; TMCL lines as text are text.py's, on top of this.
+``add_tracer`` and ``add_listener``. What is here is the request path and the client's
+settings; the rest is done by components the client owns, each with one job: who watches
+the line, events and their delivery (taps.py), replies nobody waited for and the answers
+they put in doubt (doubt.py, on the ledger's bookkeeping, ledger.py), addresses two modules
+answer at (shared.py), and the link reopened, reset, switched or closed (lifecycle.py). How
+frames are read off the wire is the framing's (tmclsh.link.framing, one per wire shape;
+tmclsh.link.ascii for the module's ASCII command line, swapped in by ``ascii_link``);
+bringing a module up, at connect and after a reconnect, is bringup.py's; TMCL lines as text
+are text.py's, on top of this.
 """
 
 from __future__ import annotations
 
 import threading
 import time
-from collections import deque
-from collections.abc import Callable, Container, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from typing import TYPE_CHECKING, TypeVar
 
 from ..base import clock
 from ..base.canspec import LINK_DEFAULTS
-from ..base.logs import Logger
 from ..base.errors import (ChecksumError, DownloadModeError, TmclTimeoutError, TransportError,
                            ValidationError)
 from ..link.base import Transport
@@ -59,18 +61,19 @@ from ..tmcl import instructions as isa
 from ..tmcl.frames import Control, Reply, ReplyKind, Request, Status
 from ..tmcl.modules import Module
 from ..tmcl.modules import load as load_module
+from .doubt import Doubts
 from .ledger import CONFIRM_ROUNDS, Ledger, Suspect
+from .lifecycle import Lifecycle, lost_check
 from .motion import MotionRecord, watched_opcodes
+from .shared import SharedAddresses
+from .taps import Listener, Taps, Tracer
+from .taps import tell as _tell
 
 if TYPE_CHECKING:
     from ..link.ascii import AsciiFraming
     from ..link.framing import CanFraming, SerialFraming
     from ..tmcl.asm import Encoded, Line
 
-log = Logger(__name__)  # (logging imported when it first logs)
-
-Tracer = Callable[[str, bytes, object], None]
-Listener = Callable[[Reply], None]
 K = TypeVar("K")
 
 _NORMAL, _VERSION, _MEMORY, _NONE = (ReplyKind.NORMAL, ReplyKind.VERSION_STRING,
@@ -78,12 +81,11 @@ _NORMAL, _VERSION, _MEMORY, _NONE = (ReplyKind.NORMAL, ReplyKind.VERSION_STRING,
 _FIRST_CONTROL = int(Control.STOP_APPLICATION)  # only control commands have other layouts
 _LOADED = int(Status.LOADED)
 _WRONG_CHECKSUM = int(Status.WRONG_CHECKSUM)
-_ALL_OPCODES = frozenset(range(256))  # a sent-only tracer that watches every command
 _QUIT_DOWNLOAD = isa.download_command("leave")
 _GET_VERSION = int(Control.GET_VERSION)
 _MOTION = watched_opcodes()  # what may start or stop a motor (client/motion.py)
 
-__all__ = ["Client", "Suspect", "CONFIRM_ROUNDS", "idempotent", "shared_text"]
+__all__ = ["Client", "Suspect", "CONFIRM_ROUNDS", "idempotent"]
 
 
 def idempotent(req: Request, downloading: bool = False) -> bool:
@@ -144,11 +146,6 @@ class Client:
         self.motion = MotionRecord()
         """What tmclsh told each motor to do and has not stopped (a turning target, a
         position move): a motor whose speed reads 0 may still be meant to turn."""
-        self._events: deque[tuple[Reply, float]] = deque()  # with when each arrived
-        self._delivering = threading.RLock()  # held while events go to the listeners
-        # when the event being delivered arrived (time.monotonic()), for listeners that
-        # put a time on it
-        self._event_time = 0.0
         # set by reconnect(): before the next command, the module is brought up again as at
         # connect (tmclsh.client.bringup: what answers, its mode, download mode)
         self._bring_up_next = False
@@ -170,39 +167,51 @@ class Client:
         # goes (a --keep-going script waits for a cable plugged back in); it raises
         # TransportError if the link stays down. None: the request fails at once.
         self._on_link_lost: Callable[[], None] | None = None
-        # run by close() while the link is still open (the ASCII link restores the mode the
-        # module was found in)
-        self._close_hooks: list[Callable[[], None]] = []
-        self._listeners: list[Listener] = []
-        self._tracers: list[Tracer] = []
-        self._sent_tracers: list[Tracer] = []  # add_tracer(sent_only=True)
-        # the commands some sent-only tracer asked for (all when one asked for every one): a
-        # script's per-line check costs a set lookup, not a call, for the lines none wants
-        self._sent_wanted: frozenset[int] = frozenset()
-        self._sent_filters: dict[Tracer, frozenset[int]] = {}  # each one's opcodes
-        self._poller: threading.Thread | None = None
-        self._poller_stop = threading.Event()
         self.stats = {"sent": 0, "timeouts": 0, "checksum_errors": 0, "resyncs": 0,
                       "discarded": 0, "events": 0, "retries": 0, "reconnects": 0,
                       "flushed": 0, "unsolicited": 0, "suspect": 0,
                       "judged": 0}
         """Counters of what happened on the link since it was opened: requests sent,
         timeouts, checksum errors, resynchronisations, retries, events, ..."""
+        # the components the client's jobs beside the request path are done by (taps.py,
+        # shared.py, doubt.py, lifecycle.py)
+        self._taps = taps = Taps(self)
+        self._tracers = taps.tracers  # (the same lists: the request path reads them here)
+        self._sent_tracers = taps.sent_tracers  # (_sent_wanted and _tracing: Taps writes)
+        self._events = taps.events
+        self._sharing = sharing = SharedAddresses(self)
+        self._doubts = doubts = Doubts(self, taps, sharing)
+        self._lifecycle = life = Lifecycle(self, taps)
+        # what the request path and the framings call (tmclsh.link.framing.Owner), bound
+        # here to the component that does it: one attribute read, as a method's would be
+        self._trace = taps.trace
+        self._tell = taps.tell
+        self._trace_sent = taps.trace_sent
+        self._discard = taps.discard
+        self._event = taps.event
+        self._deliver_events = taps.deliver
+        self._second = sharing.second
+        self._late = doubts.late
+        self._noise_unsolicited = doubts.noise_unsolicited
+        self._accept_version = doubts.accept_version
+        self._lost_check = life.lost_check
+        # the suspects not yet reported (the ledger's own queue): a script's every line asks
+        # whether it is empty before it asks for the suspects
+        self._suspects = self._ledger.suspects
         # the transport's framing, and the one requests go through: the ASCII link's while
         # the module is driven in its ASCII mode (the ascii_link property swaps them)
         self._binary_framing: SerialFraming | CanFraming = transport.framing(self)
         self._framing: SerialFraming | CanFraming | AsciiFraming = self._binary_framing
         self._by_line = False  # the framing is the ASCII link's (set with ascii_link)
 
-    # -- subscriptions ------------------------------------------------------------------
+    # -- subscriptions (taps.py) --------------------------------------------------------
     def add_listener(self, fn: Listener) -> Callable[[], None]:
         """Call ``fn(reply)`` for every unsolicited reply (138 events). Returns an unsubscribe.
 
         Listeners run after the transaction that received the event has released the link
         (or on the event poller's thread), so they may send commands themselves.
         """
-        self._listeners.append(fn)
-        return lambda: self._listeners.remove(fn) if fn in self._listeners else None
+        return self._taps.add_listener(fn)
 
     def add_tracer(self, fn: Tracer, *, sent_only: bool = False,
                    opcodes: Iterable[int] | None = None) -> Callable[[], None]:
@@ -214,167 +223,29 @@ class Client:
         ``opcodes`` (with ``sent_only``): only requests of these command numbers are needed,
         so the others skip the call (the tracer may still be told of others: it checks).
         """
-        if opcodes is not None and not sent_only:
-            raise ValueError("opcodes= filters a sent_only tracer")
-        tracers = self._sent_tracers if sent_only else self._tracers
-        tracers.append(fn)
-        filters = self._sent_filters
-        if sent_only:
-            filters[fn] = frozenset(opcodes) if opcodes is not None else _ALL_OPCODES
-            self._sent_wanted = frozenset().union(*filters.values())
+        return self._taps.add_tracer(fn, sent_only=sent_only, opcodes=opcodes)
 
-        def remove() -> None:
-            if fn in tracers:
-                tracers.remove(fn)
-                if sent_only and fn not in tracers:
-                    del filters[fn]
-                    self._sent_wanted = frozenset().union(*filters.values())
-        return remove
-
-    # -- what the framing reports (tmclsh.link.framing.Owner) ---------------------------
-    def _trace(self, direction: str, raw: bytes, decoded: object, *,
-              request: Request | None = None) -> None:
-        """Report a frame to the tracers ("tx", "rx", "drop" or "note"). ``request``: the
-        request a "tx" line carries (an ASCII line's decoded is its text), for the tracers
-        that only watch what is sent (``add_tracer(sent_only=True)`` is told requests)."""
-        if direction == "tx" and self._sent_tracers:
-            sent = decoded if request is None else request
-            if not isinstance(sent, Request) or sent.opcode in self._sent_wanted:
-                _tell(self._sent_tracers, "tx", raw, sent)
-        if self._tracers:
-            _tell(self._tracers, direction, raw, decoded)
-
-    def _tell(self, direction: str, raw: bytes, decoded: object) -> None:
-        """Report a frame to the full tracers (the framing's: it tells the sent-only
-        tracers of a request itself, before it goes out)."""
-        _tell(self._tracers, direction, raw, decoded)
-
-    def _trace_sent(self, raw: bytes, req: Request) -> None:
-        _tell(self._sent_tracers, "tx", raw, req)
-
-    def _discard(self, raw: bytes, why: str) -> None:
-        self.stats["discarded"] += len(raw)
-        if self._tracers:
-            _tell(self._tracers, "drop", raw, why)
-
-    def _event(self, raw: bytes, reply: Reply) -> None:
-        self.stats["events"] += 1
-        if self._tracers:
-            _tell(self._tracers, "rx", raw, reply)
-        self._events.append((reply, time.monotonic()))
-        self.motion.reached(reply.value)  # (138: the motors whose position move ended)
-
-    def _late(self, address: int, opcode: int, reply: Reply | None) -> bool:
-        """A reply arrived that no request waits for: True if one like it was expected
-        (``Ledger.late``), or the line may carry anything; else it is unsolicited."""
-        ledger = self._ledger
-        if ledger.late(address, opcode, reply):
-            return True
-        if ledger.opaque or self._downloading:
-            # (no doubt cast, but a reply all the same: a second module answers here too)
-            self._second(ledger.doubles.extra(address, reply))
-            return True
-        self._unsolicited(reply)
-        return False
-
-    def _noise_unsolicited(self) -> None:
-        """Bytes that were no frame came while nothing was outstanding and nothing was
-        expected: a damaged reply, possibly the real answer to the last request."""
-        if not self._ledger.dirty(self._downloading) and not self._downloading:
-            self._unsolicited(None)
-
-    def _accept_version(self, window: bytes) -> bool:
-        """Nine bytes that are no frame: a version string the ledger expects (a stale 136
-        type 0's) or one taken lately (a duplicated 136 reply)? Then they are read whole."""
-        if window[0] != self.host_address or not all(32 <= b < 127 for b in window[1:9]):
-            return False
-        raw = bytes(window[:9])
-        ledger = self._ledger
-        if ledger.late_version():
-            self._discard(raw, "stale version string")
-            return True
-        if ledger.is_version_copy(raw[1:].decode("latin-1")):
-            # (a copy is no damaged reply either: the answer may still come, after a
-            # module's pause before replying)
-            self.stats["unsolicited"] += 1
-            ledger.mark_dirty()
-            self._discard(raw, "copy of the version string")
-            self._second(ledger.doubles.extra_version())
-            return True
-        if ledger.doubles.asks_version() and not ledger.opaque:
-            # another version string right behind the one asked for: a second module
-            # answered the same 136 (nothing else sends a host-addressed string)
-            self.stats["unsolicited"] += 1
-            ledger.mark_dirty()
-            self._discard(raw, "a second version string (another module at this address?)")
-            self._second(ledger.doubles.extra_version())
-            return True
-        return False
-
-    def _second(self, found: int | None) -> None:
-        """A reply was counted (``ledger.Doubles``): ``found``, the address found shared
-        just now (the trace says so where it happened)."""
-        if found is not None and self._tracers:
-            _tell(self._tracers, "note", b"", shared_text(found))
-
+    # -- addresses two modules answer at (shared.py) ------------------------------------
     @property
     def shared(self) -> frozenset[int]:
         """The addresses two modules were found to answer at (``ledger.Doubles``): every
         request to one reaches both, and which answer is taken is chance."""
-        return frozenset(self._ledger.doubles.shared)
+        return self._sharing.shared
 
     def answered_twice(self, address: int, *, lately: bool = False) -> bool:
         """Did the last answer from ``address`` come twice (``lately``: any of the last
         few)? Not yet a finding (a line may copy a reply): asked again, two modules answer
         twice every time (``shared``)."""
-        with self._lock:
-            return self._ledger.doubles.seconded(address, lately=lately)
+        return self._sharing.answered_twice(address, lately=lately)
 
     @property
     def shared_news(self) -> bool:
         """Was an address found shared that ``take_shared`` has not told yet?"""
-        return bool(self._ledger.doubles.new)
+        return self._sharing.news
 
     def take_shared(self) -> list[int]:
         """The addresses found shared since last asked (each told once: the shell warns)."""
-        with self._lock:
-            return self._ledger.doubles.take()
-
-    def _unsolicited(self, extra: Reply | None) -> None:
-        self.stats["unsolicited"] += 1
-        if extra is not None:
-            self._second(self._ledger.doubles.extra(extra.module, extra))
-        raw = b"" if extra is None else extra.to_can() if self.is_can else extra.to_bytes()
-        for suspect in self._ledger.unsolicited(extra, raw):
-            self.stats["suspect"] += 1
-            if self._tracers:
-                _tell(self._tracers, "note", b"", f"the reply to {name_of(suspect.request)} may "
-                      "have been another request's: a reply came that nothing was waiting for")
-
-    def _deliver_events(self) -> None:
-        # One deliverer at a time (the request's thread or the event poller's), so events
-        # reach listeners in the order they came, each with its own event_time. The poller
-        # leaves its events to a request's thread that is delivering; a request's thread
-        # waits for the poller's turn to end (so the events that came before its reply are
-        # out before its result), though never for long: a poller's listener may itself be
-        # waiting for the link. A listener that sends a command delivers inline (re-entrant).
-        poller = threading.current_thread() is self._poller
-        while self._events:
-            if not self._delivering.acquire(blocking=not poller, timeout=-1 if poller else 1.0):
-                return
-            try:
-                while True:
-                    try:
-                        reply, self._event_time = self._events.popleft()
-                    except IndexError:
-                        break
-                    for fn in list(self._listeners):
-                        try:
-                            fn(reply)
-                        except Exception as exc:
-                            _failed("a listener", exc)
-            finally:
-                self._delivering.release()
+        return self._sharing.take()
 
     # -- properties ---------------------------------------------------------------------
     @property
@@ -422,7 +293,6 @@ class Client:
         operation before it sends the first of several requests, so it sends none."""
         return self._framing.refusal(req)
 
-
     @property
     def is_can(self) -> bool:
         """The link is a CAN bus (addresses are CAN ids there)."""
@@ -465,10 +335,6 @@ class Client:
     def _replies(self) -> int:
         """Replies returned so far (numbers them: ``Suspect.seq``, ``in_doubt``)."""
         return self._ledger.replies
-
-    @property
-    def _suspects(self):
-        return self._ledger.suspects
 
     def describe(self) -> str:
         """Where the module is, in words (``/dev/ttyACM0 @ 9600``, ``SIMULATED TMCM-1311``)."""
@@ -565,19 +431,6 @@ class Client:
             except BaseException:
                 self._check_download = True
                 raise
-
-    def _notice(self, text: str) -> None:
-        """Tell the user about something the client did on its own."""
-        if self.on_notice is not None:
-            self.on_notice(text)
-        else:
-            log.warning("%s", text)
-
-    def _check_download_next(self) -> None:
-        """Download mode may not have ended (a 133 went unanswered, or was interrupted):
-        before the next command, ask the module and end it if need be, so that command is
-        executed, not stored."""
-        self._check_download = True
 
     def _request(self, req: Request, timeout: float, retries: int) -> Reply | None:
         if not self.transport.is_open:
@@ -815,24 +668,7 @@ class Client:
         finally:
             self._judging = False
 
-    # -- answers in doubt ---------------------------------------------------------------
-    def _last_may_be_a_copy(self) -> bool:
-        """Whether the last reply taken could be a late copy of the one before it."""
-        with self._lock:
-            return self._ledger.last_may_be_a_copy()
-
-    def _suspect_seqs(self) -> set[int]:
-        """The ``seq`` of every suspect not yet taken (``take_suspects`` still reports them)."""
-        with self._lock:  # (the event poller may add one meanwhile)
-            return self._ledger.suspect_seqs()
-
-    def _take_suspects(self, seqs: Container[int] | None = None) -> list[Suspect]:
-        """Replies returned earlier that may have answered another request (oldest first);
-        each is reported once. ``seqs``: only those (a caller that read again, or marked the
-        values in doubt itself, takes its own; the rest stay to be reported)."""
-        with self._lock:  # (the event poller may add one meanwhile)
-            return self._ledger.take_suspects(seqs)
-
+    # -- answers in doubt (doubt.py) ----------------------------------------------------
     def doubt_on_last(self, *, take: bool = True) -> bool:
         """Was the answer just returned left in doubt (its judge could not settle it, or a
         reply that came while it was judged spoke against it)? ``take``: it is said with the
@@ -855,98 +691,23 @@ class Client:
         real answer comes while nothing waits for it; ``confirm`` gives it that chance:
         what waits is taken in, and one more exchange made (136 type 1) when the last answer
         may be such a copy (the module answers in order). Readers read those again
-        (``CONFIRM_ROUNDS`` times at most) or say they are in doubt, then ``settle`` them.
-        In ASCII mode what waits is taken in (AsciiFraming.absorb); its readings of settings
-        were judged as they were read."""
-        if not answered:
-            return set()
-        if confirm and self._by_line:
-            with self._lock:
-                self._framing.absorb()
-        elif confirm:
-            self.poll()  # what waits already is taken in (nothing is sent, nothing awaited)
-            # the exchange only if the last answer may be the reply before it, taken again;
-            # not on the simulator in process (whatever follows an answer waits already)
-            if not self.transport.simulated and self._last_may_be_a_copy():
-                try:
-                    self.request(Request(self.address, _GET_VERSION, 1, 0, 0))
-                except (TmclTimeoutError, ChecksumError, DownloadModeError):
-                    pass  # what it could find is found by the next request's flush as well
-        found = self._suspect_seqs()
-        return {key for seq, key in answered.items() if seq in found}
+        (``CONFIRM_ROUNDS`` times at most) or say they are in doubt, then settle them
+        (``Doubts.settle``). In ASCII mode what waits is taken in (AsciiFraming.absorb); its
+        readings of settings were judged as they were read."""
+        return self._doubts.in_doubt(answered, confirm=confirm)
 
-    def _settle(self, answered: Mapping[int, object]) -> None:
-        """The suspects among ``answered`` were dealt with by their reader (read again, or
-        said to be in doubt): they are not reported again."""
-        if answered:
-            self._take_suspects(answered.keys())
-
-    # -- events while idle --------------------------------------------------------------
+    # -- events while idle (taps.py) ----------------------------------------------------
     def poll(self) -> None:
         """Deliver pending unsolicited replies without waiting (never blocks a transaction)."""
-        if not self._lock.acquire(blocking=False):
-            return
-        try:
-            if not self._by_line and self.transport.is_open and self._framing.waiting():
-                self._framing.absorb()
-        except TransportError:
-            self._down = True  # found here as a request would have found it
-            raise
-        finally:
-            self._lock.release()
-            if self._events:
-                self._deliver_events()
-
-    def _confirm_last(self) -> None:
-        """At the end of a run: was the last reply the answer to its request? A late copy of
-        the reply before it (same address and command) would have been taken for it; its
-        real answer then comes right behind, when nothing waits for it, and makes the last
-        reply a suspect (``take_suspects``). So the line is watched until it has been quiet
-        for two frames' wire time (nothing is sent); otherwise, or on the simulator, what is
-        already waiting is taken in."""
-        with self._lock:
-            if not self.transport.is_open:
-                return
-            if self._by_line:
-                self._framing.absorb(watch=True)
-                return
-            ledger = self._ledger
-            quiet = self._framing.quiet_time()
-            if not ledger.last_may_be_a_copy() or ledger.confirmed == ledger.replies:
-                quiet = 0.0  # (this reply was watched for already)
-            end = time.monotonic() + max(0.5, 10 * quiet)
-            while self._framing.absorb(quiet) and quiet and time.monotonic() < end:
-                pass
-            ledger.confirmed = ledger.replies
-        if self._events:
-            self._deliver_events()
+        self._taps.poll()
 
     def start_event_poller(self, interval: float = 0.05) -> None:
         """Deliver 138 events while no command is running, from a background thread."""
-        if self._poller is not None:
-            return
-        # each poller its own stop: one that outlived stop_event_poller's wait (a listener
-        # that blocked) still ends, instead of running on beside the next one
-        stop = self._poller_stop = threading.Event()
-
-        def run() -> None:
-            while not stop.wait(interval):
-                try:
-                    self.poll()
-                except TransportError:
-                    pass  # the next command reports the lost link
-                except Exception as exc:
-                    _failed("looking for events", exc)
-
-        self._poller = threading.Thread(target=run, name="tmclsh-events", daemon=True)
-        self._poller.start()
+        self._taps.start_poller(interval)
 
     def stop_event_poller(self) -> None:
         """Stop delivering events in the background (``start_event_poller``)."""
-        self._poller_stop.set()
-        if self._poller is not None:
-            self._poller.join(1)
-            self._poller = None
+        self._taps.stop_poller()
 
     # -- the module ---------------------------------------------------------------------
     def require_module(self) -> Module:
@@ -962,12 +723,6 @@ class Client:
 
         return identify(self)
 
-    def _leave_download_mode(self) -> bool:
-        """End download mode if the module is in it (bringup.leave_download_mode)."""
-        from .bringup import leave_download_mode
-
-        return leave_download_mode(self)
-
     def wait_until(self, predicate: Callable[[], bool], timeout: float | None,
                    interval: float = 0.05) -> None:
         """Call ``predicate`` every ``interval`` s until it is true; TmclTimeoutError after
@@ -980,7 +735,7 @@ class Client:
             # a long interval never sleeps past the deadline
             clock.sleep(interval if deadline is None else min(interval, deadline - now))
 
-    # -- the link -----------------------------------------------------------------------
+    # -- the link (lifecycle.py) --------------------------------------------------------
     def reconnect(self, wait: float = 0.0, *, bring_up: bool = True) -> None:
         """Close and reopen the transport (after the port was lost, e.g. USB unplugged).
 
@@ -991,34 +746,7 @@ class Client:
         unless ``bring_up`` is false (a firmware update, which expects the module to have
         restarted into its bootloader and asks it itself).
         """
-        with self._lock:
-            self._reopen(wait)
-            self._bring_up_next = bring_up
-            self.stats["reconnects"] += 1
-            if self._tracers:
-                _tell(self._tracers, "note", b"", f"reconnected to {self.describe()}")
-
-    def _reopen(self, wait: float = 0.0) -> None:
-        self.transport.close()
-        deadline = time.monotonic() + wait
-        while True:
-            try:
-                self.transport.open()
-                break
-            except TransportError:
-                if time.monotonic() >= deadline:
-                    raise
-                time.sleep(min(0.1, max(0.0, deadline - time.monotonic())))
-        self._down = False
-        # (a module driven in ASCII mode is found again in whichever mode it is in now:
-        # bringup.again)
-        self._framing = self._binary_framing = self.transport.framing(self)
-        self._by_line = False
-        self._ledger.reset()  # (an answer still to come may come on the new link too)
-
-    def _lost_check(self, address: int, why: str) -> str:
-        """``lost_check`` for the framings (the ASCII link's line check)."""
-        return lost_check(self, address, why)
+        self._lifecycle.reconnect(wait, bring_up=bring_up)
 
     @property
     def bring_up_pending(self) -> bool:
@@ -1031,139 +759,13 @@ class Client:
         """Held for every exchange on the line; a peer that talks past ``request`` takes it."""
         return self._lock
 
-    @property
-    def _tracing(self) -> bool:
-        return bool(self._tracers or self._sent_tracers)
-
-    def _absorb(self) -> None:
-        """Take in what is pending on the line (the framing's rules): events are kept, all
-        else is stale; a reply among it is a late one."""
-        with self._lock:
-            self._framing.absorb()
-
-    def _clear_input(self) -> None:
-        """Forget bytes buffered for the binary framing (the line was in another mode)."""
-        with self._lock:
-            self._framing.clear()
-
-    def _forget_stale(self) -> None:
-        """The line was reset (its baud rate changed): nothing sent before can still arrive."""
-        with self._lock:
-            self._framing.clear()
-            self._ledger.forget()
-
-    def _resync_next(self) -> None:
-        """Something else used the line (the module's ASCII mode): whatever is left on it is
-        stale, so the next binary request starts with the resynchronisation marker."""
-        with self._lock:
-            self._framing.clear()
-            self._ledger.mark_dirty()
-
     def close(self) -> None:
         """Stop the event poller, run the close hooks, leave ASCII mode if entered, close the
         transport. Safe to call more than once."""
-        self.stop_event_poller()
-        with self._lock:
-            self._leave_link()
-            self.transport.close()
-
-    def _leave_link(self) -> None:
-        """Run the close hooks, leave ASCII mode if entered: the module is left as it was
-        found, while the link is still open."""
-        hooks, self._close_hooks = self._close_hooks, []
-        for hook in hooks:
-            try:
-                hook()
-            except Exception as exc:
-                _failed("closing", exc)
-        if self._left_downloading and self.transport.is_open:
-            self._end_left_download()
-        if self.ascii_link is not None:
-            try:
-                self.ascii_link.close()
-            except Exception as exc:
-                _failed("leaving ASCII mode", exc)
-
-    def _end_left_download(self) -> None:
-        """133 for a 132 that was sent and never ended (by a line, not an upload)."""
-        self._left_downloading = False
-        self._downloading = True  # (what 133 gets while the module stores commands)
-        try:
-            reply = self.request(Request(self.address, _QUIT_DOWNLOAD, 0, 0, 0))
-        except Exception as exc:
-            _failed("ending download mode (133)", exc)
-            return
-        finally:
-            self._downloading = False
-        if reply is not None and reply.ok:
-            self._notice(f"the module at address {self.address} was still in download mode "
-                        "(a 132 line with no 133 after it): ended it with 133; what was sent "
-                        "after the 132 is stored as its program")
-        else:
-            self._notice(f"the module at address {self.address} is in download mode (a 132 "
-                        "line) and did not leave it for 133 "
-                        f"(status {reply.status if reply is not None else 'none'})")
-
-    def _switch_transport(self, transport: Transport, module: Module | str | None = None) -> None:
-        """Go on on another link (the shell's ``.connect``): the old one is left as ``close``
-        leaves it (the close hooks run, the module is left in the mode it was found in, the
-        port is closed); nothing of it is carried over. The new link starts in binary mode
-        with ``module`` (None: not known yet); listeners, tracers and the event poller stay.
-        Bring the module up with ``bringup.bring_up`` (136, download mode, ASCII mode)."""
-        mod = load_module(module) if isinstance(module, str) else module
-        with self._lock:
-            self._leave_link()
-            try:
-                self.transport.close()
-            except Exception:  # the old link may already be gone; that is why we switch
-                pass
-            self.ascii_link = None
-            self.transport = transport
-            self.module = mod
-            self.version = None
-            self.motion.forget()  # (another module, or one that was told nothing yet)
-            self._reopen()  # clears buffers and stale-reply bookkeeping, reopens the link
-            self._bring_up_next = self._check_download = False  # (what bring_up does)
-            self.stats["reconnects"] += 1
-            if self._tracers:
-                _tell(self._tracers, "note", b"", f"reconnected to {self.describe()}")
+        self._lifecycle.close()
 
     def __enter__(self) -> Client:
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-def shared_text(address: int) -> str:
-    """What a shared address means, in words for users (the one wording)."""
-    return (f"two modules answer at address {address}: every reply came twice, so every "
-            "command reaches both and which answer is shown is chance; give one of them "
-            "another address while the other is disconnected")
-
-
-def lost_check(client: Client, address: int, why: str) -> str:
-    """The words for a line check (after a failure) that got no good answer: the first is a
-    lost reply, as a line that loses one now and then does; only a second in a row, with
-    no good answer between, is a module that stopped answering."""
-    client._checks_lost += 1
-    if client._checks_lost == 1:
-        return (f"a reply from address {address} was lost ({why}); the next command checks "
-                "the line again")
-    return f"address {address} stopped answering: {why}"
-
-
-def _tell(tracers: list[Tracer], direction: str, raw: bytes, decoded: object) -> None:
-    for fn in list(tracers):
-        try:
-            fn(direction, raw, decoded)
-        except Exception as exc:  # a broken tracer must not break the link
-            _failed("a tracer", exc)
-
-
-def _failed(what: str, exc: Exception) -> None:
-    """Something the client runs on the side failed: one line (with no logging set up,
-    Python would print a logged exception's traceback to the user); the traceback is
-    logged at debug level for whoever set logging up."""
-    log.warning("%s failed: %s", what, exc)
-    log.debug("%s failed", what, exc_info=exc)

@@ -45,20 +45,20 @@ def write(client: Client, req: Request, param: Parameter,
         return reply
     if role == "address" and not client.is_can and value != client.address:
         client.address = value
-        client._notice(f"the module answers at address {value} now: talking to it there "
-                      f"(-a {value} next time)")
+        client._taps.notice(f"the module answers at address {value} now: talking to it there "
+                           f"(-a {value} next time)")
     elif role == "host_address" and value != client.host_address:
         client.host_address = value
-        client._notice(f"the module sends its replies to host address {value} now: listening "
-                      f"there (--host-address {value} next time)")
+        client._taps.notice(f"the module sends its replies to host address {value} now: listening "
+                           f"there (--host-address {value} next time)")
     elif role == "can_id" and client.is_can and value != client.can_id:
         client.can_id = value
-        client._notice(f"the module listens on CAN id {value} now: sending there "
-                      f"(--can-id {value} next time)")
+        client._taps.notice(f"the module listens on CAN id {value} now: sending there "
+                           f"(--can-id {value} next time)")
     elif role == "reply_id" and client.is_can and value != client.reply_id:
         client.reply_id = value
-        client._notice(f"the module replies on CAN id {value} now: listening there "
-                      f"(--reply-id {value} next time)")
+        client._taps.notice(f"the module replies on CAN id {value} now: listening there "
+                           f"(--reply-id {value} next time)")
     elif role == "baud":
         _follow_baud(client, param, value)
     return reply
@@ -74,19 +74,19 @@ def _follow_baud(client: Client, param: Parameter, code: int) -> None:
     if rate == old:
         return
     if _answers(client):
-        client._notice(f"the module still answers at {old} baud: it takes {rate} baud at its "
-                      f"next start (then: --baud {rate})")
+        client._taps.notice(f"the module still answers at {old} baud: it takes {rate} baud at its "
+                           f"next start (then: --baud {rate})")
         return
     t.set_baudrate(rate)
-    client._forget_stale()
+    client._lifecycle.forget_stale()
     if _answers(client):
-        client._notice(f"the module answers at {rate} baud now: talking to it at that rate "
-                      f"(--baud {rate} next time)")
+        client._taps.notice(f"the module answers at {rate} baud now: talking to it at that rate "
+                           f"(--baud {rate} next time)")
         return
     t.set_baudrate(old)
-    client._forget_stale()
-    client._notice(f"the module answers neither at {old} nor at {rate} baud since the change; "
-                  f"try 'tmclsh scan --port {t.url} --baud auto'")
+    client._lifecycle.forget_stale()
+    client._taps.notice(f"the module answers neither at {old} nor at {rate} baud since the change; "
+                       f"try 'tmclsh scan --port {t.url} --baud auto'")
 
 
 def _rate(param: Parameter, code: int) -> int | None:

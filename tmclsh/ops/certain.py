@@ -25,7 +25,7 @@ __all__ = ["Certain", "CONFIRM_ROUNDS", "read_until_certain"]
 class Certain(Generic[K]):
     """What ``read_until_certain`` found. ``doubt``: the keys whose last answer is still in
     doubt; ``answered``: the answer each key was last given (``Client._replies`` after it ->
-    key); ``taken``: every answer the rounds took, replaced ones too (for ``Client._settle``);
+    key); ``taken``: every answer the rounds took, replaced ones too (for ``Doubts.settle``);
     ``again``: rounds read again after the first; ``accepted``: the reading ended because it
     was accepted, not because the rounds ran out."""
 

@@ -64,7 +64,7 @@ class Context:
 class TrackedContext(Context):
     """A ``Context`` that remembers which reply answered each read (``answered``:
     ``Client._replies`` after it -> the read's text), so a read whose answer the client finds
-    suspect later (``Client._suspect_seqs``) can be named, read again or marked. ``used``:
+    suspect later (``Doubts.suspect_seqs``) can be named, read again or marked. ``used``:
     the texts read (or taken from the cache) since it was last cleared."""
 
     answered: dict[int, str] = field(default_factory=dict)

@@ -289,7 +289,7 @@ class FirmwareUpdate:
                 if left > 0:
                     time.sleep(left)
             c.transport.set_baudrate(baud)
-            c._forget_stale()  # nothing sent at the other rate can still arrive
+            c._lifecycle.forget_stale()  # nothing sent at the other rate can still arrive
 
     def _boot_link(self) -> tuple:
         b = self.boot

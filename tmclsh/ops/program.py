@@ -48,7 +48,7 @@ from ..tmcl.asm import Program
 from ..base.errors import StatusError, TmclError, TmclTimeoutError, TransportError, ValidationError
 from ..base.logs import Logger
 from ..tmcl.frames import AppState, Control, Instruction, Request, Status
-from ..client.core import shared_text
+from ..client.shared import shared_text
 from .certain import read_until_certain
 
 
@@ -298,7 +298,7 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
         ended, end_error = _quit_download(client, timeout)
         client._downloading = False
         if not ended:
-            client._check_download_next()  # the next command ends it first, not stored
+            client._lifecycle.check_download_next()  # the next command ends it first, not stored
     upload_seconds = time.monotonic() - began
     if failure is not None:
         interrupted = isinstance(failure, KeyboardInterrupt)
@@ -360,7 +360,7 @@ def end_download(client, *, timeout: float | None = None) -> None:
     finally:
         client._downloading = False
         if not ended:
-            client._check_download_next()
+            client._lifecycle.check_download_next()
 
 
 def read_instruction(client, address: int, *, timeout: float | None = None) -> Instruction:

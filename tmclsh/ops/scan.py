@@ -158,7 +158,7 @@ def answer_at(client: Client, addresses: Iterable[int], baud: int, timeout: floa
     """Does any module at ``addresses`` answer at ``baud``? (``--baud auto``: a module that
     answers at two rates is on a link where the rate has no effect.)"""
     client.transport.set_baudrate(baud)  # type: ignore[attr-defined]
-    client._forget_stale()
+    client._lifecycle.forget_stale()
     for addr in addresses:
         try:
             if _probe(client, addr, max(timeout, 0.05), 1) is not None:
@@ -236,7 +236,7 @@ def _second_came(client: Client, addr: int, wait: float = SLOW_TIMEOUT) -> bool:
     busy machine or a slow second module); whatever came is taken in."""
     end = time.monotonic() + wait
     while True:
-        client._absorb()
+        client._lifecycle.absorb()
         if client.answered_twice(addr) or addr in client.shared:
             return True
         if time.monotonic() >= end:
@@ -308,7 +308,7 @@ def scan(client: Client, addresses: Iterable[int], *, timeout: float,
             else:
                 if binary is not None:
                     hit = found[addr] = _identify(client, addr, binary, timeout)
-                    client._absorb()  # (a second answer to the string, if it came)
+                    client._lifecycle.absorb()  # (a second answer to the string, if it came)
                     if client.answered_twice(addr, lately=True) or _second_came(
                             client, addr, timeout):  # (as long as an answer takes)
                         checked.add(addr)
@@ -318,7 +318,7 @@ def scan(client: Client, addresses: Iterable[int], *, timeout: float,
                 progress(addr, hit)
         if not client.is_can and addresses:
             time.sleep(min(slow_timeout, 4 * timeout))  # the last address's late answer
-            client._absorb()
+            client._lifecycle.absorb()
         wanted = set(addresses)
         for addr in sorted((again & wanted) - found.keys()):
             try:
@@ -358,5 +358,5 @@ def _ascii_pass(client: Client, addresses: list[int], timeout: float) -> dict[in
         hit = _in_ascii_mode(client, addr, timeout)
         if hit is not None:
             found[addr] = hit
-    client._resync_next()  # (binary frames after ASCII lines start from a clean line)
+    client._lifecycle.resync_next()  # (binary frames after ASCII lines start from a clean line)
     return found

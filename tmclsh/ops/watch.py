@@ -8,7 +8,7 @@ the CSV file and the keys.
 * An answer in doubt is never given as the module's value. On a line that brings a reply
   twice, the copy may be taken for the next request's answer (same command, same layout);
   the client finds that out when the real answer comes while nothing waits for it
-  (``Client._suspect_seqs``). A read found so during its sample (by a later read's request)
+  (``Doubts.suspect_seqs``). A read found so during its sample (by a later read's request)
   is read again at once, then one 136 type 1 exchange lets the line's last answer arrive
   (``Reading.settle``). A value still in doubt is None and named in ``Sample.suspect``.
   No exchange is added while nothing is in doubt.
@@ -234,7 +234,7 @@ class Reading:
             (the others' reads come from this sample's cache)."""
             assert doubt is not None and ctx.cache is not None
             self.reread += len(doubt)
-            client._settle(ctx.answered)
+            client._doubts.settle(ctx.answered)
             for seq in [q for q, text in ctx.answered.items() if text in doubt]:
                 del ctx.answered[seq]
             for text in doubt:
@@ -261,7 +261,7 @@ class Reading:
                 self.errors.pop(name, None)
             self.suspect += [n for n in names if n not in self.suspect]
         if self.judged:
-            client._settle(ctx.answered)
+            client._doubts.settle(ctx.answered)
 
     def sample(self) -> Sample:
         if self.lost is not None:

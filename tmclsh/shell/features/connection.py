@@ -82,7 +82,7 @@ def cmd_connect(session: Session, arg: str) -> None:
         new = {"port": port}
     # the old module is left in the mode it was found in; the new one is brought up as at
     # the command line (136, -m checked, download mode ended, ASCII mode recognised)
-    client._switch_transport(transport, module)
+    client._lifecycle.switch_transport(transport, module)
     for key in ("port", "can", "sim"):
         settings.pop(key, None)
     settings.update(new)

@@ -206,7 +206,7 @@ def judge(session: Session, expression: expr.Expression, *, again: bool = True,
                                confirm_again=confirm, accept=settled,
                                again=(CONFIRM_ROUNDS if again else 0) + twice)
     ok, left, right, values = seen[-1]
-    session.client._settle(answered)
+    session.client._doubts.settle(answered)
     if twice and not found.accepted and not found.doubt:  # never agreed twice in a row
         return Judged(ok, left, right, [expression.text], answered, found.again + 1,
                       values=values, disagreed=True)
@@ -271,11 +271,11 @@ def cmd_wait(session: Session, args: str) -> None:
             return False
         before, last, last_at, unread = last, judged, time.monotonic() - start, None
         if before is not None:  # (judged by this poll's requests)
-            session.client._settle(before.answered)
+            session.client._doubts.settle(before.answered)
         if not last.ok or last.doubt:
             return False  # a "not yet" in doubt costs one more poll: a condition met is confirmed
         last.doubt = sorted(session.client.in_doubt(last.answered, confirm=True))
-        session.client._settle(last.answered)
+        session.client._doubts.settle(last.answered)
         return not last.doubt
 
     left = session.time_left()
@@ -294,7 +294,7 @@ def cmd_wait(session: Session, args: str) -> None:
         else:
             # the last answer judged, so it is not stated as read when it was in doubt
             doubt = sorted(session.client.in_doubt(last.answered, confirm=True)) or last.doubt
-            session.client._settle(last.answered)
+            session.client._doubts.settle(last.answered)
             last.doubt = doubt
             seen = last.in_doubt() if doubt else last.seen()
             record.update(last.record(expression, False), read_at=round(last_at, 3))

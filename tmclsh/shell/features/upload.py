@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Iterator
 
 from ...base import files
 from ...base.errors import AsmError, TmclError, ValidationError
-from ...client.core import shared_text
+from ...client.shared import shared_text
 from ...ops import program
 from ...ops.program import UploadError
 from ...tmcl import asm, sourcemap

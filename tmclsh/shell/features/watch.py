@@ -12,7 +12,7 @@
 * An answer in doubt is never shown as the module's value. On a line that brings a reply
   twice, the copy may be taken for the next request's answer (same command, same layout);
   the client finds that out when the real answer comes while nothing waits for it
-  (``Client._suspect_seqs``). A read found so during its sample (by a later read's request)
+  (``Doubts.suspect_seqs``). A read found so during its sample (by a later read's request)
   is read again at once, then one 136 type 1 exchange lets the line's last answer arrive;
   the sample's last read is judged by the next sample's first request, so a sample is shown
   one sample late (the last one after a 136 type 1 exchange). A value still in doubt is

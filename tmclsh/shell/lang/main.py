@@ -219,7 +219,7 @@ def _run_unattended(args: argparse.Namespace, session: Session) -> int:
     unlisten = lambda: None  # noqa: E731
     started = _watch_for_starts(client)
     if out.json:
-        unlisten = client.add_listener(lambda reply: out.event(reply, client._event_time))
+        unlisten = client.add_listener(lambda reply: out.event(reply, client._taps.event_time))
         client.start_event_poller()  # an event shows when it comes, not at the next line
     finished = False
     suspects, shared = session.stats.suspects, len(session.stats.shared)

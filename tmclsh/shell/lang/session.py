@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from ...tmcl import instructions as isa
-from ...client.core import idempotent, shared_text
+from ...client.core import idempotent
+from ...client.shared import shared_text
 from ...client.text import LineClient as Client
 from ...client.text import Result
 from ...link.framing import name_of as _name
@@ -405,11 +406,11 @@ class Session:
                 ring[seq % ANSWERED] = (seq, text, where)
 
     def report_suspects(self) -> None:
-        """Say which earlier answers may have been another request's (Client._take_suspects):
+        """Say which earlier answers may have been another request's (Doubts.take_suspects):
         a result is never silently kept when the link shows it may be wrong."""
         self.report_shared()
-        take = getattr(self.client, "_take_suspects", None)
-        for s in take() if callable(take) else ():
+        doubts = getattr(self.client, "_doubts", None)
+        for s in doubts.take_suspects() if doubts is not None else ():
             known = self._answered[s.seq % ANSWERED]
             line, where = known[1:] if known is not None and known[0] == s.seq else (None, None)
             self.stats.suspects += 1
@@ -440,11 +441,11 @@ class Session:
 
     def confirm_answers(self) -> None:
         """At the end of a run (-c, -f): give the last answer the chance to show it was
-        another request's (``Client._confirm_last``), then report the suspects."""
-        confirm = getattr(self.client, "_confirm_last", None)
-        if callable(confirm) and self.client.connected:
+        another request's (``Doubts.confirm_last``), then report the suspects."""
+        doubts = getattr(self.client, "_doubts", None)
+        if doubts is not None and self.client.connected:
             try:
-                confirm()
+                doubts.confirm_last()
             except TransportError:
                 pass  # the link went: the next command, if any, says so
         self.report_suspects()
