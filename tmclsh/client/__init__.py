@@ -1,5 +1,8 @@
-"""One module on one link: requests, retries, events and the lock (``core``), the module's
-ASCII mode (``ascii``), and from settings to a client brought up (``connect``)."""
+"""One module on one link: requests, retries and the lock (``core``) and the components the
+client owns (who watches the line and its events, ``taps``; answers in doubt, ``doubt`` on
+the ``ledger``; addresses two modules answer at, ``shared``; the link reopened, switched or
+closed, ``lifecycle``), the module's ASCII mode (``ascii``), and from settings to a client
+brought up (``connect``)."""
 
 # ``tmclsh.client`` was one module before the layers; scripts imported these from it
 _MOVED = {"Client": ("tmclsh.client.text", "LineClient"),
