@@ -3,8 +3,8 @@ methods, so that each part can be read, tested and used from Python on its own.
 
 The code is read, not imported: every ``.py`` under ``tmclsh/`` (the man page and completion
 generator included), each ``def`` directly in a class body counted as a method (a property's
-getter and setter are two). The few files and classes still over are listed below with the
-reason they are left; an entry that is no longer needed fails too, so the list only shrinks.
+getter and setter are two). None is excepted: the last one, the client, was split into its
+components (tmclsh/client/taps.py, doubt.py, shared.py, lifecycle.py).
 """
 
 from __future__ import annotations
@@ -18,12 +18,6 @@ ROOT = Path(__file__).resolve().parents[2] / "tmclsh"
 MAX_LINES = 900
 MAX_METHODS = 45
 
-# path under tmclsh/ -> why it may still be over MAX_LINES (none now: the Client's jobs beside
-# the request path went to its components, tmclsh/client/taps.py, doubt.py, shared.py and
-# lifecycle.py)
-LONG_FILES: dict[str, str] = {}
-# (path, class) -> why it may still have more than MAX_METHODS methods
-BIG_CLASSES: dict[tuple[str, str], str] = {}
 
 
 def _sources() -> list[Path]:
@@ -46,37 +40,18 @@ def _classes(path: Path) -> list[tuple[str, int]]:
 
 
 def test_no_source_file_is_over_900_lines():
-    over = {_name(p): n for p in _sources() if (n := _lines(p)) > MAX_LINES}
-    new = {name: n for name, n in over.items() if name not in LONG_FILES}
+    new = {_name(p): n for p in _sources() if (n := _lines(p)) > MAX_LINES}
     assert not new, (f"over {MAX_LINES} lines: " + ", ".join(
         f"tmclsh/{name} ({n})" for name, n in sorted(new.items()))
         + "; split it by what each part does (HACKING.md's layers)")
 
 
 def test_no_class_has_over_45_methods():
-    over = {(_name(p), cls): n for p in _sources() for cls, n in _classes(p)
-            if n > MAX_METHODS}
-    new = {key: n for key, n in over.items() if key not in BIG_CLASSES}
+    new = {(_name(p), cls): n for p in _sources() for cls, n in _classes(p)
+           if n > MAX_METHODS}
     assert not new, (f"over {MAX_METHODS} methods: " + ", ".join(
         f"{cls} in tmclsh/{name} ({n})" for (name, cls), n in sorted(new.items()))
         + "; move methods into the component they belong to")
-
-
-@pytest.mark.parametrize("name", sorted(LONG_FILES))
-def test_a_long_file_allowed_is_still_long(name):
-    path = ROOT / name
-    assert path.is_file() and _lines(path) > MAX_LINES, (
-        f"tmclsh/{name} is now within {MAX_LINES} lines (or gone): remove it from LONG_FILES")
-
-
-@pytest.mark.parametrize("key", sorted(BIG_CLASSES))
-def test_a_big_class_allowed_is_still_big(key):
-    name, cls = key
-    path = ROOT / name
-    counts = dict(_classes(path)) if path.is_file() else {}
-    assert counts.get(cls, 0) > MAX_METHODS, (
-        f"{cls} in tmclsh/{name} has {MAX_METHODS} methods or fewer now (or is gone): "
-        "remove it from BIG_CLASSES")
 
 
 def test_the_counts_read_what_they_say(tmp_path):
