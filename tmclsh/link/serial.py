@@ -273,7 +273,7 @@ class SerialTransport(StreamTransport):
     def pending(self) -> int:
         fd = self._fd
         if fd is not None and _FIONREAD is not None:
-            # the client asks before every request: one ioctl, without pyserial's layers
+            # one ioctl, without pyserial's layers (before every request where no epoll is)
             try:
                 return int.from_bytes(fcntl.ioctl(fd, _FIONREAD, _FOUR_ZEROS), _BYTEORDER)
             except OSError as exc:
