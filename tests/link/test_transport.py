@@ -443,7 +443,9 @@ def test_ready_says_whether_anything_waits_and_goes_with_the_port():
     import os
     import select
 
-    fds = lambda: len(os.listdir("/proc/self/fd")) if os.path.isdir("/proc/self/fd") else 0
+    def fds() -> int:
+        return len(os.listdir("/proc/self/fd")) if os.path.isdir("/proc/self/fd") else 0
+
     before = fds()
     responder = _PtyResponder(lambda f: [(0, _reply_to(f))])
     t = open_serial(responder.path, 115200)
