@@ -436,6 +436,42 @@ def test_transact_keeps_the_timeout_and_says_what_came():
         responder.close()
 
 
+def test_ready_says_whether_anything_waits_and_goes_with_the_port():
+    """The client asks ``ready`` before every request (what waits cannot be its answer): it
+    must say what ``pending`` says, also once bytes were read, and be gone with the port (on
+    Linux an epoll descriptor of its own: reopening a port again and again leaks none)."""
+    import os
+    import select
+
+    def fds() -> int:
+        return len(os.listdir("/proc/self/fd")) if os.path.isdir("/proc/self/fd") else 0
+
+    before = fds()
+    responder = _PtyResponder(lambda f: [(0, _reply_to(f))])
+    t = open_serial(responder.path, 115200)
+    try:
+        if hasattr(select, "epoll"):
+            assert t._poll is not None
+        assert t.ready() is False and t.pending() == 0
+        t.write(GAP1)
+        end = time.monotonic() + patience(2.0)
+        while t.pending() < 9 and time.monotonic() < end:
+            time.sleep(0.005)
+        assert t.pending() == 9 and t.ready() is True
+        assert t.read_available() == _reply_to(GAP1)
+        assert t.ready() is False
+        for _ in range(3):  # closed and opened again, as a reconnect does
+            t.close()
+            with pytest.raises(TransportError):
+                t.ready()
+            t.open()
+            assert t.ready() is False
+    finally:
+        t.close()
+        responder.close()
+    assert fds() == before
+
+
 def test_the_same_answer_twice_is_the_same_reply_and_another_is_another():
     values = iter([7, 7, -5])
     responder = _PtyResponder(lambda f: [(0, _reply_to(f, next(values) & 0xFFFFFFFF))])

@@ -82,6 +82,7 @@ _FIRST_CONTROL = int(Control.STOP_APPLICATION)  # only control commands have oth
 _LOADED = int(Status.LOADED)
 _WRONG_CHECKSUM = int(Status.WRONG_CHECKSUM)
 _QUIT_DOWNLOAD = isa.download_command("leave")
+_ENTER_DOWNLOAD = isa.download_command("enter")
 _GET_VERSION = int(Control.GET_VERSION)
 _MOTION = watched_opcodes()  # what may start or stop a motor (client/motion.py)
 
@@ -391,7 +392,7 @@ class Client:
                 self.motion.take(self.module, req, reply.status)
             op = req.opcode
             if op >= _FIRST_CONTROL and reply is not None and (
-                    op == _QUIT_DOWNLOAD or op == isa.download_command("enter")) and reply.ok:
+                    op == _QUIT_DOWNLOAD or op == _ENTER_DOWNLOAD) and reply.ok:
                 # (a typed 132 with no 133 after it; asked of 132 and 133 alone: an upload's
                 # verify sends thousands of 134)
                 if op == _QUIT_DOWNLOAD:

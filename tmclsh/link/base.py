@@ -80,6 +80,12 @@ class StreamTransport(Transport):
     def pending(self) -> int:
         """Bytes that can be read now without waiting."""
 
+    def ready(self) -> bool:
+        """Is anything to be read now (the client asks before every request, so a transport
+        may answer it more cheaply than by counting the bytes)? True may also mean the line
+        has something to say that a read will tell (a port hung up)."""
+        return self.pending() > 0
+
     def transact(self, data: bytes, size: int, timeout: float | None) -> bytes:
         """``write(data)``, then ``read(size, timeout)``: the request path's common case in
         one call, so a transport can do it in fewer steps (the serial port's own descriptor)."""

@@ -105,12 +105,12 @@ class SerialFraming:
         self.owner = owner
         self.decoder = FrameDecoder(owner.host_address)
         self._seen: dict[bytes, Reply] = {}  # frame -> Reply (the fast path)
-        self._pending: Callable[[], int] = transport.pending
+        self._ready: Callable[[], bool] = transport.ready
 
     # -- what waits --------------------------------------------------------------------
     def waiting(self) -> bool:
         """Is anything waiting to be read (one cheap check before a request)?"""
-        return bool(self.decoder.buf or self._pending())
+        return bool(self.decoder.buf) or self._ready()
 
     def clear(self) -> None:
         """Forget what is buffered (the line was in another mode, or reset)."""
