@@ -14,9 +14,13 @@ from conftest import ROOT, tmclsh_env
 EXAMPLES = ROOT / "examples"
 
 
+def _run(name: str, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, str(EXAMPLES / name), *args], capture_output=True,
+                          text=True, env=tmclsh_env(), cwd=str(ROOT), timeout=120)
+
+
 def example(name: str, *args: str) -> str:
-    run = subprocess.run([sys.executable, str(EXAMPLES / name), *args], capture_output=True,
-                         text=True, env=tmclsh_env(), cwd=str(ROOT), timeout=120)
+    run = _run(name, *args)
     assert run.returncode == 0, run.stderr
     assert "Traceback" not in run.stderr and "Warning" not in run.stderr, run.stderr
     return run.stdout
@@ -68,8 +72,7 @@ def test_check_a_firmware_image(tmp_path, version, last):
 
 
 def failing(name: str, *args: str) -> str:
-    run = subprocess.run([sys.executable, str(EXAMPLES / name), *args], capture_output=True,
-                         text=True, env=tmclsh_env(), cwd=str(ROOT), timeout=120)
+    run = _run(name, *args)
     assert run.returncode == 1 and "Traceback" not in run.stderr, run.stderr
     assert run.stdout == "" and len(run.stderr.strip().splitlines()) == 1, run.stderr
     return run.stderr
