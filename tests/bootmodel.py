@@ -73,16 +73,21 @@ class BootLogic:
     def commands(self) -> list[int]:
         return [h[0] for h in self.heard]
 
-    def respond(self, addr: int, cmd: int, typ: int, motor: int, value: int):
-        """The version string, (status, value), or None for silence."""
+    def hears(self, addr: int, cmd: int, typ: int, motor: int, value: int) -> bool:
+        """Whether a frame to ``addr`` is answered: one this module takes is recorded and
+        its command's hook run (which may silence it)."""
         if addr not in self.addresses or self.silent:
-            return None
+            return False
         self.heard.append((cmd, typ, motor, value))
         hook = self.hooks.get(cmd)
         if hook is not None:
             hook(self)
-            if self.silent:
-                return None
+        return not self.silent
+
+    def respond(self, addr: int, cmd: int, typ: int, motor: int, value: int):
+        """The version string, (status, value), or None for silence."""
+        if not self.hears(addr, cmd, typ, motor, value):
+            return None
         if cmd == 136 and typ == 0:
             return self.version
         if self.in_bootloader:

@@ -56,14 +56,8 @@ class FieldModule(BootModule):
     def respond(self, addr: int, cmd: int, typ: int, motor: int, value: int):
         if self.in_bootloader or (cmd == 136 and typ == 0) or cmd == 242:
             return super().respond(addr, cmd, typ, motor, value)
-        if addr not in self.addresses or self.silent:
+        if not self.hears(addr, cmd, typ, motor, value):
             return None
-        self.heard.append((cmd, typ, motor, value))
-        hook = self.hooks.get(cmd)
-        if hook is not None:
-            hook(self)
-            if self.silent:
-                return None
         if self.downloading and cmd < 128:
             self.stored[self.download_at] = (cmd, typ, motor, value)
             self.download_at += 1
