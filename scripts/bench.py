@@ -1685,12 +1685,15 @@ def _p99(values: list[float]) -> float:
 def bench_bridge_forwarder(args: argparse.Namespace) -> dict:
     """What ``tmclsh bridge`` (its lines read and dropped) adds to a raw pyserial GAP round
     trip, against what a minimal select-loop forwarder in Python adds, each in front of its
-    own simulator, with blocks straight to a third simulator around each (``bracket``):
-    added = a path block's median (or p99) minus the mean of the raw blocks' either side,
-    the median of that over the pairs (this machine's floor drifts within seconds)."""
+    own simulator, with blocks straight to a third simulator around each (``bracket``).
+    Median: a path block's median minus the mean of the raw blocks' either side, the median
+    of that over the pairs (this machine's floor drifts within seconds). p99: of all the
+    round trips of a path over the run, minus that of all the raw ones (a block of 200 has
+    two round trips beyond its p99: a difference of two such blocks is mostly noise)."""
     block = max(50, args.count // 10)
     pairs = args.pairs or 4 * args.rounds
     frame = gap_frame()
+    pooled: dict[str, list[float]] = {"raw": [], "forwarder": [], "bridge": []}
     with SimProcess(args.module) as direct, SimProcess(args.module) as fsim, \
             SimProcess(args.module) as bsim, open(os.devnull, "w") as sink:
         fwd = subprocess.Popen([sys.executable, "-c", FORWARDER, fsim.path],
@@ -1709,12 +1712,14 @@ def bench_bridge_forwarder(args: argparse.Namespace) -> dict:
 
                 def raw_block(_: int) -> Block:
                     lat = raw.round_trips([frame], block)
+                    pooled["raw"] += lat
                     return {"us": statistics.median(lat) * 1e6, "p99": _p99(lat) * 1e6}
 
                 def paths_block(_: int) -> Block:
                     out = {}
                     for name, port in (("forwarder", f), ("bridge", b)):
                         lat = port.round_trips([frame], block)
+                        pooled[name] += lat
                         out[name] = statistics.median(lat) * 1e6
                         out[name + "-p99"] = _p99(lat) * 1e6
                     return out
@@ -1731,8 +1736,7 @@ def bench_bridge_forwarder(args: argparse.Namespace) -> dict:
     added = {name: statistics.median(p[name] - (a["us"] + c["us"]) / 2
                                      for p, a, c in zip(paths, raws, raws[1:]))
              for name in ("forwarder", "bridge")}
-    p99 = {name: statistics.median(p[name + "-p99"] - (a["p99"] + c["p99"]) / 2
-                                   for p, a, c in zip(paths, raws, raws[1:]))
+    p99 = {name: (_p99(pooled[name]) - _p99(pooled["raw"])) * 1e6
            for name in ("forwarder", "bridge")}
     ratio = added["bridge"] / max(added["forwarder"], 1.0)
     ratio99 = p99["bridge"] / max(p99["forwarder"], 1.0)

@@ -143,7 +143,8 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def test_a_serial_program_reaches_a_can_module(capsys):
+def test_a_serial_program_reaches_a_can_module(capfd):
+    # (capfd: the bridge describes in a process of its own, writing to the same stdout)
     channel = "bridge-can"
     sim = Simulator("TMCM-1311")
     server = serve_can(sim, "virtual", channel)
@@ -173,7 +174,7 @@ def test_a_serial_program_reaches_a_can_module(capsys):
         server.close()
         sim.close()
     assert rc == [0]
-    lines = capsys.readouterr().out.splitlines()
+    lines = capfd.readouterr().out.splitlines()
     assert f"127.0.0.1:{port_no}" in lines  # the endpoint, for a program to connect to
     objs = [json.loads(line) for line in lines if line.startswith("{")]
     got = [o for o in objs if "frame" in o]
@@ -336,3 +337,79 @@ def test_pipelined_requests_are_paired_and_no_reply_by_design_is_no_error():
     assert [o["op"] for o in no_reply] == [242, 205]
     s = objs[-1]["summary"]
     assert (s["unanswered"], s["late"], s["unpaired"], s["errors"]) == (0, 0, 0, 0)
+
+
+# -- the describing in a process of its own (issue 34: the bridge's p99) ----------------------
+
+def _describer_of(pid: int) -> int:
+    """The bridge's describing process: its one child."""
+    deadline = time.monotonic() + 20
+    while True:
+        with open(f"/proc/{pid}/task/{pid}/children") as f:
+            kids = [int(k) for k in f.read().split()]
+        if kids:
+            return kids[0]
+        assert time.monotonic() < deadline, "the bridge has no describing process"
+        time.sleep(0.05)
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/task"), reason="reads /proc (Linux)")
+def test_the_describing_is_not_the_forwarding_s_process_and_its_loss_stops_nothing():
+    """The frames are described in another process, which Ctrl-C does not reach by itself
+    (the bridge ends it); killed outright, the forwarding goes on, and the bridge says at the
+    end that it cannot tell what the traffic left."""
+    from responder import PtyModule
+
+    module = PtyModule(version="1311V111")
+    bridge = Bridge("--pty", "--port", module.path)
+    try:
+        describer = _describer_of(bridge.proc.pid)
+        with serial.Serial(bridge.endpoint, timeout=5) as port:
+            assert _exchange(port, request(1, 6, 4))[2] == 100
+            os.kill(describer, signal.SIGINT)  # (a Ctrl-C to it alone: ignored)
+            assert _exchange(port, request(1, 6, 4))[2] == 100
+            os.kill(describer, signal.SIGKILL)
+            for i in range(50):
+                assert _exchange(port, request(1, 5, 4, 0, i))[2] == 100
+        bridge.proc.send_signal(signal.SIGINT)
+        out, err = bridge.proc.communicate(timeout=30)
+    finally:
+        bridge.kill()
+        module.close()
+    assert bridge.proc.returncode == 0, err
+    assert "could not be read in time: check the module" in err and "Traceback" not in err
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/task"), reason="reads /proc (Linux)")
+def test_the_bridge_killed_outright_leaves_no_describer_behind():
+    from responder import PtyModule
+
+    module = PtyModule(version="1311V111")
+    bridge = Bridge("--pty", "--port", module.path)
+    try:
+        describer = _describer_of(bridge.proc.pid)
+        with serial.Serial(bridge.endpoint, timeout=5) as port:
+            assert _exchange(port, request(1, 6, 4))[2] == 100
+        bridge.proc.kill()
+        out, _ = bridge.proc.communicate(timeout=30)  # (ends when the describer's stdout does)
+    finally:
+        bridge.kill()
+        module.close()
+    assert not os.path.exists(f"/proc/{describer}") or \
+        open(f"/proc/{describer}/stat").read().split(") ")[1][0] == "Z"
+    objs = [json.loads(line) for line in out.splitlines()]
+    assert [o.get("frame") for o in objs] == ["request", "reply", None]  # and its summary
+
+
+def test_a_signal_as_soon_as_the_endpoint_is_out_ends_the_bridge_cleanly(make_pty_sim):
+    sim, path = make_pty_sim()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        bridge = Bridge("--pty", "--port", path)
+        try:
+            bridge.proc.send_signal(sig)
+            out, err = bridge.proc.communicate(timeout=30)
+        finally:
+            bridge.kill()
+        assert bridge.proc.returncode == 0, err
+        assert "Traceback" not in err
+        assert json.loads(out.splitlines()[-1])["summary"]["frames"] == 0

@@ -228,7 +228,8 @@ def test_what_the_command_line_refuses(run_tmclsh):
     assert r.returncode == 1 and "missing.asc" in r.stderr and "Traceback" not in r.stderr
 
 
-def test_a_reply_of_eight_data_bytes_reads_the_same_everywhere(tmp_path, capsys):
+def test_a_reply_of_eight_data_bytes_reads_the_same_everywhere(tmp_path, capfd):
+    # (capfd: the bridge describes in a process of its own, writing to the same stdout)
     """A TMCM-1260 answers with DLC 8 (its seven bytes and their sum): the client, the
     monitor (a log of it), the bridge (a serial master to the CAN module) and ``.decode``
     read the same reply: module 1, status 100, GAP, value 1000; nothing called unanswered."""
@@ -249,7 +250,7 @@ def test_a_reply_of_eight_data_bytes_reads_the_same_everywhere(tmp_path, capsys)
         log.on_message_received(msg(T0, 1, instruction(6, 4)))
         log.on_message_received(msg(T0 + 0.001, 2, captured))
     assert cli.main(["monitor", "--log", str(path), "--json"]) == 0
-    objs = objects(capsys.readouterr().out)
+    objs = objects(capfd.readouterr().out)
     (req, rep) = frames(objs)
     assert (rep["frame"], rep["op"], rep["status"], rep["value"]) == ("reply", 6, 100, 1000)
     assert objs[-1]["summary"]["unanswered"] == 0 and objs[-1]["summary"]["other"] == 0
@@ -289,7 +290,7 @@ def test_a_reply_of_eight_data_bytes_reads_the_same_everywhere(tmp_path, capsys)
         bus.shutdown()
     assert got == bytes([2, 1, 100, 6, 0, 0, 3, 0xE8]) + bytes([sum(got[:8]) & 0xFF])
     assert rc == [0]
-    objs = objects("\n".join(line for line in capsys.readouterr().out.splitlines()
+    objs = objects("\n".join(line for line in capfd.readouterr().out.splitlines()
                              if line.startswith("{")))
     (req, rep) = frames(objs)
     assert (rep["frame"], rep["op"], rep["status"], rep["value"]) == ("reply", 6, 100, 1000)

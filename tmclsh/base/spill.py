@@ -93,12 +93,14 @@ class SpillWriter:
     """A text stream whose ``write`` never blocks: what is written goes to ``stream`` on a
     thread of its own; when ``bound`` writes wait there (the reader of ``stream`` stopped
     reading), further writes are dropped and counted (``dropped``: one per write, so one
-    per line for a writer of lines). ``close`` waits for what was taken to be written."""
+    per line for a writer of lines). ``close`` waits for what was taken to be written.
+    ``poll``: as ``Spill``'s (lines written in batches, one flush each, the writing thread
+    woken that often rather than for every line)."""
 
-    def __init__(self, stream: Any, bound: int = 2000):
+    def __init__(self, stream: Any, bound: int = 2000, poll: float | None = None):
         self.stream = stream
         self.gone = False  # the reader went away (a broken pipe: ``| head`` has ended)
-        self._spill = Spill(self._write, bound, name="output")
+        self._spill = Spill(self._write, bound, name="output", poll=poll)
 
     @property
     def dropped(self) -> int:

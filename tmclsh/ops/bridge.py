@@ -7,18 +7,19 @@ bytes (``write``) and hands bytes back (``on_output``). Here the target is the m
 link:
 
 * ``SerialBridge``: a serial module (``--port``). Bytes go both ways as they come, unread
-  and unchanged; each chunk is then told to the monitor (``heard``).
+  and unchanged; each chunk is noted just before it goes.
 * ``CanBridge``: a CAN module (``--can``). The master speaks serial frames; each request's
   seven instruction bytes go to the module's CAN id as they are, and each reply's seven
   (of seven or eight: tmcl/decoder.py ``can_reply``), or a version string's eight, come
-  back as a serial frame to the host address, checksum added. Bytes that are no frame cannot be forwarded on CAN: they are told as noise.
+  back as a serial frame to the host address, checksum added. Bytes that are no frame
+  cannot be forwarded on CAN: they are noted as noise.
 
-What was forwarded is told to the caller (``heard``) in the order the wire carried it, on a
-thread of its own, after it was forwarded (see ``_Bridge``): reading it, showing it and
-writing it to a file never delay a byte, and a reader that stops reading never stops the
-forwarding. ``Left`` keeps what the master's exchanges leave behind (a motor started,
-download or ASCII mode entered), which the front end ends when the bridge closes. Nothing
-here prints.
+What was forwarded is handed, as it is forwarded, to ``put`` (ops/handoff.py: a pipe to a
+process of its own that describes it), which never waits: reading it, showing it and writing
+it to a file never delay a byte nor take the interpreter from the forwarding, and a reader
+that stops reading never stops the forwarding. ``Left`` keeps what the master's exchanges
+leave behind (a motor started, download or ASCII mode entered), which the front end ends
+when the bridge closes. Nothing here prints.
 """
 
 from __future__ import annotations
@@ -30,7 +31,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from ..base.errors import TransportError
-from ..base.spill import Spill
 from ..link.ascii import char_address
 from ..link.base import CanFrame, CanTransport, StreamTransport
 from ..tmcl import instructions as isa
@@ -38,18 +38,15 @@ from ..tmcl.decoder import CAN_VERSION, FRAME_PIECE, FrameDecoder, can_reply
 from ..tmcl.frames import ReplyKind, checksum
 from ..tmcl.status import status_ok
 from ..tmcl.traffic import enters_ascii, leaves_ascii, plausible_request
+from .handoff import CAN_RX, CAN_TX, LOST, NOISE
 from .monitor import RX, TEXT, TX, Exchange, Item
 
 log = logging.getLogger(__name__)
 
 TICK = 0.1  # s the module's reader waits before it looks whether the bridge closed
-# what ``heard`` is told: (TX | RX, bytes, time) on serial; (CAN_TX | CAN_RX, CanFrame) on
-# CAN; (NOISE, bytes, time) for bytes of the master no frame could be made of; (LOST, why)
-CAN_TX, CAN_RX, NOISE, LOST = "can-tx", "can-rx", "noise", "lost"
-
-Heard = Callable[[tuple], None]
-NOTES = 200_000  # things forwarded that may wait to be told before the newest are not told
-TELL_EVERY = 0.002  # s between the teller's looks: forwarding only appends, wakes nobody
+# what ``notes.put`` is given: (TX | RX, bytes, time) on serial; (CAN_TX | CAN_RX, CanFrame)
+# on CAN; (NOISE, bytes, time) for bytes of the master no frame could be made of; (LOST, why)
+Put = Callable[[tuple], bool]
 
 
 class _Target:
@@ -62,25 +59,21 @@ class _Target:
 
 
 class _Bridge:
-    """The forwarding, and the telling of what was forwarded.
+    """The forwarding, and the handing over of what was forwarded.
 
-    Each chunk is noted just before it is forwarded (a hand-off that never waits: a
-    ``Spill``), so the notes keep the order the wire had: an answer is never noted ahead of
-    its request, nor a request ahead of the answer the master waited for. A thread of its
-    own tells ``heard`` every note in order, holding ``lock`` (the caller takes it too, for
-    its own looks at the monitor). The forwarding threads never wait for it: when the
-    telling falls ``NOTES`` behind, the newest notes are not told and are counted
-    (``untold``); the frames were forwarded all the same.
+    Each chunk is put just before it is forwarded, so the notes keep the order the wire
+    had: an answer is never noted ahead of its request, nor a request ahead of the answer
+    the master waited for. ``put`` never waits (ops/handoff.py); what it could not hand
+    over was forwarded all the same and is counted there. ``lost``: why the module's link
+    was lost, once it was (``ended`` is set then).
     """
 
-    def __init__(self, heard: Heard, *, pty: bool = False,
-                 tcp: tuple[str, int] | None = None):
+    def __init__(self, put: Put, *, pty: bool = False, tcp: tuple[str, int] | None = None):
         from ..sim.serve import serve_pty, serve_tcp
 
-        self.heard = heard
-        self.lock = threading.Lock()
-        self.told_at = time.monotonic()
-        self._notes = Spill(self._tell, NOTES, name="bridge-teller", poll=TELL_EVERY)
+        self.note = put
+        self.lost: str | None = None
+        self.ended = threading.Event()
         self._closed = threading.Event()
         self.target = _Target(self._from_master)
         if pty:
@@ -94,25 +87,11 @@ class _Bridge:
         self._reader = threading.Thread(target=self._loop, name="bridge-module", daemon=True)
         self._reader.start()
 
-    def note(self, event: tuple) -> None:
-        self._notes.put(event)
-
-    @property
-    def untold(self) -> int:
-        """Things forwarded that were not told (the telling fell too far behind)."""
-        return self._notes.dropped
-
-    def _tell(self, event: tuple) -> None:
-        with self.lock:
-            self.heard(event)
-        self.told_at = time.monotonic()
-
-    def quiet_for(self) -> float:
-        """Seconds since the last thing forwarded was told, 0 while some wait to be told:
-        only a line quiet this long has partial frames (a chunk may still be on its way)."""
-        if self._notes.waiting:
-            return 0.0
-        return time.monotonic() - self.told_at
+    def _lose(self, why: str) -> None:
+        if self.lost is None:
+            self.lost = why
+        self.note((LOST, why))
+        self.ended.set()
 
     def _to_master(self, data: bytes) -> None:
         out = self.target.on_output
@@ -128,38 +107,37 @@ class _Bridge:
                 self._step()
         except TransportError as exc:
             if not self._closed.is_set():
-                self.note((LOST, str(exc)))
+                self._lose(str(exc))
         except Exception as exc:  # the bridge must say why it stopped forwarding
             log.exception("the bridge's module reader failed")
-            self.note((LOST, f"the bridge stopped forwarding: {exc}"))
+            self._lose(f"the bridge stopped forwarding: {exc}")
 
     def _step(self) -> None:  # pragma: no cover - overridden
         raise NotImplementedError
 
     def close(self) -> None:
         """Stop serving the master and stop reading the module (its link stays open: the
-        front end may still need it); what was forwarded is told before this returns."""
+        front end may still need it); nothing is put after this returns."""
         if self._closed.is_set():
             return
         self._closed.set()
         self.server.close()
         self._reader.join(timeout=2)
-        self._notes.close()
 
 
 class SerialBridge(_Bridge):
     """A master on a pty or TCP port and a serial module: bytes forwarded unchanged."""
 
-    def __init__(self, module: StreamTransport, heard: Heard, **kw):
+    def __init__(self, module: StreamTransport, put: Put, **kw):
         self.module = module
-        super().__init__(heard, **kw)
+        super().__init__(put, **kw)
 
     def _from_master(self, data: bytes) -> None:
         self.note((TX, data, time.time()))
         try:
             self.module.write(data)
         except TransportError as exc:
-            self.note((LOST, str(exc)))
+            self._lose(str(exc))
 
     def _step(self) -> None:
         data = self.module.read_some(TICK)
@@ -176,7 +154,7 @@ class CanBridge(_Bridge):
     ``host``: the address byte of the serial replies the master gets.
     """
 
-    def __init__(self, module: CanTransport, heard: Heard, *, can_id: int | None = None,
+    def __init__(self, module: CanTransport, put: Put, *, can_id: int | None = None,
                  reply_id: int = 2, host: int = 2, **kw):
         self.module = module
         self.can_id = can_id
@@ -184,7 +162,7 @@ class CanBridge(_Bridge):
         self.host = host
         self.requests = FrameDecoder(None, resync=plausible_request)
         self._versions = 0  # version strings asked for and not yet answered
-        super().__init__(heard, **kw)
+        super().__init__(put, **kw)
 
     def _from_master(self, data: bytes) -> None:
         dec = self.requests
@@ -202,7 +180,7 @@ class CanBridge(_Bridge):
             try:
                 self.module.send(arb, raw[1:8])
             except TransportError as exc:
-                self.note((LOST, str(exc)))
+                self._lose(str(exc))
                 break
 
     def _step(self) -> None:
@@ -259,6 +237,16 @@ class Left:
 
     def __bool__(self) -> bool:
         return bool(self.started or self.download or self.ascii)
+
+    def to_dict(self) -> dict[str, list[int]]:
+        """As the describer hands it back to the bridge's process (ops/handoff.py)."""
+        return {"started": sorted(self.started), "download": sorted(self.download),
+                "ascii": sorted(self.ascii)}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Left:
+        return cls(set(d.get("started", ())), set(d.get("download", ())),
+                   set(d.get("ascii", ())))
 
     def describe(self, address: int) -> str:
         what = [w for w, s in (("a motor or the stored program started", self.started),

@@ -4,8 +4,9 @@ forwarded unchanged (ops/bridge.py) and shown as ``tmclsh monitor`` shows it.
 Like ``tmclsh sim``, the first line on stdout is where the program connects (the pty's path
 or HOST:PORT); the traffic follows, one line per exchange (or one JSON object per frame),
 until Ctrl-C or SIGTERM, then the summary. Forwarding comes first: the frames are read and
-shown on another thread, and lines a reader does not take (a paused pager, a full pipe) are
-dropped and counted in the summary, never frames or the forwarding's pace.
+shown in a process of its own (ops/handoff.py), and lines a reader does not take (a paused
+pager, a full pipe) are dropped and counted in the summary, never frames or the
+forwarding's pace.
 
 When the bridge closes, the program on the other side loses the module: what its exchanges
 left behind is ended then, as tmclsh ends its own (the one safety stop, shell/features/stop.py): a
@@ -17,7 +18,6 @@ from __future__ import annotations
 
 import os
 import sys
-import threading
 import time
 from typing import Any
 
@@ -26,13 +26,15 @@ from ...base.errors import (EXIT_FAILED, EXIT_OK, ConnectError, TmclError, Trans
                             ValidationError)
 from ...ops.bridge import CAN_RX, CAN_TX, LOST, TICK, CanBridge, Left, SerialBridge
 from ...ops.filter import Filter
+from ...ops.handoff import CAPTURE, DONE, END, FINISH, LEFT, START, Describer
 from ...ops.monitor import DEFAULT_HOST, RX, TX, CanReader, Monitor, SerialPair
 from .livetable import wanted
 from .monitor import (Limits, View, _capture, end_live_output, end_table, interruptible,
                       live_output, live_table, load_module, off_the_wire, restore, show_items)
 
-
-FORWARDING_SWITCH = 0.0002  # s a thread may hold the interpreter while another waits
+LEFT_WAIT = 10.0  # s the describer may take to read what was forwarded and say what it left
+OUTPUT_EVERY = 0.02  # s between the describer's writes of its lines: a batch a write, not a line
+END_WAIT = 5.0  # s it may take to finish after Ctrl-C gave up on its reader
 
 
 def run_bridge(args) -> int:
@@ -51,64 +53,57 @@ def run_bridge(args) -> int:
     host = getattr(args, "host_address", None)
     host = DEFAULT_HOST if host is None else host
     json_mode = bool(getattr(args, "json", False))
-    with_table = wanted(args, json_mode)
     transport = _open_module(args, port, can_spec)
     view = View(monitor, json_mode=json_mode, hex_bytes=args.hex)
     try:
-        capture, close_capture = _capture(args.output, is_can)
+        capture = _capture(args.output, is_can)
     except BaseException:
         transport.close()
         raise
-    # forwarding first: showing and the -o file never hold it up (what they cannot keep
-    # up with is dropped and counted, never a frame on the wire)
-    capture, close_capture, capture_dropped = off_the_wire(capture, close_capture)
-    out = live_output(view)
-    table = live_table(with_table, view, monitor, out, True)
-    serve: dict[str, Any] = {"pty": True} if args.pty else {"tcp": args.tcp}
     if is_can:
         reader: Any = CanReader(monitor, [can_id] if can_id is not None else None,
                                 [reply_id], learn=False)
     else:
         reader = SerialPair(monitor)
-    told = _Told(reader, view, filt, monitor, capture, Limits(args.count, args.duration, False))
+    teller = _Teller(reader, view, filt, monitor, capture,
+                     Limits(args.count, args.duration, False), wanted(args, json_mode))
+    # forwarding first: everything that describes it runs in a process of its own (forked
+    # here, before the bridge has a thread), and what it cannot keep up with is dropped
+    # and counted, never a frame on the wire or the forwarding's time
+    describer = Describer(teller.run, name="bridge-describer")
+    describer.start()
+    previous = interruptible()  # (from here Ctrl-C and SIGTERM end the bridge as one)
+    try:
+        bridge = _serve(transport, describer, args, is_can, can_id, reply_id, host)
+        try:
+            left = _forward(bridge, describer, transport)
+            if left:
+                _put_right(transport, left, monitor, args, is_can, bridge.lost,
+                           lambda event: describer.notes.send((CAPTURE, event)))
+        finally:
+            transport.close()
+            describer.notes.send((FINISH, describer.notes.dropped))
+            _finished(describer)
+    finally:
+        restore(previous)
+    return EXIT_OK if bridge.lost is None else EXIT_FAILED
+
+
+def _serve(transport, describer: Describer, args, is_can: bool, can_id, reply_id, host):
+    serve: dict[str, Any] = {"pty": True} if args.pty else {"tcp": args.tcp}
+    put = describer.notes.put
     try:
         if is_can:
-            bridge: Any = CanBridge(transport, told, can_id=can_id, reply_id=reply_id,
-                                    host=host, **serve)
-        else:
-            bridge = SerialBridge(transport, told, **serve)
-    except OSError as exc:
+            return CanBridge(transport, put, can_id=can_id, reply_id=reply_id, host=host,
+                             **serve)
+        return SerialBridge(transport, put, **serve)
+    except BaseException as exc:
         transport.close()
-        close_capture()
-        end_live_output(view, out, monitor.summary)
-        raise ConnectError(f"cannot serve the bridge: {exc}") from exc
-    sys.stdout.write(bridge.endpoint + "\n")
-    sys.stdout.flush()
-    print(f"bridging {bridge.endpoint} <-> {transport.describe()}; Ctrl-C ends",
-          file=sys.stderr, flush=True)
-    if table is not None:
-        table.start()
-    # the forwarding threads wait for the interpreter while the teller reads and shows
-    # what was forwarded: a short switch interval bounds that wait (the default 5 ms would
-    # be the forwarding's worst case)
-    switch = sys.getswitchinterval()
-    sys.setswitchinterval(FORWARDING_SWITCH)
-    try:
-        _forward(bridge, told)
-    finally:
-        sys.setswitchinterval(switch)
-        monitor.summary.untold = bridge.untold
-        try:
-            if told.left:
-                _put_right(transport, told.left, monitor, args, is_can, told.lost, capture)
-        finally:
-            close_capture()  # (after the closing stop: a replayed capture shows it too)
-            monitor.summary.capture_dropped = capture_dropped()
-            transport.close()
-            end_table(view)  # (again: once only, if _forward did not end it)
-            end_live_output(view, out, monitor.summary)
-    view.summary(monitor.summary)
-    return EXIT_OK if told.lost is None else EXIT_FAILED
+        describer.notes.close()  # (it ends without a word: nothing was bridged)
+        describer.join(END_WAIT)
+        if isinstance(exc, OSError):
+            raise ConnectError(f"cannot serve the bridge: {exc}") from exc
+        raise
 
 
 def _open_module(args, port: str | None, can_spec: str | None):
@@ -121,64 +116,170 @@ def _open_module(args, port: str | None, can_spec: str | None):
         raise ConnectError(str(exc)) from exc
 
 
-class _Told:
-    """What the bridge tells (on its forwarding threads, in the wire's order, under its
-    lock): read into items, shown, and what they leave behind kept (``left``)."""
+def _forward(bridge, describer: Describer, transport) -> Left | None:
+    """Say where the program connects, then forward until Ctrl-C, SIGTERM, a limit the
+    describer reached, or the module's link lost; then what the traffic left, as the
+    describer read it (None: it could not say)."""
+    try:
+        sys.stdout.write(bridge.endpoint + "\n")
+        sys.stdout.flush()
+        print(f"bridging {bridge.endpoint} <-> {transport.describe()}; Ctrl-C ends",
+              file=sys.stderr, flush=True)
+        describer.notes.send((START,))
+        describing = True
+        while not bridge.ended.is_set():
+            if not describing:
+                bridge.ended.wait(TICK)
+                continue
+            got = describer.back.take(TICK)
+            if got is None:  # (it is gone: the forwarding is not)
+                describing = False
+                print("bridge: the traffic is no longer shown (its reader ended); "
+                      "forwarding goes on until Ctrl-C", file=sys.stderr, flush=True)
+            elif any(event[0] == DONE for event in got):
+                break
+    except KeyboardInterrupt:
+        pass
+    finally:
+        bridge.close()  # (nothing is put after this)
+    describer.notes.send((END,))
+    try:
+        said = describer.wait_for(LEFT, LEFT_WAIT)
+    except KeyboardInterrupt:
+        said = None
+    if bridge.lost is not None:
+        print(f"bridge: {bridge.lost}", file=sys.stderr)
+    if said is None:
+        print("bridge closed: what the traffic through it left at the module could not "
+              "be read in time: check the module", file=sys.stderr)
+        return None
+    return Left.from_dict(said[1])
+
+
+def _finished(describer: Describer) -> None:
+    """Wait for the describer's last lines and summary to reach their reader; Ctrl-C gives
+    up on a reader that does not take them (the describer then writes the summary)."""
+    try:
+        while not describer.join(TICK):
+            pass
+    except KeyboardInterrupt:
+        describer.interrupt()
+        if not describer.join(END_WAIT):
+            describer.kill()
+
+
+class _Teller:
+    """The describing side (ops/handoff.py ``Describer``): what the bridge forwarded, read
+    into items, shown, written to ``-o``, and what it leaves behind kept (``left``, handed
+    back at ``END``); at ``FINISH``, the summary."""
 
     def __init__(self, reader, view: View, filt: Filter, monitor: Monitor, capture,
-                 limits: Limits):
+                 limits: Limits, with_table: bool):
         self.reader, self.view, self.filt, self.monitor = reader, view, filt, monitor
-        self.capture, self.limits = capture, limits
+        self.capture, self.close_capture = capture
+        self.limits, self.with_table = limits, with_table
         self.left = Left()
         self.lost: str | None = None
-        self.done = threading.Event()  # a limit reached or the module's link lost
+        self.done = False  # a limit reached or the module's link lost
 
-    def __call__(self, event: tuple) -> None:
+    def run(self, notes, back) -> None:
+        """Until ``FINISH`` (or the end of ``notes``: the bridge's process has gone)."""
+        view, monitor, reader = self.view, self.monitor, self.reader
+        self.capture, close_capture, capture_dropped = off_the_wire(self.capture,
+                                                                      self.close_capture)
+        self.out = None
+        self.waiting: list[tuple] | None = []  # (what came before the endpoint was out)
+        self.ended = said_done = False
+        last = ticked = time.monotonic()
+        try:
+            while (got := notes.take(TICK)) is not None:
+                now = time.monotonic()
+                for event in got:
+                    if self.take(event, back):
+                        return
+                if got:
+                    last = now
+                if not self.ended and now - ticked >= TICK:
+                    ticked = now
+                    t = time.time()
+                    self.show(reader.quiet(t) if now - last >= TICK else monitor.expire(t))
+                if self.done and not said_done:
+                    said_done = back.send((DONE,), timeout=0)
+        finally:
+            if not self.ended:
+                self.show(reader.end(time.time()))
+            close_capture()  # (after the closing stop: a replayed capture shows it too)
+            monitor.summary.capture_dropped = capture_dropped()
+            end_table(view)
+            if self.out is not None:
+                end_live_output(view, self.out, monitor.summary)
+                view.summary(monitor.summary)
+            view.flush()
+
+    def take(self, event: tuple, back) -> bool:
+        """One thing from the bridge's process; True at ``FINISH``."""
+        kind = event[0]
+        if self.waiting is not None:
+            if kind not in (START, END, FINISH):
+                self.waiting.append(event)
+                return False
+            self.begin(table=kind == START)
+        if kind == END:
+            self.show(self.reader.end(time.time()))
+            self.ended = True
+            end_table(self.view)  # (before what the bridge says on stderr)
+            back.send((LEFT, self.left.to_dict()))
+        elif kind == CAPTURE:
+            _capture_only(self.capture, event[1])
+        elif kind == FINISH:
+            self.monitor.summary.untold = event[1]
+            return True
+        elif kind != START:
+            self.tell(event)
+        return False
+
+    def begin(self, table: bool) -> None:
+        """The endpoint is out: the lines (and the table) follow it from here."""
+        self.out = live_output(self.view, OUTPUT_EVERY)
+        if table:
+            live = live_table(self.with_table, self.view, self.monitor, self.out, True)
+            if live is not None:
+                live.start()
+        early, self.waiting = self.waiting or [], None
+        for event in early:
+            self.tell(event)
+
+    def tell(self, event: tuple) -> None:
         items, lost = _read(event, self.reader, self.monitor, self.capture)
         if lost is not None and self.lost is None:
             self.lost = lost
-            self.done.set()
+            self.done = True
         self.show(items)
 
     def show(self, items: list) -> None:
         for item in items:
             self.left.take(item)
-        if self.done.is_set() and self.lost is None:
+        if self.done and self.lost is None:
             return  # (the count was reached: still read and counted, not shown)
         summary = self.monitor.summary
         if show_items(items, self.view, self.filt, summary, self.limits) \
                 or self.limits.reached(summary.shown, summary):
-            self.done.set()
+            self.done = True
         self.view.flush()
 
 
-def _forward(bridge, told: _Told) -> None:
-    """Forward until Ctrl-C, SIGTERM, a limit, or the module's link is lost; in between,
-    a silence ends partial frames and requests wait no longer than their timeout."""
-    previous = interruptible()
-    try:
-        try:
-            while not told.done.wait(TICK):
-                quiet = bridge.quiet_for() >= TICK  # (else bytes may still be told)
-                with bridge.lock:
-                    now = time.time()
-                    told.show(told.reader.quiet(now) if quiet else told.monitor.expire(now))
-        except KeyboardInterrupt:
-            pass
-        finally:
-            bridge.close()  # (what was forwarded before is told)
-        with bridge.lock:
-            told.show(told.reader.end(time.time()))
-        end_table(told.view)  # (before what is said on stderr from here on)
-        if told.lost is not None:
-            print(f"bridge: {told.lost}", file=sys.stderr)
-    finally:
-        restore(previous)
-        told.view.flush()
+def _capture_only(capture, event: tuple) -> None:
+    """A frame of the closing stop's, for the ``-o`` file only."""
+    if capture is None:
+        return
+    if event[0] in (TX, RX):
+        capture(event[2], event[1], event[0])
+    else:
+        capture(event[1])
 
 
 def _read(event: tuple, reader, monitor: Monitor, capture) -> tuple[list, str | None]:
-    """One thing the bridge told, read: (the items, why the module's link was lost)."""
+    """One thing the bridge forwarded, read: (the items, why the module's link was lost)."""
     kind = event[0]
     if kind == LOST:
         return [], event[1]
@@ -203,8 +304,8 @@ def _read(event: tuple, reader, monitor: Monitor, capture) -> tuple[list, str | 
 def _put_right(transport, left: Left, monitor: Monitor, args, is_can: bool,
                lost: str | None, capture=None) -> None:
     """The program can no longer reach the module: end what its exchanges left behind.
-    ``capture`` (``-o``) gets the frames sent for that too, so a replayed capture ends as
-    the module was left."""
+    ``capture`` gets the frames sent for that as the bridge's events, for the ``-o`` file,
+    so a replayed capture ends as the module was left."""
     from ...client import bringup
     from ...client.ascii import leave_binary
     from ...client.core import Client
@@ -243,8 +344,8 @@ def _put_right(transport, left: Left, monitor: Monitor, args, is_can: bool,
 
 
 def _capturing(capture, client, is_can: bool):
-    """A tracer that writes what the closing stop sends and gets to the ``-o`` capture, as
-    the bridge writes what it forwards (bytes with their direction; CAN frames)."""
+    """A tracer that hands what the closing stop sends and gets on as the bridge's own
+    events (bytes with their direction; CAN frames), for the ``-o`` capture."""
     from ...link.base import CanFrame
 
     def trace(direction: str, raw: bytes, decoded: object) -> None:
@@ -252,9 +353,9 @@ def _capturing(capture, client, is_can: bool):
             return
         now = time.time()
         if not is_can:
-            capture(now, bytes(raw), TX if direction == "tx" else RX)
+            capture((TX if direction == "tx" else RX, bytes(raw), now))
         elif direction == "tx":
-            capture(CanFrame(now, client.can_id, bytes(raw)))
+            capture((CAN_TX, CanFrame(now, client.can_id, bytes(raw))))
         elif direction == "rx":
-            capture(CanFrame(now, client.reply_id, bytes(raw)))
+            capture((CAN_RX, CanFrame(now, client.reply_id, bytes(raw))))
     return trace

@@ -682,11 +682,12 @@ def off_the_wire(capture, close_capture):
     return put, close, lambda: spill.dropped
 
 
-def live_output(view: View) -> SpillWriter:
+def live_output(view: View, poll: float | None = None) -> SpillWriter:
     """What a live run shows goes through a writer that never blocks: a reader that stops
-    reading (a paused pager, a full pipe) loses lines, counted, and never the wire's pace."""
+    reading (a paused pager, a full pipe) loses lines, counted, and never the wire's pace.
+    ``poll``: written in batches that often (SpillWriter)."""
     view.flush()
-    out = SpillWriter(view.stream)
+    out = SpillWriter(view.stream, poll=poll)
     view.stream = out
     view.batch = 1
     return out

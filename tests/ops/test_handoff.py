@@ -1,0 +1,145 @@
+"""The hand-off between a bridge's forwarding and its describing (ops/handoff.py): every event
+comes out as it went in, whatever the pipe's reads cut; a full pipe never makes the
+forwarding wait; the describer, in its own process, outlives whatever ends the bridge's."""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from tmclsh.link.base import CanFrame
+from tmclsh.ops.handoff import (CAN_RX, CAN_TX, CAPTURE, DONE, END, FINISH, LEFT, LOST, NOISE,
+                                PIPE_BUF, RX, START, TX, Describer, LocalPipe, Pipe, Unpacker,
+                                pack)
+
+times = st.floats(min_value=0, max_value=4e9, allow_nan=False)
+serial_events = st.tuples(st.sampled_from([TX, RX, NOISE]), st.binary(max_size=3 * PIPE_BUF),
+                          times)
+can_events = st.builds(lambda k, t, i, d, e, r, m: (k, CanFrame(t, i, d, e, r, m)),
+                       st.sampled_from([CAN_TX, CAN_RX]), times,
+                       st.integers(0, (1 << 29) - 1), st.binary(max_size=8), st.booleans(),
+                       st.booleans(), st.booleans())
+words = st.one_of(st.just((START,)), st.just((END,)), st.just((DONE,)),
+                  st.builds(lambda n: (FINISH, n), st.integers(0, 10**9)),
+                  st.builds(lambda s: (LOST, s), st.text(max_size=200)),
+                  st.builds(lambda a: (LEFT, {"started": a, "download": [], "ascii": a}),
+                            st.lists(st.integers(0, 255), max_size=5)))
+events = st.one_of(serial_events, can_events, words,
+                   st.builds(lambda e: (CAPTURE, e), st.one_of(serial_events, can_events)))
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(events, max_size=30), st.data())
+def test_every_event_comes_out_as_it_went_in_whatever_the_reads_cut(evs, data):
+    blob = b"".join(r for e in evs for r in pack(e))
+    assert all(len(r) <= PIPE_BUF for e in evs for r in pack(e))  # (each written whole)
+    cuts = sorted(data.draw(st.lists(st.integers(0, len(blob)), max_size=8)))
+    unpacker, got = Unpacker(), []
+    for a, b in zip([0, *cuts], [*cuts, len(blob)]):
+        got += unpacker.feed(blob[a:b])
+    # a long chunk comes out as consecutive pieces of the same kind and time
+    it = iter(got)
+    for e in evs:
+        n = len(pack(e))
+        pieces = [next(it) for _ in range(n)]
+        inner = e[1] if e[0] == CAPTURE else e
+        if inner[0] in (TX, RX, NOISE):
+            body = [p[1] if e[0] != CAPTURE else p[1][1] for p in pieces]
+            assert b"".join(body) == inner[1]
+            assert all((p if e[0] != CAPTURE else p[1])[2] == inner[2] for p in pieces)
+        else:
+            assert pieces == [e]
+    assert next(it, None) is None
+
+
+def test_a_full_pipe_takes_nothing_more_and_never_waits():
+    pipe = Pipe()
+    chunk = (TX, bytes(range(9)), 1.0)
+    counts: list[int] = []
+
+    def fill() -> None:
+        put = 0
+        while pipe.put(chunk):
+            put += 1
+        for _ in range(1000):
+            assert pipe.put(chunk) is False  # (nobody reads: refused, not waited for)
+        counts.append(put)
+
+    filler = threading.Thread(target=fill, daemon=True)
+    filler.start()
+    filler.join(60)
+    assert not filler.is_alive(), "a put waited for a reader"
+    (put,) = counts
+    assert pipe.dropped == 1001
+    # what went in comes out whole and in order, and after that the pipe takes again
+    got = []
+    while (more := pipe.take(0)):
+        got += more
+    assert len(got) == put and all(e == chunk for e in got)
+    assert pipe.put((RX, b"\x02", 2.0)) and pipe.take(1) == [(RX, b"\x02", 2.0)]
+    pipe.close()
+
+
+def test_the_in_process_pipe_is_bounded_as_a_pipe_is():
+    pipe = LocalPipe(bound=1000)
+    while pipe.put((TX, bytes(9), 1.0)):
+        pass
+    assert pipe.dropped == 1
+    assert sum(len(r) for e in pipe.take(0) for r in pack(e)) <= 1000
+    pipe.close()
+    assert pipe.take(0) is None
+
+
+@pytest.mark.parametrize("fork", [True, False], ids=["process", "thread"])
+def test_the_describer_runs_in_its_own_process_and_answers(tmp_path, fork):
+    """Forked where there is ``fork``; on a thread of the bridge's process where there is
+    not (Windows), with the same records."""
+    seen = tmp_path / "seen"
+
+    def run(notes, back):
+        got = []
+        while (more := notes.take(5)) is not None:
+            for e in more:
+                if e[0] == END:
+                    back.send((LEFT, {"pid": os.getpid(), "n": len(got)}))
+                elif e[0] == FINISH:
+                    seen.write_text(repr(got))
+                    return
+                else:
+                    got.append(e)
+
+    d = Describer(run, fork=fork)
+    d.start()
+    for i in range(100):
+        assert d.notes.put((TX, bytes([i]), float(i)))
+    assert d.notes.send((END,))
+    said = d.wait_for(LEFT, 20)
+    assert said is not None and said[1]["n"] == 100
+    assert (said[1]["pid"] != os.getpid()) == fork
+    d.notes.send((FINISH, 0))
+    assert d.join(20)
+    assert seen.read_text() == repr([(TX, bytes([i]), float(i)) for i in range(100)])
+
+
+def test_the_describer_ends_when_the_bridge_has_gone(tmp_path):
+    """The bridge's side closed without a word (its process killed): the describer sees the
+    end of its notes and finishes on its own (no process left behind)."""
+    seen = tmp_path / "seen"
+
+    def run(notes, back):
+        n = 0
+        while (more := notes.take(5)) is not None:
+            n += len(more)
+        seen.write_text(str(n))
+
+    d = Describer(run)
+    d.start()
+    d.notes.put((RX, b"x", 0.0))
+    d.notes.close()
+    assert d.join(20)
+    assert seen.read_text() == "1"

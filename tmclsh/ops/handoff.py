@@ -1,0 +1,410 @@
+"""What a bridge forwarded, handed to whatever describes it in a process of its own.
+
+Why another process: a bridge's forwarding threads and anything that describes what they
+forward (reading frames, pairing, wording lines, a live table, a file) share one interpreter
+lock when they share a process, and the forwarding then waits for it at every turn: measured,
+a p99 of several hundred microseconds added to each exchange, against about 25 when the
+describing runs in another process. So the bridge's process only forwards, and hands each
+chunk as a few bytes to a pipe that never makes it wait (``Pipe.put``): a pipe that is full
+(the describer fell far behind) does not take the chunk, which is counted (``dropped``); it
+was forwarded all the same.
+
+Each record is at most ``PIPE_BUF`` bytes, which a pipe writes whole or not at all, so the
+two forwarding threads (the master's and the module's) can put at once without a lock and
+their records keep the order they were put in: the wire's order, as each is put just before
+its chunk is forwarded.
+
+The same pipe carries the few words the two sides say to each other (``START``, ``END``,
+``FINISH``, ``DONE``, ``LEFT``), each a record too. Where a process cannot be forked
+(Windows), the describer runs on a thread of the bridge's own process (``spawn``), its pipe
+an in-process one with the same records (``LocalPipe``): the same code, without the gain.
+
+Nothing here prints.
+"""
+
+from __future__ import annotations
+
+import errno
+import json
+import logging
+import os
+import select
+import struct
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from typing import Any
+
+from ..link.base import CanFrame
+from .monitor import RX, TX
+
+# what the forwarding tells: (TX | RX | NOISE, bytes, time) for a serial chunk or the
+# master's bytes that are no frame; (CAN_TX | CAN_RX, CanFrame); (LOST, why)
+CAN_TX, CAN_RX, NOISE, LOST = "can-tx", "can-rx", "noise", "lost"
+# what the two sides say to each other: START (the endpoint is out: the describer may draw),
+# END (forwarding has stopped: say what the traffic left), FINISH (untold: the end),
+# DONE (from the describer: a limit was reached), LEFT (its answer to END: a dict),
+# CAPTURE (a frame for the -o file only: what the closing stop sent and got)
+START, END, FINISH, DONE, LEFT, CAPTURE = "start", "end", "finish", "done", "left", "capture"
+
+PIPE_BUF = getattr(select, "PIPE_BUF", 512)  # bytes a pipe writes whole or not at all
+PIPE_SIZE = 1 << 20  # bytes asked of the kernel for the pipe (Linux; else its default)
+
+_HEAD = struct.Struct("<HBd")  # bytes after the head, kind, time
+_CAN = struct.Struct("<IB")  # arbitration id, flags
+_EXTENDED, _ERROR, _REMOTE = 1, 2, 4
+_KINDS = (TX, RX, NOISE, CAN_TX, CAN_RX, LOST, START, END, FINISH, DONE, LEFT)
+_CODE = {k: i for i, k in enumerate(_KINDS)}
+_CAPTURED = 0x80  # the kind's code with this bit: CAPTURE, around the frame it names
+_CHUNK = PIPE_BUF - _HEAD.size  # bytes of a serial chunk a record carries
+
+
+def pack(event: tuple) -> list[bytes]:
+    """The records of one event (a long serial chunk takes several, each whole)."""
+    kind = event[0]
+    flag = 0
+    if kind == CAPTURE:
+        flag, event = _CAPTURED, event[1]
+        kind = event[0]
+    code = _CODE[kind] | flag
+    if kind in (TX, RX, NOISE):
+        data, t = event[1], event[2]
+        if len(data) <= _CHUNK:
+            return [_HEAD.pack(len(data), code, t) + data]
+        return [_HEAD.pack(len(part), code, t) + part
+                for part in (data[i:i + _CHUNK] for i in range(0, len(data), _CHUNK))]
+    if kind in (CAN_TX, CAN_RX):
+        f: CanFrame = event[1]
+        flags = (_EXTENDED if f.extended else 0) | (_ERROR if f.error else 0) \
+            | (_REMOTE if f.remote else 0)
+        body = _CAN.pack(f.arbitration_id, flags) + bytes(f.data)
+        return [_HEAD.pack(len(body), code, f.t) + body]
+    if kind == FINISH:
+        body = str(event[1]).encode()
+    elif kind in (LOST, LEFT):
+        body = json.dumps(event[1]).encode()[:_CHUNK]
+    else:
+        body = b""
+    return [_HEAD.pack(len(body), code, 0.0) + body]
+
+
+class Unpacker:
+    """Records back into events, whatever pieces the pipe's reads cut them into."""
+
+    def __init__(self) -> None:
+        self._rest = b""
+
+    def feed(self, data: bytes) -> list[tuple]:
+        buf = self._rest + data if self._rest else data
+        events: list[tuple] = []
+        at, end, head = 0, len(buf), _HEAD.size
+        unpack = _HEAD.unpack_from
+        while end - at >= head:
+            size, code, t = unpack(buf, at)
+            if end - at - head < size:
+                break
+            body = buf[at + head:at + head + size]
+            at += head + size
+            kind = _KINDS[code & ~_CAPTURED]
+            if kind in (TX, RX, NOISE):
+                event: tuple = (kind, body, t)
+            elif kind in (CAN_TX, CAN_RX):
+                arb, flags = _CAN.unpack_from(body)
+                event = (kind, CanFrame(t, arb, body[_CAN.size:], bool(flags & _EXTENDED),
+                                        bool(flags & _ERROR), bool(flags & _REMOTE)))
+            elif kind == FINISH:
+                event = (kind, int(body))
+            elif kind in (LOST, LEFT):
+                event = (kind, json.loads(body))
+            else:
+                event = (kind,)
+            events.append((CAPTURE, event) if code & _CAPTURED else event)
+        self._rest = buf[at:]
+        return events
+
+
+class Pipe:
+    """One way between two processes: ``put`` never waits (False: the pipe is full, the
+    event not handed over, counted in ``dropped``); ``send`` waits for room (the words the
+    two sides say, once the forwarding has stopped or from the describer); ``take`` reads
+    what came within ``timeout`` seconds (None: the other side has closed its end)."""
+
+    def __init__(self) -> None:
+        self._r, self._w = os.pipe()
+        os.set_blocking(self._w, False)
+        try:
+            import fcntl
+
+            fcntl.fcntl(self._w, getattr(fcntl, "F_SETPIPE_SZ", 1031), PIPE_SIZE)
+        except (ImportError, OSError):
+            pass  # (not Linux, or a limit on pipe sizes: the default size)
+        self.dropped = 0
+        self._unpacker = Unpacker()
+
+    def put(self, event: tuple) -> bool:
+        write, w = os.write, self._w
+        for record in pack(event):
+            try:
+                write(w, record)
+            except BlockingIOError:
+                self.dropped += 1  # (not exact under two threads: a count for the summary)
+                return False
+            except OSError:  # (the describer has gone: forwarding goes on)
+                self.dropped += 1
+                return False
+        return True
+
+    def send(self, event: tuple, timeout: float = 5.0) -> bool:
+        """Put ``event``, waiting up to ``timeout`` seconds for room; False: no room came
+        or the other side has gone."""
+        deadline = time.monotonic() + timeout
+        for record in pack(event):
+            while True:
+                try:
+                    os.write(self._w, record)
+                    break
+                except BlockingIOError:
+                    left = deadline - time.monotonic()
+                    if left <= 0:
+                        return False
+                    select.select([], [self._w], [], left)
+                except OSError:
+                    return False
+        return True
+
+    def take(self, timeout: float | None) -> list[tuple] | None:
+        ready, _, _ = select.select([self._r], [], [], timeout)
+        if not ready:
+            return []
+        try:
+            data = os.read(self._r, 1 << 16)
+        except OSError as exc:
+            if exc.errno == errno.EINTR:
+                return []
+            return None
+        if not data:
+            return None
+        return self._unpacker.feed(data)
+
+    def giving(self) -> None:
+        """This process only puts (after the fork): its reading end closed."""
+        self._close("_r")
+
+    def taking(self) -> None:
+        """This process only takes: its writing end closed, so it sees the other's end."""
+        self._close("_w")
+
+    def close(self) -> None:
+        self._close("_r")
+        self._close("_w")
+
+    def _close(self, end: str) -> None:
+        fd = getattr(self, end)
+        if fd is not None:
+            setattr(self, end, None)
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+
+class LocalPipe:
+    """``Pipe``'s records between two threads of one process (where no process can be
+    forked): bounded as a pipe is, by bytes waiting."""
+
+    def __init__(self, bound: int = PIPE_SIZE) -> None:
+        self.bound = bound
+        self.dropped = 0
+        self._records: deque[bytes] = deque()
+        self._size = 0
+        self._ready = threading.Condition()
+        self._closed = False
+        self._unpacker = Unpacker()
+
+    def put(self, event: tuple) -> bool:
+        records = pack(event)
+        with self._ready:
+            if self._closed or self._size + sum(map(len, records)) > self.bound:
+                self.dropped += 1
+                return False
+            self._records.extend(records)
+            self._size += sum(map(len, records))
+            self._ready.notify()
+        return True
+
+    def send(self, event: tuple, timeout: float = 5.0) -> bool:
+        with self._ready:
+            if self._closed:
+                return False
+            records = pack(event)
+            self._records.extend(records)
+            self._size += sum(map(len, records))
+            self._ready.notify()
+        return True
+
+    def take(self, timeout: float | None) -> list[tuple] | None:
+        with self._ready:
+            if not self._records and not self._closed:
+                self._ready.wait(timeout)
+            if not self._records:
+                return None if self._closed else []
+            data = b"".join(self._records)
+            self._records.clear()
+            self._size = 0
+        return self._unpacker.feed(data)
+
+    def giving(self) -> None:
+        """(One process: both ends stay.)"""
+
+    def taking(self) -> None:
+        """(One process: both ends stay.)"""
+
+    def close(self) -> None:
+        with self._ready:
+            self._closed = True
+            self._ready.notify_all()
+
+
+NICE = 10  # the describer's lower priority: where every core is busy, the forwarding runs first
+
+
+def _lower(by: int) -> None:
+    try:
+        os.nice(by)
+    except (AttributeError, OSError):
+        pass
+
+
+class Describer:
+    """``run(notes, back)`` on the other side: in a forked process where there is
+    ``os.fork``, else on a thread. ``notes`` carries what was forwarded to it, ``back`` its
+    words to the bridge.
+
+    In the forked process Ctrl-C and SIGTERM are ignored: the bridge's process ends it
+    (``END``, ``FINISH``), or the end of ``notes`` does when that process has gone however
+    it went, so the describer always gets to say what the traffic left and to write its
+    summary. ``interrupt`` (SIGUSR1) raises KeyboardInterrupt there, to give up on a reader
+    that does not take its last lines. Forked with ``os.fork`` itself: ``multiprocessing``
+    would also join the process at the bridge's exit, for as long as it takes.
+    """
+
+    def __init__(self, run: Callable[[Any, Any], None], *, name: str = "describer",
+                 fork: bool | None = None):
+        self.forked = hasattr(os, "fork") if fork is None else fork
+        kind = Pipe if self.forked else LocalPipe
+        self.notes, self.back = kind(), kind()
+        self._run = run
+        self._pid: int | None = None
+        self._thread: threading.Thread | None = None
+        if not self.forked:
+            self._thread = threading.Thread(target=self._on_thread, name=name, daemon=True)
+
+    def start(self) -> None:
+        """Start it; fork before the caller has any thread of its own (a thread's locks
+        would be copied into the describer as they stood)."""
+        if self._thread is not None:
+            self._thread.start()
+            return
+        import sys
+
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError, AttributeError):
+                pass
+        pid = os.fork()
+        if pid == 0:  # pragma: no cover - (the describer's process: measured by its tests)
+            os._exit(self._in_child())
+        self._pid = pid
+        self.notes.giving()
+        self.back.taking()
+
+    def _in_child(self) -> int:
+        import signal
+        import sys
+
+        def interrupted(*_: object) -> None:
+            raise KeyboardInterrupt
+
+        status = 0
+        try:
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                signal.signal(sig, signal.SIG_IGN)
+            signal.signal(signal.SIGUSR1, interrupted)
+            _lower(NICE)
+            self.notes.taking()
+            self.back.giving()
+            self._run(self.notes, self.back)
+        except KeyboardInterrupt:
+            pass
+        except BaseException:
+            logging.getLogger(__name__).exception("describing the bridge's traffic failed")
+            status = 1
+        finally:
+            for stream in (sys.stdout, sys.stderr):
+                try:
+                    stream.flush()
+                except (OSError, ValueError, AttributeError):
+                    pass
+        return status
+
+    def _on_thread(self) -> None:
+        try:
+            self._run(self.notes, self.back)
+        finally:
+            self.back.close()
+
+    def wait_for(self, kind: str, timeout: float) -> tuple | None:
+        """The first word of ``kind`` that comes back within ``timeout`` seconds (None: the
+        describer ended or did not say it); words of other kinds are passed over."""
+        deadline = time.monotonic() + timeout
+        while (left := deadline - time.monotonic()) > 0:
+            got = self.back.take(left)
+            if got is None:
+                return None
+            for event in got:
+                if event[0] == kind:
+                    return event
+        return None
+
+    def interrupt(self) -> None:
+        """Give up on what the describer is waiting for (its reader, in a forked process)."""
+        self._signal("SIGUSR1")
+
+    def kill(self) -> None:
+        self._signal("SIGKILL")
+
+    def _signal(self, name: str) -> None:
+        if self._pid is None:
+            return
+        import signal
+
+        try:
+            os.kill(self._pid, getattr(signal, name))
+        except OSError:
+            pass
+
+    def join(self, timeout: float) -> bool:
+        """Wait for the describer to end; False: it did not within ``timeout``."""
+        deadline = time.monotonic() + timeout
+        if self._thread is not None:
+            self._thread.join(timeout)
+            ended = not self._thread.is_alive()
+        else:
+            ended = self._pid is None
+            while not ended:
+                try:
+                    pid, _ = os.waitpid(self._pid, os.WNOHANG)
+                except ChildProcessError:
+                    pid = self._pid
+                if pid:
+                    self._pid, ended = None, True
+                elif time.monotonic() >= deadline:
+                    break
+                else:
+                    time.sleep(0.01)
+        if ended:
+            self.notes.close()
+            self.back.close()
+        return ended
