@@ -377,6 +377,7 @@ def test_the_describing_is_not_the_forwarding_s_process_and_its_loss_stops_nothi
         bridge.kill()
         module.close()
     assert bridge.proc.returncode == 0, err
+    assert "the process that shows the traffic has ended" in err
     assert "could not be read in time: check the module" in err and "Traceback" not in err
 
 

@@ -134,8 +134,8 @@ def _forward(bridge, describer: Describer, transport) -> Left | None:
             got = describer.back.take(TICK)
             if got is None:  # (it is gone: the forwarding is not)
                 describing = False
-                print("bridge: the traffic is no longer shown (its reader ended); "
-                      "forwarding goes on until Ctrl-C", file=sys.stderr, flush=True)
+                print("bridge: the process that shows the traffic has ended: nothing more "
+                      "is shown; forwarding goes on until Ctrl-C", file=sys.stderr, flush=True)
             elif any(event[0] == DONE for event in got):
                 break
     except KeyboardInterrupt:
