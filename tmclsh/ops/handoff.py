@@ -58,6 +58,8 @@ _KINDS = (TX, RX, NOISE, CAN_TX, CAN_RX, LOST, START, END, FINISH, DONE, LEFT)
 _CODE = {k: i for i, k in enumerate(_KINDS)}
 _CAPTURED = 0x80  # the kind's code with this bit: CAPTURE, around the frame it names
 _CHUNK = PIPE_BUF - _HEAD.size  # bytes of a serial chunk a record carries
+_head = _HEAD.pack
+_SERIAL = {TX: _CODE[TX], RX: _CODE[RX]}
 
 
 def pack(event: tuple) -> list[bytes]:
@@ -144,6 +146,16 @@ class Pipe:
 
     def put(self, event: tuple) -> bool:
         write, w = os.write, self._w
+        kind = event[0]
+        if kind is TX or kind is RX:  # (the forwarding's own chunks: packed here, in one)
+            data = event[1]
+            if len(data) <= _CHUNK:
+                try:
+                    write(w, _head(len(data), _SERIAL[kind], event[2]) + data)
+                    return True
+                except OSError:  # (full, or the describer has gone: forwarding goes on)
+                    self.dropped += 1
+                    return False
         for record in pack(event):
             try:
                 write(w, record)
