@@ -153,6 +153,10 @@ def _forward(bridge, describer: Describer, transport) -> Left | None:
         print("bridge closed: what the traffic through it left at the module could not "
               "be read in time: check the module", file=sys.stderr)
         return None
+    if describer.notes.dropped:
+        print(f"bridge closed: {describer.notes.dropped} chunks of the traffic were forwarded "
+              "but not read (reading fell too far behind): what they left at the module is "
+              "not known: check the module", file=sys.stderr)
     return Left.from_dict(said[1])
 
 
