@@ -48,7 +48,8 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable, Iterable, Mapping
+from threading import get_ident
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from typing import TYPE_CHECKING, TypeVar
 
 from ..base import clock
@@ -94,6 +95,70 @@ def idempotent(req: Request, downloading: bool = False) -> bool:
     may (``idempotent``, not one of its ``once_types``: a retried ``MVP REL`` would move
     twice as far); never while downloading (every frame is stored)."""
     return not downloading and isa.repeatable(req.opcode, req.type)
+
+
+def _run(client: Client, reqs: Iterable[Request], timeout: float, retries: int
+         ) -> Iterator[Reply | None]:
+    """``Client.requests``: each request through ``Client.request``, the next one taken
+    while the module answers (the framing calls ``_Ahead.take`` once the request is written:
+    ``SerialFraming.meanwhile``; the ASCII link's never does, its requests are taken as they
+    go)."""
+    ahead = _Ahead(reqs)
+    take = ahead.take
+    request = client.request
+    while (req := ahead.next()) is not None:
+        framing = client._framing  # (the one in use now: the ASCII link swaps it)
+        framing.meanwhile = take
+        try:
+            reply = request(req, timeout=timeout, retries=retries)
+        finally:
+            framing.meanwhile = None
+        yield reply
+
+
+class _Ahead:
+    """The requests of a run (``Client.requests``), the next one taken from the caller's
+    iterable, and its frame made, while the module answers the one before (``take``), so
+    that the time between a reply and the next request is the client's checks alone. What
+    taking one raised is raised where that request would have gone; a Ctrl-C is not held
+    back."""
+
+    __slots__ = ("_reqs", "_next", "_error", "_thread")
+
+    def __init__(self, reqs: Iterable[Request]):
+        self._reqs: Iterator[Request] | None = iter(reqs)
+        self._next: Request | None = None
+        self._error: Exception | None = None
+        self._thread = 0  # the thread the run goes on (another's exchange takes nothing)
+
+    def take(self) -> None:
+        if (self._next is not None or self._reqs is None or self._error is not None
+                or get_ident() != self._thread):
+            return
+        try:
+            req = next(self._reqs)
+            req.to_bytes()  # (kept by the request: its frame is ready when it goes)
+        except StopIteration:
+            self._reqs = None
+        except Exception as exc:
+            self._error = exc
+        else:
+            self._next = req
+
+    def next(self) -> Request | None:
+        """The next request (None: the run is over)."""
+        self._thread = get_ident()
+        req = self._next
+        if req is not None:  # (taken while the module answered: the common case)
+            self._next = None
+            return req
+        self.take()
+        if self._error is not None:
+            self._reqs = None
+            error, self._error = self._error, None
+            raise error
+        req, self._next = self._next, None
+        return req
 
 
 class Client:
@@ -409,6 +474,22 @@ class Client:
         finally:
             if self._events:
                 self._deliver_events()
+
+    def requests(self, reqs: Iterable[Request], *, timeout: float | None = None,
+                 retries: int | None = None) -> Iterator[Reply | None]:
+        """``request`` for each of ``reqs`` in turn: each reply is yielded before the next
+        request is sent, so the caller stops the run by leaving its loop (nothing more is
+        sent). Each request goes through ``request`` itself, with all its checks. ``reqs``
+        is read one ahead: the next request is taken (and its frame made) while the module
+        answers the one before, so a run made by a generator (an upload's frames, their
+        read-back) costs the line no time between a reply and the next request but the
+        checks. ``timeout`` and ``retries`` as ``request``'s, checked before anything is
+        sent."""
+        if timeout is None:
+            timeout = self._timeout
+        elif not (isinstance(timeout, (int, float)) and timeout > 0):
+            raise ValueError(f"timeout must be a positive number of seconds, got {timeout!r}")
+        return _run(self, reqs, timeout, self.retries if retries is None else retries)
 
     def _before_next(self, req: Request) -> None:
         """The first command after a reconnect brings the module up again, exactly as at
