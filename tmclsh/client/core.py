@@ -394,11 +394,11 @@ class Client:
         """``request`` for each of ``reqs`` in turn: each reply is yielded before the next
         request is sent, so the caller stops the run by leaving its loop (nothing more is
         sent). Each request takes the steps ``request`` takes, with the same checks
-        (client/steps.py); what a run does not change is looked up once. ``reqs`` is read
-        one ahead: the next request is taken (and its frame made) while the module answers
-        the one before, so a run made by a generator (an upload's frames, their read-back)
-        costs the line no time between a reply and the next request but the checks.
-        ``timeout`` and ``retries`` as ``request``'s, checked before anything is sent."""
+        (client/steps.py); what a run does not change is looked up once, so thousands at
+        the line's pace (an upload's frames, their read-back) cost little more between a
+        reply and the next request than the checks. ``reqs`` is read as each goes out (a
+        list made before costs the line least). ``timeout`` and ``retries`` as
+        ``request``'s, checked before anything is sent."""
         if timeout is None:
             timeout = self._timeout
         elif not (isinstance(timeout, (int, float)) and timeout > 0):

@@ -7,11 +7,16 @@ bring an earlier answer is resynchronised (``clear_line``); the framing's ``exch
 it and checks the reply (address, host, command, checksum, layout); the answer is written
 into the ledger and judged when it may be a copy (``take_answer``); what it tells beyond
 itself is taken once the link is released (``after_answer``). A run goes through the same
-steps with what it does not change looked up once, and takes the next request from its
-caller while the module answers (``_Ahead``); an attempt of a run's that is not plain (a
+steps with what it does not change looked up once, and without the layers of a single
+request's entry (its arguments checked, its own loop of attempts): what a run adds between
+one reply and the next request is its checks. An attempt of a run's that is not plain (a
 failure, a reply that is no plain answer) is carried on by ``Client._request``'s own loop
 of attempts, as its first, and anything unusual before it (a bring-up or download check
 due, the ASCII line, the link down) is left to ``Client.request`` whole.
+
+(Work between writing a request and waiting for its reply is no gain: measured on a pty,
+what the client does there delays the reply by as much, so a run's requests are best made
+before it starts, as an upload makes its frames.)
 """
 
 from __future__ import annotations
@@ -105,14 +110,12 @@ def after_answer(client: Client, req: Request, reply: Reply | None) -> None:
 def run(client: Client, reqs: Iterable[Request], timeout: float, retries: int
         ) -> Iterator[Reply | None]:
     """``Client.requests``: each request by the steps above, what a run does not change
-    looked up once, the next request taken while the module answers."""
+    looked up once."""
     lock = client._lock
     framing = client._framing
     exchange = framing.exchange
     carry = client._request
-    ahead = _Ahead(reqs)
-    take = ahead.take
-    while (req := ahead.next()) is not None:
+    for req in reqs:
         op = req.opcode
         kind = _NORMAL if op < _FIRST_CONTROL else isa.reply_kind(op, req.type)
         plain = False
@@ -128,7 +131,6 @@ def run(client: Client, reqs: Iterable[Request], timeout: float, retries: int
                     except BaseException as exc:
                         first = (False, exc)  # (nothing of req went out)
                     else:
-                        framing.meanwhile = take
                         try:
                             reply = exchange(req, kind, timeout, synced)
                         except BaseException as exc:
@@ -136,8 +138,6 @@ def run(client: Client, reqs: Iterable[Request], timeout: float, retries: int
                         else:
                             if reply is None or reply.status == _WRONG_CHECKSUM:
                                 first = (True, reply)
-                        finally:
-                            framing.meanwhile = None
                     try:
                         if first is None:
                             reply = take_answer(client, req, reply, timeout, retries)
@@ -152,47 +152,3 @@ def run(client: Client, reqs: Iterable[Request], timeout: float, retries: int
             if plain and client._events:
                 client._deliver_events()
         yield reply if plain else client.request(req, timeout=timeout, retries=retries)
-
-
-class _Ahead:
-    """The requests of a run, the next one taken from the caller's iterable, and its frame
-    made, while the module answers the one before (the framing calls ``take`` once the
-    request is written: ``SerialFraming.meanwhile``), so that the time between a reply and
-    the next request is the client's checks alone. What taking one raised is raised where
-    that request would have gone; a Ctrl-C is not held back."""
-
-    __slots__ = ("_reqs", "_next", "_error")
-
-    def __init__(self, reqs: Iterable[Request]):
-        self._reqs: Iterator[Request] | None = iter(reqs)
-        self._next: Request | None = None
-        self._error: Exception | None = None
-
-    def take(self) -> None:
-        # (called by the run's own exchange only: the framing's hook is set while the run
-        # holds the link)
-        if self._next is not None or self._reqs is None or self._error is not None:
-            return
-        try:
-            req = next(self._reqs)
-            req.to_bytes()  # (kept by the request: its frame is ready when it goes)
-        except StopIteration:
-            self._reqs = None
-        except Exception as exc:
-            self._error = exc
-        else:
-            self._next = req
-
-    def next(self) -> Request | None:
-        """The next request (None: the run is over)."""
-        req = self._next
-        if req is not None:  # (taken while the module answered: the common case)
-            self._next = None
-            return req
-        self.take()
-        if self._error is not None:
-            self._reqs = None
-            error, self._error = self._error, None
-            raise error
-        req, self._next = self._next, None
-        return req

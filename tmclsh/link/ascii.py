@@ -473,9 +473,6 @@ class AsciiFraming:
     """
 
     mode = ASCII  # (Client.mode: the facts of the mode this framing talks)
-    # (SerialFraming's hook for a run of requests; a line's exchange never calls it: the
-    # run's next request is taken as it goes)
-    meanwhile = None
 
     def __init__(self, transport: StreamTransport, owner: Owner, *, echo: Echo = Echo.CHAR,
                  gp67: int | None = None, stats: dict[str, int] | None = None):

@@ -14,8 +14,6 @@ from abc import ABC, abstractmethod
 from typing import TYPE_CHECKING, NamedTuple
 
 if TYPE_CHECKING:
-    from collections.abc import Callable
-
     from .framing import CanFraming, Owner, SerialFraming
 
 
@@ -88,15 +86,10 @@ class StreamTransport(Transport):
         has something to say that a read will tell (a port hung up)."""
         return self.pending() > 0
 
-    def transact(self, data: bytes, size: int, timeout: float | None,
-                 meanwhile: Callable[[], object] | None = None) -> bytes:
+    def transact(self, data: bytes, size: int, timeout: float | None) -> bytes:
         """``write(data)``, then ``read(size, timeout)``: the request path's common case in
-        one call, so a transport can do it in fewer steps (the serial port's own descriptor).
-        ``meanwhile`` is called between the two: work that does not need the reply is done
-        while it is on its way."""
+        one call, so a transport can do it in fewer steps (the serial port's own descriptor)."""
         self.write(data)
-        if meanwhile is not None:
-            meanwhile()
         return self.read(size, timeout)
 
     def read_available(self) -> bytes:

@@ -106,9 +106,6 @@ class SerialFraming:
         self.decoder = FrameDecoder(owner.host_address)
         self._seen: dict[bytes, Reply] = {}  # frame -> Reply (the fast path)
         self._ready: Callable[[], bool] = transport.ready
-        # called once the request is written, before its reply is waited for: the owner's
-        # work that does not need the reply (a run's next request made, Client.requests)
-        self.meanwhile: Callable[[], None] | None = None
 
     # -- what waits --------------------------------------------------------------------
     def waiting(self) -> bool:
@@ -156,8 +153,6 @@ class SerialFraming:
             o.stats["sent"] += 1
             if tracing:
                 o._tell("tx", raw, req)  # (when it goes: the trace shows the time)
-            if self.meanwhile is not None:
-                self.meanwhile()
             if kind == _NONE:
                 return None
             # the first read uses the client's timeout, so a pyserial URL port is not
@@ -165,7 +160,7 @@ class SerialFraming:
             head = b"" if buf else t.read(FRAME, timeout)
         else:
             o.stats["sent"] += 1
-            head = t.transact(raw, FRAME, timeout, self.meanwhile)
+            head = t.transact(raw, FRAME, timeout)
         if not buf:
             # the common case first: nine bytes that are the reply. The same nine bytes are
             # the same (immutable) reply, and a script repeating its lines mostly gets
@@ -366,7 +361,6 @@ class CanFraming:
     def __init__(self, transport: CanTransport, owner: Owner):
         self.transport = transport
         self.owner = owner
-        self.meanwhile: Callable[[], None] | None = None  # (as SerialFraming's)
 
     def waiting(self) -> bool:
         return True  # (a non-blocking receive is the only way to know)
@@ -393,8 +387,6 @@ class CanFraming:
         o.stats["sent"] += 1
         if o._tracers:
             o._tell("tx", data, req)
-        if self.meanwhile is not None:
-            self.meanwhile()
         if kind == _NONE:
             return None
         deadline = time.monotonic() + timeout

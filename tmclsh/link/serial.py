@@ -21,7 +21,6 @@ import os
 import select
 import sys
 import time
-from typing import TYPE_CHECKING
 from urllib.parse import urlsplit
 
 import serial as pyserial
@@ -29,9 +28,6 @@ import serial as pyserial
 from ..base.canspec import LINK_DEFAULTS
 from ..base.errors import TransportError
 from .base import StreamTransport
-
-if TYPE_CHECKING:
-    from collections.abc import Callable
 
 try:  # bytes waiting on a POSIX descriptor (what pyserial's in_waiting asks, minus its layers)
     import fcntl
@@ -171,11 +167,10 @@ class SerialTransport(StreamTransport):
         except (pyserial.SerialException, OSError) as exc:
             raise self._lost("read", exc) from exc
 
-    def transact(self, data: bytes, size: int, timeout: float | None,
-                 meanwhile: Callable[[], object] | None = None) -> bytes:
+    def transact(self, data: bytes, size: int, timeout: float | None) -> bytes:
         fd = self._fd
         if fd is None:
-            return super().transact(data, size, timeout, meanwhile)
+            return super().transact(data, size, timeout)
         try:  # (write's common case, written out: once per request)
             n = os.write(fd, data)
         except BlockingIOError:
@@ -186,8 +181,6 @@ class SerialTransport(StreamTransport):
             self.write(data[n:])
         # the reply mostly comes whole: one wait, one read; anything else as read() does it
         start = time.monotonic()
-        if meanwhile is not None:
-            meanwhile()
         poll = self._poll
         try:
             if poll is not None:

@@ -241,6 +241,15 @@ _READ_MEMORY = int(Control.READ_MEMORY)
 _LOADED = int(Status.LOADED)
 
 
+def _made(reqs: list[Request]) -> list[Request]:
+    """A run's requests with their frames made, before the first goes: what is made
+    between a reply and the next request, or while the module answers, costs the line
+    that time (Client.requests)."""
+    for req in reqs:
+        req.to_bytes()  # (kept by the request)
+    return reqs
+
+
 def _send(client, opcode: int, type_: int = 0, motor: int = 0, value: int = 0, *,
           timeout: float | None = None, retries: int | None = None):
     # an upload is thousands of these: Request.make checks plain in-range numbers without
@@ -275,12 +284,12 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
     acked = sent = 0
     failure: BaseException | None = None
     began = time.monotonic()
-    # one run of requests (Client.requests), each frame made while the module stores the one
-    # before (every one goes to the module that got 132; an Instruction holds plain ints in
-    # range, its value signed: make's fast path)
+    # one run of requests (Client.requests), the frames made before the first goes (every one
+    # goes to the module that got 132; an Instruction holds plain ints in range, its value
+    # signed: make's fast path)
     make, address = Request.make, client.address
-    frames = client.requests((make(address, ins.opcode, ins.type, ins.motor, ins.value)
-                              for ins in instructions), timeout=timeout)
+    frames = client.requests(_made([make(address, ins.opcode, ins.type, ins.motor, ins.value)
+                                    for ins in instructions]), timeout=timeout)
     client._downloading = True  # no retries: a repeated frame would be stored twice
     try:
         _ok(_send(client, Control.START_DOWNLOAD, 0, 0, start, timeout=timeout),
@@ -428,8 +437,8 @@ def verify_image(client, instructions: Sequence[Instruction], start: int = 0, *,
         read_at: dict[int, int] = {}  # Client._replies after the read -> the cell's index
         make, module = Request.make, client.address
         cells = range(total) if todo is None else sorted(todo)
-        reads = client.requests((make(module, _READ_MEMORY, 0, 0, start + idx) for idx in cells),
-                                timeout=timeout)
+        reads = client.requests(_made([make(module, _READ_MEMORY, 0, 0, start + idx)
+                                       for idx in cells]), timeout=timeout)
         ledger = client._ledger  # (its count of replies: ``Client._replies``)
         for n, (idx, reply) in enumerate(zip(cells, reads)):
             if reply is None or reply.stored is None:
