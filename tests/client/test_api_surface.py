@@ -153,8 +153,8 @@ CLIENT_NAMES = {
     "bring_up_pending", "can_id", "check", "close", "connected", "cut_by", "describe",
     "doubt_on_last", "encode", "execute", "host_address", "identify", "in_doubt", "is_can",
     "judges_as_read", "lock", "mode", "module", "motion", "on_notice", "poll", "prepare",
-    "reconnect", "refusal", "reply_id", "request", "require_module", "retries", "send",
-    "shared", "shared_news", "start_event_poller", "stats", "stop_event_poller",
+    "reconnect", "refusal", "reply_id", "request", "requests", "require_module", "retries",
+    "send", "shared", "shared_news", "start_event_poller", "stats", "stop_event_poller",
     "take_shared", "timeout", "transport", "value", "version", "wait_until"}
 
 

@@ -48,15 +48,13 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from typing import TYPE_CHECKING, TypeVar
 
 from ..base import clock
 from ..base.canspec import LINK_DEFAULTS
-from ..base.errors import (ChecksumError, DownloadModeError, TmclTimeoutError, TransportError,
-                           ValidationError)
+from ..base.errors import ChecksumError, TmclTimeoutError, TransportError, ValidationError
 from ..link.base import Transport
-from ..link.framing import name_of
 from ..tmcl import instructions as isa
 from ..tmcl.frames import Control, Reply, ReplyKind, Request, Status
 from ..tmcl.modules import Module
@@ -64,8 +62,10 @@ from ..tmcl.modules import load as load_module
 from .doubt import Doubts
 from .ledger import CONFIRM_ROUNDS, Ledger, Suspect
 from .lifecycle import Lifecycle, lost_check
-from .motion import MotionRecord, watched_opcodes
+from .motion import MotionRecord
 from .shared import SharedAddresses
+from .steps import after_answer, clear_line, reply_kind, take_answer
+from .steps import run as run_requests
 from .taps import Listener, Taps, Tracer
 from .taps import tell as _tell
 
@@ -78,13 +78,8 @@ K = TypeVar("K")
 
 _NORMAL, _VERSION, _MEMORY, _NONE = (ReplyKind.NORMAL, ReplyKind.VERSION_STRING,
                                      ReplyKind.MEMORY, ReplyKind.NONE)
-_FIRST_CONTROL = int(Control.STOP_APPLICATION)  # only control commands have other layouts
-_LOADED = int(Status.LOADED)
 _WRONG_CHECKSUM = int(Status.WRONG_CHECKSUM)
-_QUIT_DOWNLOAD = isa.download_command("leave")
-_ENTER_DOWNLOAD = isa.download_command("enter")
 _GET_VERSION = int(Control.GET_VERSION)
-_MOTION = watched_opcodes()  # what may start or stop a motor (client/motion.py)
 
 __all__ = ["Client", "Suspect", "CONFIRM_ROUNDS", "idempotent"]
 
@@ -388,27 +383,27 @@ class Client:
                 except TransportError:
                     self._down = True
                     raise
-            if req.opcode in _MOTION and reply is not None and not self._downloading:
-                self.motion.take(self.module, req, reply.status)
-            op = req.opcode
-            if op >= _FIRST_CONTROL and reply is not None and (
-                    op == _QUIT_DOWNLOAD or op == _ENTER_DOWNLOAD) and reply.ok:
-                # (a typed 132 with no 133 after it; asked of 132 and 133 alone: an upload's
-                # verify sends thousands of 134)
-                if op == _QUIT_DOWNLOAD:
-                    self._left_downloading = False
-                elif not self._downloading:
-                    self._left_downloading = True
-            if reply is not None and reply.status == _LOADED and not self._downloading:
-                raise DownloadModeError(
-                    _LOADED, reply,
-                    f"the module is in download mode (it stores commands instead of executing "
-                    f"them): {name_of(req)} was stored in program memory, not executed; "
-                    "the line 133 (quit download mode) ends it")
+            after_answer(self, req, reply)
             return reply
         finally:
             if self._events:
                 self._deliver_events()
+
+    def requests(self, reqs: Iterable[Request], *, timeout: float | None = None,
+                 retries: int | None = None) -> Iterator[Reply | None]:
+        """``request`` for each of ``reqs`` in turn: each reply is yielded before the next
+        request is sent, so the caller stops the run by leaving its loop (nothing more is
+        sent). Each request takes the steps ``request`` takes, with the same checks
+        (client/steps.py); what a run does not change is looked up once, so thousands at
+        the line's pace (an upload's frames, their read-back) cost little more between a
+        reply and the next request than the checks. ``reqs`` is read as each goes out (a
+        list made before costs the line least). ``timeout`` and ``retries`` as
+        ``request``'s, checked before anything is sent."""
+        if timeout is None:
+            timeout = self._timeout
+        elif not (isinstance(timeout, (int, float)) and timeout > 0):
+            raise ValueError(f"timeout must be a positive number of seconds, got {timeout!r}")
+        return run_requests(self, reqs, timeout, self.retries if retries is None else retries)
 
     def _before_next(self, req: Request) -> None:
         """The first command after a reconnect brings the module up again, exactly as at
@@ -433,11 +428,15 @@ class Client:
                 self._check_download = True
                 raise
 
-    def _request(self, req: Request, timeout: float, retries: int) -> Reply | None:
-        if not self.transport.is_open:
+    def _request(self, req: Request, timeout: float, retries: int,
+                 first: tuple[bool, object] | None = None) -> Reply | None:
+        """``req``'s answer (steps.py), attempted again where that is safe. ``first``: an
+        attempt a run made already (``steps.run``): whether ``req`` went out, and its reply
+        or what it raised, taken on from there as an attempt of this loop's own."""
+        if first is None and not self.transport.is_open:
             raise TransportError(f"{self.transport.describe()} is not connected "
                                  "(the link was closed or lost; reconnect first)")
-        kind = _NORMAL if req.opcode < _FIRST_CONTROL else isa.reply_kind(req.opcode, req.type)
+        kind = reply_kind(req)
         framing = self._framing
         ledger = self._ledger
         attempt = 0
@@ -446,20 +445,18 @@ class Client:
             attempt += 1
             sent = False  # a failed resynchronisation sends nothing (its marker is counted)
             try:
-                if framing.waiting():
-                    self._flush_input()
-                synced = False
-                if ledger.dirty(self._downloading):
-                    if ledger.needs_sync(req, kind, self._downloading):
-                        self._resync(req.address, timeout)
-                        synced = True
-                elif ledger.run and time.monotonic() - self._answered_at >= timeout:
-                    # quiet for a whole timeout, nothing expected: an answer displaced
-                    # before now would have come (it counts as lost after a timeout)
-                    ledger.in_step()
-                sent = went = True
-                # (the line was found clear just now, unless a resynchronisation ran since)
-                reply = framing.exchange(req, kind, timeout, absorb=synced)
+                if first is None:
+                    synced = clear_line(self, req, kind, timeout)
+                    sent = went = True
+                    # (the line was found clear just now, unless a resynchronisation ran since)
+                    reply = framing.exchange(req, kind, timeout, absorb=synced)
+                else:
+                    sent, outcome = first
+                    went = sent
+                    first = None
+                    if isinstance(outcome, BaseException):
+                        raise outcome
+                    reply = outcome  # type: ignore[assignment]
             except TmclTimeoutError as exc:
                 self.stats["timeouts"] += 1
                 failure: Exception = exc
@@ -482,14 +479,7 @@ class Client:
                     continue
                 if reply is None:
                     return None
-                copy = ledger.took(req, reply, copy=None, downloading=self._downloading)
-                found = ledger.doubles.answered(req, reply)
-                if found is not None:
-                    self._second(found)
-                self._answered_at = time.monotonic()
-                if copy and not self._judging:
-                    return self._judge(req, reply, timeout, retries)
-                return reply
+                return take_answer(self, req, reply, timeout, retries)
             if sent:
                 ledger.expect_late(req, kind)
             # a failed line check sent nothing of ``req``: asking again is safe for any command

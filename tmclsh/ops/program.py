@@ -241,6 +241,15 @@ _READ_MEMORY = int(Control.READ_MEMORY)
 _LOADED = int(Status.LOADED)
 
 
+def _made(reqs: list[Request]) -> list[Request]:
+    """A run's requests with their frames made, before the first goes: what is made
+    between a reply and the next request, or while the module answers, costs the line
+    that time (Client.requests)."""
+    for req in reqs:
+        req.to_bytes()  # (kept by the request)
+    return reqs
+
+
 def _send(client, opcode: int, type_: int = 0, motor: int = 0, value: int = 0, *,
           timeout: float | None = None, retries: int | None = None):
     # an upload is thousands of these: Request.make checks plain in-range numbers without
@@ -274,19 +283,20 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
     total = len(instructions)
     acked = sent = 0
     failure: BaseException | None = None
-    # thousands of frames at the line's pace: what does not change during the download is
-    # looked up once (the module's address included: every frame goes to the one that got 132)
-    request, make, address = client.request, Request.make, client.address
     began = time.monotonic()
+    # one run of requests (Client.requests), the frames made before the first goes (every one
+    # goes to the module that got 132; an Instruction holds plain ints in range, its value
+    # signed: make's fast path)
+    make, address = Request.make, client.address
+    frames = client.requests(_made([make(address, ins.opcode, ins.type, ins.motor, ins.value)
+                                    for ins in instructions]), timeout=timeout)
     client._downloading = True  # no retries: a repeated frame would be stored twice
     try:
         _ok(_send(client, Control.START_DOWNLOAD, 0, 0, start, timeout=timeout),
             f"start download (132) at address {start}")
-        for ins in instructions:
-            sent += 1
-            # (an Instruction holds plain ints in range, its value signed: make's fast path)
-            reply = request(make(address, ins.opcode, ins.type, ins.motor, ins.value),
-                            timeout=timeout)
+        while acked < total:
+            sent = acked + 1  # (the next frame goes out, or may have, whatever happens now)
+            reply = next(frames)
             if reply is None or reply.status != _LOADED:
                 _ok(reply, f"instruction at address {start + acked}", (Status.LOADED,))
             acked += 1
@@ -295,6 +305,7 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
     except (TmclError, KeyboardInterrupt) as exc:
         failure = exc
     finally:
+        frames.close()
         ended, end_error = _quit_download(client, timeout)
         client._downloading = False
         if not ended:
@@ -424,14 +435,16 @@ def verify_image(client, instructions: Sequence[Instruction], start: int = 0, *,
         # for one read is done once a round, the loop only sends and keeps the answers)
         require_binary(client, "reading program memory (134)", _READ_MEMORY)
         read_at: dict[int, int] = {}  # Client._replies after the read -> the cell's index
-        request, make, module = client.request, Request.make, client.address
-        for n, idx in enumerate(range(total) if todo is None else sorted(todo)):
-            address = start + idx
-            reply = request(make(module, _READ_MEMORY, 0, 0, address), timeout=timeout)
+        make, module = Request.make, client.address
+        cells = range(total) if todo is None else sorted(todo)
+        reads = client.requests(_made([make(module, _READ_MEMORY, 0, 0, start + idx)
+                                       for idx in cells]), timeout=timeout)
+        ledger = client._ledger  # (its count of replies: ``Client._replies``)
+        for n, (idx, reply) in enumerate(zip(cells, reads)):
             if reply is None or reply.stored is None:
-                raise TmclError(f"no program-memory reply for address {address}")
+                raise TmclError(f"no program-memory reply for address {start + idx}")
             got[idx] = reply.stored
-            read_at[client._replies] = idx
+            read_at[ledger.replies] = idx
             if progress is not None and todo is None:
                 progress("verify", n + 1, total)
         return read_at
