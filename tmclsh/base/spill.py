@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections import deque
 from collections.abc import Callable
 from typing import Any
@@ -34,6 +35,7 @@ class Spill:
         self.bound = bound
         self.poll = poll
         self.dropped = 0
+        self._taking = False
         self._items: deque[Any] = deque()
         self._ready = threading.Condition(threading.Lock())
         self._closing = False
@@ -66,12 +68,26 @@ class Spill:
                         ready.wait(self.poll)
                 if not items:
                     return
+            self._taking = True
             while items:
                 thing = items.popleft()
                 try:
                     take(thing)
                 except Exception:
                     log.exception("taking what was handed over failed")
+            self._taking = False
+
+    def drain(self, timeout: float) -> bool:
+        """Wait until what was put has been taken (at most ``timeout`` seconds): before
+        another process writes where ``take`` writes. False: it had not."""
+        deadline = time.monotonic() + timeout
+        while self._items or self._taking:
+            if time.monotonic() >= deadline:
+                return False
+            with self._ready:
+                self._ready.notify()
+            time.sleep(0.002)
+        return True
 
     def close(self, timeout: float | None = None) -> int:
         """Take nothing more; the worker takes what waits (for at most ``timeout`` seconds,
@@ -129,6 +145,11 @@ class SpillWriter:
 
     def flush(self) -> None:
         """Nothing to do here: the writing thread flushes whenever it catches up."""
+
+    def drain(self, timeout: float) -> bool:
+        """Wait (at most ``timeout`` seconds) until what was written has reached ``stream``:
+        before another process writes to the same terminal."""
+        return self._spill.drain(timeout)
 
     def isatty(self) -> bool:
         try:

@@ -188,6 +188,13 @@ class LogWriter:
     def write(self, frame: CanFrame) -> None:
         self._logger.on_message_received(self._message(self._can, frame))
 
+    def flush(self) -> None:
+        """What python-can's writer has put in its file's buffer, pushed to the disk (its
+        own buffers, as a .blf's, stay with it)."""
+        file = getattr(self._logger, "file", None)
+        if file is not None:
+            file.flush()
+
     def close(self) -> None:
         self._logger.stop()
 

@@ -43,6 +43,10 @@ class CaptureWriter:
             self._out.flush()
             self._flushed = now
 
+    def flush(self) -> None:
+        self._out.flush()
+        self._flushed = time.monotonic()
+
     def close(self) -> None:
         self._out.commit()
 

@@ -309,6 +309,7 @@ class Describer:
         self._run = run
         self._pid: int | None = None
         self._thread: threading.Thread | None = None
+        self.status: int | None = None  # once it has ended: 0, or what went wrong (not 0)
         if not self.forked:
             self._thread = threading.Thread(target=self._on_thread, name=name, daemon=True)
 
@@ -350,6 +351,8 @@ class Describer:
             self._run(self.notes, self.back)
         except KeyboardInterrupt:
             pass
+        except BrokenPipeError:  # (its reader has gone, ``| head``: quiet, as tmclsh ends then)
+            status = 1
         except BaseException:
             logging.getLogger(__name__).exception("describing the bridge's traffic failed")
             status = 1
@@ -364,6 +367,11 @@ class Describer:
     def _on_thread(self) -> None:
         try:
             self._run(self.notes, self.back)
+        except BrokenPipeError:
+            self.status = 1
+        except BaseException:
+            logging.getLogger(__name__).exception("describing the bridge's traffic failed")
+            self.status = 1
         finally:
             self.back.close()
 
@@ -379,6 +387,32 @@ class Describer:
                 if event[0] == kind:
                     return event
         return None
+
+    @property
+    def alive(self) -> bool:
+        """Whether it still runs (a forked one that was killed has not)."""
+        if self._thread is not None:
+            return self._thread.is_alive()
+        if self._pid is None:
+            return False
+        try:
+            pid, status = os.waitpid(self._pid, os.WNOHANG)
+        except ChildProcessError:
+            return False
+        if pid:
+            self._pid, self.status = None, os.waitstatus_to_exitcode(status)
+            return False
+        return True
+
+    def gone(self, within: float) -> bool:
+        """Whether it has ended, or does within ``within`` seconds (a process killed closes
+        its pipes a moment before it can be waited for)."""
+        deadline = time.monotonic() + within
+        while self.alive:
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(0.01)
+        return True
 
     def interrupt(self) -> None:
         """Give up on what the describer is waiting for (its reader, in a forked process)."""
@@ -403,15 +437,18 @@ class Describer:
         if self._thread is not None:
             self._thread.join(timeout)
             ended = not self._thread.is_alive()
+            if ended and self.status is None:
+                self.status = 0
         else:
             ended = self._pid is None
             while not ended:
                 try:
-                    pid, _ = os.waitpid(self._pid, os.WNOHANG)
+                    pid, status = os.waitpid(self._pid, os.WNOHANG)
                 except ChildProcessError:
-                    pid = self._pid
+                    pid, status = self._pid, 1 << 8
                 if pid:
                     self._pid, ended = None, True
+                    self.status = os.waitstatus_to_exitcode(status)
                 elif time.monotonic() >= deadline:
                     break
                 else:

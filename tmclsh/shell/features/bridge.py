@@ -24,7 +24,7 @@ from typing import Any
 from ...base.canspec import LINK_DEFAULTS
 from ...base.errors import (EXIT_FAILED, EXIT_OK, ConnectError, TmclError, TransportError, UsageError,
                             ValidationError)
-from ...ops.bridge import CAN_RX, CAN_TX, LOST, TICK, CanBridge, Left, SerialBridge
+from ...ops.bridge import CAN_RX, CAN_TX, LOST, NOISE, TICK, CanBridge, Left, SerialBridge
 from ...ops.filter import Filter
 from ...ops.handoff import CAPTURE, DONE, END, FINISH, LEFT, START, Describer
 from ...ops.monitor import DEFAULT_HOST, RX, TX, CanReader, Monitor, SerialPair
@@ -32,9 +32,12 @@ from .livetable import wanted
 from .monitor import (Limits, View, _capture, end_live_output, end_table, interruptible,
                       live_output, live_table, load_module, off_the_wire, restore, show_items)
 
-LEFT_WAIT = 10.0  # s the describer may take to read what was forwarded and say what it left
+SOON = 2.0  # s the describer takes, as a rule, to read the rest and say what it left
+LEFT_WAIT = 30.0  # s it may take beyond that (far behind on a busy machine: a pipe's 1 MiB)
 OUTPUT_EVERY = 0.02  # s between the describer's writes of its lines: a batch a write, not a line
 END_WAIT = 5.0  # s it may take to finish after Ctrl-C gave up on its reader
+DRAIN_WAIT = 2.0  # s the describer's last lines may take to reach the terminal before the
+# bridge's own words follow them (a terminal that takes longer has them after)
 
 
 def run_bridge(args) -> int:
@@ -56,7 +59,8 @@ def run_bridge(args) -> int:
     transport = _open_module(args, port, can_spec)
     view = View(monitor, json_mode=json_mode, hex_bytes=args.hex)
     try:
-        capture = _capture(args.output, is_can)
+        *capture, flush_capture = _capture(args.output, is_can)
+        flush_capture()  # (its header: written by the describer alone from here)
     except BaseException:
         transport.close()
         raise
@@ -76,7 +80,7 @@ def run_bridge(args) -> int:
     try:
         bridge = _serve(transport, describer, args, is_can, can_id, reply_id, host)
         try:
-            left = _forward(bridge, describer, transport)
+            left = _forward(bridge, describer, transport, args.output)
             if left:
                 _put_right(transport, left, monitor, args, is_can, bridge.lost,
                            lambda event: describer.notes.send((CAPTURE, event)))
@@ -84,9 +88,31 @@ def run_bridge(args) -> int:
             transport.close()
             describer.notes.send((FINISH, describer.notes.dropped))
             _finished(describer)
+            if describer.status and args.output:
+                _salvage(capture[1])
     finally:
         restore(previous)
-    return EXIT_OK if bridge.lost is None else EXIT_FAILED
+    return EXIT_OK if bridge.lost is None and describer.status == 0 else EXIT_FAILED
+
+
+def _salvage(close_capture) -> None:
+    """The describer ended before it closed the ``-o`` file: what reached the disk until
+    then (pushed every half second) is kept under its name, as the describer would have."""
+    try:
+        close_capture()
+    except OSError:  # (FileError is one)
+        pass  # (it had closed it after all: its reader, not its file, was gone)
+
+
+def _terminal_back() -> None:
+    """The describer ended with the terminal as its live table left it (cursor hidden, in
+    the middle of a line): the cursor shown and a line begun, where stdout is a terminal."""
+    try:
+        if sys.stdout.isatty():
+            sys.stdout.write("\x1b[?25h\n")
+            sys.stdout.flush()
+    except (OSError, ValueError):
+        pass
 
 
 def _serve(transport, describer: Describer, args, is_can: bool, can_id, reply_id, host):
@@ -116,7 +142,7 @@ def _open_module(args, port: str | None, can_spec: str | None):
         raise ConnectError(str(exc)) from exc
 
 
-def _forward(bridge, describer: Describer, transport) -> Left | None:
+def _forward(bridge, describer: Describer, transport, output: str | None) -> Left | None:
     """Say where the program connects, then forward until Ctrl-C, SIGTERM, a limit the
     describer reached, or the module's link lost; then what the traffic left, as the
     describer read it (None: it could not say)."""
@@ -125,7 +151,7 @@ def _forward(bridge, describer: Describer, transport) -> Left | None:
         sys.stdout.flush()
         print(f"bridging {bridge.endpoint} <-> {transport.describe()}; Ctrl-C ends",
               file=sys.stderr, flush=True)
-        describer.notes.send((START,))
+        describer.notes.send((START,))  # (the table may draw now: below those two lines)
         describing = True
         while not bridge.ended.is_set():
             if not describing:
@@ -134,8 +160,11 @@ def _forward(bridge, describer: Describer, transport) -> Left | None:
             got = describer.back.take(TICK)
             if got is None:  # (it is gone: the forwarding is not)
                 describing = False
-                print("bridge: the process that shows the traffic has ended: nothing more "
-                      "is shown; forwarding goes on until Ctrl-C", file=sys.stderr, flush=True)
+                _terminal_back()
+                written = f"; {output} keeps what was written until now" if output else ""
+                print(f"bridge: the process that shows the traffic has ended: nothing more "
+                      f"is shown{written}; forwarding goes on until Ctrl-C", file=sys.stderr,
+                      flush=True)
             elif any(event[0] == DONE for event in got):
                 break
     except KeyboardInterrupt:
@@ -144,14 +173,20 @@ def _forward(bridge, describer: Describer, transport) -> Left | None:
         bridge.close()  # (nothing is put after this)
     describer.notes.send((END,))
     try:
-        said = describer.wait_for(LEFT, LEFT_WAIT)
+        said = describer.wait_for(LEFT, SOON)
+        if said is None and describer.alive:
+            print("bridge: reading the rest of what was forwarded, to end what it left at "
+                  "the module (Ctrl-C skips that)", file=sys.stderr, flush=True)
+            said = describer.wait_for(LEFT, LEFT_WAIT)
     except KeyboardInterrupt:
         said = None
     if bridge.lost is not None:
         print(f"bridge: {bridge.lost}", file=sys.stderr)
     if said is None:
-        print("bridge closed: what the traffic through it left at the module could not "
-              "be read in time: check the module", file=sys.stderr)
+        why = "could not be read in time" if not describer.gone(0.5) else \
+            "is not known (the process that showed the traffic ended)"
+        print(f"bridge closed: what the traffic through it left at the module {why}: check "
+              "the module", file=sys.stderr)
         return None
     if describer.notes.dropped:
         print(f"bridge closed: {describer.notes.dropped} chunks of the traffic were forwarded "
@@ -185,6 +220,7 @@ class _Teller:
         self.left = Left()
         self.lost: str | None = None
         self.done = False  # a limit reached or the module's link lost
+        self.heard = time.time()  # the time of the newest thing forwarded that was read
 
     def run(self, notes, back) -> None:
         """Until ``FINISH`` (or the end of ``notes``: the bridge's process has gone)."""
@@ -193,7 +229,7 @@ class _Teller:
                                                                       self.close_capture)
         self.out = None
         self.waiting: list[tuple] | None = []  # (what came before the endpoint was out)
-        self.ended = said_done = False
+        self.ended = said_done = orphaned = False
         last = ticked = time.monotonic()
         try:
             while (got := notes.take(TICK)) is not None:
@@ -204,20 +240,32 @@ class _Teller:
                 if got:
                     last = now
                 if not self.ended and now - ticked >= TICK:
+                    # (a line quiet for a tick has partial frames; else the requests are
+                    # expired as of the newest thing read, not of the clock: a describer
+                    # behind the wire would call answers it has yet to read missing)
                     ticked = now
-                    t = time.time()
-                    self.show(reader.quiet(t) if now - last >= TICK else monitor.expire(t))
+                    self.show(reader.quiet(time.time()) if now - last >= TICK
+                              else monitor.expire(self.heard))
                 if self.done and not said_done:
                     said_done = back.send((DONE,), timeout=0)
+            # (the bridge's process has gone: a shell may be back at its prompt below the
+            # table, so the end is not drawn over it: the cursor is given back, no more;
+            # what it forwarded before it could say the endpoint was out is still shown)
+            if view.table is not None:
+                view.table.abandon()
+            elif self.waiting:
+                self.begin(table=False)
+            orphaned = True
         finally:
-            if not self.ended:
+            if not self.ended and not orphaned:
                 self.show(reader.end(time.time()))
             close_capture()  # (after the closing stop: a replayed capture shows it too)
             monitor.summary.capture_dropped = capture_dropped()
             end_table(view)
             if self.out is not None:
                 end_live_output(view, self.out, monitor.summary)
-                view.summary(monitor.summary)
+                if not orphaned:
+                    view.summary(monitor.summary)
             view.flush()
 
     def take(self, event: tuple, back) -> bool:
@@ -232,6 +280,8 @@ class _Teller:
             self.show(self.reader.end(time.time()))
             self.ended = True
             end_table(self.view)  # (before what the bridge says on stderr)
+            if self.out is not None:
+                self.out.drain(DRAIN_WAIT)
             back.send((LEFT, self.left.to_dict()))
         elif kind == CAPTURE:
             _capture_only(self.capture, event[1])
@@ -254,6 +304,11 @@ class _Teller:
             self.tell(event)
 
     def tell(self, event: tuple) -> None:
+        kind = event[0]
+        if kind in (TX, RX, NOISE):
+            self.heard = event[2]
+        elif kind in (CAN_TX, CAN_RX):
+            self.heard = event[1].t
         items, lost = _read(event, self.reader, self.monitor, self.capture)
         if lost is not None and self.lost is None:
             self.lost = lost

@@ -119,6 +119,22 @@ class LiveTable:
             self._flush()
         self._live = None
 
+    def abandon(self) -> None:
+        """Stop drawing without the last draw (what is below the table is not ours any
+        more): the cursor shown again, and that is all."""
+        live = self._live
+        if live is None:
+            return
+        if self._thread is not None:
+            self._stop.set()
+            self._thread.join()
+            self._thread = None
+        self._live = None
+        try:
+            self.out.write("\x1b[?25h")
+        except (OSError, ValueError):
+            pass
+
     def _redraws(self) -> None:
         while not self._stop.wait(self.refresh):
             if self.out.waiting:  # (the terminal has not taken the last one: skip this)

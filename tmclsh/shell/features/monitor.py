@@ -551,7 +551,7 @@ def run_monitor(args) -> int:
     with_table = wanted(args, json_mode)
     is_can = can_spec is not None or (log_path is not None and _can_log(log_path))
     view = View(monitor, json_mode=json_mode, hex_bytes=args.hex)
-    capture, close_capture = _capture(args.output, is_can)
+    capture, close_capture, _ = _capture(args.output, is_can)
     transport = None
     live = log_path is None
     capture_dropped = lambda: 0  # noqa: E731
@@ -647,18 +647,19 @@ def _open(opener):
 
 
 def _capture(path: str | None, is_can: bool):
-    """``-o FILE``: (what takes each frame or chunk, what closes the file)."""
+    """``-o FILE``: (what takes each frame or chunk, what closes the file, what pushes what
+    was written to the disk: before a fork, so no process writes it twice)."""
     if not path:
-        return None, lambda: None
+        return None, lambda: None, lambda: None
     if is_can:
         from ...link.canlog import LogWriter
 
         writer: Any = LogWriter(path)
-        return writer.write, writer.close
-    from ...ops.capture import CaptureWriter
+    else:
+        from ...ops.capture import CaptureWriter
 
-    writer = CaptureWriter(path)
-    return writer.write, writer.close
+        writer = CaptureWriter(path)
+    return writer.write, writer.close, writer.flush
 
 
 CAPTURE_BOUND = 100_000  # frames a live -o file may fall behind before the newest are dropped
