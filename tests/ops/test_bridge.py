@@ -131,6 +131,7 @@ def test_ascii_mode_through_the_bridge_is_shown_as_text_and_left_at_the_end(make
     texts = [(o["direction"], o["text"]) for o in objs if o.get("frame") == "text"]
     assert ("tx", "AGAP 4, 0") in texts and ("rx", "BA 100 51200") in texts
     assert "left the module in ASCII mode at address 1" in err
+    assert "stays in ASCII mode" not in err  # (it does not: the bridge ends it)
     # the module is back in binary mode: it answers a frame
     with serial.Serial(path, timeout=1) as port:
         port.write(request(1, 6, 4))

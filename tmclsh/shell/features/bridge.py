@@ -389,6 +389,10 @@ def _put_right(transport, left: Left, monitor: Monitor, args, is_can: bool,
                         reply_id=getattr(args, "reply_id", None))
         if capture is not None:
             client.add_tracer(_capturing(capture, client, is_can))
+        # what the bring-up notices on its own is said as the bridge's; of the ASCII mode
+        # it finds, nothing ("it stays in ASCII mode at exit" would be wrong): the bridge
+        # has said it ends that, and does right after
+        client.on_notice = _unsaid if address in left.ascii else _said_closing
         try:
             bringup.bring_up(client, strict=False)  # (leaves download mode, finds ASCII)
             if address in left.ascii:
@@ -400,6 +404,14 @@ def _put_right(transport, left: Left, monitor: Monitor, args, is_can: bool,
                   file=sys.stderr)
         finally:
             client.close()
+
+
+def _said_closing(text: str) -> None:
+    print(f"bridge closed: {text}", file=sys.stderr)
+
+
+def _unsaid(text: str) -> None:
+    """(A notice the closing stop's own words supersede.)"""
 
 
 def _capturing(capture, client, is_can: bool):
