@@ -434,35 +434,6 @@ def test_a_signal_as_soon_as_the_endpoint_is_out_ends_the_bridge_cleanly(make_pt
         assert json.loads(out.splitlines()[-1])["summary"]["frames"] == 0
 
 
-@pytest.mark.skipif(not os.path.exists("/proc/self/task"), reason="reads /proc (Linux)")
-def test_traffic_not_read_in_time_is_counted_and_named_at_the_end():
-    """The describing process stopped (a machine too busy to give it a turn): the forwarding
-    goes on, what could not be handed over is counted, and at the end the bridge says that
-    what that traffic left at the module is not known."""
-    from responder import PtyModule
-
-    module = PtyModule(version="1311V111")
-    bridge = Bridge("--pty", "--port", module.path)
-    try:
-        describer = _describer_of(bridge.proc.pid)
-        with serial.Serial(bridge.endpoint, timeout=5) as port:
-            os.kill(describer, signal.SIGSTOP)
-            try:
-                for _ in range(300):  # (4,000 bytes a write: the pipe, 1 MiB, fills)
-                    port.write(b"\xff" * 4000)
-                port.reset_input_buffer()
-            finally:
-                os.kill(describer, signal.SIGCONT)
-            time.sleep(0.5)
-            port.reset_input_buffer()
-            assert _exchange(port, request(1, 6, 4))[2] == 100  # (the line goes on)
-        objs, err = bridge.stop()
-    finally:
-        bridge.kill()
-        module.close()
-    assert objs[-1]["summary"]["untold"] > 0
-    assert "forwarded but not read" in err and "check the module" in err
-
 
 def test_a_reader_that_goes_away_ends_nothing_in_a_traceback(make_pty_sim):
     """``tmclsh bridge --json | head -1``: the forwarding goes on to the end; the lines and

@@ -13,7 +13,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tmclsh.link.base import CanFrame
-from tmclsh.ops.handoff import (CAN_RX, CAN_TX, CAPTURE, DONE, END, FINISH, LEFT, LOST, NOISE,
+from tmclsh.ops.handoff import (BEHIND, CAN_RX, CAN_TX, CAPTURE, DONE, END, FINISH, LEFT, LOST,
+                                NOISE,
                                 PIPE_BUF, RX, START, TX, Describer, LocalPipe, Pipe, Unpacker,
                                 pack)
 
@@ -76,11 +77,18 @@ def test_a_full_pipe_takes_nothing_more_and_never_waits():
     assert not filler.is_alive(), "a put waited for a reader"
     (put,) = counts
     assert pipe.dropped == 1001
+    # beyond the pipe's own room, BEHIND bytes waited in this process
+    assert put * (9 + 11) >= BEHIND
     # what went in comes out whole and in order, and after that the pipe takes again
     got = []
-    while (more := pipe.take(0)):
+    while True:
+        pipe.catch_up()
+        more = pipe.take(0)
+        if not more:
+            break
         got += more
     assert len(got) == put and all(e == chunk for e in got)
+    assert pipe.waiting == 0
     assert pipe.put((RX, b"\x02", 2.0)) and pipe.take(1) == [(RX, b"\x02", 2.0)]
     pipe.close()
 

@@ -50,6 +50,7 @@ START, END, FINISH, DONE, LEFT, CAPTURE = "start", "end", "finish", "done", "lef
 
 PIPE_BUF = getattr(select, "PIPE_BUF", 512)  # bytes a pipe writes whole or not at all
 PIPE_SIZE = 1 << 20  # bytes asked of the kernel for the pipe (Linux; else its default)
+BEHIND = 4 << 20  # bytes that may wait for room in the pipe before the newest are dropped
 
 _HEAD = struct.Struct("<HBd")  # bytes after the head, kind, time
 _CAN = struct.Struct("<IB")  # arbitration id, flags
@@ -127,10 +128,16 @@ class Unpacker:
 
 
 class Pipe:
-    """One way between two processes: ``put`` never waits (False: the pipe is full, the
-    event not handed over, counted in ``dropped``); ``send`` waits for room (the words the
-    two sides say, once the forwarding has stopped or from the describer); ``take`` reads
-    what came within ``timeout`` seconds (None: the other side has closed its end)."""
+    """One way between two processes: ``put`` never waits; ``send`` waits for room (the
+    words the two sides say, once the forwarding has stopped or from the describer);
+    ``take`` reads what came within ``timeout`` seconds (None: the other side has closed its
+    end).
+
+    What a full pipe cannot take (the describer behind: a busy machine) waits in this
+    process, in order, up to ``BEHIND`` bytes, and goes into the pipe ahead of anything
+    put after it, at the next ``put``, ``catch_up`` or ``send``; beyond that, events are
+    not handed over and are counted in ``dropped``. Only a put that finds records waiting
+    takes a lock: the common one is a single write."""
 
     def __init__(self) -> None:
         self._r, self._w = os.pipe()
@@ -142,48 +149,100 @@ class Pipe:
         except (ImportError, OSError):
             pass  # (not Linux, or a limit on pipe sizes: the default size)
         self.dropped = 0
+        self._behind: deque[bytes] = deque()
+        self._behind_size = 0
+        self._lock = threading.Lock()
         self._unpacker = Unpacker()
 
     def put(self, event: tuple) -> bool:
-        write, w = os.write, self._w
         kind = event[0]
-        if kind is TX or kind is RX:  # (the forwarding's own chunks: packed here, in one)
+        if not self._behind and (kind is TX or kind is RX):  # (the forwarding's own chunks)
             data = event[1]
             if len(data) <= _CHUNK:
                 try:
-                    write(w, _head(len(data), _SERIAL[kind], event[2]) + data)
+                    os.write(self._w, _head(len(data), _SERIAL[kind], event[2]) + data)
                     return True
-                except OSError:  # (full, or the describer has gone: forwarding goes on)
+                except BlockingIOError:
+                    pass
+                except (OSError, TypeError):  # (the describer has gone, or this end closed)
                     self.dropped += 1
                     return False
-        for record in pack(event):
-            try:
-                write(w, record)
-            except BlockingIOError:
-                self.dropped += 1  # (not exact under two threads: a count for the summary)
-                return False
-            except OSError:  # (the describer has gone: forwarding goes on)
+        with self._lock:
+            if not self._write_behind():
                 self.dropped += 1
                 return False
+            records = pack(event)
+            behind = self._behind
+            if behind:
+                return self._wait(records)
+            for i, record in enumerate(records):
+                try:
+                    os.write(self._w, record)
+                except BlockingIOError:
+                    return self._wait(records[i:])
+                except (OSError, TypeError):
+                    self.dropped += 1
+                    return False
+            return True
+
+    def _wait(self, records: list[bytes]) -> bool:
+        """(Under the lock.) ``records`` wait behind the others, if there is room."""
+        size = sum(map(len, records))
+        if self._behind_size + size > BEHIND:
+            self.dropped += 1
+            return False
+        self._behind.extend(records)
+        self._behind_size += size
+        return True
+
+    def catch_up(self) -> None:
+        """Put what waits in this process into the pipe, as far as it takes it now."""
+        if self._behind:
+            with self._lock:
+                self._write_behind()
+
+    def _write_behind(self) -> bool:
+        """(Under the lock.) False: the other side has gone (what waited is counted)."""
+        behind = self._behind
+        while behind:
+            try:
+                os.write(self._w, behind[0])
+            except BlockingIOError:
+                return True
+            except (OSError, TypeError):
+                self.dropped += len(behind)
+                behind.clear()
+                self._behind_size = 0
+                return False
+            self._behind_size -= len(behind.popleft())
         return True
 
     def send(self, event: tuple, timeout: float = 5.0) -> bool:
-        """Put ``event``, waiting up to ``timeout`` seconds for room; False: no room came
-        or the other side has gone."""
+        """Put ``event`` after what waits, waiting up to ``timeout`` seconds for room;
+        False: no room came or the other side has gone."""
         deadline = time.monotonic() + timeout
-        for record in pack(event):
-            while True:
-                try:
-                    os.write(self._w, record)
+        with self._lock:
+            records = pack(event)
+            self._behind.extend(records)  # (the two sides' words: never refused for room)
+            self._behind_size += sum(map(len, records))
+            while self._behind:
+                if not self._write_behind():
+                    return False
+                if not self._behind:
                     break
-                except BlockingIOError:
-                    left = deadline - time.monotonic()
-                    if left <= 0:
-                        return False
-                    select.select([], [self._w], [], left)
-                except OSError:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                try:
+                    select.select([], [self._w], [], min(left, 0.1))
+                except (OSError, ValueError, TypeError):
                     return False
         return True
+
+    @property
+    def waiting(self) -> int:
+        """Records waiting in this process for room in the pipe."""
+        return len(self._behind)
 
     def take(self, timeout: float | None) -> list[tuple] | None:
         ready, _, _ = select.select([self._r], [], [], timeout)
@@ -266,6 +325,9 @@ class LocalPipe:
             self._size = 0
         return self._unpacker.feed(data)
 
+    def catch_up(self) -> None:
+        """(Nothing waits outside it.)"""
+
     def giving(self) -> None:
         """(One process: both ends stay.)"""
 
@@ -276,16 +338,6 @@ class LocalPipe:
         with self._ready:
             self._closed = True
             self._ready.notify_all()
-
-
-NICE = 10  # the describer's lower priority: where every core is busy, the forwarding runs first
-
-
-def _lower(by: int) -> None:
-    try:
-        os.nice(by)
-    except (AttributeError, OSError):
-        pass
 
 
 class Describer:
@@ -345,7 +397,6 @@ class Describer:
             for sig in (signal.SIGINT, signal.SIGTERM):
                 signal.signal(sig, signal.SIG_IGN)
             signal.signal(signal.SIGUSR1, interrupted)
-            _lower(NICE)
             self.notes.taking()
             self.back.giving()
             self._run(self.notes, self.back)

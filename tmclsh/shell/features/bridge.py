@@ -157,6 +157,7 @@ def _forward(bridge, describer: Describer, transport, output: str | None) -> Lef
             if not describing:
                 bridge.ended.wait(TICK)
                 continue
+            describer.notes.catch_up()  # (what the pipe could not take, a tick late at most)
             got = describer.back.take(TICK)
             if got is None:  # (it is gone: the forwarding is not)
                 describing = False
