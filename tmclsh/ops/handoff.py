@@ -5,9 +5,9 @@ forward (reading frames, pairing, wording lines, a live table, a file) share one
 lock when they share a process, and the forwarding then waits for it at every turn: measured,
 a p99 of several hundred microseconds added to each exchange, against about 25 when the
 describing runs in another process. So the bridge's process only forwards, and hands each
-chunk as a few bytes to a pipe that never makes it wait (``Pipe.put``): a pipe that is full
-(the describer fell far behind) does not take the chunk, which is counted (``dropped``); it
-was forwarded all the same.
+chunk as a few bytes to a pipe that never makes it wait (``Pipe.put``): what a full pipe
+cannot take (the describer behind) waits beside it in order, and beyond ``BEHIND`` bytes is
+not handed over and is counted (``dropped``); it was forwarded all the same.
 
 Each record is at most ``PIPE_BUF`` bytes, which a pipe writes whole or not at all, so the
 two forwarding threads (the master's and the module's) can put at once without a lock and
@@ -16,7 +16,7 @@ its chunk is forwarded.
 
 The same pipe carries the few words the two sides say to each other (``START``, ``END``,
 ``FINISH``, ``DONE``, ``LEFT``), each a record too. Where a process cannot be forked
-(Windows), the describer runs on a thread of the bridge's own process (``spawn``), its pipe
+(Windows), the describer runs on a thread of the bridge's own process (``Describer``), its pipe
 an in-process one with the same records (``LocalPipe``): the same code, without the gain.
 
 Nothing here prints.
