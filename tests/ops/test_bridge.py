@@ -440,26 +440,16 @@ def test_a_reader_that_goes_away_ends_nothing_in_a_traceback(make_pty_sim):
     the summary nobody reads any more end quietly, exit 1 (as every tmclsh command whose
     reader went away)."""
     sim, path = make_pty_sim()
-    r, w = os.pipe()
-    proc = subprocess.Popen([sys.executable, "-m", "tmclsh", "bridge", "--pty", "--port", path,
-                             "--json"], stdout=w, stderr=subprocess.PIPE, text=True,
-                            env=tmclsh_env(), cwd=str(ROOT))
-    os.close(w)
+    bridge = Bridge("--pty", "--port", path)
     try:
-        with os.fdopen(r, "rb", buffering=0) as reader:
-            endpoint = b""
-            while not endpoint.endswith(b"\n"):
-                endpoint += reader.read(1)
-        # (the reader has gone: the pipe's end is closed)
-        with serial.Serial(endpoint.decode().strip(), timeout=5) as port:
+        bridge.proc.stdout.close()  # (the reader has gone, after the endpoint)
+        with serial.Serial(bridge.endpoint, timeout=5) as port:
             for _ in range(5):
                 assert _exchange(port, request(1, 6, 4))[2] == 100
         time.sleep(0.3)
-        proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=30)
+        bridge.proc.send_signal(signal.SIGINT)
+        _, err = bridge.proc.communicate(timeout=30)
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
+        bridge.kill()
     assert "Traceback" not in err and "failed" not in err, err
-    assert proc.returncode == 1
+    assert bridge.proc.returncode == 1

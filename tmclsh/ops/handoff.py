@@ -185,10 +185,11 @@ class Pipe:
                     return False
             return True
 
-    def _wait(self, records: list[bytes]) -> bool:
-        """(Under the lock.) ``records`` wait behind the others, if there is room."""
+    def _wait(self, records: list[bytes], bounded: bool = True) -> bool:
+        """(Under the lock.) ``records`` wait behind the others, if there is room (or
+        whatever the room: ``bounded`` False, the two sides' words)."""
         size = sum(map(len, records))
-        if self._behind_size + size > BEHIND:
+        if bounded and self._behind_size + size > BEHIND:
             self.dropped += 1
             return False
         self._behind.extend(records)
@@ -222,9 +223,7 @@ class Pipe:
         False: no room came or the other side has gone."""
         deadline = time.monotonic() + timeout
         with self._lock:
-            records = pack(event)
-            self._behind.extend(records)  # (the two sides' words: never refused for room)
-            self._behind_size += sum(map(len, records))
+            self._wait(pack(event), bounded=False)
             while self._behind:
                 if not self._write_behind():
                     return False
@@ -397,7 +396,6 @@ class Describer:
         def interrupted(*_: object) -> None:
             raise KeyboardInterrupt
 
-        status = 0
         try:
             for sig in (signal.SIGINT, signal.SIGTERM):
                 signal.signal(sig, signal.SIG_IGN)
@@ -408,32 +406,35 @@ class Describer:
                 pass
             self.notes.taking()
             self.back.giving()
-            self._run(self.notes, self.back)
-        except KeyboardInterrupt:
-            pass
-        except BrokenPipeError:  # (its reader has gone, ``| head``: quiet, as tmclsh ends then)
-            status = 1
-        except BaseException:
-            logging.getLogger(__name__).exception("describing the bridge's traffic failed")
-            status = 1
+            return self._described()
         finally:
             for stream in (sys.stdout, sys.stderr):
                 try:
                     stream.flush()
                 except (OSError, ValueError, AttributeError):
                     pass
-        return status
 
     def _on_thread(self) -> None:
         try:
-            self._run(self.notes, self.back)
-        except BrokenPipeError:
-            self.status = 1
-        except BaseException:
-            logging.getLogger(__name__).exception("describing the bridge's traffic failed")
-            self.status = 1
+            failed = self._described()
+            if failed:
+                self.status = failed  # (else 0, set when it is joined)
         finally:
             self.back.close()
+
+    def _described(self) -> int:
+        """``run``, and how it ended: 0, or 1 when it failed (its reader gone, ``| head``:
+        quietly, as tmclsh ends then; anything else: logged)."""
+        try:
+            self._run(self.notes, self.back)
+        except KeyboardInterrupt:
+            pass
+        except BrokenPipeError:
+            return 1
+        except BaseException:
+            logging.getLogger(__name__).exception("describing the bridge's traffic failed")
+            return 1
+        return 0
 
     def wait_for(self, kind: str, timeout: float) -> tuple | None:
         """The first word of ``kind`` that comes back within ``timeout`` seconds (None: the

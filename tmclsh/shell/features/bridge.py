@@ -285,7 +285,7 @@ class _Teller:
                 self.out.drain(DRAIN_WAIT)
             back.send((LEFT, self.left.to_dict()))
         elif kind == CAPTURE:
-            _capture_only(self.capture, event[1])
+            _write(self.capture, event[1])
         elif kind == FINISH:
             self.monitor.summary.untold = event[1]
             return True
@@ -328,8 +328,9 @@ class _Teller:
         self.view.flush()
 
 
-def _capture_only(capture, event: tuple) -> None:
-    """A frame of the closing stop's, for the ``-o`` file only."""
+def _write(capture, event: tuple) -> None:
+    """A chunk (TX, RX) or CAN frame the bridge forwarded, or one of the closing stop's,
+    written to the ``-o`` file."""
     if capture is None:
         return
     if event[0] in (TX, RX):
@@ -344,14 +345,12 @@ def _read(event: tuple, reader, monitor: Monitor, capture) -> tuple[list, str | 
     if kind == LOST:
         return [], event[1]
     if kind in (TX, RX):
+        _write(capture, event)
         _, data, t = event
-        if capture is not None:
-            capture(t, data, kind)
         return reader.feed(kind, data, t), None
     if kind in (CAN_TX, CAN_RX):
+        _write(capture, event)
         f = event[1]
-        if capture is not None:
-            capture(f)
         if kind == CAN_TX:
             reader.request_ids.add(f.arbitration_id)
         return reader.feed(f.t, f.arbitration_id, f.data, extended=f.extended, error=f.error,
