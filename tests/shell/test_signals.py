@@ -116,3 +116,56 @@ def test_a_signal_wrapped_in_another_error_is_still_the_stop(monkeypatch, capsys
     assert status == 128 + signal.SIGTERM, err
     assert "terminated (SIGTERM): stopped motor 0 (MST; speed reads 0)" in err
     assert "Traceback" not in err
+
+
+_KILLED_IN_A_CALLBACK = """
+import os, signal, sys, weakref
+from tmclsh.shell.lang.session import Session
+
+run_line = Session.run_line
+
+
+class Thing:
+    pass
+
+
+def killed_in_a_callback(self, line, *args, **kwargs):
+    done = run_line(self, line, *args, **kwargs)
+    if line.startswith("ROR"):
+        # SIGTERM whose handler runs inside a weak reference's callback (as in importlib's
+        # module-lock cleanup): what the handler raises there is dropped by the interpreter
+        def callback(_ref):
+            os.kill(os.getpid(), signal.SIGTERM)
+            for _ in range(10_000):
+                pass
+
+        thing = Thing()
+        ref = weakref.ref(thing, callback)
+        del thing
+    return done
+
+
+Session.run_line = killed_in_a_callback
+sys.argv = ["tmclsh", *sys.argv[1:]]
+from tmclsh.cli.main import main
+
+sys.exit(main())
+"""
+
+
+def test_a_signal_that_lands_in_a_callback_still_ends_the_run(served):
+    """Seen in CI: a SIGTERM during the switch into ASCII mode landed in importlib's
+    weak-reference callback, was dropped ("Exception ignored"), and the run slept on for 30 s.
+    It is sent again and ends the run as any SIGTERM does: the one stop, exit 143, the module
+    in binary mode."""
+    sim, path = served
+    p = subprocess.Popen([sys.executable, "-c", _KILLED_IN_A_CALLBACK, "--port", path,
+                          "--ascii", "-c", "ROR 0, 30000; .sleep 30"], cwd=str(ROOT),
+                         env=tmclsh_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True)
+    _, err = p.communicate(timeout=patience(20))
+    assert p.returncode == 128 + signal.SIGTERM, err
+    assert "Exception ignored" not in err
+    assert "terminated (SIGTERM): stopped motor 0" in err, err
+    assert not sim.ascii_active
+    assert sim.param("axis", 3, 0) == 0

@@ -16,6 +16,7 @@ import shlex
 import sys
 
 from ..base.edges import error_record, write_json
+from ..base.interrupts import restore, unwind_on
 from ..base.errors import (EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, TmclError,
                            exit_status)
 
@@ -135,7 +136,9 @@ def cmd_firmware(args: argparse.Namespace) -> int:
     settings = connection_settings(args)
     update = FirmwareUpdate(settings, image, progress=report.step,
                     confirm=None if yes or args.check else report.ask)
-    previous = _unwind_on_signals()
+    # SIGTERM and SIGHUP unwind like Ctrl-C: the update still says where the module stands
+    # (and one restarted into its bootloader before the erase is sent back)
+    previous = unwind_on(("SIGTERM", "SIGHUP"))
     try:
         if args.check:
             plan = update.check()
@@ -159,7 +162,7 @@ def cmd_firmware(args: argparse.Namespace) -> int:
     finally:
         report.close()
         update.close()
-        _restore_signals(previous)
+        restore(previous)
     if as_json:
         report.emit(result.to_json())
     elif result.nothing_to_do:
@@ -230,32 +233,3 @@ def _show_plan(report: Report, plan) -> None:
         down = f" (a DOWNGRADE: older than {plan.version})" if plan.change == "downgrade" else ""
         print(f"would   restart it into its bootloader, erase, write {img.length} bytes, "
               f"verify, start {plan.image_version.text}{down}")
-
-
-def _unwind_on_signals() -> dict:
-    """SIGTERM and SIGHUP unwind like Ctrl-C, so the update still says where the module
-    stands (and a module restarted into its bootloader before the erase is sent back)."""
-    import signal
-
-    def leave(signum: int, frame: object) -> None:
-        raise SystemExit(128 + signum)
-
-    previous = {}
-    for sig in (getattr(signal, "SIGTERM", None), getattr(signal, "SIGHUP", None)):
-        if sig is None:
-            continue
-        try:
-            previous[sig] = signal.signal(sig, leave)
-        except (ValueError, OSError):  # not the main thread, or not on this platform
-            pass
-    return previous
-
-
-def _restore_signals(previous: dict) -> None:
-    import signal
-
-    for sig, handler in previous.items():
-        try:
-            signal.signal(sig, handler)
-        except (ValueError, OSError):
-            pass

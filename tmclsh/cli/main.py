@@ -404,10 +404,11 @@ def _user_modules(args: argparse.Namespace) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from ..base import startup
+    from ..base import interrupts, startup
 
     if argv is None:  # the process's own command line (not a caller's list: a test, a script)
         startup.hold()  # (the collector, while tmclsh starts: base/startup.py)
+        interrupts.keep()  # (a signal dropped in a callback is sent again: base/interrupts.py)
     try:
         return _main(sys.argv[1:] if argv is None else argv)
     finally:

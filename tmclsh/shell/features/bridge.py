@@ -24,13 +24,14 @@ from typing import Any
 from ...base.canspec import LINK_DEFAULTS
 from ...base.errors import (EXIT_FAILED, EXIT_OK, ConnectError, TmclError, TransportError, UsageError,
                             ValidationError)
+from ...base.interrupts import restore
 from ...ops.bridge import CAN_RX, CAN_TX, LOST, NOISE, TICK, CanBridge, Left, SerialBridge
 from ...ops.filter import Filter
 from ...ops.handoff import CAPTURE, DONE, END, FINISH, LEFT, START, Describer
 from ...ops.monitor import DEFAULT_HOST, RX, TX, CanReader, Monitor, SerialPair
 from .livetable import wanted
 from .monitor import (Limits, View, _capture, end_live_output, end_table, interruptible,
-                      live_output, live_table, load_module, off_the_wire, restore, show_items)
+                      live_output, live_table, load_module, off_the_wire, show_items)
 
 SOON = 2.0  # s the describer takes, as a rule, to read the rest and say what it left
 LEFT_WAIT = 30.0  # s it may take beyond that (far behind on a busy machine: a pipe's 1 MiB)

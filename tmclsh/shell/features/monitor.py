@@ -19,15 +19,14 @@ and ops/bridge.py's. This module only shows it.
 from __future__ import annotations
 
 import json
-import signal
 import sys
-import threading
 import time
 from collections.abc import Iterable
 from typing import Any
 
 from ...base.errors import (EXIT_FAILED, EXIT_OK, ConnectError, TmclError, TransportError,
                             UsageError, ValidationError)
+from ...base.interrupts import interrupted, restore, unwind_on
 from ...base.spill import Spill, SpillWriter
 from ...ops.filter import Filter
 from ...ops.logread import Shape
@@ -485,19 +484,8 @@ class Limits:
 def interruptible() -> dict:
     """SIGINT (Ctrl-C) and SIGTERM end a run, the summary still written: also where SIGINT
     came in ignored (a program started in the background by a shell). The handlers before,
-    to put back."""
-    previous: dict = {}
-    if threading.current_thread() is threading.main_thread():
-        def stop(*_: object) -> None:
-            raise KeyboardInterrupt
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            previous[sig] = signal.signal(sig, stop)
-    return previous
-
-
-def restore(previous: dict) -> None:
-    for sig, handler in previous.items():
-        signal.signal(sig, handler)
+    for ``restore``."""
+    return unwind_on(("SIGINT", "SIGTERM"), interrupted)
 
 
 def show_items(items: Iterable[Item], view: View, filt: Filter, summary: Summary,

@@ -30,11 +30,12 @@ from typing import TYPE_CHECKING
 from ...base.config import Config, load_config
 from ...base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE,
                             ConnectError, TmclError, UsageError)
+from ...base.interrupts import Terminated
 from ...client.connect import connection_settings, open_client
 from ...ops import units as ops_units
 from ...ops.units import Unit
 from ..lang import main as shell_main
-from ..lang.main import Terminated, exit_cleanly_on_signals, stop_on_interrupt
+from ..lang.main import exit_cleanly_on_signals, stop_on_interrupt
 from . import stop as _stop  # noqa: F401  (here: a unit's thread imports nothing)
 
 if TYPE_CHECKING:

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 
 from ...base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE,
                             ModuleGoneError, TmclError)
+from ...base.interrupts import Terminated, unwind_on
 from ..render import Output
 from .session import QuitShell, Session, frames_sent
 
@@ -317,30 +318,9 @@ def _note_left_running(session: Session) -> None:
             session.out.emit({"left_running": act.to_json()})
 
 
-class Terminated(SystemExit):
-    """SIGTERM or SIGHUP: ends the run like Ctrl-C does (the one stop), with the signal's
-    exit status. A SystemExit, not a KeyboardInterrupt: the prompt, which stops and goes on
-    after Ctrl-C, must end here."""
-
-    def __init__(self, signum: int):
-        import signal
-
-        super().__init__(128 + signum)
-        self.why = {signal.SIGTERM: "terminated (SIGTERM)"}.get(signum, "hung up (SIGHUP)")
-
-
 def exit_cleanly_on_signals() -> None:
     """SIGTERM (kill, systemd, a CI job's timeout) and SIGHUP (the terminal or SSH session
     went away) unwind like an exception: the motors and the stored program are stopped as
     for Ctrl-C and ``client.close()`` runs, so a module is never left moving, or in ASCII or
     download mode, because the shell was killed."""
-    import signal
-
-    def leave(signum: int, frame: object) -> None:
-        raise Terminated(signum)
-
-    for sig in (signal.SIGTERM, signal.SIGHUP):
-        try:
-            signal.signal(sig, leave)
-        except (ValueError, OSError):  # not the main thread, or not on this platform
-            pass
+    unwind_on(("SIGTERM", "SIGHUP"))

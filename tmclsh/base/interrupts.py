@@ -1,0 +1,104 @@
+"""Signals that end a run as exceptions, and are never lost on the way.
+
+SIGTERM (kill, systemd, a CI job's timeout), SIGHUP (the terminal or SSH session went away)
+and Ctrl-C end a run by raising in the main thread, so that it unwinds: the motors are
+stopped and the module is taken out of ASCII or download mode on the way out.
+
+Why ``keep``: Python runs a signal's handler in whatever code the main thread is running at
+that moment. When that is code the interpreter calls on its own (a weak reference's
+callback, such as the one importlib runs when a module lock is dropped, or a ``__del__``),
+what the handler raises is printed as "Exception ignored" and dropped: the signal is lost and
+the run goes on as if it had never come (seen: ``kill`` during the switch into ASCII mode,
+and a 30 s ``.sleep`` slept to its end). ``keep`` puts a ``sys.unraisablehook`` in place that
+sends such a signal again (from a thread of its own, so that the handler does not run inside
+the hook), and its handler runs once more, in the run's own code.
+It is the program's (``cli.main``), not the library's: the hook is process-wide.
+"""
+
+from __future__ import annotations
+
+import _thread
+import signal
+import sys
+from typing import Callable, Iterable
+
+_kept = False
+
+
+class Terminated(SystemExit):
+    """SIGTERM or SIGHUP: ends the run like Ctrl-C does (the one stop), with the signal's
+    exit status. A SystemExit, not a KeyboardInterrupt: the prompt, which stops and goes on
+    after Ctrl-C, must end here."""
+
+    def __init__(self, signum: int):
+        super().__init__(128 + signum)
+        self.signum = signum
+        self.why = ("terminated (SIGTERM)" if signum == signal.SIGTERM
+                    else "hung up (SIGHUP)")
+
+
+def interrupted(signum: int) -> KeyboardInterrupt:
+    """The Ctrl-C a signal stands for where it ends a run as Ctrl-C does (``monitor``)."""
+    exc = KeyboardInterrupt()
+    exc.signum = signum  # type: ignore[attr-defined]  # (for ``keep``: which one to send again)
+    return exc
+
+
+def unwind_on(signals: Iterable[str], make: Callable[[int], BaseException] = Terminated
+              ) -> dict:
+    """From now on each of ``signals`` (names, such as ``"SIGTERM"``; those this platform
+    lacks are left out) raises ``make(signum)`` in the main thread. The handlers before, for
+    ``restore``; nothing outside the main thread, where no handler can be set."""
+    def leave(signum: int, frame: object) -> None:
+        raise make(signum)
+
+    previous: dict = {}
+    for name in signals:
+        sig = getattr(signal, name, None)
+        if sig is None:
+            continue
+        try:
+            previous[sig] = signal.signal(sig, leave)
+        except (ValueError, OSError):  # not the main thread, or not on this platform
+            pass
+    return previous
+
+
+def restore(previous: dict) -> None:
+    """The handlers ``unwind_on`` replaced, back."""
+    for sig, handler in previous.items():
+        try:
+            signal.signal(sig, handler)
+        except (ValueError, OSError):
+            pass
+
+
+def keep() -> None:
+    """A signal whose exception was dropped in a callback is sent again (see above)."""
+    global _kept
+    if _kept:
+        return
+    _kept = True
+    before = sys.unraisablehook
+
+    def hook(unraisable: object) -> None:
+        exc = getattr(unraisable, "exc_value", None)
+        signum = _signal_of(exc)
+        if signum is None:
+            before(unraisable)  # type: ignore[arg-type]
+            return
+        # sent from another thread: sent from here, its handler would run at once, inside
+        # this hook, and be dropped again; the main thread runs it at its next step
+        # (``_thread``: ``Thread.start`` waits for the thread to run, and would run it here)
+        _thread.start_new_thread(signal.raise_signal, (signum,))
+
+    sys.unraisablehook = hook
+
+
+def _signal_of(exc: object) -> int | None:
+    """The signal ``exc`` was raised for, if it stands for one."""
+    if isinstance(exc, Terminated):
+        return exc.signum
+    if isinstance(exc, KeyboardInterrupt):
+        return getattr(exc, "signum", signal.SIGINT)
+    return None
