@@ -45,7 +45,7 @@ def test_killed_in_ascii_mode_leaves_binary_mode(served, sig, delay):
     wait_for(lambda: sim.ascii_active)
     time.sleep(delay)
     p.send_signal(sig)
-    assert p.wait(10) == 128 + sig
+    assert p.wait(patience(10)) == 128 + sig
     assert not sim.ascii_active
 
 
@@ -61,7 +61,7 @@ def test_killed_during_upload_ends_download_mode(served, tmp_path):
 
     wait_for(downloading)
     p.send_signal(signal.SIGTERM)
-    assert p.wait(10) == 128 + signal.SIGTERM
+    assert p.wait(patience(10)) == 128 + signal.SIGTERM
     sim.faults.delay = 0.0
     assert not downloading()
     # and the module still answers normally, on the same line

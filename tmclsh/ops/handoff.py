@@ -36,6 +36,7 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any
 
+from ..base.interrupts import interrupted, unwind_on
 from ..link.base import CanFrame
 from .monitor import RX, TX
 
@@ -393,13 +394,10 @@ class Describer:
         import signal
         import sys
 
-        def interrupted(*_: object) -> None:
-            raise KeyboardInterrupt
-
         try:
             for sig in (signal.SIGINT, signal.SIGTERM):
                 signal.signal(sig, signal.SIG_IGN)
-            signal.signal(signal.SIGUSR1, interrupted)
+            unwind_on(("SIGUSR1",), interrupted)  # (the bridge's process: "stop now")
             try:
                 os.nice(NICE)
             except OSError:
