@@ -18,7 +18,7 @@ from pathlib import Path
 
 from ..base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE,
                            ConnectError, TmclError, UsageError)
-from .firmware import _restore_signals, _unwind_on_signals
+from ..base.interrupts import restore, unwind_on
 
 CAN_PREFIX = "can:"
 
@@ -155,7 +155,7 @@ def cmd_replace(args: argparse.Namespace) -> int:
                               force=args.force, on_step=view.step, notice=view.notice,
                               confirm=confirm, source_name=args.source,
                               target_name=args.target)
-    previous = _unwind_on_signals()
+    previous = unwind_on(("SIGTERM", "SIGHUP"))
     try:
         report = replacement.run()
     except (KeyboardInterrupt, SystemExit) as exc:
@@ -168,7 +168,7 @@ def cmd_replace(args: argparse.Namespace) -> int:
     except ReplaceError as exc:
         return refuse(f"{exc}; nothing was sent", EXIT_USAGE)
     finally:
-        _restore_signals(previous)
+        restore(previous)
     status = EXIT_OK if report.ok else EXIT_FAILED
     view.report(report, None if report.ok else _resume(args, report), status)
     return status

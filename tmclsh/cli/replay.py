@@ -112,9 +112,9 @@ def cmd_replay(args: argparse.Namespace) -> int:
     table = _Table(say, client.module)
     code = EXIT_OK
     result = Result(capture)
-    from .firmware import _restore_signals, _unwind_on_signals
+    from ..base.interrupts import restore, unwind_on
 
-    previous = _unwind_on_signals()  # (SIGTERM, SIGHUP: the stop below runs all the same)
+    previous = unwind_on(("SIGTERM", "SIGHUP"))  # (the stop below runs all the same)
     try:
         replay(client, capture, as_captured=args.as_captured, writes=yes, done=table.add,
                into=result)
@@ -135,7 +135,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
                     stop_all(client, ToStderr(), "replay ended" + (where if several else ""))
         finally:
             client.close()
-            _restore_signals(previous)
+            restore(previous)
     table.show(result)
     if code == EXIT_OK and result.differences:
         code = EXIT_FAILED
