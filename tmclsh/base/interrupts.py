@@ -90,7 +90,10 @@ def keep() -> None:
         # sent from another thread: sent from here, its handler would run at once, inside
         # this hook, and be dropped again; the main thread runs it at its next step
         # (``_thread``: ``Thread.start`` waits for the thread to run, and would run it here)
-        _thread.start_new_thread(signal.raise_signal, (signum,))
+        try:
+            _thread.start_new_thread(signal.raise_signal, (signum,))
+        except RuntimeError:  # (no new thread while the interpreter ends: it is ending)
+            pass
 
     sys.unraisablehook = hook
 
