@@ -162,7 +162,7 @@ def test_event_while_idle_goes_to_listeners_through_the_poller(pty_client):
     c.send(Control.TARGET_REACHED_EVENT, 0, 0, 0)
     c.start_event_poller(0.01)
     try:
-        assert got.wait(3), "no event delivered while idle"
+        assert got.wait(patience(3)), "no event delivered while idle"
     finally:
         c.stop_event_poller()
     assert seen == [(1, 5000)]
@@ -185,7 +185,7 @@ def test_a_poller_that_outlives_its_stop_still_ends_when_another_starts(pty_clie
 
     c.poll = poll  # type: ignore[method-assign]
     c.start_event_poller(0.01)
-    assert stuck.wait(2)
+    assert stuck.wait(patience(2))
     c.stop_event_poller()  # gives up waiting after 1 s
     c.start_event_poller(0.01)
     try:

@@ -16,7 +16,7 @@ import time
 import pytest
 import serial
 
-from conftest import ROOT, tmclsh_env
+from conftest import ROOT, patience, tmclsh_env
 from tmclsh.cli import main as cli
 from tmclsh.sim import Simulator
 from tmclsh.sim.serve import serve_can
@@ -204,7 +204,7 @@ def test_a_module_that_goes_away_ends_the_bridge():
             port.write(request(1, 6, 1))
             assert len(port.read(9)) == 9
             module.close()  # unplugged
-            out, err = bridge.proc.communicate(timeout=10)
+            out, err = bridge.proc.communicate(timeout=patience(10))
     finally:
         bridge.kill()
     assert bridge.proc.returncode == 1, err

@@ -20,7 +20,7 @@ import serial
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from conftest import ROOT, tmclsh_env
+from conftest import ROOT, patience, tmclsh_env
 from responder import PtyModule, reply, valid, version_reply
 from tmclsh.ops.filter import Filter
 from tmclsh.ops.monitor import (EVENT, NOISE_RUN, REPLY, REQUEST, TEXT, Exchange,
@@ -250,7 +250,7 @@ def test_a_tap_on_the_line_of_a_pyserial_master_and_a_module(tmp_path):
         os.write(tap_master, request(1, 6, 2)[:6])  # cut off: a partial frame
         time.sleep(0.5)
         proc.send_signal(signal.SIGINT)
-        out, err = proc.communicate(timeout=10)
+        out, err = proc.communicate(timeout=patience(10))
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -294,7 +294,7 @@ def test_a_tap_that_goes_away_ends_the_run_with_its_summary():
         time.sleep(0.3)
         os.close(tap_slave)
         os.close(tap_master)  # the adapter is unplugged
-        out, err = proc.communicate(timeout=10)
+        out, err = proc.communicate(timeout=patience(10))
     finally:
         if proc.poll() is None:
             proc.kill()

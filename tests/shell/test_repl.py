@@ -20,6 +20,7 @@ from tmclsh.client.connect import connect
 from tmclsh.shell.repl import app
 from tmclsh.shell.render import Output
 from tmclsh.shell.lang.session import Session
+from conftest import patience
 
 TAB, ENTER, CTRL_C, CTRL_D = "\t", "\r", "\x03", "\x04"
 
@@ -226,7 +227,7 @@ def test_ctrl_c_while_a_command_runs(repl, slow_command):
     repl.line("ROR 0, 500", "rotating right")
     repl.wait_prompt()
     repl.type(".test-slow" + ENTER)
-    assert slow_command.wait(5)
+    assert slow_command.wait(patience(5))
     # what SIGINT does to the main thread, done to the REPL's thread
     ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(repl.thread.ident),
                                                ctypes.py_object(KeyboardInterrupt))

@@ -100,7 +100,7 @@ def test_ctrl_c_while_a_command_runs(dropped):
             repl = Repl(session, inp, Screen())
             repl.start()
             repl.type(".test-busy" + ENTER)
-            assert started.wait(5)
+            assert started.wait(patience(5))
             ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(repl.thread.ident),
                                                        ctypes.py_object(KeyboardInterrupt))
             repl.expect(f"interrupted: {STOPPED}")

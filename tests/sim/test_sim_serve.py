@@ -16,6 +16,7 @@ import serial
 from tmclsh.tmcl.frames import Reply, ReplyKind, Request, Status
 from tmclsh.sim import SimBus, Simulator
 from tmclsh.sim.serve import serve_can, serve_pty, serve_tcp
+from conftest import patience
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -151,7 +152,7 @@ def test_run_entry_point_tcp_and_signal():
         time.sleep(0.6)  # stdin is closed: the server must keep running
         assert proc.poll() is None
         proc.send_signal(signal.SIGTERM)
-        assert proc.wait(5) == 0
+        assert proc.wait(patience(5)) == 0
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -167,7 +168,7 @@ def test_run_entry_point_pty():
             port.write(Request(1, 6, 4).to_bytes())
             assert Reply.from_bytes(port.read(9)).value == 51200
         proc.send_signal(signal.SIGINT)
-        assert proc.wait(5) == 0
+        assert proc.wait(patience(5)) == 0
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -211,7 +212,7 @@ def test_sim_serves_a_bus_paced_at_its_baud_rate(run_tmclsh):
             took = time.perf_counter() - start
         assert took >= 40 * 18 * 10 / 19200
         proc.send_signal(signal.SIGINT)
-        assert proc.wait(5) == 0
+        assert proc.wait(patience(5)) == 0
     finally:
         if proc.poll() is None:
             proc.kill()
