@@ -109,8 +109,18 @@ class SerialFraming:
 
     # -- what waits --------------------------------------------------------------------
     def waiting(self) -> bool:
-        """Is anything waiting to be read (one cheap check before a request)?"""
-        return bool(self.decoder.buf) or self._ready()
+        """Is anything waiting to be read (one cheap check before a request)? The port is
+        not asked when the last reply's read took all it held less than a frame's wire
+        time ago: whatever has come since is no whole frame yet (what came behind the
+        reply was read with it and waits in the decoder; a run of requests at the line's
+        pace is spared a system call per request)."""
+        if self.decoder.buf:
+            return True
+        t = self.transport
+        emptied = t.emptied
+        if emptied and time.monotonic() - emptied < FRAME * t.byte_time:
+            return False
+        return self._ready()
 
     def clear(self) -> None:
         """Forget what is buffered (the line was in another mode, or reset)."""
@@ -160,6 +170,9 @@ class SerialFraming:
             head = b"" if buf else t.read(FRAME, timeout)
         else:
             o.stats["sent"] += 1
+            # (more than nine bytes: what had come behind the reply was read with it; the
+            # decoder below reads them frame by frame, and what is left behind the answer
+            # is taken in before the next request, as what waits then is)
             head = t.transact(raw, FRAME, timeout)
         if not buf:
             # the common case first: nine bytes that are the reply. The same nine bytes are

@@ -40,6 +40,9 @@ except ImportError:  # pragma: no cover - Windows: pyserial's in_waiting
 # or a FIONREAD ioctl cost per call (asked twice per request: is anything waiting, the reply)
 _EPOLL = getattr(select, "epoll", None)
 _FOUR_ZEROS = bytes(4)
+# what transact's one read asks for: the answer and whatever came behind it, so the framing
+# sees a copy that came right behind a reply without looking at the port again
+_READ_ALL = 256  # (a small read: what Python allocates for it is dearer beyond 512 bytes)
 _BYTEORDER = sys.byteorder  # (asked before every request)
 
 WRITE_TIMEOUT = 2.0  # a write that cannot finish in this time means the port is stuck
@@ -59,6 +62,7 @@ class SerialTransport(StreamTransport):
         if not isinstance(baudrate, int) or baudrate <= 0:
             raise ValueError(f"baud rate must be a positive number, got {baudrate!r}")
         self.baudrate = baudrate
+        self.byte_time = 10 / baudrate  # start bit, 8 data bits, stop bit
         self._ser: pyserial.SerialBase | None = None
         self._fd: int | None = None  # set when reads and writes may use the descriptor
         self._poll: select.epoll | None = None  # the descriptor's epoll (Linux), with _fd
@@ -105,6 +109,7 @@ class SerialTransport(StreamTransport):
     def close(self) -> None:
         ser, self._ser = self._ser, None
         self._fd = None
+        self.emptied = 0.0
         poll, self._poll = self._poll, None
         if poll is not None:
             poll.close()
@@ -190,9 +195,10 @@ class SerialTransport(StreamTransport):
         except (OSError, ValueError) as exc:
             raise self._lost("read", exc) from exc
         if not ready:
+            self.emptied = 0.0
             return b""  # timed out
         try:
-            got = os.read(fd, size)
+            got = os.read(fd, _READ_ALL)
         except BlockingIOError:
             got = bytes()  # (select saw it readable and something else took it: wait on)
         except OSError as exc:
@@ -202,7 +208,10 @@ class SerialTransport(StreamTransport):
                 raise self._lost("read", OSError("device reports readiness to read but "
                                                  "returned no data"))
         if len(got) >= size:
+            # a read that got less than it asked for took all there was
+            self.emptied = time.monotonic() if len(got) < _READ_ALL else 0.0
             return got
+        self.emptied = 0.0
         left = None if timeout is None else max(0.0, timeout - (time.monotonic() - start))
         return got + self._read_fd(fd, size - len(got), left)
 
@@ -285,6 +294,7 @@ class SerialTransport(StreamTransport):
 
     def set_baudrate(self, baud: int) -> None:
         self.baudrate = baud
+        self.byte_time = 10 / baud if baud > 0 else 0.0
         if self._ser is not None:
             try:
                 self._ser.baudrate = baud
