@@ -471,6 +471,11 @@ def test_no_look_at_the_port_within_a_frame_of_a_read_that_emptied_it():
         reqs = [Request(1, GAP, i % 8, 0) for i in range(50)]
         assert [r.value for r in c.requests(reqs)] == [1234] * 50
         assert len(looks) <= 1, len(looks)  # (the first request: nothing read before it)
+        before = len(looks)
+        t.write(GAP1)  # anything written but by transact may be answered at once: look again
+        assert t.emptied == 0.0
+        c._framing.waiting()
+        assert len(looks) == before + 1
     finally:
         t.close()
         responder.close()

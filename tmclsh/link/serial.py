@@ -140,6 +140,7 @@ class SerialTransport(StreamTransport):
             "or powered off?). Reconnect once it is back.")
 
     def write(self, data: bytes) -> None:
+        self.emptied = 0.0  # (what this asks for may come at once: the port is looked at)
         fd = self._fd
         if fd is not None:
             try:
