@@ -10,6 +10,7 @@ Timeouts are float seconds with pyserial's meanings: None waits forever, 0 never
 
 from __future__ import annotations
 
+import time
 from abc import ABC, abstractmethod
 from typing import TYPE_CHECKING, NamedTuple
 
@@ -74,6 +75,7 @@ class StreamTransport(Transport):
     # which spares the framing a look at the port before the next request.
     emptied = 0.0
     byte_time = 0.0
+    sent_at = 0.0  # when the last ``transact`` had written its request (time.monotonic())
 
     @abstractmethod
     def write(self, data: bytes) -> None: ...
@@ -98,6 +100,7 @@ class StreamTransport(Transport):
         It may return more than ``size``: what had come behind the answer, read with it
         (then ``emptied`` says when the port was found empty)."""
         self.write(data)
+        self.sent_at = time.monotonic()
         return self.read(size, timeout)
 
     def read_available(self) -> bytes:

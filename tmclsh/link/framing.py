@@ -156,9 +156,9 @@ class SerialFraming:
         dec = self.decoder
         host = dec.host = o.host_address  # (the client's may change between requests)
         buf = dec.buf
-        deadline = time.monotonic() + timeout
         tracing = o._tracers
         if buf or kind == _NONE or tracing:
+            deadline = time.monotonic() + timeout
             t.write(raw)
             o.stats["sent"] += 1
             if tracing:
@@ -174,6 +174,9 @@ class SerialFraming:
             # decoder below reads them frame by frame, and what is left behind the answer
             # is taken in before the next request, as what waits then is)
             head = t.transact(raw, FRAME, timeout)
+            # (the deadline from when the request went, t.sent_at, made below only when the
+            # reply is not the common case: what can wait is not done before the request)
+            deadline = 0.0
         if not buf:
             # the common case first: nine bytes that are the reply. The same nine bytes are
             # the same (immutable) reply, and a script repeating its lines mostly gets
@@ -207,6 +210,8 @@ class SerialFraming:
                     o._tell("rx", head, reply)
                 return reply
             buf += head
+            if not deadline:
+                deadline = t.sent_at + timeout
             wait = deadline - time.monotonic()
         else:
             wait = timeout

@@ -186,7 +186,7 @@ class SerialTransport(StreamTransport):
         if n != len(data):
             self.write(data[n:])
         # the reply mostly comes whole: one wait, one read; anything else as read() does it
-        start = time.monotonic()
+        self.sent_at = start = time.monotonic()
         poll = self._poll
         try:
             if poll is not None:
@@ -209,8 +209,10 @@ class SerialTransport(StreamTransport):
                 raise self._lost("read", OSError("device reports readiness to read but "
                                                  "returned no data"))
         if len(got) >= size:
-            # a read that got less than it asked for took all there was
-            self.emptied = time.monotonic() if len(got) < _READ_ALL else 0.0
+            # a read that got less than it asked for took all there was; the port was empty
+            # then, which is no earlier than the wait began (the time taken: no clock read
+            # between a reply and the next request)
+            self.emptied = start if len(got) < _READ_ALL else 0.0
             return got
         self.emptied = 0.0
         left = None if timeout is None else max(0.0, timeout - (time.monotonic() - start))
