@@ -5,8 +5,10 @@ pyserial opens and configures every port. For a plain POSIX device (a tty or pty
 case and the hot path of every round trip) reads and writes then go straight to its file
 descriptor with ``os.read``/``os.write`` and ``select``, which is what pyserial's own
 ``read``/``write`` do underneath, minus about 8 us of per-call bookkeeping; on Linux the
-request path's two looks at the descriptor (anything waiting before the request, the reply's
-arrival) go through an epoll registered once. Everything else
+request path's looks at the descriptor (anything waiting before the request, the reply's
+arrival) go through an epoll registered once. The reply's read takes whatever came behind it
+too, so the look before the next request is needed only once a frame could have come since
+(``StreamTransport.emptied``, ``SerialFraming.waiting``). Everything else
 (URL handlers, Windows) goes through pyserial's ``read``/``write``.
 
 pyserial re-applies the termios settings (and the exclusive lock) whenever ``timeout``
@@ -37,7 +39,8 @@ try:  # bytes waiting on a POSIX descriptor (what pyserial's in_waiting asks, mi
 except ImportError:  # pragma: no cover - Windows: pyserial's in_waiting
     _FIONREAD = None
 # Linux: the descriptor registered once and asked with epoll, a third of what select's sets
-# or a FIONREAD ioctl cost per call (asked twice per request: is anything waiting, the reply)
+# or a FIONREAD ioctl cost per call (asked for the reply, and whether anything waits before a
+# request that does not follow a reply closely)
 _EPOLL = getattr(select, "epoll", None)
 _FOUR_ZEROS = bytes(4)
 # what transact's one read asks for: the answer and whatever came behind it, so the framing
