@@ -436,6 +436,79 @@ def test_transact_keeps_the_timeout_and_says_what_came():
         responder.close()
 
 
+def test_transact_reads_what_came_behind_the_reply_with_it():
+    """A copy right behind a reply (a line that repeats a frame) is read with the reply, in
+    the same read: the framing then takes it in before the next request, without a look at
+    the port of its own (``emptied`` says when the port was found empty)."""
+    responder = _PtyResponder(lambda f: [(0, _reply_to(f) * 2)])
+    t = open_serial(responder.path, 115200)
+    try:
+        # (one write of the other end's: the pty hands the eighteen bytes over at once)
+        assert t.transact(GAP1, 9, patience(1.0)) == _reply_to(GAP1) * 2
+        assert t.emptied > 0
+        c = LineClient(t, module="TMCM-1311")
+        first = c.request(Request(1, GAP, 1, 0))
+        second = c.request(Request(1, GAP, 2, 0))
+        assert first.value == second.value == 1234
+        assert c.stats["flushed"] >= 1 and c.stats["timeouts"] == 0  # the copies, before
+    finally:
+        t.close()
+        responder.close()
+
+
+def test_no_look_at_the_port_within_a_frame_of_a_read_that_emptied_it():
+    """A run of requests does not ask the port whether anything waits while less than one
+    frame's wire time has passed since the reply's read took all it held: nothing whole can
+    have come since. At 50 baud a frame takes 1.8 s, far longer than a run's steps."""
+    responder = _PtyResponder(lambda f: [(0, _reply_to(f))])
+    t = open_serial(responder.path, 115200)
+    try:
+        t.set_baudrate(50)  # (a pty carries bytes at once whatever it is set to)
+        c = LineClient(t, module="TMCM-1311", timeout=patience(1.0))
+        looks = []
+        ready = c._framing._ready
+        c._framing._ready = lambda: looks.append(1) or ready()
+        reqs = [Request(1, GAP, i % 8, 0) for i in range(50)]
+        assert [r.value for r in c.requests(reqs)] == [1234] * 50
+        assert len(looks) <= 1, len(looks)  # (the first request: nothing read before it)
+        before = len(looks)
+        t.write(GAP1)  # anything written but by transact may be answered at once: look again
+        assert t.emptied == 0.0
+        c._framing.waiting()
+        assert len(looks) == before + 1
+    finally:
+        t.close()
+        responder.close()
+
+
+def test_after_a_pause_a_frame_that_came_meanwhile_is_taken_in_before_the_request():
+    """Once a frame's wire time has passed since the last read, the port is asked again: a
+    stray frame that came in the pause is no answer to the next request."""
+    stray = bytes((2, 1, 100, GAP)) + (99).to_bytes(4, "big")
+    stray += bytes((sum(stray) & 0xFF,))
+    sent = []
+
+    def answer(frame):
+        sent.append(frame)
+        pieces = [(0, _reply_to(frame))]
+        return pieces + [(0.05, stray)] if len(sent) == 1 else pieces
+
+    responder = _PtyResponder(answer)
+    t = open_serial(responder.path, 115200)
+    try:
+        c = LineClient(t, module="TMCM-1311", timeout=patience(1.0))
+        assert c.request(Request(1, GAP, 1, 0)).value == 1234
+        end = time.monotonic() + patience(2.0)
+        while t.pending() < 9 and time.monotonic() < end:  # the stray has come
+            time.sleep(0.005)
+        assert t.pending() == 9
+        assert c.request(Request(1, GAP, 1, 0)).value == 1234
+        assert c.stats["flushed"] == 9  # (bytes)
+    finally:
+        t.close()
+        responder.close()
+
+
 def test_ready_says_whether_anything_waits_and_goes_with_the_port():
     """The client asks ``ready`` before every request (what waits cannot be its answer): it
     must say what ``pending`` says, also once bytes were read, and be gone with the port (on

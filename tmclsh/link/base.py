@@ -10,6 +10,7 @@ Timeouts are float seconds with pyserial's meanings: None waits forever, 0 never
 
 from __future__ import annotations
 
+import time
 from abc import ABC, abstractmethod
 from typing import TYPE_CHECKING, NamedTuple
 
@@ -68,6 +69,13 @@ class Transport(ABC):
 
 class StreamTransport(Transport):
     kind = "stream"
+    # when the last ``transact`` read took every byte the port held (``time.monotonic()``;
+    # 0.0: not known), and how long one byte takes on the wire (0.0: bytes do not travel
+    # at a known pace). A whole frame cannot have come since less than its wire time ago,
+    # which spares the framing a look at the port before the next request.
+    emptied = 0.0
+    byte_time = 0.0
+    sent_at = 0.0  # when the last ``transact`` had written its request (time.monotonic())
 
     @abstractmethod
     def write(self, data: bytes) -> None: ...
@@ -88,8 +96,11 @@ class StreamTransport(Transport):
 
     def transact(self, data: bytes, size: int, timeout: float | None) -> bytes:
         """``write(data)``, then ``read(size, timeout)``: the request path's common case in
-        one call, so a transport can do it in fewer steps (the serial port's own descriptor)."""
+        one call, so a transport can do it in fewer steps (the serial port's own descriptor).
+        It may return more than ``size``: what had come behind the answer, read with it
+        (then ``emptied`` says when the port was found empty)."""
         self.write(data)
+        self.sent_at = time.monotonic()
         return self.read(size, timeout)
 
     def read_available(self) -> bytes:

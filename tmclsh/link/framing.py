@@ -109,8 +109,18 @@ class SerialFraming:
 
     # -- what waits --------------------------------------------------------------------
     def waiting(self) -> bool:
-        """Is anything waiting to be read (one cheap check before a request)?"""
-        return bool(self.decoder.buf) or self._ready()
+        """Is anything waiting to be read (one cheap check before a request)? The port is
+        not asked when the last reply's read took all it held less than a frame's wire
+        time ago: whatever has come since is no whole frame yet (what came behind the
+        reply was read with it and waits in the decoder; a run of requests at the line's
+        pace is spared a system call per request)."""
+        if self.decoder.buf:
+            return True
+        t = self.transport
+        emptied = t.emptied
+        if emptied and time.monotonic() - emptied < FRAME * t.byte_time:
+            return False
+        return self._ready()
 
     def clear(self) -> None:
         """Forget what is buffered (the line was in another mode, or reset)."""
@@ -146,9 +156,9 @@ class SerialFraming:
         dec = self.decoder
         host = dec.host = o.host_address  # (the client's may change between requests)
         buf = dec.buf
-        deadline = time.monotonic() + timeout
         tracing = o._tracers
         if buf or kind == _NONE or tracing:
+            deadline = time.monotonic() + timeout
             t.write(raw)
             o.stats["sent"] += 1
             if tracing:
@@ -160,7 +170,13 @@ class SerialFraming:
             head = b"" if buf else t.read(FRAME, timeout)
         else:
             o.stats["sent"] += 1
+            # (more than nine bytes: what had come behind the reply was read with it; the
+            # decoder below reads them frame by frame, and what is left behind the answer
+            # is taken in before the next request, as what waits then is)
             head = t.transact(raw, FRAME, timeout)
+            # (the deadline from when the request went, t.sent_at, made below only when the
+            # reply is not the common case: what can wait is not done before the request)
+            deadline = 0.0
         if not buf:
             # the common case first: nine bytes that are the reply. The same nine bytes are
             # the same (immutable) reply, and a script repeating its lines mostly gets
@@ -194,6 +210,8 @@ class SerialFraming:
                     o._tell("rx", head, reply)
                 return reply
             buf += head
+            if not deadline:
+                deadline = t.sent_at + timeout
             wait = deadline - time.monotonic()
         else:
             wait = timeout

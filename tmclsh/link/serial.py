@@ -5,8 +5,10 @@ pyserial opens and configures every port. For a plain POSIX device (a tty or pty
 case and the hot path of every round trip) reads and writes then go straight to its file
 descriptor with ``os.read``/``os.write`` and ``select``, which is what pyserial's own
 ``read``/``write`` do underneath, minus about 8 us of per-call bookkeeping; on Linux the
-request path's two looks at the descriptor (anything waiting before the request, the reply's
-arrival) go through an epoll registered once. Everything else
+request path's looks at the descriptor (anything waiting before the request, the reply's
+arrival) go through an epoll registered once. The reply's read takes whatever came behind it
+too, so the look before the next request is needed only once a frame could have come since
+(``StreamTransport.emptied``, ``SerialFraming.waiting``). Everything else
 (URL handlers, Windows) goes through pyserial's ``read``/``write``.
 
 pyserial re-applies the termios settings (and the exclusive lock) whenever ``timeout``
@@ -37,9 +39,13 @@ try:  # bytes waiting on a POSIX descriptor (what pyserial's in_waiting asks, mi
 except ImportError:  # pragma: no cover - Windows: pyserial's in_waiting
     _FIONREAD = None
 # Linux: the descriptor registered once and asked with epoll, a third of what select's sets
-# or a FIONREAD ioctl cost per call (asked twice per request: is anything waiting, the reply)
+# or a FIONREAD ioctl cost per call (asked for the reply, and whether anything waits before a
+# request that does not follow a reply closely)
 _EPOLL = getattr(select, "epoll", None)
 _FOUR_ZEROS = bytes(4)
+# what transact's one read asks for: the answer and whatever came behind it, so the framing
+# sees a copy that came right behind a reply without looking at the port again
+_READ_ALL = 256  # (a small read: what Python allocates for it is dearer beyond 512 bytes)
 _BYTEORDER = sys.byteorder  # (asked before every request)
 
 WRITE_TIMEOUT = 2.0  # a write that cannot finish in this time means the port is stuck
@@ -59,6 +65,7 @@ class SerialTransport(StreamTransport):
         if not isinstance(baudrate, int) or baudrate <= 0:
             raise ValueError(f"baud rate must be a positive number, got {baudrate!r}")
         self.baudrate = baudrate
+        self.byte_time = 10 / baudrate  # start bit, 8 data bits, stop bit
         self._ser: pyserial.SerialBase | None = None
         self._fd: int | None = None  # set when reads and writes may use the descriptor
         self._poll: select.epoll | None = None  # the descriptor's epoll (Linux), with _fd
@@ -105,6 +112,7 @@ class SerialTransport(StreamTransport):
     def close(self) -> None:
         ser, self._ser = self._ser, None
         self._fd = None
+        self.emptied = 0.0
         poll, self._poll = self._poll, None
         if poll is not None:
             poll.close()
@@ -135,6 +143,7 @@ class SerialTransport(StreamTransport):
             "or powered off?). Reconnect once it is back.")
 
     def write(self, data: bytes) -> None:
+        self.emptied = 0.0  # (what this asks for may come at once: the port is looked at)
         fd = self._fd
         if fd is not None:
             try:
@@ -180,7 +189,7 @@ class SerialTransport(StreamTransport):
         if n != len(data):
             self.write(data[n:])
         # the reply mostly comes whole: one wait, one read; anything else as read() does it
-        start = time.monotonic()
+        self.sent_at = start = time.monotonic()
         poll = self._poll
         try:
             if poll is not None:
@@ -190,9 +199,10 @@ class SerialTransport(StreamTransport):
         except (OSError, ValueError) as exc:
             raise self._lost("read", exc) from exc
         if not ready:
+            self.emptied = 0.0
             return b""  # timed out
         try:
-            got = os.read(fd, size)
+            got = os.read(fd, _READ_ALL)
         except BlockingIOError:
             got = bytes()  # (select saw it readable and something else took it: wait on)
         except OSError as exc:
@@ -202,7 +212,12 @@ class SerialTransport(StreamTransport):
                 raise self._lost("read", OSError("device reports readiness to read but "
                                                  "returned no data"))
         if len(got) >= size:
+            # a read that got less than it asked for took all there was; the port was empty
+            # then, which is no earlier than the wait began (the time taken: no clock read
+            # between a reply and the next request)
+            self.emptied = start if len(got) < _READ_ALL else 0.0
             return got
+        self.emptied = 0.0
         left = None if timeout is None else max(0.0, timeout - (time.monotonic() - start))
         return got + self._read_fd(fd, size - len(got), left)
 
@@ -285,6 +300,7 @@ class SerialTransport(StreamTransport):
 
     def set_baudrate(self, baud: int) -> None:
         self.baudrate = baud
+        self.byte_time = 10 / baud if baud > 0 else 0.0
         if self._ser is not None:
             try:
                 self._ser.baudrate = baud
