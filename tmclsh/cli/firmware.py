@@ -16,9 +16,9 @@ import shlex
 import sys
 
 from ..base.edges import error_record, write_json
-from ..base.interrupts import restore, unwind_on
 from ..base.errors import (EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, TmclError,
                            exit_status)
+from ..base.interrupts import restore, unwind_on
 
 
 def resume_command(args: argparse.Namespace, image: str | None = None) -> str:
