@@ -116,8 +116,7 @@ def run(client: Client, reqs: Iterable[Request], timeout: float, retries: int
     exchange = framing.exchange
     carry = client._request
     for req in reqs:
-        op = req.opcode
-        kind = _NORMAL if op < _FIRST_CONTROL else isa.reply_kind(op, req.type)
+        kind = reply_kind(req)
         plain = False
         try:
             with lock:
