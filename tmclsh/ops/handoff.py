@@ -271,7 +271,7 @@ class Pipe:
             # (traffic flows: what came is read in the rhythm, and meanwhile nothing waits
             # on the pipe, so a put wakes nobody: a wake-up a chunk costs the forwarding)
             if not self._full:
-                time.sleep(self.rhythm)
+                time.sleep(self.rhythm if timeout is None else min(self.rhythm, timeout))
         else:
             ready, _, _ = select.select([self._r], [], [], timeout)
             if not ready:
