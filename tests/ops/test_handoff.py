@@ -246,3 +246,38 @@ def test_the_describer_wakes_in_its_rhythm_not_at_every_chunk():
     # a read a rhythm, and once the puts paused longer than that a wait on the pipe and
     # another read: at most two wake-ups a rhythm's time, against one a chunk
     assert woken <= 2 * took / rhythm + 5, (woken, took)
+
+
+def test_the_describer_stops_giving_way_to_work_that_does_not_end(monkeypatch):
+    """A yield that brought the core back within a moment gave it to something woken for
+    the traffic: the describer gives way at each chunk. A yield that took long gave it to
+    work that never ends (a busy machine): yielding at each chunk would starve the
+    describer behind the wire, so it describes on without giving way for a while."""
+    from tmclsh.ops import handoff
+
+    clock = [100.0]
+    yields: list[float] = []
+
+    def yield_(cost: float) -> None:
+        yields.append(clock[0])
+        clock[0] += cost
+
+    monkeypatch.setattr(handoff, "_clock", lambda: clock[0])
+    monkeypatch.setattr(handoff, "_resume", 0.0)
+    monkeypatch.setattr(handoff, "_yield", lambda: yield_(0.00002))  # (a forwarding hop)
+    for _ in range(5):
+        handoff.give_way()
+        clock[0] += 0.00003
+    assert len(yields) == 5
+    monkeypatch.setattr(handoff, "_yield", lambda: yield_(0.004))  # (a busy loop's slice)
+    handoff.give_way()
+    assert len(yields) == 6
+    for _ in range(100):  # (within HOGGED_FOR: no more yields)
+        clock[0] += 0.0005
+        handoff.give_way()
+    assert len(yields) == 6
+    clock[0] += handoff.HOGGED_FOR
+    monkeypatch.setattr(handoff, "_yield", lambda: yield_(0.00002))
+    handoff.give_way()
+    handoff.give_way()
+    assert len(yields) == 8  # (tried again, and the core came back at once: giving way)
