@@ -453,3 +453,43 @@ def test_a_reader_that_goes_away_ends_nothing_in_a_traceback(make_pty_sim):
         bridge.kill()
     assert "Traceback" not in err and "failed" not in err, err
     assert bridge.proc.returncode == 1
+
+
+def test_the_describer_gives_way_between_the_chunks_it_describes(monkeypatch):
+    """A describer reading in a rhythm describes a batch at a time; between two chunks it
+    lets whatever woke meanwhile run (the forwarding, the programs either side of it)
+    instead of holding the core for the whole batch."""
+    import io
+
+    from tmclsh.ops.filter import Filter
+    from tmclsh.ops.handoff import END, FINISH, LEFT, RX, START, TX, LocalPipe
+    from tmclsh.ops.monitor import Monitor, SerialPair
+    from tmclsh.shell.features import bridge as front
+    from tmclsh.shell.features.monitor import Limits, View
+
+    monitor = Monitor(None, timeout=1.0)
+    view = View(monitor, json_mode=True, stream=io.StringIO())
+    teller = front._Teller(SerialPair(monitor), view, Filter((), (), (), monitor), monitor,
+                           (None, lambda: None), Limits(None, None, False), False)
+    order: list[str] = []
+    real_take = teller.take
+
+    def take(event, back):
+        order.append(event[0])
+        return real_take(event, back)
+
+    monkeypatch.setattr(teller, "take", take)
+    monkeypatch.setattr(front, "give_way", lambda: order.append("way"))
+    notes, back = LocalPipe(), LocalPipe()
+    reply = bytes.fromhex("02 01 64 06 00 00 00 00 6d")  # (GAP 1's answer: 0)
+    chunks = [(TX, request(1, 6, 1), 1.0), (RX, reply, 1.001)] * 10
+    for event in [(START,), *chunks, (END,), (FINISH, 0)]:
+        assert notes.put(event)
+    teller.run(notes, back)  # (the whole batch is there: one take)
+    assert order == ["start", "way"] + ["tx", "way", "rx", "way"] * 10 + ["end", "way", "finish"]
+    said = back.take(0)
+    assert said and said[0][0] == LEFT
+    lines = [json.loads(line) for line in view.stream.getvalue().splitlines()]
+    assert [(o["frame"], o["line"]) for o in lines[:-1]] == [("request", "GAP 1, 0"),
+                                                             ("reply", "GAP 1, 0")] * 10
+    assert lines[-1]["summary"]["replies"] == 10  # (described as ever, each in its turn)

@@ -9,6 +9,7 @@ import threading
 import time
 
 import pytest
+from conftest import patience
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -151,3 +152,132 @@ def test_the_describer_ends_when_the_bridge_has_gone(tmp_path):
     d.notes.close()
     assert d.join(20)
     assert seen.read_text() == "1"
+
+
+def test_while_traffic_flows_the_reader_waits_on_nothing_a_put_would_wake(monkeypatch):
+    """A reader waiting on the pipe is woken by each put, and the wake-up is the putter's
+    cost (the forwarding's, a chunk at a time): while what it reads keeps coming, the
+    reader reads in its rhythm instead, and waits on the pipe again only once nothing has
+    come for ``quiet`` seconds."""
+    import select as select_module
+
+    pipe = Pipe(rhythm=0.001, quiet=0.05)
+    waits: list[float] = []
+    real = select_module.select
+
+    def counted(r, w, x, timeout=None):
+        if pipe._r in r:
+            waits.append(time.monotonic())
+        return real(r, w, x, timeout)
+
+    monkeypatch.setattr(select_module, "select", counted)
+    assert pipe.put((TX, b"\x01", 1.0))
+    assert pipe.take(5) == [(TX, b"\x01", 1.0)]
+    assert len(waits) == 1  # (nothing was coming: it waited)
+    for i in range(2, 40):
+        assert pipe.put((RX if i % 2 else TX, bytes([i]), float(i)))
+        last = time.monotonic()
+        assert pipe.take(5) == [(RX if i % 2 else TX, bytes([i]), float(i))]
+    assert len(waits) == 1  # (it came on: read in the rhythm, no wait on the pipe)
+    deadline = time.monotonic() + 20
+    while len(waits) == 1:
+        assert pipe.take(0) == []
+        assert time.monotonic() < deadline
+    assert waits[1] - last >= 0.05  # (waiting on the pipe again once it was quiet)
+    assert pipe.put((TX, b"\x02", 2.0)) and pipe.take(5) == [(TX, b"\x02", 2.0)]
+    pipe.close()
+    assert pipe.take(0) is None
+
+
+def test_a_reader_behind_reads_on_without_its_pause():
+    """A read that found the pipe full is followed by the next at once, not after the
+    rhythm's pause: what waited comes out whole and in order."""
+    pipe = Pipe(rhythm=30.0)  # (a pause a test would notice)
+    chunk = (TX, bytes(range(9)), 1.0)
+    put = 0
+    while pipe.waiting == 0:
+        assert pipe.put(chunk)
+        put += 1
+    got: list[tuple] = []
+    deadline = time.monotonic() + 20
+    while len(got) < put:
+        assert time.monotonic() < deadline, "a read behind paused"
+        got += pipe.take(5)
+        pipe.catch_up()
+    assert got == [chunk] * put
+    pipe.close()
+
+
+def _woken(pid: int) -> int:
+    with open(f"/proc/{pid}/status") as fh:
+        return int(next(line for line in fh if line.startswith("voluntary_ctxt_switches"))
+                   .split()[1])
+
+
+@pytest.mark.skipif(not os.path.exists(f"/proc/{os.getpid()}/status"),
+                    reason="counts the describer's wake-ups in /proc")
+def test_the_describer_wakes_in_its_rhythm_not_at_every_chunk():
+    """Chunks put a tenth of its rhythm apart: the describing process is woken about once a
+    rhythm (its reads), not once a chunk (a wake-up the forwarding pays for). The bound
+    follows the time the puts took, so a busy machine only loosens it."""
+    rhythm = 0.002
+
+    def run(notes, back):
+        while (more := notes.take(5)) is not None:
+            if any(e[0] == FINISH for e in more):
+                return
+
+    d = Describer(run, rhythm=rhythm)
+    d.start()
+    pid = d._pid
+    assert pid is not None
+    d.notes.put((TX, b"\x00", 0.0))
+    n = 1000
+    before, start = _woken(pid), time.monotonic()
+    for i in range(n):
+        t = time.perf_counter() + rhythm / 10
+        assert d.notes.put((TX if i % 2 else RX, bytes(9), float(i)))
+        while time.perf_counter() < t:
+            pass
+    took = time.monotonic() - start
+    woken = _woken(pid) - before
+    d.notes.send((FINISH, 0))
+    assert d.join(patience(20))
+    # a read a rhythm, and once the puts paused longer than that a wait on the pipe and
+    # another read: at most two wake-ups a rhythm's time, against one a chunk
+    assert woken <= 2 * took / rhythm + 5, (woken, took)
+
+
+def test_the_describer_stops_giving_way_to_work_that_does_not_end(monkeypatch):
+    """A yield that brought the core back within a moment gave it to something woken for
+    the traffic: the describer gives way at each chunk. A yield that took long gave it to
+    work that never ends (a busy machine): yielding at each chunk would starve the
+    describer behind the wire, so it describes on without giving way for a while."""
+    from tmclsh.ops import handoff
+
+    clock = [100.0]
+    yields: list[float] = []
+
+    def yield_(cost: float) -> None:
+        yields.append(clock[0])
+        clock[0] += cost
+
+    monkeypatch.setattr(handoff, "_clock", lambda: clock[0])
+    monkeypatch.setattr(handoff, "_resume", 0.0)
+    monkeypatch.setattr(handoff, "_yield", lambda: yield_(0.00002))  # (a forwarding hop)
+    for _ in range(5):
+        handoff.give_way()
+        clock[0] += 0.00003
+    assert len(yields) == 5
+    monkeypatch.setattr(handoff, "_yield", lambda: yield_(0.004))  # (a busy loop's slice)
+    handoff.give_way()
+    assert len(yields) == 6
+    for _ in range(100):  # (within HOGGED_FOR: no more yields)
+        clock[0] += 0.0005
+        handoff.give_way()
+    assert len(yields) == 6
+    clock[0] += handoff.HOGGED_FOR
+    monkeypatch.setattr(handoff, "_yield", lambda: yield_(0.00002))
+    handoff.give_way()
+    handoff.give_way()
+    assert len(yields) == 8  # (tried again, and the core came back at once: giving way)

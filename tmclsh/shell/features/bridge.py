@@ -27,7 +27,7 @@ from ...base.errors import (EXIT_FAILED, EXIT_OK, ConnectError, TmclError, Trans
 from ...base.interrupts import restore
 from ...ops.bridge import CAN_RX, CAN_TX, LOST, NOISE, TICK, CanBridge, Left, SerialBridge
 from ...ops.filter import Filter
-from ...ops.handoff import CAPTURE, DONE, END, FINISH, LEFT, START, Describer
+from ...ops.handoff import CAPTURE, DONE, END, FINISH, LEFT, START, Describer, give_way
 from ...ops.monitor import DEFAULT_HOST, RX, TX, CanReader, Monitor, SerialPair
 from .livetable import wanted
 from .monitor import (Limits, View, _capture, end_live_output, end_table, interruptible,
@@ -239,6 +239,7 @@ class _Teller:
                 for event in got:
                     if self.take(event, back):
                         return
+                    give_way()
                 if got:
                     last = now
                 if not self.ended and now - ticked >= TICK:
