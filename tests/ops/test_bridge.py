@@ -493,3 +493,39 @@ def test_the_describer_gives_way_between_the_chunks_it_describes(monkeypatch):
     assert [(o["frame"], o["line"]) for o in lines[:-1]] == [("request", "GAP 1, 0"),
                                                              ("reply", "GAP 1, 0")] * 10
     assert lines[-1]["summary"]["replies"] == 10  # (described as ever, each in its turn)
+
+
+def test_a_serial_module_s_traffic_is_forwarded_both_ways_by_one_thread():
+    """A module on a port with a descriptor: the server's thread waits on it beside the
+    master's end and forwards both ways, so no exchange waits for a second thread to be
+    woken (and the notes still come in the wire's order); a port without one (a pyserial
+    URL) is read by a thread of its own."""
+    from responder import PtyModule
+    from tmclsh.link import open_serial
+    from tmclsh.ops.bridge import RX, TX, SerialBridge
+
+    module = PtyModule(version="1311V111")
+    for url in (module.path, f"spy://{module.path}?file=/dev/null"):
+        link = open_serial(url, 9600)
+        notes: list[tuple[str, bytes, str]] = []
+        bridge = SerialBridge(link, lambda e: notes.append(
+            (e[0], e[1], threading.current_thread().name)) or True, pty=True)
+        try:
+            with serial.Serial(bridge.endpoint, timeout=patience(5)) as port:
+                for n in range(3):
+                    port.write(request(1, 6, 1))
+                    assert len(port.read(9)) == 9
+                deadline = time.monotonic() + patience(5)
+                while sum(len(d) for k, d, _ in notes if k == RX) < 27:
+                    assert time.monotonic() < deadline, notes
+                    time.sleep(0.01)
+        finally:
+            bridge.close()
+            link.close()
+        assert [k for k, _, _ in notes][:2] == [TX, RX]
+        threads = {t for _, _, t in notes}
+        if url == module.path:
+            assert len(threads) == 1 and threads != {"bridge-module"}, threads
+        else:
+            assert "bridge-module" in threads and len(threads) == 2, threads
+    module.close()

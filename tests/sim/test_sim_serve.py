@@ -223,3 +223,58 @@ def test_sim_refuses_a_bus_on_can():
 
     assert run("TMCM-1311", [1, 2], can="virtual:x") == 2
     assert run("TMCM-1311", 1, can="virtual:x", baud=9600) == 2
+
+
+class _Echo:
+    """A target that answers every chunk with itself, and asks the server to wait on a
+    pipe beside its client (``beside``): what comes on the pipe goes to the client too."""
+
+    def __init__(self):
+        self.on_output = None
+        self.r, self.w = os.pipe()
+        os.set_blocking(self.r, False)
+        self.threads: set[str] = set()
+        self.beside = (self.r, self.ready)
+
+    def write(self, data: bytes) -> None:
+        import threading
+
+        self.threads.add(threading.current_thread().name)
+        self.on_output(data)
+
+    def ready(self) -> None:
+        import threading
+
+        self.threads.add(threading.current_thread().name)
+        try:
+            data = os.read(self.r, 4096)
+        except OSError:
+            self.beside = None  # (its descriptor gone bad: the server stops waiting on it)
+            return
+        self.on_output(b"beside:" + data)
+
+
+@pytest.mark.parametrize("kind", ["pty", "tcp"])
+def test_a_descriptor_beside_the_client_is_served_on_the_server_s_thread(kind):
+    """The bridge's one-thread forwarding rests on this: what a target puts ``beside`` is
+    waited on with the client by the server's own thread, both ways served in turn; a
+    descriptor that goes bad is dropped and the client is still served."""
+    target = _Echo()
+    server = serve_pty(target) if kind == "pty" else serve_tcp(target, "127.0.0.1", 0)
+    url = server.path if kind == "pty" else "socket://%s:%d" % server.address
+    try:
+        with serial.serial_for_url(url, timeout=patience(5)) as port:
+            port.write(b"ping")
+            assert port.read(4) == b"ping"
+            os.write(target.w, b"x")
+            assert port.read(8) == b"beside:x"
+            port.write(b"pong")
+            assert port.read(4) == b"pong"
+            assert len(target.threads) == 1  # (one thread carried both)
+            os.close(target.r)  # gone bad under the server's wait
+            port.write(b"still")
+            assert port.read(5) == b"still"
+            assert target.beside is None
+    finally:
+        server.close()
+        os.close(target.w)

@@ -113,6 +113,12 @@ class StreamTransport(Transport):
         data = self.read(1, timeout)
         return data + self.read_available() if data else data
 
+    def fileno(self) -> int | None:
+        """The descriptor a caller may wait on with ``select`` until there is something to
+        read (then ``read_some(0)``), or None where the port has none (a pyserial URL, the
+        in-process simulator): such a port is waited on by its own ``read_some``."""
+        return None
+
     def set_baudrate(self, baud: int) -> None:  # pragma: no cover - only real ports
         raise NotImplementedError
 

@@ -258,12 +258,13 @@ class SerialTransport(StreamTransport):
         fd = self._fd
         if fd is None:
             return super().read_some(timeout)
-        try:
-            ready = select.select((fd,), (), (), timeout)[0]
-        except (OSError, ValueError) as exc:
-            raise self._lost("read", exc) from exc
-        if not ready:
-            return b""
+        if timeout != 0:  # (0: the caller's own wait found it readable, the bridge's)
+            try:
+                ready = select.select((fd,), (), (), timeout)[0]
+            except (OSError, ValueError) as exc:
+                raise self._lost("read", exc) from exc
+            if not ready:
+                return b""
         try:
             data = os.read(fd, 4096)
         except BlockingIOError:
@@ -274,6 +275,9 @@ class SerialTransport(StreamTransport):
             raise self._lost("read", OSError("device reports readiness to read but "
                                              "returned no data"))
         return data
+
+    def fileno(self) -> int | None:
+        return self._fd
 
     def ready(self) -> bool:
         poll = self._poll

@@ -15,8 +15,9 @@ waiting on it, so a put wakes no process (measured per exchange: the forwarding'
 it describes (``give_way``), so a batch described at once never holds a core the
 forwarding needs.
 
-Each record is at most ``PIPE_BUF`` bytes, which a pipe writes whole or not at all, so the
-two forwarding threads (the master's and the module's) can put at once without a lock and
+Each record is at most ``PIPE_BUF`` bytes, which a pipe writes whole or not at all, so
+two forwarding threads (the master's and the module's, where the module's port is read by a
+thread of its own: ops/bridge.py) can put at once without a lock and
 their records keep the order they were put in: the wire's order, as each is put just before
 its chunk is forwarded.
 

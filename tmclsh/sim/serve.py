@@ -4,6 +4,8 @@ python-can bus. ``run`` is the blocking entry behind ``tmclsh sim``.
 Each server is one thread that blocks in ``select``/``recv`` and hands bytes to the
 simulator; replies are pushed back through the simulator's ``on_output`` callback on the
 thread that produced them, so a request/reply round trip involves no polling and no sleeps.
+A target that reads a descriptor of its own (the bridge's module port) may ask the pty and
+TCP servers' thread to wait on it too (``beside``): one thread then carries both ways.
 
 With a baud rate (``tmclsh sim --baud N``) a pty or TCP server paces the line as a real one
 is paced (``Wire``): every byte, the host's and the module's, takes ten bits' time, and a
@@ -100,6 +102,20 @@ class _Server:
     # the target attribute this server sets to receive what the module sends
     _hook = "on_output"
 
+    def _beside(self) -> tuple[int, Any] | None:
+        """What the target asks this server's thread to wait on beside its client:
+        ``target.beside``, a descriptor and what to call when it is readable (the bridge's
+        link to the module, so one thread carries both ways and no exchange waits for a
+        second thread to be woken and take the interpreter), or None. Read at each wait: the
+        target drops it when that link is lost."""
+        return getattr(self.target, "beside", None)
+
+    def _serve_beside(self, beside: tuple[int, Any]) -> bool:
+        """A wait that failed with ``beside`` in it (its descriptor gone bad): its call is
+        made, to find that out and drop it; False if it did not, and the server stops."""
+        beside[1]()
+        return self._beside() is not beside
+
     def close(self) -> None:
         """Stop serving (once): detach from the target, then release the link."""
         if self._closed.is_set():
@@ -151,15 +167,24 @@ class PtyServer(_Server):
                 view = view[n:]
 
     def _loop(self) -> None:
+        master, wake = self.master, self._wake_r
         while not self._closed.is_set():
+            beside = self._beside()
             try:
-                ready, _, _ = select.select([self.master, self._wake_r], [], [])
+                ready = select.select([master, wake] if beside is None
+                                      else [master, wake, beside[0]], [], [])[0]
             except (OSError, ValueError):
+                if beside is None or not self._serve_beside(beside):
+                    return
+                continue
+            if wake in ready:
                 return
-            if self._wake_r in ready:
-                return
+            if beside is not None and beside[0] in ready:
+                beside[1]()
+                if master not in ready:
+                    continue
             try:
-                data = os.read(self.master, 4096)
+                data = os.read(master, 4096)
             except BlockingIOError:
                 continue
             except OSError as exc:
@@ -211,6 +236,8 @@ class TcpServer(_Server):
 
     def _loop(self) -> None:
         while not self._closed.is_set():
+            if not self._wait_for(self._sock):
+                return
             try:
                 client, peer = self._sock.accept()
             except OSError:
@@ -221,6 +248,8 @@ class TcpServer(_Server):
                 self._client = client
             try:
                 while not self._closed.is_set():
+                    if not self._wait_for(client):
+                        break
                     data = client.recv(4096)
                     if not data:
                         break
@@ -235,6 +264,25 @@ class TcpServer(_Server):
                     self._client = None
                 client.close()
                 log.info("TCP client disconnected")
+
+    def _wait_for(self, sock: socket.socket) -> bool:
+        """Until ``sock`` can be read (or accepted from) without waiting, what the target
+        waits on beside it served meanwhile (``_beside``); with nothing beside, at once (the
+        call that follows waits). False: the wait failed (the server is closing)."""
+        while True:
+            beside = self._beside()
+            if beside is None:
+                return True
+            try:
+                ready = select.select([sock, beside[0]], [], [])[0]
+            except (OSError, ValueError):
+                if self._closed.is_set() or not self._serve_beside(beside):
+                    return False
+                continue
+            if beside[0] in ready:
+                beside[1]()
+            if sock in ready:
+                return True
 
     def drop_client(self) -> bool:
         """Hang up on the connected client and keep listening (a cable pulled and plugged
