@@ -529,3 +529,32 @@ def test_a_serial_module_s_traffic_is_forwarded_both_ways_by_one_thread():
         else:
             assert "bridge-module" in threads and len(threads) == 2, threads
     module.close()
+
+
+def test_what_the_module_sent_before_the_bridge_began_is_forwarded_not_a_failure():
+    """The server's thread may find the module's descriptor readable as soon as it starts
+    (bytes came between opening the port and the bridge): the bridge forwards them and goes
+    on; it does not end at its first step."""
+    import tty
+
+    from tmclsh.link import open_serial
+    from tmclsh.ops.bridge import RX, SerialBridge
+
+    for _ in range(20):  # (the race it guards against was lost about every other time)
+        module, slave = os.openpty()
+        tty.setraw(slave)
+        link = open_serial(os.ttyname(slave), 9600)
+        os.write(module, b"\x02\x01\x64\x06\x00\x00\x00\x00\x6d")
+        notes: list[tuple] = []
+        bridge = SerialBridge(link, lambda e: notes.append(e) or True, pty=True)
+        try:
+            deadline = time.monotonic() + patience(5)
+            while not any(e[0] == RX for e in notes):
+                assert time.monotonic() < deadline, notes
+                time.sleep(0.005)
+            assert bridge.lost is None, bridge.lost
+        finally:
+            bridge.close()
+            link.close()
+            os.close(module)
+            os.close(slave)

@@ -70,9 +70,10 @@ class _Target:
 class _Bridge:
     """The forwarding, and the handing over of what was forwarded.
 
-    Each chunk is put just before it is forwarded, so the notes keep the order the wire
-    had: an answer is never noted ahead of its request, nor a request ahead of the answer
-    the master waited for. ``put`` never waits (ops/handoff.py); what it could not hand
+    With a thread per direction, each chunk is put just before it is forwarded, so the
+    notes keep the order the wire had: an answer is never noted ahead of its request, nor a
+    request ahead of the answer the master waited for; with one thread for both
+    (``one_thread``), once it went, in the same order. ``put`` never waits (ops/handoff.py); what it could not hand
     over was forwarded all the same and is counted there. ``lost``: why the module's link
     was lost, once it was (``ended`` is set then).
     """
@@ -85,6 +86,9 @@ class _Bridge:
         self.lost: str | None = None
         self.ended = threading.Event()
         self._closed = threading.Event()
+        # (decided before the server starts: its thread may forward at once)
+        self.one_thread = fd is not None
+        self._reader: threading.Thread | None = None
         self.target = _Target(self._from_master)
         if fd is not None:  # (the server's thread reads the module as well)
             self.target.beside = (fd, self._ready)
@@ -96,7 +100,6 @@ class _Bridge:
             self.server = serve_tcp(self.target, *tcp)
             host, port = self.server.address
             self.endpoint = f"{host}:{port}"
-        self._reader: threading.Thread | None = None
         if fd is None:
             self._reader = threading.Thread(target=self._loop, name="bridge-module",
                                             daemon=True)
@@ -125,6 +128,8 @@ class _Bridge:
 
     def _ready(self) -> None:
         """(The server's thread: the module's descriptor is readable.)"""
+        if self._closed.is_set():
+            return  # (closing: nothing more is read, nor noted as forwarded)
         try:
             self._step(0)
         except Exception as exc:
@@ -164,7 +169,7 @@ class SerialBridge(_Bridge):
         super().__init__(put, fd=module.fileno(), **kw)
 
     def _from_master(self, data: bytes) -> None:
-        if self._reader is None:  # (one thread: noted once it went, still in the wire's order)
+        if self.one_thread:  # (noted once it went: one thread keeps the wire's order)
             try:
                 self.module.write(data)
             except TransportError as exc:
@@ -180,7 +185,7 @@ class SerialBridge(_Bridge):
     def _step(self, wait: float) -> None:
         data = self.module.read_some(wait)
         if data:
-            if self._reader is None:
+            if self.one_thread:
                 self._to_master(data)
                 self.note((RX, data, time.time()))
                 return

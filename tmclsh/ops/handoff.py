@@ -17,9 +17,8 @@ forwarding needs.
 
 Each record is at most ``PIPE_BUF`` bytes, which a pipe writes whole or not at all, so
 two forwarding threads (the master's and the module's, where the module's port is read by a
-thread of its own: ops/bridge.py) can put at once without a lock and
-their records keep the order they were put in: the wire's order, as each is put just before
-its chunk is forwarded.
+thread of its own: ops/bridge.py) can put at once without a lock and their records keep the
+order they were put in: the wire's order (ops/bridge.py ``_Bridge`` says how).
 
 The same pipe carries the few words the two sides say to each other (``START``, ``END``,
 ``FINISH``, ``DONE``, ``LEFT``), each a record too. Where a process cannot be forked

@@ -114,7 +114,10 @@ class _Server:
         """A wait that failed with ``beside`` in it (its descriptor gone bad): its call is
         made, to find that out and drop it; False if it did not, and the server stops."""
         beside[1]()
-        return self._beside() is not beside
+        if self._beside() is not beside:
+            return True
+        log.error("the server stopped: waiting on descriptor %s failed", beside[0])
+        return False
 
     def close(self) -> None:
         """Stop serving (once): detach from the target, then release the link."""
@@ -174,7 +177,7 @@ class PtyServer(_Server):
                 ready = select.select([master, wake] if beside is None
                                       else [master, wake, beside[0]], [], [])[0]
             except (OSError, ValueError):
-                if beside is None or not self._serve_beside(beside):
+                if self._closed.is_set() or beside is None or not self._serve_beside(beside):
                     return
                 continue
             if wake in ready:
