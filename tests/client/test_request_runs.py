@@ -21,6 +21,7 @@ from responder import Module, fields, reply
 
 SGP = 9
 WRONG_CHECKSUM = 1
+NOISE = bytes((0x55, 0xAA, 0x00))  # (no nine bytes from any of these make a frame)
 
 
 class FaultyLine(Module):
@@ -44,6 +45,8 @@ class FaultyLine(Module):
         if cmd != SGP or own is None:
             return own
         out = self.last + own if (self.fault == "late_copy" and value in self.at) else own
+        if self.fault == "noise" and value in self.at:
+            out = NOISE + own
         self.last = own
         return out
 
@@ -86,7 +89,7 @@ def test_each_request_goes_once_the_one_before_was_answered_and_none_after_the_c
         m.close()
 
 
-@pytest.mark.parametrize("fault", ["late_copy", "silent", "garbled"])
+@pytest.mark.parametrize("fault", ["late_copy", "silent", "garbled", "noise"])
 def test_a_run_meets_a_faulty_line_as_request_by_request_does(fault):
     """The same line fault, driven with ``request`` one at a time and as one run: the same
     replies, the same suspects (by reply number), the same counts, the same frames heard."""
@@ -114,8 +117,10 @@ def test_a_run_meets_a_faulty_line_as_request_by_request_does(fault):
         assert values_back[3] == 102 and values_back[6] == 105 and suspects
     elif fault == "silent":
         assert values_back == values and stats["timeouts"] == 2 and heard.count(103) == 2
-    else:
+    elif fault == "garbled":
         assert values_back == values and stats["retries"] == 2 and heard.count(106) == 2
+    else:
+        assert values_back == values and stats["discarded"] and heard == values
 
 
 def test_what_making_a_request_raises_comes_where_that_request_would_have_gone():
@@ -146,6 +151,32 @@ def test_a_timeout_is_refused_before_anything_is_sent():
         with pytest.raises(ValueError, match="timeout"):
             c.requests(_writes([1]), timeout=0)
         assert m.heard() == []
+    finally:
+        c.close()
+        m.close()
+
+
+def test_a_run_tells_what_an_answer_tells_beyond_itself_as_request_does():
+    """What ``after_answer`` takes from an answer, a run takes too (it is asked only of
+    answers that may tell something): a module left in download mode stores a run's first
+    request instead of executing it, and the run stops there, saying so; a 132 and a 133
+    in a run begin and end the download mode the client keeps track of."""
+    from responder import DownloadModeModule
+    from tmclsh.base.errors import DownloadModeError
+
+    m = DownloadModeModule()
+    c = LineClient(open_serial(m.path), module="TMCM-1311", timeout=1.0)
+    try:
+        m.downloading = False
+        assert c.request(Request(1, 6, 1, 0, 0)).value == -5000
+        m.downloading = True  # (left so by another program)
+        before = len(m.log)
+        with pytest.raises(DownloadModeError):
+            list(c.requests(_writes([1, 2, 3])))
+        assert [fields(raw)[4] for raw in m.log[before:]] == [1]  # nothing after it
+        replies = list(c.requests([Request(1, 133, 0, 0, 0), Request(1, 132, 0, 0, 0)]))
+        assert [r.status for r in replies] == [100, 100] and c._left_downloading
+        assert list(c.requests([Request(1, 133, 0, 0, 0)]))[0].ok and not c._left_downloading
     finally:
         c.close()
         m.close()
