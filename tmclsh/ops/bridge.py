@@ -9,8 +9,8 @@ link:
 * ``SerialBridge``: a serial module (``--port``). Bytes go both ways as they come, unread
   and unchanged; each chunk is noted just before it goes. Where the module's port has a
   descriptor (a serial port on POSIX), the server's thread waits on it beside the master's
-  end and forwards both ways, noting each chunk once it went (one thread keeps the wire's
-  order): no exchange waits for a second thread to be woken and to take the interpreter.
+  end and forwards both ways: no exchange waits for a second thread to be woken and to take
+  the interpreter.
   Measured beside a minimal forwarder, three runs each: the p99 added 1.3-2.0x that
   forwarder's with a thread per direction, 1.0-1.5x with one (the median 1.1-1.2x and
   1.05-1.13x). A port without a descriptor (a pyserial URL) is read by a thread of its own.
@@ -70,10 +70,10 @@ class _Target:
 class _Bridge:
     """The forwarding, and the handing over of what was forwarded.
 
-    With a thread per direction, each chunk is put just before it is forwarded, so the
-    notes keep the order the wire had: an answer is never noted ahead of its request, nor a
-    request ahead of the answer the master waited for; with one thread for both
-    (``one_thread``), once it went, in the same order. ``put`` never waits (ops/handoff.py); what it could not hand
+    Each chunk is put just before it is forwarded, so the notes keep the order the wire
+    had (with a thread per direction too): an answer is never noted ahead of its request,
+    nor a request ahead of the answer the master waited for; and whatever the master or
+    the module got was noted, even if the bridge is killed right after. ``put`` never waits (ops/handoff.py); what it could not hand
     over was forwarded all the same and is counted there. ``lost``: why the module's link
     was lost, once it was (``ended`` is set then).
     """
@@ -86,9 +86,7 @@ class _Bridge:
         self.lost: str | None = None
         self.ended = threading.Event()
         self._closed = threading.Event()
-        # (decided before the server starts: its thread may forward at once)
-        self.one_thread = fd is not None
-        self._reader: threading.Thread | None = None
+        self._reader: threading.Thread | None = None  # (before the server: it may forward at once)
         self.target = _Target(self._from_master)
         if fd is not None:  # (the server's thread reads the module as well)
             self.target.beside = (fd, self._ready)
@@ -169,13 +167,6 @@ class SerialBridge(_Bridge):
         super().__init__(put, fd=module.fileno(), **kw)
 
     def _from_master(self, data: bytes) -> None:
-        if self.one_thread:  # (noted once it went: one thread keeps the wire's order)
-            try:
-                self.module.write(data)
-            except TransportError as exc:
-                self._lose(str(exc))
-            self.note((TX, data, time.time()))
-            return
         self.note((TX, data, time.time()))
         try:
             self.module.write(data)
@@ -185,10 +176,6 @@ class SerialBridge(_Bridge):
     def _step(self, wait: float) -> None:
         data = self.module.read_some(wait)
         if data:
-            if self.one_thread:
-                self._to_master(data)
-                self.note((RX, data, time.time()))
-                return
             self.note((RX, data, time.time()))
             self._to_master(data)
 
