@@ -558,3 +558,53 @@ def test_what_the_module_sent_before_the_bridge_began_is_forwarded_not_a_failure
             link.close()
             os.close(module)
             os.close(slave)
+
+
+def test_a_motor_left_turning_is_stopped_when_nobody_reads_stderr_either(make_pty_sim):
+    """``tmclsh bridge ... 2>&1 | head -3`` (or ``|& less``, then q): both streams' reader
+    has gone. Ctrl-C still stops the motor the other master left turning (what the bridge
+    would say about it has nobody to go to)."""
+    sim, path = make_pty_sim()
+    proc = subprocess.Popen([sys.executable, "-m", "tmclsh", "bridge", "--pty", "--port",
+                             path, "--json"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=tmclsh_env(), cwd=str(ROOT))
+    try:
+        endpoint = proc.stdout.readline().strip()
+        assert endpoint, proc.stderr.read()
+        assert "bridging" in proc.stderr.readline()
+        proc.stdout.close()  # (the reader of both has gone)
+        proc.stderr.close()
+        with serial.Serial(endpoint, timeout=patience(5)) as port:
+            assert _exchange(port, request(1, 1, 0, 0, 500))[2] == 100  # ROR 0, 500
+        time.sleep(0.3)  # (what was forwarded last is read before the signal)
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=patience(20)) == 1  # (its reader gone, as other commands)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    with serial.Serial(path, timeout=patience(5)) as port:
+        reply = _exchange(port, request(1, 6, 3))  # GAP 3: the actual speed
+    assert struct.unpack(">i", reply[4:8])[0] == 0, reply.hex()
+
+
+def test_a_closing_stop_that_leaves_a_motor_turning_fails_the_run():
+    """The motor the other master started still reads a speed after the bridge's MST (a
+    drive that does not stop): the bridge says so and exits 1, not 0."""
+    from responder import PtyModule
+
+    module = PtyModule(version="1311V111")
+    module.values[(3, 0, False)] = 500  # (GAP 3, the actual speed, reads 500 whatever comes)
+    bridge = Bridge("--pty", "--port", module.path)
+    try:
+        with serial.Serial(bridge.endpoint, timeout=patience(5)) as port:
+            assert _exchange(port, request(1, 1, 0, 0, 500))[2] == 100  # ROR 0, 500
+        time.sleep(0.3)
+        bridge.proc.send_signal(signal.SIGINT)
+        _, err = bridge.proc.communicate(timeout=patience(20))
+    finally:
+        bridge.kill()
+        module.close()
+    assert 3 in module.commands()  # (MST was sent)
+    assert bridge.proc.returncode == 1, err
+    assert "500" in err and "Traceback" not in err, err

@@ -30,6 +30,7 @@ from ...ops.filter import Filter
 from ...ops.handoff import CAPTURE, DONE, END, FINISH, LEFT, START, Describer, give_way
 from ...ops.monitor import DEFAULT_HOST, RX, TX, CanReader, Monitor, SerialPair
 from .livetable import wanted
+from .stop import ToStderr
 from .monitor import (Limits, View, _capture, end_live_output, end_table, interruptible,
                       live_output, live_table, load_module, off_the_wire, show_items)
 
@@ -78,13 +79,14 @@ def run_bridge(args) -> int:
     describer = Describer(teller.run, name="bridge-describer")
     describer.start()
     previous = interruptible()  # (from here Ctrl-C and SIGTERM end the bridge as one)
+    ended_all = True  # (what the traffic left at the module was ended, or nothing was)
     try:
         bridge = _serve(transport, describer, args, is_can, can_id, reply_id, host)
         try:
             left = _forward(bridge, describer, transport, args.output)
-            if left:
-                _put_right(transport, left, monitor, args, is_can, bridge.lost,
-                           lambda event: describer.notes.send((CAPTURE, event)))
+            if left and not _put_right(transport, left, monitor, args, is_can, bridge.lost,
+                                       lambda event: describer.notes.send((CAPTURE, event))):
+                ended_all = False
         finally:
             transport.close()
             describer.notes.send((FINISH, describer.notes.dropped))
@@ -93,7 +95,13 @@ def run_bridge(args) -> int:
                 _salvage(capture[1])
     finally:
         restore(previous)
-    return EXIT_OK if bridge.lost is None and describer.status == 0 else EXIT_FAILED
+    return EXIT_OK if bridge.lost is None and describer.status == 0 and ended_all \
+        else EXIT_FAILED
+
+
+# the bridge's own words: never in the way of what it does (stderr may be a pipe whose
+# reader has gone: the closing stop is still done)
+_say = ToStderr().ok
 
 
 def _salvage(close_capture) -> None:
@@ -150,8 +158,7 @@ def _forward(bridge, describer: Describer, transport, output: str | None) -> Lef
     try:
         sys.stdout.write(bridge.endpoint + "\n")
         sys.stdout.flush()
-        print(f"bridging {bridge.endpoint} <-> {transport.describe()}; Ctrl-C ends",
-              file=sys.stderr, flush=True)
+        _say(f"bridging {bridge.endpoint} <-> {transport.describe()}; Ctrl-C ends")
         describer.notes.send((START,))  # (the table may draw now: below those two lines)
         describing = True
         while not bridge.ended.is_set():
@@ -164,9 +171,8 @@ def _forward(bridge, describer: Describer, transport, output: str | None) -> Lef
                 describing = False
                 _terminal_back()
                 written = f"; {output} keeps what was written until now" if output else ""
-                print(f"bridge: the process that shows the traffic has ended: nothing more "
-                      f"is shown{written}; forwarding goes on until Ctrl-C", file=sys.stderr,
-                      flush=True)
+                _say(f"bridge: the process that shows the traffic has ended: nothing more "
+                     f"is shown{written}; forwarding goes on until Ctrl-C")
             elif any(event[0] == DONE for event in got):
                 break
     except KeyboardInterrupt:
@@ -177,23 +183,23 @@ def _forward(bridge, describer: Describer, transport, output: str | None) -> Lef
     try:
         said = describer.wait_for(LEFT, SOON)
         if said is None and describer.alive:
-            print("bridge: reading the rest of what was forwarded, to end what it left at "
-                  "the module (Ctrl-C skips that)", file=sys.stderr, flush=True)
+            _say("bridge: reading the rest of what was forwarded, to end what it left at "
+                 "the module (Ctrl-C skips that)")
             said = describer.wait_for(LEFT, LEFT_WAIT)
     except KeyboardInterrupt:
         said = None
     if bridge.lost is not None:
-        print(f"bridge: {bridge.lost}", file=sys.stderr)
+        _say(f"bridge: {bridge.lost}")
     if said is None:
         why = "could not be read in time" if not describer.gone(0.5) else \
             "is not known (the process that showed the traffic ended)"
-        print(f"bridge closed: what the traffic through it left at the module {why}: check "
-              "the module", file=sys.stderr)
+        _say(f"bridge closed: what the traffic through it left at the module {why}: check "
+             "the module")
         return None
     if describer.notes.dropped:
-        print(f"bridge closed: {describer.notes.dropped} chunks of the traffic were forwarded "
-              "but not read (reading fell too far behind): what they left at the module is "
-              "not known: check the module", file=sys.stderr)
+        _say(f"bridge closed: {describer.notes.dropped} chunks of the traffic were forwarded "
+             "but not read (reading fell too far behind): what they left at the module is "
+             "not known: check the module")
     return Left.from_dict(said[1])
 
 
@@ -363,24 +369,26 @@ def _read(event: tuple, reader, monitor: Monitor, capture) -> tuple[list, str | 
 
 
 def _put_right(transport, left: Left, monitor: Monitor, args, is_can: bool,
-               lost: str | None, capture=None) -> None:
+               lost: str | None, capture=None) -> bool:
     """The program can no longer reach the module: end what its exchanges left behind.
     ``capture`` gets the frames sent for that as the bridge's events, for the ``-o`` file,
-    so a replayed capture ends as the module was left."""
+    so a replayed capture ends as the module was left. False: something may still be left
+    (said; the run then fails). What it says never stops it: stderr may be a pipe whose
+    reader has gone (``_say``)."""
     from ...client import bringup
     from ...client.ascii import leave_binary
     from ...client.core import Client
-    from .stop import ToStderr, stop_all
+    from .stop import stop_all
 
+    ended = True
     for address in left.addresses:
         what = left.describe(address)
         if lost is not None:
-            print(f"bridge closed: the traffic through it left {what} at address "
-                  f"{address}, and the link to the module is lost: check the module",
-                  file=sys.stderr)
+            _say(f"bridge closed: the traffic through it left {what} at address "
+                 f"{address}, and the link to the module is lost: check the module")
             continue
-        print(f"bridge closed: the traffic through it left {what} at address {address}; "
-              "ending that", file=sys.stderr)
+        _say(f"bridge closed: the traffic through it left {what} at address {address}; "
+             "ending that")
         if not transport.is_open:
             transport.open()
         can_id = getattr(args, "can_id", None)
@@ -400,16 +408,21 @@ def _put_right(transport, left: Left, monitor: Monitor, args, is_can: bool,
             if address in left.ascii:
                 leave_binary(client)
             if address in left.started:
-                stop_all(client, ToStderr(), "bridge closed")
+                report = stop_all(client, ToStderr(), "bridge closed")
+                # (a motor that may still turn fails the run; a 128 the module does not
+                # know is said, as a module without stored programs runs none)
+                ended = ended and report is not None and not (
+                    report.turning or report.unknown or report.link_error)
         except TmclError as exc:
-            print(f"bridge closed: could not end it at address {address}: {exc}",
-                  file=sys.stderr)
+            _say(f"bridge closed: could not end it at address {address}: {exc}")
+            ended = False
         finally:
             client.close()
+    return ended and lost is None
 
 
 def _said_closing(text: str) -> None:
-    print(f"bridge closed: {text}", file=sys.stderr)
+    _say(f"bridge closed: {text}")
 
 
 def _unsaid(text: str) -> None:
