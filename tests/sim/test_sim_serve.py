@@ -278,3 +278,43 @@ def test_a_descriptor_beside_the_client_is_served_on_the_server_s_thread(kind):
     finally:
         server.close()
         os.close(target.w)
+
+
+def test_a_second_tcp_client_is_hung_up_on_while_one_is_served_and_its_bytes_never_go():
+    """One client at a time: a second that connects meanwhile is hung up on at once, so
+    what it sent never reaches the target once the first has gone (through a bridge: a
+    motor started for a program that had long given up). After the first leaves, a new
+    client is served as ever."""
+    import socket as so
+
+    heard: list[bytes] = []
+
+    class Target:
+        on_output = None
+
+        def write(self, data: bytes) -> None:
+            heard.append(data)
+            self.on_output(b"ok")
+
+    server = serve_tcp(Target(), "127.0.0.1", 0)
+    try:
+        first = so.create_connection(server.address, timeout=patience(5))
+        first.sendall(b"A1")
+        assert first.recv(2) == b"ok"
+        second = so.create_connection(server.address, timeout=patience(5))
+        second.sendall(b"B-stale")
+        try:
+            assert second.recv(16) == b""  # (hung up on)
+        except ConnectionResetError:
+            pass  # (hung up on with its bytes unread: a reset)
+        second.close()
+        first.sendall(b"A2")
+        assert first.recv(2) == b"ok"
+        first.close()
+        third = so.create_connection(server.address, timeout=patience(5))
+        third.sendall(b"C1")
+        assert third.recv(2) == b"ok"
+        third.close()
+    finally:
+        server.close()
+    assert b"".join(heard) == b"A1A2C1"

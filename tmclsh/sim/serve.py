@@ -270,22 +270,51 @@ class TcpServer(_Server):
 
     def _wait_for(self, sock: socket.socket) -> bool:
         """Until ``sock`` can be read (or accepted from) without waiting, what the target
-        waits on beside it served meanwhile (``_beside``); with nothing beside, at once (the
-        call that follows waits). False: the wait failed (the server is closing)."""
+        waits on beside it served meanwhile (``_beside``). While a client is served, another
+        that connects is hung up on at once (``_refuse``). False: the wait failed (the
+        server is closing)."""
+        listening = self._sock
         while True:
             beside = self._beside()
-            if beside is None:
-                return True
+            waits = [sock] if sock is listening else [sock, listening]
+            if beside is not None:
+                waits.append(beside[0])
             try:
-                ready = select.select([sock, beside[0]], [], [])[0]
+                ready = select.select(waits, [], [])[0]
             except (OSError, ValueError):
-                if self._closed.is_set() or not self._serve_beside(beside):
+                if self._closed.is_set() or beside is None or not self._serve_beside(beside):
                     return False
                 continue
-            if beside[0] in ready:
+            if beside is not None and beside[0] in ready:
                 beside[1]()
             if sock in ready:
                 return True
+            if listening in ready and sock is not listening:
+                if self._gone(sock):
+                    return True  # (its end is read next: the newcomer is taken after it)
+                self._refuse()
+
+    @staticmethod
+    def _gone(client: socket.socket) -> bool:
+        """Has ``client`` hung up (what it sent before is read first)?"""
+        try:
+            if not select.select([client], [], [], 0)[0]:
+                return False
+            return client.recv(1, socket.MSG_PEEK) == b""
+        except (OSError, ValueError):
+            return True
+
+    def _refuse(self) -> None:
+        """A second client while one is served: hung up on at once. Left waiting, what it
+        sent would reach the module once the first had gone, long after it gave up (a
+        bridge would start a motor for a program that is no longer there)."""
+        try:
+            newcomer, peer = self._sock.accept()
+        except OSError:
+            return
+        log.warning("refused TCP client %s:%s: another is connected (one at a time)",
+                    *peer[:2])
+        newcomer.close()
 
     def drop_client(self) -> bool:
         """Hang up on the connected client and keep listening (a cable pulled and plugged
