@@ -11,9 +11,11 @@ link:
   descriptor (a serial port on POSIX), the server's thread waits on it beside the master's
   end and forwards both ways: no exchange waits for a second thread to be woken and to take
   the interpreter.
-  Measured beside a minimal forwarder, three runs each: the p99 added 1.3-2.0x that
-  forwarder's with a thread per direction, 1.0-1.5x with one (the median 1.1-1.2x and
-  1.05-1.13x). A port without a descriptor (a pyserial URL) is read by a thread of its own.
+  Measured beside a minimal forwarder, with the describer in its rhythm (ops/handoff.py):
+  the p99 added 1.3-2.0x that forwarder's with a thread per direction, 1.0-1.5x with one
+  (3 runs each, chunks noted after they went); as built (noted before, 7 runs), the median
+  1.1-1.4x and the p99 1.5-2.2x, against 1.3-1.7x and 1.8-3.4x before either change. A port
+  without a descriptor (a pyserial URL) is read by a thread of its own.
 * ``CanBridge``: a CAN module (``--can``). The master speaks serial frames; each request's
   seven instruction bytes go to the module's CAN id as they are, and each reply's seven
   (of seven or eight: tmcl/decoder.py ``can_reply``), or a version string's eight, come
