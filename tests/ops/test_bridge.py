@@ -298,6 +298,7 @@ def test_output_nobody_reads_never_stops_the_forwarding():
     # (how many are dropped depends on how far the describing got while nobody read: on a
     # busy machine it may lag behind, and then shows them all once they are read)
     assert shown + summary["dropped_lines"] == 2 * n
+    assert summary["shown"] == shown  # (what reached the output, not what was dropped too)
     assert summary["untold"] == 0
 
 

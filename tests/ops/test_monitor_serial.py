@@ -339,6 +339,7 @@ def test_a_live_tap_whose_output_nobody_reads_keeps_reading_the_line():
     assert (summary["requests"], summary["replies"], summary["unanswered"]) == (n, n, 0)
     shown = sum(1 for text in out.splitlines() if '"frame"' in text)
     assert summary["dropped_lines"] > 0 and shown + summary["dropped_lines"] == 2 * n
+    assert summary["shown"] == shown  # (what reached the output, not what was dropped too)
 
 
 def test_a_live_tap_ends_when_the_reader_of_its_output_has_gone():

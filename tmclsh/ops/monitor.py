@@ -129,6 +129,12 @@ class Summary:
     untold: int = 0
 
     @property
+    def written(self) -> int:
+        """Lines or objects that reached the output: those the filters let through
+        (``shown``) less those its reader did not take (``dropped``)."""
+        return max(0, self.shown - self.dropped)
+
+    @property
     def refused(self) -> int:
         """Replies whose status is an error (not 100, 101 or 128)."""
         return sum(n for s, n in self.statuses.items() if not status_ok(s))
@@ -151,7 +157,7 @@ class Summary:
                 "seconds": round(self.last - self.first, 6) if self.first is not None
                 and self.last is not None else 0.0,
                 "modules": {str(k): v for k, v in sorted(self.modules.items())},
-                "shown": self.shown, "dropped_lines": self.dropped,
+                "shown": self.written, "dropped_lines": self.dropped,
                 "capture_dropped": self.capture_dropped, "untold": self.untold}
 
 

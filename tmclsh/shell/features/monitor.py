@@ -445,7 +445,7 @@ def summary_lines(s: Summary, view: View) -> list[str]:
     if s.modules:
         lines.append("modules: " + ", ".join(f"@{a} {v}" for a, v in sorted(s.modules.items())))
     if s.filtered:
-        lines.append(f"shown: {_n(s.shown, 'line')} (the filters let these through)")
+        lines.append(f"shown: {_n(s.written, 'line')} (the filters let these through)")
     if s.dropped:
         lines.append(f"not shown: {_n(s.dropped, 'line')} (the output was not being read; "
                      "the traffic went on, counted above)")
