@@ -74,8 +74,10 @@ class PythonCanTransport(CanTransport):
 
     def _lost(self, what: str, exc: Exception) -> TransportError:
         self.close()
-        return TransportError(f"lost CAN {self.url} ({what} failed: {exc}); adapter unplugged "
-                              "or bus down? Reconnect once it is back.")
+        gone = f"lost CAN {self.url} ({what} failed: {exc}); adapter unplugged or bus down?"
+        err = TransportError(f"{gone} Reconnect once it is back.")
+        err.lost = gone  # (without the advice: for a run that cannot reconnect, the bridge)
+        return err
 
     def send(self, arbitration_id: int, data: bytes) -> None:
         bus, can = self._bus, self._can

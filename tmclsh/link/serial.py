@@ -138,9 +138,10 @@ class SerialTransport(StreamTransport):
         reason = str(exc)
         if not reason.lower().startswith(what):  # pyserial often says "read failed: ..." itself
             reason = f"{what} failed: {reason}"
-        return TransportError(
-            f"lost {self.url} ({reason}); the port is gone (module unplugged "
-            "or powered off?). Reconnect once it is back.")
+        gone = f"lost {self.url} ({reason}); the port is gone (module unplugged or powered off?)"
+        err = TransportError(f"{gone}. Reconnect once it is back.")
+        err.lost = gone  # (without the advice: for a run that cannot reconnect, the bridge)
+        return err
 
     def write(self, data: bytes) -> None:
         self.emptied = 0.0  # (what this asks for may come at once: the port is looked at)

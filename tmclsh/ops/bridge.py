@@ -57,6 +57,11 @@ TICK = 0.1  # s the module's reader waits before it looks whether the bridge clo
 Put = Callable[[tuple], bool]
 
 
+def _lost(exc: TransportError) -> str:
+    """What was lost, without the link's "reconnect" (the bridge ends with it)."""
+    return getattr(exc, "lost", None) or str(exc)
+
+
 class _Target:
     """What the pty or TCP server serves: ``write`` gets the master's bytes, ``on_output``
     (set by the server) takes the module's to the master; ``beside``: the module's
@@ -141,7 +146,7 @@ class _Bridge:
         stopped forwarding."""
         if isinstance(exc, TransportError):
             if not self._closed.is_set():
-                self._lose(str(exc))
+                self._lose(_lost(exc))
         else:
             log.exception("the bridge's module reader failed", exc_info=exc)
             self._lose(f"the bridge stopped forwarding: {exc}")
@@ -173,7 +178,7 @@ class SerialBridge(_Bridge):
         try:
             self.module.write(data)
         except TransportError as exc:
-            self._lose(str(exc))
+            self._lose(_lost(exc))
 
     def _step(self, wait: float) -> None:
         data = self.module.read_some(wait)
@@ -216,7 +221,7 @@ class CanBridge(_Bridge):
             try:
                 self.module.send(arb, raw[1:8])
             except TransportError as exc:
-                self._lose(str(exc))
+                self._lose(_lost(exc))
                 break
 
     def _step(self, wait: float) -> None:
