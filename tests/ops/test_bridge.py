@@ -610,3 +610,30 @@ def test_a_closing_stop_that_leaves_a_motor_turning_fails_the_run():
     assert 3 in module.commands()  # (MST was sent)
     assert bridge.proc.returncode == 1, err
     assert "500" in err and "Traceback" not in err, err
+
+
+def test_a_hang_up_ends_the_bridge_and_stops_the_motor_it_left_turning(make_pty_sim):
+    """The terminal closed or the SSH session dropped: SIGHUP reaches both of the bridge's
+    processes. The run ends as at Ctrl-C, and the motor the other master left turning is
+    stopped (before, both died at once and it turned on)."""
+    sim, path = make_pty_sim()
+    proc = subprocess.Popen([sys.executable, "-m", "tmclsh", "bridge", "--pty", "--port",
+                             path, "--json"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=tmclsh_env(), cwd=str(ROOT),
+                            start_new_session=True)
+    try:
+        endpoint = proc.stdout.readline().strip()
+        assert endpoint, proc.stderr.read()
+        with serial.Serial(endpoint, timeout=patience(5)) as port:
+            assert _exchange(port, request(1, 1, 0, 0, 500))[2] == 100  # ROR 0, 500
+        time.sleep(0.3)  # (what was forwarded last is read before the signal)
+        os.killpg(proc.pid, signal.SIGHUP)  # (both processes, as a hang-up does)
+        _, err = proc.communicate(timeout=patience(20))
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert "stopped motor 0" in err, err
+    with serial.Serial(path, timeout=patience(5)) as port:
+        reply = _exchange(port, request(1, 6, 3))  # GAP 3: the actual speed
+    assert struct.unpack(">i", reply[4:8])[0] == 0, reply.hex()

@@ -171,8 +171,10 @@ _SUB_NOTES = {
               "terminal is monitor's; it is drawn a few times a second off the forwarding, "
               "and a terminal that is slow to take it loses redraws, never frames. A request that answers nothing by design "
               "(137, 242, 205) is no error, and requests sent ahead of their replies are "
-              "each paired with their own. Exit status 0; 1 when the module's link goes away "
-              "or the second process could not finish (its reader gone, killed); 3 "
+              "each paired with their own. A TCP master is served one at a time; another that "
+              "connects meanwhile is hung up on. Exit status 0; 1 when the module's link goes "
+              "away, the second process could not finish (its reader gone, killed), or what "
+              "the traffic left is not known or could not be ended (a motor may still turn); 3 "
               "when the module's port or bus cannot be opened or the bridge cannot serve.",
     "replay": "Reads CAPTURE (a serial capture written by monitor -o or bridge -o, a "
               "python-can log of any format it reads, candump's screen lines, or a --log-dir "

@@ -475,8 +475,12 @@ class Describer:
         import sys
 
         try:
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                signal.signal(sig, signal.SIG_IGN)
+            # (a hang-up reaches both processes: the bridge's ends the run, this one must
+            # live to say what the traffic left)
+            for name in ("SIGINT", "SIGTERM", "SIGHUP"):
+                sig = getattr(signal, name, None)
+                if sig is not None:
+                    signal.signal(sig, signal.SIG_IGN)
             unwind_on(("SIGUSR1",), interrupted)  # (the bridge's process: "stop now")
             try:
                 os.nice(NICE)

@@ -40,6 +40,7 @@ class StopReport:
 
     program: str | None = None
     program_error: str | None = None
+    running: bool | None = None  # what 135 said of the program before 128 (None: not known)
     stopped: list[int] = field(default_factory=list)
     turning: dict[int, int] = field(default_factory=dict)
     unknown: dict[int, str] = field(default_factory=dict)
@@ -260,7 +261,7 @@ def _stop_everything(client, settle: float, sleep: Callable[[float], None]) -> S
     """
     report = StopReport()
     t = min(client.timeout, 0.5)
-    running = _program_running(client, t)
+    running = report.running = _program_running(client, t)
     if running is not False and _has(client, Control.STOP_APPLICATION):
         try:
             _ok(_send(client, Control.STOP_APPLICATION, timeout=t), "stop (128)")

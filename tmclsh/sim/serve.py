@@ -310,7 +310,9 @@ class TcpServer(_Server):
         bridge would start a motor for a program that is no longer there)."""
         try:
             newcomer, peer = self._sock.accept()
-        except OSError:
+        except OSError as exc:  # (out of descriptors: it stays waiting; not looked at in a loop)
+            log.debug("could not take a second TCP client to hang up on: %s", exc)
+            self._closed.wait(0.1)
             return
         log.warning("refused TCP client %s:%s: another is connected (one at a time)",
                     *peer[:2])

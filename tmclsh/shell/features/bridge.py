@@ -84,6 +84,8 @@ def run_bridge(args) -> int:
         bridge = _serve(transport, describer, args, is_can, can_id, reply_id, host)
         try:
             left = _forward(bridge, describer, transport, args.output)
+            if left is None or describer.notes.dropped:
+                ended_all = False  # (what the traffic left is not known: "check the module")
             if left and not _put_right(transport, left, monitor, args, is_can, bridge.lost,
                                        lambda event: describer.notes.send((CAPTURE, event))):
                 ended_all = False
@@ -375,50 +377,66 @@ def _put_right(transport, left: Left, monitor: Monitor, args, is_can: bool,
     so a replayed capture ends as the module was left. False: something may still be left
     (said; the run then fails). What it says never stops it: stderr may be a pipe whose
     reader has gone (``_say``)."""
+    ended = True
+    try:
+        for address in left.addresses:
+            what = left.describe(address)
+            if lost is not None:
+                _say(f"bridge closed: the traffic through it left {what} at address "
+                     f"{address}, and the link to the module is lost: check the module")
+                continue
+            _say(f"bridge closed: the traffic through it left {what} at address {address}; "
+                 "ending that")
+            try:
+                ended = _end_at(transport, address, left, monitor, args, is_can,
+                                capture) and ended
+            except TmclError as exc:  # (a TransportError too: the port could not reopen)
+                _say(f"bridge closed: could not end it at address {address}: {exc}")
+                ended = False
+    except KeyboardInterrupt:
+        _say("bridge closed: interrupted again: what the traffic left may still be there: "
+             "check the module")
+        return False
+    return ended and lost is None
+
+
+def _end_at(transport, address: int, left: Left, monitor: Monitor, args, is_can: bool,
+            capture) -> bool:
+    """``_put_right`` at one address: False when a motor may still turn there."""
     from ...client import bringup
     from ...client.ascii import leave_binary
     from ...client.core import Client
     from .stop import stop_all
 
-    ended = True
-    for address in left.addresses:
-        what = left.describe(address)
-        if lost is not None:
-            _say(f"bridge closed: the traffic through it left {what} at address "
-                 f"{address}, and the link to the module is lost: check the module")
-            continue
-        _say(f"bridge closed: the traffic through it left {what} at address {address}; "
-             "ending that")
-        if not transport.is_open:
-            transport.open()
-        can_id = getattr(args, "can_id", None)
-        client = Client(transport, address=address if address <= 0xFF else 1,
-                        host_address=monitor.host_of.get(address, DEFAULT_HOST),
-                        module=monitor.module_for(address), timeout=0.5,
-                        can_id=(can_id if can_id is not None else address) if is_can else None,
-                        reply_id=getattr(args, "reply_id", None))
+    if not transport.is_open:
+        transport.open()
+    can_id = getattr(args, "can_id", None)
+    client = Client(transport, address=address if address <= 0xFF else 1,
+                    host_address=monitor.host_of.get(address, DEFAULT_HOST),
+                    module=monitor.module_for(address), timeout=0.5,
+                    can_id=(can_id if can_id is not None else address) if is_can else None,
+                    reply_id=getattr(args, "reply_id", None))
+    try:
         if capture is not None:
             client.add_tracer(_capturing(capture, client, is_can))
         # what the bring-up notices on its own is said as the bridge's; of the ASCII mode
         # it finds, nothing ("it stays in ASCII mode at exit" would be wrong): the bridge
         # has said it ends that, and does right after
         client.on_notice = _unsaid if address in left.ascii else _said_closing
-        try:
-            bringup.bring_up(client, strict=False)  # (leaves download mode, finds ASCII)
-            if address in left.ascii:
-                leave_binary(client)
-            if address in left.started:
-                report = stop_all(client, ToStderr(), "bridge closed")
-                # (a motor that may still turn fails the run; a 128 the module does not
-                # know is said, as a module without stored programs runs none)
-                ended = ended and report is not None and not (
-                    report.turning or report.unknown or report.link_error)
-        except TmclError as exc:
-            _say(f"bridge closed: could not end it at address {address}: {exc}")
-            ended = False
-        finally:
-            client.close()
-    return ended and lost is None
+        bringup.bring_up(client, strict=False)  # (leaves download mode, finds ASCII)
+        if address in left.ascii:
+            leave_binary(client)
+        if address not in left.started:
+            return True
+        report = stop_all(client, ToStderr(), "bridge closed")
+        # (a motor that may still turn fails the run, and a program the module said runs
+        # that 128 could not stop; a 128 refused where 135 told nothing is said, as a
+        # module without stored programs runs none)
+        return report is not None and not (
+            report.turning or report.unknown or report.link_error
+            or (report.program_error and report.running))
+    finally:
+        client.close()
 
 
 def _said_closing(text: str) -> None:

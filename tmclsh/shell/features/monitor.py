@@ -482,10 +482,11 @@ class Limits:
 
 
 def interruptible() -> dict:
-    """SIGINT (Ctrl-C) and SIGTERM end a run, the summary still written: also where SIGINT
-    came in ignored (a program started in the background by a shell). The handlers before,
-    for ``restore``."""
-    return unwind_on(("SIGINT", "SIGTERM"), interrupted)
+    """SIGINT (Ctrl-C), SIGTERM and SIGHUP (the terminal closed, the SSH session dropped) end
+    a run, the summary still written and what a bridge's traffic left still ended: also
+    where SIGINT came in ignored (a program started in the background by a shell). The
+    handlers before, for ``restore``."""
+    return unwind_on(("SIGINT", "SIGTERM", "SIGHUP"), interrupted)
 
 
 def show_items(items: Iterable[Item], view: View, filt: Filter, summary: Summary,
