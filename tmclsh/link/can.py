@@ -76,7 +76,7 @@ class PythonCanTransport(CanTransport):
         self.close()
         gone = f"lost CAN {self.url} ({what} failed: {exc}); adapter unplugged or bus down?"
         err = TransportError(f"{gone} Reconnect once it is back.")
-        err.lost = gone  # (without the advice: for a run that cannot reconnect, the bridge)
+        err.lost = gone  # type: ignore[attr-defined]  # (no advice: the bridge ends with it)
         return err
 
     def send(self, arbitration_id: int, data: bytes) -> None:

@@ -140,7 +140,7 @@ class SerialTransport(StreamTransport):
             reason = f"{what} failed: {reason}"
         gone = f"lost {self.url} ({reason}); the port is gone (module unplugged or powered off?)"
         err = TransportError(f"{gone}. Reconnect once it is back.")
-        err.lost = gone  # (without the advice: for a run that cannot reconnect, the bridge)
+        err.lost = gone  # type: ignore[attr-defined]  # (no advice: the bridge ends with it)
         return err
 
     def write(self, data: bytes) -> None:

@@ -130,8 +130,9 @@ class Summary:
 
     @property
     def written(self) -> int:
-        """Lines or objects that reached the output: those the filters let through
-        (``shown``) less those its reader did not take (``dropped``)."""
+        """Lines or objects handed to the output and not dropped: those the filters let
+        through (``shown``) less those its reader did not take (``dropped``). (A reader
+        that has gone takes nothing more, and reads no summary either.)"""
         return max(0, self.shown - self.dropped)
 
     @property
