@@ -78,7 +78,7 @@ def run_bridge(args) -> int:
     # and counted, never a frame on the wire or the forwarding's time
     describer = Describer(teller.run, name="bridge-describer")
     describer.start()
-    previous = interruptible()  # (from here Ctrl-C and SIGTERM end the bridge as one)
+    previous = interruptible()  # (from here Ctrl-C, SIGTERM and SIGHUP end the bridge as one)
     ended_all = True  # (what the traffic left at the module was ended, or nothing was)
     try:
         bridge = _serve(transport, describer, args, is_can, can_id, reply_id, host)
