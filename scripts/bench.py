@@ -881,7 +881,8 @@ def bench_upload(args: argparse.Namespace) -> dict:
     say(f"  raw {2 * n + 2} transactions {best['raw']:.3f} s, upload + verify "
         f"{best['upload']:.3f} s (fastest of {rounds}); median of the rounds' ratios "
         f"{ratio:.3f}x (fastest over fastest {best['upload'] / best['raw']:.3f}x; upload "
-        f"{low['upload'] / low['raw_upload']:.2f}x, verify {low['verify'] / low['raw_verify']:.2f}x)")
+        f"{low['upload'] / low['raw_upload']:.2f}x, "
+        f"verify {low['verify'] / low['raw_verify']:.2f}x)")
     result = {"benchmark": "upload", "instructions": n, "raw_s": round(best["raw"], 3),
               "upload_s": round(best["upload"], 3),
               "fastest_ratio": round(best["upload"] / best["raw"], 3),

@@ -116,8 +116,8 @@ class StreamTransport(Transport):
     def fileno(self) -> int | None:
         """The descriptor a caller may wait on with ``select`` until there is something to
         read (then ``read_some(0)``, which on such a port reads without a wait of its own),
-        or None where the port has none (a pyserial URL, the
-        in-process simulator): such a port is waited on by its own ``read_some``."""
+        or None where the port has none (a pyserial URL, the in-process simulator): such a
+        port is waited on by its own ``read_some``."""
         return None
 
     def set_baudrate(self, baud: int) -> None:  # pragma: no cover - only real ports

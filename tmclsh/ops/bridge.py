@@ -80,9 +80,10 @@ class _Bridge:
     Each chunk is put just before it is forwarded, so the notes keep the order the wire
     had (with a thread per direction too): an answer is never noted ahead of its request,
     nor a request ahead of the answer the master waited for; and whatever the master or
-    the module got was noted, even if the bridge is killed right after. ``put`` never waits (ops/handoff.py); what it could not hand
-    over was forwarded all the same and is counted there. ``lost``: why the module's link
-    was lost, once it was (``ended`` is set then).
+    the module got was noted, even if the bridge is killed right after. ``put`` never
+    waits (ops/handoff.py); what it could not hand over was forwarded all the same and is
+    counted there. ``lost``: why the module's link was lost, once it was (``ended`` is set
+    then).
     """
 
     def __init__(self, put: Put, *, pty: bool = False, tcp: tuple[str, int] | None = None,

@@ -110,6 +110,25 @@ class _Server:
         target drops it when that link is lost."""
         return getattr(self.target, "beside", None)
 
+    def _wait(self, waits: list) -> list | None:
+        """Until one of ``waits`` is ready, what the target has beside them served
+        meanwhile (``_beside``): those of ``waits`` that are ready (maybe none, when only
+        what is beside was), or None when waiting failed and the server stops (it is
+        closing, or a descriptor beside went bad and was not dropped)."""
+        while True:
+            beside = self._beside()
+            try:
+                ready = select.select(waits if beside is None else [*waits, beside[0]],
+                                      [], [])[0]
+            except (OSError, ValueError):
+                if self._closed.is_set() or beside is None or not self._serve_beside(beside):
+                    return None
+                continue
+            if beside is not None and beside[0] in ready:
+                beside[1]()
+                ready.remove(beside[0])
+            return ready
+
     def _serve_beside(self, beside: tuple[int, Any]) -> bool:
         """A wait that failed with ``beside`` in it (its descriptor gone bad): its call is
         made, to find that out and drop it; False if it did not, and the server stops."""
@@ -172,20 +191,11 @@ class PtyServer(_Server):
     def _loop(self) -> None:
         master, wake = self.master, self._wake_r
         while not self._closed.is_set():
-            beside = self._beside()
-            try:
-                ready = select.select([master, wake] if beside is None
-                                      else [master, wake, beside[0]], [], [])[0]
-            except (OSError, ValueError):
-                if self._closed.is_set() or beside is None or not self._serve_beside(beside):
-                    return
-                continue
-            if wake in ready:
+            ready = self._wait([master, wake])
+            if ready is None or wake in ready:
                 return
-            if beside is not None and beside[0] in ready:
-                beside[1]()
-                if master not in ready:
-                    continue
+            if master not in ready:
+                continue
             try:
                 data = os.read(master, 4096)
             except BlockingIOError:
@@ -274,19 +284,11 @@ class TcpServer(_Server):
         that connects is hung up on at once (``_refuse``). False: the wait failed (the
         server is closing)."""
         listening = self._sock
+        waits = [sock] if sock is listening else [sock, listening]
         while True:
-            beside = self._beside()
-            waits = [sock] if sock is listening else [sock, listening]
-            if beside is not None:
-                waits.append(beside[0])
-            try:
-                ready = select.select(waits, [], [])[0]
-            except (OSError, ValueError):
-                if self._closed.is_set() or beside is None or not self._serve_beside(beside):
-                    return False
-                continue
-            if beside is not None and beside[0] in ready:
-                beside[1]()
+            ready = self._wait(waits)
+            if ready is None:
+                return False
             if sock in ready:
                 return True
             if listening in ready and sock is not listening:

@@ -30,9 +30,9 @@ from ...ops.filter import Filter
 from ...ops.handoff import CAPTURE, DONE, END, FINISH, LEFT, START, Describer, give_way
 from ...ops.monitor import DEFAULT_HOST, RX, TX, CanReader, Monitor, SerialPair
 from .livetable import wanted
-from .stop import ToStderr
 from .monitor import (Limits, View, _capture, end_live_output, end_table, interruptible,
                       live_output, live_table, load_module, off_the_wire, show_items)
+from .stop import ToStderr
 
 SOON = 2.0  # s the describer takes, as a rule, to read the rest and say what it left
 LEFT_WAIT = 30.0  # s it may take beyond that (far behind on a busy machine: a pipe's 1 MiB)
