@@ -66,6 +66,23 @@ def test_a_signal_dropped_in_a_callback_is_raised_again_in_the_run(kept, name, m
         restore(previous)
 
 
+@pytest.mark.parametrize("name", ["SIGTERM", "SIGHUP"])
+def test_a_signal_sent_again_wakes_a_run_that_went_on_into_a_long_wait(kept, name):
+    """The run's next step after the callback is one long wait (``.sleep 30``): the signal
+    sent again must cut it short, not be obeyed when it ends (it was: sent to the thread
+    that sent it again, the main thread slept on; CI saw SIGTERM obeyed 30 s late)."""
+    sig = getattr(signal, name)
+    previous = unwind_on([name])
+    started = time.monotonic()
+    try:
+        with pytest.raises(Terminated):
+            _signal_inside_a_callback(sig)
+            time.sleep(30)
+    finally:
+        restore(previous)
+    assert time.monotonic() - started < 30
+
+
 def test_ctrl_c_dropped_in_a_callback_is_raised_again(kept):
     previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:

@@ -20,6 +20,7 @@ from __future__ import annotations
 import _thread
 import signal
 import sys
+import threading
 from typing import Callable, Iterable
 
 _kept = False
@@ -89,13 +90,24 @@ def keep() -> None:
             return
         # sent from another thread: sent from here, its handler would run at once, inside
         # this hook, and be dropped again; the main thread runs it at its next step
-        # (``_thread``: ``Thread.start`` waits for the thread to run, and would run it here)
+        # (``_thread``: ``Thread.start`` waits for the thread to run, and would run it here).
+        # Sent *to* the main thread: ``raise_signal`` would deliver it to the sending thread,
+        # and a main thread that has gone on into a wait (``.sleep 30``) would not wake
+        # until the wait ended (seen under CI: a SIGTERM obeyed 30 s late)
         try:
-            _thread.start_new_thread(signal.raise_signal, (signum,))
+            _thread.start_new_thread(_send_to_main, (signum,))
         except RuntimeError:  # (no new thread while the interpreter ends: it is ending)
             pass
 
     sys.unraisablehook = hook
+
+
+def _send_to_main(signum: int) -> None:
+    """``signum`` to the main thread, which a wait it is in gives up for it."""
+    try:
+        signal.pthread_kill(threading.main_thread().ident, signum)  # type: ignore[arg-type]
+    except (AttributeError, ProcessLookupError, OSError):  # (no pthread_kill here)
+        signal.raise_signal(signum)
 
 
 def _signal_of(exc: object) -> int | None:
