@@ -133,3 +133,27 @@ def test_a_copy_of_the_read_back_before_never_passes_a_cell(module, client):
     result = program.upload(client, prog)
     assert result.verified is False
     assert result.mismatch is not None and result.mismatch.address == 21
+
+
+def test_another_thread_on_the_client_waits_for_the_end_of_download_mode(module, client):
+    # a second thread reads a parameter while the upload is between two frames: sent then,
+    # the module would store the read as an instruction and answer it LOADED, and the
+    # reader would get the frame's echo for a value
+    import threading
+
+    prog = _program(40)
+    read: list[int] = []
+    reader = threading.Thread(target=lambda: read.append(client.value("GAP 4, 0")))
+
+    def progress(stage: str, done: int, total: int) -> None:
+        if stage == "upload" and done == 10:
+            reader.start()
+            reader.join(0.5)  # (a reader that got through goes now; one that waits, waits)
+
+    result = program.upload(client, prog, progress=progress)
+    reader.join(30)
+    assert result.verified is True
+    assert module.stores == list(range(40))  # the read was not stored among them
+    assert read == [0]  # the module's answer to GAP (status 100), not a stored frame's echo
+    heard = [fields(raw)[1] for raw in module.log]
+    assert heard.index(6) > heard.index(QUIT)  # the read went after download mode ended

@@ -270,7 +270,9 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
     132 (start download), one frame per instruction (each answered with status 101), 133;
     then, with ``verify``, every instruction is read back with 134 and compared. Download mode
     is always ended (133 in a ``finally``, best effort, also after Ctrl-C); an upload that did
-    not complete raises :class:`UploadError` saying what the memory holds now.
+    not complete raises :class:`UploadError` saying what the memory holds now. Other threads
+    using the client wait from 132 until 133 is answered: a module in download mode stores
+    whatever it hears.
     """
     instructions, start = _image(program, origin)
     module = client.require_module()
@@ -290,26 +292,30 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
     make, address = Request.make, client.address
     frames = client.requests(_made([make(address, ins.opcode, ins.type, ins.motor, ins.value)
                                     for ins in instructions]), timeout=timeout)
-    client._downloading = True  # no retries: a repeated frame would be stored twice
-    try:
-        _ok(_send(client, Control.START_DOWNLOAD, 0, 0, start, timeout=timeout),
-            f"start download (132) at address {start}")
-        while acked < total:
-            sent = acked + 1  # (the next frame goes out, or may have, whatever happens now)
-            reply = next(frames)
-            if reply is None or reply.status != _LOADED:
-                _ok(reply, f"instruction at address {start + acked}", (Status.LOADED,))
-            acked += 1
-            if progress is not None:
-                progress("upload", acked, total)
-    except (TmclError, KeyboardInterrupt) as exc:
-        failure = exc
-    finally:
-        frames.close()
-        ended, end_error = _quit_download(client, timeout)
-        client._downloading = False
-        if not ended:
-            client._lifecycle.check_download_next()  # the next command ends it first, not stored
+    # the line is this upload's from 132 to 133: the module stores every frame it hears in
+    # download mode, so another thread's request on the same client in between would be
+    # stored as an instruction and answered as LOADED (its caller given a wrong value)
+    with client.lock:
+        client._downloading = True  # no retries: a repeated frame would be stored twice
+        try:
+            _ok(_send(client, Control.START_DOWNLOAD, 0, 0, start, timeout=timeout),
+                f"start download (132) at address {start}")
+            while acked < total:
+                sent = acked + 1  # (the next frame goes out, or may have, whatever happens)
+                reply = next(frames)
+                if reply is None or reply.status != _LOADED:
+                    _ok(reply, f"instruction at address {start + acked}", (Status.LOADED,))
+                acked += 1
+                if progress is not None:
+                    progress("upload", acked, total)
+        except (TmclError, KeyboardInterrupt) as exc:
+            failure = exc
+        finally:
+            frames.close()
+            ended, end_error = _quit_download(client, timeout)
+            client._downloading = False
+            if not ended:
+                client._lifecycle.check_download_next()  # the next command ends it first
     upload_seconds = time.monotonic() - began
     if failure is not None:
         interrupted = isinstance(failure, KeyboardInterrupt)
