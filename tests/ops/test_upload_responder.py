@@ -13,6 +13,7 @@ from tmclsh.client.text import LineClient
 from tmclsh.link import open_serial
 from tmclsh.ops import program
 from tmclsh.ops.program import UploadError
+from tmclsh.tmcl import asm
 from tmclsh.tmcl.frames import Instruction
 
 from responder import LOADED, INVALID_VALUE, Responder, fields, reply
@@ -157,3 +158,17 @@ def test_another_thread_on_the_client_waits_for_the_end_of_download_mode(module,
     assert read == [0]  # the module's answer to GAP (status 100), not a stored frame's echo
     heard = [fields(raw)[1] for raw in module.log]
     assert heard.index(6) > heard.index(QUIT)  # the read went after download mode ended
+
+
+def test_verify_takes_the_program_upload_took(module, client, tmp_path):
+    # what load_program returns is what upload takes; verify took only instructions and
+    # failed with "'Program' object is not iterable"
+    source = tmp_path / "prog.tmc"
+    source.write_text("SAP 4, 0, 1000\nLoop: MVP ABS, 0, 200\nJA Loop\n")
+    prog = asm.load_program(source, client.require_module(), origin=7)
+    assert program.upload(client, prog).verified is True
+    assert program.verify_image(client, prog) is None  # read from its origin, 7
+    module.memory[8] = bytes(7)
+    mismatch = program.verify_image(client, prog)
+    assert mismatch is not None and mismatch.address == 8
+    assert program.verify_image(client, prog.instructions, 7).address == 8  # as before

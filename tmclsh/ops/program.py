@@ -422,10 +422,12 @@ def read_program(client, start: int = 0, count: int | None = None, *,
     return out
 
 
-def verify_image(client, instructions: Sequence[Instruction], start: int = 0, *,
-                 progress: Progress | None = None, timeout: float | None = None
-                 ) -> Mismatch | None:
+def verify_image(client, instructions: Program | Sequence[Instruction],
+                 start: int | None = None, *, progress: Progress | None = None,
+                 timeout: float | None = None) -> Mismatch | None:
     """Read every instruction back and compare bytes; the first difference, or None.
+    ``instructions`` is what ``upload`` takes: a ``Program`` (from its origin unless
+    ``start`` says) or instructions (from ``start``, default 0).
 
     A 134 answer is any well-formed frame, so a copy of an earlier answer that a bad line
     brings late reads as the cell's content: it may match where the cell differs, or differ
@@ -433,6 +435,7 @@ def verify_image(client, instructions: Sequence[Instruction], start: int = 0, *,
     while nothing waits (a suspect); those cells are read again, ``CONFIRM_ROUNDS`` times
     at most. A cell still in doubt then is no pass (``Mismatch.doubtful``): verified means
     certain (``read_until_certain``, on ``Client.in_doubt``)."""
+    instructions, start = _image(instructions, start)
     total = len(instructions)
     got: dict[int, Instruction] = {}
 
