@@ -187,3 +187,26 @@ def test_the_client_keeps_its_public_names_and_what_they_do():
         assert not c.connected and not c.transport.is_open
     finally:
         m.close()
+
+
+def test_the_python_examples_import_only_the_public_api():
+    """README's and the docstrings' examples are what users copy: an import of a private
+    module there (``from tmclsh.ops import backup``) reads as the API."""
+    import re
+
+    public = set(tmclsh.__all__)
+    texts = {"README.md": (ROOT / "README.md").read_text()}
+    texts.update({str(p.relative_to(ROOT)): p.read_text()
+                  for p in (ROOT / "tmclsh").rglob("*.py")})
+    texts.update({str(p.relative_to(ROOT)): p.read_text()
+                  for p in (ROOT / "examples").glob("*.py")})
+    wrong = []
+    for where, text in texts.items():
+        for line in text.splitlines():
+            m = re.match(r"\s*from (tmclsh[.\w]*) import (.+)", line)
+            if m and (m.group(1) != "tmclsh" or not {n.strip() for n in m.group(2).split(
+                    ",")} <= public):
+                wrong.append(f"{where}: {line.strip()}")
+            elif re.match(r"\s*import tmclsh\.", line):
+                wrong.append(f"{where}: {line.strip()}")
+    assert wrong == []

@@ -746,11 +746,13 @@ def storable(done: list[Written], link_changed: list[Written]) -> list[Written]:
             and w.diff.slot.param.storable and w not in link_changed]
 
 
-def store(client: Client, written: list[Written]) -> int:
+def store(client: Client, written: list[Written],
+          link_changed: list[Written] | None = None) -> int:
     """Store each restored value permanently (STAP/STGP); how many were stored (a refusal is
-    the write's error)."""
+    the write's error). What ``restore`` returns may be given as it is: only what was
+    written and read back, of a parameter the module stores, is (``storable``)."""
     stored = 0
-    for w in written:
+    for w in storable(written, link_changed or []):
         slot = w.diff.slot
         reply = _request(client, STORE[slot.kind], slot)
         if reply is not None and not status_ok(reply.status):

@@ -26,15 +26,14 @@ mode the link is in. What the link cannot carry raises a
 
 Example::
 
-    from tmclsh import asm, program
-    from tmclsh.client.connect import connect
+    import tmclsh
 
-    with connect(sim="TMCM-1311") as c:
-        prog = asm.assemble_file("demo.tmc", c.require_module())
-        result = program.upload(c, prog)          # 132, frames, 133, then 134 verify
+    with tmclsh.connect(sim="TMCM-1311") as c:
+        prog = tmclsh.load_program("demo.tmc", c.require_module())
+        result = tmclsh.upload_program(c, prog)   # 132, frames, 133, then 134 verify
         assert result.verified
-        program.run(c)                            # 129 type 0
-        print(program.status(c))                  # AppStatus(state='run', pc=...)
+        tmclsh.run_program(c)                     # 129 type 0
+        print(tmclsh.program_status(c))           # AppStatus(state='run', pc=...)
 """
 
 from __future__ import annotations

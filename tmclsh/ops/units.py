@@ -23,11 +23,15 @@ opened again and stopped too (a motor they set moving may still turn). A unit th
 link or whose module refuses fails alone. Nothing is imported in a unit's thread: a stop
 landing inside an import would leave a module half made for every unit after it.
 
+A unit's thread blocked in C when the stop comes (``fn`` in ``time.sleep``) takes it only
+when that wait returns: after ``STOP_GRACE`` the main thread stops that unit's module itself,
+through its client.
+
 From Python::
 
-    from tmclsh.ops import units
-    plan = [units.Unit(1, "port", "/dev/ttyUSB0", 1), units.Unit(2, "port", "/dev/ttyUSB0", 2)]
-    for r in units.run(plan, lambda c: c.value("GAP ActualPosition, 0")):
+    import tmclsh
+    plan = [tmclsh.Unit(1, "port", "/dev/ttyUSB0", 1), tmclsh.Unit(2, "port", "/dev/ttyUSB0", 2)]
+    for r in tmclsh.run_units(plan, lambda c: c.value("GAP ActualPosition, 0")):
         print(r.unit.label, r.value, r.error)
 """
 
