@@ -7,9 +7,10 @@ from __future__ import annotations
 import threading
 import time
 
+import pytest
 from responder import Module, SharedLine
 
-from tmclsh.base.errors import ConnectError
+from tmclsh.base.errors import ConnectError, ValidationError
 from tmclsh.ops import units
 
 ROR, MST, SAP = 1, 3, 5
@@ -151,3 +152,9 @@ def test_ctrl_c_stops_a_unit_whose_function_waits_in_c_at_once():
         assert heard[heard.index(ROR):].count(MST) == 1  # stopped once, not again on waking
     finally:
         m.close()
+
+
+def test_a_unit_of_no_known_kind_is_refused_when_the_plan_is_made():
+    # it was a TypeError from connect() inside the run, as that unit's error
+    with pytest.raises(ValidationError, match="kind 'usb' is not one of port, can, sim"):
+        units.Unit(1, "usb", "/dev/ttyUSB0")

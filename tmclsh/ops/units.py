@@ -51,6 +51,7 @@ from ..link import port_class
 from ..client.connect import connect
 from .stop import stop_everything
 
+KINDS = ("port", "can", "sim")  # a unit's kind: connect's argument its link is given as
 WAIT_SLICE = 0.1  # s between the main thread's looks at the units (and its hooks' ticks)
 # s a unit's thread has to take the stop raised in it before the main thread stops its
 # module itself: a thread blocked in C (``time.sleep``, ``Event.wait``) takes it only when
@@ -68,6 +69,12 @@ class Unit:
     address: int | None = None  # serial address; None: the default (or the profile's)
     can_id: int | None = None
     reply_id: int | None = None
+
+    def __post_init__(self) -> None:
+        # (said when the plan is made, not as each unit's error once the run has begun)
+        if self.kind not in KINDS:
+            raise ValidationError(f"unit {self.number}: kind {self.kind!r} is not one of "
+                                  f"{', '.join(KINDS)} (how its link is reached)")
 
     @property
     def bus(self) -> tuple[str, str | int | None]:
