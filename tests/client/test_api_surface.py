@@ -209,4 +209,10 @@ def test_the_python_examples_import_only_the_public_api():
                 wrong.append(f"{where}: {line.strip()}")
             elif re.match(r"\s*import tmclsh\.", line):
                 wrong.append(f"{where}: {line.strip()}")
+    # and the README's words: a name it gives a script is a public one (`python -m` runs a
+    # module, which is no import)
+    private = r"(?<!-m )`?tmclsh\.(ops|client|link|tmcl|base|sim|shell|cli)\.[\w.]+"
+    for where in ("README.md", "man/tmclsh.1"):
+        words = (ROOT / where).read_text()
+        wrong += [f"{where}: {m.group(0)}" for m in re.finditer(private, words)]
     assert wrong == []
