@@ -12,6 +12,7 @@ import pytest
 from tmclsh.client.text import LineClient
 from tmclsh.link import open_serial
 from tmclsh.ops import program
+from tmclsh.base.errors import TmclError
 from tmclsh.ops.program import UploadError
 from tmclsh.tmcl import asm
 from tmclsh.tmcl.frames import Instruction
@@ -172,3 +173,23 @@ def test_verify_takes_the_program_upload_took(module, client, tmp_path):
     mismatch = program.verify_image(client, prog)
     assert mismatch is not None and mismatch.address == 8
     assert program.verify_image(client, prog.instructions, 7).address == 8  # as before
+
+
+def test_ctrl_c_in_an_upload_is_a_keyboard_interrupt_and_download_mode_is_ended(module,
+                                                                                 client):
+    # a production line's loop that logs a TmclError and goes on to the next module must
+    # not go on after Ctrl-C: it was an UploadError (a TmclError) in the upload, and a
+    # KeyboardInterrupt in its verify
+    def progress(stage: str, done: int, total: int) -> None:
+        if stage == "upload" and done == 12:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt) as info:
+        try:
+            program.upload(client, _program(40), progress=progress)
+        except TmclError:
+            pytest.fail("Ctrl-C was caught as a TmclError")
+    cause = info.value.__cause__
+    assert isinstance(cause, UploadError) and cause.interrupted and cause.download_ended
+    assert cause.written == range(12) and "interrupted (Ctrl-C)" in str(info.value)
+    assert module.stores == list(range(12)) and not module.downloading

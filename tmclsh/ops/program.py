@@ -121,7 +121,8 @@ class UploadError(TmclError):
     ``written``: addresses confirmed stored (status 101); ``unknown``: the address whose frame
     was sent but not confirmed (it may or may not be stored); ``unchanged``: addresses after
     it, which still hold what was there before. ``download_ended`` says whether 133 was
-    answered; ``interrupted`` is True for Ctrl-C.
+    answered; ``interrupted`` is True for Ctrl-C, which ``upload`` raises as the
+    ``KeyboardInterrupt`` it is, this error its ``__cause__``.
     """
 
     def __init__(self, reason: str, *, start: int, total: int, acked: int, sent: int,
@@ -269,7 +270,9 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
     132 (start download), one frame per instruction (each answered with status 101), 133;
     then, with ``verify``, every instruction is read back with 134 and compared. Download mode
     is always ended (133 in a ``finally``, best effort, also after Ctrl-C); an upload that did
-    not complete raises :class:`UploadError` saying what the memory holds now. Other threads
+    not complete raises :class:`UploadError` saying what the memory holds now, and one cut
+    short by Ctrl-C a ``KeyboardInterrupt`` whose ``__cause__`` is that error (a script that
+    goes on after a ``TmclError`` must not go on after Ctrl-C). Other threads
     using the client wait from 132 until 133 is answered: a module in download mode stores
     whatever it hears.
     """
@@ -321,9 +324,11 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
         reason = "interrupted (Ctrl-C)" if interrupted else _reason(failure)
         if isinstance(failure, StatusError) and acked < sent:
             sent = acked  # the module refused that frame: nothing was stored there
-        raise UploadError(reason, start=start, total=total, acked=acked, sent=sent,
-                          download_ended=ended, end_error=end_error,
-                          interrupted=interrupted) from failure
+        error = UploadError(reason, start=start, total=total, acked=acked, sent=sent,
+                            download_ended=ended, end_error=end_error, interrupted=interrupted)
+        if interrupted:
+            raise KeyboardInterrupt(str(error)) from error
+        raise error from failure
     if not ended:
         raise UploadError("quit download (133) failed", start=start, total=total,
                           acked=acked, sent=sent, download_ended=False, end_error=end_error)
