@@ -117,3 +117,19 @@ def test_what_restore_returns_is_stored_as_it_is_and_only_what_was_restored(modu
         assert [g[:3] for g in module.got if g[0] == STAP] == [(STAP, 4, 0)]
     finally:
         c.close()
+
+
+def test_another_modules_backup_read_from_python_names_the_argument_not_a_shell_command(
+        tmp_path):
+    one, other = tmclsh.connect(sim="TMCM-1311"), tmclsh.connect(sim="TMCM-351")
+    try:
+        path = tmp_path / "m.tmcl"
+        backup.write_backup(path, backup.read_configuration(one).text())
+        with pytest.raises(backup.BackupFileError) as exc:
+            backup.read_backup(other, path)
+        assert "read_backup(..., force=True)" in str(exc.value)
+        assert ".restore" not in str(exc.value)
+        assert backup.read_backup(other, path, force=True).skipped  # by name, as it says
+    finally:
+        one.close()
+        other.close()
