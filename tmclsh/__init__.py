@@ -79,6 +79,7 @@ _LAZY: dict[str, tuple[str, str]] = {
     "read_backup": ("tmclsh.ops.backup", "read_backup"),
     "compare_backup": ("tmclsh.ops.backup", "compare"),
     "restore_backup": ("tmclsh.ops.backup", "restore"),
+    "store_backup": ("tmclsh.ops.backup", "store"),
     "Configuration": ("tmclsh.ops.backup", "Configuration"),
     "Backup": ("tmclsh.ops.backup", "Backup"),
     "BackupFileError": ("tmclsh.ops.backup", "BackupFileError"),

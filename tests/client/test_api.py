@@ -113,6 +113,38 @@ def test_errors_are_the_builtins_a_caller_expects(client):
     assert exc.value.status == Status.EEPROM_LOCKED and exc.value.reply.status == 5
 
 
+@pytest.mark.parametrize("call", [
+    lambda c: c.send(6, 1, 300),  # motor/bank out of 0..255
+    lambda c: c.send(6, 256, 0),  # type
+    lambda c: c.send(6, 1, 0, 2**40),  # value beyond 32 bits
+    lambda c: c.send(6, 1, 0, 1.5),  # not an integer
+    lambda c: c.send(6, 1, 0, timeout=0),  # no time to answer
+    lambda c: c.value("GAP 1, 0", timeout=-1),
+])
+def test_a_raw_field_the_frame_cannot_carry_is_a_tmcl_error_and_nothing_is_sent(call):
+    """A script that catches ``TmclError`` (README: every error is one) catches these too;
+    they were plain ValueErrors."""
+    from responder import Module
+
+    m = Module(version="1311V111")
+    try:
+        with tmclsh.connect(port=m.path, timeout=1.0) as c:
+            heard = len(m.got)
+            with pytest.raises(ValidationError) as exc:
+                call(c)
+            assert isinstance(exc.value, TmclError) and isinstance(exc.value, ValueError)
+            assert "\n" not in str(exc.value)  # one line
+            assert len(m.got) == heard  # nothing sent
+    finally:
+        m.close()
+
+
+@pytest.mark.parametrize("line", [123, None, b"GAP 1, 0"])
+def test_a_line_that_is_not_text_is_a_type_error(client, line):
+    with pytest.raises(TypeError, match="a TMCL line is a str"):
+        client.execute(line)
+
+
 def _modules_after(code: str) -> dict:
     out = subprocess.run(
         [sys.executable, "-c", code + "\nimport sys, json\n"

@@ -187,3 +187,32 @@ def test_the_client_keeps_its_public_names_and_what_they_do():
         assert not c.connected and not c.transport.is_open
     finally:
         m.close()
+
+
+def test_the_python_examples_import_only_the_public_api():
+    """README's and the docstrings' examples are what users copy: an import of a private
+    module there (``from tmclsh.ops import backup``) reads as the API."""
+    import re
+
+    public = set(tmclsh.__all__)
+    texts = {"README.md": (ROOT / "README.md").read_text()}
+    texts.update({str(p.relative_to(ROOT)): p.read_text()
+                  for p in (ROOT / "tmclsh").rglob("*.py")})
+    texts.update({str(p.relative_to(ROOT)): p.read_text()
+                  for p in (ROOT / "examples").glob("*.py")})
+    wrong = []
+    for where, text in texts.items():
+        for line in text.splitlines():
+            m = re.match(r"\s*from (tmclsh[.\w]*) import (.+)", line)
+            if m and (m.group(1) != "tmclsh" or not {n.strip() for n in m.group(2).split(
+                    ",")} <= public):
+                wrong.append(f"{where}: {line.strip()}")
+            elif re.match(r"\s*import tmclsh\.", line):
+                wrong.append(f"{where}: {line.strip()}")
+    # and the README's words: a name it gives a script is a public one (`python -m` runs a
+    # module, which is no import)
+    private = r"(?<!-m )`?tmclsh\.(ops|client|link|tmcl|base|sim|shell|cli)\.[\w.]+"
+    for where in ("README.md", "man/tmclsh.1"):
+        words = (ROOT / where).read_text()
+        wrong += [f"{where}: {m.group(0)}" for m in re.finditer(private, words)]
+    assert wrong == []

@@ -309,9 +309,11 @@ def test_ctrl_c_twice_in_an_upload_does_not_leave_download_mode_behind():
     c.on_notice = lambda text: None
     try:
         c.add_tracer(_ctrl_c_on({1, 133}, times=2))  # the 2nd ROR frame, then the 133
-        with pytest.raises(program.UploadError) as err:
+        with pytest.raises(KeyboardInterrupt) as err:
             program.upload(c, [Instruction(1, 0, 0, 100)] * 3, verify=False)
-        assert err.value.interrupted and not err.value.download_ended and m.downloading
+        cause = err.value.__cause__
+        assert isinstance(cause, program.UploadError)
+        assert cause.interrupted and not cause.download_ended and m.downloading
         assert c.value("GAP 1, 0") == 77 and not m.downloading
     finally:
         c.close()

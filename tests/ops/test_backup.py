@@ -95,3 +95,41 @@ def test_a_line_that_is_no_backup_line_is_refused_before_anything_is_sent(module
         assert module.got == []
     finally:
         c.close()
+
+
+def test_what_restore_returns_is_stored_as_it_is_and_only_what_was_restored(module, tmp_path):
+    """``tmclsh.store_backup`` (exported; README's ``backup.store`` was private) takes the
+    restore's result whole: a value the module refused is not stored (STAP would store
+    whatever it holds instead)."""
+    STAP = 7
+    c = tmclsh.connect(port=module.path, timeout=0.5, retries=0)
+    try:
+        module.values[(4, 0, False)] = 1234  # MaxPositioningSpeed
+        module.values[(5, 0, False)] = 4321  # MaxAcceleration
+        saved = roundtrip(c, tmp_path / "m.tmcl")
+        module.values[(4, 0, False)] = module.values[(5, 0, False)] = 99
+        module.refuse.add((SAP, 5, 0))
+        done, link_changed = tmclsh.restore_backup(c, tmclsh.compare_backup(c, saved))
+        assert sorted((w.diff.slot.name, w.error is None) for w in done) == [
+            ("MaxAcceleration", False), ("MaxPositioningSpeed", True)]
+        module.got.clear()
+        assert tmclsh.store_backup(c, done, link_changed) == 1
+        assert [g[:3] for g in module.got if g[0] == STAP] == [(STAP, 4, 0)]
+    finally:
+        c.close()
+
+
+def test_another_modules_backup_read_from_python_names_the_argument_not_a_shell_command(
+        tmp_path):
+    one, other = tmclsh.connect(sim="TMCM-1311"), tmclsh.connect(sim="TMCM-351")
+    try:
+        path = tmp_path / "m.tmcl"
+        backup.write_backup(path, backup.read_configuration(one).text())
+        with pytest.raises(backup.BackupFileError) as exc:
+            backup.read_backup(other, path)
+        assert "read_backup(..., force=True)" in str(exc.value)
+        assert ".restore" not in str(exc.value)
+        assert backup.read_backup(other, path, force=True).skipped  # by name, as it says
+    finally:
+        one.close()
+        other.close()

@@ -7,9 +7,10 @@ from __future__ import annotations
 import threading
 import time
 
+import pytest
 from responder import Module, SharedLine
 
-from tmclsh.base.errors import ConnectError
+from tmclsh.base.errors import ConnectError, ValidationError
 from tmclsh.ops import units
 
 ROR, MST, SAP = 1, 3, 5
@@ -114,3 +115,46 @@ def test_the_shell_and_python_share_the_unit():
 
     assert shell_units.Unit is units.Unit
     assert units.Unit(3, "sim", "TMCM-1311").label == "3 sim TMCM-1311"
+
+
+def test_ctrl_c_stops_a_unit_whose_function_waits_in_c_at_once():
+    # time.sleep, Event.wait: a thread blocked in C takes the stop raised in it only when
+    # the wait returns; its motor must not turn until then
+    m = Module(version="1311V111")
+    started, released = threading.Event(), threading.Event()
+    stopped_in_time: list[bool] = []
+    try:
+        def fn(client):
+            client.execute("ROR 0, 1000")
+            started.set()
+            released.wait(PATIENCE)  # (blocked in C until the test lets it go)
+
+        main = threading.main_thread()
+
+        def press_ctrl_c():
+            try:
+                assert started.wait(PATIENCE)
+                units._raise_in(main, KeyboardInterrupt)
+                deadline = time.monotonic() + PATIENCE / 2
+                while MST not in m.commands() and time.monotonic() < deadline:
+                    time.sleep(0.05)
+                stopped_in_time.append(MST in m.commands())
+            finally:
+                released.set()
+
+        helper = threading.Thread(target=press_ctrl_c, daemon=True)
+        helper.start()
+        (result,) = units.run([units.Unit(1, "port", m.path, 1)], fn)
+        helper.join(PATIENCE)
+        assert stopped_in_time == [True]  # stopped while its function still waited
+        assert result.stopped and not result.ok
+        heard = m.commands()
+        assert heard[heard.index(ROR):].count(MST) == 1  # stopped once, not again on waking
+    finally:
+        m.close()
+
+
+def test_a_unit_of_no_known_kind_is_refused_when_the_plan_is_made():
+    # it was a TypeError from connect() inside the run, as that unit's error
+    with pytest.raises(ValidationError, match="kind 'usb' is not one of port, can, sim"):
+        units.Unit(1, "usb", "/dev/ttyUSB0")

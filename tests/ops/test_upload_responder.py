@@ -12,7 +12,9 @@ import pytest
 from tmclsh.client.text import LineClient
 from tmclsh.link import open_serial
 from tmclsh.ops import program
+from tmclsh.base.errors import TmclError
 from tmclsh.ops.program import UploadError
+from tmclsh.tmcl import asm
 from tmclsh.tmcl.frames import Instruction
 
 from responder import LOADED, INVALID_VALUE, Responder, fields, reply
@@ -133,3 +135,61 @@ def test_a_copy_of_the_read_back_before_never_passes_a_cell(module, client):
     result = program.upload(client, prog)
     assert result.verified is False
     assert result.mismatch is not None and result.mismatch.address == 21
+
+
+def test_another_thread_on_the_client_waits_for_the_end_of_download_mode(module, client):
+    # a second thread reads a parameter while the upload is between two frames: sent then,
+    # the module would store the read as an instruction and answer it LOADED, and the
+    # reader would get the frame's echo for a value
+    import threading
+
+    prog = _program(40)
+    read: list[int] = []
+    reader = threading.Thread(target=lambda: read.append(client.value("GAP 4, 0")))
+
+    def progress(stage: str, done: int, total: int) -> None:
+        if stage == "upload" and done == 10:
+            reader.start()
+            reader.join(0.5)  # (a reader that got through goes now; one that waits, waits)
+
+    result = program.upload(client, prog, progress=progress)
+    reader.join(30)
+    assert result.verified is True
+    assert module.stores == list(range(40))  # the read was not stored among them
+    assert read == [0]  # the module's answer to GAP (status 100), not a stored frame's echo
+    heard = [fields(raw)[1] for raw in module.log]
+    assert heard.index(6) > heard.index(QUIT)  # the read went after download mode ended
+
+
+def test_verify_takes_the_program_upload_took(module, client, tmp_path):
+    # what load_program returns is what upload takes; verify took only instructions and
+    # failed with "'Program' object is not iterable"
+    source = tmp_path / "prog.tmc"
+    source.write_text("SAP 4, 0, 1000\nLoop: MVP ABS, 0, 200\nJA Loop\n")
+    prog = asm.load_program(source, client.require_module(), origin=7)
+    assert program.upload(client, prog).verified is True
+    assert program.verify_image(client, prog) is None  # read from its origin, 7
+    module.memory[8] = bytes(7)
+    mismatch = program.verify_image(client, prog)
+    assert mismatch is not None and mismatch.address == 8
+    assert program.verify_image(client, prog.instructions, 7).address == 8  # as before
+
+
+def test_ctrl_c_in_an_upload_is_a_keyboard_interrupt_and_download_mode_is_ended(module,
+                                                                                 client):
+    # a production line's loop that logs a TmclError and goes on to the next module must
+    # not go on after Ctrl-C: it was an UploadError (a TmclError) in the upload, and a
+    # KeyboardInterrupt in its verify
+    def progress(stage: str, done: int, total: int) -> None:
+        if stage == "upload" and done == 12:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt) as info:
+        try:
+            program.upload(client, _program(40), progress=progress)
+        except TmclError:
+            pytest.fail("Ctrl-C was caught as a TmclError")
+    cause = info.value.__cause__
+    assert isinstance(cause, UploadError) and cause.interrupted and cause.download_ended
+    assert cause.written == range(12) and "interrupted (Ctrl-C)" in str(info.value)
+    assert module.stores == list(range(12)) and not module.downloading

@@ -289,8 +289,8 @@ binary are asked in ASCII mode (as {_b("--ascii")} asks every silent address; a 
 ASCII mode is saved by {_b("--ascii")} {_b("--save")}), and that a backup's parameters are
 read, never written, from the module it is named for, and only when that module is the type
 named, alone at its address, in binary mode and out of its bootloader. From Python:
-{_b("tmclsh.ops.inventory")} ({_b("read_inventory")}, {_b("inventory_text")},
-{_b("compare")} -> {_b("Check")}).
+{_b("tmclsh.read_inventory")}, and {_b("tmclsh.compare_inventory")} with what
+{_b("tmclsh.scan_modules")} found -> {_b("Check")}.
 """
 
 

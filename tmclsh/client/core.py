@@ -253,7 +253,7 @@ class Client:
     @timeout.setter
     def timeout(self, value: float) -> None:
         if not (isinstance(value, (int, float)) and value > 0):
-            raise ValueError(f"timeout must be a positive number of seconds, got {value!r}")
+            raise ValidationError(f"timeout must be a positive number of seconds, got {value!r}")
         self._timeout = float(value)
 
     @property
@@ -367,7 +367,7 @@ class Client:
         if timeout is None:
             timeout = self._timeout
         elif not (isinstance(timeout, (int, float)) and timeout > 0):
-            raise ValueError(f"timeout must be a positive number of seconds, got {timeout!r}")
+            raise ValidationError(f"timeout must be a positive number of seconds, got {timeout!r}")
         if self._on_link_lost is not None and not self.connected:
             self._on_link_lost()
         try:
@@ -402,7 +402,7 @@ class Client:
         if timeout is None:
             timeout = self._timeout
         elif not (isinstance(timeout, (int, float)) and timeout > 0):
-            raise ValueError(f"timeout must be a positive number of seconds, got {timeout!r}")
+            raise ValidationError(f"timeout must be a positive number of seconds, got {timeout!r}")
         return run_requests(self, reqs, timeout, self.retries if retries is None else retries)
 
     def _before_next(self, req: Request) -> None:

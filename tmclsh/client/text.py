@@ -84,6 +84,8 @@ class LineClient(Client):
         else:
             from ..tmcl import asmline as asm  # (one line's reading and encoding)
 
+            if not isinstance(line, str):
+                raise TypeError(f"a TMCL line is a str (\"GAP 1, 0\"), got {line!r}")
             as_typed = line.startswith(AS_TYPED)
             parsed = asm.parse_line(line[1:] if as_typed else line)
             if parsed.mnemonic is None:

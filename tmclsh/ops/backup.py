@@ -466,13 +466,15 @@ def _setters() -> list[isa.InstructionSpec]:
 
 
 def read_backup(client: Client, path: Path | str, *, force: bool = False,
-                command: str = ".restore", with_link: bool = False,
+                command: str | None = None, with_link: bool = False,
                 split: Callable[[str], list[str]] = split_line) -> Backup:
     """Parse and check every line of ``path`` against the live module (nothing is sent).
     Only comments, blank lines and SAP/SGP lines the module accepts may be in it: anything
     else is an error at FILE:LINE, so a typo never reads as "matches". ``command`` (.diff,
-    .restore) is named in the hint for another module's backup; ``split`` cuts a line of the
-    file into shell lines (the shell's own, which knows its commands, from the shell)."""
+    .restore: the shell's) is named in the hint for another module's backup, and ``.diff``
+    compares whatever the file holds; None (Python) is read for a restore, the hint naming
+    ``force=True``. ``split`` cuts a line of the file into shell lines (the shell's own,
+    which knows its commands, from the shell)."""
     live = client.require_module()
     path = Path(path)
     from ..base import files
@@ -494,10 +496,12 @@ def read_backup(client: Client, path: Path | str, *, force: bool = False,
     other = backup.module_name is not None and _norm(backup.module_name) != _norm(live.name)
     if other and not force and has_data(live):
         verb = "compare" if command == ".diff" else "restore"
+        how = (f"{command} {path} --force" if command is not None
+               else "read_backup(..., force=True)")
         raise BackupFileError(
             f"{path} is a backup of a {backup.module_name}, this is a {live.name}; {verb} by "
-            f"parameter name with {command} {path} --force (parameters the {live.name} does "
-            "not have are skipped)", "check")
+            f"parameter name with {how} (parameters the {live.name} does not have are "
+            "skipped)", "check")
     # .diff compares whatever the file holds; .restore writes a value outside the manual's
     # range only where the file says so (``!``, as .save writes the module's own) or --force
     anything = command == ".diff" or force
@@ -516,7 +520,8 @@ def read_backup(client: Client, path: Path | str, *, force: bool = False,
         kinds = {e.kind for e in refused}
         hint = (f"\n(a value outside the manual's range is written only from a line that "
                 f"starts with {AS_TYPED}, as .save marks the module's own, or with "
-                f"{command} --force)" if "range" in kinds and command != ".diff" else "")
+                f"{command + ' --force' if command is not None else 'force=True'})"
+                if "range" in kinds and command != ".diff" else "")
         raise BackupFileError(f"{path}: {len(refused)} lines refused, nothing sent:\n"
                               + "\n".join(f"  {e}" for e in refused) + hint,
                               "range" if kinds == {"range"} else refused[0].kind)
@@ -746,11 +751,13 @@ def storable(done: list[Written], link_changed: list[Written]) -> list[Written]:
             and w.diff.slot.param.storable and w not in link_changed]
 
 
-def store(client: Client, written: list[Written]) -> int:
+def store(client: Client, written: list[Written],
+          link_changed: list[Written] | None = None) -> int:
     """Store each restored value permanently (STAP/STGP); how many were stored (a refusal is
-    the write's error)."""
+    the write's error). What ``restore`` returns may be given as it is: only what was
+    written and read back, of a parameter the module stores, is (``storable``)."""
     stored = 0
-    for w in written:
+    for w in storable(written, link_changed or []):
         slot = w.diff.slot
         reply = _request(client, STORE[slot.kind], slot)
         if reply is not None and not status_ok(reply.status):

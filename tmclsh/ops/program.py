@@ -26,15 +26,14 @@ mode the link is in. What the link cannot carry raises a
 
 Example::
 
-    from tmclsh import asm, program
-    from tmclsh.client.connect import connect
+    import tmclsh
 
-    with connect(sim="TMCM-1311") as c:
-        prog = asm.assemble_file("demo.tmc", c.require_module())
-        result = program.upload(c, prog)          # 132, frames, 133, then 134 verify
+    with tmclsh.connect(sim="TMCM-1311") as c:
+        prog = tmclsh.load_program("demo.tmc", c.require_module())
+        result = tmclsh.upload_program(c, prog)   # 132, frames, 133, then 134 verify
         assert result.verified
-        program.run(c)                            # 129 type 0
-        print(program.status(c))                  # AppStatus(state='run', pc=...)
+        tmclsh.run_program(c)                     # 129 type 0
+        print(tmclsh.program_status(c))           # AppStatus(state='run', pc=...)
 """
 
 from __future__ import annotations
@@ -122,7 +121,8 @@ class UploadError(TmclError):
     ``written``: addresses confirmed stored (status 101); ``unknown``: the address whose frame
     was sent but not confirmed (it may or may not be stored); ``unchanged``: addresses after
     it, which still hold what was there before. ``download_ended`` says whether 133 was
-    answered; ``interrupted`` is True for Ctrl-C.
+    answered; ``interrupted`` is True for Ctrl-C, which ``upload`` raises as the
+    ``KeyboardInterrupt`` it is, this error its ``__cause__``.
     """
 
     def __init__(self, reason: str, *, start: int, total: int, acked: int, sent: int,
@@ -270,7 +270,11 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
     132 (start download), one frame per instruction (each answered with status 101), 133;
     then, with ``verify``, every instruction is read back with 134 and compared. Download mode
     is always ended (133 in a ``finally``, best effort, also after Ctrl-C); an upload that did
-    not complete raises :class:`UploadError` saying what the memory holds now.
+    not complete raises :class:`UploadError` saying what the memory holds now, and one cut
+    short by Ctrl-C a ``KeyboardInterrupt`` whose ``__cause__`` is that error (a script that
+    goes on after a ``TmclError`` must not go on after Ctrl-C). Other threads
+    using the client wait from 132 until 133 is answered: a module in download mode stores
+    whatever it hears.
     """
     instructions, start = _image(program, origin)
     module = client.require_module()
@@ -290,35 +294,41 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
     make, address = Request.make, client.address
     frames = client.requests(_made([make(address, ins.opcode, ins.type, ins.motor, ins.value)
                                     for ins in instructions]), timeout=timeout)
-    client._downloading = True  # no retries: a repeated frame would be stored twice
-    try:
-        _ok(_send(client, Control.START_DOWNLOAD, 0, 0, start, timeout=timeout),
-            f"start download (132) at address {start}")
-        while acked < total:
-            sent = acked + 1  # (the next frame goes out, or may have, whatever happens now)
-            reply = next(frames)
-            if reply is None or reply.status != _LOADED:
-                _ok(reply, f"instruction at address {start + acked}", (Status.LOADED,))
-            acked += 1
-            if progress is not None:
-                progress("upload", acked, total)
-    except (TmclError, KeyboardInterrupt) as exc:
-        failure = exc
-    finally:
-        frames.close()
-        ended, end_error = _quit_download(client, timeout)
-        client._downloading = False
-        if not ended:
-            client._lifecycle.check_download_next()  # the next command ends it first, not stored
+    # the line is this upload's from 132 to 133: the module stores every frame it hears in
+    # download mode, so another thread's request on the same client in between would be
+    # stored as an instruction and answered as LOADED (its caller given a wrong value)
+    with client.lock:
+        client._downloading = True  # no retries: a repeated frame would be stored twice
+        try:
+            _ok(_send(client, Control.START_DOWNLOAD, 0, 0, start, timeout=timeout),
+                f"start download (132) at address {start}")
+            while acked < total:
+                sent = acked + 1  # (the next frame goes out, or may have, whatever happens)
+                reply = next(frames)
+                if reply is None or reply.status != _LOADED:
+                    _ok(reply, f"instruction at address {start + acked}", (Status.LOADED,))
+                acked += 1
+                if progress is not None:
+                    progress("upload", acked, total)
+        except (TmclError, KeyboardInterrupt) as exc:
+            failure = exc
+        finally:
+            frames.close()
+            ended, end_error = _quit_download(client, timeout)
+            client._downloading = False
+            if not ended:
+                client._lifecycle.check_download_next()  # the next command ends it first
     upload_seconds = time.monotonic() - began
     if failure is not None:
         interrupted = isinstance(failure, KeyboardInterrupt)
         reason = "interrupted (Ctrl-C)" if interrupted else _reason(failure)
         if isinstance(failure, StatusError) and acked < sent:
             sent = acked  # the module refused that frame: nothing was stored there
-        raise UploadError(reason, start=start, total=total, acked=acked, sent=sent,
-                          download_ended=ended, end_error=end_error,
-                          interrupted=interrupted) from failure
+        error = UploadError(reason, start=start, total=total, acked=acked, sent=sent,
+                            download_ended=ended, end_error=end_error, interrupted=interrupted)
+        if interrupted:
+            raise KeyboardInterrupt(str(error)) from error
+        raise error from failure
     if not ended:
         raise UploadError("quit download (133) failed", start=start, total=total,
                           acked=acked, sent=sent, download_ended=False, end_error=end_error)
@@ -416,10 +426,12 @@ def read_program(client, start: int = 0, count: int | None = None, *,
     return out
 
 
-def verify_image(client, instructions: Sequence[Instruction], start: int = 0, *,
-                 progress: Progress | None = None, timeout: float | None = None
-                 ) -> Mismatch | None:
+def verify_image(client, instructions: Program | Sequence[Instruction],
+                 start: int | None = None, *, progress: Progress | None = None,
+                 timeout: float | None = None) -> Mismatch | None:
     """Read every instruction back and compare bytes; the first difference, or None.
+    ``instructions`` is what ``upload`` takes: a ``Program`` (from its origin unless
+    ``start`` says) or instructions (from ``start``, default 0).
 
     A 134 answer is any well-formed frame, so a copy of an earlier answer that a bad line
     brings late reads as the cell's content: it may match where the cell differs, or differ
@@ -427,6 +439,7 @@ def verify_image(client, instructions: Sequence[Instruction], start: int = 0, *,
     while nothing waits (a suspect); those cells are read again, ``CONFIRM_ROUNDS`` times
     at most. A cell still in doubt then is no pass (``Mismatch.doubtful``): verified means
     certain (``read_until_certain``, on ``Client.in_doubt``)."""
+    instructions, start = _image(instructions, start)
     total = len(instructions)
     got: dict[int, Instruction] = {}
 

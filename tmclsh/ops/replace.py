@@ -527,8 +527,10 @@ class Replacement:
             result = prog.upload(c, image, 0, verify=True)
         except prog.UploadError as exc:
             self.upload_error = exc
-            if exc.interrupted:
-                raise KeyboardInterrupt from exc
+            raise
+        except KeyboardInterrupt as exc:
+            if isinstance(exc.__cause__, prog.UploadError):
+                self.upload_error = exc.__cause__
             raise
         if not result.verified:
             at = result.mismatch.address if result.mismatch else "?"

@@ -23,11 +23,15 @@ opened again and stopped too (a motor they set moving may still turn). A unit th
 link or whose module refuses fails alone. Nothing is imported in a unit's thread: a stop
 landing inside an import would leave a module half made for every unit after it.
 
+A unit's thread blocked in C when the stop comes (``fn`` in ``time.sleep``) takes it only
+when that wait returns: after ``STOP_GRACE`` the main thread stops that unit's module itself,
+through its client.
+
 From Python::
 
-    from tmclsh.ops import units
-    plan = [units.Unit(1, "port", "/dev/ttyUSB0", 1), units.Unit(2, "port", "/dev/ttyUSB0", 2)]
-    for r in units.run(plan, lambda c: c.value("GAP ActualPosition, 0")):
+    import tmclsh
+    plan = [tmclsh.Unit(1, "port", "/dev/ttyUSB0", 1), tmclsh.Unit(2, "port", "/dev/ttyUSB0", 2)]
+    for r in tmclsh.run_units(plan, lambda c: c.value("GAP ActualPosition, 0")):
         print(r.unit.label, r.value, r.error)
 """
 
@@ -35,6 +39,7 @@ from __future__ import annotations
 
 import importlib
 import threading
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -46,7 +51,12 @@ from ..link import port_class
 from ..client.connect import connect
 from .stop import stop_everything
 
+KINDS = ("port", "can", "sim")  # a unit's kind: connect's argument its link is given as
 WAIT_SLICE = 0.1  # s between the main thread's looks at the units (and its hooks' ticks)
+# s a unit's thread has to take the stop raised in it before the main thread stops its
+# module itself: a thread blocked in C (``time.sleep``, ``Event.wait``) takes it only when
+# that returns, and its motor would turn until then
+STOP_GRACE = 0.5
 
 
 @dataclass(frozen=True)
@@ -59,6 +69,12 @@ class Unit:
     address: int | None = None  # serial address; None: the default (or the profile's)
     can_id: int | None = None
     reply_id: int | None = None
+
+    def __post_init__(self) -> None:
+        # (said when the plan is made, not as each unit's error once the run has begun)
+        if self.kind not in KINDS:
+            raise ValidationError(f"unit {self.number}: kind {self.kind!r} is not one of "
+                                  f"{', '.join(KINDS)} (how its link is reached)")
 
     @property
     def bus(self) -> tuple[str, str | int | None]:
@@ -142,7 +158,8 @@ class Hooks:
         pass
 
     def not_stopped(self, unit: Unit, exc: BaseException) -> None:
-        """A unit that had ended could not be opened again to be stopped."""
+        """A unit that had ended could not be opened again to be stopped, or one whose
+        thread did not take the stop could not be stopped from the main thread."""
 
     def note(self, text: str) -> None:
         """The run's own words (main thread)."""
@@ -162,7 +179,10 @@ class _Line:
     # (CPython's bpo-45274 handling), and the run would end with a unit still running
     finished: threading.Event = field(default_factory=threading.Event)
     current: Unit | None = None  # the unit running (a stop is raised in its thread)
+    client: Any = None  # its module, once opened (the main thread stops it if need be)
     raised: bool = False  # a stop was raised in the thread and may not have landed yet
+    taken: bool = False  # the main thread stopped the current unit's module itself
+    tried: bool = False  # ... or tried to
     lock: threading.Lock = field(default_factory=threading.Lock)
     # the units whose run ended before any stop (a motor may still turn: a stop of the
     # whole run reaches them too)
@@ -186,6 +206,7 @@ class Run:
         self.interrupts = (KeyboardInterrupt, *interrupts)
         self.stopping: str | None = None
         self.stopped_by: BaseException | None = None
+        self._stopped_at = 0.0  # (time.monotonic() of the stop)
         self.results = {u.number: Result(u) for u in units}
         lines: dict[tuple, _Line] = {}
         for unit in units:
@@ -219,6 +240,8 @@ class Run:
         for line in self.lines:
             while not line.finished.wait(WAIT_SLICE):
                 self.hooks.tick()
+                if self.stopping is not None:
+                    self._stop_overdue()
 
     def _stop(self, exc: BaseException) -> None:
         """Stop every unit that runs (each stops its module); none starts."""
@@ -227,12 +250,36 @@ class Run:
             return
         self.stopping = getattr(exc, "why", None) or "interrupted"
         self.stopped_by = exc
+        self._stopped_at = time.monotonic()
         self.hooks.note(f"{self.stopping}: stopping every unit")
         for line in self.lines:
             with line.lock:
                 if line.current is not None and line.thread is not None:
                     line.raised = True
                     _raise_in(line.thread, KeyboardInterrupt)
+
+    def _stop_overdue(self) -> None:
+        """A unit's thread that has not taken the stop within ``STOP_GRACE`` is blocked in
+        C (``fn`` sleeping in ``time.sleep``): its module is stopped from here, through its
+        client (one exchange at a time whichever thread asks). The line's lock is held
+        meanwhile, so the thread, woken, neither closes the client under the stop nor stops
+        again a module stopped here; a stop that failed or was cut short is its again."""
+        if time.monotonic() - self._stopped_at < STOP_GRACE:
+            return
+        for line in self.lines:
+            with line.lock:
+                unit, client = line.current, line.client
+                if not line.raised or line.tried or unit is None or client is None:
+                    continue
+                line.tried = True  # (once: a stop that failed is said once)
+                with self.hooks.attached(unit):
+                    try:
+                        self.stop(client, self.stopping or "interrupted")
+                    except (TmclError, OSError) as exc:
+                        self.hooks.not_stopped(unit, exc)
+                    else:
+                        line.taken = True
+                        self.results[unit.number].stopped = True
 
     def _stop_finished(self) -> None:
         """A stop of the run reaches the units that had already ended too: a run may end
@@ -266,7 +313,7 @@ class Run:
                     if self.stopping is not None:
                         self._not_run(unit, self.stopping)
                         continue
-                    line.current = unit
+                    line.current, line.taken, line.tried = unit, False, False
                 self._unit(line, unit)
         finally:
             try:
@@ -291,6 +338,8 @@ class Run:
                 try:
                     hooks.begin(unit)
                     client = self.open(unit)
+                    with line.lock:
+                        line.client = client
                     result.connected = True
                     hooks.connected(unit, client)
                     result.value = self.fn(client)
@@ -302,7 +351,7 @@ class Run:
                 result.error = exc     # other units down)
                 hooks.failed(unit, exc)
             try:
-                if client is not None and self.stopping is not None:
+                if client is not None and self.stopping is not None and not line.taken:
                     # interrupted, or it ended just as the stop came: stopped all the same
                     self.stop(client, self.stopping)
                     result.stopped = True
@@ -318,6 +367,7 @@ class Run:
         was raised but has not landed yet is taken back (the unit is stopped by hand)."""
         with line.lock:
             line.current = None
+            line.client = None
             if line.raised:
                 line.raised = False
                 _raise_in(threading.current_thread(), None)

@@ -21,7 +21,7 @@ import struct
 from dataclasses import dataclass, field
 from enum import IntEnum
 
-from ..base.errors import ChecksumError, FrameError
+from ..base.errors import ChecksumError, FrameError, ValidationError
 from .status import STATUS_TEXT, Status, status_ok, status_text  # noqa: F401  (re-exported)
 
 SERIAL_FRAME_LEN = 9
@@ -88,12 +88,12 @@ def checksum(data: bytes) -> int:
 
 def _check_byte(name: str, value: int) -> None:
     if not isinstance(value, int) or not 0 <= value <= 255:
-        raise ValueError(f"{name} must be 0..255, got {value!r}")
+        raise ValidationError(f"{name} must be 0..255, got {value!r}")
 
 
 def _check_value(value: int) -> None:
     if not isinstance(value, int) or not INT32_MIN <= value <= UINT32_MAX:
-        raise ValueError(f"value must fit 32 bits ({INT32_MIN}..{UINT32_MAX}), got {value!r}")
+        raise ValidationError(f"value must fit 32 bits ({INT32_MIN}..{UINT32_MAX}), got {value!r}")
 
 
 # the first eight bytes of a serial frame, either direction; frozen dataclasses are filled

@@ -99,13 +99,16 @@ def cmd_upload(session: Session, argtext: str) -> None:
         with _progress(session) as progress:
             result = program.upload(session.client, prog, origin,
                                     verify=not opts.get("--no-verify"), progress=progress)
-    except UploadError as exc:
+    except UploadError:
         dbg.program = None  # memory now holds parts of two programs
         session.state.program_state = "stop"
-        if exc.interrupted:
+        raise
+    except KeyboardInterrupt as exc:
+        if isinstance(exc.__cause__, UploadError):  # (cut short in the upload, not its verify)
+            dbg.program = None
+            session.state.program_state = "stop"
             # say what is in memory, then let the shell's Ctrl-C policy run (motors stop)
-            session.out.error(None, str(exc))
-            raise KeyboardInterrupt from exc
+            session.out.error(None, str(exc.__cause__))
         raise
     dbg.program = prog
     dbg.files.clear()
