@@ -572,9 +572,10 @@ class Client:
                 got = framing.exchange(marker, kind, timeout)
             except (TmclTimeoutError, ChecksumError) as exc:
                 ledger.expect_late(marker, kind)
-                raise type(exc)(lost_check(self, address, "after a reply that went wrong, its "
-                                           "version (136) was asked to be sure which reply "
-                                           f"is which, and this failed too: {exc}")) from exc
+                raise type(exc)(lost_check(self, address, "after a reply that did not come or "
+                                           "came damaged, its version (136) was asked to be "
+                                           "sure which reply is which, and this failed too: "
+                                           f"{exc}")) from exc
             except BaseException:
                 ledger.expect_late(marker, kind)
                 raise
