@@ -344,4 +344,6 @@ def test_one_lost_line_check_is_a_lost_reply_two_in_a_row_a_module_that_stopped(
         c.request(Request(1, GIO, AIN0, ANALOG), retries=0)
     assert "was lost" in str(first.value)
     assert "stopped answering" in str(second.value)
+    # (the answer before the check did not come: said so, not as a reply that "went wrong")
+    assert "did not come" in str(second.value)
     sim.faults.drop_next = 0
