@@ -20,6 +20,15 @@ from pathlib import Path
 import pytest
 
 
+def cache_folder(request: pytest.FixtureRequest) -> Path:
+    """pytest's cache folder for the examples (kept between runs), or a temporary one when
+    the cache is off (``-p no:cacheprovider``): then they are fetched again."""
+    cache = getattr(request.config, "cache", None)
+    if cache is not None:
+        return cache.mkdir("pytrinamic")
+    return request.getfixturevalue("tmp_path_factory").mktemp("pytrinamic")
+
+
 def examples_dir(cache: Path) -> Path:
     """The ``examples/`` folder of the installed PyTrinamic's version (or skip the test);
     ``cache``: a folder that outlives the run (``config.cache.mkdir``)."""

@@ -188,9 +188,9 @@ REFUSED = [("TMCM-1640", "hall_digital_input.py"), ("TMCM-1640", "hall_position_
 
 @pytest.fixture(scope="session")
 def examples(request) -> Path:
-    from pytrinamic_examples import examples_dir
+    from pytrinamic_examples import cache_folder, examples_dir
 
-    return examples_dir(request.config.cache.mkdir("pytrinamic"))
+    return examples_dir(cache_folder(request))
 
 
 def _run_example(examples: Path, module: str, name: str,

@@ -124,14 +124,14 @@ def test_a_pytrinamic_example_for_an_imported_module_runs_to_its_end(imported, r
     """PyTrinamic's TMCM-1260 rotate_demo.py (rotate, stop, double the distance, back to 0,
     each until PyTrinamic's own 'position reached') on the simulated imported module, its
     clock 20x real time as in test_pytrinamic_clients.py."""
-    from pytrinamic_examples import examples_dir
+    from pytrinamic_examples import cache_folder, examples_dir
     from test_pytrinamic_clients import RUNNER, SPEED
 
     from tmclsh.sim import Simulator
     from tmclsh.sim.serve import serve_pty
     from tmclsh.tmcl import modules
 
-    examples = examples_dir(request.config.cache.mkdir("pytrinamic"))
+    examples = examples_dir(cache_folder(request))
     script = examples / "modules" / "TMCM1260" / "TMCL" / "rotate_demo.py"
     env = imported("TMCM1260", "TMCM-1260")
     modules.add_file(Path(env["XDG_CONFIG_HOME"]) / "tmclsh" / "modules" / "tmcm1260.toml")
