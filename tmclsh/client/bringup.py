@@ -121,13 +121,15 @@ def switch_address(client: Client, address: int) -> None:
 
 def identify(client: Client) -> Module:
     """Ask the module what it is (136 type 0) and take its data (numbers only for a type
-    tmclsh has none for)."""
+    tmclsh has none for). The string has no checksum: one naming no module tmclsh knows is
+    checked against 136 type 1 first (``_confirmed_version``), so that a bit lost on the line
+    does not make a TMCM-1311 a 'TMCM-1111' (on the way into ASCII mode too)."""
     reply = client.request(Request(client.address, _GET_VERSION, 0, 0, 0))
     if reply is None or reply.version is None:
         status = reply.status if reply is not None else 0
         raise StatusError(status, reply, f"address {client.address} refused the version "
                           f"request (136): status {status}")
-    _adopt_version(client, reply.version)
+    _adopt_version(client, *_confirmed_version(client, reply.version))
     assert client.module is not None
     return client.module
 

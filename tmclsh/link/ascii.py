@@ -257,10 +257,16 @@ def parse_reply(line: bytes, opcode: int = 0) -> Reply | None:
     if m is None:
         return None
     value = int(m.group(4) or b"0")
-    if not INT32_MIN <= value <= UINT32_MAX:
+    status = int(m.group(3))
+    if not INT32_MIN <= value <= UINT32_MAX or status not in _STATUSES:
+        # (a status no manual lists is a damaged line, not the module's word: an ASCII
+        # reply has no checksum to tell, and '100' with a bit lost reads '000' or '108')
         return None
     return Reply(m.group(1)[0] - _ADDRESS_BASE, m.group(2)[0] - _ADDRESS_BASE,
-                 int(m.group(3)), opcode, to_signed32(value))
+                 status, opcode, to_signed32(value))
+
+
+_STATUSES = frozenset(int(s) for s in Status)
 
 
 _REPLY_START = re.compile(rb"[\x40-\xff][\x40-\xff] *[0-9]")  # how a reply line begins
@@ -661,13 +667,18 @@ class AsciiFraming:
         given = next((rep.value for r, rep in reversed(ledger.recent) if r is not None), None)
         text, req, value = next((m for m in free if m[2] != given), free[0])
         earlier = pending.get(value, 0)  # answers like this one's still to come, first
+        again = 0  # the marker asked again, each time an answer was counted off as earlier
         line = command_bytes(address, text)
-        t.write(line)
-        self.stats["sent"] += 1
-        client.stats["sent"] += 1
-        if client._tracing:
-            client._trace("tx", line, text, request=req)
-        deadline = time.monotonic() + timeout
+
+        def ask() -> float:
+            t.write(line)
+            self.stats["sent"] += 1
+            client.stats["sent"] += 1
+            if client._tracing:
+                client._trace("tx", line, text, request=req)
+            return time.monotonic() + timeout
+
+        deadline = ask()
         while True:
             for raw, got in take_lines(buf):
                 kind, reply = classify_line(got, line, _GGP)
@@ -679,10 +690,19 @@ class AsciiFraming:
                         if client._tracing:
                             client._trace("rx", raw, reply)
                         ledger.took_marker(req, reply)
+                        # (the answers counted off may have been the markers' asked now,
+                        # the earlier ones lost: as many may still come)
+                        pending[value] = pending.get(value, 0) + again
                         return reply
-                    if reply.status == Status.OK and reply.value == value:
-                        earlier -= 1
                     self._late(raw, reply)  # (an earlier check's, crossed off)
+                    if reply.status == Status.OK and reply.value == value:
+                        # the earlier check's answer, or this one's with the earlier one
+                        # lost: no wait tells them apart, so the marker is asked again,
+                        # and its answer comes after both (waiting for this one's alone
+                        # would wait for ever once the earlier answer was lost)
+                        earlier -= 1
+                        again += 1
+                        deadline = ask()
                     continue
                 self._drop(raw, "not a reply")
             left = deadline - time.monotonic()
@@ -694,8 +714,8 @@ class AsciiFraming:
         client.stats["timeouts"] += 1
         self._dirty = True
         # (earlier answers of its kind that did not come before it were lost: this one is
-        # the one still to come)
-        pending[value] = 1
+        # the one still to come, and the markers asked again)
+        pending[value] = 1 + again
         raise TmclTimeoutError(f"no answer to {text!r} within {timeout:g} s")
 
     def _clean(self, t: StreamTransport) -> None:
