@@ -40,6 +40,7 @@ class ProgramModule(Responder):
         self.refuse_at: int | None = None
         self.stored_instead: dict[int, bytes] = {}
         self.copy_first: set[int] = set()
+        self.lose_at: int | None = None  # the address whose frame is stored, its reply lost
         self.last_read = b""
         super().__init__(**kw)
 
@@ -59,6 +60,8 @@ class ProgramModule(Responder):
             self.memory[self.at] = self.stored_instead.get(self.at, raw[1:8])
             self.stores.append(self.at)
             self.at += 1
+            if self.at - 1 == self.lose_at:
+                return None
             return reply(cmd, value, LOADED)
         if cmd == READ:
             body = bytes([2]) + self.memory.get(value, bytes(7))
@@ -107,6 +110,19 @@ def test_a_refused_frame_ends_the_upload_and_download_mode(module, client):
     assert "instruction at address 40" in str(err)
     assert module.stores == list(range(40))  # nothing after the refused frame was sent
     assert not module.downloading
+
+
+def test_one_lost_reply_is_not_called_a_lost_link_when_the_module_answers_133(module, client):
+    """One stored frame's reply lost on a noisy line: the module answered the 133 after it,
+    so the link is there; the upload says which reply did not come, not 'link lost'."""
+    module.lose_at = 7
+    with pytest.raises(UploadError) as info:
+        program.upload(client, _program(20))
+    err = info.value
+    assert err.download_ended and not module.downloading
+    assert (err.acked, err.sent) == (7, 8)
+    assert "link lost" not in str(err)
+    assert str(err).startswith("upload failed: no reply to SGP from address 1 within 1 s;")
 
 
 @pytest.mark.parametrize("where", [0, 3, 6])  # the opcode, the motor, the value's top byte

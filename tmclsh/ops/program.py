@@ -321,7 +321,7 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
     upload_seconds = time.monotonic() - began
     if failure is not None:
         interrupted = isinstance(failure, KeyboardInterrupt)
-        reason = "interrupted (Ctrl-C)" if interrupted else _reason(failure)
+        reason = "interrupted (Ctrl-C)" if interrupted else _reason(failure, ended)
         if isinstance(failure, StatusError) and acked < sent:
             sent = acked  # the module refused that frame: nothing was stored there
         error = UploadError(reason, start=start, total=total, acked=acked, sent=sent,
@@ -342,10 +342,11 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
     return result
 
 
-def _reason(exc: BaseException) -> str:
-    if isinstance(exc, TmclTimeoutError):
-        return f"link lost ({exc})"
-    if isinstance(exc, TransportError):
+def _reason(exc: BaseException, answered_133: bool) -> str:
+    """Why an upload stopped, in words true of the link: a reply that did not come, when
+    the module answered the 133 after it, was lost on a line that works (a noisy one)."""
+    if isinstance(exc, TransportError) or (isinstance(exc, TmclTimeoutError)
+                                           and not answered_133):
         return f"link lost ({exc})"
     return str(exc)
 
