@@ -114,12 +114,21 @@ def probe_mode(client: Client, timeout: float | None = None) -> Probe:
             return Probe(Mode.BINARY, host=reply.host)
         if data:
             client._trace("drop", data, "no binary answer to the mode probe")
+            if _version_string(data, host):
+                client._doubts.came_late(addr)  # (136's answer, after it was given up)
         late = end_line(client, timeout)
         if _binary_answer(late, addr, Control.GET_VERSION) is not None:
             # a slow binary module: resynchronise before its next use
             client._lifecycle.resync_next()
             return Probe(Mode.BINARY, host=host)
         return probe_ascii(client, timeout)
+
+
+def _version_string(data: bytes, host: int) -> bool:
+    """Does ``data`` hold a version string (136 type 0's answer: the host address, then
+    eight printable characters)?"""
+    return any(data[i] == host and all(32 <= b < 127 for b in data[i + 1:i + 9])
+               for i in range(len(data) - 8))
 
 
 def end_line(client: Client, timeout: float) -> bytes:

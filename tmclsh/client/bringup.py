@@ -61,6 +61,9 @@ def bring_up(client: Client, *, ascii: bool = False, strict: bool = True) -> Non
     client holds is the one expected; ``strict``: another type answering is an error (at
     connect), else it is taken (after a reconnect, ``.address``)."""
     expected = client.module
+    # (what no_answer_message compares: answers from the module in this bring-up)
+    client._late_base = client._late_from.get(client.address, 0)
+    client._replies_base = client._ledger.replies
     if ascii:
         _attach_ascii(client, expected, strict)
     else:
@@ -432,9 +435,16 @@ def no_answer_message(client: Client, exc: BaseException, *, ascii: bool = False
     url = getattr(client.transport, "url", where)
     usb = _is_usb_module(client)
     socket_url = "://" in url
+    # answers from it came in this bring-up, taken or too late to be: it is there, at this
+    # address, baud rate and mode (a slow module is no silent one)
+    late = client._late_from.get(addr, 0) > client._late_base
+    heard = (client.version is not None or late
+             or client._ledger.replies > client._replies_base) and client.ascii_link is None
     first = (f"replies came from {where} but were garbled (bad checksums)" if garbled else
+             f"the module at address {addr} on {where} answered too late (replies came "
+             "after tmclsh had stopped waiting for them)" if late else
              f"the module at address {addr} on {where} answered only in part"
-             if client.version is not None and client.ascii_link is None else
+             if heard else
              f"no module answered at address {addr} on {where}")
     if what is not None:
         pass
@@ -449,12 +459,16 @@ def no_answer_message(client: Client, exc: BaseException, *, ascii: bool = False
             what = (f"asked for its version (136) {_times(tries)}, waiting "
                     f"{client.timeout:g} s each")
     lines = [f"{first}: {what}. Likely causes, most likely first:"]
-    if client.version is not None and client.ascii_link is None:
-        # it answered 136 here, readable: the baud rate, the address and the mode are right
+    if heard:
+        # it answered here, readable: the baud rate, the address and the mode are right
+        slow = f"  - a slow link: --timeout {max(2 * client.timeout, 2):g}"
+        if late:
+            lines.append(slow)
         lines.append("  - the line: noise garbles or loses replies (RS485: termination "
                      "at both ends, ground, cable length), or another device talks on the "
                      "same bus")
-        lines.append(f"  - a slow link: --timeout {max(2 * client.timeout, 2):g}")
+        if not late:
+            lines.append(slow)
         return "\n".join(lines)
     if not usb and not socket_url:
         baud = getattr(client.transport, "baudrate", LINK_DEFAULTS["baud"])

@@ -159,6 +159,13 @@ class Client:
         """Called with each one-line notice of what the client did on its own (the module
         answers at a new address, download mode ended); None: they are logged."""
         self._checks_lost = 0  # line checks in a row that got no good answer (lost_check)
+        # replies from each address that came after tmclsh had stopped waiting for them
+        # (Doubts.late): a module slower than the timeout is no module that stopped
+        # answering (lost_check), nor one that does not answer (no_answer_message)
+        self._late_from: dict[int, int] = {}
+        self._late_seen = 0  # _late_from of the address at a row's first lost check
+        self._late_base = 0  # _late_from of the address when a bring-up began
+        self._replies_base = 0  # the ledger's replies when a bring-up began
         # called when a request finds the link down, to bring it back before the request
         # goes (a --keep-going script waits for a cable plugged back in); it raises
         # TransportError if the link stays down. None: the request fails at once.

@@ -53,6 +53,7 @@ class Doubts:
         (``Ledger.late``), or the line may carry anything; else it is unsolicited."""
         ledger = self._ledger
         if ledger.late(address, opcode, reply):
+            self.came_late(address)
             return True
         if ledger.opaque or self._client._downloading:
             # (no doubt cast, but a reply all the same: a second module answers here too)
@@ -60,6 +61,12 @@ class Doubts:
             return True
         self.unsolicited(reply)
         return False
+
+    def came_late(self, address: int) -> None:
+        """An answer from ``address`` came after its request was given up (counted in
+        ``Client._late_from``: the words for a module that does not answer in time)."""
+        late = self._client._late_from
+        late[address] = late.get(address, 0) + 1
 
     def noise_unsolicited(self) -> None:
         """Bytes that were no frame came while nothing was outstanding and nothing was
@@ -77,6 +84,7 @@ class Doubts:
         raw = bytes(window[:9])
         ledger = self._ledger
         if ledger.late_version():
+            self.came_late(self._client.address)
             self._discard(raw, "stale version string")
             return True
         if ledger.is_version_copy(raw[1:].decode("latin-1")):

@@ -187,9 +187,17 @@ class Lifecycle:
 def lost_check(client: Client, address: int, why: str) -> str:
     """The words for a line check (after a failure) that got no good answer: the first is a
     lost reply, as a line that loses one now and then does; only a second in a row, with
-    no good answer between, is a module that stopped answering."""
+    no good answer between, is a module that stopped answering, unless answers from it came
+    meanwhile, after they were given up: then it answers, too late for the timeout."""
     client._checks_lost += 1
+    late = client._late_from.get(address, 0)
     if client._checks_lost == 1:
+        client._late_seen = late
         return (f"a reply from address {address} was lost ({why}); the next command checks "
                 "the line again")
+    if late > client._late_seen:
+        # (answers came, after tmclsh had given them up: the module is there, and slow)
+        return (f"address {address} answers too late: its replies came after tmclsh had "
+                f"stopped waiting for them ({why}); give it more time: --timeout "
+                f"{max(2 * client.timeout, 2):g}")
     return f"address {address} stopped answering: {why}"

@@ -761,6 +761,7 @@ class AsciiFraming:
         if reply.status == Status.OK and self._pending.get(reply.value):
             self._pending[reply.value] -= 1  # an earlier marker's late answer
             self._drop(raw, "late answer to an earlier check")
+            self.owner._doubts.came_late(reply.module)
             return
         self._drop(raw, "late reply to an earlier command")
         self.owner._late(reply.module, reply.opcode, reply)

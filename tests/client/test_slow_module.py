@@ -1,0 +1,50 @@
+"""A module that answers later than the timeout is there: its answers come after tmclsh has
+given them up. What tmclsh says must be that (and that --timeout helps), not 'no module
+answered' or 'stopped answering', which send a technician to the cable, the baud rate or
+the address. Against a module written from the manual (tests/responder.py)."""
+
+from __future__ import annotations
+
+import pytest
+
+from tmclsh.base.errors import NoAnswerError, TmclTimeoutError
+from tmclsh.client.connect import connect
+from tmclsh.client.text import LineClient
+from tmclsh.link import open_serial
+
+from responder import PtyModule
+
+
+@pytest.fixture
+def module():
+    m = PtyModule(version="1311V111")
+    yield m
+    m.close()
+
+
+def test_connect_to_a_module_slower_than_the_timeout_says_it_answered_late(module):
+    module.delay = 0.5
+    with pytest.raises(NoAnswerError) as err:
+        connect(module.path, timeout=0.3)
+    said = str(err.value)
+    assert "no module answered" not in said
+    assert "answered too late" in said
+    # the cause it names first is the one that helps
+    assert said.splitlines()[1] == "  - a slow link: --timeout 2"
+
+
+def test_a_module_that_became_slow_is_not_said_to_have_stopped_answering(module):
+    module.values[(4, 0, False)] = 1234
+    c = LineClient(open_serial(module.path), module="TMCM-1311", timeout=0.3, retries=0)
+    try:
+        assert c.value("GAP 4, 0") == 1234
+        module.delay = 0.5  # from now on every answer comes after the timeout
+        said = []
+        for _ in range(4):
+            with pytest.raises(TmclTimeoutError) as err:
+                c.value("GAP 4, 0")
+            said.append(str(err.value))
+        assert not any("stopped answering" in s for s in said), said
+        assert "answers too late" in said[-1] and "--timeout" in said[-1]
+    finally:
+        c.close()
