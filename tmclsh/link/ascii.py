@@ -821,8 +821,11 @@ class AsciiFraming:
             buf += t.read_available()
         self.stats["timeouts"] += 1
         client.stats["timeouts"] += 1
-        raise TmclTimeoutError(f"no ASCII reply to {sent.decode('latin-1').rstrip()!r} from "
-                               f"address {address} within {timeout:g} s")
+        # (the command as typed: the address character and the padding of the line, which
+        # keeps modules that frame in nines in step, are the address said after it)
+        said = sent.decode("latin-1").strip()[1:].strip()
+        raise TmclTimeoutError(f"no ASCII reply to {said!r} from address {address} within "
+                               f"{timeout:g} s")
 
     def _drop(self, raw: bytes, why: str) -> None:
         self.stats["dropped_lines"] += 1
