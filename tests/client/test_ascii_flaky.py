@@ -97,8 +97,9 @@ def test_lost_answers_to_both_line_checks_do_not_leave_the_line_checked_for_ever
         # a read's answer is lost, then the answers to both line checks after it
         module.lose += ["GAP4,0", "GGP76,0", "GGP67,0"]
         c.retries = 0
-        with pytest.raises(TmclTimeoutError, match=r"^no ASCII reply to 'GAP 4, 0' from address 1"):
-            c.value("GAP 4, 0")  # (the line as typed, without its padding)
+        typed = r"^no ASCII reply to 'GAP 4, 0' from address 1"  # (without the padding)
+        with pytest.raises(TmclTimeoutError, match=typed):
+            c.value("GAP 4, 0")
         for _ in range(2):
             with pytest.raises(TmclTimeoutError):
                 c.value("GAP 4, 0")
