@@ -123,3 +123,20 @@ def test_a_damaged_version_string_is_checked_before_ascii_mode_is_refused(module
         assert c.value("GAP 4, 0") == 1111
     finally:
         c.close()
+
+
+def test_the_trace_says_why_the_line_is_checked(module):
+    """An answer byte for byte the one before (SAP 4 = 2000, then GAP 4 answers 2000) may be
+    a copy: the line is checked before the next request. The trace says so, not 'after an
+    answer that did not come' (every answer came)."""
+    c = connect(module.path, ascii=True, module="TMCM-1311", timeout=0.3)
+    notes: list[str] = []
+    c.add_tracer(lambda d, raw, what: notes.append(str(what)) if d == "note" else None)
+    try:
+        c.execute("SAP 4, 0, 2000")
+        assert c.value("GAP 4, 0") == 2000
+        checks = [n for n in notes if n.startswith("checking the line")]
+        assert checks and all("did not come" not in n for n in checks), notes
+        assert "may have been another request's" in checks[0]
+    finally:
+        c.close()

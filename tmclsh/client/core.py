@@ -547,9 +547,9 @@ class Client:
         ledger = self._ledger
         framing = self._framing
         self.stats["resyncs"] += 1
+        why = ledger.why_dirty()
         if self._tracers:
-            _tell(self._tracers, "note", b"",
-                  "checking the line with 136 after an earlier failure")
+            _tell(self._tracers, "note", b"", f"checking the line with 136 {why}")
         if self._downloading:
             # a marker would be stored as an instruction: wait for a quiet line instead;
             # stale replies are still dropped by opcode matching. That proves nothing, so a
@@ -579,10 +579,9 @@ class Client:
                 got = framing.exchange(marker, kind, timeout)
             except (TmclTimeoutError, ChecksumError) as exc:
                 ledger.expect_late(marker, kind)
-                raise type(exc)(lost_check(self, address, "after a reply that did not come or "
-                                           "came damaged, its version (136) was asked to be "
-                                           "sure which reply is which, and this failed too: "
-                                           f"{exc}")) from exc
+                raise type(exc)(lost_check(self, address, f"{why}, its version (136) was "
+                                           "asked to be sure which reply is which, and this "
+                                           f"failed too: {exc}")) from exc
             except BaseException:
                 ledger.expect_late(marker, kind)
                 raise

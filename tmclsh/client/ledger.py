@@ -212,6 +212,18 @@ class Ledger:
         return bool(self.stale or self.stale_versions or self.opaque or self.out_of_step
                     or (self.drained and not downloading))
 
+    def why_dirty(self) -> str:
+        """Why the line is checked before the next request, in words true of each cause
+        (the trace's note, the words of a check that fails)."""
+        if self.stale or self.stale_versions:
+            return "after an answer that did not come, or came damaged"
+        if self.out_of_step:
+            # (a reply nothing waited for, or an answer byte for byte the one before)
+            return "after a reply that may have been another request's"
+        if self.opaque:
+            return "after traffic that cannot be paired with requests"
+        return "after download mode"
+
     def mark_dirty(self) -> None:
         """The line may carry anything (another mode used it): resynchronise next time."""
         self.opaque = True

@@ -621,15 +621,16 @@ class AsciiFraming:
         again. (The binary link's marker, 136, does not exist in ASCII mode.)"""
         client = self.owner
         client.stats["resyncs"] += 1
+        why = client._ledger.why_dirty()
         if client._tracing:
-            client._trace("note", b"", "checking the line with a read whose answer is known, "
-                                      "after an answer that did not come")
+            client._trace("note", b"", f"checking the line with a read whose answer is known, "
+                                      f"{why}")
         try:
             self._marker(t, address, timeout)
         except TmclTimeoutError as exc:
             raise TmclTimeoutError(client._lost_check(
-                address, "after an answer that did not come, a value whose answer is known "
-                f"was read to be sure which reply is which: {exc}")) from None
+                address, f"{why}, a value whose answer is known was read to be sure which "
+                f"reply is which: {exc}")) from None
         client._checks_lost = 0
         client._ledger.forget()
 
