@@ -32,3 +32,32 @@ def test_a_silent_module_after_a_reconnect_keeps_its_name_and_leaving_says_why_i
     finally:
         client.close()
         module.close()
+
+
+def test_leaving_with_the_link_down_names_the_motor_tmclsh_left_turning(capsys):
+    """A motor set turning, then the link lost (the USB cable pulled from a powered module):
+    Ctrl-D cannot ask the module or stop it, and says so, naming what it last told the motor
+    (was: it left without a word)."""
+    from tmclsh.base.errors import TmclError
+    from responder import PtyModule
+
+    module = PtyModule(version="1311V111")
+    client = connect(module.path, timeout=0.3, retries=0)
+    try:
+        session = Session(client, Output())
+        asked: list[str] = []
+        session.choose = lambda question, options: asked.append(question) or "leave"
+        app.run_one(session, "ROR 0, 3000")
+        module.close()  # pulled: the port is gone
+        try:
+            client.execute("GAP 3, 0")
+        except (TmclError, OSError):
+            pass
+        assert not client.connected
+        capsys.readouterr()
+        assert app.may_leave(session)
+        said = capsys.readouterr()
+        text = said.out + said.err
+        assert "link down" in text and "motor 0: ROR 0, 3000" in text, text
+    finally:
+        client.close()

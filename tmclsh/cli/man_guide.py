@@ -146,7 +146,9 @@ back until it is 0. Only motors that read 0 are called stopped; any other is nam
 Leaves the shell, like {_b(".quit")}. While a motor turns or the stored program runs, it
 asks first: 1 stop everything first, 2 leave it running, or 3 cancel; the number chooses (or
 the arrows and Enter), and the selection starts on 1 every time. A motor the shell told to
-turn and did not stop counts, even while its speed reads 0 (a stalled motor).
+turn and did not stop counts, even while its speed reads 0 (a stalled motor). With the link
+down (and not brought back by one attempt) it cannot ask: it says so and names what it last
+told each such motor.
 .SS Keys in .watch
 .TP
 {_b("s")} or space

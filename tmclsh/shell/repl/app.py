@@ -289,6 +289,17 @@ def may_leave(session: Session) -> bool:
 
     client = session.client
     choose = getattr(session, "choose", None)
+    if not client.connected and choose is not None and client.motion:
+        # the link went down while a motor tmclsh set moving may still move (a USB cable
+        # pulled from a powered module): one attempt to bring it back and ask; else say so
+        why = session.reconnect()
+        if why is not None:
+            told = "; ".join(f"motor {m}: {c.line}" for m, c in
+                             sorted(client.motion.motors().items()))
+            session.out.warn(f"leaving with the link down ({why}): tmclsh could not ask the "
+                             f"module or stop it, and last set {told}")
+            return True
+        session.out.ok(reconnected(client))
     if not client.connected or choose is None:
         return True
     if getattr(client, "bring_up_pending", False):  # (its answers are waited for: say so)
