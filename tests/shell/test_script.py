@@ -406,6 +406,19 @@ def test_source_from_the_prompt_reports_and_fails_once(session, tmp_path, capsys
     assert "hi" in cap.out and f"{path}:2: expectation failed: 0 (value 0)" in cap.err
 
 
+def test_source_with_a_bad_line_5_says_nothing_ran(session, tmp_path):
+    """A file is checked whole before its first line runs: its error says that nothing of
+    it was sent, as -f's 'not run (...; nothing was sent)' does."""
+    path = write(tmp_path, "s.tmcl", "SAP 4, 0, 1000\nGAP 4, 0\n.echo four\n\n"
+                                     "SAP 4, 0, -7\n")
+    sent = session.client.stats["sent"]
+    with pytest.raises(script.ScriptError) as info:
+        session.run_line(f".source {path}")
+    assert str(info.value).startswith(f"{path}:5: -7 is out of range")
+    assert str(info.value).endswith(f"({path} not run: nothing was sent)")
+    assert session.client.stats["sent"] == sent
+
+
 def test_end_outside_a_block(session):
     with pytest.raises(Exception, match="without an open .repeat"):
         session.run_line(".end")

@@ -806,7 +806,13 @@ def run_source(session: Session, path: str) -> bool:
     """
     file = resolve(path, None)  # relative to the current folder
     lines = as_replayed(session, file, read_lines(file, ScriptError))
-    nodes = list(Parser(session, str(file), file.parent).nodes(lines))
+    try:
+        nodes = list(Parser(session, str(file), file.parent).nodes(lines))
+    except ScriptSyntaxError as exc:
+        # (the file is checked whole before its first line runs, as -f checks it: the
+        # error says so, as -f's summary does, so nobody wonders what ran before it)
+        raise ScriptSyntaxError(exc.file, exc.line, f"{exc.message} ({path} not run: "
+                                "nothing was sent)", exc.kind, exc.text) from None
     runner = Runner(session)
     _run_nodes(runner, nodes)
     return not runner.failed
