@@ -48,3 +48,23 @@ def test_a_module_that_became_slow_is_not_said_to_have_stopped_answering(module)
         assert "answers too late" in said[-1] and "--timeout" in said[-1]
     finally:
         c.close()
+
+
+def test_no_module_at_another_address_names_the_address_first_not_the_baud_rate(module):
+    """.address 3 on a line where the module at address 1 answers: the baud rate and the
+    port are proven right, so the message does not send anyone to change them."""
+    from tmclsh.client.bringup import switch_address
+
+    c = LineClient(open_serial(module.path), module="TMCM-1311", timeout=0.2, retries=1)
+    try:
+        c.identify()
+        with pytest.raises(NoAnswerError) as err:
+            switch_address(c, 3)
+        said = str(err.value)
+        assert said.startswith("no module answered at address 3")
+        assert "where the module at address 1 answers" in said
+        assert "baud" not in said
+        assert said.splitlines()[1].startswith("  - address: no module has address 3")
+        assert c.address == 1 and c.value("GAP 4, 0") == 0
+    finally:
+        c.close()

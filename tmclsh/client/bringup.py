@@ -115,8 +115,21 @@ def switch_address(client: Client, address: int) -> None:
     try:
         bring_up(client, ascii=ascii, strict=False)
     except BaseException as exc:
+        heard = client._late_from.get(address, 0) > client._late_base  # (answered late)
         (client.address, client.can_id, client.module, client.version,
          client.ascii_link) = old
+        if (isinstance(exc, NoAnswerError) and old[3] is not None and not client.is_can
+                and not heard):
+            # the module it talked to answers on this line at this rate: the baud rate and
+            # the port are right, and the likely causes are fewer than at connect
+            where = client.describe()
+            raise NoAnswerError(
+                f"no module answered at address {address} on {where}, where the module at "
+                f"address {old[0]} answers. Likely causes, most likely first:\n"
+                f"  - address: no module has address {address}: 'tmclsh scan"
+                f"{connection_words(client)}' lists who answers\n"
+                f"  - a slow module: --timeout {max(2 * client.timeout, 2):g}"
+                f"\nstill talking to address {old[0]}") from exc
         if isinstance(exc, TmclError):
             raise type(exc)(f"{exc}\nstill talking to address {old[0]}") from exc
         raise
