@@ -170,8 +170,31 @@ def _old_then_new(client, sim):
     return old, new
 
 
-def test_corrupted_reply_during_upload(client, sim):
+def test_a_corrupted_reply_during_upload_stores_the_program_again_from_132(client, sim):
+    """A damaged reply on a line that works (the 133 after it is answered): that frame may
+    be stored, so it cannot be sent again alone; the whole program is, from 132, and the
+    verify says it is all there."""
     old, new = _old_then_new(client, sim)
+    notices: list[str] = []
+    client.on_notice = notices.append
+
+    def corrupt():
+        sim.faults.corrupt_next = 1
+
+    fail_at_frame(client, 5, corrupt)  # the reply to frame 6 (address 5) is corrupted
+    result = program.upload(client, new)
+    assert result.verified
+    assert len(notices) == 1 and "corrupted reply" in notices[0]
+    assert "storing the program again from address 0 (attempt 2 of 3)" in notices[0]
+    assert program.same_image(program.read_program(client, 0, 15), new.instructions)
+    assert sim.param("global", 129) == 0
+
+
+def test_corrupted_reply_during_upload(client, sim):
+    """With no retries (--retries 0) the upload stops at the damaged reply and says what
+    the memory holds."""
+    old, new = _old_then_new(client, sim)
+    client.retries = 0
 
     def corrupt():
         sim.faults.corrupt_next = 1
@@ -372,6 +395,7 @@ def test_shell_source_map(client, sim, timer_file, tmp_path, capsys):
 def test_shell_upload_interrupted_message(client, sim, timer_file, capsys):
     s = Session(client, Output(), yes=True)
     s.run_line(f".upload {DEMO}")
+    client.retries = 0  # (else the program is stored again, and the upload succeeds)
 
     def corrupt():
         sim.faults.corrupt_next = 1

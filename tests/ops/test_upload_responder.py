@@ -41,6 +41,9 @@ class ProgramModule(Responder):
         self.stored_instead: dict[int, bytes] = {}
         self.copy_first: set[int] = set()
         self.lose_at: int | None = None  # the address whose frame is stored, its reply lost
+        self.lose_once: set[int] = set()  # ... the first time only (a noisy line)
+        self.lose_start_once = False  # the first 132's reply lost (download mode begun)
+        self.starts = 0  # 132s heard
         self.last_read = b""
         super().__init__(**kw)
 
@@ -50,6 +53,10 @@ class ProgramModule(Responder):
             return None
         if cmd == START:
             self.downloading, self.at = True, value
+            self.starts += 1
+            if self.lose_start_once:
+                self.lose_start_once = False
+                return None
             return reply(cmd, value)
         if cmd == QUIT:
             self.downloading = False
@@ -61,6 +68,9 @@ class ProgramModule(Responder):
             self.stores.append(self.at)
             self.at += 1
             if self.at - 1 == self.lose_at:
+                return None
+            if self.at - 1 in self.lose_once:
+                self.lose_once.discard(self.at - 1)
                 return None
             return reply(cmd, value, LOADED)
         if cmd == READ:
@@ -123,6 +133,50 @@ def test_one_lost_reply_is_not_called_a_lost_link_when_the_module_answers_133(mo
     assert (err.acked, err.sent) == (7, 8)
     assert "link lost" not in str(err)
     assert str(err).startswith("upload failed: no reply to SGP from address 1 within 1 s;")
+
+
+def test_a_reply_lost_once_stores_the_whole_program_again_from_132(module, client):
+    """A noisy line loses one frame's reply: that frame may be stored or not, and one sent
+    again would be stored twice; so download mode is ended and the program stored again
+    from its start, whole, each frame once per attempt, and verified."""
+    notices: list[str] = []
+    client.on_notice = notices.append
+    module.lose_once = {12}
+    prog = _program(30)
+    result = program.upload(client, prog, origin=3)
+    assert result.verified and not module.downloading
+    assert module.starts == 2
+    assert module.stores == list(range(3, 13)) + list(range(3, 33))  # up to the lost one, then all
+    assert [module.memory[3 + i] for i in range(30)] == [i.to_bytes() for i in prog]
+    assert len(notices) == 1 and "no reply to SGP from address 1" in notices[0]
+    assert "again from address 3 (attempt 2 of 3)" in notices[0]
+
+
+def test_a_lost_answer_to_132_is_started_again(module, client):
+    module.lose_start_once = True
+    result = program.upload(client, _program(10))
+    assert result.verified and module.starts == 2 and not module.downloading
+    assert module.stores == list(range(10))  # (the first 132's frames: none went)
+
+
+def test_a_reply_lost_at_every_attempt_ends_in_an_upload_error_naming_what_may_be_stored(
+        module, client):
+    module.lose_at = 7
+    notices: list[str] = []
+    client.on_notice = notices.append
+    with pytest.raises(UploadError) as info:
+        program.upload(client, _program(20))
+    assert module.starts == 3 and len(notices) == 2  # as often as a request is retried
+    assert (info.value.acked, info.value.sent) == (7, 8)
+    assert not module.downloading
+
+
+def test_no_retries_no_second_attempt(module, client):
+    client.retries = 0
+    module.lose_once = {4}
+    with pytest.raises(UploadError):
+        program.upload(client, _program(10))
+    assert module.starts == 1 and module.stores == list(range(5))
 
 
 @pytest.mark.parametrize("where", [0, 3, 6])  # the opcode, the motor, the value's top byte

@@ -44,7 +44,8 @@ from dataclasses import dataclass
 
 from ..tmcl import instructions as isa
 from ..tmcl.asm import Program
-from ..base.errors import StatusError, TmclError, TmclTimeoutError, TransportError, ValidationError
+from ..base.errors import (ChecksumError, StatusError, TmclError, TmclTimeoutError, TransportError,
+                           ValidationError)
 from ..base.logs import Logger
 from ..tmcl.frames import AppState, Control, Instruction, Request, Status
 from ..client.shared import shared_text
@@ -268,7 +269,10 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
     """Store ``program`` on the module from ``origin`` (default: the program's origin).
 
     132 (start download), one frame per instruction (each answered with status 101), 133;
-    then, with ``verify``, every instruction is read back with 134 and compared. Download mode
+    then, with ``verify``, every instruction is read back with 134 and compared. A reply lost
+    or damaged on a line that works (the module answers the 133 after it) cannot be asked
+    again (the frame may be stored, and would be stored twice): the whole program is stored
+    again from 132, as often as the client retries a request. Download mode
     is always ended (133 in a ``finally``, best effort, also after Ctrl-C); an upload that did
     not complete raises :class:`UploadError` saying what the memory holds now, and one cut
     short by Ctrl-C a ``KeyboardInterrupt`` whose ``__cause__`` is that error (a script that
@@ -285,45 +289,37 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
         raise ValidationError("the program has no instructions; nothing to upload")
     check_fits(module, start, len(instructions))
     total = len(instructions)
-    acked = sent = 0
-    failure: BaseException | None = None
     began = time.monotonic()
-    # one run of requests (Client.requests), the frames made before the first goes (every one
-    # goes to the module that got 132; an Instruction holds plain ints in range, its value
-    # signed: make's fast path)
+    # the frames made before the first goes (every one goes to the module that got 132; an
+    # Instruction holds plain ints in range, its value signed: make's fast path)
     make, address = Request.make, client.address
-    frames = client.requests(_made([make(address, ins.opcode, ins.type, ins.motor, ins.value)
-                                    for ins in instructions]), timeout=timeout)
+    reqs = _made([make(address, ins.opcode, ins.type, ins.motor, ins.value)
+                  for ins in instructions])
     # the line is this upload's from 132 to 133: the module stores every frame it hears in
     # download mode, so another thread's request on the same client in between would be
     # stored as an instruction and answered as LOADED (its caller given a wrong value)
+    tries = 1 + client.retries
+    furthest = 0  # frames sent, in the attempt that sent the most (what may be stored)
     with client.lock:
-        client._downloading = True  # no retries: a repeated frame would be stored twice
-        try:
-            _ok(_send(client, Control.START_DOWNLOAD, 0, 0, start, timeout=timeout),
-                f"start download (132) at address {start}")
-            while acked < total:
-                sent = acked + 1  # (the next frame goes out, or may have, whatever happens)
-                reply = next(frames)
-                if reply is None or reply.status != _LOADED:
-                    _ok(reply, f"instruction at address {start + acked}", (Status.LOADED,))
-                acked += 1
-                if progress is not None:
-                    progress("upload", acked, total)
-        except (TmclError, KeyboardInterrupt) as exc:
-            failure = exc
-        finally:
-            frames.close()
-            ended, end_error = _quit_download(client, timeout)
-            client._downloading = False
-            if not ended:
-                client._lifecycle.check_download_next()  # the next command ends it first
+        for attempt in range(1, tries + 1):
+            acked, sent, failure, ended, end_error = _store(client, reqs, start, timeout,
+                                                            progress)
+            if isinstance(failure, StatusError) and acked < sent:
+                sent = acked  # the module refused that frame: nothing was stored there
+            furthest = max(furthest, sent)
+            if failure is None or attempt == tries or not _again(failure, ended):
+                break
+            # a reply lost or damaged on a line that works (133 was answered): whether that
+            # frame was stored cannot be known, and one sent again would be stored twice;
+            # the whole program from 132 can, over what the attempt before stored
+            client._taps.notice(f"upload: {_reason(failure, ended)}; storing the program "
+                                f"again from address {start} (attempt {attempt + 1} of "
+                                f"{tries})")
+    sent = furthest
     upload_seconds = time.monotonic() - began
     if failure is not None:
         interrupted = isinstance(failure, KeyboardInterrupt)
         reason = "interrupted (Ctrl-C)" if interrupted else _reason(failure, ended)
-        if isinstance(failure, StatusError) and acked < sent:
-            sent = acked  # the module refused that frame: nothing was stored there
         error = UploadError(reason, start=start, total=total, acked=acked, sent=sent,
                             download_ended=ended, end_error=end_error, interrupted=interrupted)
         if interrupted:
@@ -340,6 +336,48 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
         result.verified = result.mismatch is None
         result.verify_seconds = time.monotonic() - began
     return result
+
+
+def _store(client, reqs: list[Request], start: int, timeout: float | None,
+           progress: Progress | None
+           ) -> tuple[int, int, BaseException | None, bool, str | None]:
+    """One attempt of ``upload``'s: 132, the frames, 133 (always, in a ``finally``). Returns
+    the frames acknowledged, the frames sent (the last may be stored or not), what stopped
+    it (None: every frame stored), whether 133 was answered and why not."""
+    total = len(reqs)
+    acked = sent = 0
+    failure: BaseException | None = None
+    frames = client.requests(reqs, timeout=timeout)  # (one run of requests)
+    client._downloading = True  # no retries: a repeated frame would be stored twice
+    try:
+        _ok(_send(client, Control.START_DOWNLOAD, 0, 0, start, timeout=timeout),
+            f"start download (132) at address {start}")
+        while acked < total:
+            sent = acked + 1  # (the next frame goes out, or may have, whatever happens)
+            reply = next(frames)
+            if reply is None or reply.status != _LOADED:
+                _ok(reply, f"instruction at address {start + acked}", (Status.LOADED,))
+            acked += 1
+            if progress is not None:
+                progress("upload", acked, total)
+    except (TmclError, KeyboardInterrupt) as exc:
+        failure = exc
+    finally:
+        frames.close()
+        ended, end_error = _quit_download(client, timeout)
+        client._downloading = False
+        if not ended:
+            client._lifecycle.check_download_next()  # the next command ends it first
+    return acked, sent, failure, ended, end_error
+
+
+def _again(failure: BaseException, ended: bool) -> bool:
+    """Is an upload that ``failure`` stopped worth storing again from 132? When a reply was
+    lost or damaged and the module answered the 133 after it (the line works, download mode
+    is over); not for a frame the module refused (it would refuse it again), a link gone,
+    or Ctrl-C."""
+    return ended and isinstance(failure, (TmclTimeoutError, ChecksumError)) and not \
+        isinstance(failure, TransportError)
 
 
 def _reason(exc: BaseException, answered_133: bool) -> str:

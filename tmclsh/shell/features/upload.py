@@ -57,7 +57,16 @@ def _progress(session: Session) -> Iterator[program.Progress | None]:
                 tasks[phase] = bar.add_task(names.get(phase, phase), total=total)
             bar.update(tasks[phase], completed=done)  # type: ignore[arg-type]
 
-        yield update
+        # what the client says meanwhile (the upload stored again after a lost reply) goes
+        # above the bar, on its console: written beside it, it ran on from the bar's line
+        client = session.client
+        before = client.on_notice
+        client.on_notice = lambda text: bar.console.print(text, style="tmcl.warn",
+                                                          markup=False, highlight=False)
+        try:
+            yield update
+        finally:
+            client.on_notice = before
 
 
 def complete_file(session: Session, text: str) -> list[str]:
