@@ -483,3 +483,19 @@ def test_version_read_in_the_other_byte_order_is_explained_not_a_fault(capsys):
             assert "the same as the string, read type first" in said
             assert "TMCM-1640 data says version first" in said
             assert not out.err  # a statement, not a warning
+
+
+def test_help_of_a_parameter_command_with_its_parameter_explains_the_parameter(session,
+                                                                              capsys):
+    """`help GGP 67` is about GP 67 (the 67 was ignored: GGP's own help was shown), and the
+    whole line typed after help names the same parameter."""
+    for line in ("help GGP 67", "help GGP 67, 0", "help SGP ASCIIMode, 0, 1"):
+        session.run_line(line)
+        out = capsys.readouterr().out
+        assert out.startswith("GP 67  ASCIIMode"), (line, out[:80])
+    session.run_line("help SAP MaxCurrent, 0, 100")
+    assert capsys.readouterr().out.startswith("AP 6  MaxCurrent")
+    session.run_line("help GGP")  # the command itself, as before
+    assert capsys.readouterr().out.startswith("GGP  (command 10)")
+    session.run_line("help MVP ABS")  # not a parameter command: its own help
+    assert capsys.readouterr().out.startswith("MVP  (command 4)")

@@ -56,6 +56,11 @@ def cmd_help(session: Session, arg: str) -> None:
         raise ValidationError(unknown_command(word))
     spec = isa.by_mnemonic(word)
     if spec is not None:
+        kind = _PARAM_KINDS.get(spec.type_kind)
+        named = rest.split(None, 1)[1].split(",")[0].strip() if " " in rest.strip() else ""
+        if kind is not None and named:
+            # `help GGP 67`, `help SAP MaxCurrent, 0, 100`: the parameter the line names
+            return cmd_param(session, f"{kind} {named}", from_help=True)
         return _help_instruction(session, spec, source=source)
     number = _number(word)
     if number is not None:
@@ -71,6 +76,9 @@ def cmd_help(session: Session, arg: str) -> None:
         # `help SAPP` is a command misspelt, not a parameter: suggest commands of its kind
         raise ValidationError(f"no help topic or parameter matches {word!r}; did you mean "
                               f"{', '.join(near)}? (.help lists the commands)") from None
+
+
+_PARAM_KINDS = {"axis_param": "AP", "global_param": "GP"}  # how `help` names their parameters
 
 
 def _near_instructions(session: Session, word: str) -> list[str]:
