@@ -436,16 +436,22 @@ def test_upload_under_faults(shape, inject, timeout, retries, start, seed):
 
         remove = client.add_tracer(injector)
         # 132, the frames, 133 as often as the client retries (at least twice, each after
-        # a quiet line), then a 134 per instruction (each with retries and a marker)
+        # a quiet line), all of it once more for each retry (a reply lost: the program is
+        # stored again from 132), then a 134 per instruction (each with retries and a marker)
         quit_tries = max(2, 1 + retries)
-        attempts = 1 + len(image) + quit_tries + len(image) * (1 + retries)
-        budget = attempts * h.per_attempt + quit_tries * max(0.2, timeout) + SLACK
+        stores = 1 + retries
+        attempts = stores * (1 + len(image) + quit_tries) + len(image) * (1 + retries)
+        budget = (attempts * h.per_attempt + stores * quit_tries * max(0.2, timeout)
+                  + stores * SLACK)
         t0 = time.monotonic()
         try:
             result = program.upload(client, image, start)
             error = None
         except UploadError as exc:
             result, error = None, exc
+        except KeyboardInterrupt as exc:  # Ctrl-C in the upload: what it left, the cause
+            assert isinstance(exc.__cause__, UploadError) and exc.__cause__.interrupted, exc
+            result, error = None, exc.__cause__
         except TmclError as exc:  # the verify pass failed: download had ended
             assert isinstance(exc, LINK_ERRORS), repr(exc)
             result, error = None, exc
