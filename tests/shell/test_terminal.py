@@ -271,6 +271,20 @@ def test_terminal_through_the_cli_without_a_tty(run_tmclsh):
     assert "--- BIN sent: module in binary mode" in notes
 
 
+def test_the_terminal_says_nothing_of_reading_twice_until_the_shell_reads_in_ascii(
+        run_tmclsh):
+    """The terminal passes lines through and reads nothing twice: the note that the shell
+    reads every setting twice in ASCII mode comes only when the shell goes on in it."""
+    res = run_tmclsh("--sim", "-c", ".ascii --bin", input="GAP 1, 0\n")
+    assert res.returncode == 0, res.stderr
+    assert "no checksum" not in res.stderr
+    res = run_tmclsh("--sim", "-c", ".ascii --no-bin\nGAP 1, 0", input="GAP 1, 0\n")
+    assert res.returncode == 0, res.stderr
+    notes = res.stderr
+    assert notes.count("no checksum") == 1
+    assert notes.index("module stays in ASCII mode") < notes.index("no checksum")
+
+
 def test_terminal_raw_needs_a_tty(run_tmclsh):
     res = run_tmclsh("--sim", "-c", ".ascii --raw")
     assert res.returncode != 0 and "needs a terminal" in res.stderr

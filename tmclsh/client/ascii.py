@@ -197,9 +197,10 @@ _LINKS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _told = [False]  # NO_CHECKSUM was said in this run
 
 
-def _tell_no_checksum(client: Client) -> None:
+def tell_no_checksum(client: Client) -> None:
     """NO_CHECKSUM, the first time this run reads through an ASCII mode: a paragraph
-    repeated at every connect is one the user learns to skip."""
+    repeated at every connect is one the user learns to skip. (``.ascii``'s terminal reads
+    nothing itself: it tells this when the shell goes on in ASCII mode after it.)"""
     if not _told[0]:
         _told[0] = True
         client._taps.notice(NO_CHECKSUM)
@@ -297,7 +298,7 @@ class AsciiLink:
                 else:
                     link.echo, link.gp67, link._closed = echo, probe.gp67, False
                 if tell:
-                    _tell_no_checksum(client)
+                    tell_no_checksum(client)
                 link.entered = entered
                 link.framing.clear()
                 client._lifecycle.clear_input()

@@ -34,7 +34,7 @@ from ...tmcl import instructions as isa
 from ...client.ascii import (CR, GP_ASCII_MODE, GP_BANK, ECHO_NAMES, AsciiLink, Echo, LineKind,
                              address_char, ascii_commands, describe_gp67, drive, echo_mode,
                              echo_written, mode_record, mode_text, switch,
-                             gp67_value, starts_in_ascii)
+                             gp67_value, starts_in_ascii, tell_no_checksum)
 from ...base.errors import StatusError, ValidationError
 from ...tmcl.frames import Request, status_ok
 from ..lang import options
@@ -349,7 +349,7 @@ def cmd_ascii(session: Session, argtext: str) -> None:
     tty_in = sys.stdin.isatty() and sys.stdout.isatty()
     if opts.raw and not tty_in:
         raise ValidationError(".ascii --raw needs a terminal")
-    link, news = drive(client, tell=not opts.raw)
+    link, news = drive(client, tell=False)  # (the terminal reads nothing twice: _leave)
     if opts.raw:  # straight to the terminal: no prompt to draw around, no proxy's delay
         term = Terminal(session, link, opts, real_write(sys.__stdout__),
                         write_note=real_write(sys.__stderr__))
@@ -398,6 +398,7 @@ def _leave(term: Terminal, interactive: bool) -> None:
     else:
         term.note("module stays in ASCII mode, also when tmclsh exits (the shell talks to "
                   "it in ASCII; .mode binary switches back)")
+        tell_no_checksum(term.session.client)  # (from here the shell reads through it)
 
 
 def _complete_mode(session: Session, text: str) -> list[tuple[str, str]]:
