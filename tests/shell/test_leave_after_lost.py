@@ -61,3 +61,30 @@ def test_leaving_with_the_link_down_names_the_motor_tmclsh_left_turning(capsys):
         assert "link down" in text and "motor 0: ROR 0, 3000" in text, text
     finally:
         client.close()
+
+
+def test_a_line_typed_after_the_link_went_unnoticed_says_it_is_down_not_still_down(capsys):
+    """The link went while nobody typed (only the toolbar showed it): the next line says the
+    link is down and did not come back; "still disconnected" referred to nothing said."""
+    from tmclsh.base.errors import TmclError
+    from responder import PtyModule
+
+    module = PtyModule(version="1311V111")
+    client = connect(module.path, timeout=0.3, retries=0)
+    try:
+        session = Session(client, Output())
+        module.close()  # pulled
+        try:
+            client.execute("GAP 3, 0")  # (the toolbar's poll, say, finds it gone)
+        except (TmclError, OSError):
+            pass
+        assert not client.connected
+        capsys.readouterr()
+        sent = client.stats["sent"]
+        app.run_one(session, "GAP 1, 0")
+        said = capsys.readouterr()
+        text = said.out + said.err
+        assert "the link is down and did not come back" in text and "still" not in text, text
+        assert "nothing was sent" in text and client.stats["sent"] == sent
+    finally:
+        client.close()

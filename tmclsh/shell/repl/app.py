@@ -529,5 +529,8 @@ def _try_reconnect(session: Session, quiet: bool = False) -> bool:
         return True
     if not quiet:
         switch = ". .connect [PORT] to switch" if isinstance(why, TmclError) else ""
-        session.out.error(None, f"still disconnected ({why}); nothing was sent{switch}")
+        # (the link may have gone while nobody was typing: nothing said so yet but the
+        # toolbar, so "still" would refer to nothing)
+        session.out.error(None, f"the link is down and did not come back ({why}); nothing "
+                                f"was sent{switch}")
     return False
