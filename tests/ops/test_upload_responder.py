@@ -263,3 +263,21 @@ def test_ctrl_c_in_an_upload_is_a_keyboard_interrupt_and_download_mode_is_ended(
     assert isinstance(cause, UploadError) and cause.interrupted and cause.download_ended
     assert cause.written == range(12) and "interrupted (Ctrl-C)" in str(info.value)
     assert module.stores == list(range(12)) and not module.downloading
+
+
+def test_ctrl_c_between_two_attempts_is_said_as_any_ctrl_c_in_the_upload(module, client):
+    """Ctrl-C just as the upload says it stores the program again: a KeyboardInterrupt whose
+    cause says what the memory holds, as anywhere else in the upload (the shell forgets the
+    program it had uploaded before on that cause)."""
+    module.lose_once = {4}
+
+    def ctrl_c(text: str) -> None:
+        raise KeyboardInterrupt
+
+    client.on_notice = ctrl_c
+    with pytest.raises(KeyboardInterrupt) as info:
+        program.upload(client, _program(10))
+    cause = info.value.__cause__
+    assert isinstance(cause, UploadError) and cause.interrupted
+    assert (cause.acked, cause.sent) == (4, 5) and cause.download_ended
+    assert module.starts == 1 and not module.downloading

@@ -312,9 +312,13 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
             # a reply lost or damaged on a line that works (133 was answered): whether that
             # frame was stored cannot be known, and one sent again would be stored twice;
             # the whole program from 132 can, over what the attempt before stored
-            client._taps.notice(f"upload: {_reason(failure, ended)}; storing the program "
-                                f"again from address {start} (attempt {attempt + 1} of "
-                                f"{tries})")
+            try:
+                client._taps.notice(f"upload: {_reason(failure, ended)}; storing the program "
+                                    f"again from address {start} (attempt {attempt + 1} of "
+                                    f"{tries})")
+            except KeyboardInterrupt as exc:  # (said as any Ctrl-C in the upload is)
+                failure = exc
+                break
     sent = furthest
     upload_seconds = time.monotonic() - began
     if failure is not None:
