@@ -30,7 +30,8 @@ import time
 import weakref
 from typing import TYPE_CHECKING
 
-from ..base.errors import StatusError, TmclTimeoutError, TransportError, ValidationError
+from ..base.errors import (StatusError, TmclError, TmclTimeoutError, TransportError,
+                           ValidationError)
 from ..link.ascii import (  # noqa: F401  (the codec's names, for those who import them here)
     BS, CR, ECHO_MASK, ECHO_NAMES, ECHO_SHIFT, END_LINE, FIELDS, GP_ASCII_MODE, GP_BANK,
     GP_HOST_ADDRESS, MAX_ADDRESS, STARTUP_ASCII_BIT, AsciiFraming, Echo, LineKind, Mode,
@@ -320,10 +321,12 @@ class AsciiLink:
         return link
 
     @staticmethod
-    def _enter(client: Client) -> None:
-        """Binary 139; its reply (if the firmware sends one) is read and dropped."""
+    def _enter(client: Client, address: int | None = None) -> None:
+        """Binary 139 (to ``address``, else the client's); its reply (if the firmware sends
+        one) is read and dropped."""
         t = _transport(client)
-        raw = Request(client.address, Control.ENTER_ASCII, 0, 0, 0).to_bytes()
+        address = client.address if address is None else address
+        raw = Request(address, Control.ENTER_ASCII, 0, 0, 0).to_bytes()
         if t.pending():
             client._lifecycle.absorb()  # stale replies dropped, events kept
         t.write(raw)
@@ -333,25 +336,27 @@ class AsciiLink:
                           stop=lambda d: len(d) >= SERIAL_FRAME_LEN)
         if got:
             client._trace("rx", got, "answer to 139")
-        answer = _binary_answer(got, client.address, Control.ENTER_ASCII)
+        answer = _binary_answer(got, address, Control.ENTER_ASCII)
         if answer is not None and not status_ok(answer.status):
             raise StatusError(answer.status, answer,
                               f"the module refused to enter ASCII mode (139): status "
                               f"{answer.status}, {answer.status_text}")
 
     @staticmethod
-    def _bin(client: Client, timeout: float | None = None) -> None:
-        """ASCII ``BIN``; what follows it (echo, a reply if any) is read and dropped, and the
-        client resynchronises its binary framing before its next request."""
+    def _bin(client: Client, timeout: float | None = None, address: int | None = None) -> None:
+        """ASCII ``BIN`` (to ``address``, else the client's); what follows it (echo, a reply
+        if any) is read and dropped, and the client resynchronises its binary framing before
+        its next request (not for another module's BIN: what came was read whole)."""
         t = _transport(client)
-        line = command_bytes(client.address, isa.ASCII_BIN)
+        line = command_bytes(client.address if address is None else address, isa.ASCII_BIN)
         t.write(line)
         client._trace("tx", line, isa.ASCII_BIN)
         timeout = min(client.timeout, 0.3) if timeout is None else timeout
         got = _read_quiet(t, 0.05, timeout)
         if got:
             client._trace("rx", got, "after BIN")
-        client._lifecycle.resync_next()
+        if address is None:
+            client._lifecycle.resync_next()
 
     # -- leaving ------------------------------------------------------------------------
     @property
@@ -422,6 +427,41 @@ class AsciiLink:
 
     def _on_client_close(self) -> None:
         self.close()
+
+    # -- another address ----------------------------------------------------------------
+    @staticmethod
+    def take_away(client: Client) -> AsciiLink | None:
+        """The client turns to another address (``.address``): the link made for the module
+        it leaves is that module's, so the next one gets a link of its own (or none)."""
+        return _LINKS.pop(client, None)
+
+    @staticmethod
+    def put_back(client: Client, link: AsciiLink | None) -> None:
+        """The other address did not come up: the client stays with this link's module."""
+        if link is not None:
+            _LINKS[client] = link
+
+    def leave(self, address: int, *, in_ascii: bool) -> None:
+        """The client talks to another module now: leave the one at ``address`` in the mode
+        it was found in (``on_exit``) at once, as the client's close would have, since at
+        exit the client's address is no longer its. ``in_ascii``: the link was driving it."""
+        if self._closed:
+            return
+        self._closed = True
+        client = self.client
+        if self._on_client_close in client._lifecycle.close_hooks:
+            client._lifecycle.close_hooks.remove(self._on_client_close)
+        if not client.transport.is_open:
+            return
+        with client.lock:
+            try:
+                if in_ascii and self.on_exit == Mode.BINARY:
+                    self._bin(client, address=address)
+                elif not in_ascii and self.on_exit == Mode.ASCII:
+                    self._enter(client, address)
+            except TmclError:
+                log.warning("could not restore %s mode at address %d", self.on_exit.value,
+                            address)
 
     def let_go(self) -> None:
         """Stop using the link and leave the module in ASCII mode, where it was found (a

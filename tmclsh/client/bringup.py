@@ -102,11 +102,17 @@ def again(client: Client, req: Request) -> ValidationError | None:
 def switch_address(client: Client, address: int) -> None:
     """Talk to the module at ``address`` (on CAN: that id) from now on, brought up as at
     connect; on failure the client stays with the module it had."""
+    from .ascii import AsciiLink
+
     old = (client.address, client.can_id, client.module, client.version, client.ascii_link)
+    # the ASCII mode a module is driven in is that module's: the next one is met in the mode
+    # it is in (binary first, its ASCII mode if silent), unless tmclsh entered ASCII mode
+    # itself (--ascii, .mode ascii), which is carried as asked
+    left = AsciiLink.take_away(client)
+    ascii = old[4] is not None and old[4].found_in_binary
     client.address = address
     if client.is_can:
         client.can_id = address
-    ascii = client.ascii_link is not None
     client.ascii_link = None
     client.version = None  # (nothing is known yet of the module there)
     if client.module is not None and not client.module.generic:
@@ -118,6 +124,7 @@ def switch_address(client: Client, address: int) -> None:
         heard = client._late_from.get(address, 0) > client._late_base  # (answered late)
         (client.address, client.can_id, client.module, client.version,
          client.ascii_link) = old
+        AsciiLink.put_back(client, left)
         if (isinstance(exc, NoAnswerError) and old[3] is not None and not client.is_can
                 and not heard):
             # the module it talked to answers on this line at this rate: the baud rate and
@@ -133,6 +140,8 @@ def switch_address(client: Client, address: int) -> None:
         if isinstance(exc, TmclError):
             raise type(exc)(f"{exc}\nstill talking to address {old[0]}") from exc
         raise
+    if left is not None:
+        left.leave(old[0], in_ascii=old[4] is left)
 
 
 def identify(client: Client) -> Module:
