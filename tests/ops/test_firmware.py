@@ -12,6 +12,7 @@ import uuid
 import pytest
 
 from bootmodel import START, BootModule, CanBootModule, hex_image
+from responder import Module, SharedLine
 from tmclsh.base.errors import TransportError
 from tmclsh.ops.firmware import APPLICATION, WRITING, FirmwareError, ImageRefused, Step, FirmwareUpdate
 from tmclsh.sim import Simulator
@@ -184,6 +185,39 @@ def test_update_against_the_tables_bootloader():
         assert lengths == [(208, 0, 0, image.length), (208, 1, 0, image.checksum)]
     finally:
         module.close()
+
+
+@pytest.mark.parametrize("first", ["bootloader", "bystander"])
+def test_another_module_at_the_bootloaders_address_refuses_the_update(first):
+    """On a shared line the module at address 2 restarts into a bootloader answering at
+    address 1: a module already at 1 (here hearing every rate) would get the erase and the
+    writes and answer them too (or be taken for a module that did not restart). Asked
+    before 242, nothing sent to change either. ``first``: whose answers come first."""
+    bus = SharedLine()
+    if first == "bystander":
+        other = Module(version="1311V111", address=1, nines=True, line=bus)
+        module = BootModule(address=2, line=bus)
+    else:
+        module = BootModule(address=2, line=bus)
+        other = Module(version="1311V111", address=1, nines=True, line=bus)
+    try:
+        with pytest.raises(FirmwareError, match="another module answers at address 1"):
+            run({"port": bus.path, "address": 2}, model_image())
+        assert 242 not in module.commands() and module.app_version == "1311V111"
+        assert [g[0] for g in other.got] == [136] and other.held == b""
+    finally:
+        bus.close()
+
+
+def test_a_free_bootloader_address_on_a_shared_line_updates():
+    bus = SharedLine()
+    module = BootModule(address=2, line=bus)
+    other = Module(version="1311V111", address=5, nines=True, line=bus)
+    try:
+        _, result, _ = run({"port": bus.path, "address": 2}, model_image())
+        assert result.new_version == "1311V112" and other.got == []
+    finally:
+        bus.close()
 
 
 def test_the_tables_bootloader_found_at_its_own_baud_rate():

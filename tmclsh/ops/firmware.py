@@ -507,6 +507,7 @@ class FirmwareUpdate:
                     return Result(self.module, self.old_version, self.old_version, 0,
                                   time.monotonic() - t0, False, nothing_to_do=True,
                                   change=change)
+                self._boot_address_free()
                 busy = activity(self.client)
                 first = f" ({busy}: stopped first)" if not busy.idle else ""
                 self._ask(f"{_verb(change).capitalize()} the {self.module} at address "
@@ -552,6 +553,30 @@ class FirmwareUpdate:
         if self.entered:  # (the bootloader said it: _after_failure starts the firmware again)
             raise ImageRefused(f"{problem}; refused, nothing was erased")
         raise ImageRefused(f"{problem}; refused before anything was sent to change it")
+
+    def _boot_address_free(self) -> None:
+        """After 242 the bootloader answers at its own address (1 on a serial line), not the
+        module's: on a line several modules share, another module answering there would
+        hear the erase and every write meant for the bootloader, and answer them as well.
+        So that address is asked (136, a read) at the bootloader's link settings before the
+        restart, and the update refused while another module answers there."""
+        c = self.client
+        boot = self._boot_link()
+        if c.is_can or self._on_usb or boot[0] == self._user_link[0]:
+            return
+        self._set_link(*boot)
+        try:
+            version, where = self._ask_version(c.timeout), c.describe()
+        finally:
+            self._set_link(*self._user_link)
+        if version is None:
+            return
+        raise FirmwareError(
+            f"not updated: another module answers at address {boot[0]} on {where} "
+            f"({version!r}), where the bootloader of the module at address "
+            f"{self._user_link[0]} answers after its restart: that module would hear the "
+            "erase and every write too. Give it another address (SGP 66) or take it off the "
+            "line first; nothing was changed")
 
     def _ask(self, question: str) -> None:
         if self.confirm is not None and not self.confirm(question):
