@@ -153,6 +153,11 @@ def cmd_scan(args: argparse.Namespace) -> int:
     found = []
     tried = []
     show_progress = not args.json and sys.stderr.isatty()
+    from ..base.interrupts import Terminated, restore, unwind_on
+
+    # SIGTERM and SIGHUP end the scan as Ctrl-C does: through the finally below, so that a
+    # module in ASCII mode stepped out of it to be identified is put back first
+    previous = unwind_on(("SIGTERM", "SIGHUP"))
     try:
         for i, rate in enumerate(rates):
             if rate is not None:
@@ -212,8 +217,14 @@ def cmd_scan(args: argparse.Namespace) -> int:
         if found and inventory is not None:  # (settings are read on the scan's link)
             _scan_summary(found, auto)
             return inv.expect(args, inventory, found, client)
+    except (KeyboardInterrupt, Terminated) as exc:
+        why = exc.why if isinstance(exc, Terminated) else "interrupted"
+        print(f"tmclsh: scan {why} before the last address: only what answered until then "
+              "is listed", file=sys.stderr)
+        raise
     finally:
         client.close()
+        restore(previous)
     if not found:
         _say_error(args, f"nothing answered; tried {'; '.join(tried)}"
                    + ("" if client.is_can else ", in binary and in ASCII mode")

@@ -257,8 +257,17 @@ class AsciiLink:
             probe = found or probe_mode(client, timeout)
             if probe.mode == Mode.ASCII and client.module is None:
                 # 136 does not exist in ASCII mode: step out briefly to identify the module
-                cls._bin(client)
-                client.identify()
+                try:
+                    cls._bin(client)
+                    client.identify()
+                except BaseException:
+                    # stopped (Ctrl-C, SIGTERM) or unanswered while stepped out: back to
+                    # the ASCII mode it was found in
+                    try:
+                        cls._enter(client)
+                    except Exception:
+                        pass
+                    raise
                 probe = Probe(Mode.BINARY, host=probe.host)
                 entered_from = Mode.ASCII
             else:
@@ -308,8 +317,9 @@ class AsciiLink:
                 client.ascii_link = link
             except BaseException:
                 # interrupted (Ctrl-C, SIGTERM) between 139 and the link taking over: leave
-                # the module in binary mode, as it was found
-                if sent_139 and client.ascii_link is None:
+                # the module in binary mode, as it was found (one found in ASCII mode, and
+                # stepped out only to be identified, is in the mode it was found in again)
+                if sent_139 and client.ascii_link is None and entered_from == Mode.BINARY:
                     try:
                         cls._bin(client)
                     except Exception:
