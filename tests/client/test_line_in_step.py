@@ -95,3 +95,20 @@ def test_address_switch_to_an_absent_address_leaves_the_line_in_step(run_tmclsh,
     assert p.stdout.split()[-1:] == ["5"], (p.stdout, p.stderr)
     untouched(ascii_module, [])
     answers_at_5(run_tmclsh, bus, binary)
+
+
+def test_lines_typed_in_the_ascii_terminal_keep_binary_modules_in_step(run_tmclsh, line):
+    """The ``.ascii`` terminal (line mode; here its lines come from a pipe) pads a typed
+    line as tmclsh pads its own: a binary module that frames in nines, listening on the
+    same line, is still in step after it and answers at its own address."""
+    bus, binary, _ = line
+    other = AsciiModeModule(address=4, line=bus)
+    other.ascii, other.modes = False, ["binary"]
+    p = run_tmclsh("--port", bus.path, "-a", "4", "--timeout", "0.5", "-c", ".ascii --bin",
+                   input="GGP 67, 0\nDGGP 67, 0\n")
+    assert p.returncode == 0, p.stderr
+    assert other.modes == ["binary", "ascii", "binary"]
+    typed = [t for t in other.log if t.lstrip(b" ").startswith(b"D") and b"GGP" in t]
+    # (the mode probe's line and the two typed: each whole nine-byte blocks with its CR)
+    assert len(typed) == 3 and all((len(t) + 1) % 9 == 0 for t in typed), typed
+    answers_at_5(run_tmclsh, bus, binary)

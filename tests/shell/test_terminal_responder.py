@@ -81,8 +81,9 @@ def test_bin_typed_in_the_terminal_against_an_independent_module(module, run_tmc
     assert "--- module left ASCII mode (BIN): back to the shell on the binary link" in notes
     assert not any("send BIN" in n for n in notes)
     # the line after BIN did not go out as ASCII; the -c line after .ascii went in binary
-    # (the probe's line has spaces after the address character; the typed lines go as typed)
+    # (the probe's line and the typed lines get spaces after the address character: whole
+    # nine-byte blocks, CR included, for the binary modules on a shared line)
     assert [ln for ln in module.lines if ln.replace(" ", "") != "AGGP67,0"] == [
-        "ASAP 1, 0, 321", "ABIN"]
+        "A   SAP 1, 0, 321", "A    BIN"]
     assert res.stdout.splitlines()[-1] == "ActualPosition = 321 µsteps"
     assert module.commands()[-1] == 6 and not module.ascii

@@ -184,7 +184,7 @@ def test_the_ctrl_t_menu(served, pane, tmp_path):
     assert screen.count("BA 100 777") == 2  # SAP and GAP, each answered
     menu(p, "e", "--- local echo on")
     p.keys("GAP 4, 0", "Enter")
-    p.wait("AGAP 4, 0")  # the line as sent
+    p.wait("A        GAP 4, 0")  # the line as sent (padded to whole nine-byte blocks)
     menu(p, "f", f"--- log closed: {log}")
     p.hex("14")  # the menu, then Enter: Enter does its job and the menu is gone
     p.keys("Enter")

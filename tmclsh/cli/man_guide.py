@@ -35,7 +35,8 @@ for a module in ASCII mode at connect, in {_b("scan")} and after {_b(".address")
 lines of {_b("--ascii")}) is whole nine\\-byte blocks, none of them a valid frame: a command
 line gets spaces after its address character ({_b("A        GAP 1, 0")}), so a binary
 module on the same line, which counts what it hears in nine\\-byte frames, stays in step
-and answers at its own address afterwards. The {_b(".ascii")} terminal sends what is typed.
+and answers at its own address afterwards. The {_b(".ascii")} terminal pads each typed line the same way
+(its local echo shows the line as sent); {_b(".ascii --raw")} sends the keys as typed.
 .PP
 Bad input never reaches the module: an unknown mnemonic, a wrong type, a value out of the
 parameter's range, a write to a read-only parameter or a motor the module does not have each

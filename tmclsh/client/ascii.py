@@ -38,6 +38,7 @@ from ..link.ascii import (  # noqa: F401  (the codec's names, for those who impo
     address_char, ascii_commands, ascii_probe_bytes, ascii_probe_line, binary_answer,
     char_address, classify_line, command_bytes, decode_line, describe_gp67, echo_candidates,
     echo_mode, format_request, gp67_value, line_for, has_valid_frame, next_line, not_in_ascii,
+    padded,
     parse_reply, probe_frame, read_quiet, reply_part, reply_summary, starts_in_ascii,
     take_lines)
 from ..link.base import StreamTransport

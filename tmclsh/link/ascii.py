@@ -235,8 +235,14 @@ def command_bytes(address: int, text: str) -> bytes:
     read as a valid frame is taken (the shortest if none: the text itself holds one)."""
     if any(c in text for c in "\r\n"):
         raise ValidationError("an ASCII command is one line")
-    head, body = address_char(address).encode("latin-1"), text.encode("latin-1") + CR
-    need = -(len(head) + len(body)) % SERIAL_FRAME_LEN
+    return padded(address_char(address).encode("latin-1") + text.encode("latin-1") + CR)
+
+
+def padded(line: bytes) -> bytes:
+    """A whole command line (address character first, CR last), typed or made, with spaces
+    after its first character as ``command_bytes`` puts them: whole nine-byte blocks."""
+    head, body = line[:1], line[1:]
+    need = -len(line) % SERIAL_FRAME_LEN
     lines = [head + b" " * pad + body
              for pad in range(need, need + 4 * SERIAL_FRAME_LEN, SERIAL_FRAME_LEN)]
     return next((line for line in lines if not has_valid_frame(line)), lines[0])

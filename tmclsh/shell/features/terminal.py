@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING
 from ...tmcl import instructions as isa
 from ...client.ascii import (CR, GP_ASCII_MODE, GP_BANK, ECHO_NAMES, AsciiLink, Echo, LineKind,
                              address_char, ascii_commands, describe_gp67, drive, echo_mode,
-                             echo_written, mode_record, mode_text, switch,
+                             echo_written, mode_record, mode_text, padded, switch,
                              gp67_value, starts_in_ascii, tell_no_checksum)
 from ...base.errors import StatusError, ValidationError
 from ...tmcl.frames import Request, status_ok
@@ -220,6 +220,10 @@ class Terminal:
         mod = self.session.client.module
         line = (with_address(text, self.session.client.address, ascii_commands(mod))
                 .encode("latin-1", errors="replace") + CR)
+        if not self.opts.raw:  # (raw mode: the keys as typed)
+            # whole nine-byte blocks, as tmclsh's own lines: a binary module on the line
+            # that frames in nines stays in step
+            line = padded(line)
         self._replied.clear()
         self.line_view.expect(line)
         if self.opts.raw:
