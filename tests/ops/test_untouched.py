@@ -108,6 +108,25 @@ def test_replace_touches_only_the_old_and_the_new_module(tmp_path):
         new_line.close()
 
 
+def test_replace_on_one_line_names_the_addresses():
+    """Old and new module on one line, at 2 and 3, beside the bystander: only they are
+    touched, and the report says which modules it means (the port alone does not)."""
+    line = SharedLine()
+    try:
+        old = FieldModule("1311V111", address=2, line=line)
+        old.values[("axis", 4, 0)] = 1234
+        new = FieldModule("1311V111", address=3, line=line)
+        watching = bystander(line)
+        done = tmclsh("replace", "--from", line.path, "--from-address", "2", "--to",
+                      line.path, "--to-address", "3", "--yes", "--timeout", "0.5")
+        assert done.returncode == 0, done.stdout + done.stderr
+        assert f"replaced: {line.path} address 2 -> {line.path} address 3" in done.stdout
+        assert new.values[("axis", 4, 0)] == 1234
+        untouched(line, watching)
+    finally:
+        line.close()
+
+
 def test_the_bystander_would_notice(tmp_path):
     """The check can fail: one request to the bystander's address is seen."""
     line = SharedLine()

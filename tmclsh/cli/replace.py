@@ -153,8 +153,9 @@ def cmd_replace(args: argparse.Namespace) -> int:
         confirm = ask_yes_no
     replacement = Replacement(source, target, image=image, with_link=args.with_link,
                               force=args.force, on_step=view.step, notice=view.notice,
-                              confirm=confirm, source_name=args.source,
-                              target_name=args.target)
+                              confirm=confirm,
+                              source_name=_named(args.source, args.from_address, source),
+                              target_name=_named(args.target, args.to_address, target))
     previous = unwind_on(("SIGTERM", "SIGHUP"))
     try:
         report = replacement.run()
@@ -182,3 +183,11 @@ def _resume(args: argparse.Namespace, report) -> str:
         return (resume_command(args, "IMAGE.hex") + "   (IMAGE.hex: the image of "
                 + (needed or "the old module's firmware") + ")")
     return resume_command(args)
+
+
+def _named(given: str, address: int, where) -> str:
+    """A module as the report names it: as given, with its address unless it is the
+    default, 1 (on a line several modules share the port alone does not say which)."""
+    if isinstance(where, Path) or address == 1:
+        return given
+    return f"{given} address {address}"
