@@ -244,6 +244,9 @@ def test_a_signal_stops_every_unit(make_pty_sim, tmp_path, sig, status, why):
     for n, (_, path) in enumerate(sims, 1):
         assert f"[{n} {path}] {why}: stopped motor" in err, err
     assert re.search(r"^ +1 .* 2/2 .* stopped .*" + re.escape(why), out, re.M), out
+    # each unit's last line names what stopped it (not "Ctrl-C" for a SIGTERM)
+    assert len(re.findall(r"turn\.tmcl: " + re.escape(why) + r"( \(Ctrl-C\))? at line 2",
+                          out)) == 2, out
 
 
 def _interrupt_once_turning(script, path: str, sim, *extra: str,

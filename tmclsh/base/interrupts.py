@@ -38,6 +38,13 @@ class Terminated(SystemExit):
                     else "hung up (SIGHUP)")
 
 
+def stopped_by(why: str) -> type[KeyboardInterrupt]:
+    """A KeyboardInterrupt whose instances say ``why`` (``terminated (SIGTERM)``): what a
+    run of several units raises in each unit's thread, which takes a class, not an
+    instance, so that a unit's last line names the signal that stopped it."""
+    return type("StoppedBy", (KeyboardInterrupt,), {"why": why})
+
+
 def interrupted(signum: int) -> KeyboardInterrupt:
     """The Ctrl-C a signal stands for where it ends a run as Ctrl-C does (``monitor``)."""
     exc = KeyboardInterrupt()

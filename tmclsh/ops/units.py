@@ -47,6 +47,7 @@ from typing import Any
 
 from .. import link
 from ..base.errors import TmclError, ValidationError
+from ..base.interrupts import stopped_by
 from ..link import port_class
 from ..client.connect import connect
 from .stop import stop_everything
@@ -252,11 +253,12 @@ class Run:
         self.stopped_by = exc
         self._stopped_at = time.monotonic()
         self.hooks.note(f"{self.stopping}: stopping every unit")
+        kind = KeyboardInterrupt if self.stopping == "interrupted" else stopped_by(self.stopping)
         for line in self.lines:
             with line.lock:
                 if line.current is not None and line.thread is not None:
                     line.raised = True
-                    _raise_in(line.thread, KeyboardInterrupt)
+                    _raise_in(line.thread, kind)
 
     def _stop_overdue(self) -> None:
         """A unit's thread that has not taken the stop within ``STOP_GRACE`` is blocked in

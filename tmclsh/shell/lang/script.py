@@ -665,12 +665,13 @@ def run_file(session: Session, path: str) -> int:
     except ModuleGoneError as exc:  # (--keep-going: line after line went unanswered)
         session.report_error(None, exc)
         status = EXIT_CONNECT
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         # how far it got, before the Ctrl-C policy (stop everything) says what it stopped
         where = runner.interrupted_at
         try:
             summary(session, name, before, time.monotonic() - start, EXIT_FAILED,
                     interrupted=where[1] if where is not None else 0,
+                    stopped=getattr(exc, "why", "interrupted (Ctrl-C)"),
                     in_file=where[0] if where is not None and where[0] != name else None)
         except Exception:  # (a summary must not hide the interrupt)
             pass
@@ -736,9 +737,10 @@ def _report_plain(session: Session, exc: TmclError) -> None:
 
 def summary(session: Session, name: str, before: Counts, elapsed: float, status: int,
             kind: str = SYNTAX, *, interrupted: int | None = None,
-            in_file: str | None = None) -> None:
+            in_file: str | None = None, stopped: str = "interrupted (Ctrl-C)") -> None:
     """The last line of a script run; ``interrupted``: the line Ctrl-C came at (0: none),
-    ``in_file`` when that is in a file the script included."""
+    ``in_file`` when that is in a file the script included, ``stopped`` what stopped it (a
+    unit stopped by SIGTERM says so)."""
     now = _counts(session)
     sent = now.commands - before.commands
     shell = now.shell - before.shell
@@ -751,7 +753,7 @@ def summary(session: Session, name: str, before: Counts, elapsed: float, status:
         at = f" at line {interrupted}" if interrupted else ""
         if interrupted and in_file is not None:
             at += f" of {in_file}"
-        text = (f"{name}: interrupted (Ctrl-C){at} after {sent} "
+        text = (f"{name}: {stopped}{at} after {sent} "
                 f"command{'s' if sent != 1 else ''} sent{also}, {passed} check"
                 f"{'s' if passed != 1 else ''} passed, {failed} failed, {errors} "
                 f"error{'s' if errors != 1 else ''}, {elapsed:.2f} s")
