@@ -281,7 +281,10 @@ COMMANDS: tuple[Command, ...] = (
             'talk to the module with address N on the same bus',
             complete='complete_address', category='connection',
             details=('The new address is checked with a 136 (version) request; if nothing '
-                     "answers, the old address stays. On CAN, N is the module's CAN id. N "
+                     "answers, the old address stays. Each module is met in the mode it is "
+                     "in (binary, or its ASCII mode) and the one left is left in the mode it "
+                     "was found in; only an ASCII mode tmclsh was asked for (--ascii, .mode "
+                     "ascii) goes on to the next. On CAN, N is the module's CAN id. N "
                      'may be an expression or hold variables, so one script walks a bus: '
                      '.repeat 3 as i / .address i + 1 / GAP 1, 0 / .end.'),
             changes_link=True,
