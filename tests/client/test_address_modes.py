@@ -57,3 +57,14 @@ def test_mode_binary_then_another_address(run_tmclsh, line):
     assert p.returncode == 0, p.stderr
     assert in_binary.modes == ["binary"] and not in_binary.ascii
     assert in_ascii.ascii and in_ascii.modes[-1] == "ascii"
+
+
+def test_ascii_asked_goes_on_to_the_next_address(run_tmclsh, line):
+    """--ascii asked for ASCII mode: the module found in it already and the next one are
+    both driven through it; each is left in the mode it was found in."""
+    bus, in_ascii, in_binary, _ = line
+    p = run(run_tmclsh, bus, "-a", "3", "--ascii", "-c", ".address 4; .mode")
+    assert p.returncode == 0, p.stderr
+    assert "mode: ASCII mode" in p.stdout, p.stdout
+    assert in_binary.modes == ["binary", "ascii", "binary"] and not in_binary.ascii
+    assert in_ascii.ascii and in_ascii.modes[-1] == "ascii"

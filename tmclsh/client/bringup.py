@@ -47,6 +47,7 @@ _GP_DOWNLOAD_MODE = 129
 def start(client: Client, *, ascii: bool = False) -> Client:
     """Bring a new client up (see the module docstring). On any failure the client is
     closed, so a half-opened port is never left behind."""
+    client._ascii_asked = ascii
     try:
         bring_up(client, ascii=ascii)
     except BaseException:
@@ -109,7 +110,7 @@ def switch_address(client: Client, address: int) -> None:
     # it is in (binary first, its ASCII mode if silent), unless tmclsh entered ASCII mode
     # itself (--ascii, .mode ascii), which is carried as asked
     left = AsciiLink.take_away(client)
-    ascii = old[4] is not None and old[4].found_in_binary
+    ascii = old[4] is not None and (old[4].found_in_binary or client._ascii_asked)
     client.address = address
     if client.is_can:
         client.can_id = address

@@ -130,6 +130,7 @@ class Client:
         # typed or a script's): close() ends it, so the module is not left storing what it gets
         self._left_downloading = False
         self._ascii_link = None  # (the ascii_link property)
+        self._ascii_asked = False  # connected with ascii=True (--ascii): .address carries it
         # while a write moves the module (client/reach.py): its answer may come from the new
         # module address, go to the new host address, or come on the new CAN reply id
         self._also_from: int | None = None
