@@ -279,6 +279,7 @@ def test_two_modules_at_one_address_are_said(run_tmclsh, responders):
     rows = [json.loads(line) for line in p.stdout.splitlines()]
     assert [(r["address"], r.get("answers")) for r in rows] == [(1, 2)]
     assert "two modules answer at address 1" in p.stderr
+    assert "2 modules found at 1 (two)" in p.stderr  # (both counted)
 
 
 def test_the_simulated_bus_with_a_shared_address(run_tmclsh):

@@ -239,8 +239,9 @@ def cmd_scan(args: argparse.Namespace) -> int:
 
 def _scan_summary(found: list, auto: bool) -> None:
     """What a scan found, on standard error: where, and each address two modules share."""
-    where = ", ".join(str(f.address) + (f" ({f.baud} baud)" if auto else "") for f in found)
-    n = len(found)
+    where = ", ".join(str(f.address) + (" (two)" if f.answers > 1 else "")
+                      + (f" ({f.baud} baud)" if auto else "") for f in found)
+    n = sum(2 if f.answers > 1 else 1 for f in found)  # (every module, two at one address)
     print(f"{n} module{'s' if n != 1 else ''} found at {where}", file=sys.stderr)
     for hit in found:
         if hit.answers > 1:
