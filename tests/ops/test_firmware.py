@@ -202,9 +202,32 @@ def test_another_module_at_the_bootloaders_address_refuses_the_update(first):
         other = Module(version="1311V111", address=1, nines=True, line=bus)
     try:
         with pytest.raises(FirmwareError, match="another module answers at address 1"):
-            run({"port": bus.path, "address": 2}, model_image())
+            run({"port": bus.path, "address": 2, "baud": 115200}, model_image())
         assert 242 not in module.commands() and module.app_version == "1311V111"
         assert [g[0] for g in other.got] == [136] and other.held == b""
+    finally:
+        bus.close()
+
+
+def test_a_line_at_another_rate_than_the_bootloaders_is_not_asked_at_its_rate(monkeypatch):
+    """At 9600 no module on the line can follow the bootloader's 115200 traffic, and a
+    question at 115200 would be noise to every one of them: address 1 is not asked."""
+    from tmclsh.ops import firmware as fw
+
+    asked: list[int | None] = []
+    monkeypatch.setattr(fw.FirmwareUpdate, "_ask_version",
+                        lambda self, timeout: asked.append(fw.line_baud(self.client.transport)))
+    bus = SharedLine()
+    module = BootModule(address=2, line=bus)
+    try:
+        update = fw.FirmwareUpdate({"timeout": 0.3, "port": bus.path, "address": 2,
+                                    "baud": 9600}, model_image(), progress=lambda s: None)
+        try:
+            update.find()
+            update._boot_address_free()
+        finally:
+            update.close()
+        assert asked == []
     finally:
         bus.close()
 

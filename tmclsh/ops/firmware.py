@@ -558,11 +558,15 @@ class FirmwareUpdate:
         """After 242 the bootloader answers at its own address (1 on a serial line), not the
         module's: on a line several modules share, another module answering there would
         hear the erase and every write meant for the bootloader, and answer them as well.
-        So that address is asked (136, a read) at the bootloader's link settings before the
-        restart, and the update refused while another module answers there."""
+        So that address is asked (136, a read) before the restart, where the line runs at
+        the bootloader's rate, and the update refused while another module answers there."""
         c = self.client
         boot = self._boot_link()
         if c.is_can or self._on_usb or boot[0] == self._user_link[0]:
+            return
+        if boot[4] is not None and boot[4] != self._user_link[4]:
+            # the line runs at another rate: a module there cannot follow the bootloader's
+            # traffic, and a question at its rate would be noise to every module on it
             return
         self._set_link(*boot)
         try:
