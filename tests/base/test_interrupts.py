@@ -83,6 +83,57 @@ def test_a_signal_sent_again_wakes_a_run_that_went_on_into_a_long_wait(kept, nam
     assert time.monotonic() - started < 30
 
 
+# a function whose code the compiler folds (``2**63``): the folding checks for signals, runs
+# the handler there and clears what it raised (anything but a KeyboardInterrupt)
+_FOLDED = "def small(value):\n    return abs(value) < 2**63\n"
+
+
+@pytest.mark.parametrize("rounds", [12])
+def test_a_signal_the_compiler_dropped_is_raised_again_in_the_run(kept, rounds):
+    """A module imported from source for the first time (a fresh install) is compiled, and a
+    signal that lands while constants are folded was cleared there: seen in CI, SIGTERM during
+    the switch into ASCII mode and a 30 s ``.sleep`` slept to its end. The timer lands at a
+    random point in the compile, or after it: either way the run must be stopped (before the
+    fix about half the rounds went on)."""
+    import random
+
+    source = _FOLDED * 400
+    started = time.perf_counter()
+    compile(source, "folded", "exec")
+    takes = time.perf_counter() - started
+    previous = unwind_on(["SIGALRM"], Terminated)
+    try:
+        for _ in range(rounds):
+            with pytest.raises(Terminated):
+                signal.setitimer(signal.ITIMER_REAL, random.uniform(0.1, 0.9) * takes)
+                compile(source, "folded", "exec")
+                _run_on()
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        restore(previous)
+
+
+def test_a_signal_taken_from_inside_another_error_is_not_sent_again():
+    """C code that raises its own error from the signal's (a class being built) hands the run
+    a wrapped signal; the run stops for it (``taken``), and no second one comes."""
+    previous = unwind_on(["SIGALRM"], Terminated)
+    try:
+        with pytest.raises(Terminated) as caught:
+            signal.setitimer(signal.ITIMER_REAL, 0.001)
+            _run_on()
+        exc = caught.value
+    finally:
+        restore(previous)
+    interrupts.taken(exc)
+    exc.__traceback__ = None  # (as C code leaves it: no frame of the run on it)
+    old = signal.signal(signal.SIGALRM, lambda *a: pytest.fail("the signal came again"))
+    try:
+        del exc, caught
+        _run_on(0.2)
+    finally:
+        signal.signal(signal.SIGALRM, old)
+
+
 def test_ctrl_c_dropped_in_a_callback_is_raised_again(kept):
     previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:

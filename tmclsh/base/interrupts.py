@@ -4,14 +4,19 @@ SIGTERM (kill, systemd, a CI job's timeout), SIGHUP (the terminal or SSH session
 and Ctrl-C end a run by raising in the main thread, so that it unwinds: the motors are
 stopped and the module is taken out of ASCII or download mode on the way out.
 
-Why ``keep``: Python runs a signal's handler in whatever code the main thread is running at
-that moment. When that is code the interpreter calls on its own (a weak reference's
-callback, such as the one importlib runs when a module lock is dropped, or a ``__del__``),
-what the handler raises is printed as "Exception ignored" and dropped: the signal is lost and
-the run goes on as if it had never come (seen: ``kill`` during the switch into ASCII mode,
-and a 30 s ``.sleep`` slept to its end). ``keep`` puts a ``sys.unraisablehook`` in place that
-sends such a signal again (from a thread of its own, so that the handler does not run inside
-the hook), and its handler runs once more, in the run's own code.
+Why such an exception is watched until it has reached the run's code: Python runs a signal's
+handler in whatever the main thread is doing at that moment, and two kinds of place there
+drop what the handler raises. Code the interpreter calls on its own (a weak reference's
+callback, such as the one importlib runs when a module lock is dropped, or a ``__del__``)
+prints it as "Exception ignored" and goes on; and some of the interpreter's C code clears it
+(seen: the compiler, building a module's code when a module is first imported from source,
+clears anything but a KeyboardInterrupt). Either way the signal was lost and the run went on
+as if it had never come (seen: ``kill`` during the switch into ASCII mode, and a 30 s
+``.sleep`` slept to its end). So ``keep`` puts a ``sys.unraisablehook`` in place for the
+first kind, and an exception raised for a signal that is freed before any code of the run
+saw it says so when it goes (``_Sent.__del__``). Either sends the signal again (from a thread
+of its own, so that the handler does not run again where it was just dropped), and its
+handler runs once more, in the run's own code.
 It is the program's (``cli.main``), not the library's: the hook is process-wide.
 """
 
@@ -26,7 +31,49 @@ from typing import Callable, Iterable
 _kept = False
 
 
-class Terminated(SystemExit):
+class _Sent:
+    """An exception raised for a signal (by the handler ``unwind_on`` sets), which sends the
+    signal again if it is freed before any code outside this module saw it: C code cleared
+    it (see above). Code that caught it (an ``except`` or a ``finally`` on its way) gave it
+    a traceback through that code, and answers for it from then on."""
+
+    signum: int
+    _watched = False  # raised by the handler (not made by a test or a caller)
+
+    def __del__(self) -> None:
+        try:
+            if self._watched and _unseen(self.__traceback__):  # type: ignore[attr-defined]
+                _send_again(self.signum)
+        except Exception:  # (the interpreter ending: nothing left to send it to)
+            pass
+
+
+def _watched(exc: BaseException) -> BaseException:
+    """``exc``, watched until it has reached the run's code (when it is one of ours)."""
+    if isinstance(exc, _Sent):
+        exc._watched = True
+    return exc
+
+
+def taken(exc: BaseException) -> None:
+    """The signal ``exc`` was raised for is being acted on, though it reached the run wrapped
+    in another error (C code raised that one from it): not sent again as it goes."""
+    if isinstance(exc, _Sent):
+        exc._watched = False
+
+
+def _unseen(tb: object) -> bool:
+    """Whether a traceback passes through no code but this module's: the handler raised,
+    and nothing of the run took the exception (Python 3.11 leaves it without a traceback
+    until it is caught; later versions give it the handler's frame as it is raised)."""
+    while tb is not None:
+        if tb.tb_frame.f_code.co_filename != __file__:  # type: ignore[attr-defined]
+            return False
+        tb = tb.tb_next  # type: ignore[attr-defined]
+    return True
+
+
+class Terminated(_Sent, SystemExit):
     """SIGTERM or SIGHUP: ends the run like Ctrl-C does (the one stop), with the signal's
     exit status. A SystemExit, not a KeyboardInterrupt: the prompt, which stops and goes on
     after Ctrl-C, must end here."""
@@ -45,10 +92,14 @@ def stopped_by(why: str) -> type[KeyboardInterrupt]:
     return type("StoppedBy", (KeyboardInterrupt,), {"why": why})
 
 
+class _Interrupted(_Sent, KeyboardInterrupt):
+    """The Ctrl-C a signal stands for (``interrupted``)."""
+
+
 def interrupted(signum: int) -> KeyboardInterrupt:
     """The Ctrl-C a signal stands for where it ends a run as Ctrl-C does (``monitor``)."""
-    exc = KeyboardInterrupt()
-    exc.signum = signum  # type: ignore[attr-defined]  # (for ``keep``: which one to send again)
+    exc = _Interrupted()
+    exc.signum = signum  # (which one to send again, should it be lost)
     return exc
 
 
@@ -58,7 +109,7 @@ def unwind_on(signals: Iterable[str], make: Callable[[int], BaseException] = Ter
     lacks are left out) raises ``make(signum)`` in the main thread. The handlers before, for
     ``restore``; nothing outside the main thread, where no handler can be set."""
     def leave(signum: int, frame: object) -> None:
-        raise make(signum)
+        raise _watched(make(signum))  # (no local name: the frame would hold it in a cycle)
 
     previous: dict = {}
     for name in signals:
@@ -95,18 +146,25 @@ def keep() -> None:
         if signum is None:
             before(unraisable)  # type: ignore[arg-type]
             return
-        # sent from another thread: sent from here, its handler would run at once, inside
-        # this hook, and be dropped again; the main thread runs it at its next step
-        # (``_thread``: ``Thread.start`` waits for the thread to run, and would run it here).
-        # Sent *to* the main thread: ``raise_signal`` would deliver it to the sending thread,
-        # and a main thread that has gone on into a wait (``.sleep 30``) would not wake
-        # until the wait ended (seen under CI: a SIGTERM obeyed 30 s late)
-        try:
-            _thread.start_new_thread(_send_to_main, (signum,))
-        except RuntimeError:  # (no new thread while the interpreter ends: it is ending)
-            pass
+        if isinstance(exc, _Sent):
+            exc._watched = False  # (sent again here: not once more as it is freed)
+        _send_again(signum)
 
     sys.unraisablehook = hook
+
+
+def _send_again(signum: int) -> None:
+    """``signum`` again, to the main thread, from a thread of its own: sent from here, its
+    handler would run at once, where it was just dropped, and be dropped again; the main
+    thread runs it at its next step (``_thread``: ``Thread.start`` waits for the thread to
+    run, and would run the handler here). *To* the main thread: ``raise_signal`` would
+    deliver it to the sending thread, and a main thread that has gone on into a wait
+    (``.sleep 30``) would not wake until the wait ended (seen under CI: a SIGTERM obeyed
+    30 s late)."""
+    try:
+        _thread.start_new_thread(_send_to_main, (signum,))
+    except RuntimeError:  # (no new thread while the interpreter ends: it is ending)
+        pass
 
 
 def _send_to_main(signum: int) -> None:

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 from ...base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE,
                             ModuleGoneError, TmclError)
-from ...base.interrupts import Terminated, unwind_on
+from ...base.interrupts import Terminated, taken, unwind_on
 from ..render import Output
 from .session import QuitShell, Session, frames_sent
 
@@ -136,6 +136,7 @@ def _signal_behind(exc: BaseException) -> BaseException | None:
     seen = 0
     while exc is not None and seen < 8:
         if isinstance(exc, (KeyboardInterrupt, Terminated)):
+            taken(exc)
             return exc
         exc = exc.__cause__ or exc.__context__
         seen += 1
