@@ -97,10 +97,12 @@ def test_killed_with_a_motor_turning_stops_it_and_says_so(served, tmp_path, sig,
         p = start(path, "-c", lines.replace("\n", "; ").strip("; "))
     wait_for(lambda: sim.param("axis", 3, 0) != 0)
     p.send_signal(sig)
-    _, err = p.communicate(timeout=patience(20))
+    out, err = p.communicate(timeout=patience(20))
     assert p.returncode == 128 + sig, err
     assert f"{words}: stopped motor 0 (MST; speed reads 0)" in err, err
     assert sim.param("axis", 3, 0) == 0
+    if how == "-f":  # how far the script got, as after Ctrl-C (it said nothing of it)
+        assert f"turn.tmcl: {words} at line 2 after 1 command sent" in out, out
 
 
 def test_a_signal_wrapped_in_another_error_is_still_the_stop(monkeypatch, capsys):

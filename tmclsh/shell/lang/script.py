@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING
 
 from ...base import files, limits
 from ...base.edges import error_record
+from ...base.interrupts import Terminated
 from ...base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_OK, EXIT_USAGE, AsmError,
                             ModuleGoneError, RangeError, TmclError, ValidationError)
 from . import commands, expr, options
@@ -470,7 +471,7 @@ class Runner:
                     session.failed_unanswered(exc)  # (ModuleGoneError: the run is over)
                 if self.on_step is not None:
                     self.on_step()
-        except KeyboardInterrupt:
+        except (KeyboardInterrupt, Terminated):  # (Ctrl-C, SIGTERM, SIGHUP)
             if self.interrupted_at is None:  # (the innermost: a .source's own line)
                 self.interrupted_at = session.location
             raise
@@ -665,8 +666,9 @@ def run_file(session: Session, path: str) -> int:
     except ModuleGoneError as exc:  # (--keep-going: line after line went unanswered)
         session.report_error(None, exc)
         status = EXIT_CONNECT
-    except KeyboardInterrupt as exc:
+    except (KeyboardInterrupt, Terminated) as exc:
         # how far it got, before the Ctrl-C policy (stop everything) says what it stopped
+        # (SIGTERM and SIGHUP say so: ``why``)
         where = runner.interrupted_at
         try:
             summary(session, name, before, time.monotonic() - start, EXIT_FAILED,
