@@ -95,12 +95,16 @@ def pytest_configure(config: pytest.Config) -> None:
     started the run. A run started in the background by a shell without job control
     (``stress.sh &``, a CI step) inherits SIGINT ignored; Python then installs no handler, the
     xdist workers and every subprocess they start inherit the ignoring, and each test that
-    interrupts a tmclsh with SIGINT sees it run on to the end as if the signal were lost."""
-    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
-        try:
-            signal.signal(signal.SIGINT, signal.default_int_handler)
-        except ValueError:  # not the main thread: nothing to restore from here
-            pass
+    interrupts a tmclsh with SIGINT sees it run on to the end as if the signal were lost.
+    The same for SIGHUP (a run under ``nohup``): tmclsh keeps a SIGHUP it starts ignoring
+    ignored, as ``nohup`` asks, and the tests that hang it up need it not to."""
+    for sig, handler in ((signal.SIGINT, signal.default_int_handler),
+                         (signal.SIGHUP, signal.SIG_DFL)):
+        if signal.getsignal(sig) is signal.SIG_IGN:
+            try:
+                signal.signal(sig, handler)
+            except ValueError:  # not the main thread: nothing to restore from here
+                pass
 
 
 def tmclsh_env(**extra: str) -> dict[str, str]:

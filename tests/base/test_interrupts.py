@@ -180,3 +180,21 @@ def test_a_handler_outside_the_main_thread_is_not_set():
     t.start()
     t.join()
     assert got == [{}]
+
+
+def test_a_signal_ignored_when_asked_stays_ignored():
+    """``nohup``: SIGHUP ignored from the start stays ignored; SIGTERM still unwinds."""
+    before = signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    try:
+        previous = unwind_on(["SIGHUP", "SIGTERM"])
+        try:
+            assert signal.getsignal(signal.SIGHUP) == signal.SIG_IGN
+            os.kill(os.getpid(), signal.SIGHUP)
+            _run_on(0.1)  # (nothing raised)
+            with pytest.raises(Terminated):
+                os.kill(os.getpid(), signal.SIGTERM)
+                _run_on()
+        finally:
+            restore(previous)
+    finally:
+        signal.signal(signal.SIGHUP, before)

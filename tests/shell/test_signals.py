@@ -178,3 +178,58 @@ def test_a_signal_that_lands_in_a_callback_still_ends_the_run(served):
     assert "terminated (SIGTERM): stopped motor 0" in err, err
     assert not sim.ascii_active
     assert sim.param("axis", 3, 0) == 0
+
+
+def test_a_run_started_ignoring_sighup_outlives_its_terminal(served, tmp_path):
+    """``nohup tmclsh -f long.tmcl &``: a run meant to go on when the SSH session drops. It
+    was ended by the hang-up all the same (tmclsh set its own handler over nohup's)."""
+    sim, path = served
+    script = tmp_path / "long.tmcl"
+    script.write_text("ROR 0, 30000\n.sleep 1\nMST 0\nGAP 3, 0\n")
+
+    def as_nohup() -> None:
+        signal.signal(signal.SIGHUP, signal.SIG_IGN)
+
+    p = subprocess.Popen([sys.executable, "-m", "tmclsh", "--port", path, "-f", str(script)],
+                         cwd=str(ROOT), env=tmclsh_env(), stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, preexec_fn=as_nohup)
+    wait_for(lambda: sim.param("axis", 3, 0) != 0)
+    p.send_signal(signal.SIGHUP)
+    out, err = p.communicate(timeout=patience(20))
+    assert p.returncode == 0, err
+    assert "long.tmcl: 3 commands sent" in out, out
+    assert "hung up" not in err, err
+
+
+def test_the_prompts_terminal_gone_without_a_signal_stops_the_motors(served):
+    """The window closed or the SSH session dropped, and no SIGHUP came (tmclsh was not the
+    terminal's controlling process, or it ignores the signal): the prompt's reads fail. It
+    said "[Errno 5] Input/output error" and left the motor turning; now the hang-up's stop."""
+    import os
+    import pty
+
+    sim, path = served
+    main, tty = pty.openpty()
+    p = subprocess.Popen([sys.executable, "-m", "tmclsh", "--port", path], cwd=str(ROOT),
+                         env={**tmclsh_env(), "TERM": "xterm"}, stdin=tty, stdout=tty,
+                         stderr=subprocess.PIPE, start_new_session=True)  # (no SIGHUP)
+    os.close(tty)
+    seen = bytearray()
+
+    def shown(text: bytes) -> bool:
+        import select
+
+        while select.select([main], [], [], 0.05)[0]:
+            seen.extend(os.read(main, 4096))
+        return text in seen
+
+    try:
+        wait_for(lambda: shown(b"TMCM-1311:1>"), 20)
+        os.write(main, b"ROR 0, 30000\r")
+        wait_for(lambda: sim.param("axis", 3, 0) != 0)
+    finally:
+        os.close(main)  # the terminal goes away
+    err = p.communicate(timeout=patience(20))[1].decode()
+    assert p.returncode == 128 + signal.SIGHUP, err
+    assert "hung up (the terminal went away): stopped motor 0 (MST; speed reads 0)" in err, err
+    assert sim.param("axis", 3, 0) == 0

@@ -85,6 +85,15 @@ class Terminated(_Sent, SystemExit):
                     else "hung up (SIGHUP)")
 
 
+def hung_up(why: str = "hung up (the terminal went away)") -> Terminated:
+    """The SIGHUP a terminal's going away stands for where no signal came (tmclsh was not
+    the terminal's controlling process, or was started ignoring SIGHUP): the prompt's reads
+    failed instead. It ends the run as the signal does: the one stop, exit status 129."""
+    exc = Terminated(signal.SIGHUP)
+    exc.why = why
+    return exc
+
+
 def stopped_by(why: str) -> type[KeyboardInterrupt]:
     """A KeyboardInterrupt whose instances say ``why`` (``terminated (SIGTERM)``): what a
     run of several units raises in each unit's thread, which takes a class, not an
@@ -107,7 +116,9 @@ def unwind_on(signals: Iterable[str], make: Callable[[int], BaseException] = Ter
               ) -> dict:
     """From now on each of ``signals`` (names, such as ``"SIGTERM"``; those this platform
     lacks are left out) raises ``make(signum)`` in the main thread. The handlers before, for
-    ``restore``; nothing outside the main thread, where no handler can be set."""
+    ``restore``; nothing outside the main thread, where no handler can be set. A signal the
+    process is ignoring stays ignored: ``nohup tmclsh -f ...`` is a run meant to outlive its
+    terminal (as Python leaves Ctrl-C alone when it starts with SIGINT ignored)."""
     def leave(signum: int, frame: object) -> None:
         raise _watched(make(signum))  # (no local name: the frame would hold it in a cycle)
 
@@ -117,6 +128,8 @@ def unwind_on(signals: Iterable[str], make: Callable[[int], BaseException] = Ter
         if sig is None:
             continue
         try:
+            if signal.getsignal(sig) == signal.SIG_IGN:
+                continue
             previous[sig] = signal.signal(sig, leave)
         except (ValueError, OSError):  # not the main thread, or not on this platform
             pass

@@ -39,7 +39,9 @@ def _exit_status() -> list[str]:
         (130, "Interrupted with Ctrl-C (the program and the motors were stopped first). "
               "With several units (SEVERAL MODULES): 0 when every unit passed, 1 when any "
               "failed, 3 when a unit had no module."),
-        (129, "Hung up (SIGHUP: the terminal or SSH session went away)."),
+        (129, "Hung up (SIGHUP: the terminal or SSH session went away; also when the "
+              "prompt's terminal stops answering and no signal came). A run started "
+              "ignoring SIGHUP (nohup) goes on."),
         (143, "Terminated (SIGTERM). On both signals tmclsh still ends download mode and "
               "leaves ASCII mode if it had entered it, before exiting."),
     ]

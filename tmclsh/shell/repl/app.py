@@ -18,6 +18,7 @@ Behaviour worth knowing:
 
 from __future__ import annotations
 
+import errno
 import functools
 import logging
 import os
@@ -28,6 +29,7 @@ from typing import TYPE_CHECKING
 
 from ... import __version__
 from ...base.errors import TmclError, TransportError
+from ...base.interrupts import hung_up
 from ..lang.session import Abort, QuitShell, reconnected
 
 if TYPE_CHECKING:
@@ -428,10 +430,31 @@ def run_repl(session: Session, prompt_session: PromptSession | None = None) -> i
                 # Ctrl-C where the key binding is not active: a dumb terminal, or the
                 # moment between two prompts when the terminal is in cooked mode
                 stop_session(session, "Ctrl-C")
+            except OSError as exc:
+                if not _terminal_gone(exc):
+                    raise
+                # (it said "[Errno 5] Input/output error" and left the motors turning)
+                raise hung_up() from exc
     finally:
         unlisten()
         client.stop_event_poller()
     return 0
+
+
+def _terminal_gone(exc: OSError) -> bool:
+    """Is ``exc`` the REPL's terminal hanging up (the window closed, the SSH session gone)?
+    The link's and files' errors are tmclsh's own (TmclError); a hung-up terminal fails
+    reads and writes with EIO and is no terminal any more."""
+    if isinstance(exc, TmclError) or exc.errno not in (errno.EIO, errno.ENXIO):
+        return False
+    return not all(_is_terminal(fd) for fd in (0, 1))
+
+
+def _is_terminal(fd: int) -> bool:
+    try:
+        return os.isatty(fd)
+    except (OSError, ValueError):
+        return False
 
 
 def _after_first_prompt(ps: PromptSession, work: Callable[[], None]) -> None:
