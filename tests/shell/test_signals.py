@@ -233,3 +233,28 @@ def test_the_prompts_terminal_gone_without_a_signal_stops_the_motors(served):
     assert p.returncode == 128 + signal.SIGHUP, err
     assert "hung up (the terminal went away): stopped motor 0 (MST; speed reads 0)" in err, err
     assert sim.param("axis", 3, 0) == 0
+
+
+@pytest.mark.parametrize("moves", [True, False])
+def test_a_run_whose_reader_went_away_stops_what_it_set_moving(served, tmp_path, moves):
+    """``tmclsh -f turn.tmcl | head -1``: the run is cut short where ``head`` stopped
+    reading, before the line that would have stopped the motor; it left the motor turning.
+    A run that moved nothing sends nothing more."""
+    sim, path = served
+    script = tmp_path / "turn.tmcl"
+    first = "ROR 0, 30000\n" if moves else ""
+    script.write_text(first + "GAP 1, 0\n.sleep 0.3\nGAP 1, 0\n.sleep 0.3\nMST 0\n")
+    p = subprocess.Popen([sys.executable, "-m", "tmclsh", "--port", path, "-f", str(script)],
+                         cwd=str(ROOT), env=tmclsh_env(), stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE)
+    p.stdout.readline()
+    p.stdout.close()  # the reader goes away after one line
+    err = p.stderr.read().decode()
+    assert p.wait(patience(20)) == 1, err
+    assert "Traceback" not in err, err
+    if moves:
+        assert ("the output's reader went away: stopped motor 0 (MST; speed reads 0)"
+                in err), err
+        assert sim.param("axis", 3, 0) == 0
+    else:
+        assert "stopped" not in err, err

@@ -223,7 +223,7 @@ def _run_unattended(args: argparse.Namespace, session: Session) -> int:
     if out.json:
         unlisten = client.add_listener(lambda reply: out.event(reply, client._taps.event_time))
         client.start_event_poller()  # an event shows when it comes, not at the next line
-    finished = False
+    finished = reader_gone = False
     suspects, shared = session.stats.suspects, len(session.stats.shared)
     try:
         if args.command is not None:
@@ -233,13 +233,22 @@ def _run_unattended(args: argparse.Namespace, session: Session) -> int:
 
             status = run_file(session, args.script or "-")
         finished = True
+    except BrokenPipeError:
+        reader_gone = True
+        raise
     finally:
         client.stop_event_poller()
         if finished:  # (after Ctrl-C: straight on to the stop, nothing else first)
             _last_events(session)
         unlisten()
-        if started() and finished:  # else nothing this run sent can have started anything
+        moved = started()  # else nothing this run sent can have started anything
+        if moved and finished:
             _note_left_running(session)
+        elif moved and reader_gone:
+            # `tmclsh -f turn.tmcl | head`: the run is cut short where its reader stopped
+            # reading, and what it set moving (which a later line may have stopped) is
+            # stopped as on Ctrl-C; a run that moved nothing sends nothing more
+            stop_on_interrupt(client, "the output's reader went away")
     if status == EXIT_OK and (session.stats.suspects > suspects
                               or len(session.stats.shared) > shared):
         # (an answer found suspect as the run ended is no pass either, nor a run on an
