@@ -149,7 +149,7 @@ def test_import_tmclsh_loads_no_part_of_it():
 # its own (client/taps.py, doubt.py, shared.py, lifecycle.py; issue 32's last split): scripts
 # and the API reference use them on the client, whichever component does the work.
 CLIENT_NAMES = {
-    "add_listener", "add_tracer", "address", "answered_twice", "ascii_link",
+    "add_listener", "add_tracer", "address", "advice", "answered_twice", "ascii_link",
     "bring_up_pending", "can_id", "check", "close", "connected", "cut_by", "describe",
     "doubt_on_last", "encode", "execute", "host_address", "identify", "in_doubt", "is_can",
     "judges_as_read", "lock", "mode", "module", "motion", "on_notice", "poll", "prepare",

@@ -1,5 +1,5 @@
 """A module that answers later than the timeout is there: its answers come after tmclsh has
-given them up. What tmclsh says must be that (and that --timeout helps), not 'no module
+given them up. What tmclsh says must be that (and that a longer timeout helps), not 'no module
 answered' or 'stopped answering', which send a technician to the cable, the baud rate or
 the address. Against a module written from the manual (tests/responder.py)."""
 
@@ -29,8 +29,24 @@ def test_connect_to_a_module_slower_than_the_timeout_says_it_answered_late(modul
     said = str(err.value)
     assert "no module answered" not in said
     assert "answered too late" in said
-    # the cause it names first is the one that helps
-    assert said.splitlines()[1] == "  - a slow link: --timeout 2"
+    # the cause it names first is the one that helps, in the words of connect()'s caller
+    assert said.splitlines()[1] == "  - a slow link: timeout=2"
+
+
+def test_the_command_line_is_told_its_option(module):
+    """The same module from the command line: the advice names the option to give."""
+    import subprocess
+    import sys
+
+    from conftest import ROOT, tmclsh_env
+
+    module.delay = 0.5
+    run = subprocess.run([sys.executable, "-m", "tmclsh", "--port", module.path, "--timeout",
+                          "0.3", "-c", "GAP 1, 0"], cwd=str(ROOT), env=tmclsh_env(),
+                         capture_output=True, text=True, timeout=60)
+    assert run.returncode == 3, run.stderr
+    assert "  - a slow link: --timeout 2" in run.stderr.splitlines(), run.stderr
+    assert "timeout=" not in run.stderr
 
 
 def test_a_module_that_became_slow_is_not_said_to_have_stopped_answering(module):
@@ -45,7 +61,7 @@ def test_a_module_that_became_slow_is_not_said_to_have_stopped_answering(module)
                 c.value("GAP 4, 0")
             said.append(str(err.value))
         assert not any("stopped answering" in s for s in said), said
-        assert "answers too late" in said[-1] and "--timeout" in said[-1]
+        assert "answers too late" in said[-1] and "more time: timeout=2" in said[-1]
     finally:
         c.close()
 

@@ -108,6 +108,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
     at each baud rate GP 65 can select. Rows on stdout as modules are found, progress (on a
     terminal) and a summary on stderr."""
     from ..base.edges import write_json
+    from ..client.advice import OPTIONS
     from ..client.core import Client
     from ..client.connect import connection_settings, open_transport
     from ..tmcl.modules import baud_rates
@@ -129,6 +130,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
     client = Client(transport, address=args.first, host_address=settings["host_address"],
                     timeout=1.0, retries=0, can_id=settings.get("can_id"),
                     reply_id=settings.get("reply_id"))
+    client.advice = OPTIONS  # (its messages' advice names the command line's options)
     try:
         inv.check_link(inventory, client)
     except ValidationError:

@@ -31,6 +31,7 @@ from ..tmcl import instructions as isa
 from ..tmcl.frames import Control, Request
 from ..tmcl.modules import Module, baud_rates, by_type1, generic_for, identify as named_by
 from ..tmcl.version import parse_string
+from .advice import more_time, setting
 
 if TYPE_CHECKING:
     from .core import Client
@@ -136,7 +137,7 @@ def switch_address(client: Client, address: int) -> None:
                 f"address {old[0]} answers. Likely causes, most likely first:\n"
                 f"  - address: no module has address {address}: 'tmclsh scan"
                 f"{connection_words(client)}' lists who answers\n"
-                f"  - a slow module: --timeout {max(2 * client.timeout, 2):g}"
+                f"  - a slow module: {more_time(client)}"
                 f"\nstill talking to address {old[0]}") from exc
         if isinstance(exc, TmclError):
             raise type(exc)(f"{exc}\nstill talking to address {old[0]}") from exc
@@ -452,8 +453,9 @@ def no_answer_message(client: Client, exc: BaseException, *, ascii: bool = False
             "  - bit rate: every node on the bus must use the module's CAN bit rate "
             "(GP 69; factory setting 1000 kbit/s)\n"
             f"  - CAN ids: the module's id (GP 71, factory 1) and reply id (GP 70, factory "
-            f"2) must match --can-id and --reply-id; 'tmclsh scan --can ...' tries the ids\n"
-            f"  - a slow bus: --timeout {max(2 * client.timeout, 2):g}\n"
+            f"2) must match {setting(client, 'can_id')} and {setting(client, 'reply_id')}; "
+            "'tmclsh scan --can ...' tries the ids\n"
+            f"  - a slow bus: {more_time(client)}\n"
             "  - wiring: termination (120 ohm at both ends), CAN_H/CAN_L, power")
     url = getattr(client.transport, "url", where)
     usb = _is_usb_module(client)
@@ -484,7 +486,7 @@ def no_answer_message(client: Client, exc: BaseException, *, ascii: bool = False
     lines = [f"{first}: {what}. Likely causes, most likely first:"]
     if heard:
         # it answered here, readable: the baud rate, the address and the mode are right
-        slow = f"  - a slow link: --timeout {max(2 * client.timeout, 2):g}"
+        slow = f"  - a slow link: {more_time(client)}"
         if late:
             lines.append(slow)
         lines.append("  - the line: noise garbles or loses replies (RS485: termination "
@@ -497,14 +499,15 @@ def no_answer_message(client: Client, exc: BaseException, *, ascii: bool = False
         baud = getattr(client.transport, "baudrate", LINK_DEFAULTS["baud"])
         others = ", ".join(str(r) for r in baud_rates() if r != baud)
         lines.append(f"  - baud rate: the module may be set to another rate than {baud} (GP 65 "
-                     f"allows {others}); try --baud 115200, or 'tmclsh scan --port {url} "
+                     f"allows {others}); try {setting(client, 'baud', 115200)}, or 'tmclsh scan --port {url} "
                      f"--baud auto' tries each; {_bootloader_hint(url)}")
     lines.append(f"  - address: the module may have another address than {addr} (GP 66, "
-                 f"factory 1): 'tmclsh scan --port {url}' lists who answers; then -a N")
+                 f"factory 1): 'tmclsh scan --port {url}' lists who answers; then "
+                 f"{setting(client, 'address', 'N')}")
     if not ascii and not ascii_tried:
         lines.append("  - ASCII mode: a module in its ASCII mode ignores binary commands: "
-                     "try --ascii")
-    lines.append(f"  - a slow link: --timeout {max(2 * client.timeout, 2):g}")
+                     f"try {setting(client, 'ascii', True)}")
+    lines.append(f"  - a slow link: {more_time(client)}")
     lines.append("  - the port: is it the module's? 'tmclsh ports' lists the serial ports; "
                  "check cable and power")
     return "\n".join(lines)

@@ -13,6 +13,7 @@ from ..base.canspec import LINK_DEFAULTS
 from ..base.errors import ConnectError, UsageError, ValidationError
 from ..link import TRINAMIC_VID, trinamic_ports
 from ..link.base import Transport
+from .advice import OPTIONS
 from .bringup import start
 from .text import LineClient
 
@@ -134,6 +135,7 @@ def open_client(settings: dict, *, fallback: bool = False,
         transport.close()
         raise
     client.on_notice = notice
+    client.advice = OPTIONS  # (the command line's and the shell's: --baud, --timeout)
     remove = client.add_tracer(tracer(client)) if tracer is not None else None
     try:
         return start(client, ascii=bool(settings.get("ascii")))

@@ -64,6 +64,7 @@ from .ledger import CONFIRM_ROUNDS, Ledger, Suspect
 from .lifecycle import Lifecycle, lost_check
 from .motion import MotionRecord
 from .shared import SharedAddresses
+from .advice import KEYWORDS
 from .steps import after_answer, clear_line, reply_kind, take_answer
 from .steps import run as run_requests
 from .taps import Listener, Taps, Tracer
@@ -159,6 +160,10 @@ class Client:
         self.on_notice: Callable[[str], None] | None = None
         """Called with each one-line notice of what the client did on its own (the module
         answers at a new address, download mode ended); None: they are logged."""
+        self.advice = KEYWORDS
+        """How advice in messages names a setting (client/advice.py): ``connect``'s keywords
+        (``baud=115200``), or the command line's options (``--baud 115200``) when it or the
+        shell opened the client."""
         self._checks_lost = 0  # line checks in a row that got no good answer (lost_check)
         # replies from each address that came after tmclsh had stopped waiting for them
         # (Doubts.late): a module slower than the timeout is no module that stopped

@@ -20,6 +20,7 @@ from ..tmcl import instructions as isa
 from ..tmcl.frames import Request
 from ..tmcl.modules import Module
 from ..tmcl.modules import load as load_module
+from .advice import more_time
 from .taps import failed
 
 if TYPE_CHECKING:
@@ -198,6 +199,5 @@ def lost_check(client: Client, address: int, why: str) -> str:
     if late > client._late_seen:
         # (answers came, after tmclsh had given them up: the module is there, and slow)
         return (f"address {address} answers too late: its replies came after tmclsh had "
-                f"stopped waiting for them ({why}); give it more time: --timeout "
-                f"{max(2 * client.timeout, 2):g}")
+                f"stopped waiting for them ({why}); give it more time: {more_time(client)}")
     return f"address {address} stopped answering: {why}"

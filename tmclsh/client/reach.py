@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 
 from ..base.errors import ChecksumError, TmclTimeoutError, TransportError
 from ..tmcl.frames import Control, Reply, Request
+from .advice import setting
 
 if TYPE_CHECKING:
     from ..tmcl.modules import Parameter
@@ -54,11 +55,11 @@ def write(client: Client, req: Request, param: Parameter,
     elif role == "can_id" and client.is_can and value != client.can_id:
         client.can_id = value
         client._taps.notice(f"the module listens on CAN id {value} now: sending there "
-                           f"(--can-id {value} next time)")
+                           f"({setting(client, 'can_id', value)} next time)")
     elif role == "reply_id" and client.is_can and value != client.reply_id:
         client.reply_id = value
         client._taps.notice(f"the module replies on CAN id {value} now: listening there "
-                           f"(--reply-id {value} next time)")
+                           f"({setting(client, 'reply_id', value)} next time)")
     elif role == "baud":
         _follow_baud(client, param, value)
     return reply
@@ -75,13 +76,13 @@ def _follow_baud(client: Client, param: Parameter, code: int) -> None:
         return
     if _answers(client):
         client._taps.notice(f"the module still answers at {old} baud: it takes {rate} baud at its "
-                           f"next start (then: --baud {rate})")
+                           f"next start (then: {setting(client, 'baud', rate)})")
         return
     t.set_baudrate(rate)
     client._lifecycle.forget_stale()
     if _answers(client):
         client._taps.notice(f"the module answers at {rate} baud now: talking to it at that rate "
-                           f"(--baud {rate} next time)")
+                           f"({setting(client, 'baud', rate)} next time)")
         return
     t.set_baudrate(old)
     client._lifecycle.forget_stale()

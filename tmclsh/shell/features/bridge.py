@@ -405,6 +405,7 @@ def _end_at(transport, address: int, left: Left, monitor: Monitor, args, is_can:
     """``_put_right`` at one address: False when a motor may still turn there."""
     from ...client import bringup
     from ...client.ascii import leave_binary
+    from ...client.advice import OPTIONS
     from ...client.core import Client
     from .stop import stop_all
 
@@ -416,6 +417,7 @@ def _end_at(transport, address: int, left: Left, monitor: Monitor, args, is_can:
                     module=monitor.module_for(address), timeout=0.5,
                     can_id=(can_id if can_id is not None else address) if is_can else None,
                     reply_id=getattr(args, "reply_id", None))
+    client.advice = OPTIONS  # (its messages' advice names the command line's options)
     try:
         if capture is not None:
             client.add_tracer(_capturing(capture, client, is_can))
