@@ -17,7 +17,7 @@ first kind, and an exception raised for a signal that is freed before any code o
 saw it says so when it goes (``_Sent.__del__``). Either sends the signal again (from a thread
 of its own, so that the handler does not run again where it was just dropped), and its
 handler runs once more, in the run's own code.
-It is the program's (``cli.main``), not the library's: the hook is process-wide.
+``keep`` is the program's (``cli.main``), not the library's: the hook is process-wide.
 """
 
 from __future__ import annotations
