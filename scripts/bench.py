@@ -805,7 +805,8 @@ def bench_upload(args: argparse.Namespace) -> dict:
     read-back) a program with ``tmclsh.ops.program.upload``, beside the raw floor: the same frames
     written and their 9-byte replies read with bare pyserial, against the same pty-served
     simulator, in the same run (rounds alternate raw and tmclsh; the figure is the median of
-    the rounds' ratios, twice ``--rounds`` of them)."""
+    the rounds' ratios, six times ``--rounds`` of them: with ten, the figure of one run of
+    the row scattered by +-0.04 around a median that many runs agree on)."""
     import serial
 
     asm = tm("tmclsh.tmcl.asm")
@@ -867,7 +868,7 @@ def bench_upload(args: argparse.Namespace) -> dict:
         parts["verify"].append(result.verify_seconds)
         return took
 
-    rounds = args.pairs or 2 * args.rounds
+    rounds = args.pairs or 6 * args.rounds
     with SimProcess(args.module) as sim:
         say(f"upload: {rounds} round(s) of {n} instructions on {sim.path} ({load_note()})")
         figures: dict[str, list[float]] = {}
@@ -1835,9 +1836,10 @@ def main(argv: list[str] | None = None) -> int:
                         "client rows, twice that many lines in the script rows)")
     p.add_argument("--rounds", type=int, default=5, help="rounds per benchmark (default 5)")
     p.add_argument("--pairs", type=int, default=0,
-                   help="raw/path block pairs of the client, script and units rows (default: "
-                        "20x --rounds for the client rows; 4x for the script rows, fewer once "
-                        "35 s have passed; --rounds for the units row)")
+                   help="raw/path block pairs of the client, script, upload and units rows "
+                        "(default: 20x --rounds for the client rows; 4x for the script rows, "
+                        "fewer once 35 s have passed; 6x for the upload row; --rounds for the "
+                        "units row)")
     p.add_argument("--module", default="TMCM-1311", help="simulated module (default TMCM-1311)")
     p.add_argument("--units", type=int, action="append", metavar="N",
                    help="the units row's unit counts, once each (default: 8 and 32)")
