@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from conftest import ROOT, patience, tmclsh_env
+from conftest import ROOT, patience, read_until, tmclsh_env
 from tmclsh.tmcl.frames import Request, Reply
 from tmclsh.sim import Simulator
 from tmclsh.sim.serve import serve_pty
@@ -258,3 +258,27 @@ def test_a_run_whose_reader_went_away_stops_what_it_set_moving(served, tmp_path,
         assert sim.param("axis", 3, 0) == 0
     else:
         assert "stopped" not in err, err
+
+
+@pytest.mark.parametrize("how", ["-c", "-f"])
+def test_ctrl_c_in_a_watch_ends_an_unattended_run(served, tmp_path, how):
+    """Ctrl-C during ``.watch`` in ``-c``/``-f`` stopped the motor and ended the watch, and
+    the run went on: the next line set the motor turning again, and the run ended 0 with it
+    turning. In a run nobody types at, Ctrl-C ends the run, as on any other line."""
+    sim, path = served
+    lines = "ROR 0, 30000\n.watch GAP 3, 0\nROR 0, 10000\n.sleep 1\n"
+    if how == "-f":
+        script = tmp_path / "watch.tmcl"
+        script.write_text(lines)
+        p = start(path, "-f", str(script))
+    else:
+        p = start(path, "-c", lines)
+    read_until(p, lambda text: '"GAP 3, 0"' in text)  # the watch shows samples
+    p.send_signal(signal.SIGINT)
+    out, err = p.communicate(timeout=patience(20))
+    assert p.returncode == 130, err
+    assert "Traceback" not in err, err
+    assert "10000" not in out, out  # the line after the watch was not run
+    assert sim.param("axis", 3, 0) == 0
+    if how == "-f":
+        assert "watch.tmcl: interrupted (Ctrl-C) at line 2" in out, out

@@ -770,6 +770,10 @@ def cmd_watch(session: Session, args: str) -> None:
         from .stop import say_report
 
         say_report(session.out, result.stops[-1], "watch")
+    if result.reason == "interrupt" and not session.interactive:
+        # at the prompt Ctrl-C ends the watch and the prompt comes back; in -c/-f it ends
+        # the run as on any other line: the next line would set the motors moving again
+        raise KeyboardInterrupt
 
 
 def out_is_pipe(session: Session) -> bool:
