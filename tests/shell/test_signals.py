@@ -282,3 +282,66 @@ def test_ctrl_c_in_a_watch_ends_an_unattended_run(served, tmp_path, how):
     assert sim.param("axis", 3, 0) == 0
     if how == "-f":
         assert "watch.tmcl: interrupted (Ctrl-C) at line 2" in out, out
+
+
+class _TurningModule:
+    """A TMCM-1311 from the manual (tests/responder.py), which turns its motor on ROR/ROL
+    and stops it on MST (GAP 3 reads the speed), its stored program stopped (135 reads 0).
+    ``on_stop``: called when it hears the stop's first request (135), before it answers."""
+
+    @staticmethod
+    def make(on_stop):
+        from responder import OK, PtyModule
+
+        class Turning(PtyModule):
+            turning = 0  # (``speed`` is the responder's baud rate)
+            stop_seen = False
+
+            def respond(self, command, type_, motor, value):
+                if command == 135 and not self.stop_seen and self.turning:
+                    self.stop_seen = True
+                    on_stop(self)
+                if command in (1, 2):
+                    self.turning = value if command == 1 else -value
+                elif command == 3:
+                    self.turning = 0
+                elif command == 6 and type_ == 3:
+                    self.got.append((command, type_, motor, value))
+                    return OK, self.turning
+                elif command in (128, 135):
+                    self.got.append((command, type_, motor, value))
+                    return OK, 0
+                return super().respond(command, type_, motor, value)
+
+        return Turning(version="1311V111")
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
+def test_a_second_signal_during_the_stop_does_not_cut_it_short(sig):
+    """Ctrl-C pressed twice, or a second SIGTERM (a supervisor's), landing while the stop
+    asks whether the stored program runs: the stop was abandoned before MST (Ctrl-C said
+    "the motors may still turn"; SIGTERM and SIGHUP said nothing at all) and the motor
+    went on turning. The stop's commands go out first; the second signal cuts short only
+    the reading back, and is said."""
+    from conftest import delivered
+
+    proc: list[subprocess.Popen] = []
+
+    def second_signal(module) -> None:
+        proc[0].send_signal(sig)
+        delivered(proc[0].pid, sig)
+
+    module = _TurningModule.make(second_signal)
+    try:
+        p = start(module.path, "-c", "ROR 0, 30000; .sleep 30")
+        proc.append(p)
+        wait_for(lambda: module.turning != 0)
+        p.send_signal(sig)
+        out, err = p.communicate(timeout=patience(20))
+        assert module.stop_seen, err
+        assert p.returncode == 128 + sig, err
+        assert "Traceback" not in err, err
+        assert module.turning == 0, err  # MST went out
+        assert "again" in err, err  # the second signal is said
+    finally:
+        module.close()
