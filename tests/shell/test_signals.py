@@ -345,3 +345,74 @@ def test_a_second_signal_during_the_stop_does_not_cut_it_short(sig):
         assert "again" in err, err  # the second signal is said
     finally:
         module.close()
+
+
+@pytest.mark.skipif(__import__("shutil").which("tmux") is None, reason="tmux is not installed")
+@pytest.mark.parametrize("where", [".watch GAP 3, 0", ".ascii"])
+def test_the_terminal_gone_mid_command_ends_without_a_traceback(served, terminal, tmp_path,
+                                                                 where):
+    """The window closed while a watch draws or the ASCII terminal runs: the motor was
+    stopped and the module left ASCII mode, but a thread writing to the terminal (the
+    prompt's output proxy) met the dead terminal first and printed its traceback."""
+    import os
+    import shlex
+
+    sim, path = served
+    term = terminal()
+    err = tmp_path / "err"
+    env = " ".join(f"{k}={shlex.quote(v)}" for k, v in term.env.items())
+    term.shell(f"cd {shlex.quote(str(ROOT))} && env {env} {shlex.quote(sys.executable)} -m "
+               f"tmclsh --port {path} 2>{err}; sleep 60")
+    term.wait("TMCM-1311:1>", patience(20))
+    term.line("ROR 0, 30000")
+    wait_for(lambda: sim.param("axis", 3, 0) != 0)
+    term.line(where)
+    if where == ".ascii":
+        wait_for(lambda: sim.ascii_active)
+        term.wait("ascii A>", patience(20))
+    else:
+        term.wait("GAP 3, 0", patience(20), more_than=1)  # the watch's table is drawn
+    pid = int(subprocess.run(["pgrep", "-f", f"^{sys.executable} -m tmclsh --port {path}"],
+                             capture_output=True, text=True).stdout.split()[0])
+    term.kill()  # the terminal goes away
+
+    def ended() -> bool:
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return True
+        return False
+
+    wait_for(ended, 20)
+    text = err.read_text()
+    assert "Traceback" not in text, text
+    assert "stopped motor 0 (MST; speed reads 0)" in text, text
+    assert sim.param("axis", 3, 0) == 0
+    assert not sim.ascii_active
+
+
+def test_a_thread_that_meets_the_terminal_gone_ends_quietly(monkeypatch):
+    """The same, where it happens: a thread's write fails with EIO as the terminal goes.
+    What else fails in a thread still reaches the hook there was (which prints it)."""
+    import errno
+    import threading
+
+    from tmclsh.shell.repl import app
+
+    reached: list[BaseException] = []
+    monkeypatch.setattr(threading, "excepthook", lambda args: reached.append(args.exc_value))
+    monkeypatch.setattr(app, "_is_terminal", lambda fd: False)  # (the terminal has gone)
+    app._quiet_when_the_terminal_goes()
+
+    def fails(exc: BaseException) -> None:
+        def run() -> None:
+            raise exc
+        t = threading.Thread(target=run, name="patch-stdout-flush-thread")
+        t.start()
+        t.join()
+
+    fails(OSError(errno.EIO, "Input/output error"))
+    assert reached == []
+    other = ValueError("something else")
+    fails(other)
+    assert reached == [other]
