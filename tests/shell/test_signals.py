@@ -416,3 +416,49 @@ def test_a_thread_that_meets_the_terminal_gone_ends_quietly(monkeypatch):
     other = ValueError("something else")
     fails(other)
     assert reached == [other]
+
+
+@pytest.mark.parametrize("where, shown", [(".watch GAP 3, 0", b"stop all"),  # (its keys)
+                                          (".watch GAP 3, 0", None),  # (gone as it starts)
+                                          (".ascii", b"ascii A>")])
+def test_the_terminal_gone_without_a_signal_mid_command_stops_the_motors(served, where, shown):
+    """As at the prompt, with a watch or the ASCII terminal running: no SIGHUP came (tmclsh
+    under ``setsid``), the terminal's reads end. The watch took that for no key pressed and
+    sampled on, the motor turning, until killed."""
+    import os
+    import pty
+    import select
+
+    sim, path = served
+    main, tty = pty.openpty()
+    p = subprocess.Popen([sys.executable, "-m", "tmclsh", "--port", path], cwd=str(ROOT),
+                         env={**tmclsh_env(), "TERM": "xterm"}, stdin=tty, stdout=tty,
+                         stderr=subprocess.PIPE, start_new_session=True)  # (no SIGHUP)
+    os.close(tty)
+    seen = bytearray()
+
+    def shows(text: bytes) -> bool:
+        while select.select([main], [], [], 0.05)[0]:
+            seen.extend(os.read(main, 4096))
+        return seen.count(text) > 0
+
+    try:
+        wait_for(lambda: shows(b"TMCM-1311:1>"), 20)
+        os.write(main, b"ROR 0, 30000\r")
+        wait_for(lambda: sim.param("axis", 3, 0) != 0)
+        del seen[:]
+        os.write(main, where.encode() + b"\r")
+        if shown is not None:
+            wait_for(lambda: shows(shown), 20)
+    finally:
+        os.close(main)  # the terminal goes away
+    try:
+        err = p.communicate(timeout=patience(20))[1].decode()
+    except subprocess.TimeoutExpired:
+        p.kill()
+        raise AssertionError("tmclsh went on after its terminal went away") from None
+    assert p.returncode == 128 + signal.SIGHUP, err
+    assert "Traceback" not in err, err
+    assert "hung up (the terminal went away): stopped motor 0 (MST; speed reads 0)" in err, err
+    assert sim.param("axis", 3, 0) == 0
+    assert not sim.ascii_active

@@ -33,6 +33,7 @@
 from __future__ import annotations
 
 import csv
+import errno
 import math
 import signal
 import sys
@@ -47,6 +48,7 @@ from typing import TYPE_CHECKING, TextIO
 
 from ...base import clock, files
 from ...base.errors import TmclError, TransportError, ValidationError  # noqa: F401
+from ...base.interrupts import hung_up
 from ...ops import watch as sampling
 from ...ops.watch import Item, Reading, Sample, SendClock
 from ..lang import expr, lines, script
@@ -299,6 +301,20 @@ def render(snapshot: Snapshot, width: int | None = None):
 
 # -- keys ----------------------------------------------------------------------------------
 
+def _hung_up(stream: TextIO) -> bool:
+    """Whether ``stream`` is a terminal that has gone away (its settings cannot be read:
+    EIO), not a file or pipe (ENOTTY) that never was one."""
+    try:
+        import termios
+
+        termios.tcgetattr(stream.fileno())
+    except ImportError:  # (no termios here: nothing to tell)
+        return False
+    except (termios.error, OSError, ValueError, AttributeError) as exc:
+        return bool(exc.args) and exc.args[0] == errno.EIO
+    return False
+
+
 class Keys:
     """Single key presses from a terminal stdin, through prompt_toolkit's input (the POSIX
     terminal and the Windows console alike), in raw mode: Ctrl-C arrives as the key "\x03".
@@ -314,6 +330,8 @@ class Keys:
     def __enter__(self) -> Keys:
         try:
             if self.stream is None or not self.stream.isatty():
+                if self.stream is not None and _hung_up(self.stream):
+                    raise hung_up()  # (gone before the watch began: as below in wait)
                 return self
             from prompt_toolkit.input import create_input
 
@@ -348,7 +366,11 @@ class Keys:
             text = "".join("\x1b" if p.key == Key.Escape else p.data for p in presses
                            if p.key == Key.Escape or len(p.data) == 1)
             left = deadline - time.monotonic()
-            if text or left <= 0 or self._input.closed:
+            if self._input.closed and not text:
+                # the terminal's reads ended: it went away (a key in raw mode is never
+                # an end of input), and no SIGHUP came: the hang-up's stop ends the run
+                raise hung_up()
+            if text or left <= 0:
                 return text
             time.sleep(min(0.01, left))
 
