@@ -462,3 +462,20 @@ def test_the_terminal_gone_without_a_signal_mid_command_stops_the_motors(served,
     assert "hung up (the terminal went away): stopped motor 0 (MST; speed reads 0)" in err, err
     assert sim.param("axis", 3, 0) == 0
     assert not sim.ascii_active
+
+
+def test_a_watch_whose_reader_went_away_stops_what_the_run_set_moving(served):
+    """``tmclsh -c "ROR 0, 30000; .watch GAP 3, 0" | head -1``: the watch ended at the
+    broken pipe as if its count were reached, and the run ended there as finished: exit 0,
+    the motor turning. It is the run's reader gone, as on any other line."""
+    sim, path = served
+    p = subprocess.Popen([sys.executable, "-m", "tmclsh", "--port", path, "-c",
+                          "ROR 0, 30000\n.watch GAP 3, 0"], cwd=str(ROOT),
+                         env=tmclsh_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    p.stdout.readline()
+    p.stdout.close()  # the reader goes away after one line
+    err = p.stderr.read().decode()
+    assert p.wait(patience(20)) == 1, err
+    assert "Traceback" not in err, err
+    assert "the output's reader went away: stopped motor 0 (MST; speed reads 0)" in err, err
+    assert sim.param("axis", 3, 0) == 0

@@ -792,6 +792,8 @@ def cmd_watch(session: Session, args: str) -> None:
         from .stop import say_report
 
         say_report(session.out, result.stops[-1], "watch")
+    if result.reason == "pipe":  # the run's reader has gone: the run ends as on any line
+        raise BrokenPipeError(errno.EPIPE, "the output's reader went away")
     if result.reason == "interrupt" and not session.interactive:
         # at the prompt Ctrl-C ends the watch and the prompt comes back; in -c/-f it ends
         # the run as on any other line: the next line would set the motors moving again
