@@ -479,3 +479,43 @@ def test_a_watch_whose_reader_went_away_stops_what_the_run_set_moving(served):
     assert "Traceback" not in err, err
     assert "the output's reader went away: stopped motor 0 (MST; speed reads 0)" in err, err
     assert sim.param("axis", 3, 0) == 0
+
+
+@pytest.mark.parametrize("second", [signal.SIGINT, signal.SIGTERM])
+def test_a_second_signal_before_the_stop_begins_does_not_skip_it(monkeypatch, capsys, second):
+    """Ctrl-C pressed twice (or a SIGTERM after it) with the second landing as the run
+    turns to its stop, before the stop's first request (the stop's modules are imported
+    then): the second escaped, the run ended 130 without a word, the motor turning (found
+    on a shared line with a module model: the motor at 30000 after the run). It is part of
+    the same end: the stop runs."""
+    import os
+
+    from tmclsh.cli.main import main
+    from tmclsh.shell.lang import main as shell_main
+
+    seen = {}
+
+    def ctrl_c_mid_run(args, client, settings):
+        seen["sim"] = client.transport.simulator
+        client.execute("ROR 0, 30000")
+        raise KeyboardInterrupt
+
+    behind = shell_main._signal_behind
+
+    def second_signal_lands(exc):
+        os.kill(os.getpid(), second)  # (to this thread: its handler runs in the loop)
+        for _ in range(20):
+            time.sleep(0.001)
+        return behind(exc)
+
+    monkeypatch.setattr(shell_main, "run_connected", ctrl_c_mid_run)
+    monkeypatch.setattr(shell_main, "_signal_behind", second_signal_lands)
+    previous = signal.getsignal(signal.SIGTERM)
+    try:
+        status = main(["--sim", "-c", "GAP 1, 0"])
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    err = capsys.readouterr().err
+    assert status == 130, err
+    assert "interrupted: stopped motor 0 (MST; speed reads 0)" in err, err
+    assert seen["sim"].param("axis", 3, 0) == 0

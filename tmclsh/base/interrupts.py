@@ -154,7 +154,12 @@ class held:
     Each signal whose handler is the run's own (a Python function) is noted while the block
     runs, and handed to that handler when it ends; one that is ignored or left to the
     system is left as it is. Nothing outside the main thread, where no handler can be set.
-    The block must be short and bounded (requests with their timeouts)."""
+    The block must be short and bounded (requests with their timeouts). ``deliver=False``
+    where the run ends with the block anyway (the stop after the signal that ends it): a
+    signal noted meanwhile is part of that end, not handed on."""
+
+    def __init__(self, deliver: bool = True):
+        self.deliver = deliver
 
     def __enter__(self) -> held:
         self._previous: dict = {}
@@ -178,7 +183,7 @@ class held:
 
     def __exit__(self, *exc: object) -> None:
         restore(self._previous)
-        for signum in self._pending[:1]:  # (the first acts; it ends the run)
+        for signum in self._pending[:1] if self.deliver else ():  # (the first acts)
             self._previous[signum](signum, None)
 
 

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 from ...base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE,
                             ModuleGoneError, TmclError)
-from ...base.interrupts import Terminated, taken, unwind_on
+from ...base.interrupts import Terminated, held, taken, unwind_on
 from ..render import Output
 from .session import QuitShell, Session, frames_sent
 
@@ -111,13 +111,18 @@ def run_shell(args: argparse.Namespace) -> int:
     try:
         return run_connected(args, client, settings)
     except (KeyboardInterrupt, Terminated, RuntimeError) as exc:
-        signalled = _signal_behind(exc)
-        if signalled is None:
-            raise
+        # a second Ctrl-C or SIGTERM until the stop has begun is part of this end: it
+        # landed while the stop was imported, and the run ended without one
+        with held(deliver=False):
+            signalled = _signal_behind(exc)
+            if signalled is None:
+                raise
+            _ready_to_stop()
+            if not isinstance(signalled, Terminated):
+                print(file=sys.stderr)
         if isinstance(signalled, Terminated):  # SIGTERM (a CI job's timeout), SIGHUP
             stop_on_interrupt(client, signalled.why)
             return signalled.code
-        print(file=sys.stderr)
         stop_on_interrupt(client)
         return EXIT_INTERRUPTED
     except BrokenPipeError:  # whoever read our output has gone (`tmclsh -c ... | head`)
@@ -141,6 +146,12 @@ def _signal_behind(exc: BaseException) -> BaseException | None:
         exc = exc.__cause__ or exc.__context__
         seen += 1
     return None
+
+
+def _ready_to_stop() -> None:
+    """The stop's modules imported (the first time they are compiled, which takes a while)."""
+    from ...ops import stop  # noqa: F401
+    from ..features import stop as front  # noqa: F401
 
 
 def stop_on_interrupt(client, why: str = "interrupted") -> None:
