@@ -60,6 +60,11 @@ from ..lang.session import reconnected
 if TYPE_CHECKING:
     from ..lang.session import Session
 
+try:  # (here: nothing is imported in a unit's thread, where a watch may run)
+    import termios
+except ImportError:  # (not on Windows)
+    termios = None  # type: ignore[assignment]
+
 Number = int | float
 
 DEFAULT_INTERVAL = 0.1  # seconds between samples
@@ -304,12 +309,10 @@ def render(snapshot: Snapshot, width: int | None = None):
 def _hung_up(stream: TextIO) -> bool:
     """Whether ``stream`` is a terminal that has gone away (its settings cannot be read:
     EIO), not a file or pipe (ENOTTY) that never was one."""
-    try:
-        import termios
-
-        termios.tcgetattr(stream.fileno())
-    except ImportError:  # (no termios here: nothing to tell)
+    if termios is None:  # (no termios here: nothing to tell)
         return False
+    try:
+        termios.tcgetattr(stream.fileno())
     except (termios.error, OSError, ValueError, AttributeError) as exc:
         return bool(exc.args) and exc.args[0] == errno.EIO
     return False
