@@ -519,3 +519,45 @@ def test_a_second_signal_before_the_stop_begins_does_not_skip_it(monkeypatch, ca
     assert status == 130, err
     assert "interrupted: stopped motor 0 (MST; speed reads 0)" in err, err
     assert seen["sim"].param("axis", 3, 0) == 0
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize("ascii", [False, True])
+def test_a_motor_set_turning_at_an_address_left_is_stopped_too(make_pty_sim, sig, ascii):
+    """``ROR 0, 20000; .address 2; ROR 0, 30000`` then Ctrl-C or SIGTERM: the stop went to
+    address 2 only; the motor at address 1, which this run set turning, went on. The run's
+    stop visits each address it left a motor moving at (and leaves the others alone)."""
+    from tmclsh.sim import SimBus, Simulator
+
+    sims = [Simulator("TMCM-1311", a) for a in (1, 2, 3)]
+    bus, path = make_pty_sim(target=SimBus(sims))
+    extra = ("--ascii",) if ascii else ()
+    p = start(path, *extra, "-c", "ROR 0, 20000; .address 2; ROR 0, 30000; .sleep 30")
+    wait_for(lambda: sims[1].param("axis", 3, 0) != 0)
+    p.send_signal(sig)
+    out, err = p.communicate(timeout=patience(30))
+    assert p.returncode == 128 + sig, err
+    assert "Traceback" not in err, err
+    assert [s.param("axis", 3, 0) for s in sims[:2]] == [0, 0], err
+    assert "address 1: stopped motor 0 (MST; speed reads 0)" in err, err
+    assert not any(s.ascii_active for s in sims), err
+
+
+def test_an_address_left_that_no_longer_answers_is_named(make_pty_sim):
+    """The module left turning does not answer when the stop comes back for it: said,
+    with the motor, in one line; the run still ends with the signal's status."""
+    from tmclsh.sim import SimBus, Simulator
+
+    sims = [Simulator("TMCM-1311", a) for a in (1, 2)]
+    bus, path = make_pty_sim(target=SimBus(sims))
+    p = start(path, "--timeout", "0.2", "-c",
+              "ROR 0, 20000; .address 2; ROR 0, 30000; .sleep 30")
+    wait_for(lambda: sims[1].param("axis", 3, 0) != 0)
+    sims[0].faults.lose_next = 10_000  # (address 1 hears nothing from now on)
+    p.send_signal(signal.SIGTERM)
+    out, err = p.communicate(timeout=patience(60))
+    assert p.returncode == 143, err
+    assert "Traceback" not in err, err
+    assert "terminated (SIGTERM): stopped motor 0 (MST; speed reads 0)" in err, err
+    assert "terminated (SIGTERM): address 1: motor 0 may still turn: " in err, err
+    assert sims[1].param("axis", 3, 0) == 0

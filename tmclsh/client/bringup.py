@@ -31,6 +31,7 @@ from ..tmcl import instructions as isa
 from ..tmcl.frames import Control, Request
 from ..tmcl.modules import Module, baud_rates, by_type1, generic_for, identify as named_by
 from ..tmcl.version import parse_string
+from .motion import MotionRecord
 
 if TYPE_CHECKING:
     from .core import Client
@@ -143,6 +144,12 @@ def switch_address(client: Client, address: int) -> None:
         raise
     if left is not None:
         left.leave(old[0], in_ascii=old[4] is left)
+    # what this client set moving belongs to the module it was told to: kept by its address
+    # for the stop, and the module met now has its own record (none: told nothing yet)
+    gone_from = old[1] if client.is_can else old[0]
+    if client.motion:
+        client._motion_left[gone_from] = client.motion
+    client.motion = client._motion_left.pop(address, None) or MotionRecord()
 
 
 def identify(client: Client) -> Module:

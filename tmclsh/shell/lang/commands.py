@@ -286,7 +286,9 @@ COMMANDS: tuple[Command, ...] = (
                      "was found in; only an ASCII mode tmclsh was asked for (--ascii, .mode "
                      "ascii) goes on to the next. On CAN, N is the module's CAN id. N "
                      'may be an expression or hold variables, so one script walks a bus: '
-                     '.repeat 3 as i / .address i + 1 / GAP 1, 0 / .end.'),
+                     '.repeat 3 as i / .address i + 1 / GAP 1, 0 / .end. Ctrl-C, SIGTERM '
+                     'or SIGHUP in -c and -f stop the module in use, then each module left '
+                     'with a motor tmclsh told to turn or move.'),
             changes_link=True,
             expands=True),
     Command('.module', 'connection', '.module [NAME]',

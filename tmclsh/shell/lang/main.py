@@ -156,10 +156,22 @@ def _ready_to_stop() -> None:
 
 def stop_on_interrupt(client, why: str = "interrupted") -> None:
     """Ctrl-C, SIGTERM or SIGHUP in -c/-f (and SIGTERM/SIGHUP at the prompt): the one stop
-    (stop.py), said on stderr."""
+    (stop.py), said on stderr; then the same at each address ``.address`` left a motor
+    told to move at (this run's modules only: no other address is sent anything)."""
     from ..features.stop import ToStderr, stop_all
 
     stop_all(client, ToStderr(), why)
+    for address in list(getattr(client, "_motion_left", {})):
+        from ...client.bringup import switch_address
+
+        try:
+            switch_address(client, address)
+        except (TmclError, OSError) as exc:
+            motors = ", ".join(map(str, sorted(client._motion_left[address].motors())))
+            ToStderr().warn(f"{why}: address {address}: motor {motors} may still turn: "
+                            f"{str(exc).splitlines()[0]}")
+            continue
+        stop_all(client, ToStderr(), f"{why}: address {address}")
 
 
 def _interactive(args: argparse.Namespace) -> bool:
