@@ -31,7 +31,6 @@ from ..tmcl import instructions as isa
 from ..tmcl.frames import Control, Request
 from ..tmcl.modules import Module, baud_rates, by_type1, generic_for, identify as named_by
 from ..tmcl.version import parse_string
-from .motion import MotionRecord
 
 if TYPE_CHECKING:
     from .core import Client
@@ -105,6 +104,7 @@ def switch_address(client: Client, address: int) -> None:
     """Talk to the module at ``address`` (on CAN: that id) from now on, brought up as at
     connect; on failure the client stays with the module it had."""
     from .ascii import AsciiLink
+    from .motion import MotionRecord
 
     old = (client.address, client.can_id, client.module, client.version, client.ascii_link)
     # the ASCII mode a module is driven in is that module's: the next one is met in the mode
