@@ -198,3 +198,34 @@ def test_a_signal_ignored_when_asked_stays_ignored():
             restore(previous)
     finally:
         signal.signal(signal.SIGHUP, before)
+
+
+def test_a_held_block_hands_its_signal_on_when_it_ends():
+    """``held``: a SIGTERM landing inside waits for the block's end (the stop's commands
+    all go out), then ends the run; without the hold it cut the block short."""
+    previous = unwind_on(("SIGTERM",))
+    done = []
+    try:
+        with pytest.raises(Terminated):
+            with interrupts.held():
+                os.kill(os.getpid(), signal.SIGTERM)
+                _run_on(0.2)  # (the handler has had its chance to run here)
+                done.append("the block ran to its end")
+        assert done
+        with pytest.raises(Terminated):  # and the handler is the run's again
+            os.kill(os.getpid(), signal.SIGTERM)
+            _run_on()
+    finally:
+        restore(previous)
+
+
+def test_a_held_block_leaves_an_ignored_signal_ignored():
+    before = signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    try:
+        with interrupts.held():
+            assert signal.getsignal(signal.SIGHUP) is signal.SIG_IGN
+            os.kill(os.getpid(), signal.SIGHUP)
+            _run_on(0.1)
+        assert signal.getsignal(signal.SIGHUP) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGHUP, before)

@@ -122,6 +122,39 @@ def test_interrupted_then_resumed(model_hex, phase, command, nth):
         module.close()
 
 
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_a_second_signal_while_the_module_is_sent_back_says_where_it_stands(model_hex, sig):
+    """Interrupted before the erase, and again as the module is sent back to its firmware
+    (205 out, its answer awaited): it said "the module is in its bootloader ... starts again
+    when switched off and on" of a module that ran its firmware again. 205 is said to have
+    gone out."""
+    module = BootModule()
+    image = model_hex(size=5000)
+    holder: dict = {}
+
+    def signal_again(m):  # the signal lands while the update waits for this answer
+        if "p" in holder:
+            holder["p"].send_signal(sig)
+            delivered(holder["p"].pid, sig)
+
+    try:
+        # before the erase (206: the memory asked), and as 205 arrives to send it back
+        module.hooks[206] = module.hooks[205] = signal_again
+        p = holder["p"] = tmclsh("firmware", image, "--port", module.path, "--yes",
+                                 "--timeout", "0.2")
+        rc, out, err = finish(p)
+        assert rc == 128 + sig, err
+        assert "Traceback" not in err, err
+        deadline = time.monotonic() + patience(10)
+        while module.in_bootloader and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert not module.in_bootloader and module.erases == 0
+        assert "the module is in its bootloader; nothing was erased" not in err, err
+        assert "205 was sent to start its firmware 1311V111 again" in err, err
+    finally:
+        module.close()
+
+
 def test_killed_mid_write_then_the_same_command_completes(sim_hex):
     """SIGKILL: nothing is said; the module stays in its bootloader, and the same command
     finds it there and completes."""

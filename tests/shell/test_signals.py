@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from conftest import ROOT, patience, tmclsh_env
+from conftest import ROOT, patience, read_until, tmclsh_env
 from tmclsh.tmcl.frames import Request, Reply
 from tmclsh.sim import Simulator
 from tmclsh.sim.serve import serve_pty
@@ -258,3 +258,306 @@ def test_a_run_whose_reader_went_away_stops_what_it_set_moving(served, tmp_path,
         assert sim.param("axis", 3, 0) == 0
     else:
         assert "stopped" not in err, err
+
+
+@pytest.mark.parametrize("how", ["-c", "-f"])
+def test_ctrl_c_in_a_watch_ends_an_unattended_run(served, tmp_path, how):
+    """Ctrl-C during ``.watch`` in ``-c``/``-f`` stopped the motor and ended the watch, and
+    the run went on: the next line set the motor turning again, and the run ended 0 with it
+    turning. In a run nobody types at, Ctrl-C ends the run, as on any other line."""
+    sim, path = served
+    lines = "ROR 0, 30000\n.watch GAP 3, 0\nROR 0, 10000\n.sleep 1\n"
+    if how == "-f":
+        script = tmp_path / "watch.tmcl"
+        script.write_text(lines)
+        p = start(path, "-f", str(script))
+    else:
+        p = start(path, "-c", lines)
+    read_until(p, lambda text: '"GAP 3, 0"' in text)  # the watch shows samples
+    p.send_signal(signal.SIGINT)
+    out, err = p.communicate(timeout=patience(20))
+    assert p.returncode == 130, err
+    assert "Traceback" not in err, err
+    assert "10000" not in out, out  # the line after the watch was not run
+    assert sim.param("axis", 3, 0) == 0
+    if how == "-f":
+        assert "watch.tmcl: interrupted (Ctrl-C) at line 2" in out, out
+
+
+class _TurningModule:
+    """A TMCM-1311 from the manual (tests/responder.py), which turns its motor on ROR/ROL
+    and stops it on MST (GAP 3 reads the speed), its stored program stopped (135 reads 0).
+    ``on_stop``: called when it hears the stop's first request (135), before it answers."""
+
+    @staticmethod
+    def make(on_stop):
+        from responder import OK, PtyModule
+
+        class Turning(PtyModule):
+            turning = 0  # (``speed`` is the responder's baud rate)
+            stop_seen = False
+
+            def respond(self, command, type_, motor, value):
+                if command == 135 and not self.stop_seen and self.turning:
+                    self.stop_seen = True
+                    on_stop(self)
+                if command in (1, 2):
+                    self.turning = value if command == 1 else -value
+                elif command == 3:
+                    self.turning = 0
+                elif command == 6 and type_ == 3:
+                    self.got.append((command, type_, motor, value))
+                    return OK, self.turning
+                elif command in (128, 135):
+                    self.got.append((command, type_, motor, value))
+                    return OK, 0
+                return super().respond(command, type_, motor, value)
+
+        return Turning(version="1311V111")
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
+def test_a_second_signal_during_the_stop_does_not_cut_it_short(sig):
+    """Ctrl-C pressed twice, or a second SIGTERM (a supervisor's), landing while the stop
+    asks whether the stored program runs: the stop was abandoned before MST (Ctrl-C said
+    "the motors may still turn"; SIGTERM and SIGHUP said nothing at all) and the motor
+    went on turning. The stop's commands go out first; the second signal cuts short only
+    the reading back, and is said."""
+    from conftest import delivered
+
+    proc: list[subprocess.Popen] = []
+
+    def second_signal(module) -> None:
+        proc[0].send_signal(sig)
+        delivered(proc[0].pid, sig)
+
+    module = _TurningModule.make(second_signal)
+    try:
+        p = start(module.path, "-c", "ROR 0, 30000; .sleep 30")
+        proc.append(p)
+        wait_for(lambda: module.turning != 0)
+        p.send_signal(sig)
+        out, err = p.communicate(timeout=patience(20))
+        assert module.stop_seen, err
+        assert p.returncode == 128 + sig, err
+        assert "Traceback" not in err, err
+        assert module.turning == 0, err  # MST went out
+        assert "again" in err, err  # the second signal is said
+    finally:
+        module.close()
+
+
+@pytest.mark.skipif(__import__("shutil").which("tmux") is None, reason="tmux is not installed")
+@pytest.mark.parametrize("where", [".watch GAP 3, 0", ".ascii"])
+def test_the_terminal_gone_mid_command_ends_without_a_traceback(served, terminal, tmp_path,
+                                                                 where):
+    """The window closed while a watch draws or the ASCII terminal runs: the motor was
+    stopped and the module left ASCII mode, but a thread writing to the terminal (the
+    prompt's output proxy) met the dead terminal first and printed its traceback."""
+    import os
+    import shlex
+
+    sim, path = served
+    term = terminal()
+    err = tmp_path / "err"
+    env = " ".join(f"{k}={shlex.quote(v)}" for k, v in term.env.items())
+    term.shell(f"cd {shlex.quote(str(ROOT))} && env {env} {shlex.quote(sys.executable)} -m "
+               f"tmclsh --port {path} 2>{err}; sleep 60")
+    term.wait("TMCM-1311:1>", patience(20))
+    term.line("ROR 0, 30000")
+    wait_for(lambda: sim.param("axis", 3, 0) != 0)
+    term.line(where)
+    if where == ".ascii":
+        wait_for(lambda: sim.ascii_active)
+        term.wait("ascii A>", patience(20))
+    else:
+        term.wait("GAP 3, 0", patience(20), more_than=1)  # the watch's table is drawn
+    pid = int(subprocess.run(["pgrep", "-f", f"^{sys.executable} -m tmclsh --port {path}"],
+                             capture_output=True, text=True).stdout.split()[0])
+    term.kill()  # the terminal goes away
+
+    def ended() -> bool:
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return True
+        return False
+
+    wait_for(ended, 20)
+    text = err.read_text()
+    assert "Traceback" not in text, text
+    assert "stopped motor 0 (MST; speed reads 0)" in text, text
+    assert sim.param("axis", 3, 0) == 0
+    assert not sim.ascii_active
+
+
+def test_a_thread_that_meets_the_terminal_gone_ends_quietly(monkeypatch):
+    """The same, where it happens: a thread's write fails with EIO as the terminal goes.
+    What else fails in a thread still reaches the hook there was (which prints it)."""
+    import errno
+    import threading
+
+    from tmclsh.shell.repl import app
+
+    reached: list[BaseException] = []
+    monkeypatch.setattr(threading, "excepthook", lambda args: reached.append(args.exc_value))
+    monkeypatch.setattr(app, "_is_terminal", lambda fd: False)  # (the terminal has gone)
+    app._quiet_when_the_terminal_goes()
+
+    def fails(exc: BaseException) -> None:
+        def run() -> None:
+            raise exc
+        t = threading.Thread(target=run, name="patch-stdout-flush-thread")
+        t.start()
+        t.join()
+
+    fails(OSError(errno.EIO, "Input/output error"))
+    assert reached == []
+    other = ValueError("something else")
+    fails(other)
+    assert reached == [other]
+
+
+@pytest.mark.parametrize("where, shown", [(".watch GAP 3, 0", b"stop all"),  # (its keys)
+                                          (".watch GAP 3, 0", None),  # (gone as it starts)
+                                          (".ascii", b"ascii A>")])
+def test_the_terminal_gone_without_a_signal_mid_command_stops_the_motors(served, where, shown):
+    """As at the prompt, with a watch or the ASCII terminal running: no SIGHUP came (tmclsh
+    under ``setsid``), the terminal's reads end. The watch took that for no key pressed and
+    sampled on, the motor turning, until killed."""
+    import os
+    import pty
+    import select
+
+    sim, path = served
+    main, tty = pty.openpty()
+    p = subprocess.Popen([sys.executable, "-m", "tmclsh", "--port", path], cwd=str(ROOT),
+                         env={**tmclsh_env(), "TERM": "xterm"}, stdin=tty, stdout=tty,
+                         stderr=subprocess.PIPE, start_new_session=True)  # (no SIGHUP)
+    os.close(tty)
+    seen = bytearray()
+
+    def shows(text: bytes) -> bool:
+        while select.select([main], [], [], 0.05)[0]:
+            seen.extend(os.read(main, 4096))
+        return seen.count(text) > 0
+
+    try:
+        wait_for(lambda: shows(b"TMCM-1311:1>"), 20)
+        os.write(main, b"ROR 0, 30000\r")
+        wait_for(lambda: sim.param("axis", 3, 0) != 0)
+        del seen[:]
+        os.write(main, where.encode() + b"\r")
+        if shown is not None:
+            wait_for(lambda: shows(shown), 20)
+    finally:
+        os.close(main)  # the terminal goes away
+    try:
+        err = p.communicate(timeout=patience(20))[1].decode()
+    except subprocess.TimeoutExpired:
+        p.kill()
+        raise AssertionError("tmclsh went on after its terminal went away") from None
+    assert p.returncode == 128 + signal.SIGHUP, err
+    assert "Traceback" not in err, err
+    assert "hung up (the terminal went away): stopped motor 0 (MST; speed reads 0)" in err, err
+    assert sim.param("axis", 3, 0) == 0
+    assert not sim.ascii_active
+
+
+def test_a_watch_whose_reader_went_away_stops_what_the_run_set_moving(served):
+    """``tmclsh -c "ROR 0, 30000; .watch GAP 3, 0" | head -1``: the watch ended at the
+    broken pipe as if its count were reached, and the run ended there as finished: exit 0,
+    the motor turning. It is the run's reader gone, as on any other line."""
+    sim, path = served
+    p = subprocess.Popen([sys.executable, "-m", "tmclsh", "--port", path, "-c",
+                          "ROR 0, 30000\n.watch GAP 3, 0"], cwd=str(ROOT),
+                         env=tmclsh_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    p.stdout.readline()
+    p.stdout.close()  # the reader goes away after one line
+    err = p.stderr.read().decode()
+    assert p.wait(patience(20)) == 1, err
+    assert "Traceback" not in err, err
+    assert "the output's reader went away: stopped motor 0 (MST; speed reads 0)" in err, err
+    assert sim.param("axis", 3, 0) == 0
+
+
+@pytest.mark.parametrize("second", [signal.SIGINT, signal.SIGTERM])
+def test_a_second_signal_before_the_stop_begins_does_not_skip_it(monkeypatch, capsys, second):
+    """Ctrl-C pressed twice (or a SIGTERM after it) with the second landing as the run
+    turns to its stop, before the stop's first request (the stop's modules are imported
+    then): the second escaped, the run ended 130 without a word, the motor turning (found
+    on a shared line with a module model: the motor at 30000 after the run). It is part of
+    the same end: the stop runs."""
+    import os
+
+    from tmclsh.cli.main import main
+    from tmclsh.shell.lang import main as shell_main
+
+    seen = {}
+
+    def ctrl_c_mid_run(args, client, settings):
+        seen["sim"] = client.transport.simulator
+        client.execute("ROR 0, 30000")
+        raise KeyboardInterrupt
+
+    behind = shell_main._signal_behind
+
+    def second_signal_lands(exc):
+        os.kill(os.getpid(), second)  # (to this thread: its handler runs in the loop)
+        for _ in range(20):
+            time.sleep(0.001)
+        return behind(exc)
+
+    monkeypatch.setattr(shell_main, "run_connected", ctrl_c_mid_run)
+    monkeypatch.setattr(shell_main, "_signal_behind", second_signal_lands)
+    previous = signal.getsignal(signal.SIGTERM)
+    try:
+        status = main(["--sim", "-c", "GAP 1, 0"])
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    err = capsys.readouterr().err
+    assert status == 130, err
+    assert "interrupted: stopped motor 0 (MST; speed reads 0)" in err, err
+    assert seen["sim"].param("axis", 3, 0) == 0
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize("ascii", [False, True])
+def test_a_motor_set_turning_at_an_address_left_is_stopped_too(make_pty_sim, sig, ascii):
+    """``ROR 0, 20000; .address 2; ROR 0, 30000`` then Ctrl-C or SIGTERM: the stop went to
+    address 2 only; the motor at address 1, which this run set turning, went on. The run's
+    stop visits each address it left a motor moving at (and leaves the others alone)."""
+    from tmclsh.sim import SimBus, Simulator
+
+    sims = [Simulator("TMCM-1311", a) for a in (1, 2, 3)]
+    bus, path = make_pty_sim(target=SimBus(sims))
+    extra = ("--ascii",) if ascii else ()
+    p = start(path, *extra, "-c", "ROR 0, 20000; .address 2; ROR 0, 30000; .sleep 30")
+    wait_for(lambda: sims[1].param("axis", 3, 0) != 0)
+    p.send_signal(sig)
+    out, err = p.communicate(timeout=patience(30))
+    assert p.returncode == 128 + sig, err
+    assert "Traceback" not in err, err
+    assert [s.param("axis", 3, 0) for s in sims[:2]] == [0, 0], err
+    assert "address 1: stopped motor 0 (MST; speed reads 0)" in err, err
+    assert not any(s.ascii_active for s in sims), err
+
+
+def test_an_address_left_that_no_longer_answers_is_named(make_pty_sim):
+    """The module left turning does not answer when the stop comes back for it: said,
+    with the motor, in one line; the run still ends with the signal's status."""
+    from tmclsh.sim import SimBus, Simulator
+
+    sims = [Simulator("TMCM-1311", a) for a in (1, 2)]
+    bus, path = make_pty_sim(target=SimBus(sims))
+    p = start(path, "--timeout", "0.2", "-c",
+              "ROR 0, 20000; .address 2; ROR 0, 30000; .sleep 30")
+    wait_for(lambda: sims[1].param("axis", 3, 0) != 0)
+    sims[0].faults.lose_next = 10_000  # (address 1 hears nothing from now on)
+    p.send_signal(signal.SIGTERM)
+    out, err = p.communicate(timeout=patience(60))
+    assert p.returncode == 143, err
+    assert "Traceback" not in err, err
+    assert "terminated (SIGTERM): stopped motor 0 (MST; speed reads 0)" in err, err
+    assert "terminated (SIGTERM): address 1: motor 0 may still turn: " in err, err
+    assert sims[1].param("axis", 3, 0) == 0

@@ -275,7 +275,11 @@ def test_keys_typed_together_all_count(session):
     assert result.reason == "key" and [r.stopped for r in result.stops] == [[0]]
 
 
-def test_ctrl_c_stops_the_motor_and_ends_the_watch(session, capsys):
+@pytest.mark.parametrize("interactive", [True, False])
+def test_ctrl_c_stops_the_motor_and_ends_the_watch(sim, capsys, interactive):
+    """At the prompt the watch ends and the prompt comes back; elsewhere (-c, -f, Python)
+    the interrupt goes on to end the run, after the watch's stop."""
+    session = Session(sim, Output(json_mode=True), interactive=interactive)
     session.run_line("ROR 0, 50000")
     emit = session.out.emit
     seen = []
@@ -288,7 +292,11 @@ def test_ctrl_c_stops_the_motor_and_ends_the_watch(session, capsys):
 
     session.out.emit = emit_then_interrupt
     t0 = time.monotonic()
-    session.run_line(".watch speed=GAP 2, 0 --interval 0.02")
+    if interactive:
+        session.run_line(".watch speed=GAP 2, 0 --interval 0.02")
+    else:
+        with pytest.raises(KeyboardInterrupt):
+            session.run_line(".watch speed=GAP 2, 0 --interval 0.02")
     assert time.monotonic() - t0 < patience(5) and 5 <= len(seen) <= 6
     err = capsys.readouterr().err
     assert "ended by Ctrl-C" in err and "stopped motor 0 (MST; speed reads 0)" in err

@@ -145,6 +145,48 @@ def restore(previous: dict) -> None:
             pass
 
 
+_ENDING = ("SIGINT", "SIGTERM", "SIGHUP")
+
+
+class held:
+    """A block the signals that end a run wait for: the stop's commands (128, MST), which a
+    second Ctrl-C or SIGTERM landing between them would leave unsent, the motors turning.
+    Each signal whose handler is the run's own (a Python function) is noted while the block
+    runs, and handed to that handler when it ends; one that is ignored or left to the
+    system is left as it is. Nothing outside the main thread, where no handler can be set.
+    The block must be short and bounded (requests with their timeouts). ``deliver=False``
+    where the run ends with the block anyway (the stop after the signal that ends it): a
+    signal noted meanwhile is part of that end, not handed on."""
+
+    def __init__(self, deliver: bool = True):
+        self.deliver = deliver
+
+    def __enter__(self) -> held:
+        self._previous: dict = {}
+        self._pending: list[int] = []
+        if threading.current_thread() is not threading.main_thread():
+            return self
+        for name in _ENDING:
+            sig = getattr(signal, name, None)
+            if sig is None:
+                continue
+            try:
+                handler = signal.getsignal(sig)
+                if callable(handler):
+                    self._previous[sig] = signal.signal(sig, self._note)
+            except (ValueError, OSError):
+                pass
+        return self
+
+    def _note(self, signum: int, frame: object) -> None:
+        self._pending.append(signum)
+
+    def __exit__(self, *exc: object) -> None:
+        restore(self._previous)
+        for signum in self._pending[:1] if self.deliver else ():  # (the first acts)
+            self._previous[signum](signum, None)
+
+
 def keep() -> None:
     """A signal whose exception was dropped in a callback is sent again (see above)."""
     global _kept

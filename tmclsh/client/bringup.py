@@ -105,6 +105,7 @@ def switch_address(client: Client, address: int) -> None:
     """Talk to the module at ``address`` (on CAN: that id) from now on, brought up as at
     connect; on failure the client stays with the module it had."""
     from .ascii import AsciiLink
+    from .motion import MotionRecord
 
     old = (client.address, client.can_id, client.module, client.version, client.ascii_link)
     # the ASCII mode a module is driven in is that module's: the next one is met in the mode
@@ -144,6 +145,12 @@ def switch_address(client: Client, address: int) -> None:
         raise
     if left is not None:
         left.leave(old[0], in_ascii=old[4] is left)
+    # what this client set moving belongs to the module it was told to: kept by its address
+    # for the stop, and the module met now has its own record (none: told nothing yet)
+    gone_from = old[1] if client.is_can else old[0]
+    if client.motion:
+        client._motion_left[gone_from] = client.motion
+    client.motion = client._motion_left.pop(address, None) or MotionRecord()
 
 
 def identify(client: Client) -> Module:

@@ -144,6 +144,10 @@ class Client:
         self.motion = MotionRecord()
         """What tmclsh told each motor to do and has not stopped (a turning target, a
         position move): a motor whose speed reads 0 may still be meant to turn."""
+        self._motion_left: dict[int, MotionRecord] = {}
+        """The same for the modules ``.address`` switched away from (by address or CAN
+        id) while a motor there was still told to move: the stop after a signal goes
+        there too."""
         # set by reconnect(): before the next command, the module is brought up again as at
         # connect (tmclsh.client.bringup: what answers, its mode, download mode)
         self._bring_up_next = False

@@ -178,6 +178,7 @@ class Lifecycle:
             c.module = mod
             c.version = None
             c.motion.forget()  # (another module, or one that was told nothing yet)
+            c._motion_left.clear()  # (another link)
             self.reopen()  # clears buffers and stale-reply bookkeeping, reopens the link
             c._bring_up_next = c._check_download = False  # (what bring_up does)
             c.stats["reconnects"] += 1

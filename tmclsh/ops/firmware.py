@@ -41,6 +41,7 @@ from dataclasses import dataclass
 
 from ..base.errors import (ChecksumError, InBootloaderError, NoAnswerError, TmclError,
                            TmclTimeoutError, TransportError)
+from ..base.interrupts import held
 from ..client.bringup import bring_up, confirmed_bootloader
 from ..client.connect import open_transport
 from ..client.core import Client
@@ -742,7 +743,9 @@ class FirmwareUpdate:
         try:
             if not self.client.connected:
                 return
-            self._request("start")
+            with held():  # (a second Ctrl-C lands once 205 is out, and is said so)
+                self._request("start")
+                self.start_unanswered = True
             self._restarting()
             usb = self._on_usb
             if usb:
@@ -754,10 +757,8 @@ class FirmwareUpdate:
             return
         parsed = parse_string(version or "")
         if parsed is not None and not parsed.bootloader:
-            self.sent_back = True
+            self.sent_back, self.start_unanswered = True, False
             self.state = APPLICATION
-        else:
-            self.start_unanswered = True
 
     # -- after a failure ----------------------------------------------------------------
     def situation(self) -> str:

@@ -15,6 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from ..base.errors import StatusError, TmclError, ValidationError
+from ..base.interrupts import held
 from ..client.ledger import CONFIRM_ROUNDS
 from ..client.motion import Commanded
 from ..tmcl import instructions as isa
@@ -261,24 +262,25 @@ def _stop_everything(client, settle: float, sleep: Callable[[float], None]) -> S
     """
     report = StopReport()
     t = min(client.timeout, 0.5)
-    running = report.running = _program_running(client, t)
-    if running is not False and _has(client, Control.STOP_APPLICATION):
-        try:
-            _ok(_send(client, Control.STOP_APPLICATION, timeout=t), "stop (128)")
-            report.program = "stopped" if running else None
-        except TmclError as exc:
-            report.program_error = str(exc)
-    elif running is False:
-        report.program = "not running"
     pending: list[int] = []
-    for m in _motors(client):
-        try:
-            _ok(_send(client, _MST, 0, m, timeout=t), f"MST {m}")
-            pending.append(m)
-        except TmclError as exc:
-            if _no_such_motor(client, m, exc):
-                break
-            report.unknown[m] = str(exc)
+    with held():  # (a second Ctrl-C or SIGTERM waits until the stop's commands are out)
+        running = report.running = _program_running(client, t)
+        if running is not False and _has(client, Control.STOP_APPLICATION):
+            try:
+                _ok(_send(client, Control.STOP_APPLICATION, timeout=t), "stop (128)")
+                report.program = "stopped" if running else None
+            except TmclError as exc:
+                report.program_error = str(exc)
+        elif running is False:
+            report.program = "not running"
+        for m in _motors(client):
+            try:
+                _ok(_send(client, _MST, 0, m, timeout=t), f"MST {m}")
+                pending.append(m)
+            except TmclError as exc:
+                if _no_such_motor(client, m, exc):
+                    break
+                report.unknown[m] = str(exc)
     number = _speed_parameter(client)
     deadline = time.monotonic() + settle
     def read(doubt: set[int] | None) -> dict[int, int]:

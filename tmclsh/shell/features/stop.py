@@ -15,6 +15,7 @@ import sys
 from typing import TYPE_CHECKING, Protocol
 
 from ...base.errors import TmclError
+from ...base.interrupts import Terminated
 
 if TYPE_CHECKING:
     from ...client.core import Client
@@ -72,8 +73,13 @@ def stop_all(client: Client, say: Say, why: str = "", *,
 
     try:
         report = stop_everything(client, reconnect=reconnect)
-    except KeyboardInterrupt:
-        say.warn(f"{prefix}interrupted again: the motors may still turn")
+    except (KeyboardInterrupt, Terminated) as exc:
+        # (the program's stop and MST went out first: base/interrupts.py ``held``)
+        again = getattr(exc, "why", "interrupted")
+        say.warn(f"{prefix}{again} again: the stop was sent, not read back: the motors may "
+                 "still turn")
+        if isinstance(exc, Terminated):  # (the run ends: at the prompt too)
+            raise
         return None
     except (TmclError, OSError) as exc:  # not expected (it reports instead); a stop never raises
         say.warn(f"{prefix}stopping failed: {exc}; the motors may still turn")

@@ -33,6 +33,7 @@
 from __future__ import annotations
 
 import csv
+import errno
 import math
 import signal
 import sys
@@ -47,6 +48,7 @@ from typing import TYPE_CHECKING, TextIO
 
 from ...base import clock, files
 from ...base.errors import TmclError, TransportError, ValidationError  # noqa: F401
+from ...base.interrupts import hung_up
 from ...ops import watch as sampling
 from ...ops.watch import Item, Reading, Sample, SendClock
 from ..lang import expr, lines, script
@@ -57,6 +59,11 @@ from ..lang.session import reconnected
 
 if TYPE_CHECKING:
     from ..lang.session import Session
+
+try:  # (here: nothing is imported in a unit's thread, where a watch may run)
+    import termios
+except ImportError:  # (not on Windows)
+    termios = None  # type: ignore[assignment]
 
 Number = int | float
 
@@ -299,6 +306,18 @@ def render(snapshot: Snapshot, width: int | None = None):
 
 # -- keys ----------------------------------------------------------------------------------
 
+def _hung_up(stream: TextIO) -> bool:
+    """Whether ``stream`` is a terminal that has gone away (its settings cannot be read:
+    EIO), not a file or pipe (ENOTTY) that never was one."""
+    if termios is None:  # (no termios here: nothing to tell)
+        return False
+    try:
+        termios.tcgetattr(stream.fileno())
+    except (termios.error, OSError, ValueError, AttributeError) as exc:
+        return bool(exc.args) and exc.args[0] == errno.EIO
+    return False
+
+
 class Keys:
     """Single key presses from a terminal stdin, through prompt_toolkit's input (the POSIX
     terminal and the Windows console alike), in raw mode: Ctrl-C arrives as the key "\x03".
@@ -314,6 +333,8 @@ class Keys:
     def __enter__(self) -> Keys:
         try:
             if self.stream is None or not self.stream.isatty():
+                if self.stream is not None and _hung_up(self.stream):
+                    raise hung_up()  # (gone before the watch began: as below in wait)
                 return self
             from prompt_toolkit.input import create_input
 
@@ -348,7 +369,11 @@ class Keys:
             text = "".join("\x1b" if p.key == Key.Escape else p.data for p in presses
                            if p.key == Key.Escape or len(p.data) == 1)
             left = deadline - time.monotonic()
-            if text or left <= 0 or self._input.closed:
+            if self._input.closed and not text:
+                # the terminal's reads ended: it went away (a key in raw mode is never
+                # an end of input), and no SIGHUP came: the hang-up's stop ends the run
+                raise hung_up()
+            if text or left <= 0:
                 return text
             time.sleep(min(0.01, left))
 
@@ -770,6 +795,12 @@ def cmd_watch(session: Session, args: str) -> None:
         from .stop import say_report
 
         say_report(session.out, result.stops[-1], "watch")
+    if result.reason == "pipe":  # the run's reader has gone: the run ends as on any line
+        raise BrokenPipeError(errno.EPIPE, "the output's reader went away")
+    if result.reason == "interrupt" and not session.interactive:
+        # at the prompt Ctrl-C ends the watch and the prompt comes back; in -c/-f it ends
+        # the run as on any other line: the next line would set the motors moving again
+        raise KeyboardInterrupt
 
 
 def out_is_pipe(session: Session) -> bool:

@@ -286,7 +286,9 @@ COMMANDS: tuple[Command, ...] = (
                      "was found in; only an ASCII mode tmclsh was asked for (--ascii, .mode "
                      "ascii) goes on to the next. On CAN, N is the module's CAN id. N "
                      'may be an expression or hold variables, so one script walks a bus: '
-                     '.repeat 3 as i / .address i + 1 / GAP 1, 0 / .end.'),
+                     '.repeat 3 as i / .address i + 1 / GAP 1, 0 / .end. Ctrl-C, SIGTERM '
+                     'or SIGHUP in -c and -f stop the module in use, then each module left '
+                     'with a motor tmclsh told to turn or move.'),
             changes_link=True,
             expands=True),
     Command('.module', 'connection', '.module [NAME]',
@@ -435,7 +437,8 @@ COMMANDS: tuple[Command, ...] = (
                      '  .watch rev=GAP 1, 0 / 51200 --until "rev >= 2" --csv run.csv\n'
                      'Keys: s or space stops everything (the stored program if it runs, then '
                      'MST to every motor, speeds read back) and keeps watching; Ctrl-C does '
-                     'the same and ends the watch; q (or Esc) ends the watch quietly, motors '
+                     'the same and ends the watch (in -c and -f it ends the run, exit 130, '
+                     'as on any line); q (or Esc) ends the watch quietly, motors '
                      'keep running. A lost link shows as "link lost"; the watch reconnects '
                      'and samples on once the link is back. Under --json or in a pipe, '
                      'each sample is a JSON object {"t": s, "values": {...}}. An answer the '

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 from ...base.errors import (EXIT_CONNECT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE,
                             ModuleGoneError, TmclError)
-from ...base.interrupts import Terminated, taken, unwind_on
+from ...base.interrupts import Terminated, held, taken, unwind_on
 from ..render import Output
 from .session import QuitShell, Session, frames_sent
 
@@ -111,13 +111,18 @@ def run_shell(args: argparse.Namespace) -> int:
     try:
         return run_connected(args, client, settings)
     except (KeyboardInterrupt, Terminated, RuntimeError) as exc:
-        signalled = _signal_behind(exc)
-        if signalled is None:
-            raise
+        # a second Ctrl-C or SIGTERM until the stop has begun is part of this end: it
+        # landed while the stop was imported, and the run ended without one
+        with held(deliver=False):
+            signalled = _signal_behind(exc)
+            if signalled is None:
+                raise
+            _ready_to_stop()
+            if not isinstance(signalled, Terminated):
+                print(file=sys.stderr)
         if isinstance(signalled, Terminated):  # SIGTERM (a CI job's timeout), SIGHUP
             stop_on_interrupt(client, signalled.why)
             return signalled.code
-        print(file=sys.stderr)
         stop_on_interrupt(client)
         return EXIT_INTERRUPTED
     except BrokenPipeError:  # whoever read our output has gone (`tmclsh -c ... | head`)
@@ -143,12 +148,30 @@ def _signal_behind(exc: BaseException) -> BaseException | None:
     return None
 
 
+def _ready_to_stop() -> None:
+    """The stop's modules imported (the first time they are compiled, which takes a while)."""
+    from ...ops import stop  # noqa: F401
+    from ..features import stop as front  # noqa: F401
+
+
 def stop_on_interrupt(client, why: str = "interrupted") -> None:
     """Ctrl-C, SIGTERM or SIGHUP in -c/-f (and SIGTERM/SIGHUP at the prompt): the one stop
-    (stop.py), said on stderr."""
+    (stop.py), said on stderr; then the same at each address ``.address`` left a motor
+    told to move at (this run's modules only: no other address is sent anything)."""
     from ..features.stop import ToStderr, stop_all
 
     stop_all(client, ToStderr(), why)
+    for address in list(getattr(client, "_motion_left", {})):
+        from ...client.bringup import switch_address
+
+        try:
+            switch_address(client, address)
+        except (TmclError, OSError) as exc:
+            motors = ", ".join(map(str, sorted(client._motion_left[address].motors())))
+            ToStderr().warn(f"{why}: address {address}: motor {motors} may still turn: "
+                            f"{str(exc).splitlines()[0]}")
+            continue
+        stop_all(client, ToStderr(), f"{why}: address {address}")
 
 
 def _interactive(args: argparse.Namespace) -> bool:

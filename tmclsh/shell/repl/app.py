@@ -406,6 +406,7 @@ def run_repl(session: Session, prompt_session: PromptSession | None = None) -> i
     dumb = prompt_session is None and is_dumb_terminal()
     if dumb:
         _dumb_echo(ps)
+    _quiet_when_the_terminal_goes()
     show_banner(session, settings)
     _after_first_prompt(ps, lambda: warm_up(session))
     unlisten = client.add_listener(session.out.event)
@@ -448,6 +449,29 @@ def _terminal_gone(exc: OSError) -> bool:
     if isinstance(exc, TmclError) or exc.errno not in (errno.EIO, errno.ENXIO):
         return False
     return not all(_is_terminal(fd) for fd in (0, 1))
+
+
+def _quiet_when_the_terminal_goes() -> None:
+    """A thread that writes to the terminal (prompt_toolkit's ``patch_stdout`` flushes
+    from one, under the prompt, a watch and the ASCII terminal) meets the terminal's going
+    away first, and printed its traceback there as the shell ended (with the hang-up's
+    stop said right below). The main thread acts on the hang-up (SIGHUP, or its own read
+    failing); such a thread ends quietly. Every other error in a thread goes on to the
+    hook there was."""
+    import threading
+
+    before = threading.excepthook
+    if getattr(before, "terminal_gone_quiet", False):
+        return
+
+    def hook(args) -> None:
+        exc = args.exc_value
+        if isinstance(exc, OSError) and _terminal_gone(exc):
+            return
+        before(args)
+
+    hook.terminal_gone_quiet = True  # type: ignore[attr-defined]
+    threading.excepthook = hook
 
 
 def _is_terminal(fd: int) -> bool:
