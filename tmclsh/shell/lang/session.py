@@ -497,6 +497,7 @@ class Session:
         spec = enc.spec
         if spec is None or spec.confirm:  # may refuse, or ask first
             self._before_sending(enc)
+        sent = client.stats["sent"]
         try:
             reply = client._send_encoded(enc, req)
         except (TmclTimeoutError, ChecksumError) as exc:
@@ -504,6 +505,12 @@ class Session:
                 raise
             # (the client says whether the frame went out; if it cannot tell, it may have)
             raise _unsure(client, req, exc, getattr(exc, "sent", True)) from exc
+        except BaseException:
+            # Ctrl-C or SIGTERM before the reply: a command that went out is one the module
+            # got, and the summary after it counts it ("at line 1 after 1 command sent")
+            if client.stats["sent"] > sent:
+                self.stats.commands += 1
+            raise
         result = Result(text, enc, reply)
         if reply is not None:
             seq = client._replies
