@@ -405,7 +405,7 @@ def test_a_thread_that_meets_the_terminal_gone_ends_quietly(monkeypatch):
 
     reached: list[BaseException] = []
     monkeypatch.setattr(threading, "excepthook", lambda args: reached.append(args.exc_value))
-    monkeypatch.setattr(app, "_is_terminal", lambda fd: False)  # (the terminal has gone)
+    monkeypatch.setattr(app, "terminal_gone", lambda fd: True)  # (the terminal has gone)
     app._quiet_when_the_terminal_goes()
 
     def fails(exc: BaseException) -> None:

@@ -1,6 +1,6 @@
 """The edges of a run, written once for every entry point: the JSON record a run's error
-leaves on stdout, the one writer of a JSON object as a line, and what to do when whoever
-reads stdout has gone (``tmclsh ... | head``). The exit status an exception ends a run with
+leaves on stdout, the one writer of a JSON object as a line, what to do when whoever
+reads stdout has gone (``tmclsh ... | head``), and whether the terminal has gone. The exit status an exception ends a run with
 is decided in ``errors.exit_status``.
 
 A program reading ``--json`` output parses one shape of error whatever the command was (the
@@ -10,11 +10,17 @@ shell's lines, ``scan``, ``firmware``, ``monitor``, ``bridge``): ``{"line": ...,
 
 from __future__ import annotations
 
+import errno
 import os
 import sys
 from typing import Any, TextIO
 
 from .errors import EXIT_FAILED
+
+try:  # (here, not where it is asked: nothing is imported in a unit's thread)
+    import termios
+except ImportError:  # (not on Windows)
+    termios = None  # type: ignore[assignment]
 
 
 def error_record(message: str, status: int | None = None, *, line: str | None = None,
@@ -53,4 +59,17 @@ def reader_gone() -> int:
     return EXIT_FAILED
 
 
-__all__ = ["error_record", "write_json", "reader_gone"]
+def terminal_gone(fd: int) -> bool:
+    """Whether ``fd`` is a terminal that has hung up (the window closed, the SSH session
+    dropped): its settings can no longer be read (EIO). A file or pipe, which never was a
+    terminal (ENOTTY), has not."""
+    if termios is None:  # (no termios here: nothing to tell)
+        return False
+    try:
+        termios.tcgetattr(fd)
+    except (termios.error, OSError) as exc:
+        return bool(exc.args) and exc.args[0] == errno.EIO
+    return False
+
+
+__all__ = ["error_record", "write_json", "reader_gone", "terminal_gone"]

@@ -48,6 +48,7 @@ from typing import TYPE_CHECKING, TextIO
 
 from ...base import clock, files
 from ...base.errors import TmclError, TransportError, ValidationError  # noqa: F401
+from ...base.edges import terminal_gone
 from ...base.interrupts import hung_up
 from ...ops import watch as sampling
 from ...ops.watch import Item, Reading, Sample, SendClock
@@ -59,11 +60,6 @@ from ..lang.session import reconnected
 
 if TYPE_CHECKING:
     from ..lang.session import Session
-
-try:  # (here: nothing is imported in a unit's thread, where a watch may run)
-    import termios
-except ImportError:  # (not on Windows)
-    termios = None  # type: ignore[assignment]
 
 Number = int | float
 
@@ -306,16 +302,11 @@ def render(snapshot: Snapshot, width: int | None = None):
 
 # -- keys ----------------------------------------------------------------------------------
 
-def _hung_up(stream: TextIO) -> bool:
-    """Whether ``stream`` is a terminal that has gone away (its settings cannot be read:
-    EIO), not a file or pipe (ENOTTY) that never was one."""
-    if termios is None:  # (no termios here: nothing to tell)
-        return False
+def _stream_gone(stream: TextIO) -> bool:
     try:
-        termios.tcgetattr(stream.fileno())
-    except (termios.error, OSError, ValueError, AttributeError) as exc:
-        return bool(exc.args) and exc.args[0] == errno.EIO
-    return False
+        return terminal_gone(stream.fileno())
+    except (OSError, ValueError, AttributeError):  # (no descriptor: a replaced stdin)
+        return False
 
 
 class Keys:
@@ -333,7 +324,7 @@ class Keys:
     def __enter__(self) -> Keys:
         try:
             if self.stream is None or not self.stream.isatty():
-                if self.stream is not None and _hung_up(self.stream):
+                if self.stream is not None and _stream_gone(self.stream):
                     raise hung_up()  # (gone before the watch began: as below in wait)
                 return self
             from prompt_toolkit.input import create_input

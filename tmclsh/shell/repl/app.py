@@ -28,6 +28,7 @@ from contextlib import nullcontext
 from typing import TYPE_CHECKING
 
 from ... import __version__
+from ...base.edges import terminal_gone
 from ...base.errors import TmclError, TransportError
 from ...base.interrupts import hung_up
 from ..lang.session import Abort, QuitShell, reconnected
@@ -448,7 +449,7 @@ def _terminal_gone(exc: OSError) -> bool:
     reads and writes with EIO and is no terminal any more."""
     if isinstance(exc, TmclError) or exc.errno not in (errno.EIO, errno.ENXIO):
         return False
-    return not all(_is_terminal(fd) for fd in (0, 1))
+    return any(terminal_gone(fd) for fd in (0, 1))
 
 
 def _quiet_when_the_terminal_goes() -> None:
@@ -472,13 +473,6 @@ def _quiet_when_the_terminal_goes() -> None:
 
     hook.terminal_gone_quiet = True  # type: ignore[attr-defined]
     threading.excepthook = hook
-
-
-def _is_terminal(fd: int) -> bool:
-    try:
-        return os.isatty(fd)
-    except (OSError, ValueError):
-        return False
 
 
 def _after_first_prompt(ps: PromptSession, work: Callable[[], None]) -> None:
