@@ -205,34 +205,60 @@ def test_a_run_started_ignoring_sighup_outlives_its_terminal(served, tmp_path):
     assert "hung up" not in err, err
 
 
+class _Terminal:
+    """tmclsh's prompt on a pty of its own, as in a window, but not its controlling terminal
+    (as under ``setsid``): when the window goes (``close``), no SIGHUP comes, and only the
+    prompt's reads and writes can tell."""
+
+    def __init__(self, path: str):
+        import os
+        import pty
+
+        self.main, tty = pty.openpty()
+        self.p = subprocess.Popen([sys.executable, "-m", "tmclsh", "--port", path],
+                                  cwd=str(ROOT), env={**tmclsh_env(), "TERM": "xterm"},
+                                  stdin=tty, stdout=tty, stderr=subprocess.PIPE,
+                                  start_new_session=True)  # (no SIGHUP)
+        os.close(tty)
+        self.seen = bytearray()
+
+    def shows(self, text: bytes) -> bool:
+        """Whether ``text`` has been drawn (since the last ``forget``)."""
+        import os
+        import select
+
+        while select.select([self.main], [], [], 0.05)[0]:
+            self.seen.extend(os.read(self.main, 4096))
+        return text in self.seen
+
+    def type(self, line: str) -> None:
+        import os
+
+        os.write(self.main, line.encode() + b"\r")
+
+    def forget(self) -> None:
+        del self.seen[:]
+
+    def close(self) -> None:
+        """The window goes away."""
+        import os
+
+        os.close(self.main)
+
+
 def test_the_prompts_terminal_gone_without_a_signal_stops_the_motors(served):
     """The window closed or the SSH session dropped, and no SIGHUP came (tmclsh was not the
     terminal's controlling process, or it ignores the signal): the prompt's reads fail. It
     said "[Errno 5] Input/output error" and left the motor turning; now the hang-up's stop."""
-    import os
-    import pty
-
     sim, path = served
-    main, tty = pty.openpty()
-    p = subprocess.Popen([sys.executable, "-m", "tmclsh", "--port", path], cwd=str(ROOT),
-                         env={**tmclsh_env(), "TERM": "xterm"}, stdin=tty, stdout=tty,
-                         stderr=subprocess.PIPE, start_new_session=True)  # (no SIGHUP)
-    os.close(tty)
-    seen = bytearray()
-
-    def shown(text: bytes) -> bool:
-        import select
-
-        while select.select([main], [], [], 0.05)[0]:
-            seen.extend(os.read(main, 4096))
-        return text in seen
-
+    term = _Terminal(path)
     try:
-        wait_for(lambda: shown(b"TMCM-1311:1>"), 20)
-        os.write(main, b"ROR 0, 30000\r")
+        wait_for(lambda: term.shows(b"TMCM-1311:1>"), 20)
+        term.type("ROR 0, 30000")
         wait_for(lambda: sim.param("axis", 3, 0) != 0)
     finally:
-        os.close(main)  # the terminal goes away
+        term.close()  # the terminal goes away
+    p = term.p
     err = p.communicate(timeout=patience(20))[1].decode()
     assert p.returncode == 128 + signal.SIGHUP, err
     assert "hung up (the terminal went away): stopped motor 0 (MST; speed reads 0)" in err, err
@@ -429,33 +455,19 @@ def test_the_terminal_gone_without_a_signal_mid_command_stops_the_motors(served,
     """As at the prompt, with a watch or the ASCII terminal running: no SIGHUP came (tmclsh
     under ``setsid``), the terminal's reads end. The watch took that for no key pressed and
     sampled on, the motor turning, until killed."""
-    import os
-    import pty
-    import select
-
     sim, path = served
-    main, tty = pty.openpty()
-    p = subprocess.Popen([sys.executable, "-m", "tmclsh", "--port", path], cwd=str(ROOT),
-                         env={**tmclsh_env(), "TERM": "xterm"}, stdin=tty, stdout=tty,
-                         stderr=subprocess.PIPE, start_new_session=True)  # (no SIGHUP)
-    os.close(tty)
-    seen = bytearray()
-
-    def shows(text: bytes) -> bool:
-        while select.select([main], [], [], 0.05)[0]:
-            seen.extend(os.read(main, 4096))
-        return seen.count(text) > 0
-
+    term = _Terminal(path)
     try:
-        wait_for(lambda: shows(b"TMCM-1311:1>"), 20)
-        os.write(main, b"ROR 0, 30000\r")
+        wait_for(lambda: term.shows(b"TMCM-1311:1>"), 20)
+        term.type("ROR 0, 30000")
         wait_for(lambda: sim.param("axis", 3, 0) != 0)
-        del seen[:]
-        os.write(main, where.encode() + b"\r")
+        term.forget()
+        term.type(where)
         if shown is not None:
-            wait_for(lambda: shows(shown), 20)
+            wait_for(lambda: term.shows(shown), 20)
     finally:
-        os.close(main)  # the terminal goes away
+        term.close()  # the terminal goes away
+    p = term.p
     try:
         err = p.communicate(timeout=patience(20))[1].decode()
     except subprocess.TimeoutExpired:
