@@ -31,6 +31,9 @@ ALLOWED = {
     ("client/ledger.py", "reply.opcode == _GET_VERSION"):
         "136 type 1 names the module's type and firmware, the same every time: two different "
         "answers to it from one address are two modules there (ledger.Doubles)",
+    ("client/ledger.py", "last.opcode == _GET_VERSION"):
+        "a 136 type 0 answer is a version string, which a second module at the address "
+        "follows with its own (ledger.Doubles.asks_version)",
     ("client/ledger.py", "extra.opcode == _GET_VERSION"):
         "the ledger's own resynchronisation marker is a 136: a copy of a marker's reply "
         "proves nothing about the answers before it",

@@ -35,6 +35,7 @@ CONFIRM_ROUNDS = 3
 # as requests) before two modules that agree are said to share it (``Doubles``): a line that
 # copies replies at a rate p copies this many within as many requests at about p to this power
 SHARED_AFTER = 8
+_TWICE = 2 * SHARED_AFTER  # (asked per answer)
 
 
 @dataclass(frozen=True)
@@ -67,7 +68,7 @@ class Doubles:
       line check that follows a copy (136) is one more request most likely answered once."""
 
     def __init__(self) -> None:
-        self.last: tuple[int, int, int] | None = None  # (address, command, type) last answered
+        self.last: Request | None = None  # the request last answered
         self.replies: dict[int, int] = {}  # replies from each address, taken or not
         # the reply count before each of the last answers from each address
         self.marks: dict[int, deque[int]] = {}
@@ -86,11 +87,11 @@ class Doubles:
         n = self.replies.get(addr, 0)
         marks.append(n)
         self.replies[addr] = n + 1
-        self.last = (addr, req.opcode, req.type)
+        self.last = req
         if reply is not None and reply.opcode == _GET_VERSION and self._version_differs(
                 addr, reply):
             return self._found(addr)
-        if n + 1 - marks[0] >= 2 * SHARED_AFTER and len(marks) == SHARED_AFTER:
+        if n + 1 - marks[0] >= _TWICE and len(marks) == SHARED_AFTER:
             return self._found(addr)
         return None
 
@@ -110,7 +111,7 @@ class Doubles:
         one more reply from the address asked (``extra``)."""
         if not self.asks_version():
             return None
-        return self.extra(self.last[0])  # type: ignore[index]
+        return self.extra(self.last.address)  # type: ignore[union-attr]
 
     def _version_differs(self, addr: int, reply: Reply) -> bool:
         """Is ``reply`` a 136 type 1 answer (a normal frame: a string answers type 0) other
@@ -142,7 +143,8 @@ class Doubles:
 
     def asks_version(self) -> bool:
         """Was the last answer a version string (136 type 0)? Then a second one may come."""
-        return self.last is not None and self.last[1:] == (_GET_VERSION, 0)
+        last = self.last
+        return last is not None and last.opcode == _GET_VERSION and last.type == 0
 
     def forget_versions(self) -> None:
         """The link was reopened: the module there may be another one now."""
@@ -314,7 +316,7 @@ class Ledger:
         # request takes it; an ASCII reply names none: a copy of it is taken for anything)
         return self._same(rep, reply) and (r is not None or not self.by_command) and r != req
 
-    def took(self, req: Request, reply: Reply, *, copy: bool | None = False,
+    def took(self, req: Request, reply: Reply, copy: bool | None = False,
              downloading: bool = False) -> bool:
         """``reply`` was returned as ``req``'s answer (``copy``: ``may_be_a_copy`` said so;
         None: asked here, never while ``downloading``, whose frames are stored, not read).

@@ -54,14 +54,15 @@ def clear_line(client: Client, req: Request, kind: ReplyKind, timeout: float) ->
     line that may still bring an answer ``req``'s could be taken for is resynchronised
     (``Client._resync``: True, the line is clear now)."""
     ledger = client._ledger
-    if client._framing.waiting():
+    now = time.monotonic()  # (one clock read for both looks)
+    if client._framing.waiting(now):
         client._flush_input()
     downloading = client._downloading
     if ledger.dirty(downloading):
         if ledger.needs_sync(req, kind, downloading):
             client._resync(req.address, timeout)
             return True
-    elif ledger.run and time.monotonic() - client._answered_at >= timeout:
+    elif ledger.run and now - client._answered_at >= timeout:
         # quiet for a whole timeout, nothing expected: an answer displaced before now would
         # have come (it counts as lost after a timeout)
         ledger.in_step()
@@ -73,7 +74,7 @@ def take_answer(client: Client, req: Request, reply: Reply, timeout: float,
     """``reply`` taken as ``req``'s answer: written into the ledger (counted, and for two
     modules at one address), and judged first when it may be a copy (``Client._judge``)."""
     ledger = client._ledger
-    copy = ledger.took(req, reply, copy=None, downloading=client._downloading)
+    copy = ledger.took(req, reply, None, client._downloading)  # (copy asked there)
     found = ledger.doubles.answered(req, reply)
     if found is not None:
         client._second(found)
@@ -115,8 +116,10 @@ def run(client: Client, reqs: Iterable[Request], timeout: float, retries: int
     framing = client._framing
     exchange = framing.exchange
     carry = client._request
+    kind_of = isa.reply_kind
     for req in reqs:
-        kind = reply_kind(req)
+        op = req.opcode
+        kind = _NORMAL if op < _FIRST_CONTROL else kind_of(op, req.type)  # (reply_kind's)
         plain = False
         try:
             with lock:

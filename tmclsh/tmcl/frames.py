@@ -181,11 +181,12 @@ class Request:
     def instruction(self) -> Instruction:
         # (its fields passed the same checks when the request was made: the simulator asks
         # this of every request it hears)
-        ins = _new(Instruction)
-        _ins_opcode(ins, self.opcode)
-        _ins_type(ins, self.type)
-        _ins_motor(ins, self.motor)
-        _ins_value(ins, self.value)
+        ins = _new(_FillInstruction)
+        ins.opcode = self.opcode
+        ins.type = self.type
+        ins.motor = self.motor
+        ins.value = self.value
+        ins.__class__ = Instruction
         return ins
 
     @property
@@ -202,13 +203,14 @@ class Request:
                 and motor.__class__ is int and value.__class__ is int
                 and 0 <= address <= 255 and 0 <= opcode <= 255 and 0 <= type <= 255
                 and 0 <= motor <= 255 and INT32_MIN <= value <= INT32_MAX):
-            req = _new(cls)
-            _req_address(req, address)
-            _req_opcode(req, opcode)
-            _req_type(req, type)
-            _req_motor(req, motor)
-            _req_value(req, value)
-            _req_frame(req, None)
+            req = _new(_FillRequest)
+            req.address = address
+            req.opcode = opcode
+            req.type = type
+            req.motor = motor
+            req.value = value
+            req._frame = None
+            req.__class__ = Request
             return req
         return cls(address, opcode, type, motor, value)
 
@@ -279,15 +281,10 @@ class Reply:
     def from_frame(cls, frame: bytes) -> Reply:
         """A normal reply from nine bytes whose checksum the caller has verified: every field
         is one byte or a signed 32-bit value, so there is nothing left to check (hot path)."""
-        r = _new(cls)
-        host, module, status, opcode, value = _SERIAL_HEAD.unpack_from(frame)
-        _reply_host(r, host)
-        _reply_module(r, module)
-        _reply_status(r, status)
-        _reply_opcode(r, opcode)
-        _reply_value(r, value)
-        _reply_version(r, None)
-        _reply_stored(r, None)
+        r = _new(_FillReply)
+        r.host, r.module, r.status, r.opcode, r.value = _SERIAL_HEAD.unpack_from(frame)
+        r.version = r.stored = None
+        r.__class__ = Reply
         return r
 
     @classmethod
@@ -295,20 +292,19 @@ class Reply:
         """A 134 read-back from nine bytes whose checksum the caller has verified (the same
         reply as ``from_bytes(frame, ReplyKind.MEMORY, module, opcode)``; upload verifies one
         per instruction)."""
-        host, op, type_, motor, value = _SERIAL_HEAD.unpack_from(frame)
-        stored = _new(Instruction)
-        _ins_opcode(stored, op)
-        _ins_type(stored, type_)
-        _ins_motor(stored, motor)
-        _ins_value(stored, value)
-        r = _new(cls)
-        _reply_host(r, host)
-        _reply_module(r, module)
-        _reply_status(r, _STATUS_OK)
-        _reply_opcode(r, opcode)
-        _reply_value(r, value)
-        _reply_version(r, None)
-        _reply_stored(r, stored)
+        stored = _new(_FillInstruction)
+        r = _new(_FillReply)
+        # (unpacked straight into the slots: the frame's host, the stored instruction)
+        r.host, stored.opcode, stored.type, stored.motor, stored.value = \
+            _SERIAL_HEAD.unpack_from(frame)
+        stored.__class__ = Instruction
+        r.value = stored.value
+        r.module = module
+        r.status = _STATUS_OK
+        r.opcode = opcode
+        r.version = None
+        r.stored = stored
+        r.__class__ = Reply
         return r
 
     @property
@@ -398,16 +394,18 @@ class Reply:
                 f"({self.status_text}) op {self.opcode} value {self.value}")
 
 
-# The hot-path constructors above fill the frozen slots through the slots' own descriptors:
-# ``object.__setattr__`` looks each name up first, a third of a request's making.
-(_req_address, _req_opcode, _req_type, _req_motor, _req_value, _req_frame) = (
-    Request.__dict__[f].__set__ for f in ("address", "opcode", "type", "motor", "value",
-                                          "_frame"))
-(_reply_host, _reply_module, _reply_status, _reply_opcode, _reply_value, _reply_version,
- _reply_stored) = (Reply.__dict__[f].__set__ for f in ("host", "module", "status", "opcode",
-                                                        "value", "version", "stored"))
-(_ins_opcode, _ins_type, _ins_motor, _ins_value) = (
-    Instruction.__dict__[f].__set__ for f in ("opcode", "type", "motor", "value"))
+def _filling(cls: type) -> type:
+    """A plain class with ``cls``'s slots. The hot-path constructors above fill one of these
+    with plain stores and then make it a ``cls`` (``__class__`` assignment, which Python
+    allows between classes of one layout): a frozen instance can only be filled through
+    its slots' descriptors, one call per field, which took twice as long (a reply is made
+    per answer, an upload's verify makes an instruction with each). Never seen outside."""
+    return type(f"_Filling{cls.__name__}", (), {"__slots__": cls.__slots__})
+
+
+_FillRequest, _FillReply, _FillInstruction = (_filling(c) for c in (Request, Reply, Instruction))
+# (a request's frame is made once, when first asked for: set on the frozen request)
+_req_frame = Request.__dict__["_frame"].__set__
 
 
 def hexdump(data: bytes) -> str:

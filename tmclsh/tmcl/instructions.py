@@ -337,11 +337,12 @@ def parameter_command(kind: str, access: str) -> InstructionSpec:
 
 @cache
 @cache
+@cache
 def reply_kind(opcode: int, type_: int) -> ReplyKind:
     """How the answer to a request is laid out: the frame layer's reading (136 type 0, 134),
     or none at all where the instruction set says none comes (137, 205, 242). (Kept per
-    command: the client asks it of every control command it sends, an upload's verify
-    thousands of 134s.)"""
+    command and type: the client asks it of every control command it sends, an upload's
+    verify thousands of 134s.)"""
     ctl = _tables()[1].get(opcode)
     if ctl is not None and ctl.reply == "none":
         return ReplyKind.NONE
