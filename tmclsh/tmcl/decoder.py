@@ -42,7 +42,9 @@ Piece = tuple[int, bytes]  # (NOISE | FRAME_PIECE | WHOLE, the bytes)
 def is_frame(window: bytes | bytearray, host: int | None = None, memory: bool = False) -> bool:
     """Do these nine bytes make a frame? The sum must check out; with ``host`` given, a
     reply to it must also carry a TMCL status byte (not a 134 read-back: ``memory``)."""
-    return (sum(window[:8]) & 0xFF == window[8]
+    # (the sum of the first eight is the ninth: the sum of all nine less the ninth twice is
+    # 0 modulo 256, asked without cutting the window; once per reply)
+    return (not (sum(window) - 2 * window[8]) & 0xFF
             and (host is None or memory or window[0] != host or window[2] in _STATUSES))
 
 
