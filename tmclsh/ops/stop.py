@@ -201,6 +201,44 @@ def activity(client, *, timeout: float | None = None) -> Activity:
     return act
 
 
+def where_in_use(client) -> int:
+    """The address the client talks to (on CAN its id): the key of ``Client._motion_left``."""
+    return client.can_id if getattr(client, "is_can", False) else client.address
+
+
+def activity_everywhere(client, *, timeout: float | None = None
+                        ) -> list[tuple[int, Activity, str | None]]:
+    """``activity`` at the address in use, then at each address this client left a motor
+    told to move at (``Client._motion_left``), as (address, activity, why it could not be
+    asked or None): a user who set a motor turning at address 1 and went on at address 2
+    is told of both, and no address the client never talked to is asked anything. An
+    address that does not answer counts its told motors as told, their speed unread. The
+    client talks to its own address again afterwards (a failure to get back raises: it
+    would talk to another module than its user thinks)."""
+    home = where_in_use(client)
+    found = [(home, activity(client, timeout=timeout), None)]
+    others = [a for a in getattr(client, "_motion_left", {}) if a != home]
+    if not others:
+        return found
+    from ..client.bringup import switch_address
+
+    try:
+        for address in others:
+            try:
+                switch_address(client, address)
+                found.append((address, activity(client, timeout=timeout), None))
+            except (TmclError, OSError) as exc:
+                told = client._motion_left[address].motors() if where_in_use(
+                    client) != address else client.motion.motors()
+                found.append((address, Activity(commanded={m: (c, None) for m, c in
+                                                           told.items()}),
+                              str(exc).splitlines()[0]))
+    finally:
+        if where_in_use(client) != home:
+            switch_address(client, home)
+    return found
+
+
 def _move_ended(client, told: Commanded, motor: int, timeout: float) -> bool:
     """A position move the module says has ended (TargetPositionReached, or the actual
     position at the target): tmclsh forgets it. A speed it was told is never over by

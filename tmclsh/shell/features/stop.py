@@ -100,6 +100,39 @@ def stop_all(client: Client, say: Say, why: str = "", *,
     return report
 
 
+def stop_everywhere(client: Client, say: Say, why: str = "", *,
+                    session: Session | None = None, back: bool = True) -> bool:
+    """``stop_all`` at the address in use, then at each address ``.address`` left a motor
+    told to move at (this client's modules only: no other address is sent anything), each
+    said with its address; with ``back``, the client talks to its own address again
+    afterwards (the prompt goes on there). True when every stop read back stopped."""
+    from ...client.bringup import switch_address
+    from ...ops.stop import where_in_use
+
+    report = stop_all(client, say, why, session=session)
+    ok = report is not None and report.ok
+    home = where_in_use(client)
+    for address in [a for a in getattr(client, "_motion_left", {}) if a != home]:
+        where = f"{why}: address {address}" if why else f"address {address}"
+        try:
+            switch_address(client, address)
+        except (TmclError, OSError) as exc:
+            motors = ", ".join(map(str, sorted(client._motion_left[address].motors())))
+            say.warn(f"{where}: motor {motors} may still turn: {str(exc).splitlines()[0]}")
+            ok = False
+            continue
+        report = stop_all(client, say, where, session=session)
+        ok = ok and report is not None and report.ok
+    if back and where_in_use(client) != home:
+        try:
+            switch_address(client, home)
+        except (TmclError, OSError) as exc:
+            say.warn(f"still talking to address {where_in_use(client)}, not {home}: "
+                     f"{str(exc).splitlines()[0]}")
+            ok = False
+    return ok
+
+
 def say_report(say: Say, report: StopReport, why: str = "") -> None:
     """What a stop did, in the stop's one wording (``describe_stop``)."""
     prefix = f"{why}: " if why else ""

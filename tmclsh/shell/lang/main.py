@@ -158,20 +158,9 @@ def stop_on_interrupt(client, why: str = "interrupted") -> None:
     """Ctrl-C, SIGTERM or SIGHUP in -c/-f (and SIGTERM/SIGHUP at the prompt): the one stop
     (stop.py), said on stderr; then the same at each address ``.address`` left a motor
     told to move at (this run's modules only: no other address is sent anything)."""
-    from ..features.stop import ToStderr, stop_all
+    from ..features.stop import ToStderr, stop_everywhere
 
-    stop_all(client, ToStderr(), why)
-    for address in list(getattr(client, "_motion_left", {})):
-        from ...client.bringup import switch_address
-
-        try:
-            switch_address(client, address)
-        except (TmclError, OSError) as exc:
-            motors = ", ".join(map(str, sorted(client._motion_left[address].motors())))
-            ToStderr().warn(f"{why}: address {address}: motor {motors} may still turn: "
-                            f"{str(exc).splitlines()[0]}")
-            continue
-        stop_all(client, ToStderr(), f"{why}: address {address}")
+    stop_everywhere(client, ToStderr(), why, back=False)  # (the run ends: no way back)
 
 
 def _interactive(args: argparse.Namespace) -> bool:
@@ -332,23 +321,30 @@ def _motion_parameters(client) -> frozenset[tuple[int, int]]:
 def _note_left_running(session: Session) -> None:
     """A script that ends while a motor turns, or one it told to turn reads still (stalled,
     not started yet), or the program runs, says so on stderr, and on stdout with --json (it
-    leaves them so: that may well be what it was for)."""
-    from ...ops.stop import activity
+    leaves them so: that may well be what it was for). Each address the script left a motor
+    told to move at is asked too, and named (``.address 1`` then ``ROR``, ``.address 2``)."""
+    from ...ops.stop import activity_everywhere
 
     client = session.client
     if not client.connected:
         return
     try:
-        act = activity(client)
+        found = activity_everywhere(client)
     except (TmclError, OSError):
         return
-    if act.only_slowing:
-        print(f"tmclsh: note: {act} as the run ends", file=sys.stderr)
-    elif not act.idle:
-        print(f"tmclsh: note: {act}; left running (.stopall stops everything)",
-              file=sys.stderr)
+    for address, act, why in found:
+        at = f"address {address}: " if len(found) > 1 else ""
+        stop = (f".stopall at address {address} stops everything" if len(found) > 1
+                else ".stopall stops everything")
+        if act.only_slowing:
+            print(f"tmclsh: note: {at}{act} as the run ends", file=sys.stderr)
+            continue
+        if act.idle:
+            continue
+        unread = f" ({why})" if why else ""
+        print(f"tmclsh: note: {at}{act}{unread}; left running ({stop})", file=sys.stderr)
         if session.out.json:  # (a program reading stdout learns it there)
-            session.out.emit({"left_running": act.to_json()})
+            session.out.emit({"left_running": act.to_json(), "address": address})
 
 
 def exit_cleanly_on_signals() -> None:

@@ -287,8 +287,8 @@ LEAVE_OPTIONS = [("stop", "stop everything first, then leave"),
 def may_leave(session: Session) -> bool:
     """Leaving while a motor turns or the stored program runs: ask (stop first / leave
     running / cancel). True when the shell may end."""
-    from ...ops.stop import activity
-    from ..features.stop import stop_session
+    from ...ops.stop import activity_everywhere
+    from ..features.stop import stop_everywhere
 
     client = session.client
     choose = getattr(session, "choose", None)
@@ -310,16 +310,17 @@ def may_leave(session: Session) -> bool:
                          "whether a motor turns or its program runs; it has not answered "
                          "since the link came back, so this waits a few seconds for it")
     try:
-        act = activity(client)
+        found = activity_everywhere(client)  # (each address left with a motor told to move)
     except (TmclError, OSError):
         return True
-    if act.idle:
+    busy = [(address, act, why) for address, act, why in found if not act.idle]
+    if not busy:
         return True
-    what = str(act)
+    what = "; ".join((f"address {address}: " if len(found) > 1 else "") + str(act)
+                     + (f" ({why})" if why else "") for address, act, why in busy)
     answer = choose(f"{what[:1].upper()}{what[1:]}. Leave the shell?", LEAVE_OPTIONS)
     if answer == "stop":
-        report = stop_session(session, "leaving")
-        if report is not None and not report.ok:
+        if not stop_everywhere(client, session.out, "leaving", session=session):
             session.out.warn("not everything stopped: staying in the shell "
                              "(leave again to quit anyway)")
             session.choose = None  # the next Ctrl-D or .quit leaves without asking
