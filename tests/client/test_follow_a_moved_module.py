@@ -80,6 +80,8 @@ def test_a_new_address_is_followed(moving, capsys, from_old):
         assert s.client.address == 3 and m.address == 3
         assert "ok: SerialAddress set to 3" in said.out
         assert "answers at address 3 now" in said.err
+        # (a program's client: told connect()'s keyword for its next run, not an option)
+        assert "(address=3 next time)" in said.err, said.err
         assert "stopped answering" not in said.err and "another request" not in said.err
         assert s.client.stats["suspect"] == 0 and s.stats.suspects == 0
     finally:
@@ -93,7 +95,25 @@ def test_a_new_host_address_is_followed(moving, capsys):
         s.run_line("SGP SerialHostAddress, 0, 5")
         assert s.client.host_address == 5
         s.run_line("GAP 4, 0")
-        assert "replies to host address 5 now" in capsys.readouterr().err
+        said = capsys.readouterr().err
+        assert "replies to host address 5 now" in said
+        assert "(host_address=5 next time)" in said, said
+    finally:
+        s.client.close()
+
+
+def test_the_shell_is_told_the_option_for_its_next_run(moving, capsys):
+    """At the prompt or in a script the advice is the shell's own command where it has one
+    (``.address 3``), but what to give the next run is the command line's option."""
+    from tmclsh.client.advice import SHELL
+
+    m = moving()
+    s = session(m)
+    s.client.advice = SHELL
+    try:
+        s.run_line("SGP SerialAddress, 0, 3")
+        said = capsys.readouterr().err
+        assert "answers at address 3 now" in said and "(-a 3 next time)" in said, said
     finally:
         s.client.close()
 

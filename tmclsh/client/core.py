@@ -166,8 +166,9 @@ class Client:
         answers at a new address, download mode ended); None: they are logged."""
         self.advice = KEYWORDS
         """How advice in messages names a setting (client/advice.py): ``connect``'s keywords
-        (``baud=115200``), or the command line's options (``--baud 115200``) when it or the
-        shell opened the client."""
+        (``baud=115200``), the command line's options (``--baud 115200``) when it opened the
+        client, or the shell's commands where it has one (``.address 5``) while the prompt
+        or a script talks through it."""
         self._checks_lost = 0  # line checks in a row that got no good answer (lost_check)
         # replies from each address that came after tmclsh had stopped waiting for them
         # (Doubts.late): a module slower than the timeout is no module that stopped

@@ -47,19 +47,19 @@ def write(client: Client, req: Request, param: Parameter,
     if role == "address" and not client.is_can and value != client.address:
         client.address = value
         client._taps.notice(f"the module answers at address {value} now: talking to it there "
-                           f"(-a {value} next time)")
+                           f"({setting(client, 'address', value, later=True)} next time)")
     elif role == "host_address" and value != client.host_address:
         client.host_address = value
         client._taps.notice(f"the module sends its replies to host address {value} now: listening "
-                           f"there (--host-address {value} next time)")
+                           f"there ({setting(client, 'host_address', value, later=True)} next time)")
     elif role == "can_id" and client.is_can and value != client.can_id:
         client.can_id = value
         client._taps.notice(f"the module listens on CAN id {value} now: sending there "
-                           f"({setting(client, 'can_id', value)} next time)")
+                           f"({setting(client, 'can_id', value, later=True)} next time)")
     elif role == "reply_id" and client.is_can and value != client.reply_id:
         client.reply_id = value
         client._taps.notice(f"the module replies on CAN id {value} now: listening there "
-                           f"({setting(client, 'reply_id', value)} next time)")
+                           f"({setting(client, 'reply_id', value, later=True)} next time)")
     elif role == "baud":
         _follow_baud(client, param, value)
     return reply
@@ -76,13 +76,13 @@ def _follow_baud(client: Client, param: Parameter, code: int) -> None:
         return
     if _answers(client):
         client._taps.notice(f"the module still answers at {old} baud: it takes {rate} baud at its "
-                           f"next start (then: {setting(client, 'baud', rate)})")
+                           f"next start (then: {setting(client, 'baud', rate, later=True)})")
         return
     t.set_baudrate(rate)
     client._lifecycle.forget_stale()
     if _answers(client):
         client._taps.notice(f"the module answers at {rate} baud now: talking to it at that rate "
-                           f"({setting(client, 'baud', rate)} next time)")
+                           f"({setting(client, 'baud', rate, later=True)} next time)")
         return
     t.set_baudrate(old)
     client._lifecycle.forget_stale()

@@ -178,6 +178,7 @@ def run_connected(args: argparse.Namespace, client, settings: dict, *,
     before the first line (a unit of several gives its session its own variables and view,
     shell/features/units.py, with ``config``, the config file it read once). Exit status."""
     from ...base.config import load_settings
+    from ...client.advice import SHELL
 
     shell_settings = load_settings(config)
     out = Output(json_mode=bool(args.json), color=str(shell_settings.get("color", "auto")))
@@ -190,6 +191,10 @@ def run_connected(args: argparse.Namespace, client, settings: dict, *,
     if client.module is not None and client.module.generic:
         out.warn(f"{client.module.type_name}: {client.module.NOTICE}")  # once, at the start
     client.on_notice = out.warn  # what the client does on its own (ends download mode)
+    # from here on its messages' advice is in the shell's words (".address 5", "-a 5" being
+    # no line the prompt or a script takes), the command line's option where the shell has
+    # no command (client/advice.py); what the connect said before stays the command line's
+    client.advice = SHELL
     if not interactive:  # who and where, for scripts run on several (shell/features/units.py sets them)
         address = client.can_id if client.is_can else client.address
         session.variables.update(unit=1, address=address, port=_link_text(settings))
