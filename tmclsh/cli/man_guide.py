@@ -118,9 +118,12 @@ reported once as {_b('{"address": 1, "duplicate": true, "warning": "..."}')}, fa
 Ctrl-C interrupts: everything is stopped (see {_b("Ctrl-C")} below) and, outside the
 interactive prompt, {_b(PROG)} exits with status 130. A script that ends while a motor turns
 or the stored program runs leaves them so, with a note on standard error (with {_b("--json")}
-also {_b('{"left_running": {...}}')} on standard output). A motor the run told to turn
+also {_b('{"left_running": {...}, "address": N}')} on standard output). A motor the run told to turn
 ({_b("ROR 0, 1000")}, a rotation left, a position move, a target speed written) and did not stop counts as
-left turning even while its speed reads 0 (it has not started yet, or it stalls).
+left turning even while its speed reads 0 (it has not started yet, or it stalls). A run that
+moved on with {_b(".address")} is asked about each address it left such a motor at, and each is
+named ({_b("address 1: motor 0 turns ...")}); Ctrl-D and {_b(".quit")} at the prompt ask the same.
+No address the run did not talk to is sent anything.
 .IP \\(bu 2
 A lost link fails the line it was lost on, with the reason; with {_b("--keep-going")} the
 script goes on: lines that need no module run as always ({_b(".sleep")} still sleeps), and

@@ -288,7 +288,8 @@ COMMANDS: tuple[Command, ...] = (
                      'may be an expression or hold variables, so one script walks a bus: '
                      '.repeat 3 as i / .address i + 1 / GAP 1, 0 / .end. Ctrl-C, SIGTERM '
                      'or SIGHUP in -c and -f stop the module in use, then each module left '
-                     'with a motor tmclsh told to turn or move.'),
+                     'with a motor tmclsh told to turn or move; the note at the end of a '
+                     'script and the question at Ctrl-D name each such module too.'),
             changes_link=True,
             expands=True),
     Command('.module', 'connection', '.module [NAME]',
