@@ -121,3 +121,22 @@ def test_ctrl_d_asks_about_the_address_left_and_stops_it_there(bus, terminal):
     assert "leaving: address 1: stopped motor 0" in screen, screen
     assert [raw for raw in to(bus, 1) if raw[1] == 3], "no MST reached address 1"
     assert not to(bus, 3)
+
+
+@needs_tmux
+def test_ctrl_c_at_the_prompt_stops_the_address_left_too(bus, terminal):
+    """The banner says Ctrl-C stops all motors: at the address in use, then at each address
+    the session left a motor told to move at, and the prompt stays where it was."""
+    term = terminal(height=30)
+    term.start("--port", bus.path, "--timeout", "2")
+    term.wait("TMCM-1311:1>")
+    term.run("ROR 0, 1000", "rotating right")
+    term.run(".address 2", "address 2: TMCM-1311")
+    term.keys("C-c")
+    screen = term.wait("Ctrl-C: address 1: stopped motor 0")
+    assert "Ctrl-C: stopped motor 0" in screen, screen  # (address 2's own stop first)
+    assert [raw for raw in to(bus, 1) if raw[1] == 3], "no MST reached address 1"
+    term.run("GAP 1, 0", "ActualPosition")
+    assert "TMCM-1311:2>" in term.screen()
+    term.quit()  # (nothing left running: no question)
+    assert not to(bus, 3)

@@ -144,7 +144,9 @@ Completion never asks the module.
 {_b("Ctrl-C")}
 Stops everything and clears the line: the stored program if it runs (128; a running program
 would start the motors again), then MST to every motor, then each motor's actual speed read
-back until it is 0. Only motors that read 0 are called stopped; any other is named.
+back until it is 0. Only motors that read 0 are called stopped; any other is named. Then the
+same at each address {_b(".address")} left a motor the shell told to move at (no other address
+is sent anything), said with its address; the prompt stays at the address it was at.
 .TP
 {_b("Ctrl-D")}
 Leaves the shell, like {_b(".quit")}. While a motor turns or the stored program runs, it
@@ -152,7 +154,8 @@ asks first: 1 stop everything first, 2 leave it running, or 3 cancel; the number
 the arrows and Enter), and the selection starts on 1 every time. A motor the shell told to
 turn and did not stop counts, even while its speed reads 0 (a stalled motor). With the link
 down (and not brought back by one attempt) it cannot ask: it says so and names what it last
-told each such motor.
+told each such motor. Each address {_b(".address")} left a motor the shell told to move at
+is asked too, and named; stopping first stops it there as well.
 .SS Keys in .watch
 .TP
 {_b("s")} or space

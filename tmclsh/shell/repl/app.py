@@ -392,7 +392,7 @@ def run_repl(session: Session, prompt_session: PromptSession | None = None) -> i
     """The interactive shell; returns the exit status (0)."""
     from prompt_toolkit.patch_stdout import patch_stdout
 
-    from ..features.stop import stop_session
+    from ..features.stop import stop_everywhere
 
     session.interactive = True
     session.ask = ask_yes_no
@@ -432,7 +432,7 @@ def run_repl(session: Session, prompt_session: PromptSession | None = None) -> i
             except KeyboardInterrupt:
                 # Ctrl-C where the key binding is not active: a dumb terminal, or the
                 # moment between two prompts when the terminal is in cooked mode
-                stop_session(session, "Ctrl-C")
+                stop_everywhere(session.client, session.out, "Ctrl-C", session=session)
             except OSError as exc:
                 if not _terminal_gone(exc):
                     raise
@@ -523,7 +523,7 @@ def run_text(session: Session, text: str) -> bool:
 def run_one(session: Session, text: str) -> bool:
     """One line with every failure turned into a message; False after ``.quit``."""
     from ..lang.lines import classify
-    from ..features.stop import stop_session
+    from ..features.stop import stop_everywhere
 
     line = classify(text)
     # a lost link (also one a .watch met) is brought back before the next TMCL line
@@ -549,7 +549,7 @@ def run_one(session: Session, text: str) -> bool:
         session.report_error(text, exc)
     except KeyboardInterrupt:
         session.end_interrupted_line()  # the terminal echoed ^C on the command's line
-        stop_session(session, "interrupted")
+        stop_everywhere(session.client, session.out, "interrupted", session=session)
     except Exception as exc:  # a bug must not take the motor shell down with it
         log.debug("internal error", exc_info=True)
         session.out.error(text, f"internal error ({type(exc).__name__}: {exc}); "

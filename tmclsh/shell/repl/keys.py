@@ -27,11 +27,13 @@ def tmcl_bindings(session: Session) -> KeyBindings:
 
     @kb.add("c-c")
     def _stop(event) -> None:
-        """Stop every motor, clear the line."""
-        from ..features.stop import stop_session
+        """Stop every motor (at each address ``.address`` left one told to move too),
+        clear the line."""
+        from ..features.stop import stop_everywhere
 
         event.current_buffer.reset()
-        run_in_terminal(lambda: stop_session(session, "Ctrl-C"))
+        run_in_terminal(lambda: stop_everywhere(session.client, session.out, "Ctrl-C",
+                                                session=session))
 
     @kb.add("tab", filter=~has_completions)
     def _complete(event) -> None:
