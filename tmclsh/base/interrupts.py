@@ -98,6 +98,17 @@ def terminated_by(exc: BaseException) -> Terminated | None:
     return Terminated(signum)  # (made here, not raised by a handler: never sent again)
 
 
+def stopped_words(exc: BaseException) -> str:
+    """What stopped a run, in the words its summary says it with: the signal's
+    (``terminated (SIGTERM)``, ``hung up (SIGHUP)``), what a unit was stopped for
+    (``stopped_by``), else ``interrupted (Ctrl-C)``."""
+    why = getattr(exc, "why", None)
+    if isinstance(why, str) and why:
+        return why
+    signalled = terminated_by(exc)
+    return signalled.why if signalled is not None else "interrupted (Ctrl-C)"
+
+
 def hung_up(why: str = "hung up (the terminal went away)") -> Terminated:
     """The SIGHUP a terminal's going away stands for where no signal came (tmclsh was not
     the terminal's controlling process, or was started ignoring SIGHUP): the prompt's reads
