@@ -27,6 +27,12 @@ def request(addr: int, cmd: int, typ: int = 0, motor: int = 0, value: int = 0) -
     return body + bytes([sum(body) & 0xFF])
 
 
+# the exit status each signal ends a bridge with (Ctrl-C is its way to end; SIGTERM and SIGHUP
+# end it with the status every command ends with on them)
+ENDS = {signal.SIGINT: 0, signal.SIGTERM: 143, signal.SIGHUP: 129}
+WORDS = {signal.SIGTERM: "terminated (SIGTERM)", signal.SIGHUP: "hung up (SIGHUP)"}
+
+
 class Bridge:
     """``tmclsh bridge ... --json`` in its own process: ``endpoint`` is its first line."""
 
@@ -42,7 +48,7 @@ class Bridge:
         time.sleep(0.3)  # (what was forwarded last is read before the signal)
         self.proc.send_signal(sig)
         out, err = self.proc.communicate(timeout=20)
-        assert self.proc.returncode == 0, err
+        assert self.proc.returncode == ENDS[sig], err
         return [json.loads(line) for line in out.splitlines()], err
 
     def kill(self) -> None:
@@ -291,7 +297,7 @@ def test_output_nobody_reads_never_stops_the_forwarding():
         bridge.kill()
         module.close()
     assert (timeouts, wrong) == (0, 0)
-    assert bridge.proc.returncode == 0, err
+    assert bridge.proc.returncode == 143, err
     summary = json.loads(out.splitlines()[-1])["summary"]
     assert (summary["requests"], summary["replies"], summary["unanswered"]) == (n, n, 0)
     # 2 objects per exchange; what the pipe took is in out, the rest was dropped, counted
@@ -424,14 +430,20 @@ def test_the_bridge_killed_outright_leaves_no_describer_behind():
 
 def test_a_signal_as_soon_as_the_endpoint_is_out_ends_the_bridge_cleanly(make_pty_sim):
     sim, path = make_pty_sim()
-    for sig in (signal.SIGINT, signal.SIGTERM):
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         bridge = Bridge("--pty", "--port", path)
         try:
             bridge.proc.send_signal(sig)
             out, err = bridge.proc.communicate(timeout=30)
         finally:
             bridge.kill()
-        assert bridge.proc.returncode == 0, err
+        # Ctrl-C is the bridge's way to end (0); SIGTERM and SIGHUP end it as they end every
+        # command: said in the same words, with the signal's status (it was 0)
+        assert bridge.proc.returncode == ENDS[sig], err
+        if sig in WORDS:
+            assert f"{WORDS[sig]}: stopped forwarding" in err, err
+        else:
+            assert "stopped forwarding" not in err, err
         assert "Traceback" not in err
         assert json.loads(out.splitlines()[-1])["summary"]["frames"] == 0
 
@@ -634,6 +646,7 @@ def test_a_hang_up_ends_the_bridge_and_stops_the_motor_it_left_turning(make_pty_
             proc.kill()
             proc.communicate()
     assert "stopped motor 0" in err, err
+    assert proc.returncode == 129 and "hung up (SIGHUP): stopped forwarding" in err, err
     with serial.Serial(path, timeout=patience(5)) as port:
         reply = _exchange(port, request(1, 6, 3))  # GAP 3: the actual speed
     assert struct.unpack(">i", reply[4:8])[0] == 0, reply.hex()

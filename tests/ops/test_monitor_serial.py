@@ -218,6 +218,37 @@ def _wait_listening(proc: subprocess.Popen) -> None:
     assert line.startswith("listening on"), line + proc.stderr.read()
 
 
+@pytest.mark.parametrize("sig, status, words", [
+    (signal.SIGINT, 0, None),
+    (signal.SIGTERM, 143, "terminated (SIGTERM)"),
+    (signal.SIGHUP, 129, "hung up (SIGHUP)")])
+def test_a_signal_ends_the_monitor_with_its_words_and_status(sig, status, words):
+    """Ctrl-C is how a monitor ends (0); SIGTERM and SIGHUP end it as they end every other
+    command: the signal named on stderr in the words ``-f`` uses, its exit status (143, 129;
+    it was 0), and the summary as ever."""
+    tap_master, tap_slave = os.openpty()
+    tty.setraw(tap_slave)
+    proc = _monitor("--port", os.ttyname(tap_slave))
+    try:
+        _wait_listening(proc)
+        os.write(tap_master, request(1, 6, 4) + reply(6, 1000))
+        proc.send_signal(sig)
+        out, err = proc.communicate(timeout=patience(20))
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+        os.close(tap_master)
+        os.close(tap_slave)
+    assert proc.returncode == status, err
+    assert "Traceback" not in err, err
+    if words is None:
+        assert "stopped listening" not in err, err
+    else:
+        assert f"{words}: stopped listening" in err, err
+    assert "frames in" in err.splitlines()[-1], err  # (the summary, last, as ever)
+
+
 def test_a_tap_on_the_line_of_a_pyserial_master_and_a_module(tmp_path):
     """The master (pyserial) talks to a module written from the manual; everything on the
     line reaches the tap, with noise and a frame split in two; ``tmclsh monitor --port``
@@ -334,7 +365,7 @@ def test_a_live_tap_whose_output_nobody_reads_keeps_reading_the_line():
             proc.communicate()
         os.close(tap_master)
         os.close(tap_slave)
-    assert proc.returncode == 0, err
+    assert proc.returncode == 143, err  # (SIGTERM's status, as every command's)
     summary = json.loads(out.splitlines()[-1])["summary"]
     assert (summary["requests"], summary["replies"], summary["unanswered"]) == (n, n, 0)
     shown = sum(1 for text in out.splitlines() if '"frame"' in text)

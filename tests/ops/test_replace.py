@@ -202,6 +202,8 @@ def test_interrupted_during_a_step_the_same_run_again_completes_it(modules, step
         r.run()
     states = {o.step: o.state for o in r.report.steps}
     assert states[step] == STOPPED, r.report.to_json()
+    texts = {o.step: o.text for o in r.report.steps}
+    assert texts[step] == "interrupted (Ctrl-C) during this step"
     assert r.report.situation.startswith("the old module was only read")
     new.hooks.clear()
     report = replace(old, new, image=image())[0].run()
@@ -249,6 +251,19 @@ KILL_AT = [("identify", 10, 1), ("firmware", 201, 40), ("configuration", 5, 3),
            ("program", 132, 1), ("verify", 10, 82)]
 
 
+# what each step stopped there says of the new module
+SITUATION = {"identify": "new module: nothing was written to the new module",
+             "firmware": "new module: ",
+             # (two written, the third sent as the signal came: it said "no setting")
+             "configuration": "new module: 3 settings written to the new module, the last "
+                              "as it was stopped (it may not have been taken); the rest as "
+                              "they were",
+             # (132 answered once the signal landed: download mode begun, nothing stored)
+             "program": "new module: program memory: nothing was written; the program memory "
+                        "is unchanged",
+             "verify": "new module: written as the steps above say"}
+
+
 @pytest.mark.parametrize("step,command,count", KILL_AT, ids=[k[0] for k in KILL_AT])
 def test_command_line_killed_during_a_step_names_the_command_that_completes_it(modules,
                                                                             tmp_path, step,
@@ -277,6 +292,10 @@ def test_command_line_killed_during_a_step_names_the_command_that_completes_it(m
     assert sent.is_set() and proc.returncode == 128 + signal.SIGTERM, err
     assert re.search(rf"^{step}\s+stopped", out, re.M), out
     assert "the old module was only read" in err
+    # which signal stopped which step, in every command's words (it said "stopped by a
+    # signal"), and what the step had done to the new module
+    assert f"{step}: stopped: terminated (SIGTERM) during this step" in err, err
+    assert SITUATION[step] in err, err
     command = re.search(r"to complete the replacement, run: (.*)$", err, re.M).group(1)
     words = shlex.split(command)
     assert words[0] == "tmclsh" and sorted(words[1:]) == sorted(args)  # the same command

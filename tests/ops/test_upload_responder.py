@@ -7,6 +7,11 @@ next cell's answer never passes that cell.
 
 from __future__ import annotations
 
+import signal
+import subprocess
+import sys
+import time
+
 import pytest
 
 from tmclsh.client.text import LineClient
@@ -14,6 +19,8 @@ from tmclsh.link import open_serial
 from tmclsh.ops import program
 from tmclsh.base.errors import TmclError
 from tmclsh.ops.program import UploadError
+from tmclsh.base.interrupts import Terminated, stopped_by
+from conftest import ROOT, patience, tmclsh_env
 from tmclsh.tmcl import asm
 from tmclsh.tmcl.frames import Instruction
 
@@ -263,6 +270,81 @@ def test_ctrl_c_in_an_upload_is_a_keyboard_interrupt_and_download_mode_is_ended(
     assert isinstance(cause, UploadError) and cause.interrupted and cause.download_ended
     assert cause.written == range(12) and "interrupted (Ctrl-C)" in str(info.value)
     assert module.stores == list(range(12)) and not module.downloading
+
+
+_UNIT_STOP = stopped_by("terminated (SIGTERM)")  # (what ops/units raises in a unit's thread)
+
+
+@pytest.mark.parametrize("stop, words", [
+    (_UNIT_STOP, "terminated (SIGTERM)"),
+    (lambda: Terminated(signal.SIGTERM), "terminated (SIGTERM)"),
+    (lambda: Terminated(signal.SIGHUP), "hung up (SIGHUP)")])
+def test_a_signal_in_an_upload_is_named_and_raised_as_itself(module, client, stop, words):
+    """A unit stopped by SIGTERM (the stop ``ops/units`` raises in its thread), or a run's
+    own SIGTERM or SIGHUP, cuts an upload short: the error says which (it said "interrupted
+    (Ctrl-C)", or nothing for a run's own SIGTERM), and what is raised is still the stop of
+    that kind (its exit status, a unit's words), the error its cause."""
+    kind = type(stop())
+
+    def progress(stage: str, done: int, total: int) -> None:
+        if stage == "upload" and done == 12:
+            raise stop()
+
+    with pytest.raises(BaseException) as info:  # (a test that fails, not a run cut short)
+        program.upload(client, _program(40), progress=progress)
+    assert isinstance(info.value, kind), repr(info.value)
+    cause = info.value.__cause__
+    assert isinstance(cause, UploadError) and cause.interrupted and cause.download_ended
+    assert cause.reason == words and "Ctrl-C" not in str(cause)
+    assert str(cause).startswith(f"upload failed: {words}; instructions 0..11 written")
+    assert getattr(info.value, "why", words) == words
+    assert module.stores == list(range(12)) and not module.downloading
+
+
+def _uploading(ports: list[str], tmp_path, modules: list[ProgramModule]) -> tuple[int, str, str]:
+    """``tmclsh --port A [--port B] -f`` a script that uploads 1000 instructions, SIGTERM once
+    every module has stored 20 of them; (status, stdout, stderr)."""
+    prog = tmp_path / "long.tmcl"
+    prog.write_text("".join(f"SGP {i % 56}, 2, {i}\n" for i in range(1000)))
+    script = tmp_path / "up.tmcl"
+    script.write_text(f".upload --yes {prog}\n")
+    args = [a for p in ports for a in ("--port", p)]
+    proc = subprocess.Popen([sys.executable, "-m", "tmclsh", *args, "-f", str(script)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=tmclsh_env(), cwd=str(ROOT))
+    try:
+        deadline = time.monotonic() + patience(30)
+        while not all(len(m.stores) >= 20 for m in modules):
+            assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read()
+            time.sleep(0.01)
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=patience(30))
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    return proc.returncode, out, err
+
+
+@pytest.mark.parametrize("units", [1, 2])
+def test_an_upload_cut_short_by_sigterm_says_so_and_what_memory_holds(tmp_path, units):
+    """Each unit's upload stopped by SIGTERM says "terminated (SIGTERM)" (it said
+    "interrupted (Ctrl-C)") with what the memory holds; a run of one module says that too
+    (it said nothing of the memory). Download mode is ended; exit status 143."""
+    modules = [ProgramModule(delay=0.005) for _ in range(units)]
+    try:
+        status, out, err = _uploading([m.path for m in modules], tmp_path, modules)
+    finally:
+        for m in modules:
+            m.close()
+    assert status == 143, err
+    assert "Ctrl-C" not in out + err, out + err
+    said = [line for line in err.splitlines()
+            if "error: upload failed: terminated (SIGTERM); instructions 0.." in line]
+    assert len(said) == units, err
+    assert "download mode ended" in said[0]
+    assert out.count("up.tmcl: terminated (SIGTERM) at line 1") == units, out
+    assert not any(m.downloading for m in modules)
 
 
 def test_ctrl_c_between_two_attempts_is_said_as_any_ctrl_c_in_the_upload(module, client):

@@ -249,6 +249,42 @@ def test_a_signal_stops_every_unit(make_pty_sim, tmp_path, sig, status, why):
                           out)) == 2, out
 
 
+def test_a_reader_gone_stops_what_each_unit_set_moving(tmp_path):
+    """`tmclsh --port A --port B -f turn.tmcl | head -1`: as a run of one module does, the
+    run is cut short where its reader went away: the unit that set a motor turning stops it
+    and says so on stderr, the unit that moved nothing is sent nothing more, and the run
+    ends 1 (it ran to its end unheard, exit 0, the motor turning). Modules written from the
+    manuals (tests/responder.py), not the simulator."""
+    from responder import PtyModule
+
+    turning, still = PtyModule(version="1311V111"), PtyModule(version="1311V111")
+    script = tmp_path / "turn.tmcl"
+    script.write_text(".if unit == 1\nROR 0, 500\n.end\n"
+                      ".repeat 100\nGAP 1, 0\n.sleep 0.1\n.end\n")
+    proc = subprocess.Popen([sys.executable, "-m", "tmclsh", "--port", turning.path,
+                             "--port", still.path, "-f", str(script)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=tmclsh_env(), cwd=str(ROOT))
+    try:
+        read_until(proc, lambda text: "rotating" in text and text.count("\n") >= 3)
+        proc.stdout.close()  # (`| head`: the reader has what it wanted and goes)
+        err = proc.stderr.read()
+        proc.wait(timeout=patience(30))
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        turning.close()
+        still.close()
+    assert proc.returncode == 1, err
+    assert 1 in turning.commands()  # ROR
+    after_ror = turning.commands()[turning.commands().index(1):]
+    assert 3 in after_ror, turning.got  # MST: the one stop
+    assert f"[1 {turning.path}] the output's reader went away: stopped motor 0" in err, err
+    assert 3 not in still.commands(), still.got
+    assert f"[2 {still.path}] the output's reader went away: stopped" not in err, err
+    assert "Traceback" not in err and "Exception ignored" not in err, err
+
+
 def _interrupt_once_turning(script, path: str, sim, *extra: str,
                             then=lambda: None, timeout: float = 20) -> tuple[int, str, str]:
     """Run ``script`` on the units at 1-3 on ``path``; once ``sim``'s motor turns, ``then()``

@@ -85,6 +85,30 @@ class Terminated(_Sent, SystemExit):
                     else "hung up (SIGHUP)")
 
 
+def terminated_by(exc: BaseException) -> Terminated | None:
+    """The SIGTERM or SIGHUP behind ``exc``: a ``Terminated``, or the Ctrl-C ``interrupted``
+    made for one (a run that ends on all three alike, such as ``monitor``, still ends with
+    the signal's words and exit status, as every other command does). None: Ctrl-C, or no
+    signal at all."""
+    if isinstance(exc, Terminated):
+        return exc
+    signum = getattr(exc, "signum", None) if isinstance(exc, KeyboardInterrupt) else None
+    if signum is None or signum == signal.SIGINT:
+        return None
+    return Terminated(signum)  # (made here, not raised by a handler: never sent again)
+
+
+def stopped_words(exc: BaseException) -> str:
+    """What stopped a run, in the words its summary says it with: the signal's
+    (``terminated (SIGTERM)``, ``hung up (SIGHUP)``), what a unit was stopped for
+    (``stopped_by``), else ``interrupted (Ctrl-C)``."""
+    why = getattr(exc, "why", None)
+    if isinstance(why, str) and why:
+        return why
+    signalled = terminated_by(exc)
+    return signalled.why if signalled is not None else "interrupted (Ctrl-C)"
+
+
 def hung_up(why: str = "hung up (the terminal went away)") -> Terminated:
     """The SIGHUP a terminal's going away stands for where no signal came (tmclsh was not
     the terminal's controlling process, or was started ignoring SIGHUP): the prompt's reads

@@ -247,6 +247,9 @@ Exit status: 0 when every unit passed, 1 when any failed, 3 when a unit had no m
 last line on standard error names them), 2 when every unit refused the lines before anything
 was sent. Ctrl\\-C, SIGTERM and SIGHUP stop every unit that runs, each stopping its module's
 program and motors as one run does and saying so; units not started yet are not started.
+So does the reader of standard output going away (a pipe into {_b("head")}), as for one
+module: each unit that set a motor moving stops it and says so on standard error, the
+others are sent nothing more, exit status 1.
 .PP
 Fresh modules all answer at address 1: on a shared line give them their addresses one at a
 time (plug one in, {_b("SGP 66, 0,")} {_i("N")}, plug in the next); {_b("tmclsh scan")} then

@@ -46,6 +46,7 @@ from ..tmcl import instructions as isa
 from ..tmcl.asm import Program
 from ..base.errors import (ChecksumError, StatusError, TmclError, TmclTimeoutError, TransportError,
                            ValidationError)
+from ..base.interrupts import Terminated, stopped_words
 from ..base.logs import Logger
 from ..tmcl.frames import AppState, Control, Instruction, Request, Status
 from ..client.shared import shared_text
@@ -122,8 +123,9 @@ class UploadError(TmclError):
     ``written``: addresses confirmed stored (status 101); ``unknown``: the address whose frame
     was sent but not confirmed (it may or may not be stored); ``unchanged``: addresses after
     it, which still hold what was there before. ``download_ended`` says whether 133 was
-    answered; ``interrupted`` is True for Ctrl-C, which ``upload`` raises as the
-    ``KeyboardInterrupt`` it is, this error its ``__cause__``.
+    answered; ``interrupted`` is True for Ctrl-C, SIGTERM or SIGHUP (``reason`` names which,
+    as a script's summary does), which ``upload`` raises as the ``KeyboardInterrupt`` or
+    ``Terminated`` it is, this error its ``__cause__``.
     """
 
     def __init__(self, reason: str, *, start: int, total: int, acked: int, sent: int,
@@ -316,18 +318,19 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
                 client._taps.notice(f"upload: {_reason(failure, ended)}; storing the program "
                                     f"again from address {start} (attempt {attempt + 1} of "
                                     f"{tries})")
-            except KeyboardInterrupt as exc:  # (said as any Ctrl-C in the upload is)
+            except (KeyboardInterrupt, Terminated) as exc:  # (said as any in the upload is)
                 failure = exc
                 break
     sent = furthest
     upload_seconds = time.monotonic() - began
     if failure is not None:
-        interrupted = isinstance(failure, KeyboardInterrupt)
-        reason = "interrupted (Ctrl-C)" if interrupted else _reason(failure, ended)
+        interrupted = isinstance(failure, (KeyboardInterrupt, Terminated))
+        # (what stopped it by name: Ctrl-C, or the SIGTERM that stopped a unit or a run)
+        reason = stopped_words(failure) if interrupted else _reason(failure, ended)
         error = UploadError(reason, start=start, total=total, acked=acked, sent=sent,
                             download_ended=ended, end_error=end_error, interrupted=interrupted)
         if interrupted:
-            raise KeyboardInterrupt(str(error)) from error
+            raise _again_as(failure, error) from error
         raise error from failure
     if not ended:
         raise UploadError("quit download (133) failed", start=start, total=total,
@@ -340,6 +343,18 @@ def upload(client, program: Program | Sequence[Instruction], origin: int | None 
         result.verified = result.mismatch is None
         result.verify_seconds = time.monotonic() - began
     return result
+
+
+def _again_as(stop: BaseException, error: UploadError) -> BaseException:
+    """The Ctrl-C or signal that cut an upload short, to raise again with ``error`` (what
+    the memory holds) as its cause: SIGTERM's own exception (its exit status), a Ctrl-C of
+    the same kind (a unit's names what stopped it) saying the error."""
+    if isinstance(stop, Terminated):
+        return stop
+    try:
+        return type(stop)(str(error))
+    except TypeError:  # (a kind that takes other arguments)
+        return KeyboardInterrupt(str(error))
 
 
 def _store(client, reqs: list[Request], start: int, timeout: float | None,
@@ -364,7 +379,7 @@ def _store(client, reqs: list[Request], start: int, timeout: float | None,
             acked += 1
             if progress is not None:
                 progress("upload", acked, total)
-    except (TmclError, KeyboardInterrupt) as exc:
+    except (TmclError, KeyboardInterrupt, Terminated) as exc:
         failure = exc
     finally:
         frames.close()

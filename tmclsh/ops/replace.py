@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING
 
 from ..base.errors import (ConnectError, InBootloaderError, NoAnswerError, TmclError,
                            TmclTimeoutError, TransportError, ValidationError)
+from ..base.interrupts import Terminated, stopped_words
 from ..tmcl import instructions as isa
 from ..tmcl import modules as moddb
 from ..tmcl.frames import Control, Instruction
@@ -155,7 +156,11 @@ class Replacement:
         self.backup: bk.Backup | None = None
         self.update = None  # the firmware update, while one runs
         self.upload_error: prog.UploadError | None = None
+        self.upload_began = False  # the program step's upload was started
         self.written = 0  # settings written by this run
+        # settings the configuration step has sent so far (the last may have been cut
+        # short), and whether it got to the end of its writes (then ``written`` is exact)
+        self.tried, self.restored = 0, False
         self._dir = tempfile.TemporaryDirectory(prefix="tmclsh-replace-")
 
     # -- running the steps ----------------------------------------------------------------
@@ -174,8 +179,12 @@ class Replacement:
                 except Stop as stop:
                     outcome = stop.outcome
                 except (KeyboardInterrupt, SystemExit) as exc:
-                    why = "interrupted" if isinstance(exc, KeyboardInterrupt) else \
-                        "stopped by a signal"
+                    # which stopped it, in the words every command uses (interrupted
+                    # (Ctrl-C), terminated (SIGTERM), hung up (SIGHUP)); the situation
+                    # says what the step had done
+                    why = stopped_words(exc) if isinstance(exc, (KeyboardInterrupt,
+                                                                  Terminated)) \
+                        else "stopped"
                     self._end(Outcome(name, STOPPED, f"{why} during this step"))
                     raise
                 except ConnectError as exc:
@@ -210,17 +219,40 @@ class Replacement:
             "identify": "nothing was written to the new module",
             "firmware": (self.update.situation() if self.update is not None
                          else "its firmware was not changed"),
-            "configuration": (f"{self.written} setting{'s' if self.written != 1 else ''} "
-                              "written to the new module (the rest as they were)"
-                              if self.written else "no setting was written to the new module"),
-            "program": (self.upload_error.memory_text() if self.upload_error is not None
-                        else "its program memory as the upload left it"),
+            "configuration": self._configuration_situation(),
+            "program": self._program_situation(),
             "verify": "written as the steps above say (what reads back differently is "
                       "named in the verify step)",
         }[step]
         old = (BACKUP_UNCHANGED.format(self.report.source) if isinstance(self.source, Path)
                else OLD_UNCHANGED)
         return f"{old}; new module: {new}"
+
+    def _tried_one(self) -> None:
+        self.tried += 1
+
+    def _configuration_situation(self) -> str:
+        """The new module's settings after the configuration step stopped: how many were
+        written, or, cut short among its writes, how many were sent (the last one as the
+        stop came, which may or may not have been taken)."""
+        n = self.written if self.restored else self.tried
+        plural = "s" if n != 1 else ""
+        if not n:
+            return "no setting was written to the new module"
+        if self.restored:
+            return f"{n} setting{plural} written to the new module (the rest as they were)"
+        return (f"{n} setting{plural} written to the new module, the last as it was stopped "
+                "(it may not have been taken); the rest as they were")
+
+    def _program_situation(self) -> str:
+        """The new module's program memory after the program step stopped: what the
+        upload wrote, or that it had not begun, or that only its verify was cut short."""
+        if self.upload_error is not None:
+            return f"program memory: {self.upload_error.memory_text()}"
+        if not self.upload_began:
+            return "its program memory was not changed (the upload had not begun)"
+        return ("the program was uploaded whole; its read-back was cut short: not known to "
+                "read back equal")
 
     def close(self) -> None:
         self._close_new()
@@ -461,8 +493,9 @@ class Replacement:
         c = self._client()
         backup = self._read_backup()
         diffs = bk.compare(c, backup)
-        done, link_changed = bk.restore(c, diffs)
+        done, link_changed = bk.restore(c, diffs, progress=self._tried_one)
         self.written = sum(1 for w in done if w.error is None)
+        self.restored = True
         if link_changed or (self.with_link and c.address != self.target.get("address")):
             self.target["address"] = c.address  # (followed: the module moved)
         errors = [w for w in done if w.error]
@@ -523,12 +556,13 @@ class Replacement:
         image = list(old)
         if len(held) > len(old) and len(old) < c.require_module().program_memory:
             image.append(Instruction(isa.END_MARKER, 0, 0, 0))  # its own program ends here
+        self.upload_began = True  # (from here the new module's memory may change)
         try:
             result = prog.upload(c, image, 0, verify=True)
         except prog.UploadError as exc:
             self.upload_error = exc
             raise
-        except KeyboardInterrupt as exc:
+        except (KeyboardInterrupt, Terminated) as exc:  # (what it had written: the cause)
             if isinstance(exc.__cause__, prog.UploadError):
                 self.upload_error = exc.__cause__
             raise

@@ -158,6 +158,12 @@ class Hooks:
     def not_run(self, unit: Unit, why: str) -> None:
         pass
 
+    def to_stop(self, unit: Unit) -> bool:
+        """Whether the run's stop is to reach this unit's module (every unit by default: a
+        front end may spare a module its run set nothing moving on). Its thread, or the
+        main thread for a unit that had ended."""
+        return True
+
     def not_stopped(self, unit: Unit, exc: BaseException) -> None:
         """A unit that had ended could not be opened again to be stopped, or one whose
         thread did not take the stop could not be stopped from the main thread."""
@@ -275,6 +281,10 @@ class Run:
                     continue
                 line.tried = True  # (once: a stop that failed is said once)
                 with self.hooks.attached(unit):
+                    if not self.hooks.to_stop(unit):
+                        line.taken = True  # (nothing of it to stop)
+                        self.results[unit.number].stopped = True
+                        continue
                     try:
                         self.stop(client, self.stopping or "interrupted")
                     except (TmclError, OSError) as exc:
@@ -288,6 +298,8 @@ class Run:
         with a motor turning, and Ctrl-C stops every motor of the run."""
         for line in self.lines:
             for unit in line.done:
+                if not self.hooks.to_stop(unit):
+                    continue
                 for _ in range(3):  # (Ctrl-C again while it stops: it stops all the same)
                     try:
                         self._stop_one(unit)
@@ -355,7 +367,8 @@ class Run:
             try:
                 if client is not None and self.stopping is not None and not line.taken:
                     # interrupted, or it ended just as the stop came: stopped all the same
-                    self.stop(client, self.stopping)
+                    if hooks.to_stop(unit):
+                        self.stop(client, self.stopping)
                     result.stopped = True
             finally:
                 if client is not None:

@@ -24,14 +24,15 @@ from typing import Any
 from ...base.canspec import LINK_DEFAULTS
 from ...base.errors import (EXIT_FAILED, EXIT_OK, ConnectError, TmclError, TransportError, UsageError,
                             ValidationError)
-from ...base.interrupts import restore
+from ...base.interrupts import Terminated, restore, terminated_by
 from ...ops.bridge import CAN_RX, CAN_TX, LOST, NOISE, TICK, CanBridge, Left, SerialBridge
 from ...ops.filter import Filter
 from ...ops.handoff import CAPTURE, DONE, END, FINISH, LEFT, START, Describer, give_way
 from ...ops.monitor import DEFAULT_HOST, RX, TX, CanReader, Monitor, SerialPair
 from .livetable import wanted
 from .monitor import (Limits, View, _capture, end_live_output, end_table, interruptible,
-                      live_output, live_table, load_module, off_the_wire, show_items)
+                      live_output, live_table, load_module, off_the_wire, said_ended,
+                      show_items)
 from .stop import ToStderr
 
 SOON = 2.0  # s the describer takes, as a rule, to read the rest and say what it left
@@ -80,10 +81,11 @@ def run_bridge(args) -> int:
     describer.start()
     previous = interruptible()  # (from here Ctrl-C, SIGTERM and SIGHUP end the bridge as one)
     ended_all = True  # (what the traffic left at the module was ended, or nothing was)
+    ended: list[Terminated] = []  # the SIGTERM or SIGHUP that ended the forwarding
     try:
         bridge = _serve(transport, describer, args, is_can, can_id, reply_id, host)
         try:
-            left = _forward(bridge, describer, transport, args.output)
+            left = _forward(bridge, describer, transport, args.output, ended)
             if left is None or describer.notes.dropped:
                 ended_all = False  # (what the traffic left is not known: "check the module")
             if left and not _put_right(transport, left, monitor, args, is_can, bridge.lost,
@@ -97,6 +99,8 @@ def run_bridge(args) -> int:
                 _salvage(capture[1])
     finally:
         restore(previous)
+    if ended:  # (the signal's status, as every command ends on it)
+        return ended[0].code  # type: ignore[return-value]
     return EXIT_OK if bridge.lost is None and describer.status == 0 and ended_all \
         else EXIT_FAILED
 
@@ -153,10 +157,12 @@ def _open_module(args, port: str | None, can_spec: str | None):
         raise ConnectError(str(exc)) from exc
 
 
-def _forward(bridge, describer: Describer, transport, output: str | None) -> Left | None:
+def _forward(bridge, describer: Describer, transport, output: str | None,
+             ended: list[Terminated]) -> Left | None:
     """Say where the program connects, then forward until Ctrl-C, SIGTERM, a limit the
     describer reached, or the module's link lost; then what the traffic left, as the
-    describer read it (None: it could not say)."""
+    describer read it (None: it could not say). A SIGTERM or SIGHUP that ended it is said
+    and put in ``ended``."""
     try:
         sys.stdout.write(bridge.endpoint + "\n")
         sys.stdout.flush()
@@ -177,10 +183,14 @@ def _forward(bridge, describer: Describer, transport, output: str | None) -> Lef
                      f"is shown{written}; forwarding goes on until Ctrl-C")
             elif any(event[0] == DONE for event in got):
                 break
-    except KeyboardInterrupt:
-        pass
+    except KeyboardInterrupt as exc:
+        signalled = terminated_by(exc)
+        if signalled is not None:
+            ended.append(signalled)
     finally:
         bridge.close()  # (nothing is put after this)
+    if ended:
+        said_ended(ended[0], "stopped forwarding")
     describer.notes.send((END,))
     try:
         said = describer.wait_for(LEFT, SOON)

@@ -26,7 +26,7 @@ from typing import Any
 
 from ...base.errors import (EXIT_FAILED, EXIT_OK, ConnectError, TmclError, TransportError,
                             UsageError, ValidationError)
-from ...base.interrupts import interrupted, restore, unwind_on
+from ...base.interrupts import Terminated, interrupted, restore, terminated_by, unwind_on
 from ...base.spill import Spill, SpillWriter
 from ...ops.filter import Filter
 from ...ops.logread import Shape
@@ -587,8 +587,8 @@ def run_monitor(args) -> int:
                   file=sys.stderr, flush=True)
         if table is not None:
             table.start()
-        failed = _run(source, reader if live else None, view, filt, monitor,
-                      Limits(args.count, args.duration, not live), live)
+        failed, ended = _run(source, reader if live else None, view, filt, monitor,
+                             Limits(args.count, args.duration, not live), live)
     finally:
         if transport is not None:
             transport.close()
@@ -597,17 +597,32 @@ def run_monitor(args) -> int:
         end_table(view)
         if out is not None:
             end_live_output(view, out, monitor.summary)
+    if ended is not None:  # SIGTERM, SIGHUP: said as every command says it
+        said_ended(ended, "stopped listening")
     if out is not None and out.gone:  # (the reader of stdout has gone: end quietly, as
         from ...base.edges import reader_gone  # other tools do; a monitor only listens)
 
         if not json_mode:
             view.summary(monitor.summary)  # (on stderr, still the user's)
-        return reader_gone()
+        gone = reader_gone()
+        return gone if ended is None else ended.code  # type: ignore[return-value]
     if failed is not None:  # (what was heard until then is still summed up)
         print(f"tmclsh: {failed}", file=sys.stderr, flush=True)
     if failed is None or monitor.summary.frames or monitor.summary.noise:
         view.summary(monitor.summary)  # (of a log that gave nothing, only why)
+    if ended is not None:
+        return ended.code  # type: ignore[return-value]
     return EXIT_OK if failed is None else EXIT_FAILED
+
+
+def said_ended(ended: Terminated, what: str) -> None:
+    """The SIGTERM or SIGHUP that ended a run taking it as Ctrl-C, on stderr in the words a
+    run of ``-c``/``-f`` uses (``terminated (SIGTERM): ...``); its exit status is the
+    signal's (143, 129), as there. Said where stderr still takes it."""
+    try:
+        print(f"{ended.why}: {what}", file=sys.stderr, flush=True)
+    except (OSError, ValueError):
+        pass
 
 
 def _readable(path: str) -> None:
@@ -718,13 +733,14 @@ def end_table(view: View) -> None:
 
 
 def _run(source, reader, view: View, filt: Filter, monitor: Monitor, limits: Limits,
-         live: bool) -> str | None:
+         live: bool) -> tuple[str | None, Terminated | None]:
     """Show what the source yields until it ends, the limits are reached or Ctrl-C; a live
     source is ended by the reader (requests still waiting are unanswered). Returns why the
-    source failed (a lost adapter, a log python-can cannot read on), else None."""
+    source failed (a lost adapter, a log python-can cannot read on), else None; and the
+    SIGTERM or SIGHUP that ended it, if one did."""
     previous = interruptible()
     summary = monitor.summary
-    failed = None
+    failed = ended = None
     try:
         try:
             table = view.table
@@ -738,8 +754,8 @@ def _run(source, reader, view: View, filt: Filter, monitor: Monitor, limits: Lim
                         break  # (`monitor | head`: what it heard no one reads any more)
                 elif table is not None:
                     table.tick()
-        except KeyboardInterrupt:
-            pass
+        except KeyboardInterrupt as exc:
+            ended = terminated_by(exc)
         except TmclError as exc:
             failed = str(exc)
         finally:
@@ -751,4 +767,4 @@ def _run(source, reader, view: View, filt: Filter, monitor: Monitor, limits: Lim
     finally:
         restore(previous)
         view.flush()
-    return failed
+    return failed, ended

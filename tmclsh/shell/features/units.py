@@ -13,8 +13,11 @@ wherever in tmclsh it is written, goes to that unit's view (``unitview``): a liv
 a terminal, lines prefixed with the unit in a pipe, ``"unit"`` in every JSON object.
 
 Ctrl-C, SIGTERM and SIGHUP stop every unit: each stops its module with the one stop
-(``stop.stop_all``) and says so; units not yet started are not started. A unit that loses its
-link or whose module refuses a line fails alone.
+(``stop.stop_all``) and says so; units not yet started are not started. So does stdout's
+reader going away (``| head``), as it cuts a run of one module short: each unit that set a
+motor moving stops it and says so on stderr, the rest are sent nothing more, and the run
+ends with the status a run of one module ends with there. A unit that loses its link or
+whose module refuses a line fails alone.
 """
 
 from __future__ import annotations
@@ -35,7 +38,7 @@ from ...client.connect import connection_settings, open_client
 from ...ops import units as ops_units
 from ...ops.units import Unit
 from ..lang import main as shell_main
-from ..lang.main import exit_cleanly_on_signals, stop_on_interrupt
+from ..lang.main import READER_GONE, exit_cleanly_on_signals, stop_on_interrupt
 from . import stop as _stop  # noqa: F401  (here: a unit's thread imports nothing)
 
 if TYPE_CHECKING:
@@ -198,6 +201,13 @@ def _load_ahead(text: str) -> bool:
     return commands
 
 
+class ReaderGone(Exception):
+    """Whoever read the run's stdout went away: the run is stopped as a signal stops it
+    (``ops.units.Run``'s interrupts), with these words."""
+
+    why = READER_GONE
+
+
 class Run(ops_units.Hooks):
     """The shell's front end of ``ops.units.Run``: each unit a run of ``main.run_connected``
     on its module, shown through the view (``unitview``)."""
@@ -207,18 +217,27 @@ class Run(ops_units.Hooks):
         self.args, self.units, self.view = args, plan, view
         self.config = config if config is not None else load_config()  # (see run_units)
         self.run = ops_units.Run(plan, self._fn, open=self._open, stop=stop_on_interrupt,
-                                 hooks=self, interrupts=(Terminated,),
+                                 hooks=self, interrupts=(Terminated, ReaderGone),
                                  writes_files=writes_files)
+        self._told_gone = False  # (the run was stopped for it once)
 
     def go(self) -> int:
         exit_cleanly_on_signals()
         with self.view.showing():
             results = self.run.go()
-        return self._status(results)
+        status = self._status(results)
+        if self.view.out_gone:  # (the interpreter's last flush must not fail again)
+            from ...base.edges import reader_gone
+
+            gone = reader_gone()
+            return status if isinstance(self.run.stopped_by, Terminated) else gone
+        return status
 
     @property
     def stop_status(self) -> int:
         by = self.run.stopped_by
+        if isinstance(by, ReaderGone):
+            return EXIT_FAILED  # (as a run of one module: base/edges.reader_gone)
         return by.code if isinstance(by, Terminated) else EXIT_INTERRUPTED  # type: ignore
 
     # -- opening and running a unit (its own thread) -------------------------------------
@@ -279,6 +298,17 @@ class Run(ops_units.Hooks):
 
     def tick(self) -> None:
         self.view.tick()
+        if self.view.out_gone and not self._told_gone and self.run.stopping is None:
+            self._told_gone = True
+            raise ReaderGone(READER_GONE)
+
+    def to_stop(self, unit: Unit) -> bool:
+        """A run cut short by its reader stops what each unit set moving, as a run of one
+        module does (main._run_unattended); a signal stops every unit's module."""
+        if not isinstance(self.run.stopped_by, ReaderGone):
+            return True
+        session = self.view.record(unit).session
+        return session is not None and session.moved()
 
     def _unit_status(self, result: ops_units.Result) -> int:
         if result.stopped:

@@ -301,7 +301,9 @@ class View:
         self.log_dir = log_dir
         self.records = {u.number: Record(u, self, log_dir) for u in units}
         self.out, self.err = sys.stdout, sys.stderr  # the real streams
-        self._gone = False  # the reader of our output went away: nothing more is written
+        # the streams whose reader went away (a broken pipe): nothing more is written to
+        # them; stdout's going cuts the run short (``out_gone``, shell/features/units.py)
+        self._gone: set[int] = set()
         # while draining: what is to be written, and to which stream (one write for a run
         # of text to one stream; a change of stream writes what was held, so stdout and
         # stderr keep their order in one file)
@@ -355,8 +357,13 @@ class View:
             held.clear()
             self._put(stream, text)
 
+    @property
+    def out_gone(self) -> bool:
+        """Whoever read stdout went away (``tmclsh ... | head``)."""
+        return id(self.out) in self._gone
+
     def _write(self, stream: TextIO, text: str) -> None:
-        if self._gone:
+        if id(stream) in self._gone:
             return
         held = self._held
         if held is not None:
@@ -368,13 +375,13 @@ class View:
         self._put(stream, text)
 
     def _put(self, stream: TextIO, text: str) -> None:
-        if self._gone:
+        if id(stream) in self._gone:
             return
         try:
             stream.write(text)
             stream.flush()
-        except (OSError, ValueError):  # a closed pipe: the units go on, unheard
-            self._gone = True
+        except (OSError, ValueError):  # a closed pipe: that stream is heard no more
+            self._gone.add(id(stream))
 
     def note(self, text: str) -> None:
         """The run's own words (not a unit's), on stderr."""

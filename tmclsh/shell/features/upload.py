@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Iterator
 
 from ...base import files
 from ...base.errors import AsmError, TmclError, ValidationError
+from ...base.interrupts import Terminated
 from ...client.shared import shared_text
 from ...ops import program
 from ...ops.program import UploadError
@@ -112,7 +113,7 @@ def cmd_upload(session: Session, argtext: str) -> None:
         dbg.program = None  # memory now holds parts of two programs
         session.state.program_state = "stop"
         raise
-    except KeyboardInterrupt as exc:
+    except (KeyboardInterrupt, Terminated) as exc:  # (Ctrl-C, SIGTERM, SIGHUP)
         if isinstance(exc.__cause__, UploadError):  # (cut short in the upload, not its verify)
             dbg.program = None
             session.state.program_state = "stop"

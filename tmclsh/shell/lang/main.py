@@ -16,6 +16,9 @@ from .session import QuitShell, Session, frames_sent
 if TYPE_CHECKING:
     from ...base.config import Config
 
+# why a run is cut short when whoever read its output went away (`tmclsh -f run.tmcl | head`):
+# the words of its stop, on stderr
+READER_GONE = "the output's reader went away"
 
 
 def refused_line(session: Session, lines: list[str]) -> tuple[str, TmclError] | None:
@@ -237,6 +240,7 @@ def _run_unattended(args: argparse.Namespace, session: Session) -> int:
     # come; see app.py)
     unlisten = lambda: None  # noqa: E731
     started = _watch_for_starts(client)
+    session.moved = lambda: started(keep=True)
     if out.json:
         unlisten = client.add_listener(lambda reply: out.event(reply, client._taps.event_time))
         client.start_event_poller()  # an event shows when it comes, not at the next line
@@ -265,7 +269,7 @@ def _run_unattended(args: argparse.Namespace, session: Session) -> int:
             # `tmclsh -f turn.tmcl | head`: the run is cut short where its reader stopped
             # reading, and what it set moving (which a later line may have stopped) is
             # stopped as on Ctrl-C; a run that moved nothing sends nothing more
-            stop_on_interrupt(client, "the output's reader went away")
+            stop_on_interrupt(client, READER_GONE)
     if status == EXIT_OK and (session.stats.suspects > suspects
                               or len(session.stats.shared) > shared):
         # (an answer found suspect as the run ended is no pass either, nor a run on an
@@ -301,8 +305,9 @@ def _watch_for_starts(client):
     remove = client.add_tracer(tracer, sent_only=True,
                                opcodes=starts | {op for op, _ in writes})
 
-    def started() -> bool:
-        remove()
+    def started(keep: bool = False) -> bool:
+        if not keep:
+            remove()
         return bool(sent)
 
     return started

@@ -212,6 +212,9 @@ class Session:
         # told (lines done, lines in all) after each line of -c and of a -f script (a unit's
         # live table, shell/features/units.py); None: nobody asks
         self.progress: Callable[[int, int], None] | None = None
+        # whether this run of -c/-f has sent anything that starts motion so far (set by the
+        # run, main._run_unattended): what a run cut short must stop (a unit's too)
+        self.moved: Callable[[], bool] = lambda: False
         # lines failed in a row for want of an answer, and client._replies when the count
         # began (failed_unanswered)
         self._unanswered = 0
