@@ -363,3 +363,21 @@ def test_ctrl_c_between_two_attempts_is_said_as_any_ctrl_c_in_the_upload(module,
     assert isinstance(cause, UploadError) and cause.interrupted
     assert (cause.acked, cause.sent) == (4, 5) and cause.download_ended
     assert module.starts == 1 and not module.downloading
+
+
+def test_the_ctrl_c_a_signal_stood_for_stays_that_signals_when_raised_again():
+    """An upload cut short by the Ctrl-C a SIGTERM stands for (``interrupted``, a run that
+    ends on all three alike) is raised again saying what memory holds, and still names the
+    SIGTERM (``terminated_by``): its words and exit status are not lost to a plain Ctrl-C."""
+    import signal
+
+    from tmclsh.base.interrupts import interrupted, terminated_by
+    from tmclsh.ops.program import UploadError, _again_as
+
+    error = UploadError("terminated (SIGTERM)", start=0, total=4, acked=1, sent=2,
+                        download_ended=True, end_error=None, interrupted=True)
+    again = _again_as(interrupted(signal.SIGTERM), error)
+    assert isinstance(again, KeyboardInterrupt) and "terminated (SIGTERM)" in str(again)
+    found = terminated_by(again)
+    assert found is not None and found.signum == signal.SIGTERM
+    assert terminated_by(_again_as(KeyboardInterrupt(), error)) is None  # (Ctrl-C stays one)

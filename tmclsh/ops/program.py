@@ -352,9 +352,13 @@ def _again_as(stop: BaseException, error: UploadError) -> BaseException:
     if isinstance(stop, Terminated):
         return stop
     try:
-        return type(stop)(str(error))
+        again = type(stop)(str(error))
     except TypeError:  # (a kind that takes other arguments)
-        return KeyboardInterrupt(str(error))
+        again = KeyboardInterrupt(str(error))
+    signum = getattr(stop, "signum", None)
+    if signum is not None:  # (the Ctrl-C a SIGTERM stood for stays that SIGTERM's)
+        again.signum = signum  # type: ignore[attr-defined]
+    return again
 
 
 def _store(client, reqs: list[Request], start: int, timeout: float | None,
