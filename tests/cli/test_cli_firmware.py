@@ -202,7 +202,7 @@ def test_sigterm_mid_write_says_where_the_module_stands(sim_hex):
         rc, out, err = finish(p)
         assert rc == 128 + signal.SIGTERM
         last = json.loads(out.splitlines()[-1])
-        assert last["state"] == "writing" and last["error"] == "stopped by a signal (exit status 143)"
+        assert last["state"] == "writing" and last["error"] == "terminated (SIGTERM); exit status 143"
         assert last["resume"].startswith("tmclsh firmware ") and "--yes" in last["resume"]
     finally:
         server.close()

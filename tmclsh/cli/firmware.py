@@ -18,7 +18,7 @@ import sys
 from ..base.edges import error_record, write_json
 from ..base.errors import (EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, TmclError,
                            exit_status)
-from ..base.interrupts import restore, unwind_on
+from ..base.interrupts import restore, stopped_words, unwind_on
 
 
 def resume_command(args: argparse.Namespace, image: str | None = None) -> str:
@@ -149,8 +149,9 @@ def cmd_firmware(args: argparse.Namespace) -> int:
         code = exc.code if isinstance(exc, SystemExit) and isinstance(exc.code, int) \
             else exit_status(exc)  # type: ignore[arg-type]
         report.close()
+        # (which signal, in the words every run's summary says it with)
         _stopped(report, update, args, "interrupted" if code == EXIT_INTERRUPTED
-                 else f"stopped by a signal (exit status {code})", None, code)
+                 else f"{stopped_words(exc)}; exit status {code}", None, code)
         return code
     except TmclError as exc:
         report.close()
