@@ -225,7 +225,7 @@ def _wait_listening(proc: subprocess.Popen) -> None:
 def test_a_signal_ends_the_monitor_with_its_words_and_status(sig, status, words):
     """Ctrl-C is how a monitor ends (0); SIGTERM and SIGHUP end it as they end every other
     command: the signal named on stderr in the words ``-f`` uses, its exit status (143, 129;
-    it was 0), and the summary as ever."""
+    it was 0), and the summary as ever. Sent as soon as it says it listens (see below)."""
     tap_master, tap_slave = os.openpty()
     tty.setraw(tap_slave)
     proc = _monitor("--port", os.ttyname(tap_slave))
@@ -407,3 +407,32 @@ def test_a_live_tap_ends_when_the_reader_of_its_output_has_gone():
     assert proc.returncode == 1, err
     assert "Traceback" not in err and "Broken pipe" not in err, err
     assert " frames in " in err, err
+
+
+
+def test_the_monitor_says_it_listens_only_once_a_signal_ends_it_as_it_should(monkeypatch):
+    """"listening on" is the moment a user (or a test, or a supervisor) may signal it: by
+    then SIGINT, SIGTERM and SIGHUP must end it with its summary. It said so before setting
+    them (a Ctrl-C at once was Python's own, exit 130: seen once in CI under load)."""
+    from tmclsh.cli.main import main
+    from tmclsh.shell.features import monitor as front
+
+    order: list[str] = []
+    real = front.interruptible
+    monkeypatch.setattr(front, "interruptible", lambda: (order.append("handlers"), real())[1])
+    real_print = print
+
+    def noting(*args, **kw):
+        if args and str(args[0]).startswith("listening on"):
+            order.append("listening")
+        real_print(*args, **kw)
+
+    monkeypatch.setattr("builtins.print", noting)
+    tap_master, tap_slave = os.openpty()
+    tty.setraw(tap_slave)
+    try:
+        assert main(["monitor", "--port", os.ttyname(tap_slave), "--duration", "0.3"]) == 0
+    finally:
+        os.close(tap_master)
+        os.close(tap_slave)
+    assert order == ["handlers", "listening"], order

@@ -21,7 +21,7 @@ from __future__ import annotations
 import json
 import sys
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from typing import Any
 
 from ...base.errors import (EXIT_FAILED, EXIT_OK, ConnectError, TmclError, TransportError,
@@ -582,13 +582,15 @@ def run_monitor(args) -> int:
         else:
             reader = None
             source = listen.serial_capture(log_path, monitor)
-        if live:
-            print(f"listening on {transport.describe()} (nothing is sent); Ctrl-C ends",
-                  file=sys.stderr, flush=True)
-        if table is not None:
-            table.start()
+        def started() -> None:
+            if live:
+                print(f"listening on {transport.describe()} (nothing is sent); Ctrl-C ends",
+                      file=sys.stderr, flush=True)
+            if table is not None:
+                table.start()
+
         failed, ended = _run(source, reader if live else None, view, filt, monitor,
-                             Limits(args.count, args.duration, not live), live)
+                             Limits(args.count, args.duration, not live), live, started)
     finally:
         if transport is not None:
             transport.close()
@@ -733,16 +735,20 @@ def end_table(view: View) -> None:
 
 
 def _run(source, reader, view: View, filt: Filter, monitor: Monitor, limits: Limits,
-         live: bool) -> tuple[str | None, Terminated | None]:
+         live: bool, started: Callable[[], None] = lambda: None
+         ) -> tuple[str | None, Terminated | None]:
     """Show what the source yields until it ends, the limits are reached or Ctrl-C; a live
     source is ended by the reader (requests still waiting are unanswered). Returns why the
     source failed (a lost adapter, a log python-can cannot read on), else None; and the
-    SIGTERM or SIGHUP that ended it, if one did."""
+    SIGTERM or SIGHUP that ended it, if one did. ``started`` says it listens (and starts
+    the table) once a signal ends the run as it should: one sent as soon as "listening on"
+    shows was an exit 130 from Python's own Ctrl-C."""
     previous = interruptible()
     summary = monitor.summary
     failed = ended = None
     try:
         try:
+            started()
             table = view.table
             for items in source:
                 if show_items(items, view, filt, summary, limits) \
