@@ -285,6 +285,42 @@ def test_a_reader_gone_stops_what_each_unit_set_moving(tmp_path):
     assert "Traceback" not in err and "Exception ignored" not in err, err
 
 
+
+def test_a_reader_gone_found_as_the_units_end_still_stops_what_they_set_moving(tmp_path):
+    """`| head -1` whose reader went while the units slept, a unit's last lines a read and a
+    ROL: the read's line is the first write to find the reader gone, and the unit ends (the
+    ROL sent) before the run's next look at the units; that look was never taken, so the
+    run ended 1 with no word of the reader and both motors turning. Now the run looks once
+    more as the units end and stops what each set moving. Modules from the manuals."""
+    from responder import PtyModule
+
+    modules = [PtyModule(version="1311V111"), PtyModule(version="1311V111")]
+    script = tmp_path / "turn.tmcl"
+    script.write_text("ROR 0, 500\n.sleep 2\nGAP 1, 0\nROL 0, 300\n")
+    proc = subprocess.Popen([sys.executable, "-m", "tmclsh", "--port", modules[0].path,
+                             "--port", modules[1].path, "-f", str(script)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=tmclsh_env(), cwd=str(ROOT))
+    try:
+        read_until(proc, lambda text: text.count("rotating") == 2)
+        proc.stdout.close()  # (`| head -1`: the reader has its lines and goes)
+        err = proc.stderr.read()
+        proc.wait(timeout=patience(30))
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        for module in modules:
+            module.close()
+    assert proc.returncode == 1, err
+    for module in modules:
+        sent = module.commands()
+        last_move = max(i for i, op in enumerate(sent) if op in (1, 2))  # ROR or ROL
+        assert 3 in sent[last_move:], module.got  # an MST after it: not left turning
+        said = f"{module.path}] the output's reader went away: stopped motor 0"
+        assert said in err, err
+    assert "Traceback" not in err and "Exception ignored" not in err, err
+
+
 def _interrupt_once_turning(script, path: str, sim, *extra: str,
                             then=lambda: None, timeout: float = 20) -> tuple[int, str, str]:
     """Run ``script`` on the units at 1-3 on ``path``; once ``sim``'s motor turns, ``then()``

@@ -172,7 +172,7 @@ class Hooks:
         """The run's own words (main thread)."""
 
     def tick(self) -> None:
-        """Every ``WAIT_SLICE`` while units run (main thread)."""
+        """Every ``WAIT_SLICE`` while units run, and once as the last ends (main thread)."""
 
 
 @dataclass
@@ -236,6 +236,10 @@ class Run:
         while True:
             try:
                 self._wait()
+                # one look more as the units end: a unit's last lines may be the first to
+                # meet the reader gone, the unit done before the next tick (its motor set
+                # turning after them, and the run silently ended 1)
+                self.hooks.tick()
                 break
             except self.interrupts as exc:
                 self._stop(exc)
