@@ -54,15 +54,14 @@ def clear_line(client: Client, req: Request, kind: ReplyKind, timeout: float) ->
     line that may still bring an answer ``req``'s could be taken for is resynchronised
     (``Client._resync``: True, the line is clear now)."""
     ledger = client._ledger
-    now = time.monotonic()  # (one clock read for both looks)
-    if client._framing.waiting(now):
+    if client._framing.waiting():
         client._flush_input()
     downloading = client._downloading
     if ledger.dirty(downloading):
         if ledger.needs_sync(req, kind, downloading):
             client._resync(req.address, timeout)
             return True
-    elif ledger.run and now - client._answered_at >= timeout:
+    elif ledger.run and time.monotonic() - client._answered_at >= timeout:
         # quiet for a whole timeout, nothing expected: an answer displaced before now would
         # have come (it counts as lost after a timeout)
         ledger.in_step()
@@ -116,10 +115,8 @@ def run(client: Client, reqs: Iterable[Request], timeout: float, retries: int
     framing = client._framing
     exchange = framing.exchange
     carry = client._request
-    kind_of = isa.reply_kind
     for req in reqs:
-        op = req.opcode
-        kind = _NORMAL if op < _FIRST_CONTROL else kind_of(op, req.type)  # (reply_kind's)
+        kind = reply_kind(req)
         plain = False
         try:
             with lock:

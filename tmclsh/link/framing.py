@@ -108,18 +108,17 @@ class SerialFraming:
         self._ready: Callable[[], bool] = transport.ready
 
     # -- what waits --------------------------------------------------------------------
-    def waiting(self, now: float | None = None) -> bool:
+    def waiting(self) -> bool:
         """Is anything waiting to be read (one cheap check before a request)? The port is
         not asked when the last reply's read took all it held less than a frame's wire
         time ago: whatever has come since is no whole frame yet (what came behind the
         reply was read with it and waits in the decoder; a run of requests at the line's
-        pace is spared a system call per request). ``now``: ``time.monotonic()``, when the
-        caller has just read it."""
+        pace is spared a system call per request)."""
         if self.decoder.buf:
             return True
         t = self.transport
         emptied = t.emptied
-        if emptied and (now or time.monotonic()) - emptied < FRAME * t.byte_time:
+        if emptied and time.monotonic() - emptied < FRAME * t.byte_time:
             return False
         return self._ready()
 
@@ -381,7 +380,7 @@ class CanFraming:
         self.transport = transport
         self.owner = owner
 
-    def waiting(self, now: float | None = None) -> bool:
+    def waiting(self) -> bool:
         return True  # (a non-blocking receive is the only way to know)
 
     def clear(self) -> None:
