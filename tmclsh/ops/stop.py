@@ -206,6 +206,13 @@ def where_in_use(client) -> int:
     return client.can_id if getattr(client, "is_can", False) else client.address
 
 
+def addresses_left(client) -> list[int]:
+    """The addresses other than the one in use where this client left a motor told to move
+    (``Client._motion_left``): the only others the end of a run asks or stops anything at."""
+    home = where_in_use(client)
+    return [a for a in getattr(client, "_motion_left", {}) if a != home]
+
+
 def activity_everywhere(client, *, timeout: float | None = None
                         ) -> list[tuple[int, Activity, str | None]]:
     """``activity`` at the address in use, then at each address this client left a motor
@@ -217,7 +224,7 @@ def activity_everywhere(client, *, timeout: float | None = None
     would talk to another module than its user thinks)."""
     home = where_in_use(client)
     found = [(home, activity(client, timeout=timeout), None)]
-    others = [a for a in getattr(client, "_motion_left", {}) if a != home]
+    others = addresses_left(client)
     if not others:
         return found
     from ..client.bringup import switch_address

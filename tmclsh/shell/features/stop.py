@@ -107,12 +107,12 @@ def stop_everywhere(client: Client, say: Say, why: str = "", *,
     said with its address; with ``back``, the client talks to its own address again
     afterwards (the prompt goes on there). True when every stop read back stopped."""
     from ...client.bringup import switch_address
-    from ...ops.stop import where_in_use
+    from ...ops.stop import addresses_left, where_in_use
 
     report = stop_all(client, say, why, session=session)
     ok = report is not None and report.ok
     home = where_in_use(client)
-    for address in [a for a in getattr(client, "_motion_left", {}) if a != home]:
+    for address in addresses_left(client):
         where = f"{why}: address {address}" if why else f"address {address}"
         try:
             switch_address(client, address)
