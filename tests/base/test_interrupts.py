@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import threading
 import time
 import weakref
 
@@ -79,8 +80,11 @@ def test_a_signal_sent_again_wakes_a_run_that_went_on_into_a_long_wait(kept, nam
             # the hook's part, straight: a signal dropped in a callback and sent again (a
             # process-directed one, as the callback's own, may be given to another thread on
             # a busy machine and then wakes no C wait: the run's own waits are sliced for
-            # that, base/clock.py; this one is not)
-            interrupts._send_again(sig)
+            # that, base/clock.py; this one is not). Sent once this thread is surely in the
+            # wait: one that lands as it goes in (the interpreter let go, the sleep not yet
+            # begun) is taken only when the sleep ends, whichever thread it was sent to
+            # (seen once in CI, under load)
+            threading.Timer(1.0, interrupts._send_again, (sig,)).start()
             time.sleep(30)  # a wait in C that only a signal sent to this thread cuts short
     finally:
         restore(previous)
